@@ -1,0 +1,27 @@
+"""Random Walk Radiosity's numerical core: pure numpy + embreex, no bpy.
+
+    from addon.core import PatchScene, solve, predict
+    scene = PatchScene(vertices, triangles, triangle_patch, reflectivity, emission)
+    result = solve(scene, estimator="finite", paths=1_000_000, seed=0)
+    p = predict(scene, estimator="finite", target_mse=1e-4)
+
+The method is Sbert & Brusi's shooting random walk radiosity: the finite (Phi_T) estimator and
+the biased infinite one, with the paper's heuristic MSE formulas (2), (3) and the relative
+efficiency (4).
+"""
+from .error_model import Prediction, mse_to_relative_rms, predict, relative_rms_to_mse
+from .estimators import BIASED_INFINITE, FINITE
+from .scene import PatchScene
+from .solver import SolveResult, solve
+
+__all__ = [
+    "PatchScene",
+    "solve",
+    "predict",
+    "Prediction",
+    "SolveResult",
+    "relative_rms_to_mse",
+    "mse_to_relative_rms",
+    "FINITE",
+    "BIASED_INFINITE",
+]

@@ -1,0 +1,194 @@
+"""The two shooting random walk estimators of Sbert & Brusi, advanced as a wavefront.
+
+Every path of a batch ("chunk") advances one bounce per step: the live paths' rays go to the
+ray tracer together, and their scores accumulate with ``np.bincount``.
+
+Weights are relative: a path from source i starts with per-channel weight E_ic / E_bar_i (1 in a
+grey scene), and the true carried power is that weight times Phi_T / N. What a chunk tallies is
+the power *incident* on each patch's front side, I_j; the reflected radiosity is
+b_j = R_j I_j (Phi_T / N) / A_j.
+
+- ``finite`` (the paper's Phi_T estimator): the carried power never changes; each hit scores,
+  then the path survives with probability R_bar_j (the patch's mean reflectivity). In colour,
+  survivors multiply each channel by R_jc / R_bar_j, so every channel stays unbiased.
+- ``biased_infinite``: each hit scores, the carried power is multiplied by R_jc, and the path
+  goes on until the product of (mean) reflectivities along it falls below the threshold t.
+  The power still carried at that moment is "undistributed".
+
+Rays that hit nothing escape; rays that hit a patch's back side are absorbed there ("blocked"):
+radiosity leaves only the front side of a patch.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .sampling import SourceTable, choose_triangles, cosine_directions, points_on_triangles
+
+FINITE = "finite"
+BIASED_INFINITE = "biased_infinite"
+ESTIMATORS = (FINITE, BIASED_INFINITE)
+EXIT_RANDOM = "random"
+EXIT_HIT = "hit"
+EXIT_POINTS = (EXIT_RANDOM, EXIT_HIT)
+
+
+class WalkTables:
+    """Per-solve tables: materials in the layouts the walk reads, shared by all chunks."""
+
+    def __init__(self, scene, estimator, threshold, exit_point):
+        self.geometry = scene.geometry
+        self.tracer = scene.tracer
+        self.estimator = estimator
+        self.threshold = float(threshold)
+        self.exit_random = exit_point == EXIT_RANDOM
+        self.patch_count = scene.patch_count
+        self.sources = SourceTable(scene.patch_area, scene.emission)
+        R = scene.reflectivity
+        self.mean_reflectivity = scene.mean_reflectivity  # R_bar (P,)
+        # Grey scenes carry one channel; colour scenes three.
+        self.channels = 1 if scene.is_grey else 3
+        self.reflectivity = np.ascontiguousarray(R[:, : self.channels].T)  # (C,P)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.where(self.mean_reflectivity > 0, R.T / self.mean_reflectivity, 0.0)
+            mean_emission = scene.emission.mean(axis=1)
+            start = np.where(mean_emission > 0, scene.emission.T / mean_emission, 0.0)
+        self.survivor_weight = np.ascontiguousarray(ratio[: self.channels])  # R_jc / R_bar_j (C,P)
+        self.start_weight = np.ascontiguousarray(start[: self.channels])      # E_ic / E_bar_i (C,P)
+        # In a grey finite walk every weight stays exactly 1: no weight arrays at all.
+        self.unit_weights = estimator == FINITE and self.channels == 1
+
+
+@dataclass
+class ChunkTally:
+    """What one batch of paths produced, in relative weights (multiply by Phi_T / N)."""
+
+    paths: int
+    rays: int
+    incident: np.ndarray                 # (C,P) power incident on each patch's front side
+    emitted: np.ndarray                  # (C,) total starting weight
+    escaped: np.ndarray                  # (C,) carried by rays that hit nothing
+    blocked: np.ndarray                  # (C,) carried by rays that hit a back side
+    undistributed: np.ndarray            # (C,) left on paths cut by the threshold
+    ended: dict = field(default_factory=dict)  # path counts by how they ended
+
+
+class Aborted(Exception):
+    """The walk was asked to stop; its partial chunk is discarded."""
+
+
+def _weight_sum(weights, mask):
+    """Sum of the carried weights of the masked paths, per channel."""
+    if weights is None:
+        return np.array([float(np.count_nonzero(mask))])
+    return weights[:, mask].sum(axis=1)
+
+
+def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=None) -> ChunkTally:
+    """Trace ``paths`` random walks from the sources to their end; return their tallies."""
+    g = tables.geometry
+    C, P = tables.channels, tables.patch_count
+    finite = tables.estimator == FINITE
+    incident = np.zeros((C, P))
+    escaped = np.zeros(C)
+    blocked = np.zeros(C)
+    undistributed = np.zeros(C)
+    ended = {"escaped": 0, "blocked": 0, "absorbed": 0, "threshold": 0}
+
+    patch = tables.sources.choose(rng.random(paths))
+    weights = None if tables.unit_weights else tables.start_weight[:, patch]
+    emitted = _weight_sum(weights, slice(None)) if weights is not None else np.array([float(paths)])
+    accumulated = np.ones(paths) if not finite else None  # product of R_bar along the path
+    leave_from = None  # hit points, for exit_point="hit"
+    rays = 0
+    n = paths
+    while n:
+        if abort is not None and abort.is_set():
+            raise Aborted
+        u = rng.random((6, n), dtype=np.float32)
+        if leave_from is None:
+            triangle = choose_triangles(g, patch, u[0])
+            origins = points_on_triangles(g, triangle, u[1], u[2])
+        else:
+            origins = leave_from
+        directions = cosine_directions(g, patch, u[3], u[4])
+        if tables.exit_random:
+            hit = tables.tracer.first_hit(origins, directions)
+        else:
+            hit, distance = tables.tracer.first_hit_distance(origins, directions)
+        rays += n
+
+        missed = hit < 0
+        hit_safe = np.where(missed, 0, hit)
+        facing = np.einsum("ij,ij->i", directions, g.triangle_normal[hit_safe]) < 0
+        front = facing & ~missed
+        if not front.all():
+            back = ~missed & ~facing
+            n_missed, n_back = int(np.count_nonzero(missed)), int(np.count_nonzero(back))
+            if n_missed:
+                escaped += _weight_sum(weights, missed)
+                ended["escaped"] += n_missed
+            if n_back:
+                blocked += _weight_sum(weights, back)
+                ended["blocked"] += n_back
+            keep = np.flatnonzero(front)
+            hit = hit[keep]
+            u5 = u[5][keep]
+            if weights is not None:
+                weights = weights[:, keep]
+            if accumulated is not None:
+                accumulated = accumulated[keep]
+            if not tables.exit_random:
+                origins, directions, distance = origins[keep], directions[keep], distance[keep]
+        else:
+            u5 = u[5]
+        if hit.size == 0:
+            break
+        hit_triangle = hit
+        patch = g.triangle_patch[hit_triangle]
+
+        # Score: the power arriving at the hit patch.
+        if weights is None:
+            incident[0] += np.bincount(patch, minlength=P)
+        else:
+            for c in range(C):
+                incident[c] += np.bincount(patch, weights=weights[c], minlength=P)
+
+        if finite:
+            survive = u5 < tables.mean_reflectivity[patch]
+            ended["absorbed"] += int(survive.size - np.count_nonzero(survive))
+            go_on = np.flatnonzero(survive)
+            patch = patch[go_on]
+            hit_triangle = hit_triangle[go_on]
+            if weights is not None:
+                weights = weights[:, go_on] * tables.survivor_weight[:, patch]
+        else:
+            weights = weights * tables.reflectivity[:, patch]
+            accumulated = accumulated * tables.mean_reflectivity[patch]
+            cut = accumulated < tables.threshold
+            if cut.any():
+                undistributed += weights[:, cut].sum(axis=1)
+                ended["threshold"] += int(np.count_nonzero(cut))
+                go_on = np.flatnonzero(~cut)
+                patch, hit_triangle = patch[go_on], hit_triangle[go_on]
+                weights, accumulated = weights[:, go_on], accumulated[go_on]
+            else:
+                go_on = slice(None)
+
+        if not tables.exit_random:
+            o, d, t = origins[go_on], directions[go_on], distance[go_on]
+            leave_from = o + d * t[:, None]
+            leave_from += g.triangle_normal[hit_triangle] * np.float32(g.ray_offset)
+        n = patch.size
+
+    return ChunkTally(
+        paths=paths,
+        rays=rays,
+        incident=incident,
+        emitted=emitted,
+        escaped=escaped,
+        blocked=blocked,
+        undistributed=undistributed,
+        ended=ended,
+    )

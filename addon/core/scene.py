@@ -1,0 +1,339 @@
+"""The patch scene: validated arrays of geometry and materials, and everything the
+random walks precompute from them once (patch frames, sampling tables, the ray tracer).
+
+Notation follows Sbert & Brusi: a patch i has area A_i, reflectivity R_i and emittance
+(emitted power per unit area) E_i; its power is Phi_i = E_i A_i and Phi_T = sum_i Phi_i.
+Colours are carried as three channels; the grey quantities the paper's formulas use are
+channel means (R_bar_i, E_bar_i), so that a grey scene is exactly the paper's.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+CHANNELS = 3
+
+# Rays leave a patch from a point pushed this far along its normal, relative to the scene's
+# bounding-box diagonal. Geometry is centred on its bounding box before it is converted to
+# float32, so the offset is ~100 float32 ulps at the scene's extent whatever its scale or
+# distance from the origin.
+RELATIVE_RAY_OFFSET = 1e-5
+
+# A triangle whose area is below this fraction of diagonal**2 is degenerate.
+RELATIVE_DEGENERATE_AREA = 1e-14
+
+# Triangles of one patch must share its orientation: a triangle whose normal is further than
+# this (cosine) from the patch's mean normal has the wrong winding or is not coplanar.
+MIN_PATCH_NORMAL_COSINE = 0.5
+
+
+def _indices_text(mask_or_indices, limit=10):
+    idx = np.flatnonzero(mask_or_indices) if np.asarray(mask_or_indices).dtype == bool else np.asarray(mask_or_indices)
+    shown = ", ".join(str(int(i)) for i in idx[:limit])
+    more = f" and {idx.size - limit} more" if idx.size > limit else ""
+    return f"{shown}{more}"
+
+
+def _as_channels(values, patch_count, name):
+    """(P,) grey or (P,3) RGB -> (P,3) float64, with shape errors that say what was expected."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim == 1:
+        if array.shape[0] != patch_count:
+            raise ValueError(f"{name} has {array.shape[0]} values but the scene has {patch_count} patches")
+        return np.repeat(array[:, None], CHANNELS, axis=1)
+    if array.ndim == 2 and array.shape[1] == CHANNELS:
+        if array.shape[0] != patch_count:
+            raise ValueError(f"{name} has {array.shape[0]} rows but the scene has {patch_count} patches")
+        return np.ascontiguousarray(array)
+    raise ValueError(f"{name} must have shape (P,) or (P, 3); got {array.shape}")
+
+
+def validate_materials(reflectivity, emission, patch_count):
+    """Check reflectivity and emission arrays; return them as (P,3) float64.
+
+    Raises ValueError naming the problem and the offending patch indices.
+    """
+    R = _as_channels(reflectivity, patch_count, "reflectivity")
+    E = _as_channels(emission, patch_count, "emission")
+    for name, values in (("reflectivity", R), ("emission", E)):
+        bad = ~np.isfinite(values).all(axis=1)
+        if bad.any():
+            raise ValueError(f"{name} is NaN or infinite on patches {_indices_text(bad)}")
+    negative = (E < 0).any(axis=1)
+    if negative.any():
+        raise ValueError(f"emission is negative on patches {_indices_text(negative)}")
+    outside = ((R < 0) | (R >= 1)).any(axis=1)
+    if outside.any():
+        raise ValueError(
+            f"reflectivity must lie in [0, 1) but does not on patches {_indices_text(outside)} "
+            "(a reflectivity of 1 or more creates energy or never lets a path end)"
+        )
+    if not (E > 0).any():
+        raise ValueError("the scene has no emitting patch: every emission is zero")
+    return R, E
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Geometry arrays derived once and shared by every material set on the same patches.
+
+    Triangles are stored sorted by patch (the ray tracer's primitive ids index this order).
+    Positions are relative to ``centre`` (the bounding-box centre) in float32.
+    """
+
+    centre: np.ndarray            # (3,) float64
+    diagonal: float               # bounding-box diagonal, scene units
+    ray_offset: float             # distance a ray origin is pushed along the normal
+    triangle_index: np.ndarray    # (T,) original index of each sorted triangle
+    triangle_patch: np.ndarray    # (T,) int32 patch of each sorted triangle
+    triangle_area: np.ndarray     # (T,) float64
+    triangle_normal: np.ndarray   # (T,3) float32 unit normals
+    triangle_origin: np.ndarray   # (T,3) float32 first vertex, pushed off the surface by ray_offset
+    triangle_edge1: np.ndarray    # (T,3) float32
+    triangle_edge2: np.ndarray    # (T,3) float32
+    triangle_corners: np.ndarray  # (T,3,3) float32 centred corners, the ray tracer's input
+    patch_area: np.ndarray        # (P,) float64
+    patch_normal: np.ndarray      # (P,3) float32
+    patch_tangent: np.ndarray     # (P,3) float32
+    patch_bitangent: np.ndarray   # (P,3) float32
+    patch_first_triangle: np.ndarray  # (P,) int64 first sorted triangle of each patch
+    patch_triangle_count: np.ndarray  # (P,) int64
+    triangle_key: np.ndarray      # (T,) float64: patch + cumulative area fraction in the patch
+
+    @property
+    def patch_count(self):
+        return self.patch_area.shape[0]
+
+    @property
+    def triangle_count(self):
+        return self.triangle_patch.shape[0]
+
+    @cached_property
+    def max_triangles_per_patch(self):
+        return int(self.patch_triangle_count.max())
+
+    @cached_property
+    def tracer(self):
+        """The Embree scene over these triangles, built on first use and then reused."""
+        from .raytrace import RayTracer
+
+        return RayTracer(self.triangle_corners)
+
+
+def build_geometry(vertices, triangles, triangle_patch, patch_count):
+    V = np.asarray(vertices, dtype=np.float64)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ValueError(f"vertices must have shape (V, 3); got {V.shape}")
+    if V.shape[0] == 0:
+        raise ValueError("the scene has no vertices")
+    bad_vertex = ~np.isfinite(V).all(axis=1)
+    if bad_vertex.any():
+        raise ValueError(f"vertices are NaN or infinite at vertex indices {_indices_text(bad_vertex)}")
+    T_raw = np.asarray(triangles)
+    if T_raw.ndim != 2 or T_raw.shape[1] != 3:
+        raise ValueError(f"triangles must have shape (T, 3); got {T_raw.shape}")
+    if T_raw.shape[0] == 0:
+        raise ValueError("the scene has no triangles")
+    if not np.issubdtype(T_raw.dtype, np.integer):
+        raise ValueError(f"triangles must hold integer vertex indices; got dtype {T_raw.dtype}")
+    T = T_raw.astype(np.int64)
+    out_of_range = ((T < 0) | (T >= V.shape[0])).any(axis=1)
+    if out_of_range.any():
+        raise ValueError(
+            f"triangles {_indices_text(out_of_range)} use vertex indices outside [0, {V.shape[0]})"
+        )
+    tp_raw = np.asarray(triangle_patch)
+    if tp_raw.shape != (T.shape[0],):
+        raise ValueError(f"triangle_patch must have shape ({T.shape[0]},) to match triangles; got {tp_raw.shape}")
+    if not np.issubdtype(tp_raw.dtype, np.integer):
+        raise ValueError(f"triangle_patch must hold integer patch indices; got dtype {tp_raw.dtype}")
+    tp = tp_raw.astype(np.int64)
+    bad_patch = (tp < 0) | (tp >= patch_count)
+    if bad_patch.any():
+        raise ValueError(
+            f"triangles {_indices_text(bad_patch)} name patches outside [0, {patch_count}) "
+            f"(the scene has {patch_count} patches, one per row of reflectivity and emission)"
+        )
+
+    used = V[np.unique(T)]
+    lo, hi = used.min(axis=0), used.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    diagonal = float(np.linalg.norm(hi - lo))
+    if not diagonal > 0:
+        raise ValueError("the scene has no extent: all vertices coincide")
+
+    corners = V[T] - centre                       # (T,3,3) float64, centred
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    cross = np.cross(e1, e2)
+    double_area = np.linalg.norm(cross, axis=1)
+    area = 0.5 * double_area
+    degenerate = area <= RELATIVE_DEGENERATE_AREA * diagonal**2
+    if degenerate.any():
+        warnings.warn(
+            f"dropped {int(degenerate.sum())} degenerate (zero-area) triangles: {_indices_text(degenerate)}",
+            stacklevel=3,
+        )
+    keep = np.flatnonzero(~degenerate)
+    patch_area = np.bincount(tp[keep], weights=area[keep], minlength=patch_count)
+    empty = patch_area <= 0
+    if empty.any():
+        raise ValueError(f"patches {_indices_text(empty)} have no area (no triangles, or only degenerate ones)")
+
+    order = keep[np.argsort(tp[keep], kind="stable")]
+    tp_sorted = tp[order]
+    normal = cross[order] / double_area[order, None]
+    weighted = np.zeros((patch_count, 3))
+    np.add.at(weighted, tp_sorted, cross[order])  # area-weighted normal sum (x2), one pass
+    norm = np.linalg.norm(weighted, axis=1)
+    folded = norm <= 1e-12 * patch_area * 2
+    if folded.any():
+        raise ValueError(
+            f"patches {_indices_text(folded)} have triangles of opposite winding that cancel: "
+            "a patch must be coplanar triangles facing one way"
+        )
+    patch_normal = weighted / norm[:, None]
+    cosine = np.einsum("ij,ij->i", normal, patch_normal[tp_sorted])
+    crooked = cosine < MIN_PATCH_NORMAL_COSINE
+    if crooked.any():
+        raise ValueError(
+            f"patches {_indices_text(np.unique(tp_sorted[crooked]))} mix triangles of different "
+            "orientation: a patch must be coplanar triangles with the same winding"
+        )
+
+    # An orthonormal frame (t, s, n) per patch for cosine-distributed directions.
+    helper = np.where(np.abs(patch_normal[:, :1]) < 0.6, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    tangent = np.cross(helper, patch_normal)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    bitangent = np.cross(patch_normal, tangent)
+
+    count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
+    first = np.concatenate(([0], np.cumsum(count)[:-1]))
+    sorted_area = area[order]
+    cumulative = np.cumsum(sorted_area)
+    before_patch = np.concatenate(([0.0], cumulative))[first]
+    fraction = (cumulative - before_patch[tp_sorted]) / patch_area[tp_sorted]
+    last = first + count - 1
+    fraction[last] = 1.0  # exact upper end, whatever the rounding
+    ray_offset = RELATIVE_RAY_OFFSET * diagonal
+    sorted_corners = corners[order]
+
+    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
+    return Geometry(
+        centre=centre,
+        diagonal=diagonal,
+        ray_offset=ray_offset,
+        triangle_index=order,
+        triangle_patch=tp_sorted.astype(np.int32),
+        triangle_area=sorted_area,
+        triangle_normal=f32(normal),
+        triangle_origin=f32(sorted_corners[:, 0] + ray_offset * normal),
+        triangle_edge1=f32(e1[order]),
+        triangle_edge2=f32(e2[order]),
+        triangle_corners=f32(sorted_corners),
+        patch_area=patch_area,
+        patch_normal=f32(patch_normal),
+        patch_tangent=f32(tangent),
+        patch_bitangent=f32(bitangent),
+        patch_first_triangle=first,
+        patch_triangle_count=count,
+        triangle_key=tp_sorted + fraction,
+    )
+
+
+class PatchScene:
+    """Patches (groups of coplanar triangles) with their reflectivity and emittance.
+
+    Parameters
+    ----------
+    vertices : (V,3) float
+    triangles : (T,3) int, indices into ``vertices``; the normal follows the right-hand rule
+        and radiosity leaves the front side.
+    triangle_patch : (T,) int in [0, P): the patch each triangle belongs to.
+    reflectivity : (P,3) RGB or (P,) grey, each in [0, 1).
+    emission : (P,3) or (P,), the emittance E (power per unit area), >= 0.
+
+    Degenerate triangles are dropped with a warning; everything else that is wrong raises
+    ``ValueError`` naming the problem and the offending indices.
+    """
+
+    def __init__(self, vertices, triangles, triangle_patch, reflectivity, emission, *, _geometry=None):
+        reflectivity_arr = np.asarray(reflectivity)
+        if reflectivity_arr.ndim not in (1, 2) or reflectivity_arr.shape[0] == 0:
+            raise ValueError(f"reflectivity must have shape (P,) or (P, 3) with P > 0; got {reflectivity_arr.shape}")
+        patch_count = reflectivity_arr.shape[0]
+        self.reflectivity, self.emission = validate_materials(reflectivity, emission, patch_count)
+        self.vertices = np.asarray(vertices, dtype=np.float64)
+        self.triangles = np.asarray(triangles)
+        self.triangle_patch = np.asarray(triangle_patch)
+        self.geometry = _geometry if _geometry is not None else build_geometry(
+            vertices, triangles, triangle_patch, patch_count
+        )
+
+    # --- materials -------------------------------------------------------------------------
+    def with_materials(self, reflectivity, emission):
+        """A scene on the same patches with other materials, sharing geometry and ray tracer."""
+        return PatchScene(
+            self.vertices, self.triangles, self.triangle_patch, reflectivity, emission, _geometry=self.geometry
+        )
+
+    # --- sizes -----------------------------------------------------------------------------
+    @property
+    def patch_count(self):
+        return self.geometry.patch_count
+
+    @property
+    def triangle_count(self):
+        return self.geometry.triangle_count
+
+    @property
+    def patch_area(self):
+        return self.geometry.patch_area
+
+    @property
+    def patch_normal(self):
+        return self.geometry.patch_normal.astype(np.float64)
+
+    @cached_property
+    def total_area(self):
+        """A_T."""
+        return float(self.patch_area.sum())
+
+    # --- grey quantities of the paper ------------------------------------------------------
+    @cached_property
+    def mean_reflectivity(self):
+        """R_bar_i: the channel mean of each patch's reflectivity (the survival probability)."""
+        return self.reflectivity.mean(axis=1)
+
+    @cached_property
+    def is_grey(self):
+        return bool((self.reflectivity == self.reflectivity[:, :1]).all() and (self.emission == self.emission[:, :1]).all())
+
+    @cached_property
+    def patch_power(self):
+        """Phi_i = A_i E_bar_i, the channel-mean power of each patch."""
+        return self.patch_area * self.emission.mean(axis=1)
+
+    @cached_property
+    def total_power(self):
+        """Phi_T."""
+        return float(self.patch_power.sum())
+
+    @cached_property
+    def average_reflectivity(self):
+        """R_ave: the area-weighted average reflectivity (channel mean)."""
+        return float((self.patch_area * self.mean_reflectivity).sum() / self.total_area)
+
+    @property
+    def tracer(self):
+        """The ray tracer over this geometry (shared with scenes made by with_materials)."""
+        return self.geometry.tracer
+
+    def __repr__(self):
+        return (
+            f"PatchScene({self.patch_count} patches, {self.triangle_count} triangles, "
+            f"A_T={self.total_area:.6g}, Phi_T={self.total_power:.6g}, R_ave={self.average_reflectivity:.4g})"
+        )

@@ -1,0 +1,295 @@
+"""solve(): runs the random walks in chunks over threads, to a path count or an error target.
+
+Chunk k of a run draws its random numbers from its own stream, SeedSequence(seed, spawn_key=(k,)),
+and chunk tallies are added in chunk order, so a run's result depends only on the seed and the
+chunk plan, never on the number of threads or on timing: bitwise reproducible.
+
+Chunks are also the independent batches of the a-posteriori error estimate ("batch means"):
+with K chunks of n_k paths giving per-chunk estimates b^(k), the per-path variance of each
+patch is estimated by sum_k n_k (b^(k) - b)^2 / (K - 1), and the MSE of the result by its
+area-weighted mean over patches (and channels) divided by N.
+"""
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .error_model import check_estimator, check_positive, predict
+from .estimators import EXIT_POINTS, EXIT_RANDOM, FINITE, WalkTables, walk_chunk
+
+STOP_PATHS = "paths"
+STOP_TARGET = "target"
+STOP_CANCELLED = "cancelled"
+STOP_TIME_LIMIT = "time_limit"
+STOP_RULES = ("predicted", "measured")
+
+# A chunk aims at about this many rays: big enough that per-step Python overhead is small,
+# small enough that progress, cancel and the batch error estimate come often.
+RAYS_PER_CHUNK = 1 << 18
+MAX_CHUNK_PATHS = 1 << 16
+MIN_CHUNK_PATHS = 128
+# The batch estimate wants this many chunks in a run when the run is small.
+MIN_CHUNKS = 32
+# With stop_rule="measured": never stop on fewer chunks than this, nor run past this many
+# times the predicted paths (unless paths= is given as the cap).
+MIN_MEASURED_CHUNKS = 8
+MEASURED_CAP_FACTOR = 64
+POLL_SECONDS = 0.05
+
+
+@dataclass
+class SolveResult:
+    radiosity: np.ndarray          # (P,3) B = E + b
+    reflected: np.ndarray          # (P,3) b
+    paths: int
+    rays: int
+    seconds: float
+    mean_path_length: float
+    predicted_mse: float
+    measured_mse: float
+    stopped: str
+    estimator: str
+    threshold: float | None
+    exit_point: str
+    seed: int
+    threads: int
+    chunks: int
+    energy: dict = field(default_factory=dict)
+    path_ends: dict = field(default_factory=dict)
+    prediction: object = None
+
+    @property
+    def rays_per_second(self):
+        return self.rays / self.seconds if self.seconds > 0 else math.nan
+
+
+def chunk_paths_for(expected_path_length, planned_paths):
+    by_rays = int(RAYS_PER_CHUNK / max(expected_path_length, 1.0))
+    by_batches = math.ceil(planned_paths / MIN_CHUNKS)
+    return int(min(MAX_CHUNK_PATHS, max(MIN_CHUNK_PATHS, min(by_rays, by_batches))))
+
+
+class _Accumulator:
+    """Sums chunk tallies in chunk order, with what the batch error estimate needs."""
+
+    def __init__(self, scene, tables, prediction):
+        C, P = tables.channels, scene.patch_count
+        self.scene = scene
+        self.channels = C
+        self.incident = np.zeros((C, P))
+        self.incident_sq = np.zeros((C, P))  # sum_k I_k^2 / n_k
+        self.emitted = np.zeros(C)
+        self.escaped = np.zeros(C)
+        self.blocked = np.zeros(C)
+        self.undistributed = np.zeros(C)
+        self.ended = {}
+        self.paths = 0
+        self.rays = 0
+        self.chunks = 0
+        # b_j = (R_j Phi_T / A_j) I_j / N
+        self.reflectivity = tables.reflectivity  # (C,P)
+        self.score = tables.reflectivity * (scene.total_power / scene.patch_area)  # (C,P)
+        self.weight = scene.patch_area / scene.total_area
+
+    def add(self, tally):
+        self.incident += tally.incident
+        self.incident_sq += tally.incident**2 / tally.paths
+        self.emitted += tally.emitted
+        self.escaped += tally.escaped
+        self.blocked += tally.blocked
+        self.undistributed += tally.undistributed
+        for key, value in tally.ended.items():
+            self.ended[key] = self.ended.get(key, 0) + value
+        self.paths += tally.paths
+        self.rays += tally.rays
+        self.chunks += 1
+
+    def reflected(self):
+        if self.paths == 0:
+            return np.zeros((self.scene.patch_count, 3))
+        b = (self.score * self.incident / self.paths).T
+        return np.repeat(b, 3, axis=1) if self.channels == 1 else b
+
+    def measured_mse(self):
+        """Batch-means estimate of the MSE of the current result (variance only)."""
+        if self.chunks < 2:
+            return math.nan
+        N = self.paths
+        spread = np.maximum(self.incident_sq - self.incident**2 / N, 0.0)
+        variance_of_mean = self.score**2 * spread / ((self.chunks - 1) * N)
+        return float((variance_of_mean.mean(axis=0) * self.weight).sum())
+
+    def energy(self):
+        """Power balance of the run in the scene's units, per channel (3,)."""
+        scale = self.scene.total_power / self.paths if self.paths else 0.0
+        expand = (lambda a: np.repeat(a, 3)) if self.channels == 1 else (lambda a: a)
+        absorbed = ((1 - self.reflectivity) * self.incident).sum(axis=1) + self.blocked
+        return {
+            "emitted": expand(self.emitted * scale),
+            "absorbed": expand(absorbed * scale),
+            "escaped": expand(self.escaped * scale),
+            "undistributed": expand(self.undistributed * scale),
+            "blocked": expand(self.blocked * scale),
+        }
+
+
+def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads):
+    check_estimator(estimator, threshold)
+    check_positive("paths", paths, integer=True)
+    check_positive("target_mse", target_mse)
+    check_positive("max_seconds", max_seconds)
+    check_positive("threads", threads, integer=True)
+    if paths is None and target_mse is None:
+        raise ValueError("give paths (a path count) or target_mse (an error target)")
+    if exit_point not in EXIT_POINTS:
+        raise ValueError(f"exit_point must be one of {', '.join(EXIT_POINTS)}; got {exit_point!r}")
+    if stop_rule not in STOP_RULES:
+        raise ValueError(f"stop_rule must be one of {', '.join(STOP_RULES)}; got {stop_rule!r}")
+    if stop_rule == "measured" and target_mse is None:
+        raise ValueError("stop_rule='measured' needs a target_mse")
+
+
+def solve(
+    scene,
+    estimator=FINITE,
+    *,
+    paths=None,
+    target_mse=None,
+    threshold=1e-3,
+    seed=0,
+    exit_point=EXIT_RANDOM,
+    stop_rule="predicted",
+    progress=None,
+    should_stop=None,
+    max_seconds=None,
+    threads=None,
+):
+    """Radiosity of ``scene`` by shooting random walks.
+
+    Runs ``paths`` paths, or, with ``target_mse``, the paths formula (2)/(3) predicts for it
+    (``stop_rule="predicted"``) or until the batch estimate meets it (``"measured"``, capped
+    by ``paths`` if given, else 64 times the prediction). ``progress(fraction, stats)`` and
+    ``should_stop()`` are called from the calling thread between chunks; ``max_seconds``
+    bounds the wall time. A stopped run returns the complete chunks it has.
+    """
+    _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads)
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"seed must be a non-negative whole number; got {seed!r}")
+    threads = int(threads or min(os.cpu_count() or 1, 8))
+    start = time.perf_counter()
+
+    prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
+    measured_rule = stop_rule == "measured"
+    if measured_rule:
+        planned = prediction.paths_for(target_mse)
+        cap = paths if paths is not None else MEASURED_CAP_FACTOR * planned
+    else:
+        planned = paths if paths is not None else prediction.paths_for(target_mse)
+        cap = planned
+    chunk = chunk_paths_for(prediction.expected_path_length, planned)
+    tables = WalkTables(scene, estimator, threshold, exit_point)
+    total = _Accumulator(scene, tables, prediction)
+    abort = threading.Event()
+    seed_root = int(seed)
+
+    def run_chunk(k, n):
+        rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed_root, spawn_key=(k,))))
+        return walk_chunk(tables, n, rng, abort)
+
+    def chunk_size(k):
+        return min(chunk, cap - k * chunk)
+
+    chunk_count = math.ceil(cap / chunk)
+    done_rule = STOP_TARGET if (target_mse is not None and not measured_rule) else STOP_PATHS
+    stopped = None
+    pending = deque()
+    next_chunk = 0
+    executor = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="radiosity")
+    try:
+        while stopped is None:
+            # Keep every thread busy, with one chunk queued beyond those running.
+            while next_chunk < chunk_count and len(pending) < threads + 1:
+                pending.append(executor.submit(run_chunk, next_chunk, chunk_size(next_chunk)))
+                next_chunk += 1
+            if not pending:
+                stopped = done_rule
+                break
+            tally = None
+            while tally is None and stopped is None:
+                try:
+                    tally = pending[0].result(timeout=POLL_SECONDS)
+                except TimeoutError:
+                    stopped = _interrupted(should_stop, max_seconds, start)
+            if stopped:
+                break
+            pending.popleft()
+            total.add(tally)
+            elapsed = time.perf_counter() - start
+            mse_now = total.measured_mse()
+            if progress is not None:
+                fraction = total.paths / cap
+                if measured_rule and mse_now > 0:  # NaN compares False
+                    fraction = max(fraction, target_mse / mse_now)
+                progress(
+                    min(1.0, fraction),
+                    {
+                        "paths": total.paths,
+                        "rays": total.rays,
+                        "seconds": elapsed,
+                        "rays_per_second": total.rays / elapsed if elapsed > 0 else math.nan,
+                        "measured_mse": mse_now,
+                        "predicted_mse": prediction.mse_for(total.paths),
+                    },
+                )
+            if measured_rule and total.chunks >= MIN_MEASURED_CHUNKS and mse_now <= target_mse:
+                stopped = STOP_TARGET
+            elif total.paths >= cap:
+                stopped = done_rule
+            else:
+                stopped = _interrupted(should_stop, max_seconds, start)
+    finally:
+        # Chunks still running are abandoned at their next step; their partial tallies are dropped.
+        abort.set()
+        for future in pending:
+            future.cancel()
+        executor.shutdown(wait=True)
+
+    seconds = time.perf_counter() - start
+    reflected = total.reflected()
+    radiosity = scene.emission + reflected
+    n = total.paths
+    return SolveResult(
+        radiosity=radiosity,
+        reflected=reflected,
+        paths=n,
+        rays=total.rays,
+        seconds=seconds,
+        mean_path_length=total.rays / n if n else math.nan,
+        predicted_mse=prediction.mse_for(n),
+        measured_mse=total.measured_mse(),
+        stopped=stopped,
+        estimator=estimator,
+        threshold=threshold if estimator != FINITE else None,
+        exit_point=exit_point,
+        seed=seed_root,
+        threads=threads,
+        chunks=total.chunks,
+        energy=total.energy() if n else {},
+        path_ends=dict(total.ended),
+        prediction=prediction,
+    )
+
+
+def _interrupted(should_stop, max_seconds, start):
+    if should_stop is not None and should_stop():
+        return STOP_CANCELLED
+    if max_seconds is not None and time.perf_counter() - start >= max_seconds:
+        return STOP_TIME_LIMIT
+    return None
