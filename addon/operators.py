@@ -1,0 +1,174 @@
+"""Operators: ``radiosity.solve`` (modal with a worker thread, or synchronous)
+and ``radiosity.cancel``."""
+
+from __future__ import annotations
+
+import bpy
+
+from . import scene_io, worker
+
+TIMER_SECONDS = 0.1
+
+
+def _redraw(context):
+    screen = getattr(context, "screen", None)
+    if screen is None:
+        return
+    for area in screen.areas:
+        if area.type == "VIEW_3D":
+            area.tag_redraw()
+
+
+def _store_stats(settings, output):
+    r = output.result
+    settings.last_paths = int(r.paths)
+    settings.last_rays = float(r.rays)
+    settings.last_seconds = float(r.seconds)
+    settings.last_mean_path_length = float(r.mean_path_length)
+    settings.last_predicted_mse = float(r.predicted_mse)
+    measured = float(r.measured_mse)
+    settings.last_measured_mse = measured if measured == measured else -1.0  # NaN -> -1
+    settings.last_patches = int(output.patches.combined.patch_count)
+    settings.last_stopped = str(r.stopped)
+    settings.last_estimator = str(r.estimator)
+
+
+class RADIOSITY_OT_solve(bpy.types.Operator):
+    """Compute diffuse global illumination of the selected meshes by shooting random walks and bake it into colour attributes"""
+
+    bl_idname = "radiosity.solve"
+    bl_label = "Solve Radiosity"
+    bl_options = {"REGISTER", "UNDO"}
+
+    _job = None
+    _timer = None
+    _notes = ()
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and worker.running_job() is None
+
+    # -- synchronous: background mode, scripts, EXEC_DEFAULT ------------------
+    def execute(self, context):
+        started = self._start_job(context, threaded=False)
+        if started is not None:
+            return started
+        return self._finish(context)
+
+    # -- interactive: worker thread + modal timer -----------------------------
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        started = self._start_job(context, threaded=True)
+        if started is not None:
+            return started
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(TIMER_SECONDS, window=context.window)
+        wm.modal_handler_add(self)
+        _redraw(context)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type == "ESC" and event.value == "PRESS":
+            job.cancel()
+        if job.done.is_set():
+            return self._finish(context)
+        if event.type == "TIMER":
+            _redraw(context)
+        return {"PASS_THROUGH"}
+
+    def cancel(self, context):  # Blender cancels the modal (e.g. file closed)
+        if self._job is not None:
+            self._job.cancel()
+            self._job.join(timeout=10)
+        self._cleanup(context)
+
+    # -- shared -----------------------------------------------------------------
+    def _start_job(self, context, threaded):
+        """Read the scene and start the job; returns a result set on failure."""
+        try:
+            objects, notes = scene_io.read_selection(context)
+        except ValueError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        settings = context.scene.radiosity.solve_settings()
+        self._notes = notes
+        self._job = worker.SolveJob(objects, settings)
+        if threaded:
+            worker.set_running_job(self._job)
+            self._job.start()
+        else:
+            self._job._run()
+        return None
+
+    def _cleanup(self, context):
+        if self._timer is not None:
+            context.window_manager.event_timer_remove(self._timer)
+            self._timer = None
+        worker.set_running_job(None)
+        _redraw(context)
+
+    def _finish(self, context):
+        job = self._job
+        self._cleanup(context)
+        output = job.output
+        if job.error is not None:
+            if job.traceback:
+                print(job.traceback)
+            self.report({"ERROR"}, f"Radiosity failed: {job.error}")
+            return {"CANCELLED"}
+        if output is None or output.result.stopped == "cancelled":
+            self.report({"INFO"}, "Radiosity cancelled: the scene is unchanged")
+            return {"CANCELLED"}
+        settings = context.scene.radiosity
+        try:
+            scene_io.write_results(context, output, job.settings.output)
+        except Exception as exc:  # noqa: BLE001 - report, never a traceback
+            import traceback
+
+            print(traceback.format_exc())
+            self.report({"ERROR"}, f"Writing the result failed: {exc}")
+            return {"CANCELLED"}
+        _store_stats(settings, output)
+        for note in self._notes:
+            self.report({"WARNING"}, note)
+        r = output.result
+        if r.stopped == "time_limit":
+            self.report({"WARNING"}, f"Time limit reached after {r.paths:,} paths; the result is noisier than asked")
+        self.report(
+            {"INFO"},
+            f"Radiosity: {settings.last_patches:,} patches, {r.paths:,} paths, {r.rays:,} rays "
+            f"in {r.seconds:.1f} s",
+        )
+        return {"FINISHED"}
+
+
+class RADIOSITY_OT_cancel(bpy.types.Operator):
+    """Stop the running radiosity solve; the scene stays as it was"""
+
+    bl_idname = "radiosity.cancel"
+    bl_label = "Cancel Radiosity"
+
+    @classmethod
+    def poll(cls, context):
+        return worker.running_job() is not None
+
+    def execute(self, context):
+        job = worker.running_job()
+        if job is not None:
+            job.cancel()
+        return {"FINISHED"}
+
+
+classes = (RADIOSITY_OT_solve, RADIOSITY_OT_cancel)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,139 @@
+"""The 3D View sidebar panel (tab "Radiosity")."""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+
+from . import preview, worker
+
+
+def _number(x):
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    if abs(x) >= 1e6:
+        return f"{x / 1e6:.2f} M"
+    if abs(x) >= 1e4:
+        return f"{x / 1e3:.1f} k"
+    return f"{x:,.0f}" if float(x).is_integer() else f"{x:.3g}"
+
+
+def draw_settings(layout, settings):
+    col = layout.column(align=True)
+    col.prop(settings, "estimator", text="")
+    row = col.row()
+    row.active = settings.estimator == "biased_infinite"
+    row.prop(settings, "threshold")
+    col = layout.column(align=True)
+    col.prop(settings, "target_error")
+    col.prop(settings, "patch_size")
+    layout.prop(settings, "exit_point")
+    layout.prop(settings, "output")
+    col = layout.column(align=True)
+    col.prop(settings, "seed")
+    col.prop(settings, "time_limit")
+    col.prop(settings, "threads")
+
+
+def draw_estimate(layout, context, value, fresh):
+    box = layout.box()
+    title = "Estimate" if fresh else "Estimate (updating...)"
+    box.label(text=title, icon="INFO")
+    if value is None:
+        box.label(text="Computing...")
+        return
+    if "error" in value:
+        for line in _wrap(value["error"], 40):
+            box.label(text=line)
+        return
+    col = box.column(align=True)
+    col.label(text=f"Objects: {value['objects']}   Patches: {_number(value['patches'])}")
+    col.label(text=f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}")
+    col.label(text=f"Path length: {value['path_length']:.2f}   R_ave: {value['R_ave']:.2f}")
+    re = value["relative_efficiency"]
+    better = "finite" if re > 1 else "biased infinite"
+    col.label(text=f"Rel. efficiency (4): {re:.2f} ({better} better)")
+
+
+def draw_progress(layout, job):
+    stats = job.snapshot()
+    box = layout.box()
+    fraction = float(stats.get("fraction", 0.0) or 0.0)
+    text = f"{fraction * 100:.0f}%  {_number(stats.get('paths', 0))} paths"
+    if hasattr(box, "progress"):
+        box.progress(factor=fraction, type="BAR", text=text)
+    else:
+        box.label(text=text)
+    col = box.column(align=True)
+    col.label(text=f"Rays/s: {_number(stats.get('rays_per_second'))}")
+    mse = stats.get("measured_mse")
+    col.label(text=f"Error estimate (MSE): {mse:.3g}" if mse is not None and mse == mse else "Error estimate: -")
+    if job.cancelled:
+        col.label(text="Cancelling...")
+    box.operator("radiosity.cancel", icon="CANCEL")
+
+
+def draw_last_run(layout, settings):
+    if not settings.last_paths:
+        return
+    box = layout.box()
+    box.label(text="Last run", icon="CHECKMARK")
+    col = box.column(align=True)
+    col.label(text=f"{settings.last_estimator}: {_number(settings.last_patches)} patches")
+    col.label(text=f"Paths: {_number(settings.last_paths)}   Rays: {_number(settings.last_rays)}")
+    col.label(text=f"Time: {settings.last_seconds:.2f} s   Path length: {settings.last_mean_path_length:.2f}")
+    col.label(text=f"MSE predicted: {settings.last_predicted_mse:.3g}")
+    if settings.last_measured_mse >= 0:
+        col.label(text=f"MSE measured: {settings.last_measured_mse:.3g}")
+    col.label(text=f"Stopped by: {settings.last_stopped}")
+
+
+def _wrap(text, width):
+    words, line, lines = text.split(), "", []
+    for w in words:
+        if len(line) + len(w) + 1 > width and line:
+            lines.append(line)
+            line = w
+        else:
+            line = f"{line} {w}".strip()
+    if line:
+        lines.append(line)
+    return lines
+
+
+class VIEW3D_PT_radiosity(bpy.types.Panel):
+    bl_label = "Random Walk Radiosity"
+    bl_idname = "VIEW3D_PT_radiosity"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Radiosity"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.scene.radiosity
+        job = worker.running_job()
+        layout.enabled = True
+        col = layout.column()
+        col.enabled = job is None
+        draw_settings(col, settings)
+        if job is not None:
+            draw_progress(layout, job)
+        else:
+            value, fresh = preview.current(context)
+            draw_estimate(layout, context, value, fresh)
+            layout.operator("radiosity.solve", icon="LIGHT_SUN")
+        draw_last_run(layout, settings)
+
+
+classes = (VIEW3D_PT_radiosity,)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,363 @@
+"""Reading the Blender scene into arrays and writing results back (bpy glue).
+
+No numerics here beyond reshaping: the arrays go to ``worker`` and come back.
+
+Units: emission = emission colour x strength, reflectivity = base colour, so
+the radiosity written is what Cycles' COMBINED bake gives for the same
+Lambertian scene (a closed box emitting S with albedo R gives S / (1 - R)).
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from .core import meshing
+from .worker import MAX_REFLECTIVITY, ObjectArrays
+
+COLLECTION_NAME = "Radiosity"
+ATTRIBUTE_NAME = "Radiosity"
+POINT_ATTRIBUTE_NAME = "Radiosity Vertex"  # the POINT colours when both are written
+MATERIAL_NAME = "Radiosity Result"
+SOURCE_PROPERTY = "radiosity_source"  # custom property marking result objects
+DEFAULT_GREY = (0.8, 0.8, 0.8)
+RESULT_SUFFIX = " Radiosity"
+
+
+class SceneError(ValueError):
+    """Bad input found while reading the scene: a message for the user."""
+
+
+# ---------------------------------------------------------------------------
+# Materials
+# ---------------------------------------------------------------------------
+
+def _socket_colour(node, name, notes, what):
+    socket = node.inputs.get(name)
+    if socket is None:
+        return np.zeros(3)
+    if socket.is_linked:
+        notes.append(f"{what}: '{name}' of '{node.name}' is connected (texture?); its default colour was used")
+    value = socket.default_value
+    return np.array(value[:3], dtype=np.float64)
+
+
+def _socket_float(node, name, notes, what, default=0.0):
+    socket = node.inputs.get(name)
+    if socket is None:
+        return default
+    if socket.is_linked:
+        notes.append(f"{what}: '{name}' of '{node.name}' is connected (texture?); its default value was used")
+    return float(socket.default_value)
+
+
+def _surface_shader(tree):
+    output = None
+    for target in ("CYCLES", "ALL", "EEVEE"):
+        try:
+            output = tree.get_output_node(target)
+        except Exception:  # noqa: BLE001 - older API variants
+            output = None
+        if output is not None:
+            break
+    if output is None:
+        output = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"), None)
+    if output is None:
+        return None
+    socket = output.inputs.get("Surface")
+    node = None
+    while socket is not None and socket.is_linked:
+        node = socket.links[0].from_node
+        if node.bl_idname == "NodeReroute":
+            socket = node.inputs[0]
+            node = None
+            continue
+        break
+    return node
+
+
+_SUPPORTED = ("ShaderNodeBsdfPrincipled", "ShaderNodeBsdfDiffuse", "ShaderNodeEmission")
+
+
+def material_colours(material):
+    """(reflectivity (3,), emission (3,), notes) of a material.
+
+    Principled BSDF: base colour, emission colour x strength.  Diffuse BSDF:
+    colour.  Emission: colour x strength, no reflection.  No node tree: the
+    viewport colour.  No material: grey 0.8.  Linked (textured) inputs use
+    the socket's default and add a note.
+    """
+    notes = []
+    if material is None:
+        return np.array(DEFAULT_GREY), np.zeros(3), notes
+    what = f"material '{material.name}'"
+    tree = material.node_tree
+    uses_nodes = tree is not None
+    if uses_nodes and bpy.app.version < (5, 0, 0):
+        uses_nodes = bool(material.use_nodes)
+    if not uses_nodes:
+        return np.array(material.diffuse_color[:3], dtype=np.float64), np.zeros(3), notes
+    node = _surface_shader(tree)
+    if node is None or node.bl_idname not in _SUPPORTED:
+        found = next((n for n in tree.nodes if n.bl_idname in _SUPPORTED), None)
+        kind = "nothing" if node is None else f"'{node.name}'"
+        if found is None:
+            notes.append(f"{what}: surface is {kind}, no Principled/Diffuse/Emission node; viewport colour used")
+            return np.array(material.diffuse_color[:3], dtype=np.float64), np.zeros(3), notes
+        notes.append(f"{what}: surface is {kind}; used node '{found.name}'")
+        node = found
+    if node.bl_idname == "ShaderNodeBsdfPrincipled":
+        reflectivity = _socket_colour(node, "Base Color", notes, what)
+        name = "Emission Color" if "Emission Color" in node.inputs else "Emission"
+        emission = _socket_colour(node, name, notes, what) * _socket_float(
+            node, "Emission Strength", notes, what, 1.0
+        )
+    elif node.bl_idname == "ShaderNodeBsdfDiffuse":
+        reflectivity = _socket_colour(node, "Color", notes, what)
+        emission = np.zeros(3)
+    else:  # Emission
+        reflectivity = np.zeros(3)
+        emission = _socket_colour(node, "Color", notes, what) * _socket_float(
+            node, "Strength", notes, what, 1.0
+        )
+    return reflectivity, emission, notes
+
+
+def _slot_tables(obj, notes):
+    """Reflectivity and emission of each material slot (at least one row)."""
+    materials = [slot.material for slot in obj.material_slots] or [None]
+    R = np.empty((len(materials), 3))
+    E = np.empty((len(materials), 3))
+    for k, material in enumerate(materials):
+        R[k], E[k], more = material_colours(material)
+        notes.extend(more)
+    return R, E
+
+
+# ---------------------------------------------------------------------------
+# Reading objects
+# ---------------------------------------------------------------------------
+
+def is_result_object(obj) -> bool:
+    return obj is not None and SOURCE_PROPERTY in obj.keys()
+
+
+def source_objects(context):
+    """Selected mesh objects that take part, sorted by name (the patch order)."""
+    objs = [
+        o for o in context.selected_objects
+        if o.type == "MESH" and not is_result_object(o)
+    ]
+    return sorted(objs, key=lambda o: o.name)
+
+
+def _get(collection, attr, count, dtype, width=1):
+    out = np.empty(count * width, dtype=dtype)
+    if count:
+        collection.foreach_get(attr, out)
+    return out.reshape(-1, width) if width > 1 else out
+
+
+def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
+    """Arrays of one object: evaluated (modifiers), world space, outward winding."""
+    evaluated = obj.evaluated_get(depsgraph)
+    mesh = evaluated.to_mesh()
+    try:
+        V = len(mesh.vertices)
+        F = len(mesh.polygons)
+        if F == 0:
+            notes.append(f"'{obj.name}' has no faces and was skipped")
+            return None
+        co = _get(mesh.vertices, "co", V, np.float32, 3).astype(np.float64)
+        face_sizes = _get(mesh.polygons, "loop_total", F, np.int32).astype(np.int64)
+        loop_start = _get(mesh.polygons, "loop_start", F, np.int32).astype(np.int64)
+        material_index = _get(mesh.polygons, "material_index", F, np.int32).astype(np.int64)
+        loop_vertex = _get(mesh.loops, "vertex_index", len(mesh.loops), np.int32).astype(np.int64)
+        # corners face by face (loop_start is normally already in order)
+        order = np.argsort(loop_start, kind="stable")
+        if np.any(order != np.arange(F)) or (F and loop_start[0] != 0):
+            raise SceneError(f"'{obj.name}': unexpected corner order")
+        corner_verts = loop_vertex
+        mesh.calc_loop_triangles()
+        T = len(mesh.loop_triangles)
+        triangles = _get(mesh.loop_triangles, "vertices", T, np.int32, 3).astype(np.int64)
+        triangle_face = _get(mesh.loop_triangles, "polygon_index", T, np.int32).astype(np.int64)
+        R_slots, E_slots = _slot_tables(evaluated, notes)
+    finally:
+        evaluated.to_mesh_clear()
+    M = np.array(obj.matrix_world, dtype=np.float64)
+    vertices = co @ M[:3, :3].T + M[:3, 3]
+    if np.linalg.det(M[:3, :3]) < 0:  # negative scale: keep normals outward
+        corner_verts = meshing.reverse_faces(face_sizes, corner_verts)
+        triangles = triangles[:, ::-1].copy()
+    slot = np.clip(material_index, 0, len(R_slots) - 1)
+    return ObjectArrays(
+        name=obj.name,
+        vertices=vertices,
+        face_sizes=face_sizes,
+        corner_verts=corner_verts,
+        triangles=triangles,
+        triangle_face=triangle_face,
+        face_reflectivity=R_slots[slot],
+        face_emission=E_slots[slot],
+    )
+
+
+def read_selection(context):
+    """(objects, notes) for the selected meshes; SceneError for bad input.
+
+    Raises when nothing usable is selected, when no selected face emits, or
+    when materials hold values the solver cannot use (NaN, negative
+    emission).  Reflectivity above MAX_REFLECTIVITY is clamped with a note.
+    """
+    notes = []
+    candidates = source_objects(context)
+    if not candidates:
+        raise SceneError("Select one or more mesh objects (result objects in 'Radiosity' do not count)")
+    depsgraph = context.evaluated_depsgraph_get()
+    objects = []
+    for obj in candidates:
+        arrays = read_object(obj, depsgraph, notes)
+        if arrays is not None:
+            objects.append(arrays)
+    if not objects:
+        raise SceneError("The selected mesh objects have no faces")
+    for o in objects:
+        for name, values in (("reflectivity", o.face_reflectivity), ("emission", o.face_emission)):
+            if not np.all(np.isfinite(values)):
+                raise SceneError(f"'{o.name}': a material's {name} is not a finite number")
+        if np.any(o.face_emission < 0):
+            raise SceneError(f"'{o.name}': a material has a negative emission (colour or strength)")
+        if np.any(o.face_reflectivity < 0):
+            raise SceneError(f"'{o.name}': a material has a negative base colour")
+        if np.any(o.face_reflectivity > MAX_REFLECTIVITY):
+            notes.append(
+                f"'{o.name}': base colours above {MAX_REFLECTIVITY} were clamped to {MAX_REFLECTIVITY}"
+            )
+            o.face_reflectivity = np.minimum(o.face_reflectivity, MAX_REFLECTIVITY)
+    if not any(np.any(o.face_emission > 0) for o in objects):
+        raise SceneError(
+            "No emitter among the selected objects: give a material an emission strength > 0 "
+            "(Principled BSDF 'Emission Strength' or an Emission shader)"
+        )
+    # unique notes, in order
+    return objects, list(dict.fromkeys(notes))
+
+
+# ---------------------------------------------------------------------------
+# Writing results
+# ---------------------------------------------------------------------------
+
+def result_material():
+    """The material that shows the 'Radiosity' attribute as emission."""
+    material = bpy.data.materials.get(MATERIAL_NAME)
+    if material is not None and material.node_tree is not None:
+        return material
+    material = bpy.data.materials.new(MATERIAL_NAME)
+    if bpy.app.version < (5, 0, 0):
+        material.use_nodes = True
+    tree = material.node_tree
+    tree.nodes.clear()
+    attribute = tree.nodes.new("ShaderNodeAttribute")
+    attribute.attribute_type = "GEOMETRY"
+    attribute.attribute_name = ATTRIBUTE_NAME
+    attribute.location = (-400, 0)
+    emission = tree.nodes.new("ShaderNodeEmission")
+    emission.inputs["Strength"].default_value = 1.0
+    emission.location = (-150, 0)
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
+    output.location = (100, 0)
+    tree.links.new(attribute.outputs["Color"], emission.inputs["Color"])
+    tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    material.diffuse_color = (1.0, 1.0, 1.0, 1.0)
+    return material
+
+
+def result_collection(scene):
+    collection = bpy.data.collections.get(COLLECTION_NAME)
+    if collection is None:
+        collection = bpy.data.collections.new(COLLECTION_NAME)
+    if collection.name not in scene.collection.children:
+        scene.collection.children.link(collection)
+    return collection
+
+
+def previous_results():
+    return [o for o in bpy.data.objects if is_result_object(o)]
+
+
+def remove_previous_results():
+    for obj in previous_results():
+        mesh = obj.data
+        bpy.data.objects.remove(obj, do_unlink=True)
+        if mesh is not None and mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
+
+
+def _rgba(values):
+    values = np.asarray(values, dtype=np.float32).reshape(-1, 3)
+    out = np.ones((len(values), 4), dtype=np.float32)
+    out[:, :3] = values
+    return out.ravel()
+
+
+def build_mesh(name, patch_mesh: meshing.PatchMesh):
+    """A Blender mesh whose faces are the patches (foreach_set only)."""
+    mesh = bpy.data.meshes.new(name)
+    pm = patch_mesh
+    mesh.vertices.add(len(pm.points))
+    mesh.vertices.foreach_set("co", pm.points.astype(np.float32).ravel())
+    mesh.loops.add(len(pm.corner_verts))
+    mesh.loops.foreach_set("vertex_index", pm.corner_verts.astype(np.int32))
+    mesh.polygons.add(pm.patch_count)
+    mesh.polygons.foreach_set("loop_start", pm.face_starts.astype(np.int32))
+    mesh.update()
+    return mesh
+
+
+def write_colours(mesh, patch_mesh, face_colours, point_colours, output):
+    """Add the colour attributes: CORNER (flat per patch) and/or POINT."""
+    names = []
+    if output in ("FACE", "BOTH"):
+        attr = mesh.color_attributes.new(ATTRIBUTE_NAME, "FLOAT_COLOR", "CORNER")
+        attr.data.foreach_set("color", _rgba(meshing.corner_values(patch_mesh, face_colours)))
+        names.append(attr.name)
+    if output in ("VERTEX", "BOTH"):
+        name = ATTRIBUTE_NAME if output == "VERTEX" else POINT_ATTRIBUTE_NAME
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "POINT")
+        attr.data.foreach_set("color", _rgba(point_colours))
+        names.append(attr.name)
+    main = mesh.color_attributes.get(ATTRIBUTE_NAME)
+    mesh.color_attributes.active_color = main
+    try:
+        mesh.color_attributes.render_color_index = mesh.color_attributes.active_color_index
+    except AttributeError:  # older API
+        pass
+    return names
+
+
+def write_results(context, output_data, output_mode):
+    """Replace the previous results with one object per source object.
+
+    ``output_data`` is a worker.SolveOutput.  Returns the new objects.
+    """
+    scene = context.scene
+    remove_previous_results()
+    collection = result_collection(scene)
+    material = result_material()
+    created = []
+    for arrays, pm, faces, points in zip(
+        output_data.patches.objects,
+        output_data.patches.meshes,
+        output_data.face_colours,
+        output_data.point_colours,
+    ):
+        name = arrays.name + RESULT_SUFFIX
+        mesh = build_mesh(name, pm)
+        write_colours(mesh, pm, faces, points, output_mode)
+        mesh.materials.append(material)
+        obj = bpy.data.objects.new(name, mesh)  # vertices are in world space
+        obj[SOURCE_PROPERTY] = arrays.name
+        collection.objects.link(obj)
+        created.append(obj)
+    return created

@@ -1,0 +1,249 @@
+"""The solve, as numpy arrays in and numpy arrays out, and the thread that runs it.
+
+Nothing here imports bpy: the main thread reads the Blender scene into
+:class:`ObjectArrays` (see ``scene_io``), a :class:`SolveJob` meshes, solves
+and averages in a worker thread, and the main thread writes the result.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .core import meshing
+
+#: Reflectivity is clamped below this: the random walks need R < 1.
+MAX_REFLECTIVITY = 0.99
+
+
+@dataclass
+class ObjectArrays:
+    """One source object, read from Blender, world space, outward winding."""
+
+    name: str
+    vertices: np.ndarray  # (V,3) float64
+    face_sizes: np.ndarray  # (F,) int64
+    corner_verts: np.ndarray  # (C,) int64
+    triangles: np.ndarray  # (T,3) int64, Blender's loop triangles (vertex indices)
+    triangle_face: np.ndarray  # (T,) int64
+    face_reflectivity: np.ndarray  # (F,3) float64 in [0, MAX_REFLECTIVITY]
+    face_emission: np.ndarray  # (F,3) float64 >= 0, emission colour x strength
+
+
+@dataclass
+class SolveSettings:
+    estimator: str = "finite"  # "finite" | "biased_infinite"
+    threshold: float = 1e-3
+    relative_rms: float = 0.05  # error target as a fraction of the mean reflected radiosity
+    paths: int | None = None  # fixed path count instead of the error target
+    patch_size: float = 0.5
+    exit_point: str = "random"  # "random" | "hit"
+    seed: int = 0
+    max_seconds: float | None = None
+    threads: int | None = None
+    output: str = "FACE"  # "FACE" | "VERTEX" | "BOTH"
+
+
+@dataclass
+class Patches:
+    """The patch meshes of the source objects and their PatchScene arrays."""
+
+    objects: list  # ObjectArrays
+    meshes: list  # meshing.PatchMesh, one per object
+    combined: meshing.CombinedPatches
+    reflectivity: np.ndarray  # (P,3)
+    emission: np.ndarray  # (P,3)
+
+    def patch_scene(self):
+        from .core import PatchScene
+
+        return PatchScene(
+            self.combined.vertices,
+            self.combined.triangles,
+            self.combined.triangle_patch,
+            self.reflectivity,
+            self.emission,
+        )
+
+
+@dataclass
+class SolveOutput:
+    patches: Patches
+    result: object  # core SolveResult
+    prediction: object  # core Prediction for the run's settings
+    target_mse: float | None
+    face_colours: list = field(default_factory=list)  # (P_k,3) per object
+    point_colours: list = field(default_factory=list)  # (N_k,3) per object, or None
+
+
+def make_patches(objects, patch_size) -> Patches:
+    """Mesh every object into patches and gather per-patch materials."""
+    meshes = [
+        meshing.mesh_patches(
+            o.vertices,
+            o.face_sizes,
+            o.corner_verts,
+            patch_size,
+            face_triangles=o.triangles,
+            triangle_face=o.triangle_face,
+        )
+        for o in objects
+    ]
+    combined = meshing.concatenate(meshes)
+    if combined.patch_count == 0:
+        raise ValueError("the selected objects have no faces")
+    reflectivity = np.concatenate(
+        [o.face_reflectivity[m.patch_face] for o, m in zip(objects, meshes)]
+    ).reshape(-1, 3)
+    emission = np.concatenate(
+        [o.face_emission[m.patch_face] for o, m in zip(objects, meshes)]
+    ).reshape(-1, 3)
+    return Patches(list(objects), meshes, combined, reflectivity, emission)
+
+
+def prediction_for(scene, settings: SolveSettings):
+    """(prediction, target_mse) of the core for these settings, no tracing."""
+    from .core import predict, relative_rms_to_mse
+
+    base = predict(scene, settings.estimator, threshold=settings.threshold)
+    if settings.paths:
+        return predict(scene, settings.estimator, threshold=settings.threshold, paths=int(settings.paths)), None
+    target = relative_rms_to_mse(base, settings.relative_rms)
+    return predict(scene, settings.estimator, threshold=settings.threshold, target_mse=target), target
+
+
+def estimate(objects, settings: SolveSettings) -> dict:
+    """What the panel shows before a run: sizes and the paper's predictions."""
+    from .core import predict
+
+    patches = make_patches(objects, settings.patch_size)
+    scene = patches.patch_scene()
+    p, target = prediction_for(scene, settings)
+    other = "biased_infinite" if settings.estimator == "finite" else "finite"
+    return {
+        "objects": len(objects),
+        "patches": int(scene.patch_count),
+        "paths": int(p.paths),
+        "rays": float(p.expected_rays),
+        "path_length": float(p.expected_path_length),
+        "R_ave": float(p.R_ave),
+        "relative_efficiency": float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency),
+        "target_mse": target,
+        "predicted_mse": float(p.predicted_mse),
+        "other_estimator": other,
+    }
+
+
+def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None) -> SolveOutput:
+    """Mesh, solve and compute the colours to write, for the given objects."""
+    from .core import solve
+
+    patches = make_patches(objects, settings.patch_size)
+    scene = patches.patch_scene()
+    prediction, target = prediction_for(scene, settings)
+    result = solve(
+        scene,
+        settings.estimator,
+        paths=int(settings.paths) if settings.paths else None,
+        target_mse=target,
+        threshold=settings.threshold,
+        seed=int(settings.seed),
+        exit_point=settings.exit_point,
+        stop_rule="predicted",
+        progress=progress,
+        should_stop=should_stop,
+        max_seconds=settings.max_seconds or None,
+        threads=settings.threads or None,
+    )
+    out = SolveOutput(patches, result, prediction, target)
+    radiosity = np.asarray(result.radiosity, dtype=np.float64)
+    for k, mesh in enumerate(patches.meshes):
+        B = radiosity[patches.combined.patch_slice(k)]
+        out.face_colours.append(B)
+        out.point_colours.append(
+            meshing.point_average(mesh, B) if settings.output in ("VERTEX", "BOTH") else None
+        )
+    return out
+
+
+class SolveJob:
+    """Runs :func:`run_solve` in a thread; the main thread polls it.
+
+    ``progress`` is a dict (fraction, paths, rays, seconds, rays_per_second,
+    measured_mse) updated between batches; ``cancel()`` stops the solve at the
+    next batch.  When ``done`` is set, either ``output`` or ``error`` holds the
+    outcome (``error`` is a message for the user, ``traceback`` for developers).
+    """
+
+    def __init__(self, objects, settings: SolveSettings):
+        self.objects = objects
+        self.settings = settings
+        self._lock = threading.Lock()
+        self._cancel = threading.Event()
+        self.done = threading.Event()
+        self.progress = {"fraction": 0.0, "paths": 0, "rays": 0, "seconds": 0.0,
+                         "rays_per_second": 0.0, "measured_mse": None}
+        self.output: SolveOutput | None = None
+        self.error: str | None = None
+        self.traceback: str | None = None
+        self.started = time.perf_counter()
+        self._thread = threading.Thread(target=self._run, name="radiosity-solve", daemon=True)
+
+    def start(self):
+        self._thread.start()
+        return self
+
+    def cancel(self):
+        self._cancel.set()
+
+    @property
+    def cancelled(self) -> bool:
+        return self._cancel.is_set()
+
+    def join(self, timeout=None):
+        self._thread.join(timeout)
+
+    def snapshot(self) -> dict:
+        with self._lock:
+            return dict(self.progress)
+
+    def _on_progress(self, fraction, stats):
+        with self._lock:
+            self.progress = {"fraction": float(fraction), **dict(stats)}
+
+    def _run(self):
+        try:
+            self.output = run_solve(self.objects, self.settings, self._on_progress, self._cancel.is_set)
+        except ValueError as exc:  # bad input: a message for the user
+            self.error = str(exc)
+        except Exception as exc:  # noqa: BLE001 - reported, never raised into Blender
+            import traceback
+
+            self.error = f"{type(exc).__name__}: {exc}"
+            self.traceback = traceback.format_exc()
+        finally:
+            self.done.set()
+
+
+# The job of the running modal solve, if any (one at a time).
+_running: SolveJob | None = None
+
+
+def running_job() -> SolveJob | None:
+    return _running if _running is not None and not _running.done.is_set() else None
+
+
+def set_running_job(job: SolveJob | None):
+    global _running
+    _running = job
+
+
+def cancel_running_job():
+    job = _running
+    if job is not None:
+        job.cancel()
+        job.join(timeout=10)
+    set_running_job(None)
