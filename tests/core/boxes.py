@@ -1,0 +1,57 @@
+"""Closed boxes of axis-aligned rectangular patches, with exact form factors.
+
+Used as analytic references: every patch of a closed box sees every non-coplanar patch whole,
+so the contour-integral form factors are exact.
+"""
+import numpy as np
+
+from addon.core import PatchScene
+from addon.core.reference import rectangle_form_factors
+
+# Six faces of the box [0,sx]x[0,sy]x[0,sz] as (origin, u, v) in units of the size, with
+# u x v pointing into the box: floor, ceiling, x=0, x=sx, y=0, y=sy.
+FACES = (
+    ((0, 0, 0), (1, 0, 0), (0, 1, 0)),
+    ((0, 0, 1), (0, 1, 0), (1, 0, 0)),
+    ((0, 0, 0), (0, 1, 0), (0, 0, 1)),
+    ((1, 0, 0), (0, 0, 1), (0, 1, 0)),
+    ((0, 0, 0), (0, 0, 1), (1, 0, 0)),
+    ((0, 1, 0), (1, 0, 0), (0, 0, 1)),
+)
+FLOOR, CEILING, LEFT, RIGHT, FRONT, BACK = range(6)
+
+
+def box_rectangles(size=(1.0, 1.0, 1.0), n=1, offset=(0.0, 0.0, 0.0), scale=1.0):
+    """Patch rectangles (origin, u, v) and face index of each: n x n patches on every face."""
+    size = np.asarray(size, dtype=np.float64) * scale
+    origins, us, vs, face_of = [], [], [], []
+    for face, (o, u, v) in enumerate(FACES):
+        o, u, v = (np.asarray(x, np.float64) * size for x in (o, u, v))
+        i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        i, j = i.ravel(), j.ravel()
+        origins.append(o + np.outer(i, u / n) + np.outer(j, v / n))
+        us.append(np.tile(u / n, (n * n, 1)))
+        vs.append(np.tile(v / n, (n * n, 1)))
+        face_of.append(np.full(n * n, face))
+    origin = np.concatenate(origins) + np.asarray(offset, np.float64)
+    return origin, np.concatenate(us), np.concatenate(vs), np.concatenate(face_of)
+
+
+def rectangles_to_mesh(origin, u, v):
+    """Two triangles per rectangle, wound so the normal is u x v."""
+    P = origin.shape[0]
+    corners = np.stack([origin, origin + u, origin + u + v, origin + v], axis=1).reshape(-1, 3)
+    base = 4 * np.arange(P)[:, None]
+    triangles = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3)
+    triangle_patch = np.repeat(np.arange(P), 2)
+    return corners, triangles, triangle_patch
+
+
+def box_scene(reflectivity_by_face, emission_by_face, size=(1.0, 1.0, 1.0), n=1, offset=(0, 0, 0), scale=1.0):
+    """PatchScene of a closed box and its exact form factors F (P,P)."""
+    origin, u, v, face = box_rectangles(size, n, offset, scale)
+    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
+    R = np.asarray(reflectivity_by_face, np.float64)[face]
+    E = np.asarray(emission_by_face, np.float64)[face]
+    scene = PatchScene(vertices, triangles, triangle_patch, R, E)
+    return scene, rectangle_form_factors(origin, u, v), face
