@@ -73,10 +73,10 @@ def cornell_box(size=2.0, light_strength=12.0):
     objects = [room, lamp, short, tall]
 
     camera_data = bpy.data.cameras.new("Camera")
-    camera_data.lens = 35
+    camera_data.lens = 45
     camera = bpy.data.objects.new("Camera", camera_data)
     bpy.context.scene.collection.objects.link(camera)
-    camera.location = (s / 2, -1.95 * s, s / 2)
+    camera.location = (s / 2, -1.4 * s, s / 2)
     camera.rotation_euler = (np.pi / 2, 0.0, 0.0)
     bpy.context.scene.camera = camera
 
