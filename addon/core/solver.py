@@ -48,6 +48,7 @@ POLL_SECONDS = 0.05
 class SolveResult:
     radiosity: np.ndarray          # (P,3) B = E + b
     reflected: np.ndarray          # (P,3) b
+    reflected_variance: np.ndarray  # (P,3) batch-means estimate of Var(b), NaN below 2 chunks
     paths: int
     rays: int
     seconds: float
@@ -117,14 +118,23 @@ class _Accumulator:
         b = (self.score * self.incident / self.paths).T
         return np.repeat(b, 3, axis=1) if self.channels == 1 else b
 
-    def measured_mse(self):
-        """Batch-means estimate of the MSE of the current result (variance only)."""
+    def variance_of_mean(self):
+        """Batch-means estimate of Var(b_j) per channel and patch, (C,P); NaN below 2 chunks."""
         if self.chunks < 2:
-            return math.nan
+            return np.full_like(self.incident, math.nan)
         N = self.paths
         spread = np.maximum(self.incident_sq - self.incident**2 / N, 0.0)
-        variance_of_mean = self.score**2 * spread / ((self.chunks - 1) * N)
-        return float((variance_of_mean.mean(axis=0) * self.weight).sum())
+        return self.score**2 * spread / ((self.chunks - 1) * N)
+
+    def reflected_variance(self):
+        v = self.variance_of_mean().T
+        return np.repeat(v, 3, axis=1) if self.channels == 1 else v
+
+    def measured_mse(self):
+        """Batch-means estimate of the MSE of the current result (its variance part)."""
+        if self.chunks < 2:
+            return math.nan
+        return float((self.variance_of_mean().mean(axis=0) * self.weight).sum())
 
     def energy(self):
         """Power balance of the run in the scene's units, per channel (3,)."""
@@ -268,6 +278,7 @@ def solve(
     return SolveResult(
         radiosity=radiosity,
         reflected=reflected,
+        reflected_variance=total.reflected_variance(),
         paths=n,
         rays=total.rays,
         seconds=seconds,
