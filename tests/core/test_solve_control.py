@@ -1,0 +1,102 @@
+"""Reproducibility, runs to an error target, progress, cancel and time limits."""
+import math
+import time
+
+import numpy as np
+import pytest
+
+from addon.core import predict, solve
+from addon.core.solver import chunk_paths_for
+from boxes import box_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    s, _, _ = box_scene([0.3, 0.6, 0.7, 0.5, 0.4, 0.65], [0, 1.0, 0, 0, 0, 0], (1.0, 1.4, 0.8), n=3)
+    return s
+
+
+@pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
+@pytest.mark.parametrize("exit_point", ["random", "hit"])
+def test_bitwise_reproducible_whatever_the_threads(scene, estimator, exit_point):
+    runs = [solve(scene, estimator, paths=50_000, seed=7, threads=t, exit_point=exit_point) for t in (1, 2, 2)]
+    for r in runs[1:]:
+        assert np.array_equal(r.radiosity, runs[0].radiosity)
+        assert r.rays == runs[0].rays
+    other = solve(scene, estimator, paths=50_000, seed=8, threads=2, exit_point=exit_point)
+    assert not np.array_equal(other.radiosity, runs[0].radiosity)
+
+
+def test_predicted_stop_rule_runs_the_predicted_paths(scene):
+    target = 1e-4
+    p = predict(scene, "finite", target_mse=target)
+    r = solve(scene, "finite", target_mse=target, seed=1)
+    assert r.paths == p.paths and r.stopped == "target"
+    assert r.predicted_mse == pytest.approx(p.mse_per_path / p.paths)
+    assert r.predicted_mse <= target
+
+
+def test_measured_stop_rule_stops_at_the_target(scene):
+    target = 2e-4
+    r = solve(scene, "biased_infinite", target_mse=target, stop_rule="measured", seed=2)
+    assert r.stopped == "target"
+    assert r.measured_mse <= target
+    assert r.chunks >= 8
+
+
+def test_progress_reports_and_reaches_one(scene):
+    seen = []
+    solve(scene, "finite", paths=100_000, seed=3, progress=lambda f, stats: seen.append((f, dict(stats))))
+    fractions = [f for f, _ in seen]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    assert seen[-1][1]["paths"] == 100_000
+    assert all(k in seen[-1][1] for k in ("rays", "seconds", "rays_per_second", "measured_mse"))
+
+
+def test_cancel_returns_complete_chunks(scene):
+    calls = {"n": 0}
+
+    def stop_after_two_progress_calls():
+        return calls["n"] >= 2
+
+    def count(fraction, stats):
+        calls["n"] += 1
+
+    r = solve(scene, "finite", paths=5_000_000, seed=4, progress=count, should_stop=stop_after_two_progress_calls)
+    assert r.stopped == "cancelled"
+    assert 0 < r.paths < 5_000_000
+    chunk = chunk_paths_for(predict(scene, "finite").expected_path_length, 5_000_000)
+    assert r.chunks == 2 and r.paths == 2 * chunk
+    assert np.isfinite(r.radiosity).all() and (r.radiosity >= 0).all()
+    # What it returns is an estimate from whole chunks: the energy still balances path by path.
+    assert sum(r.path_ends.values()) == r.paths
+
+
+def test_time_limit(scene):
+    start = time.perf_counter()
+    r = solve(scene, "finite", paths=50_000_000, seed=5, max_seconds=0.3)
+    assert r.stopped == "time_limit"
+    assert time.perf_counter() - start < 5.0
+    assert r.paths < 50_000_000
+
+
+def test_zero_reflectivity_traces_one_bounce(scene):
+    black = scene.with_materials(np.zeros(scene.patch_count), scene.emission)
+    r = solve(black, "finite", paths=10_000, seed=6)
+    assert r.rays == 10_000 and np.array_equal(r.radiosity, black.emission)
+    p = predict(black, "finite", target_mse=1e-6)
+    assert p.paths == 1 and p.mse_per_path == 0
+
+
+@pytest.mark.parametrize("scale, offset", [(1e-4, 0.0), (1e4, 0.0), (1.0, 1e5)])
+def test_scale_and_position_do_not_matter(scale, offset):
+    """Ray offsets are relative to the scene and geometry is centred before float32: the
+    same scene scaled or moved far away gives the same radiosity within the noise."""
+    base, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], (1.0, 1.4, 0.8), n=3)
+    moved, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], (1.0, 1.4, 0.8), n=3, offset=(offset,) * 3, scale=scale)
+    a = solve(base, "finite", paths=200_000, seed=9)
+    b = solve(moved, "finite", paths=200_000, seed=10)
+    # Radiosity is power per area: scaling lengths by s scales B of the same emittance by 1.
+    z = (a.reflected - b.reflected) / np.sqrt(a.reflected_variance + b.reflected_variance)
+    assert np.abs(z[:, 0]).max() < 4.5
+    assert b.path_ends["escaped"] == 0 and b.path_ends["blocked"] == 0
