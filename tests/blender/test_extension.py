@@ -1,0 +1,481 @@
+"""The extension in the bpy module: registration, solve, results, errors, files, panel."""
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+import addon
+from addon import panel, preview, scene_io, worker
+from addon.core import PatchScene, predict, relative_rms_to_mse, solve
+from addon.core.meshing import concatenate, mesh_patches, point_average, triangle_areas
+
+from .conftest import build_test_scene, mesh_arrays, read_colours, result_objects
+
+PATCH_SIZE = 0.25
+ERROR = 10.0  # percent
+
+
+def configure(context, output="FACE", seed=3, threads=1):
+    s = context.scene.radiosity
+    s.patch_size = PATCH_SIZE
+    s.target_error = ERROR
+    s.output = output
+    s.seed = seed
+    s.threads = threads
+    return s
+
+
+# ---------------------------------------------------------------------------
+# Registration
+# ---------------------------------------------------------------------------
+
+def _trace():
+    """Everything the extension could leave behind."""
+    names = {n for n in dir(bpy.types) if "radiosity" in n.lower()}
+    ops = []
+    for op in ("solve", "cancel"):
+        try:
+            getattr(bpy.ops.radiosity, op).get_rna_type()
+            ops.append(op)
+        except KeyError:
+            pass
+    from addon import operators, properties
+
+    registered = [c.__name__ for c in (*properties.classes, *operators.classes, *panel.classes) if c.is_registered]
+    return {
+        "types": names,
+        "registered": registered,
+        "scene_prop": hasattr(bpy.types.Scene, "radiosity"),
+        "ops": ops,
+        "depsgraph_handlers": len(bpy.app.handlers.depsgraph_update_post),
+        "timers": bpy.app.timers.is_registered(preview._start),
+    }
+
+
+def test_register_and_unregister_leave_no_trace():
+    addon.unregister()
+    before = _trace()
+    assert before["types"] == set() and not before["scene_prop"] and before["ops"] == []
+    assert before["registered"] == []
+    for _ in range(2):  # twice: unregister must really undo register
+        addon.register()
+        during = _trace()
+        assert "VIEW3D_PT_radiosity" in during["types"]
+        assert "RADIOSITY_OT_solve" in during["types"]
+        assert during["registered"] == ["RadiositySettings", "RADIOSITY_OT_solve", "RADIOSITY_OT_cancel",
+                                        "VIEW3D_PT_radiosity"]
+        assert during["scene_prop"] and during["ops"] == ["solve", "cancel"]
+        assert during["depsgraph_handlers"] == before["depsgraph_handlers"] + 1
+        addon.unregister()
+        assert _trace() == before
+
+
+# ---------------------------------------------------------------------------
+# Solve and results
+# ---------------------------------------------------------------------------
+
+def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1):
+    """The core on the same patches, meshed from the test's own arrays."""
+    names = sorted(spec)
+    meshes = [mesh_patches(spec[n][0], [len(f) for f in spec[n][1]], np.concatenate(spec[n][1]), PATCH_SIZE)
+              for n in names]
+    c = concatenate(meshes)
+    R = np.concatenate([spec[n][2][m.patch_face] for n, m in zip(names, meshes)])
+    E = np.concatenate([spec[n][3][m.patch_face] for n, m in zip(names, meshes)])
+    scene = PatchScene(c.vertices, c.triangles, c.triangle_patch, R, E)
+    target = relative_rms_to_mse(predict(scene), relative_rms)
+    result = solve(scene, "finite", target_mse=target, seed=seed, threads=threads)
+    return names, meshes, c, result
+
+
+def test_solve_matches_core_on_the_same_patches(blender):
+    spec = build_test_scene()
+    s = configure(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    names, meshes, combined, ref = reference(spec)
+    objs = result_objects()
+    assert [o["radiosity_source"] for o in objs] == names
+    assert [o.name for o in objs] == [n + " Radiosity" for n in names]
+    assert all(o.users_collection[0].name == "Radiosity" for o in objs)
+    for k, (obj, m) in enumerate(zip(objs, meshes)):
+        co, sizes, corners = mesh_arrays(obj.data)
+        np.testing.assert_array_equal(sizes, m.face_sizes)
+        np.testing.assert_array_equal(corners, m.corner_verts)
+        np.testing.assert_allclose(co, m.points, atol=1e-6)
+        domain, colours = read_colours(obj.data, "Radiosity")
+        assert domain == "CORNER"
+        expected = ref.radiosity[combined.patch_slice(k)].astype(np.float32)
+        # flat per patch: every corner of a patch has the patch's colour
+        np.testing.assert_array_equal(colours[:, :3], np.repeat(expected, m.face_sizes, axis=0))
+        np.testing.assert_array_equal(colours[:, 3], 1.0)
+    assert s.last_paths == ref.paths and s.last_rays == ref.rays
+    assert s.last_patches == combined.patch_count
+    assert s.last_stopped == "target"
+    # the lamp emits: its radiosity is at least its emission; walls get light
+    lamp = ref.radiosity[combined.patch_slice(names.index("Lamp"))]
+    assert np.all(lamp >= np.array([4.0, 3.5, 3.0]) - 1e-12)
+    assert np.all(ref.radiosity[combined.patch_slice(names.index("Room"))].mean(axis=0) > 0)
+    # the material shows the attribute as emission
+    material = objs[0].data.materials[0]
+    attribute = next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeAttribute")
+    assert attribute.attribute_name == "Radiosity"
+    assert objs[0].data.color_attributes.active_color.name == "Radiosity"
+
+
+def test_vertex_colours_are_area_weighted_averages(blender):
+    build_test_scene()
+    configure(blender, output="BOTH")
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    for obj in result_objects():
+        mesh = obj.data
+        co, sizes, corners = mesh_arrays(mesh)
+        _, flat = read_colours(mesh, "Radiosity")
+        domain, smooth = read_colours(mesh, "Radiosity Vertex")
+        assert domain == "POINT" and len(smooth) == len(mesh.vertices)
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        num = np.zeros((len(co), 3))
+        den = np.zeros(len(co))
+        for s, n in zip(starts, sizes):  # plain loop: an independent check
+            p = co[corners[s:s + n]].astype(float)
+            area = 0.5 * np.linalg.norm(np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0))
+            for v in set(corners[s:s + n]):
+                num[v] += area * flat[s, :3]
+                den[v] += area
+        np.testing.assert_allclose(smooth[:, :3], num / den[:, None], rtol=2e-5, atol=1e-7)
+
+
+def test_vertex_only_output_writes_point_attribute_named_radiosity(blender):
+    build_test_scene()
+    configure(blender, output="VERTEX")
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    for obj in result_objects():
+        assert [a.name for a in obj.data.color_attributes] == ["Radiosity"]
+        assert obj.data.color_attributes["Radiosity"].domain == "POINT"
+
+
+def _snapshot():
+    out = {}
+    for obj in bpy.data.objects:
+        if "radiosity_source" in obj.keys():
+            continue
+        entry = {"matrix": tuple(map(tuple, obj.matrix_world)), "materials": [s.material and s.material.name for s in obj.material_slots]}
+        if obj.type == "MESH":
+            co, sizes, corners = mesh_arrays(obj.data)
+            entry.update(co=co.tobytes(), sizes=sizes.tobytes(), corners=corners.tobytes(),
+                         attributes=sorted(a.name for a in obj.data.attributes))
+        out[obj.name] = entry
+    materials = {}
+    for m in bpy.data.materials:
+        if m.node_tree is None:
+            continue
+        materials[m.name] = [
+            (n.name, i.name, repr(tuple(i.default_value) if hasattr(i.default_value, "__len__") else i.default_value))
+            for n in m.node_tree.nodes for i in n.inputs if hasattr(i, "default_value")
+        ]
+    return out, materials
+
+
+def test_originals_are_unchanged_and_rerun_replaces_results(blender):
+    build_test_scene()
+    configure(blender)
+    before = _snapshot()
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    first = [(o.name, o.data.name) for o in result_objects()]
+    after_objects, after_materials = _snapshot()
+    assert after_objects == before[0]
+    for name, values in before[1].items():  # the result material is new, the others the same
+        assert after_materials[name] == values
+    blender.scene.radiosity.seed = 11
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    second = [(o.name, o.data.name) for o in result_objects()]
+    assert second == first  # replaced, not ".001" copies
+    assert len(bpy.data.collections["Radiosity"].objects) == 3
+    assert not [m for m in bpy.data.meshes if m.name.endswith(".001")]
+    assert _snapshot()[0] == before[0]
+
+
+def test_result_objects_in_the_selection_are_ignored(blender):
+    build_test_scene()
+    configure(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    for o in result_objects():
+        o.select_set(True)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    assert len(result_objects()) == 3
+
+
+def test_negative_scale_and_modifiers_keep_outward_normals(blender):
+    spec = build_test_scene()
+    block = bpy.data.objects["Block"]
+    block.scale = (-1, 1, 1)
+    block.location = (0.7, 0, 0)  # mirrored into x in [0.2, 0.5] again
+    configure(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    mesh = bpy.data.objects["Block Radiosity"].data
+    co, sizes, corners = mesh_arrays(mesh)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    centre = co.mean(axis=0)
+    for s, n in zip(starts, sizes):
+        p = co[corners[s:s + n]].astype(float)
+        normal = np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
+        assert np.dot(normal, p.mean(axis=0) - centre) > 0  # outward
+    _ = spec
+
+
+def test_textured_and_unusual_materials_are_read_with_notes(blender):
+    m = bpy.data.materials.new("Textured")
+    tree = m.node_tree
+    node = tree.nodes["Principled BSDF"]
+    node.inputs["Base Color"].default_value = (0.2, 0.3, 0.4, 1)
+    tex = tree.nodes.new("ShaderNodeTexChecker")
+    tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
+    R, E, notes = scene_io.material_colours(m)
+    np.testing.assert_allclose(R, [0.2, 0.3, 0.4], rtol=1e-6)
+    assert any("Base Color" in n for n in notes)
+    d = bpy.data.materials.new("Diffuse")
+    d.node_tree.nodes.remove(d.node_tree.nodes["Principled BSDF"])
+    diffuse = d.node_tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (0.1, 0.5, 0.2, 1)
+    d.node_tree.links.new(diffuse.outputs["BSDF"], d.node_tree.nodes["Material Output"].inputs["Surface"])
+    R, E, notes = scene_io.material_colours(d)
+    np.testing.assert_allclose(R, [0.1, 0.5, 0.2], rtol=1e-6)
+    np.testing.assert_array_equal(E, 0)
+    e = bpy.data.materials.new("Lamp")
+    e.node_tree.nodes.remove(e.node_tree.nodes["Principled BSDF"])
+    em = e.node_tree.nodes.new("ShaderNodeEmission")
+    em.inputs["Color"].default_value = (1, 0.5, 0.25, 1)
+    em.inputs["Strength"].default_value = 8.0
+    e.node_tree.links.new(em.outputs["Emission"], e.node_tree.nodes["Material Output"].inputs["Surface"])
+    R, E, _ = scene_io.material_colours(e)
+    np.testing.assert_allclose(E, [8, 4, 2])
+    np.testing.assert_array_equal(R, 0)
+    R, E, _ = scene_io.material_colours(None)
+    np.testing.assert_allclose(R, 0.8)
+
+
+def test_closed_box_gives_cycles_units(blender):
+    """A closed box emitting S everywhere with albedo R has B = S / (1 - R)."""
+    from .conftest import box_arrays, make_object, principled
+
+    S, R = 2.0, 0.5
+    v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    obj = make_object("Closed", v, f, [principled("Glow", (R, R, R), (1, 1, 1), S)])
+    obj.select_set(True)
+    s = configure(blender)
+    s.patch_size = 0.5
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    _, colours = read_colours(result_objects()[0].data, "Radiosity")
+    np.testing.assert_allclose(colours[:, :3].mean(), S / (1 - R), rtol=0.05)
+
+
+# ---------------------------------------------------------------------------
+# Bad input: reported, nothing changed
+# ---------------------------------------------------------------------------
+
+def _expect_error(match):
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.radiosity.solve()
+
+
+def test_bad_input_is_reported_and_changes_nothing(blender):
+    build_test_scene()
+    configure(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    state = _snapshot()
+    results = {o.name: read_colours(o.data, "Radiosity")[1].tobytes() for o in result_objects()}
+    stats = blender.scene.radiosity.last_paths
+
+    def unchanged():
+        assert _snapshot() == state
+        assert {o.name: read_colours(o.data, "Radiosity")[1].tobytes() for o in result_objects()} == results
+        assert blender.scene.radiosity.last_paths == stats
+
+    for o in bpy.data.objects:
+        o.select_set(False)
+    _expect_error("Select one or more mesh objects")
+    unchanged()
+
+    bpy.data.objects["Room"].select_set(True)
+    _expect_error("No emitter")
+    unchanged()
+
+    bpy.data.objects["Lamp"].select_set(True)
+    lamp_node = bpy.data.materials["Emitter"].node_tree.nodes["Principled BSDF"]
+    lamp_node.inputs["Emission Strength"].default_value = -1.0
+    state = _snapshot()
+    _expect_error("negative emission")
+    unchanged()
+    lamp_node.inputs["Emission Strength"].default_value = 4.0
+
+    white = bpy.data.materials["White"].node_tree.nodes["Principled BSDF"]
+    white.inputs["Base Color"].default_value = (math.nan, 0.5, 0.5, 1.0)
+    state = _snapshot()
+    _expect_error("not a finite number")
+    unchanged()
+
+
+# ---------------------------------------------------------------------------
+# Files
+# ---------------------------------------------------------------------------
+
+def test_saved_blend_reloads_with_the_attribute(blender, tmp_path):
+    build_test_scene()
+    configure(blender, output="BOTH")
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    saved = {o.name: (read_colours(o.data, "Radiosity")[1].copy(), read_colours(o.data, "Radiosity Vertex")[1].copy())
+             for o in result_objects()}
+    path = str(tmp_path / "result.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert not result_objects()
+    bpy.ops.wm.open_mainfile(filepath=path)
+    objs = result_objects()
+    assert sorted(o.name for o in objs) == sorted(saved)
+    for o in objs:
+        domain, flat = read_colours(o.data, "Radiosity")
+        assert domain == "CORNER" and o.data.color_attributes["Radiosity"].data_type == "FLOAT_COLOR"
+        np.testing.assert_array_equal(flat, saved[o.name][0])
+        np.testing.assert_array_equal(read_colours(o.data, "Radiosity Vertex")[1], saved[o.name][1])
+    assert bpy.context.scene.radiosity.last_paths > 0
+
+
+# ---------------------------------------------------------------------------
+# Estimate and panel
+# ---------------------------------------------------------------------------
+
+def test_estimate_matches_the_core_prediction(blender):
+    spec = build_test_scene()
+    configure(blender)
+    value = preview.compute(blender)
+    names, meshes, combined, _ = reference(spec)
+    scene = PatchScene(combined.vertices, combined.triangles, combined.triangle_patch,
+                       np.concatenate([spec[n][2][m.patch_face] for n, m in zip(names, meshes)]),
+                       np.concatenate([spec[n][3][m.patch_face] for n, m in zip(names, meshes)]))
+    p = predict(scene, "finite", target_mse=relative_rms_to_mse(predict(scene), ERROR / 100))
+    assert value["patches"] == combined.patch_count
+    assert value["paths"] == p.paths
+    assert value["rays"] == pytest.approx(p.expected_rays)
+    R = p.R_ave
+    t = blender.scene.radiosity.threshold
+    assert value["relative_efficiency"] == pytest.approx((1 - R) * (1 + math.log(t) / math.log(R)) / (1 + R))
+    blender.scene.radiosity.patch_size = PATCH_SIZE / 2
+    assert preview.compute(blender)["patches"] > value["patches"]
+    for o in bpy.data.objects:
+        o.select_set(False)
+    assert "error" in preview.compute(blender)
+
+
+class FakeLayout:
+    """Stands in for UILayout: records what is drawn, checks props exist."""
+
+    def __init__(self, log=None):
+        self.log = [] if log is None else log
+        self.enabled = True
+        self.active = True
+
+    def _child(self, *args, **kwargs):
+        return FakeLayout(self.log)
+
+    column = row = box = split = _child
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, name
+        self.log.append(("prop", name))
+
+    def label(self, text="", **kwargs):
+        self.log.append(("label", text))
+
+    def operator(self, idname, **kwargs):
+        module, name = idname.split(".")
+        getattr(getattr(bpy.ops, module), name).get_rna_type()
+        self.log.append(("operator", idname))
+
+    def progress(self, factor=0.0, type="BAR", text=""):
+        assert 0.0 <= factor <= 1.0
+        self.log.append(("progress", text))
+
+
+def draw_panel(context):
+    class Host:
+        layout = FakeLayout()
+
+    panel.VIEW3D_PT_radiosity.draw(Host, context)
+    return Host.layout.log
+
+
+def test_panel_draws_in_empty_normal_and_running_states(blender):
+    # empty scene
+    log = draw_panel(blender)
+    assert ("operator", "radiosity.solve") in log and ("prop", "estimator") in log
+    # normal: selection with a fresh estimate in the cache
+    build_test_scene()
+    configure(blender)
+    preview.STATE.value, preview.STATE.key = preview.compute(blender), preview._key(blender)
+    log = draw_panel(blender)
+    labels = " ".join(t for k, t in log if k == "label")
+    assert "Patches:" in labels and "Rel. efficiency (4)" in labels
+    # error estimate shown for an empty selection
+    for o in bpy.data.objects:
+        o.select_set(False)
+    preview.STATE.value, preview.STATE.key = preview.compute(blender), preview._key(blender)
+    labels = " ".join(t for k, t in draw_panel(blender) if k == "label")
+    assert "Select" in labels
+    # running: a job that has not finished
+    objects, _ = (None, None)
+    for name in ("Room", "Lamp", "Block"):
+        bpy.data.objects[name].select_set(True)
+    objects, _ = scene_io.read_selection(blender)
+    job = worker.SolveJob(objects, blender.scene.radiosity.solve_settings())
+    job._on_progress(0.4, {"paths": 1000, "rays": 2000, "seconds": 0.1, "rays_per_second": 20000.0,
+                           "measured_mse": 1e-3})
+    worker.set_running_job(job)
+    try:
+        log = draw_panel(blender)
+    finally:
+        worker.set_running_job(None)
+    assert ("operator", "radiosity.cancel") in log
+    assert ("operator", "radiosity.solve") not in log
+    assert any(k == "progress" and "40%" in t for k, t in log)
+    # after a run: statistics
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    labels = " ".join(t for k, t in draw_panel(blender) if k == "label")
+    assert "Last run" in labels and "Stopped by: target" in labels
+
+
+# ---------------------------------------------------------------------------
+# Worker thread: cancel
+# ---------------------------------------------------------------------------
+
+def test_worker_thread_cancels_between_batches(blender):
+    build_test_scene()
+    configure(blender)
+    objects, _ = scene_io.read_selection(blender)
+    settings = blender.scene.radiosity.solve_settings()
+    settings.paths = 50_000_000  # far more than the test waits for
+    job = worker.SolveJob(objects, settings).start()
+    deadline = 60
+    import time
+
+    t0 = time.perf_counter()
+    while job.snapshot()["paths"] == 0 and time.perf_counter() - t0 < deadline:
+        time.sleep(0.01)
+    job.cancel()
+    job.join(timeout=deadline)
+    assert job.done.is_set() and job.error is None
+    assert job.output.result.stopped == "cancelled"
+    assert 0 < job.output.result.paths < settings.paths
+    assert not result_objects()  # nothing written by the worker
+
+
+def test_worker_reports_core_errors_as_messages(blender):
+    build_test_scene()
+    configure(blender)
+    objects, _ = scene_io.read_selection(blender)
+    settings = blender.scene.radiosity.solve_settings()
+    settings.estimator = "biased_infinite"
+    settings.threshold = 2.0  # outside (0, 1): the core refuses
+    job = worker.SolveJob(objects, settings)
+    job._run()
+    assert job.output is None and "threshold" in job.error and job.traceback is None
