@@ -72,6 +72,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         job = self._job
         if event.type == "ESC" and event.value == "PRESS":
             job.cancel()
+            return {"RUNNING_MODAL"}  # consumed; finishes on the next timer tick
         if job.done.is_set():
             return self._finish(context)
         if event.type == "TIMER":

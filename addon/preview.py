@@ -81,7 +81,11 @@ def _start():
         STATE.pending_key = None
         _redraw_all()
         return None
-    except Exception:  # noqa: BLE001
+    except Exception as exc:  # noqa: BLE001 - shown in the panel, never raised
+        STATE.value = {"error": f"{type(exc).__name__}: {exc}"}
+        STATE.key = STATE.pending_key
+        STATE.pending_key = None
+        _redraw_all()
         return None
 
     def run():

@@ -144,10 +144,10 @@ def is_result_object(obj) -> bool:
 
 def source_objects(context):
     """Selected mesh objects that take part, sorted by name (the patch order)."""
-    objs = [
-        o for o in context.selected_objects
-        if o.type == "MESH" and not is_result_object(o)
-    ]
+    selected = getattr(context, "selected_objects", None)
+    if selected is None:  # window-less contexts (timers): the view layer's selection
+        selected = [o for o in context.view_layer.objects if o.select_get()]
+    objs = [o for o in selected if o.type == "MESH" and not is_result_object(o)]
     return sorted(objs, key=lambda o: o.name)
 
 
@@ -336,6 +336,17 @@ def write_colours(mesh, patch_mesh, face_colours, point_colours, output):
     return names
 
 
+def show_attribute_in_solid_view():
+    """Let the 3D views' solid shading colour objects by their colour attribute."""
+    for screen in bpy.data.screens:
+        for area in screen.areas:
+            if area.type != "VIEW_3D":
+                continue
+            for space in area.spaces:
+                if space.type == "VIEW_3D":
+                    space.shading.color_type = "VERTEX"
+
+
 def write_results(context, output_data, output_mode):
     """Replace the previous results with one object per source object.
 
@@ -360,4 +371,5 @@ def write_results(context, output_data, output_mode):
         obj[SOURCE_PROPERTY] = arrays.name
         collection.objects.link(obj)
         created.append(obj)
+    show_attribute_in_solid_view()
     return created

@@ -479,3 +479,100 @@ def test_worker_reports_core_errors_as_messages(blender):
     job = worker.SolveJob(objects, settings)
     job._run()
     assert job.output is None and "threshold" in job.error and job.traceback is None
+
+
+# ---------------------------------------------------------------------------
+# The modal path (worker thread + timer), driven with stand-in events: the
+# bpy module has no window, so Blender itself never calls invoke/modal here.
+# ---------------------------------------------------------------------------
+
+class FakeEvent:
+    def __init__(self, type, value="NOTHING"):
+        self.type = type
+        self.value = value
+
+
+def _modal_operator():
+    from addon.operators import RADIOSITY_OT_solve as Op
+
+    class ModalStandIn:
+        _job = None
+        _timer = None
+        _notes = ()
+        _start_job = Op._start_job
+        _cleanup = Op._cleanup
+        _finish = Op._finish
+        modal = Op.modal
+
+        def __init__(self):
+            self.reports = []
+
+        def report(self, kind, message):
+            self.reports.append((sorted(kind)[0], message))
+
+    return ModalStandIn()
+
+
+def _drive(op, context, cancel=False, seconds=60):
+    import time
+
+    t0 = time.perf_counter()
+    if cancel:
+        while op._job.snapshot()["paths"] == 0 and time.perf_counter() - t0 < seconds:
+            time.sleep(0.01)
+        assert op.modal(context, FakeEvent("ESC", "PRESS")) == {"RUNNING_MODAL"}
+    while time.perf_counter() - t0 < seconds:
+        state = op.modal(context, FakeEvent("TIMER"))
+        if state != {"PASS_THROUGH"}:
+            return state
+        time.sleep(0.02)
+    raise AssertionError("the modal solve did not finish")
+
+
+def test_modal_solve_cancel_leaves_the_scene_as_before(blender):
+    build_test_scene()
+    configure(blender)
+    s = blender.scene.radiosity
+    s.target_error = 0.05  # millions of paths: still running when Esc comes
+    before = _snapshot()
+    op = _modal_operator()
+    assert op._start_job(blender, threaded=True) is None
+    assert worker.running_job() is op._job
+    assert not bpy.ops.radiosity.solve.poll()  # one solve at a time
+    assert _drive(op, blender, cancel=True) == {"CANCELLED"}
+    assert worker.running_job() is None
+    assert op._job.output.result.stopped == "cancelled"
+    assert ("INFO", "Radiosity cancelled: the scene is unchanged") in op.reports
+    assert not result_objects() and "Radiosity" not in bpy.data.collections
+    assert _snapshot() == before and s.last_paths == 0
+
+
+def test_modal_solve_writes_the_same_result_as_the_synchronous_one(blender):
+    build_test_scene()
+    configure(blender)
+    op = _modal_operator()
+    assert op._start_job(blender, threaded=True) is None
+    assert _drive(op, blender) == {"FINISHED"}
+    assert worker.running_job() is None
+    threaded = {o.name: read_colours(o.data, "Radiosity")[1].copy() for o in result_objects()}
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    synchronous = {o.name: read_colours(o.data, "Radiosity")[1] for o in result_objects()}
+    assert threaded.keys() == synchronous.keys()
+    for name in threaded:
+        np.testing.assert_array_equal(threaded[name], synchronous[name])
+
+
+def test_modifiers_are_applied(blender):
+    build_test_scene()
+    block = bpy.data.objects["Block"]
+    mod = block.modifiers.new("Array", "ARRAY")
+    mod.count = 2
+    mod.relative_offset_displace = (0, 1.2, 0)
+    configure(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    co, sizes, _ = mesh_arrays(bpy.data.objects["Block Radiosity"].data)
+    assert co[:, 1].max() > 0.5 + 0.3  # the arrayed copy is there
+    block.modifiers.remove(mod)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    co2, sizes2, _ = mesh_arrays(bpy.data.objects["Block Radiosity"].data)
+    assert len(sizes2) * 2 == len(sizes)
