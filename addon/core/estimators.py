@@ -97,7 +97,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
     ended = {"escaped": 0, "blocked": 0, "absorbed": 0, "threshold": 0}
 
     patch = tables.sources.choose(rng.random(paths))
-    weights = None if tables.unit_weights else tables.start_weight[:, patch]
+    weights = None if tables.unit_weights else np.take(tables.start_weight, patch, axis=1)
     emitted = _weight_sum(weights, slice(None)) if weights is not None else np.array([float(paths)])
     accumulated = np.ones(paths) if not finite else None  # product of R_bar along the path
     leave_from = None  # hit points, for exit_point="hit"
@@ -121,7 +121,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
 
         missed = hit < 0
         hit_safe = np.where(missed, 0, hit)
-        facing = np.einsum("ij,ij->i", directions, g.triangle_normal[hit_safe]) < 0
+        facing = np.einsum("ij,ij->i", directions, np.take(g.triangle_normal, hit_safe, axis=0)) < 0
         front = facing & ~missed
         if not front.all():
             back = ~missed & ~facing
@@ -136,11 +136,13 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             hit = hit[keep]
             u5 = u[5][keep]
             if weights is not None:
-                weights = weights[:, keep]
+                weights = np.take(weights, keep, axis=1)
             if accumulated is not None:
                 accumulated = accumulated[keep]
             if not tables.exit_random:
-                origins, directions, distance = origins[keep], directions[keep], distance[keep]
+                origins = np.take(origins, keep, axis=0)
+                directions = np.take(directions, keep, axis=0)
+                distance = distance[keep]
         else:
             u5 = u[5]
         if hit.size == 0:
@@ -162,9 +164,9 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             patch = patch[go_on]
             hit_triangle = hit_triangle[go_on]
             if weights is not None:
-                weights = weights[:, go_on] * tables.survivor_weight[:, patch]
+                weights = np.take(weights, go_on, axis=1) * np.take(tables.survivor_weight, patch, axis=1)
         else:
-            weights = weights * tables.reflectivity[:, patch]
+            weights = weights * np.take(tables.reflectivity, patch, axis=1)
             accumulated = accumulated * tables.mean_reflectivity[patch]
             cut = accumulated < tables.threshold
             if cut.any():
@@ -172,14 +174,18 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 ended["threshold"] += int(np.count_nonzero(cut))
                 go_on = np.flatnonzero(~cut)
                 patch, hit_triangle = patch[go_on], hit_triangle[go_on]
-                weights, accumulated = weights[:, go_on], accumulated[go_on]
+                weights, accumulated = np.take(weights, go_on, axis=1), accumulated[go_on]
             else:
                 go_on = slice(None)
 
         if not tables.exit_random:
-            o, d, t = origins[go_on], directions[go_on], distance[go_on]
-            leave_from = o + d * t[:, None]
-            leave_from += g.triangle_normal[hit_triangle] * np.float32(g.ray_offset)
+            if not isinstance(go_on, slice):
+                origins = np.take(origins, go_on, axis=0)
+                directions = np.take(directions, go_on, axis=0)
+                distance = distance[go_on]
+            leave_from = directions * distance[:, None]
+            leave_from += origins
+            leave_from += np.take(g.triangle_normal, hit_triangle, axis=0) * np.float32(g.ray_offset)
         n = patch.size
 
     return ChunkTally(

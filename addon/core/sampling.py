@@ -10,7 +10,12 @@ TWO_PI = np.float32(2.0 * np.pi)
 
 
 class SourceTable:
-    """Chooses emitting patches with probability Phi_i / Phi_T (power summed over channels)."""
+    """Chooses emitting patches with probability Phi_i / Phi_T (power summed over channels).
+
+    A guide table (the cutpoint method) makes each choice O(1) on average: bucket m of M
+    equal buckets of [0,1) stores the first source whose cumulative probability passes
+    m / M, and a short vectorised walk finishes the search.
+    """
 
     def __init__(self, patch_area, emission):
         power = patch_area * emission.sum(axis=1)
@@ -19,22 +24,37 @@ class SourceTable:
         self.cdf = cumulative / cumulative[-1]
         self.cdf[-1] = 1.0
         self.probability = power[self.patches] / cumulative[-1]
+        buckets = self.patches.size
+        self.guide = np.searchsorted(self.cdf, np.arange(buckets) / buckets, side="right")
 
     def choose(self, u):
-        """Patch index for each uniform u in [0, 1)."""
-        k = np.searchsorted(self.cdf, u, side="right")
-        np.minimum(k, self.patches.size - 1, out=k)
+        """Patch index for each uniform u in [0, 1): the first k with u < cdf[k]."""
+        k = self.guide[(u * self.guide.size).astype(np.int64)]
+        behind = np.flatnonzero(self.cdf[k] <= u)
+        while behind.size:
+            k[behind] += 1
+            behind = behind[self.cdf[k[behind]] <= u[behind]]
         return self.patches[k]
 
 
 def choose_triangles(geometry, patch, u):
-    """A triangle of each patch, chosen with probability proportional to its area."""
+    """A triangle of each patch, chosen with probability proportional to its area.
+
+    Patches of one or two triangles (the common case: quads) need one comparison; larger
+    patches search their cumulative areas.
+    """
     first = geometry.patch_first_triangle[patch]
     if geometry.max_triangles_per_patch == 1:
         return first
-    k = np.searchsorted(geometry.triangle_key, patch + u.astype(np.float64), side="right")
-    last = first + geometry.patch_triangle_count[patch] - 1
-    return np.clip(k, first, last)
+    triangle = first + (u >= geometry.patch_first_fraction[patch])
+    if geometry.max_triangles_per_patch > 2:
+        many = np.flatnonzero(geometry.patch_triangle_count[patch] > 2)
+        if many.size:
+            p = patch[many]
+            k = np.searchsorted(geometry.triangle_key, p + u[many].astype(np.float64), side="right")
+            last = first[many] + geometry.patch_triangle_count[p] - 1
+            triangle[many] = np.clip(k, first[many], last)
+    return triangle
 
 
 def points_on_triangles(geometry, triangle, u1, u2):
@@ -44,22 +64,34 @@ def points_on_triangles(geometry, triangle, u1, u2):
     and needs no square root. float32 (n,3), centred coordinates.
     """
     fold = (u1 + u2) > 1
-    a = np.where(fold, 1 - u1, u1)
-    b = np.where(fold, 1 - u2, u2)
-    points = geometry.triangle_origin[triangle]
-    points += geometry.triangle_edge1[triangle] * a[:, None]
-    points += geometry.triangle_edge2[triangle] * b[:, None]
+    a = np.where(fold, 1 - u1, u1)[:, None]
+    b = np.where(fold, 1 - u2, u2)[:, None]
+    frame = np.take(geometry.triangle_frame, triangle, axis=0)  # one gather: origin, edge1, edge2
+    points = frame[:, 3:6] * a
+    points += frame[:, 0:3]
+    points += frame[:, 6:9] * b
     return points
 
 
 def cosine_directions(geometry, patch, u1, u2):
-    """Directions about each patch's normal with density cos(theta)/pi. float32 (n,3) unit."""
-    phi = TWO_PI * u1
-    sin_theta = np.sqrt(u2)
-    cos_theta = np.sqrt(1 - u2)
-    x = (sin_theta * np.cos(phi))[:, None]
-    y = (sin_theta * np.sin(phi))[:, None]
-    directions = geometry.patch_normal[patch] * cos_theta[:, None]
-    directions += geometry.patch_tangent[patch] * x
-    directions += geometry.patch_bitangent[patch] * y
+    """Directions about each patch's normal with density cos(theta)/pi. float32 (n,3) unit.
+
+    A uniform point s on the unit sphere, added to the normal, gives the direction n + s of a
+    uniform point on the unit sphere resting on the surface, and such directions are
+    cosine-distributed (Malley's method seen from the sphere). One gather, no frame.
+    """
+    z = 1 - 2 * u1
+    r = np.sqrt(np.maximum(1 - z * z, 0))
+    phi = TWO_PI * u2
+    directions = np.take(geometry.patch_normal, patch, axis=0)
+    directions[:, 0] += r * np.cos(phi)
+    directions[:, 1] += r * np.sin(phi)
+    directions[:, 2] += z
+    length = np.sqrt(np.einsum("ij,ij->i", directions, directions))
+    # s = -n has probability zero, but float32 can land there: fall back to the normal.
+    degenerate = length < 1e-6
+    if degenerate.any():
+        directions[degenerate] = geometry.patch_normal[patch[degenerate]]
+        length[degenerate] = 1
+    directions /= length[:, None]
     return directions

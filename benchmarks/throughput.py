@@ -1,0 +1,114 @@
+"""Throughput of solve() against Embree's raw ray rate, measured in the same run.
+
+    python -m benchmarks.throughput [--scene room_fig4|cornell] [--threads 1 2] [--seconds 3]
+
+The raw rate traces the same kind of rays (uniform points on patches, cosine directions,
+drawn once beforehand) with embreex alone, split over the same number of threads; the
+end-to-end rate is rays / seconds of a whole solve (sampling, tracing, scoring, threads).
+Machines here are shared and noisy, so only the ratio of the two is meaningful.
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from addon.core import predict, solve
+from addon.core.sampling import choose_triangles, cosine_directions, points_on_triangles
+
+RESULTS = Path(__file__).parent / "results"
+
+
+def sample_rays(scene, count, seed=0):
+    """Rays as the walks cast them: a patch by area, a uniform point on it, a cosine direction."""
+    g = scene.geometry
+    rng = np.random.default_rng(seed)
+    cdf = np.cumsum(g.patch_area) / g.patch_area.sum()
+    patch = np.minimum(np.searchsorted(cdf, rng.random(count), side="right"), scene.patch_count - 1)
+    u = rng.random((5, count), dtype=np.float32)
+    triangle = choose_triangles(g, patch, u[0])
+    return points_on_triangles(g, triangle, u[1], u[2]), cosine_directions(g, patch, u[3], u[4])
+
+
+def raw_rate(scene, threads, seconds, batch=1 << 16):
+    """Rays per second of embreex alone on pre-drawn rays, over ``threads`` threads."""
+    origins, directions = sample_rays(scene, batch * 8)
+    tracer = scene.tracer
+    tracer.first_hit(origins[:batch], directions[:batch])  # warm up
+
+    def worker(offset):
+        rays, k = 0, offset
+        start = time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            s = (k % 8) * batch
+            tracer.first_hit(origins[s : s + batch], directions[s : s + batch])
+            rays += batch
+            k += 1
+        return rays, time.perf_counter() - start
+
+    with ThreadPoolExecutor(threads) as pool:
+        results = list(pool.map(worker, range(threads)))
+    return sum(r for r, _ in results) / max(t for _, t in results)
+
+
+def solve_rate(scene, estimator, threads, seconds, **kw):
+    p = predict(scene, estimator, threshold=kw.get("threshold", 1e-3))
+    paths = int(seconds * 1.5e6 / p.expected_path_length * threads)
+    solve(scene, estimator, paths=min(paths, 20_000), threads=threads, **kw)  # warm up
+    r = solve(scene, estimator, paths=paths, threads=threads, seed=1, max_seconds=seconds, **kw)
+    return r.rays / r.seconds, r
+
+
+def build_scene(name):
+    if name == "room_fig4":
+        from sample_scenes import room_fig4
+
+        return room_fig4.build().scene
+    if name == "cornell":
+        from sample_scenes import cornell_box
+
+        return cornell_box.build().scene
+    raise SystemExit(f"unknown scene {name}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scene", nargs="+", default=["cornell", "room_fig4"])
+    ap.add_argument("--threads", nargs="+", type=int, default=[1, 2])
+    ap.add_argument("--seconds", type=float, default=3.0)
+    ap.add_argument("--out", default=str(RESULTS / "throughput.md"))
+    args = ap.parse_args(argv)
+    rows = []
+    for name in args.scene:
+        scene = build_scene(name)
+        for threads in args.threads:
+            raw = raw_rate(scene, threads, args.seconds)
+            for estimator, kw in (("finite", {}), ("biased_infinite", {"threshold": 1e-3})):
+                for exit_point in ("random", "hit"):
+                    rate, r = solve_rate(scene, estimator, threads, args.seconds, exit_point=exit_point, **kw)
+                    row = (name, scene.triangle_count, threads, estimator, exit_point, raw / 1e6, rate / 1e6, rate / raw)
+                    rows.append(row)
+                    print("{:10s} {:7d} tris  {} thr  {:16s} {:6s}  raw {:6.2f} Mray/s  solve {:6.2f} Mray/s  ratio {:.2f}".format(*row), flush=True)
+    lines = [
+        "# Throughput: solve() against Embree's raw ray rate",
+        "",
+        f"Machine: {platform.processor() or platform.machine()}, {platform.python_version()}; "
+        f"`python -m benchmarks.throughput {' '.join(sys.argv[1:])}`.",
+        "Raw: embreex alone on pre-drawn rays of the same kind over the same threads, measured in the same run.",
+        "",
+        "| scene | triangles | threads | estimator | exit point | raw Mray/s | solve Mray/s | ratio |",
+        "|---|---:|---:|---|---|---:|---:|---:|",
+    ]
+    lines += ["| {} | {} | {} | {} | {} | {:.2f} | {:.2f} | {:.2f} |".format(*r) for r in rows]
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text("\n".join(lines) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

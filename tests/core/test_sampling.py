@@ -1,0 +1,67 @@
+"""The sampling primitives: sources by power, uniform points, cosine directions."""
+import numpy as np
+
+from addon.core.sampling import SourceTable, choose_triangles, cosine_directions, points_on_triangles
+from boxes import box_scene
+
+
+def test_sources_follow_power_exactly_at_bucket_edges():
+    area = np.array([1.0, 2.0, 1.0, 4.0, 0.5])
+    emission = np.array([[0, 0, 0], [1, 1, 1], [3, 0, 0], [1e-9, 0, 0], [2, 2, 2]], float)
+    table = SourceTable(area, emission)
+    assert list(table.patches) == [1, 2, 3, 4]
+    # The choice is exactly "first k with u < cdf[k]": check against searchsorted on a fine grid.
+    u = np.linspace(0, 1, 200_001, endpoint=False)
+    u = np.concatenate([u, table.cdf[:-1], np.nextafter(table.cdf[:-1], 0), [np.nextafter(1.0, 0)]])
+    expected = table.patches[np.searchsorted(table.cdf, u, side="right")]
+    assert np.array_equal(table.choose(u), expected)
+
+
+def test_sources_frequencies():
+    rng = np.random.default_rng(0)
+    area = rng.uniform(0.1, 2, 500)
+    emission = rng.uniform(0, 1, (500, 3)) * (rng.random((500, 1)) < 0.3)
+    table = SourceTable(area, emission)
+    n = 2_000_000
+    counts = np.bincount(table.choose(rng.random(n)), minlength=500)[table.patches]
+    expected = n * table.probability
+    chi2 = ((counts - expected) ** 2 / expected).sum()
+    dof = table.patches.size - 1
+    assert chi2 < dof + 5 * np.sqrt(2 * dof)
+
+
+def test_cosine_directions_moments():
+    """cos(theta) has density 2 c on [0,1]: E[c] = 2/3, E[c^2] = 1/2; azimuth uniform."""
+    scene, _, _ = box_scene([0.5] * 6, [1] * 6, n=1)
+    g = scene.geometry
+    n = 1_000_000
+    rng = np.random.default_rng(1)
+    patch = rng.integers(0, 6, n)
+    u = rng.random((2, n), dtype=np.float32)
+    d = cosine_directions(g, patch, u[0], u[1]).astype(np.float64)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1, atol=1e-6)
+    c = np.einsum("ij,ij->i", d, g.patch_normal[patch])
+    assert c.min() >= -1e-6
+    # Standard errors: sd(c) = 1/sqrt(18), sd(c^2) = 1/sqrt(12)
+    assert abs(c.mean() - 2 / 3) < 5 / np.sqrt(18 * n)
+    assert abs((c**2).mean() - 0.5) < 5 / np.sqrt(12 * n)
+    # Tangential components average to zero (uniform azimuth), per patch orientation.
+    tangential = d - c[:, None] * g.patch_normal[patch]
+    assert np.abs(tangential.mean(axis=0)).max() < 5 * np.sqrt(0.25 / n)
+
+
+def test_points_are_uniform_on_patches():
+    scene, _, _ = box_scene([0.5] * 6, [1] * 6, size=(2.0, 1.0, 1.0), n=1)
+    g = scene.geometry
+    n = 400_000
+    rng = np.random.default_rng(2)
+    patch = np.zeros(n, dtype=np.int64)  # the floor: [0,2] x [0,1] at z = 0
+    u = rng.random((3, n), dtype=np.float32)
+    p = points_on_triangles(g, choose_triangles(g, patch, u[0]), u[1], u[2]) + g.centre
+    # Pushed off the floor by the ray offset, inside the rectangle, uniform in x and y.
+    np.testing.assert_allclose(p[:, 2], g.ray_offset, rtol=1e-3, atol=1e-6)
+    assert p[:, 0].min() >= -1e-6 and p[:, 0].max() <= 2 + 1e-6
+    for coordinate, length in ((0, 2.0), (1, 1.0)):
+        hist = np.histogram(p[:, coordinate], bins=20, range=(0, length))[0]
+        expected = n / 20
+        assert ((hist - expected) ** 2 / expected).sum() < 19 + 5 * np.sqrt(38)
