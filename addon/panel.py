@@ -49,6 +49,8 @@ def draw_estimate(layout, context, value, fresh):
         return
     col = box.column(align=True)
     col.label(text=f"Objects: {value['objects']}   Patches: {_number(value['patches'])}")
+    if value.get("target_mse") is not None:
+        col.label(text=f"Target MSE: {value['target_mse']:.3g}")
     col.label(text=f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}")
     col.label(text=f"Path length: {value['path_length']:.2f}   R_ave: {value['R_ave']:.2f}")
     re = value["relative_efficiency"]

@@ -415,7 +415,7 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
     preview.STATE.value, preview.STATE.key = preview.compute(blender), preview._key(blender)
     log = draw_panel(blender)
     labels = " ".join(t for k, t in log if k == "label")
-    assert "Patches:" in labels and "Rel. efficiency (4)" in labels
+    assert "Patches:" in labels and "Rel. efficiency (4)" in labels and "Target MSE" in labels
     # error estimate shown for an empty selection
     for o in bpy.data.objects:
         o.select_set(False)
