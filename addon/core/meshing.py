@@ -272,6 +272,37 @@ def _longest_edges(points, face_sizes, corner_verts, starts):
     return longest
 
 
+def _weld(keys, n_vertices):
+    """Merge generated points with equal keys.
+
+    Returns (unique key rows, index of the first generated point of each,
+    output point of every generated point).  Interior points (kind 2) are
+    unique by construction; the others are welded through one int64 code
+    per key (a 1-D sort instead of a row-wise one).
+    """
+    kind = keys[:, 0]
+    shared = np.flatnonzero(kind != 2)
+    interior = np.flatnonzero(kind == 2)
+    k = keys[shared]
+    code = k[:, 1].copy()  # kind 0: the source vertex
+    on_edge = k[:, 0] == 1
+    if np.any(on_edge):
+        pair = k[on_edge, 1] * n_vertices + k[on_edge, 2]
+        _, pair_id = np.unique(pair, return_inverse=True)
+        D = int(k[on_edge, 4].max()) + 1
+        if (pair_id.max() + 1) * D * D + n_vertices < 2**62:
+            code[on_edge] = n_vertices + (pair_id.ravel() * D + k[on_edge, 3]) * D + k[on_edge, 4]
+        else:  # astronomically many edges x cuts: weld row-wise
+            _, code = np.unique(k, axis=0, return_inverse=True)
+            code = code.ravel()
+    _, first, inv = np.unique(code, return_index=True, return_inverse=True)
+    inverse = np.empty(len(keys), dtype=np.int64)
+    inverse[shared] = inv.ravel()
+    inverse[interior] = len(first) + np.arange(len(interior))
+    first_index = np.concatenate([shared[first], interior])
+    return keys[first_index], first_index, inverse
+
+
 def mesh_patches(
     vertices,
     face_sizes,
@@ -462,8 +493,7 @@ def mesh_patches(
         )
     keys = np.concatenate(b.keys)
     positions = np.concatenate(b.positions)
-    uniq, first_index, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.ravel()
+    uniq, first_index, inverse = _weld(keys, len(points))
     out_points = positions[first_index].copy()
     # canonical positions: source vertices exactly, edge points from the
     # lower-indexed vertex, so both neighbouring faces agree bit for bit
@@ -581,7 +611,9 @@ def point_average(mesh: PatchMesh, patch_values) -> np.ndarray:
     flat = values.reshape(len(values), -1)
     cp = mesh.corner_patch
     # each patch counted once per point even if it had a repeated corner
-    pairs = np.unique(np.stack([mesh.corner_verts, cp], axis=1), axis=0)
+    P = max(mesh.patch_count, 1)
+    code = np.unique(mesh.corner_verts.astype(np.int64) * P + cp)
+    pairs = np.stack([code // P, code % P], axis=1)
     w = mesh.patch_area[pairs[:, 1]]
     N = len(mesh.points)
     total_w = np.bincount(pairs[:, 0], weights=w, minlength=N)
