@@ -69,8 +69,16 @@ def draw_progress(layout, job):
         box.label(text=text)
     col = box.column(align=True)
     col.label(text=f"Rays/s: {_number(stats.get('rays_per_second'))}")
+    if job.patch_count is not None:
+        col.label(text=f"Patches: {_number(job.patch_count)}   Paths to do: {_number(job.prediction.paths)}")
     mse = stats.get("measured_mse")
-    col.label(text=f"Error estimate (MSE): {mse:.3g}" if mse is not None and mse == mse else "Error estimate: -")
+    relative = job.relative_error(mse)
+    target = job.settings.relative_rms * 100
+    if relative is not None:
+        col.label(text=f"Error now: {relative * 100:.2f}% (target {target:.2f}%)")
+        col.label(text=f"MSE: {mse:.3g}")
+    else:
+        col.label(text=f"Error now: - (target {target:.2f}%)")
     if job.cancelled:
         col.label(text="Cancelling...")
     box.operator("radiosity.cancel", icon="CANCEL")

@@ -137,13 +137,19 @@ def estimate(objects, settings: SolveSettings) -> dict:
     }
 
 
-def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None) -> SolveOutput:
-    """Mesh, solve and compute the colours to write, for the given objects."""
+def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None, on_prediction=None) -> SolveOutput:
+    """Mesh, solve and compute the colours to write, for the given objects.
+
+    ``on_prediction(prediction, patch_count)`` is called once the patches
+    are known, before the first path.
+    """
     from .core import solve
 
     patches = make_patches(objects, settings.patch_size)
     scene = patches.patch_scene()
     prediction, target = prediction_for(scene, settings)
+    if on_prediction is not None:
+        on_prediction(prediction, int(scene.patch_count))
     result = solve(
         scene,
         settings.estimator,
@@ -187,6 +193,8 @@ class SolveJob:
         self.progress = {"fraction": 0.0, "paths": 0, "rays": 0, "seconds": 0.0,
                          "rays_per_second": 0.0, "measured_mse": None}
         self.output: SolveOutput | None = None
+        self.prediction = None  # core Prediction, once the patches are known
+        self.patch_count = None
         self.error: str | None = None
         self.traceback: str | None = None
         self.started = time.perf_counter()
@@ -214,9 +222,22 @@ class SolveJob:
         with self._lock:
             self.progress = {"fraction": float(fraction), **dict(stats)}
 
+    def _on_prediction(self, prediction, patch_count):
+        self.prediction = prediction
+        self.patch_count = patch_count
+
+    def relative_error(self, mse):
+        """An MSE as the relative RMS error the settings speak of (None if unknown)."""
+        p = self.prediction
+        if p is None or mse is None or not mse == mse or p.mean_reflected_radiosity <= 0:
+            return None
+        return mse ** 0.5 / p.mean_reflected_radiosity
+
     def _run(self):
         try:
-            self.output = run_solve(self.objects, self.settings, self._on_progress, self._cancel.is_set)
+            self.output = run_solve(
+                self.objects, self.settings, self._on_progress, self._cancel.is_set, self._on_prediction
+            )
         except ValueError as exc:  # bad input: a message for the user
             self.error = str(exc)
         except Exception as exc:  # noqa: BLE001 - reported, never raised into Blender

@@ -428,8 +428,12 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
         bpy.data.objects[name].select_set(True)
     objects, _ = scene_io.read_selection(blender)
     job = worker.SolveJob(objects, blender.scene.radiosity.solve_settings())
+    scene = worker.make_patches(objects, PATCH_SIZE).patch_scene()
+    prediction, _ = worker.prediction_for(scene, job.settings)
+    job._on_prediction(prediction, scene.patch_count)
+    mse = (0.07 * prediction.mean_reflected_radiosity) ** 2  # a 7% relative error
     job._on_progress(0.4, {"paths": 1000, "rays": 2000, "seconds": 0.1, "rays_per_second": 20000.0,
-                           "measured_mse": 1e-3})
+                           "measured_mse": mse})
     worker.set_running_job(job)
     try:
         log = draw_panel(blender)
@@ -438,6 +442,8 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
     assert ("operator", "radiosity.cancel") in log
     assert ("operator", "radiosity.solve") not in log
     assert any(k == "progress" and "40%" in t for k, t in log)
+    labels = " ".join(t for k, t in log if k == "label")
+    assert "Error now: 7.00% (target 10.00%)" in labels and "Rays/s: 20.0 k" in labels
     # after a run: statistics
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     labels = " ".join(t for k, t in draw_panel(blender) if k == "label")
