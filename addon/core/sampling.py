@@ -64,13 +64,13 @@ def points_on_triangles(geometry, triangle, u1, u2):
     and needs no square root. float32 (n,3), centred coordinates.
     """
     fold = (u1 + u2) > 1
-    a = np.where(fold, 1 - u1, u1)[:, None]
-    b = np.where(fold, 1 - u2, u2)[:, None]
-    frame = np.take(geometry.triangle_frame, triangle, axis=0)  # one gather: origin, edge1, edge2
-    points = frame[:, 3:6] * a
-    points += frame[:, 0:3]
-    points += frame[:, 6:9] * b
-    return points
+    a = np.where(fold, 1 - u1, u1)
+    b = np.where(fold, 1 - u2, u2)
+    frame = np.take(geometry.triangle_frame, triangle, axis=1)  # one gather: (9,n)
+    points = frame[3:6] * a
+    points += frame[0:3]
+    points += frame[6:9] * b
+    return np.ascontiguousarray(points.T)
 
 
 def cosine_directions(geometry, patch, u1, u2):

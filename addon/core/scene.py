@@ -102,7 +102,7 @@ class Geometry:
     patch_first_triangle: np.ndarray  # (P,) int64 first sorted triangle of each patch
     patch_triangle_count: np.ndarray  # (P,) int64
     triangle_key: np.ndarray      # (T,) float64: patch + cumulative area fraction in the patch
-    triangle_frame: np.ndarray    # (T,9) float32: origin (pushed off), edge1, edge2 in one row
+    triangle_frame: np.ndarray    # (9,T) float32: origin (pushed off), edge1, edge2, one row per coordinate
     patch_first_fraction: np.ndarray  # (P,) float32: area fraction of each patch's first triangle
 
     @property
@@ -243,7 +243,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         patch_first_triangle=first,
         patch_triangle_count=count,
         triangle_key=tp_sorted + fraction,
-        triangle_frame=f32(np.hstack([sorted_corners[:, 0] + ray_offset * normal, e1[order], e2[order]])),
+        triangle_frame=f32(np.hstack([sorted_corners[:, 0] + ray_offset * normal, e1[order], e2[order]]).T),
         patch_first_fraction=f32(fraction[first]),
     )
 
