@@ -256,7 +256,8 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
 
 
 def test_closed_box_gives_cycles_units(blender):
-    """A closed box emitting S everywhere with albedo R has B = S / (1 - R)."""
+    """A closed box emitting S everywhere with albedo R has B = S / (1 - R),
+    in our result and in Cycles' COMBINED bake of the same box."""
     from .conftest import box_arrays, make_object, principled
 
     S, R = 2.0, 0.5
@@ -267,7 +268,26 @@ def test_closed_box_gives_cycles_units(blender):
     s.patch_size = 0.5
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     _, colours = read_colours(result_objects()[0].data, "Radiosity")
-    np.testing.assert_allclose(colours[:, :3].mean(), S / (1 - R), rtol=0.05)
+    ours = colours[:, :3].mean()
+    np.testing.assert_allclose(ours, S / (1 - R), rtol=0.03)
+
+    # Cycles' COMBINED bake of the same box (pure Lambertian: no specular layer)
+    obj.data.materials[0].node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
+    obj.data.color_attributes.new("Bake", "FLOAT_COLOR", "CORNER")
+    obj.data.color_attributes.active_color = obj.data.color_attributes["Bake"]
+    for o in bpy.data.objects:
+        o.select_set(o == obj)
+    blender.view_layer.objects.active = obj
+    scene = blender.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = 16
+    scene.cycles.max_bounces = scene.cycles.diffuse_bounces = 64
+    scene.render.bake.target = "VERTEX_COLORS"
+    assert bpy.ops.object.bake(type="COMBINED") == {"FINISHED"}
+    _, baked = read_colours(obj.data, "Bake")
+    np.testing.assert_allclose(baked[:, :3].mean(), S / (1 - R), rtol=0.01)
+    np.testing.assert_allclose(ours, baked[:, :3].mean(), rtol=0.03)
 
 
 # ---------------------------------------------------------------------------
