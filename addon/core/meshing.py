@@ -526,8 +526,10 @@ def mesh_patches(
     pstarts = _starts(sizes)
     tri_patch = np.zeros(0, dtype=np.int64)
     tris = np.zeros((0, 3), dtype=np.int64)
-    # triangles and grid quads: fan (exact for a planar quad cell)
-    small = sizes <= 4
+    # triangles and grid cells: fan (exact for a planar cell); kept quads and
+    # kept n-gons: the source triangulation (Blender's, when given)
+    kept_patch = ~big[patch_face]
+    small = (sizes == 3) | ((sizes == 4) & ~kept_patch)
     if np.any(small):
         sp = np.nonzero(small)[0]
         cnt = sizes[sp] - 2
@@ -536,7 +538,7 @@ def mesh_patches(
         f0 = pstarts[tp]
         tris = np.stack([corners[f0], corners[f0 + k + 1], corners[f0 + k + 2]], axis=1)
         tri_patch = tp
-    # kept n-gons: the source triangulation, mapped onto the patch points
+    # kept quads and n-gons: the source triangulation, mapped onto the patch points
     if np.any(~small):
         ng = np.nonzero(~small)[0]
         src_face = patch_face[ng]

@@ -97,6 +97,18 @@ def test_small_ngon_kept_with_given_triangulation():
     np.testing.assert_array_equal(m.triangle_patch, 0)
 
 
+def test_kept_quad_uses_the_given_triangulation():
+    # concave "dart" quad: corner 3 is reflex, so a fan from corner 0 is
+    # wrong (its triangles overlap); the given triangulation is right
+    v = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [1.5, 0.5, 0]], float)
+    tris = np.array([[3, 0, 1], [3, 1, 2]])
+    m = mesh_patches(v, [4], [0, 1, 2, 3], patch_size=5.0, face_triangles=tris, triangle_face=[0, 0])
+    assert m.patch_count == 1 and m.face_sizes[0] == 4
+    exact = 0.5 * abs(np.cross(v[1] - v[3], v[2] - v[3])[2]) + 0.5 * abs(np.cross(v[0] - v[3], v[1] - v[3])[2])
+    assert m.patch_area[0] == pytest.approx(exact)
+    np.testing.assert_allclose(m.points[m.triangles], v[tris])
+
+
 def test_neighbouring_faces_share_points_on_the_common_edge():
     # two unit quads side by side, same subdivision -> conforming grid
     v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0]], float)
@@ -225,7 +237,7 @@ def test_random_convex_polygons_preserve_area_and_orientation(polys, patch_size)
     for k, (rx, ry, z, n) in enumerate(polys):
         a = np.linspace(0, 2 * np.pi, n + 1)[:-1] + 0.3
         p = np.stack([rx * np.cos(a) + 10 * k, ry * np.sin(a), np.full(n, z)], axis=1)
-        corners.extend(range(len(verts) * 0 + sum(sizes), sum(sizes) + n))
+        corners.extend(range(sum(sizes), sum(sizes) + n))
         verts.append(p)
         sizes.append(n)
     v = np.concatenate(verts)
