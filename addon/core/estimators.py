@@ -90,7 +90,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
     g = tables.geometry
     C, P = tables.channels, tables.patch_count
     finite = tables.estimator == FINITE
-    incident = np.zeros((C, P))
+    scored_patches, scored_weights = [], []  # per step; one bincount per chunk at the end
     escaped = np.zeros(C)
     blocked = np.zeros(C)
     undistributed = np.zeros(C)
@@ -151,11 +151,9 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         patch = g.triangle_patch[hit_triangle]
 
         # Score: the power arriving at the hit patch.
-        if weights is None:
-            incident[0] += np.bincount(patch, minlength=P)
-        else:
-            for c in range(C):
-                incident[c] += np.bincount(patch, weights=weights[c], minlength=P)
+        scored_patches.append(patch)
+        if weights is not None:
+            scored_weights.append(weights)
 
         if finite:
             survive = u5 < tables.mean_reflectivity[patch]
@@ -188,6 +186,12 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             leave_from += np.take(g.triangle_normal, hit_triangle, axis=0) * np.float32(g.ray_offset)
         n = patch.size
 
+    patches = np.concatenate(scored_patches) if scored_patches else np.zeros(0, np.int32)
+    if tables.unit_weights:
+        incident = np.bincount(patches, minlength=P)[None].astype(np.float64)
+    else:
+        w = np.concatenate(scored_weights, axis=1) if scored_weights else np.zeros((C, 0))
+        incident = np.stack([np.bincount(patches, weights=w[c], minlength=P) for c in range(C)])
     return ChunkTally(
         paths=paths,
         rays=rays,
