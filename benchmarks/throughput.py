@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from addon.core import predict, solve
-from addon.core.sampling import choose_triangles, cosine_directions, points_on_triangles
+from addon.core.sampling import cosine_directions, points_on_patches
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -31,8 +31,7 @@ def sample_rays(scene, count, seed=0):
     cdf = np.cumsum(g.patch_area) / g.patch_area.sum()
     patch = np.minimum(np.searchsorted(cdf, rng.random(count), side="right"), scene.patch_count - 1)
     u = rng.random((5, count), dtype=np.float32)
-    triangle = choose_triangles(g, patch, u[0])
-    return points_on_triangles(g, triangle, u[1], u[2]), cosine_directions(g, patch, u[3], u[4])
+    return points_on_patches(g, patch, u[0], u[1], u[2]), cosine_directions(g, patch, u[3], u[4])
 
 
 def raw_rate(scene, threads, seconds, batch=1 << 16):

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sampling import SourceTable, choose_triangles, cosine_directions, points_on_triangles
+from .sampling import SourceTable, cosine_directions, points_on_patches
 
 FINITE = "finite"
 BIASED_INFINITE = "biased_infinite"
@@ -56,6 +56,16 @@ class WalkTables:
             start = np.where(mean_emission > 0, scene.emission.T / mean_emission, 0.0)
         self.survivor_weight = np.ascontiguousarray(ratio[: self.channels])  # R_jc / R_bar_j (C,P)
         self.start_weight = np.ascontiguousarray(start[: self.channels])      # E_ic / E_bar_i (C,P)
+        # Uniform numbers per ray: point (2), direction (2), then a triangle choice unless every
+        # patch is a parallelogram, then a survival test for the finite estimator.
+        self.uniforms_per_ray = 4
+        self.row_triangle = self.row_survival = None
+        if not self.geometry.all_parallelograms:
+            self.row_triangle = self.uniforms_per_ray
+            self.uniforms_per_ray += 1
+        if estimator == FINITE:
+            self.row_survival = self.uniforms_per_ray
+            self.uniforms_per_ray += 1
         # In a grey finite walk every weight stays exactly 1: no weight arrays at all.
         self.unit_weights = estimator == FINITE and self.channels == 1
 
@@ -106,13 +116,13 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
     while n:
         if abort is not None and abort.is_set():
             raise Aborted
-        u = rng.random((6, n), dtype=np.float32)
+        u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
         if leave_from is None:
-            triangle = choose_triangles(g, patch, u[0])
-            origins = points_on_triangles(g, triangle, u[1], u[2])
+            u_triangle = None if tables.row_triangle is None else u[tables.row_triangle]
+            origins = points_on_patches(g, patch, u_triangle, u[0], u[1])
         else:
             origins = leave_from
-        directions = cosine_directions(g, patch, u[3], u[4])
+        directions = cosine_directions(g, patch, u[2], u[3])
         if tables.exit_random:
             hit = tables.tracer.first_hit(origins, directions)
         else:
@@ -134,7 +144,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 ended["blocked"] += n_back
             keep = np.flatnonzero(front)
             hit = hit[keep]
-            u5 = u[5][keep]
+            u5 = u[tables.row_survival][keep] if finite else None
             if weights is not None:
                 weights = np.take(weights, keep, axis=1)
             if accumulated is not None:
@@ -144,7 +154,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 directions = np.take(directions, keep, axis=0)
                 distance = distance[keep]
         else:
-            u5 = u[5]
+            u5 = u[tables.row_survival] if finite else None
         if hit.size == 0:
             break
         hit_triangle = hit

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sampling import choose_triangles, cosine_directions, points_on_triangles
+from .sampling import cosine_directions, points_on_patches
 
 
 # --- closed-form form factors of axis-aligned rectangles ------------------------------------
@@ -108,8 +108,7 @@ def form_factors_raycast(scene, rays_per_patch=100_000, seed=0, block_rays=1 << 
         rows = np.arange(p0, min(P, p0 + patches_per_block))
         patch = np.repeat(rows, rays_per_patch)
         u = rng.random((5, patch.size), dtype=np.float32)
-        triangle = choose_triangles(g, patch, u[0])
-        origins = points_on_triangles(g, triangle, u[1], u[2])
+        origins = points_on_patches(g, patch, u[0], u[1], u[2])
         directions = cosine_directions(g, patch, u[3], u[4])
         hit = scene.tracer.first_hit(origins, directions)
         ok = hit >= 0

@@ -73,6 +73,27 @@ def points_on_triangles(geometry, triangle, u1, u2):
     return np.ascontiguousarray(points.T)
 
 
+def points_on_patches(geometry, patch, u_triangle, u1, u2):
+    """Uniform points on the given patches (pushed off along the normal), float32 (n,3).
+
+    Parallelogram patches take corner + u1 a + u2 b; others choose a triangle by area
+    (``u_triangle``, which may be None when every patch is a parallelogram) and a point on it.
+    """
+    if geometry.all_parallelograms:
+        frame = np.take(geometry.parallelogram_frame, patch, axis=1)
+        points = frame[3:6] * u1
+        points += frame[0:3]
+        points += frame[6:9] * u2
+        return np.ascontiguousarray(points.T)
+    points = points_on_triangles(geometry, choose_triangles(geometry, patch, u_triangle), u1, u2)
+    if geometry.any_parallelograms:
+        some = np.flatnonzero(geometry.patch_parallelogram[patch])
+        if some.size:
+            frame = np.take(geometry.parallelogram_frame, patch[some], axis=1)
+            points[some] = (frame[0:3] + frame[3:6] * u1[some] + frame[6:9] * u2[some]).T
+    return points
+
+
 def cosine_directions(geometry, patch, u1, u2):
     """Directions about each patch's normal with density cos(theta)/pi. float32 (n,3) unit.
 
@@ -83,15 +104,15 @@ def cosine_directions(geometry, patch, u1, u2):
     z = 1 - 2 * u1
     r = np.sqrt(np.maximum(1 - z * z, 0))
     phi = TWO_PI * u2
-    directions = np.take(geometry.patch_normal, patch, axis=0)
-    directions[:, 0] += r * np.cos(phi)
-    directions[:, 1] += r * np.sin(phi)
-    directions[:, 2] += z
-    length = np.sqrt(np.einsum("ij,ij->i", directions, directions))
+    d = np.take(geometry.patch_normal_rows, patch, axis=1)  # (3,n)
+    d[0] += r * np.cos(phi)
+    d[1] += r * np.sin(phi)
+    d[2] += z
+    length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     # s = -n has probability zero, but float32 can land there: fall back to the normal.
-    degenerate = length < 1e-6
-    if degenerate.any():
-        directions[degenerate] = geometry.patch_normal[patch[degenerate]]
+    degenerate = np.flatnonzero(length < 1e-6)
+    if degenerate.size:
+        d[:, degenerate] = np.take(geometry.patch_normal_rows, patch[degenerate], axis=1)
         length[degenerate] = 1
-    directions /= length[:, None]
-    return directions
+    d /= length
+    return np.ascontiguousarray(d.T)

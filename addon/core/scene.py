@@ -91,19 +91,16 @@ class Geometry:
     triangle_patch: np.ndarray    # (T,) int32 patch of each sorted triangle
     triangle_area: np.ndarray     # (T,) float64
     triangle_normal: np.ndarray   # (T,3) float32 unit normals
-    triangle_origin: np.ndarray   # (T,3) float32 first vertex, pushed off the surface by ray_offset
-    triangle_edge1: np.ndarray    # (T,3) float32
-    triangle_edge2: np.ndarray    # (T,3) float32
     triangle_corners: np.ndarray  # (T,3,3) float32 centred corners, the ray tracer's input
     patch_area: np.ndarray        # (P,) float64
     patch_normal: np.ndarray      # (P,3) float32
-    patch_tangent: np.ndarray     # (P,3) float32
-    patch_bitangent: np.ndarray   # (P,3) float32
     patch_first_triangle: np.ndarray  # (P,) int64 first sorted triangle of each patch
     patch_triangle_count: np.ndarray  # (P,) int64
     triangle_key: np.ndarray      # (T,) float64: patch + cumulative area fraction in the patch
     triangle_frame: np.ndarray    # (9,T) float32: origin (pushed off), edge1, edge2, one row per coordinate
     patch_first_fraction: np.ndarray  # (P,) float32: area fraction of each patch's first triangle
+    patch_parallelogram: np.ndarray   # (P,) bool: the patch is two triangles forming a parallelogram
+    parallelogram_frame: np.ndarray   # (9,P) float32: corner (pushed off), edge a, edge b (zeros if not)
 
     @property
     def patch_count(self):
@@ -116,6 +113,19 @@ class Geometry:
     @cached_property
     def max_triangles_per_patch(self):
         return int(self.patch_triangle_count.max())
+
+    @cached_property
+    def patch_normal_rows(self):
+        """(3,P) float32: the patch normals one coordinate per row, for column gathers."""
+        return np.ascontiguousarray(self.patch_normal.T)
+
+    @cached_property
+    def all_parallelograms(self):
+        return bool(self.patch_parallelogram.all())
+
+    @cached_property
+    def any_parallelograms(self):
+        return bool(self.patch_parallelogram.any())
 
     @cached_property
     def tracer(self):
@@ -206,12 +216,6 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             "orientation: a patch must be coplanar triangles with the same winding"
         )
 
-    # An orthonormal frame (t, s, n) per patch for cosine-distributed directions.
-    helper = np.where(np.abs(patch_normal[:, :1]) < 0.6, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    tangent = np.cross(helper, patch_normal)
-    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
-    bitangent = np.cross(patch_normal, tangent)
-
     count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
     first = np.concatenate(([0], np.cumsum(count)[:-1]))
     sorted_area = area[order]
@@ -222,6 +226,8 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     fraction[last] = 1.0  # exact upper end, whatever the rounding
     ray_offset = RELATIVE_RAY_OFFSET * diagonal
     sorted_corners = corners[order]
+    is_parallelogram, parallelogram = _parallelograms(sorted_corners, first, count, diagonal)
+    parallelogram[:, :3] += ray_offset * patch_normal
 
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     return Geometry(
@@ -232,20 +238,49 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         triangle_patch=tp_sorted.astype(np.int32),
         triangle_area=sorted_area,
         triangle_normal=f32(normal),
-        triangle_origin=f32(sorted_corners[:, 0] + ray_offset * normal),
-        triangle_edge1=f32(e1[order]),
-        triangle_edge2=f32(e2[order]),
         triangle_corners=f32(sorted_corners),
         patch_area=patch_area,
         patch_normal=f32(patch_normal),
-        patch_tangent=f32(tangent),
-        patch_bitangent=f32(bitangent),
         patch_first_triangle=first,
         patch_triangle_count=count,
         triangle_key=tp_sorted + fraction,
         triangle_frame=f32(np.hstack([sorted_corners[:, 0] + ray_offset * normal, e1[order], e2[order]]).T),
         patch_first_fraction=f32(fraction[first]),
+        patch_parallelogram=is_parallelogram,
+        parallelogram_frame=f32(np.where(is_parallelogram[:, None], parallelogram, 0.0).T),
     )
+
+
+def _parallelograms(sorted_corners, first, count, diagonal):
+    """Which patches are two triangles forming a parallelogram, and its (corner, a, b).
+
+    Such a patch (any quad with parallel sides: the grids meshing makes) is sampled as
+    corner + u a + v b, without choosing a triangle or folding.
+    """
+    P = first.shape[0]
+    frame = np.zeros((P, 9))
+    two = np.flatnonzero(count == 2)
+    if two.size == 0:
+        return np.zeros(P, bool), frame
+    t0 = sorted_corners[first[two]]          # (n,3,3)
+    t1 = sorted_corners[first[two] + 1]
+    tolerance = 1e-7 * diagonal
+    distance = np.linalg.norm(t0[:, :, None, :] - t1[:, None, :, :], axis=-1)  # (n,3,3)
+    shared = distance < tolerance
+    shared_in_t0 = shared.any(axis=2)        # (n,3)
+    shared_in_t1 = shared.any(axis=1)
+    ok = (shared_in_t0.sum(axis=1) == 2) & (shared_in_t1.sum(axis=1) == 2) & (shared.sum(axis=(1, 2)) == 2)
+    rows = np.arange(two.size)
+    p = t0[rows, np.argmin(shared_in_t0, axis=1)]      # t0's own corner
+    q = t1[rows, np.argmin(shared_in_t1, axis=1)]      # t1's own corner
+    order = np.argsort(~shared_in_t0, axis=1, kind="stable")[:, :2]
+    s1 = t0[rows, order[:, 0]]
+    s2 = t0[rows, order[:, 1]]
+    ok &= np.linalg.norm(p + q - s1 - s2, axis=1) < tolerance  # the diagonals bisect each other
+    frame[two] = np.hstack([p, s1 - p, s2 - p])
+    flags = np.zeros(P, bool)
+    flags[two[ok]] = True
+    return flags, frame
 
 
 class PatchScene:

@@ -65,3 +65,31 @@ def test_points_are_uniform_on_patches():
         hist = np.histogram(p[:, coordinate], bins=20, range=(0, length))[0]
         expected = n / 20
         assert ((hist - expected) ** 2 / expected).sum() < 19 + 5 * np.sqrt(38)
+
+
+def test_parallelogram_and_triangle_patches_sample_alike():
+    """Rectangles made of two triangles are sampled as parallelograms; the same rectangle
+    split into four triangles goes through the triangle path: both uniform on the patch."""
+    from addon.core import PatchScene
+    from addon.core.sampling import points_on_patches
+
+    # Patch 0: rectangle [0,2]x[0,1] as two triangles; patch 1: rectangle [0,2]x[2,3] as
+    # four triangles around its centre; patch 2: a lone triangle.
+    V = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0],
+                  [0, 2, 0], [2, 2, 0], [2, 3, 0], [0, 3, 0], [1, 2.5, 0],
+                  [3, 0, 0], [4, 0, 0], [3, 1, 0]], float)
+    T = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 8], [5, 6, 8], [6, 7, 8], [7, 4, 8], [9, 10, 11]])
+    scene = PatchScene(V, T, [0, 0, 1, 1, 1, 1, 2], [0.5, 0.5, 0.5], [1, 0, 0])
+    g = scene.geometry
+    assert list(g.patch_parallelogram) == [True, False, False]
+    n = 300_000
+    rng = np.random.default_rng(4)
+    for patch_index, (x0, y0) in ((0, (0, 0)), (1, (0, 2))):
+        patch = np.full(n, patch_index)
+        u = rng.random((3, n), dtype=np.float32)
+        p = points_on_patches(g, patch, u[0], u[1], u[2]) + g.centre
+        assert p[:, 0].min() >= x0 - 1e-6 and p[:, 0].max() <= x0 + 2 + 1e-6
+        assert p[:, 1].min() >= y0 - 1e-6 and p[:, 1].max() <= y0 + 1 + 1e-6
+        hist = np.histogram2d(p[:, 0], p[:, 1], bins=(8, 4), range=((x0, x0 + 2), (y0, y0 + 1)))[0].ravel()
+        expected = n / 32
+        assert ((hist - expected) ** 2 / expected).sum() < 31 + 5 * np.sqrt(62)
