@@ -11,11 +11,12 @@ efficiency (4).
 """
 from .error_model import Prediction, mse_to_relative_rms, predict, relative_rms_to_mse
 from .estimators import BIASED_INFINITE, FINITE
-from .scene import PatchScene
+from .scene import PatchError, PatchScene
 from .solver import SolveResult, solve
 
 __all__ = [
     "PatchScene",
+    "PatchError",
     "solve",
     "predict",
     "Prediction",

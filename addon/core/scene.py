@@ -30,6 +30,20 @@ RELATIVE_DEGENERATE_AREA = 1e-14
 MIN_PATCH_NORMAL_COSINE = 0.5
 
 
+class PatchError(ValueError):
+    """A ValueError about particular patches; ``patches`` holds their indices, so that a caller
+    that knows where patches came from (the Blender layer) can name the objects instead."""
+
+    def __init__(self, message, patches):
+        super().__init__(message)
+        self.patches = np.asarray(patches, dtype=np.int64)
+
+
+def _indices(mask_or_indices):
+    a = np.asarray(mask_or_indices)
+    return np.flatnonzero(a) if a.dtype == bool else a
+
+
 def _indices_text(mask_or_indices, limit=10):
     idx = np.flatnonzero(mask_or_indices) if np.asarray(mask_or_indices).dtype == bool else np.asarray(mask_or_indices)
     shown = ", ".join(str(int(i)) for i in idx[:limit])
@@ -61,15 +75,16 @@ def validate_materials(reflectivity, emission, patch_count):
     for name, values in (("reflectivity", R), ("emission", E)):
         bad = ~np.isfinite(values).all(axis=1)
         if bad.any():
-            raise ValueError(f"{name} is NaN or infinite on patches {_indices_text(bad)}")
+            raise PatchError(f"{name} is NaN or infinite on patches {_indices_text(bad)}", _indices(bad))
     negative = (E < 0).any(axis=1)
     if negative.any():
-        raise ValueError(f"emission is negative on patches {_indices_text(negative)}")
+        raise PatchError(f"emission is negative on patches {_indices_text(negative)}", _indices(negative))
     outside = ((R < 0) | (R >= 1)).any(axis=1)
     if outside.any():
-        raise ValueError(
+        raise PatchError(
             f"reflectivity must lie in [0, 1) but does not on patches {_indices_text(outside)} "
-            "(a reflectivity of 1 or more creates energy or never lets a path end)"
+            "(a reflectivity of 1 or more creates energy or never lets a path end)",
+            _indices(outside),
         )
     if not (E > 0).any():
         raise ValueError("the scene has no emitting patch: every emission is zero")
@@ -193,27 +208,31 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     patch_area = np.bincount(tp[keep], weights=area[keep], minlength=patch_count)
     empty = patch_area <= 0
     if empty.any():
-        raise ValueError(f"patches {_indices_text(empty)} have no area (no triangles, or only degenerate ones)")
+        raise PatchError(f"patches {_indices_text(empty)} have no area (no triangles, or only degenerate ones)", _indices(empty))
 
     order = keep[np.argsort(tp[keep], kind="stable")]
     tp_sorted = tp[order]
     normal = cross[order] / double_area[order, None]
-    weighted = np.zeros((patch_count, 3))
-    np.add.at(weighted, tp_sorted, cross[order])  # area-weighted normal sum (x2), one pass
+    weighted = np.stack(  # area-weighted normal sum (x2)
+        [np.bincount(tp_sorted, weights=cross[order, k], minlength=patch_count) for k in range(3)], axis=1
+    )
     norm = np.linalg.norm(weighted, axis=1)
     folded = norm <= 1e-12 * patch_area * 2
     if folded.any():
-        raise ValueError(
+        raise PatchError(
             f"patches {_indices_text(folded)} have triangles of opposite winding that cancel: "
-            "a patch must be coplanar triangles facing one way"
+            "a patch must be coplanar triangles facing one way",
+            _indices(folded),
         )
     patch_normal = weighted / norm[:, None]
     cosine = np.einsum("ij,ij->i", normal, patch_normal[tp_sorted])
     crooked = cosine < MIN_PATCH_NORMAL_COSINE
     if crooked.any():
-        raise ValueError(
-            f"patches {_indices_text(np.unique(tp_sorted[crooked]))} mix triangles of different "
-            "orientation: a patch must be coplanar triangles with the same winding"
+        crooked_patches = np.unique(tp_sorted[crooked])
+        raise PatchError(
+            f"patches {_indices_text(crooked_patches)} mix triangles of different "
+            "orientation: a patch must be coplanar triangles with the same winding",
+            crooked_patches,
         )
 
     count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)

@@ -138,3 +138,12 @@ def test_with_materials_shares_geometry_and_tracer(mesh):
     assert other.tracer is tracer
     with pytest.raises(ValueError, match=r"reflectivity must lie"):
         scene.with_materials(np.full(24, 1.0), np.ones(24))
+
+
+def test_patch_errors_carry_the_patch_indices(mesh):
+    from addon.core import PatchError
+
+    with pytest.raises(PatchError) as info:
+        make(mesh, R=with_value(24, [2, 9], 1.0))
+    assert list(info.value.patches) == [2, 9]
+    assert isinstance(info.value, ValueError)
