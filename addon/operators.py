@@ -4,10 +4,13 @@ and ``radiosity.cancel``."""
 from __future__ import annotations
 
 import bpy
+from bpy.app.handlers import persistent
 
 from . import scene_io, worker
 
 TIMER_SECONDS = 0.1
+#: Above this share of the emitted power absorbed on back sides, the user is warned.
+BLOCKED_WARNING = 0.01
 
 
 def _redraw(context):
@@ -113,6 +116,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
     def _finish(self, context):
         job = self._job
         self._cleanup(context)
+        job.join(timeout=10)  # done is set: the thread is ending
         output = job.output
         if job.error is not None:
             if job.traceback:
@@ -122,6 +126,19 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         if output is None or output.result.stopped == "cancelled":
             self.report({"INFO"}, "Radiosity cancelled: the scene is unchanged")
             return {"CANCELLED"}
+        if job.file_generation != worker.file_generation():
+            self.report({"WARNING"}, "Radiosity: the file changed while solving; the result was discarded")
+            return {"CANCELLED"}
+        missing = _missing_sources(output)
+        if missing:
+            self.report({"ERROR"}, f"Radiosity: {', '.join(repr(n) for n in missing)} was deleted while "
+                        "solving; the result was discarded and the scene is unchanged")
+            return {"CANCELLED"}
+        r = output.result
+        if r.paths == 0:
+            self.report({"ERROR"}, f"Radiosity: the time limit ({job.settings.max_seconds:g} s) ended the run "
+                        "before the first batch of paths; nothing was written. Raise the time limit")
+            return {"CANCELLED"}
         settings = context.scene.radiosity
         try:
             scene_io.write_results(context, output, job.settings.output)
@@ -129,12 +146,16 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             import traceback
 
             print(traceback.format_exc())
-            self.report({"ERROR"}, f"Writing the result failed: {exc}")
+            self.report({"ERROR"}, f"Writing the result failed, the scene is unchanged: {exc}")
             return {"CANCELLED"}
         _store_stats(settings, output)
-        for note in self._notes:
+        for note in [*self._notes, *output.notes]:
             self.report({"WARNING"}, note)
-        r = output.result
+        blocked = output.blocked_fraction()
+        if blocked > BLOCKED_WARNING:
+            self.report({"WARNING"}, f"{blocked * 100:.1f}% of the light reached the back of faces and was "
+                        "absorbed there: one-sided faces seen from behind, or flipped normals (see Overlays > "
+                        "Face Orientation; give thin walls thickness with a Solidify modifier)")
         if r.stopped == "time_limit":
             self.report({"WARNING"}, f"Time limit reached after {r.paths:,} paths; the result is noisier than asked")
         self.report(
@@ -143,6 +164,18 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             f"in {r.seconds:.1f} s",
         )
         return {"FINISHED"}
+
+
+def _missing_sources(output):
+    """Names of the source objects that no longer exist (deleted while the worker ran)."""
+    present = {o.session_uid for o in bpy.data.objects}
+    return [o.name for o in output.patches.objects if o.uid is not None and o.uid not in present]
+
+
+@persistent
+def _on_load_pre(*_args):
+    """Another file is about to load (or a new one): stop the solve, discard its result."""
+    worker.file_changed()
 
 
 class RADIOSITY_OT_cancel(bpy.types.Operator):
@@ -168,8 +201,12 @@ classes = (RADIOSITY_OT_solve, RADIOSITY_OT_cancel)
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
+    if _on_load_pre not in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.append(_on_load_pre)
 
 
 def unregister():
+    if _on_load_pre in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.remove(_on_load_pre)
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -30,6 +30,7 @@ def draw_settings(layout, settings):
     col.prop(settings, "patch_size")
     layout.prop(settings, "exit_point")
     layout.prop(settings, "output")
+    layout.prop(settings, "clamp_reflectivity")
     col = layout.column(align=True)
     col.prop(settings, "seed")
     col.prop(settings, "time_limit")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from .worker import SolveSettings
 
@@ -63,6 +63,13 @@ class RadiositySettings(bpy.types.PropertyGroup):
             ("BOTH", "Both", "Face colours as 'Radiosity', vertex colours as 'Radiosity Vertex'"),
         ],
         default="FACE",
+    )
+    clamp_reflectivity: BoolProperty(
+        name="Clamp bright colours",
+        description="Use 0.99 for base colours above it (white is 1.0) instead of refusing colours of "
+        "1 or more, which would never let a path end in a closed room; reported as a warning",
+        default=False,
+        update=_changed,
     )
     seed: IntProperty(name="Seed", default=0, min=0, description="Random seed (same seed, same result)")
     time_limit: FloatProperty(

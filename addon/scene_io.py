@@ -32,12 +32,70 @@ class SceneError(ValueError):
 # Materials
 # ---------------------------------------------------------------------------
 
+def _srgb_to_linear(c):
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def image_average(image):
+    """Average linear RGB of an image's pixels, or None if it has none (missing file)."""
+    try:
+        width, height = image.size[:]
+        channels = image.channels
+        if width * height == 0 or channels < 1:
+            return None
+        pixels = np.empty(width * height * channels, dtype=np.float32)
+        image.pixels.foreach_get(pixels)
+    except Exception:  # noqa: BLE001 - unreadable image: the caller falls back and says so
+        return None
+    pixels = pixels.reshape(-1, channels).astype(np.float64)
+    rgb = pixels[:, :3] if channels >= 3 else np.repeat(pixels[:, :1], 3, axis=1)
+    # Byte images hold their colour space's values; float images are scene linear.
+    if not image.is_float and image.colorspace_settings.name == "sRGB":
+        rgb = _srgb_to_linear(rgb)
+    return rgb.mean(axis=0)
+
+
+def _text(colour):
+    return "(" + ", ".join(f"{c:.3g}" for c in colour) + ")"
+
+
+def _linked_colour(socket, node, name, notes, what):
+    """The colour of a socket driven by a link: an image's or a checker's average when that is
+    known, else the socket's own default; always with a note saying which."""
+    default = np.array(socket.default_value[:3], dtype=np.float64)
+    source = socket.links[0].from_node
+    while source.bl_idname == "NodeReroute" and source.inputs[0].is_linked:
+        source = source.inputs[0].links[0].from_node
+    if source.bl_idname == "ShaderNodeTexImage" and source.image is not None:
+        average = image_average(source.image)
+        if average is not None:
+            notes.append(f"{what}: '{name}' comes from image '{source.image.name}'; "
+                         f"its average colour {_text(average)} was used")
+            return average
+        notes.append(f"{what}: '{name}' comes from image '{source.image.name}', which has no pixels "
+                     f"(missing file?); the socket's colour {_text(default)} was used")
+        return default
+    if source.bl_idname == "ShaderNodeTexChecker":
+        a, b = source.inputs["Color1"], source.inputs["Color2"]
+        if not a.is_linked and not b.is_linked:
+            average = 0.5 * (np.array(a.default_value[:3]) + np.array(b.default_value[:3]))
+            notes.append(f"{what}: '{name}' comes from checker texture '{source.name}'; "
+                         f"the average of its two colours {_text(average)} was used")
+            return average
+    if source.bl_idname == "ShaderNodeRGB":
+        return np.array(source.outputs[0].default_value[:3], dtype=np.float64)
+    notes.append(f"{what}: '{name}' of '{node.name}' is driven by '{source.name}', whose average "
+                 f"is not known here; the socket's own colour {_text(default)} was used")
+    return default
+
+
 def _socket_colour(node, name, notes, what):
     socket = node.inputs.get(name)
     if socket is None:
         return np.zeros(3)
     if socket.is_linked:
-        notes.append(f"{what}: '{name}' of '{node.name}' is connected (texture?); its default colour was used")
+        return _linked_colour(socket, node, name, notes, what)
     value = socket.default_value
     return np.array(value[:3], dtype=np.float64)
 
@@ -47,7 +105,8 @@ def _socket_float(node, name, notes, what, default=0.0):
     if socket is None:
         return default
     if socket.is_linked:
-        notes.append(f"{what}: '{name}' of '{node.name}' is connected (texture?); its default value was used")
+        notes.append(f"{what}: '{name}' of '{node.name}' is connected (texture?); its own value "
+                     f"{float(socket.default_value):.3g} was used")
     return float(socket.default_value)
 
 
@@ -124,14 +183,15 @@ def material_colours(material):
 
 
 def _slot_tables(obj, notes):
-    """Reflectivity and emission of each material slot (at least one row)."""
+    """Reflectivity, emission and material name of each material slot (at least one row)."""
     materials = [slot.material for slot in obj.material_slots] or [None]
     R = np.empty((len(materials), 3))
     E = np.empty((len(materials), 3))
     for k, material in enumerate(materials):
         R[k], E[k], more = material_colours(material)
         notes.extend(more)
-    return R, E
+    names = tuple("(no material)" if m is None else m.name for m in materials)
+    return R, E, names
 
 
 # ---------------------------------------------------------------------------
@@ -182,7 +242,7 @@ def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
         T = len(mesh.loop_triangles)
         triangles = _get(mesh.loop_triangles, "vertices", T, np.int32, 3).astype(np.int64)
         triangle_face = _get(mesh.loop_triangles, "polygon_index", T, np.int32).astype(np.int64)
-        R_slots, E_slots = _slot_tables(evaluated, notes)
+        R_slots, E_slots, slot_names = _slot_tables(evaluated, notes)
     finally:
         evaluated.to_mesh_clear()
     M = np.array(obj.matrix_world, dtype=np.float64)
@@ -193,6 +253,9 @@ def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
     slot = np.clip(material_index, 0, len(R_slots) - 1)
     return ObjectArrays(
         name=obj.name,
+        uid=int(obj.session_uid),
+        face_slot=slot,
+        slot_names=slot_names,
         vertices=vertices,
         face_sizes=face_sizes,
         corner_verts=corner_verts,
@@ -203,17 +266,50 @@ def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
     )
 
 
+def _describe(obj):
+    kind = obj.type.lower()
+    if obj.type == "EMPTY" and obj.instance_type == "COLLECTION" and obj.instance_collection is not None:
+        return (f"'{obj.name}' instances collection '{obj.instance_collection.name}' (make the "
+                "instances real first: Object > Apply > Make Instances Real)")
+    if obj.type in ("CURVE", "FONT", "SURFACE", "META"):
+        return f"'{obj.name}' is a {kind} (convert it to a mesh first)"
+    return f"'{obj.name}' is a {kind}"
+
+
+def skipped_objects(context):
+    """Selected objects that are not meshes (and not results): they take no part."""
+    selected = getattr(context, "selected_objects", None)
+    if selected is None:
+        selected = [o for o in context.view_layer.objects if o.select_get()]
+    return sorted((o for o in selected if o.type != "MESH"), key=lambda o: o.name)
+
+
+def _materials_where(o, bad_faces):
+    """Names of the materials of object arrays ``o`` on the faces flagged in ``bad_faces``."""
+    slots = np.unique(o.face_slot[bad_faces]) if o.face_slot is not None else []
+    return ", ".join(f"'{o.slot_names[k]}'" for k in slots) if len(slots) else "a material"
+
+
 def read_selection(context):
     """(objects, notes) for the selected meshes; SceneError for bad input.
 
-    Raises when nothing usable is selected, when no selected face emits, or
-    when materials hold values the solver cannot use (NaN, negative
-    emission).  Reflectivity above MAX_REFLECTIVITY is clamped with a note.
+    Raises, naming the objects and materials, when nothing usable is selected, when no
+    selected face emits, or when materials hold values the solver cannot use: NaN,
+    negative colours or strengths, and reflectivity (base colour) of 1 or more -- unless
+    the scene's "Clamp bright colours" setting is on, which lowers those to
+    MAX_REFLECTIVITY and says so.
     """
     notes = []
     candidates = source_objects(context)
+    skipped = skipped_objects(context)
     if not candidates:
+        if skipped:
+            raise SceneError("No mesh among the selected objects: " + "; ".join(_describe(o) for o in skipped))
         raise SceneError("Select one or more mesh objects (result objects in 'Radiosity' do not count)")
+    for o in skipped:
+        notes.append(_describe(o) + ": skipped")
+    settings = getattr(context.scene, "radiosity", None)
+    clamp = bool(getattr(settings, "clamp_reflectivity", False))
     depsgraph = context.evaluated_depsgraph_get()
     objects = []
     for obj in candidates:
@@ -223,22 +319,37 @@ def read_selection(context):
     if not objects:
         raise SceneError("The selected mesh objects have no faces")
     for o in objects:
-        for name, values in (("reflectivity", o.face_reflectivity), ("emission", o.face_emission)):
-            if not np.all(np.isfinite(values)):
-                raise SceneError(f"'{o.name}': a material's {name} is not a finite number")
-        if np.any(o.face_emission < 0):
-            raise SceneError(f"'{o.name}': a material has a negative emission (colour or strength)")
-        if np.any(o.face_reflectivity < 0):
-            raise SceneError(f"'{o.name}': a material has a negative base colour")
-        if np.any(o.face_reflectivity > MAX_REFLECTIVITY):
-            notes.append(
-                f"'{o.name}': base colours above {MAX_REFLECTIVITY} were clamped to {MAX_REFLECTIVITY}"
+        for name, values in (("base colour", o.face_reflectivity), ("emission", o.face_emission)):
+            bad = ~np.isfinite(values).all(axis=1)
+            if bad.any():
+                raise SceneError(f"'{o.name}': the {name} of material {_materials_where(o, bad)} is not a "
+                                 "finite number (NaN or infinite, from a driver or a script?)")
+        bad = (o.face_emission < 0).any(axis=1)
+        if bad.any():
+            raise SceneError(f"'{o.name}': material {_materials_where(o, bad)} has a negative emission "
+                             "(colour or strength)")
+        bad = (o.face_reflectivity < 0).any(axis=1)
+        if bad.any():
+            raise SceneError(f"'{o.name}': material {_materials_where(o, bad)} has a negative base colour")
+        bright = (o.face_reflectivity >= 1).any(axis=1)
+        if bright.any() and not clamp:
+            value = float(o.face_reflectivity[bright].max())
+            raise SceneError(
+                f"'{o.name}': material {_materials_where(o, bright)} has a base colour of {value:.3g}. "
+                "Radiosity needs a reflectivity below 1: a surface that reflects all the light it gets "
+                "never lets a random walk end in a closed room (and above 1 it creates light). "
+                f"Lower the base colour below 1, or turn on 'Clamp bright colours' to use {MAX_REFLECTIVITY}"
             )
+        over = (o.face_reflectivity > MAX_REFLECTIVITY).any(axis=1)
+        if over.any() and clamp:
+            notes.append(f"'{o.name}': base colours of material {_materials_where(o, over)} above "
+                         f"{MAX_REFLECTIVITY} were clamped to {MAX_REFLECTIVITY} ('Clamp bright colours' is on)")
             o.face_reflectivity = np.minimum(o.face_reflectivity, MAX_REFLECTIVITY)
     if not any(np.any(o.face_emission > 0) for o in objects):
         raise SceneError(
             "No emitter among the selected objects: give a material an emission strength > 0 "
-            "(Principled BSDF 'Emission Strength' or an Emission shader)"
+            "(Principled BSDF 'Emission Strength' or an Emission shader); lamps (Light objects) "
+            "are not used"
         )
     # unique notes, in order
     return objects, list(dict.fromkeys(notes))
@@ -248,12 +359,17 @@ def read_selection(context):
 # Writing results
 # ---------------------------------------------------------------------------
 
+MATERIAL_PROPERTY = "radiosity_result_material"  # marks the material we made
+
+
 def result_material():
-    """The material that shows the 'Radiosity' attribute as emission."""
-    material = bpy.data.materials.get(MATERIAL_NAME)
-    if material is not None and material.node_tree is not None:
-        return material
+    """The material that shows the 'Radiosity' attribute as emission (ours, never a user's
+    material that happens to have the same name)."""
+    for material in bpy.data.materials:
+        if MATERIAL_PROPERTY in material.keys() and material.node_tree is not None:
+            return material
     material = bpy.data.materials.new(MATERIAL_NAME)
+    material[MATERIAL_PROPERTY] = True
     if bpy.app.version < (5, 0, 0):
         material.use_nodes = True
     tree = material.node_tree
@@ -283,15 +399,24 @@ def result_collection(scene):
 
 
 def previous_results():
-    return [o for o in bpy.data.objects if is_result_object(o)]
+    """The result objects a re-run replaces: marked objects in the 'Radiosity' collection only.
+    A result the user copied or moved elsewhere is theirs and is left alone."""
+    collection = bpy.data.collections.get(COLLECTION_NAME)
+    if collection is None:
+        return []
+    return [o for o in collection.objects if is_result_object(o)]
 
 
-def remove_previous_results():
-    for obj in previous_results():
+def _remove_objects(objects):
+    for obj in objects:
         mesh = obj.data
         bpy.data.objects.remove(obj, do_unlink=True)
         if mesh is not None and mesh.users == 0:
             bpy.data.meshes.remove(mesh)
+
+
+def remove_previous_results():
+    _remove_objects(previous_results())
 
 
 def _rgba(values):
@@ -350,26 +475,36 @@ def show_attribute_in_solid_view():
 def write_results(context, output_data, output_mode):
     """Replace the previous results with one object per source object.
 
+    All new objects are built first and only then swapped in for the old ones, so a failure
+    part-way leaves the previous results as they were (never a half-written set).
     ``output_data`` is a worker.SolveOutput.  Returns the new objects.
     """
     scene = context.scene
+    created = []
+    try:
+        material = result_material()
+        for arrays, pm, faces, points in zip(
+            output_data.patches.objects,
+            output_data.patches.meshes,
+            output_data.face_colours,
+            output_data.point_colours,
+        ):
+            if not (np.isfinite(faces).all() and (points is None or np.isfinite(points).all())):
+                raise ValueError(f"the result for '{arrays.name}' is not finite")
+            name = arrays.name + RESULT_SUFFIX
+            mesh = build_mesh(name, pm)
+            obj = bpy.data.objects.new(name, mesh)  # vertices are in world space
+            created.append(obj)
+            write_colours(mesh, pm, faces, points, output_mode)
+            mesh.materials.append(material)
+            obj[SOURCE_PROPERTY] = arrays.name
+    except Exception:
+        _remove_objects(created)
+        raise
     remove_previous_results()
     collection = result_collection(scene)
-    material = result_material()
-    created = []
-    for arrays, pm, faces, points in zip(
-        output_data.patches.objects,
-        output_data.patches.meshes,
-        output_data.face_colours,
-        output_data.point_colours,
-    ):
-        name = arrays.name + RESULT_SUFFIX
-        mesh = build_mesh(name, pm)
-        write_colours(mesh, pm, faces, points, output_mode)
-        mesh.materials.append(material)
-        obj = bpy.data.objects.new(name, mesh)  # vertices are in world space
-        obj[SOURCE_PROPERTY] = arrays.name
+    for obj in created:
         collection.objects.link(obj)
-        created.append(obj)
+        obj.name = obj.data.name = obj[SOURCE_PROPERTY] + RESULT_SUFFIX  # the names the old ones had
     show_attribute_in_solid_view()
     return created

@@ -7,15 +7,18 @@ and averages in a worker thread, and the main thread writes the result.
 
 from __future__ import annotations
 
+import atexit
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .core import meshing
 
-#: Reflectivity is clamped below this: the random walks need R < 1.
+#: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
+#: need R < 1; without the setting, a base colour of 1 or more is refused).
 MAX_REFLECTIVITY = 0.99
 
 
@@ -29,8 +32,11 @@ class ObjectArrays:
     corner_verts: np.ndarray  # (C,) int64
     triangles: np.ndarray  # (T,3) int64, Blender's loop triangles (vertex indices)
     triangle_face: np.ndarray  # (T,) int64
-    face_reflectivity: np.ndarray  # (F,3) float64 in [0, MAX_REFLECTIVITY]
+    face_reflectivity: np.ndarray  # (F,3) float64 in [0, 1)
     face_emission: np.ndarray  # (F,3) float64 >= 0, emission colour x strength
+    uid: int | None = None  # the source object's session_uid (to find it again)
+    face_slot: np.ndarray | None = None  # (F,) material slot of each face
+    slot_names: tuple = ()  # material name of each slot
 
 
 @dataclass
@@ -77,6 +83,15 @@ class SolveOutput:
     target_mse: float | None
     face_colours: list = field(default_factory=list)  # (P_k,3) per object
     point_colours: list = field(default_factory=list)  # (N_k,3) per object, or None
+    notes: list = field(default_factory=list)  # the core's warnings, for the user
+
+    def blocked_fraction(self):
+        """Share of the emitted power absorbed on the back side of faces."""
+        energy = self.result.energy
+        if not energy:
+            return 0.0
+        emitted = float(np.sum(energy["emitted"]))
+        return float(np.sum(energy["blocked"])) / emitted if emitted > 0 else 0.0
 
 
 def make_patches(objects, patch_size) -> Patches:
@@ -145,8 +160,11 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     """
     from .core import solve
 
-    patches = make_patches(objects, settings.patch_size)
-    scene = patches.patch_scene()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        patches = make_patches(objects, settings.patch_size)
+        scene = patches.patch_scene()
+    notes = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
     prediction, target = prediction_for(scene, settings)
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count))
@@ -164,7 +182,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         max_seconds=settings.max_seconds or None,
         threads=settings.threads or None,
     )
-    out = SolveOutput(patches, result, prediction, target)
+    out = SolveOutput(patches, result, prediction, target, notes=notes)
     radiosity = np.asarray(result.radiosity, dtype=np.float64)
     for k, mesh in enumerate(patches.meshes):
         B = radiosity[patches.combined.patch_slice(k)]
@@ -198,6 +216,7 @@ class SolveJob:
         self.error: str | None = None
         self.traceback: str | None = None
         self.started = time.perf_counter()
+        self.file_generation = _file_generation  # the open file when the job was made
         self._thread = threading.Thread(target=self._run, name="radiosity-solve", daemon=True)
 
     def start(self):
@@ -212,7 +231,13 @@ class SolveJob:
         return self._cancel.is_set()
 
     def join(self, timeout=None):
-        self._thread.join(timeout)
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    @property
+    def alive(self) -> bool:
+        """The worker thread is still running."""
+        return self._thread.is_alive()
 
     def snapshot(self) -> dict:
         with self._lock:
@@ -268,3 +293,24 @@ def cancel_running_job():
         job.cancel()
         job.join(timeout=10)
     set_running_job(None)
+
+
+# Bumped when another file is loaded (or the file is closed): a job made for the old file
+# must not write into the new one.
+_file_generation = 0
+
+
+def file_generation() -> int:
+    return _file_generation
+
+
+def file_changed():
+    """Another file is being loaded: stop the running job and remember that the file changed."""
+    global _file_generation
+    _file_generation += 1
+    cancel_running_job()
+
+
+# Blender quitting (or the Python process ending) with a solve running: stop the worker so that
+# it never runs on into a finalising interpreter.
+atexit.register(cancel_running_job)
