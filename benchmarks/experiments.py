@@ -47,7 +47,8 @@ def percent_area_error(estimate, reference, area, tolerance=0.10):
 class CurvePoint:
     paths: int
     rays: int
-    seconds: float
+    seconds: float      # wall time of the solves (the core's own seconds), summed
+    cpu_seconds: float  # process CPU time (all threads) of the solves, summed: robust to other load
     radiosity: np.ndarray
     predicted_mse: float
     batch_mse: float  # the core's a-posteriori estimate for the cumulative run (combined batches)
@@ -60,12 +61,15 @@ def cumulative_runs(scene, estimator, batches, seed, threshold=1e-3, threads=Non
     total_paths = 0
     total_rays = 0
     seconds = 0.0
+    cpu = 0.0
     weighted = None
     batch_mse_weighted = 0.0
     out = []
     for k, n in enumerate(batches):
+        c0 = time.process_time()
         r = solve(scene, estimator, paths=int(n), threshold=threshold, seed=int(seed) * 1000 + k,
                   threads=threads, exit_point=exit_point)
+        cpu += time.process_time() - c0
         total_paths += r.paths
         total_rays += r.rays
         seconds += r.seconds
@@ -74,7 +78,7 @@ def cumulative_runs(scene, estimator, batches, seed, threshold=1e-3, threads=Non
         batch_mse_weighted += (r.paths**2) * r.measured_mse
         p = r.prediction
         out.append(CurvePoint(
-            paths=total_paths, rays=total_rays, seconds=seconds,
+            paths=total_paths, rays=total_rays, seconds=seconds, cpu_seconds=cpu,
             radiosity=scene.emission + weighted / total_paths,
             predicted_mse=p.mse_per_path / total_paths,
             batch_mse=batch_mse_weighted / total_paths**2,

@@ -1,10 +1,10 @@
 """Reproduce the experiments of Sbert & Brusi on the sample scenes; write markdown and PNGs.
 
-    nice .venv/bin/python -m benchmarks.paper            # full run, ~15-25 min on 2 cores
-    .venv/bin/python -m benchmarks.paper --quick         # smoke run, ~1 min, into results/quick/
+    nice .venv/bin/python -m benchmarks.paper            # full run: ~10 min on 2 cores, ~4 once references are cached
+    .venv/bin/python -m benchmarks.paper --quick         # smoke run, ~15 s, into out/benchmarks_quick/
     .venv/bin/python -m benchmarks.paper --only fig12,fig4,fig6,cornell
 
-Outputs (benchmarks/results/, or benchmarks/results/quick/ with --quick):
+Outputs (benchmarks/results/, or out/benchmarks_quick/ with --quick; both overwritten):
     fig1_fig2.md, fig1.png, fig2.png       expected vs experimental MSE, figure 2(d)
     table3_fig4_room.md, fig3.png          the 66,572-patch room (table 3, figure 3)
     table4_fig6_room.md, fig5.png          the 2,200-patch room (table 4, figure 5)
@@ -28,6 +28,7 @@ import numpy as np
 from . import experiments as ex
 
 RESULTS = Path(__file__).resolve().parent / "results"
+QUICK_RESULTS = Path(__file__).resolve().parent.parent / "out" / "benchmarks_quick"  # ignored by git
 
 # The paper's tables 3 and 4 (paths, total rays, expected error, experimental error).
 PAPER_TABLE3 = {
@@ -49,7 +50,7 @@ FULL = {
                  reps=5),
     "fig4": dict(scale=1.0, reference_factor=8),
     "fig6": dict(scale=1.0, reference_factor=20),
-    "cornell": dict(divisions=20, first_paths=10_000, points=6, reference_paths=40_000_000),
+    "cornell": dict(divisions=20, first_paths=10_000, points=9, reference_paths=40_000_000),
 }
 QUICK = {
     "fig1": dict(enclosure_divisions=4, cube_divisions=1, rays_per_patch=20_000, first_paths=2_000, points=4,
@@ -137,20 +138,38 @@ def run_fig12(c, threads, out):
         refl = np.full(P, R)
         ref = ex.direct_reference(F1, F2, refl, emission, area, rays=P * c["rays_per_patch"], seconds=ff_seconds)
         scene = base.scene.with_materials(refl, emission)
-        entry = {"reference_mse": ref.mse, "configs": {}}
+        from addon.core.reference import path_variances
+
+        var_finite, var_infinite = path_variances(0.5 * (F1 + F2), refl, emission, area)
+        entry = {"reference_mse": ref.mse, "configs": {},
+                 # table 1's exact per-path variances, area-weighted: E(MSE) x N with nothing neglected
+                 "table1_mse_per_path": {"finite": float(np.sum(area * var_finite) / area.sum()),
+                                         "infinite": float(np.sum(area * var_infinite) / area.sum())},
+                 "formula1_mse_per_path": formula1_per_path(scene, ref.radiosity)}
         for est, t in CONFIGS:
             label = cfg_label(est, t)
-            mses, rays, secs, lengths, batch = [], [], [], [], []
+            mses, rays, secs, cpus, lengths, batch = [], [], [], [], [], []
             for rep in range(c["reps"]):
                 pts = ex.cumulative_runs(scene, est, batches, seed=100 + rep, threshold=t or 1e-3, threads=threads)
                 mses.append([ex.mse(p.radiosity, ref.radiosity, area) for p in pts])
                 rays.append([p.rays for p in pts])
                 secs.append([p.seconds for p in pts])
+                cpus.append([p.cpu_seconds for p in pts])
                 batch.append([p.batch_mse for p in pts])
                 lengths.append(pts[-1].rays / pts[-1].paths)
             pred = [p.predicted_mse for p in pts]
             from addon.core import predict
 
+            # The biased estimator's bias: with a uniform R every path scores exactly K hits
+            # (K = its deterministic length), so its expectation is the Neumann series of
+            # B = E + R F B cut after K bounces; bias^2 is the MSE of that truncation.
+            K = int(round(float(np.mean(lengths))))
+            Fm = 0.5 * (F1 + F2)
+            term, B_K = emission.astype(float), emission.astype(float)
+            for _ in range(K):
+                term = refl * (Fm @ term)
+                B_K = B_K + term
+            bias_sq = ex.mse(B_K, ref.radiosity[:, 0], area) if est != "finite" else 0.0
             pr = predict(scene, est, threshold=t or 1e-3)
             m = np.mean(mses, axis=0)
             entry["configs"][label] = {
@@ -159,8 +178,10 @@ def run_fig12(c, threads, out):
                 if c["reps"] > 1 else None,
                 "batch_estimate": np.mean(batch, axis=0).tolist(),
                 "rays": np.mean(rays, axis=0).tolist(), "seconds": np.mean(secs, axis=0).tolist(),
+                "cpu_seconds": np.mean(cpus, axis=0).tolist(),
                 "mean_path_length": float(np.mean(lengths)), "expected_path_length": pr.expected_path_length,
                 "formula4": pr.relative_efficiency if est != "finite" else None,
+                "bias_squared": bias_sq,
             }
             ratio = (m - ref.mse) / np.array(pred)
             log(f"  R={R} {label}: measured/predicted {np.round(ratio, 3).tolist()}, "
@@ -175,6 +196,12 @@ def run_fig12(c, threads, out):
         results["by_r"][str(R)] = entry
     write_fig12(results, out)
     return results
+
+
+def formula1_per_path(scene, B_ref):
+    """Formula (1) before the paper's averaging: Phi_T / A_T * sum_i b_i R_i, with b from a reference."""
+    b = (np.asarray(B_ref) - scene.emission).mean(axis=1)
+    return float(scene.total_power / scene.total_area * np.sum(b * scene.mean_reflectivity))
 
 
 def write_fig12(res, out):
@@ -216,13 +243,29 @@ def write_fig12(res, out):
         rows = []
         for label, v in cfgs.items():
             ratios = np.array(v["measured_corrected"]) / np.array(v["predicted"])
-            rows.append([label, f"{v['mean_path_length']:.3f}", f"{v['expected_path_length']:.3f}",
+            rows.append([label, fmt(v.get("bias_squared", 0.0)), f"{v['mean_path_length']:.3f}",
+                         f"{v['expected_path_length']:.3f}",
                          f"{ex.geometric_mean(ratios):.3f}", f"{ratios.min():.3f}-{ratios.max():.3f}",
                          f"{v['relative_efficiency_measured']:.3f}" if "relative_efficiency_measured" in v else "-",
-                         f"{v['formula4']:.3f}" if v["formula4"] else "-"])
-        lines += [md_table(["estimator", "rays/path measured", "rays/path formula",
+                         f"{v['formula4']:.3f}" if v["formula4"] else "-",
+                         f"{v['seconds'][-1]:.2f}", f"{v.get('cpu_seconds', [math.nan])[-1]:.2f}",
+                         f"{v['rays'][-1] / v.get('cpu_seconds', [math.nan])[-1] / 1e6:.2f}"])
+        lines += [md_table(["estimator", "bias^2 (truncated Neumann series)", "rays/path measured", "rays/path formula",
                             "measured/expected (geo. mean)", "range", "rel. efficiency measured",
-                            "formula (4)"], rows), ""]
+                            "formula (4)", f"wall s, {paths[-1]:,} paths", "CPU s", "Mrays per CPU s"], rows), ""]
+        if "table1_mse_per_path" in entry:
+            t1 = entry["table1_mse_per_path"]
+            f2 = cfgs["finite"]["predicted"][0] * paths[0]
+            f3 = cfgs["biased t=0.001"]["predicted"][0] * paths[0]
+            lines += ["Where the heuristic loses accuracy (MSE x paths, i.e. per path):", "",
+                      md_table(["", "finite", "infinite"],
+                               [["formula (2) / (3)", f2, f3],
+                                ["formula (1): Phi_T/A_T sum b_i R_i, reference b_i (finite only)",
+                                 entry["formula1_mse_per_path"], "-"],
+                                ["table 1 exact (xi_i and b_i^2 kept; F of the reference)", t1["finite"],
+                                 t1["infinite"]],
+                                ["table 1 exact / formula", f"{t1['finite'] / f2:.3f}",
+                                 f"{t1['infinite'] / f3:.3f}"]]), ""]
     (out / "fig1_fig2.md").write_text("\n".join(lines) + "\n")
 
     colors = {"0.2": "tab:blue", "0.5": "tab:green", "0.8": "tab:red"}
@@ -248,6 +291,9 @@ def write_fig12(res, out):
         for t, c in ((0.01, "tab:orange"), (0.001, "tab:purple")):
             v = entry["configs"][f"biased t={t:g}"]
             ax.loglog(paths, v["predicted"], "-", color=c, lw=2, label=f"expected (3), t={t:g}")
+            if v.get("bias_squared", 0) > 0:
+                ax.loglog(paths, np.array(v["predicted"]) + v["bias_squared"], "--", color=c, lw=1,
+                          label=f"(3) + bias$^2$, t={t:g}")
             ax.loglog(paths, v["measured_corrected"], ":o", color=c, ms=4, mfc="white", label=f"experimental, t={t:g}")
         readable_log_x(ax)
         ax.set_title(f"({'abc'[list(res['by_r']).index(R)]}) biased infinite, R_ave = {R}")
@@ -295,7 +341,8 @@ def run_room(which, c, threads, out):
     log(f"{which}: {sample.patch_count} patches, reference: finite run of {ref_paths:,} paths")
     ref = ex.long_run_reference(sample, ref_paths, threads=threads, label=which)
     log(f"  reference done: {ref.seconds:.0f} s, its MSE {ref.mse:.3g}")
-    res = {"patches": sample.patch_count, "R_ave": sample.r_ave, "scale": scale, "reference_paths": ref_paths,
+    res = {"formula1_mse_per_path": formula1_per_path(scene, ref.radiosity),
+           "patches": sample.patch_count, "R_ave": sample.r_ave, "scale": scale, "reference_paths": ref_paths,
            "reference_mse": ref.mse, "reference_seconds": ref.seconds, "reference_rays": ref.rays, "rows": {}}
     from addon.core import predict
 
@@ -308,7 +355,7 @@ def run_room(which, c, threads, out):
             m = ex.mse(p.radiosity, ref.radiosity, area)
             rows.append({"paths": p.paths, "rays": p.rays, "rays_per_path": p.rays / p.paths,
                          "expected": p.predicted_mse, "measured": m, "corrected": m - ref.mse,
-                         "batch_estimate": p.batch_mse, "seconds": p.seconds,
+                         "batch_estimate": p.batch_mse, "seconds": p.seconds, "cpu_seconds": p.cpu_seconds,
                          "percent_area": ex.percent_area_error(p.radiosity, ref.radiosity, area)})
         res["rows"][key] = rows
         res[f"{key}_expected_path_length"] = pr.expected_path_length
@@ -332,7 +379,9 @@ def write_room(which, res, paper, out):
              f"Path counts: the paper's x {res['scale']:g}. Reference: one finite run of "
              f"{res['reference_paths']:,} paths ({res['reference_rays']:,} rays, {res['reference_seconds']:.0f} s), "
              f"whose own MSE, {res['reference_mse']:.3g} (batch estimate), is subtracted in the 'corrected' column.",
-             f"Seconds are wall time with the core's threads on a shared 2-core machine. %A: percentage of the area "
+             f"Seconds: wall time of the solves with 2 threads on a 2-core machine shared with other work; CPU "
+             "seconds: the process's CPU time over all threads, which that other work disturbs much less (the plots "
+             "use it). %A: percentage of the area "
              "whose radiosity has a relative error of at least 10% against the reference.", ""]
     for key, label in (("biased", "biased infinite, t = 0.001"), ("finite", "finite (Phi_T)")):
         lines += [f"## {label}", ""]
@@ -340,30 +389,35 @@ def write_room(which, res, paper, out):
         for pos, r, pp in zip(POSITIONS, res["rows"][key], paper[key]):
             rows.append([pos, r["paths"], r["rays"], f"{r['rays_per_path']:.2f}", r["expected"], r["measured"],
                          r["corrected"], f"{r['corrected'] / r['expected']:.2f}", r["batch_estimate"],
-                         f"{r['seconds']:.1f}", f"{r['percent_area']:.1f}",
+                         f"{r['seconds']:.1f}", f"{r['cpu_seconds']:.1f}", f"{r['percent_area']:.1f}",
                          pp[0], pp[1], f"{pp[1] / pp[0]:.2f}", pp[2], pp[3], f"{pp[3] / pp[2]:.2f}"])
         lines += [md_table(["image", "paths", "rays", "rays/path", "expected MSE", "measured MSE", "corrected",
-                            "corrected/expected", "core batch estimate", "seconds", "%A",
+                            "corrected/expected", "core batch estimate", "seconds", "CPU seconds", "%A",
                             "paper paths", "paper rays", "paper rays/path", "paper expected", "paper experimental",
                             "paper exp./expected"], rows), ""]
     lines += [f"Expected rays per path: finite {res['finite_expected_path_length']:.2f}, biased "
               f"{res['biased_expected_path_length']:.2f} (1 + log t / log R_ave).",
               f"Relative efficiency (MSE x rays, biased / finite; geometric mean over all pairs of points): "
               f"measured {res['re_measured']:.2f}, formula (4) {res['formula4']:.2f}.", ""]
+    if "formula1_mse_per_path" in res:
+        f2 = res["rows"]["finite"][0]["expected"] * res["rows"]["finite"][0]["paths"]
+        lines += [f"Formula (1) before the paper's averaging, Phi_T/A_T sum_i b_i R_i with the reference's b_i, gives "
+                  f"{res['formula1_mse_per_path'] / f2:.3f} x formula (2) for the finite estimator: that much of "
+                  "the gap between expected and measured comes from replacing b_i R_i by its scene average.", ""]
     (out / f"{'table3_fig4_room' if which == 'fig4' else 'table4_fig6_room'}.md").write_text("\n".join(lines) + "\n")
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for key, marker, label in (("biased", "o", "biased t=0.001"), ("finite", "s", "finite ($\\Phi_T$)")):
         rows = res["rows"][key]
-        s = [r["seconds"] for r in rows]
+        s = [r["cpu_seconds"] for r in rows]
         c = COLORS[key]
         axes[0].loglog(s, [r["expected"] for r in rows], "-", color=c, lw=2, alpha=0.5, label=f"{label}, expected")
         axes[0].loglog(s, [r["corrected"] for r in rows], ":" + marker, color=c, label=f"{label}, experimental")
         axes[1].semilogx(s, [r["percent_area"] for r in rows], ":" + marker, color=c, label=label)
-    axes[0].set_xlabel("seconds")
+    axes[0].set_xlabel("CPU seconds (all threads)")
     axes[0].set_ylabel("MSE")
     axes[0].set_title("MSE against run time")
-    axes[1].set_xlabel("seconds")
+    axes[1].set_xlabel("CPU seconds (all threads)")
     axes[1].set_ylabel("%A (area with relative error >= 10%)")
     axes[1].set_title("%A against run time")
     for ax in axes:
@@ -393,7 +447,8 @@ def run_cornell(c, threads, out):
     for est, key in (("finite", "finite"), ("biased_infinite", "biased")):
         pts = ex.cumulative_runs(sample.scene, est, batches, seed=11, threshold=1e-3, threads=threads)
         pr = predict(sample.scene, est, threshold=1e-3)
-        res["rows"][key] = [{"paths": p.paths, "rays": p.rays, "seconds": p.seconds, "expected": p.predicted_mse,
+        res["rows"][key] = [{"paths": p.paths, "rays": p.rays, "seconds": p.seconds, "cpu_seconds": p.cpu_seconds,
+                             "expected": p.predicted_mse,
                              "measured": ex.mse(p.radiosity, ref.radiosity, area),
                              "corrected": ex.mse(p.radiosity, ref.radiosity, area) - ref.mse,
                              "percent_area": ex.percent_area_error(p.radiosity, ref.radiosity, area)} for p in pts]
@@ -407,9 +462,10 @@ def run_cornell(c, threads, out):
         lines += [f"## {key}" + (" (t = 0.001)" if key == "biased" else ""), "",
                   f"rays/path measured {res[f'{key}_mean_path_length']:.3f}, formula "
                   f"{res[f'{key}_expected_path_length']:.3f}", ""]
-        lines += [md_table(["paths", "rays", "seconds", "expected MSE", "measured", "corrected", "corrected/expected",
-                            "%A"],
-                           [[r["paths"], r["rays"], f"{r['seconds']:.2f}", r["expected"], r["measured"], r["corrected"],
+        lines += [md_table(["paths", "rays", "seconds", "CPU seconds", "expected MSE", "measured", "corrected",
+                            "corrected/expected", "%A"],
+                           [[r["paths"], r["rays"], f"{r['seconds']:.2f}", f"{r['cpu_seconds']:.2f}", r["expected"],
+                             r["measured"], r["corrected"],
                              f"{r['corrected'] / r['expected']:.2f}", f"{r['percent_area']:.1f}"]
                             for r in res["rows"][key]]), ""]
     (out / "cornell_box.md").write_text("\n".join(lines) + "\n")
@@ -426,10 +482,10 @@ def write_time_vs_error(summary, out):
     if "fig12" in summary:
         for R, entry in summary["fig12"]["by_r"].items():
             panels.append((f"Figure 1 scene, R_ave = {R}", {
-                "finite": (entry["configs"]["finite"]["seconds"], entry["configs"]["finite"]["measured_corrected"]),
-                "biased t=0.001": (entry["configs"]["biased t=0.001"]["seconds"],
+                "finite": (entry["configs"]["finite"]["cpu_seconds"], entry["configs"]["finite"]["measured_corrected"]),
+                "biased t=0.001": (entry["configs"]["biased t=0.001"]["cpu_seconds"],
                                    entry["configs"]["biased t=0.001"]["measured_corrected"]),
-                "biased t=0.01": (entry["configs"]["biased t=0.01"]["seconds"],
+                "biased t=0.01": (entry["configs"]["biased t=0.01"]["cpu_seconds"],
                                   entry["configs"]["biased t=0.01"]["measured_corrected"]),
             }))
     for key, title in (("fig4", "Figure 4 room (66,572 patches)"), ("fig6", "Figure 6 room (2,200 patches)"),
@@ -437,8 +493,8 @@ def write_time_vs_error(summary, out):
         if key in summary:
             rows = summary[key]["rows"]
             panels.append((title, {
-                "finite": ([r["seconds"] for r in rows["finite"]], [r["corrected"] for r in rows["finite"]]),
-                "biased t=0.001": ([r["seconds"] for r in rows["biased"]], [r["corrected"] for r in rows["biased"]]),
+                "finite": ([r["cpu_seconds"] for r in rows["finite"]], [r["corrected"] for r in rows["finite"]]),
+                "biased t=0.001": ([r["cpu_seconds"] for r in rows["biased"]], [r["corrected"] for r in rows["biased"]]),
             }))
     if not panels:
         return
@@ -454,7 +510,7 @@ def write_time_vs_error(summary, out):
             ax.loglog(s[ok], m[ok], st, color=c, label=label, ms=4)
         readable_log_x(ax)
         ax.set_title(title)
-        ax.set_xlabel("seconds")
+        ax.set_xlabel("CPU seconds (all threads)")
         ax.set_ylabel("MSE (vs reference)")
         ax.legend(fontsize=8)
     for ax in axes.ravel()[len(panels):]:
@@ -477,20 +533,36 @@ def _jsonable(o):
     return o
 
 
+def core_version():
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    try:
+        commit = subprocess.run(["git", "log", "-1", "--format=%h %cd", "--date=iso", "--", "addon/core"], cwd=root,
+                                capture_output=True, text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "addon/core"], cwd=root, capture_output=True,
+                               text=True, timeout=10).stdout.strip()
+        return commit + (" (+ uncommitted changes)" if dirty else "")
+    except Exception:  # noqa: BLE001 - only a label
+        return "unknown"
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="small scenes and path counts, into results/quick/")
+    ap.add_argument("--quick", action="store_true", help="small scenes and path counts, into out/benchmarks_quick/")
     ap.add_argument("--only", default="fig12,fig4,fig6,cornell", help="comma-separated subset")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args(argv)
     cfg = QUICK if args.quick else FULL
-    out = args.out or (RESULTS / "quick" if args.quick else RESULTS)
+    out = args.out or (QUICK_RESULTS if args.quick else RESULTS)
     out.mkdir(parents=True, exist_ok=True)
     only = set(args.only.split(","))
     summary_path = out / "summary.json"
     summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
-    summary["config"] = {"quick": args.quick, "threads": args.threads, **{k: v for k, v in cfg.items()}}
+    summary["config"] = {"quick": args.quick, "threads": args.threads, "core": core_version(),
+                         **{k: v for k, v in cfg.items()}}
+    log(f"core: {summary['config']['core']}")
     start = time.perf_counter()
     if "fig4" in only:
         summary["fig4"] = run_room("fig4", cfg["fig4"], args.threads, out)
