@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sampling import SourceTable, cosine_directions, points_on_patches
+from .sampling import SourceTable, cosine_directions, points_at_barycentric, points_on_patches
 
 FINITE = "finite"
 BIASED_INFINITE = "biased_infinite"
@@ -126,7 +126,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         if tables.exit_random:
             hit = tables.tracer.first_hit(origins, directions)
         else:
-            hit, distance = tables.tracer.first_hit_distance(origins, directions)
+            hit, bary_u, bary_v = tables.tracer.first_hit_barycentric(origins, directions)
         rays += n
 
         missed = hit < 0
@@ -150,9 +150,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             if accumulated is not None:
                 accumulated = accumulated[keep]
             if not tables.exit_random:
-                origins = np.take(origins, keep, axis=0)
-                directions = np.take(directions, keep, axis=0)
-                distance = distance[keep]
+                bary_u, bary_v = bary_u[keep], bary_v[keep]
         else:
             u5 = u[tables.row_survival] if finite else None
         if hit.size == 0:
@@ -187,13 +185,11 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 go_on = slice(None)
 
         if not tables.exit_random:
+            # Leave from the hit point, re-made from its barycentric coordinates on the
+            # triangle's leaving frame: on the surface (inset, pushed off), whatever the distance.
             if not isinstance(go_on, slice):
-                origins = np.take(origins, go_on, axis=0)
-                directions = np.take(directions, go_on, axis=0)
-                distance = distance[go_on]
-            leave_from = directions * distance[:, None]
-            leave_from += origins
-            leave_from += np.take(g.triangle_normal, hit_triangle, axis=0) * np.float32(g.ray_offset)
+                bary_u, bary_v = bary_u[go_on], bary_v[go_on]
+            leave_from = points_at_barycentric(g, hit_triangle, bary_u, bary_v)
         n = patch.size
 
     patches = np.concatenate(scored_patches) if scored_patches else np.zeros(0, np.int32)

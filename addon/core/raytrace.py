@@ -28,7 +28,8 @@ class RayTracer:
         """Index of the first triangle each ray hits, -1 where it hits nothing. (n,) int32."""
         return self._scene.run(origins, directions)
 
-    def first_hit_distance(self, origins, directions):
-        """(triangle index, distance along the unit direction) of each ray's first hit."""
+    def first_hit_barycentric(self, origins, directions):
+        """(triangle index, u, v) of each ray's first hit: the hit point is
+        corner0 + u (corner1 - corner0) + v (corner2 - corner0)."""
         out = self._scene.run(origins, directions, output=1)
-        return out["primID"], out["tfar"]
+        return out["primID"], out["u"], out["v"]

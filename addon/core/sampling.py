@@ -64,8 +64,12 @@ def points_on_triangles(geometry, triangle, u1, u2):
     and needs no square root. float32 (n,3), centred coordinates.
     """
     fold = (u1 + u2) > 1
-    a = np.where(fold, 1 - u1, u1)
-    b = np.where(fold, 1 - u2, u2)
+    return points_at_barycentric(geometry, triangle, np.where(fold, 1 - u1, u1), np.where(fold, 1 - u2, u2))
+
+
+def points_at_barycentric(geometry, triangle, a, b):
+    """The points corner0 + a edge1 + b edge2 of the given triangles' leaving frames (inset
+    from the edges, pushed off along the normal). float32 (n,3), centred coordinates."""
     frame = np.take(geometry.triangle_frame, triangle, axis=1)  # one gather: (9,n)
     points = frame[3:6] * a
     points += frame[0:3]

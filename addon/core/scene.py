@@ -22,6 +22,15 @@ CHANNELS = 3
 # distance from the origin.
 RELATIVE_RAY_OFFSET = 1e-5
 
+# Points where rays leave a patch keep this distance (relative to the diagonal, ~17 float32
+# ulps at the scene's extent) from the patch's edges, so that float32 rounding never puts an
+# origin on the far side of an adjacent wall, where its ray would hit that wall's back.
+RELATIVE_EDGE_INSET = 1e-6
+
+# Scenes whose bounding-box diagonal lies outside this range are refused: float32 ray tracing
+# and float64 areas stay far from overflow and underflow inside it.
+MIN_DIAGONAL, MAX_DIAGONAL = 1e-12, 1e12
+
 # A triangle whose area is below this fraction of diagonal**2 is degenerate.
 RELATIVE_DEGENERATE_AREA = 1e-14
 
@@ -188,9 +197,15 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     used = V[np.unique(T)]
     lo, hi = used.min(axis=0), used.max(axis=0)
     centre = 0.5 * (lo + hi)
-    diagonal = float(np.linalg.norm(hi - lo))
+    with np.errstate(over="ignore", invalid="ignore"):
+        diagonal = float(np.linalg.norm(hi - lo))
     if not diagonal > 0:
         raise ValueError("the scene has no extent: all vertices coincide")
+    if not MIN_DIAGONAL <= diagonal <= MAX_DIAGONAL:
+        raise ValueError(
+            f"the scene's size (bounding-box diagonal {diagonal:.3g}) is outside [{MIN_DIAGONAL:g}, {MAX_DIAGONAL:g}] "
+            "scene units: rescale it (radiosity does not depend on the unit of length)"
+        )
 
     corners = V[T] - centre                       # (T,3,3) float64, centred
     e1 = corners[:, 1] - corners[:, 0]
@@ -245,8 +260,10 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     fraction[last] = 1.0  # exact upper end, whatever the rounding
     ray_offset = RELATIVE_RAY_OFFSET * diagonal
     sorted_corners = corners[order]
-    is_parallelogram, parallelogram = _parallelograms(sorted_corners, first, count, diagonal)
+    inset = RELATIVE_EDGE_INSET * diagonal
+    is_parallelogram, parallelogram = _parallelograms(sorted_corners, first, count, diagonal, inset)
     parallelogram[:, :3] += ray_offset * patch_normal
+    leave_corners = _inset_triangles(sorted_corners, inset)
 
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     return Geometry(
@@ -263,14 +280,36 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         patch_first_triangle=first,
         patch_triangle_count=count,
         triangle_key=tp_sorted + fraction,
-        triangle_frame=f32(np.hstack([sorted_corners[:, 0] + ray_offset * normal, e1[order], e2[order]]).T),
+        triangle_frame=f32(
+            np.hstack(
+                [
+                    leave_corners[:, 0] + ray_offset * normal,
+                    leave_corners[:, 1] - leave_corners[:, 0],
+                    leave_corners[:, 2] - leave_corners[:, 0],
+                ]
+            ).T
+        ),
         patch_first_fraction=f32(fraction[first]),
         patch_parallelogram=is_parallelogram,
         parallelogram_frame=f32(np.where(is_parallelogram[:, None], parallelogram, 0.0).T),
     )
 
 
-def _parallelograms(sorted_corners, first, count, diagonal):
+def _inset_triangles(corners, inset):
+    """Each triangle shrunk about its incentre so that every edge moves in by ``inset``
+    (by at most half the inradius for tiny triangles). (T,3,3)."""
+    a = np.linalg.norm(corners[:, 2] - corners[:, 1], axis=1)  # side opposite corner 0
+    b = np.linalg.norm(corners[:, 0] - corners[:, 2], axis=1)
+    c = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+    perimeter = a + b + c
+    incentre = (a[:, None] * corners[:, 0] + b[:, None] * corners[:, 1] + c[:, None] * corners[:, 2]) / perimeter[:, None]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    inradius = 2 * area / perimeter
+    shrink = np.minimum(inset / inradius, 0.5)
+    return incentre[:, None, :] + (1 - shrink)[:, None, None] * (corners - incentre[:, None, :])
+
+
+def _parallelograms(sorted_corners, first, count, diagonal, inset=0.0):
     """Which patches are two triangles forming a parallelogram, and its (corner, a, b).
 
     Such a patch (any quad with parallel sides: the grids meshing makes) is sampled as
@@ -296,7 +335,11 @@ def _parallelograms(sorted_corners, first, count, diagonal):
     s1 = t0[rows, order[:, 0]]
     s2 = t0[rows, order[:, 1]]
     ok &= np.linalg.norm(p + q - s1 - s2, axis=1) < tolerance  # the diagonals bisect each other
-    frame[two] = np.hstack([p, s1 - p, s2 - p])
+    edge_a, edge_b = s1 - p, s2 - p
+    # Inset every side by ``inset`` (at most a quarter of the patch): corner + d_a a + d_b b.
+    d_a = np.minimum(inset / np.linalg.norm(edge_a, axis=1), 0.25)[:, None]
+    d_b = np.minimum(inset / np.linalg.norm(edge_b, axis=1), 0.25)[:, None]
+    frame[two] = np.hstack([p + d_a * edge_a + d_b * edge_b, (1 - 2 * d_a) * edge_a, (1 - 2 * d_b) * edge_b])
     flags = np.zeros(P, bool)
     flags[two[ok]] = True
     return flags, frame
@@ -330,6 +373,14 @@ class PatchScene:
         self.geometry = _geometry if _geometry is not None else build_geometry(
             vertices, triangles, triangle_patch, patch_count
         )
+        with np.errstate(over="ignore", invalid="ignore"):
+            power = self.patch_area[:, None] * self.emission
+        if not np.isfinite(power.sum()):
+            raise PatchError(
+                "emission times area overflows: the emitted power is not a finite number "
+                f"(largest emission {self.emission.max():.3g}); use smaller units of power",
+                np.flatnonzero(~np.isfinite(power).all(axis=1) | (power.max(axis=1) > 1e300)),
+            )
 
     # --- materials -------------------------------------------------------------------------
     def with_materials(self, reflectivity, emission):
