@@ -10,7 +10,7 @@ from . import scene_io, worker
 
 TIMER_SECONDS = 0.1
 #: Above this share of the emitted power absorbed on back sides, the user is warned.
-BLOCKED_WARNING = 0.01
+BLOCKED_WARNING = 0.05
 
 
 def _redraw(context):

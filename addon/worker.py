@@ -311,6 +311,21 @@ def file_changed():
     cancel_running_job()
 
 
-# Blender quitting (or the Python process ending) with a solve running: stop the worker so that
-# it never runs on into a finalising interpreter.
+def _stop_at_exit():
+    job = _running
+    if job is not None:
+        job.cancel()
+
+
+# Blender quitting (or the Python process ending) with a solve running: stop the worker before
+# the interpreter waits for threads. The solver's chunks run in a ThreadPoolExecutor, whose
+# threads Python joins at shutdown *before* ``atexit`` runs -- a chunk of long paths could hold
+# the exit for minutes -- so the cancel is registered with threading's own exit hooks (run
+# last-registered first, before those joins), and with atexit as a fallback.
+try:
+    import concurrent.futures.thread  # noqa: F401 - registers its exit hook first
+
+    threading._register_atexit(_stop_at_exit)
+except (AttributeError, RuntimeError):  # pragma: no cover - other Pythons, or already exiting
+    pass
 atexit.register(cancel_running_job)

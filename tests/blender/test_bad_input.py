@@ -1,0 +1,386 @@
+"""Bad input and bad timing in Blender (issue 6): each case ends with a clear report, the scene
+is either unchanged or holds the complete new result, and the worker thread is gone."""
+
+import math
+import os
+import subprocess
+import sys
+import time
+
+import bpy
+import numpy as np
+import pytest
+
+from addon import scene_io, worker
+
+from .conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
+from .test_extension import _drive, _modal_operator, _snapshot, configure
+
+
+def _unchanged_after_error(context, match):
+    """Run the solve synchronously; it must fail with ``match`` and change nothing."""
+    before = _snapshot()
+    results = {o.name: read_colours(o.data, "Radiosity")[1].tobytes() for o in result_objects()}
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.radiosity.solve()
+    assert _snapshot() == before
+    assert {o.name: read_colours(o.data, "Radiosity")[1].tobytes() for o in result_objects()} == results
+
+
+def _run_sync(context):
+    """The operator's synchronous path with its reports captured: (state, reports)."""
+    op = _modal_operator()
+    started = op._start_job(context, threaded=False)
+    if started is not None:
+        return started, op.reports
+    return op._finish(context), op.reports
+
+
+def _select(*names):
+    for o in bpy.data.objects:
+        o.select_set(o.name in names)
+
+
+# ---------------------------------------------------------------------------------------------
+# Selection
+# ---------------------------------------------------------------------------------------------
+
+def test_nothing_selected_and_no_mesh_selected(blender):
+    build_test_scene()
+    configure(blender)
+    _select()
+    _unchanged_after_error(blender, "Select one or more mesh objects")
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    lamp = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    holder = bpy.data.collections.new("Props")
+    instancer = bpy.data.objects.new("Instancer", None)
+    instancer.instance_type = "COLLECTION"
+    instancer.instance_collection = holder
+    for o in (camera, lamp, instancer):
+        blender.scene.collection.objects.link(o)
+    _select("Camera", "Sun", "Instancer")
+    _unchanged_after_error(
+        blender, r"No mesh among the selected objects: 'Camera' is a camera; 'Instancer' instances collection "
+        r"'Props' \(make the instances real first.*; 'Sun' is a light")
+    # With meshes too, the others are skipped with a note.
+    _select("Camera", "Instancer", "Room", "Lamp", "Block")
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}
+    assert ("WARNING", "'Camera' is a camera: skipped") in reports
+    assert any(kind == "WARNING" and "'Instancer' instances collection 'Props'" in text for kind, text in reports)
+
+
+def test_no_emitter_and_zero_strength(blender):
+    build_test_scene()
+    configure(blender)
+    _select("Room", "Block")
+    _unchanged_after_error(blender, "No emitter among the selected objects")
+    _select("Room", "Block", "Lamp")
+    bpy.data.materials["Emitter"].node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 0.0
+    _unchanged_after_error(blender, "No emitter among the selected objects")
+
+
+@pytest.mark.parametrize("where", ["Base Color", "Emission Strength", "Emission Color"])
+def test_nan_in_a_material_is_named(blender, where):
+    build_test_scene()
+    configure(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}  # a previous result that must survive
+    node = bpy.data.materials["Emitter"].node_tree.nodes["Principled BSDF"]
+    socket = node.inputs[where]
+    socket.default_value = math.nan if where == "Emission Strength" else (math.nan, 0.5, 0.5, 1.0)
+    what = "base colour" if where == "Base Color" else "emission"
+    _unchanged_after_error(blender, rf"'Lamp': the {what} of material 'Emitter' is not a finite number")
+
+
+# ---------------------------------------------------------------------------------------------
+# Reflectivity of 1 or more: refused with the reason, or clamped on request
+# ---------------------------------------------------------------------------------------------
+
+def test_white_base_colour_is_refused_with_the_reason_or_clamped_on_request(blender):
+    build_test_scene()
+    configure(blender)
+    white = bpy.data.materials["White"].node_tree.nodes["Principled BSDF"].inputs["Base Color"]
+    white.default_value = (1.0, 1.0, 1.0, 1.0)
+    _unchanged_after_error(
+        blender, r"'Room': material 'White' has a base colour of 1\. .*reflectivity below 1: .*never lets a "
+        r"random walk end in a closed room.*'Clamp bright colours'")
+    # Opt in: clamped to 0.99, solved, and said so.
+    blender.scene.radiosity.clamp_reflectivity = True
+    objects, notes = scene_io.read_selection(blender)
+    room = next(o for o in objects if o.name == "Room")
+    assert room.face_reflectivity.max() == worker.MAX_REFLECTIVITY
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}
+    assert any(kind == "WARNING" and "'White' above 0.99 were clamped to 0.99" in text for kind, text in reports)
+    # Below 1 nothing is changed, clamp or not: 0.995 stays 0.995 (slow, but what was asked).
+    blender.scene.radiosity.clamp_reflectivity = False
+    white.default_value = (0.995, 0.995, 0.995, 1.0)
+    objects, notes = scene_io.read_selection(blender)
+    room = next(o for o in objects if o.name == "Room")
+    np.testing.assert_allclose(room.face_reflectivity.max(), 0.995, rtol=1e-6)
+    assert not any("clamp" in n for n in notes)
+
+
+# ---------------------------------------------------------------------------------------------
+# Textures
+# ---------------------------------------------------------------------------------------------
+
+def test_image_texture_uses_the_average_linear_colour_and_says_so(blender):
+    m = principled("Painted", (0.1, 0.1, 0.1))
+    tree = m.node_tree
+    image = bpy.data.images.new("Paint", 4, 2)  # 8-bit sRGB
+    pixels = np.zeros((8, 4), np.float32)
+    pixels[:, 3] = 1
+    pixels[:4, :3] = [0.2, 0.6, 1.0]
+    pixels[4:, :3] = [0.8, 0.4, 0.0]
+    image.pixels.foreach_set(pixels.ravel())
+    stored = np.empty(32, np.float32)
+    image.pixels.foreach_get(stored)  # 8-bit quantised
+    expected = scene_io._srgb_to_linear(stored.reshape(8, 4)[:, :3].astype(float)).mean(axis=0)
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    R, E, notes = scene_io.material_colours(m)
+    np.testing.assert_allclose(R, expected, rtol=1e-9)
+    assert 0.2 < R[0] < 0.4  # linear, not the sRGB mean 0.5
+    assert any("image 'Paint'" in n and "average colour" in n for n in notes)
+    # A procedural texture has no known average: the socket's own colour, and a note saying so.
+    noise = tree.nodes.new("ShaderNodeTexNoise")
+    tree.links.new(noise.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    R, E, notes = scene_io.material_colours(m)
+    np.testing.assert_allclose(R, 0.1, rtol=1e-6)
+    assert any("driven by 'Noise Texture'" in n and "socket's own colour" in n for n in notes)
+    # An image without pixels (missing file): the socket's colour, said so.
+    missing = bpy.data.images.new("Gone", 4, 4)
+    missing.source = "FILE"
+    missing.filepath = os.path.join(ROOT, "no_such_file.png")
+    missing.reload()
+    tex.image = missing
+    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    R, E, notes = scene_io.material_colours(m)
+    np.testing.assert_allclose(R, 0.1, rtol=1e-6)
+    assert any("no pixels" in n for n in notes)
+
+
+# ---------------------------------------------------------------------------------------------
+# Time limits
+# ---------------------------------------------------------------------------------------------
+
+def test_time_limit_before_the_first_batch_writes_nothing(blender):
+    """Walls of 0.9999 make one batch of paths (thousands of bounces each) take far longer than
+    the limit: no path is finished, and an emission-only 'result' must not be written."""
+    build_test_scene()
+    configure(blender)
+    for name in ("White", "Red"):
+        bpy.data.materials[name].node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (
+            0.9999, 0.9999, 0.9999, 1)
+    _select("Room", "Lamp")
+    blender.scene.radiosity.target_error = 0.05
+    blender.scene.radiosity.time_limit = 0.01
+    before = _snapshot()
+    state, reports = _run_sync(blender)
+    assert state == {"CANCELLED"}
+    assert any(kind == "ERROR" and "before the first batch" in text for kind, text in reports)
+    assert not result_objects() and _snapshot() == before and blender.scene.radiosity.last_paths == 0
+
+
+def test_time_limit_keeps_the_paths_done_and_says_so(blender):
+    build_test_scene()
+    configure(blender)
+    s = blender.scene.radiosity
+    s.target_error = 0.05  # millions of paths
+    s.time_limit = 0.5
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}
+    assert any(kind == "WARNING" and text.startswith("Time limit reached") for kind, text in reports)
+    assert s.last_stopped == "time_limit" and s.last_paths > 0
+    assert len(result_objects()) == 3
+    for o in result_objects():
+        colours = read_colours(o.data, "Radiosity")[1]
+        assert np.isfinite(colours).all() and (colours >= 0).all()
+
+
+# ---------------------------------------------------------------------------------------------
+# While the worker runs: an object deleted, another file loaded
+# ---------------------------------------------------------------------------------------------
+
+def _start_long_job(context):
+    configure(context)
+    context.scene.radiosity.target_error = 0.05  # millions of paths: still running when we act
+    op = _modal_operator()
+    assert op._start_job(context, threaded=True) is None
+    t0 = time.perf_counter()
+    while op._job.snapshot()["paths"] == 0 and time.perf_counter() - t0 < 60:
+        time.sleep(0.01)
+    return op
+
+
+def test_object_deleted_while_solving_a_completed_run_is_not_written(blender):
+    build_test_scene()
+    configure(blender)
+    s = blender.scene.radiosity
+    s.target_error = 0.05
+    s.time_limit = 1.0  # the run completes by itself (time limit) after the deletion
+    op = _modal_operator()
+    assert op._start_job(blender, threaded=True) is None
+    bpy.data.objects.remove(bpy.data.objects["Block"], do_unlink=True)
+    state = _drive(op, blender)
+    assert state == {"CANCELLED"}
+    assert op._job.output is not None and op._job.output.result.paths > 0  # a complete run...
+    assert any(kind == "ERROR" and "'Block' was deleted while solving" in text for kind, text in op.reports)
+    assert not result_objects()  # ...that is not written for a scene that no longer exists
+    assert not op._job.alive and worker.running_job() is None
+
+
+@pytest.mark.parametrize("blender_cancels_the_modal", [True, False])
+def test_new_file_while_solving_stops_the_worker_and_writes_nothing(blender, blender_cancels_the_modal):
+    build_test_scene()
+    op = _start_long_job(blender)
+    job = op._job
+    bpy.ops.wm.read_homefile(use_empty=True)  # load_pre: the worker is stopped
+    assert not job.alive and job.cancelled and worker.running_job() is None
+    if blender_cancels_the_modal:  # what Blender does to running modal operators on a load
+        from addon.operators import RADIOSITY_OT_solve
+
+        RADIOSITY_OT_solve.cancel(op, bpy.context)
+    else:  # a last timer tick reaches the operator: it must not write into the new file
+        assert _drive(op, bpy.context) == {"CANCELLED"}
+    assert not result_objects() and "Radiosity" not in bpy.data.collections
+    assert worker.running_job() is None
+
+
+def test_a_finished_job_from_the_previous_file_is_not_written(blender):
+    """Even a job that completed just before the load must not write into the new file."""
+    build_test_scene()
+    configure(blender)
+    op = _modal_operator()
+    assert op._start_job(blender, threaded=True) is None
+    op._job.join(timeout=60)
+    assert op._job.output is not None and op._job.output.result.stopped == "target"
+    worker.set_running_job(None)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    build_test_scene()  # same names in the new file
+    assert _drive(op, bpy.context) == {"CANCELLED"}
+    assert any("the file changed while solving" in text for _, text in op.reports)
+    assert not result_objects()
+
+
+@pytest.mark.parametrize("hook", [True, False])
+def test_quitting_while_solving_stops_the_worker(tmp_path, hook):
+    """The Python process (Blender) ending with a solve running whose batches take minutes
+    (walls of 0.99999): the exit hooks cancel the worker, the process exits within seconds, and
+    the worker thread is gone. Without the hook (the control case) the exit waits for the batch."""
+    script = tmp_path / "quit.py"
+    script.write_text(
+        "import atexit, sys, time\n"
+        f"sys.path.insert(0, {ROOT!r})\n"
+        "job = None\n"
+        "def report():\n"
+        "    print('worker alive after the hooks:', job.alive, flush=True)\n"
+        "atexit.register(report)  # registered first: runs last\n"
+        "import bpy, addon, threading\n"
+        "from addon import scene_io, worker\n"
+        f"if not {hook}:\n"
+        "    threading._threading_atexits[:] = [f for f in threading._threading_atexits\n"
+        "                                       if getattr(f, 'func', f) is not worker._stop_at_exit]\n"
+        "from tests.blender.conftest import box_arrays, make_object, principled\n"
+        "bpy.ops.wm.read_factory_settings(use_empty=True)\n"
+        "addon.register()\n"
+        "v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)\n"
+        "room = make_object('Room', v, f, [principled('Glow', (0.99999,) * 3, (1, 1, 1), 1.0)])\n"
+        "room.select_set(True)\n"
+        "objects, _ = scene_io.read_selection(bpy.context)\n"
+        "settings = bpy.context.scene.radiosity.solve_settings()\n"
+        "settings.paths = 10**6\n"
+        "settings.threads = 2\n"
+        "job = worker.SolveJob(objects, settings).start()\n"
+        "worker.set_running_job(job)\n"
+        "time.sleep(1.0)\n"
+        "assert job.alive and job.snapshot()['paths'] == 0\n"
+        "print('quitting', flush=True)\n"
+        "t0 = time.perf_counter()\n"
+        "sys.exit(0)\n"
+    )
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                              timeout=20 if hook else 8)
+    except subprocess.TimeoutExpired:
+        assert not hook, "the process did not exit within 20 s with the hook"
+        return  # the control case: stuck in the batch until killed
+    elapsed = time.perf_counter() - t0
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "quitting" in proc.stdout
+    if hook:
+        assert "worker alive after the hooks: False" in proc.stdout, proc.stdout
+        assert elapsed < 15
+    else:
+        raise AssertionError(f"without the hook the process exited in {elapsed:.1f} s: the control case "
+                             "no longer shows the problem, so the test proves nothing")
+
+
+# ---------------------------------------------------------------------------------------------
+# Geometry through Blender: n-gons, modifiers, negative scale, linked duplicates
+# ---------------------------------------------------------------------------------------------
+
+def _prism(name, sides, radius, height, material, inward=True, location=(0, 0, 0), scale=(1, 1, 1)):
+    angles = 2 * np.pi * np.arange(sides) / sides
+    ring = np.c_[radius * np.cos(angles), radius * np.sin(angles)]
+    vertices = np.vstack([np.c_[ring, np.zeros(sides)], np.c_[ring, np.full(sides, height)]])
+    bottom = tuple(range(sides - 1, -1, -1))
+    top = tuple(range(sides, 2 * sides))
+    sides_faces = [(k, (k + 1) % sides, sides + (k + 1) % sides, sides + k) for k in range(sides)]
+    faces = [bottom, top, *sides_faces]  # outward
+    if inward:
+        faces = [tuple(reversed(f)) for f in faces]
+    return make_object(name, vertices, faces, [material], location=location, scale=scale)
+
+
+def _t_critical(alpha, dof):
+    """c with P(|t_dof| > c) = alpha, by integrating Student's density (no scipy here)."""
+    x = np.linspace(0, 200, 2_000_001)
+    log_norm = math.lgamma((dof + 1) / 2) - math.lgamma(dof / 2) - 0.5 * math.log(dof * math.pi)
+    density = np.exp(log_norm - (dof + 1) / 2 * np.log1p(x * x / dof))
+    tail = 2 * (np.trapz(density, x) - np.concatenate([[0], np.cumsum((density[1:] + density[:-1]) / 2 * np.diff(x))]))
+    return float(x[np.searchsorted(-tail, -alpha)])
+
+
+def test_furnace_through_blender_with_ngons_modifiers_mirror_and_linked_duplicates(blender):
+    """A closed room made of an n-gon prism (octagon floor and ceiling), mirrored (negative
+    scale), with a bevel and a subdivision modifier, and every face emitting S with albedo R:
+    B = S / (1 - R) on every patch, exactly in expectation, whatever the geometry. The batch
+    variance of each patch gives the band; no ray escapes or hits a back side."""
+    S, R = 1.0, 0.5
+    glow = principled("Glow", (R, R, R), (1, 1, 1), S)
+    room = _prism("Room", 8, 2.0, 1.5, glow, inward=True, scale=(-1, 1, 1))
+    room.modifiers.new("Bevel", "BEVEL").width = 0.1
+    room.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    # Two linked duplicates (one mesh) of an outward box inside the room, also glowing.
+    v, f = box_arrays((-0.2, -0.2, 0.0), (0.2, 0.2, 0.4), inward=False)
+    block = make_object("Block", v, f, [glow], location=(-0.6, 0, 0.5))
+    twin = bpy.data.objects.new("Block Twin", block.data)
+    twin.location = (0.6, 0.3, 0.6)
+    blender.scene.collection.objects.link(twin)
+    _select("Room", "Block", "Block Twin")
+    configure(blender)
+    blender.scene.radiosity.patch_size = 0.5
+    objects, notes = scene_io.read_selection(blender)
+    settings = blender.scene.radiosity.solve_settings()
+    settings.paths = 200_000
+    settings.threads = 2
+    output = worker.run_solve(objects, settings)
+    r = output.result
+    assert r.path_ends["escaped"] == 0 and r.path_ends["blocked"] == 0
+    # Area-weighted mean: hits per path are geometric (mean 1/(1-R), variance R/(1-R)^2).
+    A = output.patches.patch_scene().patch_area
+    mean_b = (A * r.reflected[:, 0]).sum() / A.sum()
+    sd = R * S * math.sqrt(R) / (1 - R) / math.sqrt(r.paths)
+    assert abs(mean_b - S * R / (1 - R)) < 4.5 * sd
+    # Per patch: the batch estimate of the variance has chunks - 1 degrees of freedom, so z is
+    # Student-t; the bound keeps P(any patch out) below 1e-3 (Bonferroni over the patches).
+    z = (r.radiosity[:, 0] - S / (1 - R)) / np.sqrt(r.reflected_variance[:, 0])
+    assert np.abs(z).max() < _t_critical(1e-3 / len(z), r.chunks - 1), (np.abs(z).max(), len(z), r.chunks)
+    # And through the operator: one result per object, the twins apart.
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    names = sorted(o["radiosity_source"] for o in result_objects())
+    assert names == ["Block", "Block Twin", "Room"]
