@@ -37,12 +37,13 @@ EXIT_POINTS = (EXIT_RANDOM, EXIT_HIT)
 class WalkTables:
     """Per-solve tables: materials in the layouts the walk reads, shared by all chunks."""
 
-    def __init__(self, scene, estimator, threshold, exit_point):
+    def __init__(self, scene, estimator, threshold, exit_point, stratified=False):
         self.geometry = scene.geometry
         self.tracer = scene.tracer
         self.estimator = estimator
         self.threshold = float(threshold)
         self.exit_random = exit_point == EXIT_RANDOM
+        self.stratified = bool(stratified)
         self.patch_count = scene.patch_count
         self.sources = SourceTable(scene.patch_area, scene.emission)
         R = scene.reflectivity
@@ -106,7 +107,11 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
     undistributed = np.zeros(C)
     ended = {"escaped": 0, "blocked": 0, "absorbed": 0, "threshold": 0}
 
-    patch = tables.sources.choose(rng.random(paths))
+    first_step = True
+    if tables.stratified:
+        patch, first_uniforms = tables.sources.stratified(paths, rng)
+    else:
+        patch = tables.sources.choose(rng.random(paths))
     weights = None if tables.unit_weights else np.take(tables.start_weight, patch, axis=1)
     emitted = _weight_sum(weights, slice(None)) if weights is not None else np.array([float(paths)])
     accumulated = np.ones(paths) if not finite else None  # product of R_bar along the path
@@ -117,6 +122,9 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         if abort is not None and abort.is_set():
             raise Aborted
         u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
+        if first_step and tables.stratified:
+            u[:4] = first_uniforms  # the first ray: a randomly shifted low-discrepancy set
+        first_step = False
         if leave_from is None:
             u_triangle = None if tables.row_triangle is None else u[tables.row_triangle]
             origins = points_on_patches(g, patch, u_triangle, u[0], u[1])

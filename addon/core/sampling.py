@@ -4,6 +4,8 @@ uniform random numbers they consume as arguments, so that they are deterministic
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 TWO_PI = np.float32(2.0 * np.pi)
@@ -24,8 +26,39 @@ class SourceTable:
         self.cdf = cumulative / cumulative[-1]
         self.cdf[-1] = 1.0
         self.probability = power[self.patches] / cumulative[-1]
+        self._lock = threading.Lock()
         buckets = self.patches.size
         self.guide = np.searchsorted(self.cdf, np.arange(buckets) / buckets, side="right")
+
+    def stratified(self, count, rng):
+        """``count`` sources allotted in proportion to power, and the first ray's uniforms.
+
+        Systematic sampling: the points (k + u0) / count of one random u0 pick the sources, so
+        source i gets floor or ceil of count p_i paths, exactly count p_i on average (the
+        estimator keeps its expectation). Paths come out grouped by source; the m paths of a
+        source take Halton points 0..m-1 (bases 2, 3, 5, 7) for (point, point, direction,
+        direction), all shifted by one random vector modulo 1 (Cranley-Patterson), so each
+        path's numbers are still uniform. Returns (patch (count,), uniforms (4, count) float32).
+        """
+        u = (np.arange(count) + rng.random()) / count
+        patch = self.choose(u)
+        k = np.searchsorted(self.cdf, u, side="right")
+        start = np.searchsorted(k, k, side="left")  # first path of each path's source
+        index = np.arange(count) - start
+        shift = rng.random(4)
+        points = np.take(self._halton_table(count), index, axis=1) + shift[:, None]
+        points -= np.floor(points)
+        return patch, points.astype(np.float32)
+
+    def _halton_table(self, count):
+        """Halton points 0..count-1 in bases 2, 3, 5, 7, computed once and kept (4, n)."""
+        table = getattr(self, "_halton", None)
+        if table is None or table.shape[1] < count:
+            with self._lock:
+                table = getattr(self, "_halton", None)
+                if table is None or table.shape[1] < count:
+                    table = self._halton = halton(np.arange(count), (2, 3, 5, 7))
+        return table
 
     def choose(self, u):
         """Patch index for each uniform u in [0, 1): the first k with u < cdf[k]."""
@@ -35,6 +68,20 @@ class SourceTable:
             k[behind] += 1
             behind = behind[self.cdf[k[behind]] <= u[behind]]
         return self.patches[k]
+
+
+def halton(index, bases):
+    """Radical inverses of the integers ``index`` in each base: (len(bases), n) float64."""
+    index = np.asarray(index, dtype=np.int64)
+    out = np.zeros((len(bases), index.size))
+    for row, base in enumerate(bases):
+        i = index.copy()
+        f = 1.0 / base
+        while i.any():
+            out[row] += f * (i % base)
+            i //= base
+            f /= base
+    return out
 
 
 def choose_triangles(geometry, patch, u):
