@@ -95,3 +95,24 @@ def test_deterministic_and_registry():
         a, b = build(name), build(name)
         assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)
         assert np.array_equal(a.reflectivity, b.reflectivity) and np.array_equal(a.emission, b.emission)
+
+
+@pytest.mark.parametrize("name,kwargs,closed", [
+    ("fig1_r0.5", {}, True),
+    ("fig6_room", {}, True),
+    ("cornell_box", {"closed": True, "divisions": 10}, True),
+    ("cornell_box", {"divisions": 10}, False),
+])
+def test_rays_hit_front_faces(name, kwargs, closed):
+    """Through the core: in a closed scene no ray escapes, and back faces are hit only where a
+    light panel's back faces the ceiling across its 1 cm gap (measured: 0.2% of paths in the
+    room, 1.3% in the 1 m Cornell box). Reversing a single wall ends 19% of paths in the figure 6
+    room and 30% in the closed box (measured), so a bound of 3% tells the two apart."""
+    solve = pytest.importorskip("addon.core").solve
+    sample = build(name, **kwargs)
+    r = solve(sample.scene, "finite", paths=20_000, seed=5, threads=1)
+    if closed:
+        assert r.path_ends["escaped"] == 0
+    assert r.path_ends["blocked"] <= 0.03 * r.paths
+    if name.startswith("fig1"):
+        assert r.path_ends["blocked"] == 0
