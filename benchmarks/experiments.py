@@ -54,6 +54,16 @@ class CurvePoint:
     batch_mse: float  # the core's a-posteriori estimate for the cumulative run (combined batches)
 
 
+def paper_sampling():
+    """Keyword arguments that pin the paper's own estimator (independent sampling) if the core
+    offers other samplings; empty if it does not."""
+    import inspect
+
+    from addon.core import solve
+
+    return {"sampling": "independent"} if "sampling" in inspect.signature(solve).parameters else {}
+
+
 def cumulative_runs(scene, estimator, batches, seed, threshold=1e-3, threads=None, exit_point="random"):
     """Run independent batches of ``batches[k]`` paths; yield the combined estimate after each."""
     from addon.core import solve
@@ -68,7 +78,7 @@ def cumulative_runs(scene, estimator, batches, seed, threshold=1e-3, threads=Non
     for k, n in enumerate(batches):
         c0 = time.process_time()
         r = solve(scene, estimator, paths=int(n), threshold=threshold, seed=int(seed) * 1000 + k,
-                  threads=threads, exit_point=exit_point)
+                  threads=threads, exit_point=exit_point, **paper_sampling())
         cpu += time.process_time() - c0
         total_paths += r.paths
         total_rays += r.rays
@@ -161,7 +171,7 @@ def long_run_reference(sample, paths, seed=987654, threads=None, cache=True, lab
         z = np.load(path)
         return Reference(radiosity=z["B"], mse=float(z["mse"]), rays=int(z["rays"]), seconds=float(z["seconds"]),
                          method=f"finite run of {paths:,} paths")
-    r = solve(sample.scene, "finite", paths=int(paths), seed=seed, threads=threads)
+    r = solve(sample.scene, "finite", paths=int(paths), seed=seed, threads=threads, **paper_sampling())
     if cache:
         CACHE.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, B=r.radiosity, mse=r.measured_mse, rays=r.rays, seconds=r.seconds)
