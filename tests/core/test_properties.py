@@ -1,0 +1,171 @@
+"""Property-based tests (hypothesis): random small scenes always give a sane, balanced result,
+and random bad arrays are either accepted as a valid scene or refused with a ValueError -- never
+another exception, a NaN, or a scene the walks cannot use."""
+import math
+import os
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from addon.core import PatchScene, predict, solve
+
+# More examples for a local bug hunt: PROPERTY_EXAMPLES=5000 pytest tests/core/test_properties.py
+SETTINGS = settings(max_examples=int(os.environ.get("PROPERTY_EXAMPLES", 150)), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+# ---------------------------------------------------------------------------------------------
+# Random small scenes
+# ---------------------------------------------------------------------------------------------
+
+@st.composite
+def scenes(draw):
+    """1-6 random triangles or quads anywhere in a cube of random size and place, optionally
+    inside a closed box; random reflectivities (grey or colour) and at least one emitter."""
+    scale = draw(st.sampled_from([1e-3, 1.0, 1e3]))
+    offset = draw(st.sampled_from([0.0, 1e4]))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    count = draw(st.integers(1, 6))
+    vertices, triangles, patch = [], [], []
+    for p in range(count):
+        corners = rng.uniform(-1, 1, (3, 3))
+        base = len(vertices)
+        vertices += list(corners)
+        triangles.append([base, base + 1, base + 2])
+        if draw(st.booleans()):  # a quad: the parallelogram's fourth corner, coplanar
+            vertices.append(corners[0] + corners[2] - corners[1])
+            triangles.append([base, base + 2, base + 3])
+        patch += [p] * (len(triangles) - len(patch))
+    if draw(st.booleans()):  # a closed box around everything, facing in
+        b = len(vertices)
+        box = np.array([[x, y, z] for z in (-2, 2) for y in (-2, 2) for x in (-2, 2)], float)
+        vertices += list(box)
+        quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+        for q in quads:
+            triangles += [[b + q[0], b + q[1], b + q[2]], [b + q[0], b + q[2], b + q[3]]]
+            patch += [count, count]
+            count += 1
+    grey = draw(st.booleans())
+    R = rng.uniform(0, 0.95, count) if grey else rng.uniform(0, 0.95, (count, 3))
+    E = np.where(rng.random(count) < 0.4, rng.uniform(0, 5, count), 0.0)
+    E[draw(st.integers(0, count - 1))] = rng.uniform(0.1, 5)
+    V = np.array(vertices) * scale + offset
+    return V, np.array(triangles), np.array(patch), R, E
+
+
+@SETTINGS
+@given(
+    scene_arrays=scenes(),
+    estimator=st.sampled_from(["finite", "biased_infinite"]),
+    exit_point=st.sampled_from(["random", "hit"]),
+    seed=st.integers(0, 1000),
+)
+def test_random_scenes_give_sane_balanced_results(scene_arrays, estimator, exit_point, seed):
+    V, T, TP, R, E = scene_arrays
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a random triangle may be degenerate: dropped
+            scene = PatchScene(V, T, TP, R, E)
+    except ValueError as exc:
+        # Only a patch left without area may be refused here.
+        assert "no area" in str(exc)
+        return
+    N = 400
+    r = solve(scene, estimator, paths=N, threshold=1e-4, seed=seed, exit_point=exit_point, threads=1)
+    assert r.paths == N and r.stopped == "paths"
+    assert np.isfinite(r.radiosity).all() and (r.reflected >= 0).all()
+    assert sum(r.path_ends.values()) == N
+    e = r.energy
+    if estimator == "biased_infinite" or scene.is_grey:
+        # Exact in every biased run, and in grey finite runs (weights stay 1): to 1e-9.
+        lost = e["absorbed"] + e["escaped"] + e["undistributed"] - e["emitted"]
+        if estimator == "biased_infinite":
+            np.testing.assert_allclose(lost, 0, atol=1e-9 * e["emitted"].max())
+        scale = scene.total_power / N
+        ended = (r.path_ends["absorbed"] + r.path_ends["threshold"]) * scale
+        if estimator == "finite":
+            np.testing.assert_allclose(ended + e["escaped"] + e["blocked"], e["emitted"], rtol=1e-9)
+    # Every channel of the emitted power matches the scene's (weights are relative to E_bar).
+    if scene.is_grey:
+        np.testing.assert_allclose(e["emitted"], scene.total_power, rtol=1e-9)
+    p = predict(scene, estimator, threshold=1e-4)
+    assert math.isfinite(p.mse_per_path) and p.expected_path_length >= 1
+
+
+# ---------------------------------------------------------------------------------------------
+# Random bad arrays
+# ---------------------------------------------------------------------------------------------
+
+GOOD_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1]], float)
+GOOD_T = np.array([[0, 1, 2], [0, 2, 3], [0, 4, 5], [0, 5, 1]])
+GOOD_TP = np.array([0, 0, 1, 1])
+GOOD_R = np.array([0.5, 0.5])
+GOOD_E = np.array([1.0, 0.0])
+
+SPECIAL = [np.nan, np.inf, -np.inf, -1.0, 0.0, 1.0, 1.5, 1e308, -1e-300, 2**40, 0.99999]
+
+
+def _mutations(good):
+    """Strategies for a bad version of one input array."""
+    good = np.asarray(good)
+    shapes = st.sampled_from([(), (0,), good.shape, good.shape[:1], (good.shape[0] + 1,) + good.shape[1:],
+                              (good.shape[0], 2), (good.shape[0], 4), (1,) + good.shape, (2, 2, 2)])
+
+    @st.composite
+    def one(draw):
+        kind = draw(st.sampled_from(["poke", "shape", "dtype", "object", "list", "none"]))
+        if kind == "poke":  # one or a few entries replaced by special values
+            a = good.astype(np.float64).copy()
+            for _ in range(draw(st.integers(1, 3))):
+                index = tuple(draw(st.integers(0, n - 1)) for n in a.shape)
+                a[index] = draw(st.sampled_from(SPECIAL))
+            if good.dtype.kind in "iu" and draw(st.booleans()):
+                with np.errstate(invalid="ignore"):
+                    return a.astype(np.int64)  # NaN/inf become garbage integers
+            return a
+        if kind == "shape":
+            shape = draw(shapes)
+            return np.ones(shape, dtype=good.dtype)
+        if kind == "dtype":
+            dtype = draw(st.sampled_from([np.float32, np.int8, np.uint64, np.bool_, np.complex128, np.float16]))
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return good.astype(dtype)
+        if kind == "object":
+            return np.array(["a"] * good.size, dtype=object).reshape(good.shape)
+        if kind == "list":
+            return good.tolist()
+        return None
+
+    return one()
+
+
+INPUTS = ("vertices", "triangles", "triangle_patch", "reflectivity", "emission")
+GOOD = dict(zip(INPUTS, (GOOD_V, GOOD_T, GOOD_TP, GOOD_R, GOOD_E)))
+
+
+@SETTINGS
+@given(
+    which=st.lists(st.sampled_from(INPUTS), min_size=1, max_size=2, unique=True),
+    data=st.data(),
+)
+def test_bad_arrays_are_refused_with_a_value_error_or_make_a_valid_scene(which, data):
+    args = dict(GOOD)
+    for name in which:
+        args[name] = data.draw(_mutations(GOOD[name]), label=name)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = PatchScene(**args)
+    except ValueError as exc:
+        assert str(exc)  # a message
+        return
+    # Accepted: then it is a scene the walks can use.
+    assert np.isfinite(scene.reflectivity).all() and ((scene.reflectivity >= 0) & (scene.reflectivity < 1)).all()
+    assert np.isfinite(scene.emission).all() and (scene.emission >= 0).all() and scene.total_power > 0
+    assert (scene.patch_area > 0).all() and np.isfinite(scene.patch_area).all()
+    assert np.isfinite(scene.patch_normal).all()
+    r = solve(scene, "finite", paths=200, seed=0, threads=1)
+    assert np.isfinite(r.radiosity).all() and (r.reflected >= 0).all()
