@@ -119,6 +119,32 @@ def make_patches(objects, patch_size) -> Patches:
     return Patches(list(objects), meshes, combined, reflectivity, emission)
 
 
+def objects_of_patches(patches: Patches, indices) -> str:
+    """' (objects 'A', 'B')' for the source objects of the given patch indices, or ''."""
+    if indices is None or len(indices) == 0:
+        return ""
+    owners = np.unique(patches.combined.patch_object[np.asarray(indices, dtype=np.int64)])
+    names = ", ".join(f"'{patches.objects[k].name}'" for k in owners)
+    return f" (in {names})"
+
+
+def scene_and_notes(patches: Patches):
+    """(PatchScene, notes): the core's errors and warnings name the objects of their patches."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            scene = patches.patch_scene()
+        except ValueError as exc:
+            where = objects_of_patches(patches, getattr(exc, "patches", None))
+            raise ValueError(f"{exc}{where}") from exc
+    notes = [
+        f"{w.message}{objects_of_patches(patches, getattr(w.message, 'patches', None))}"
+        for w in caught
+        if issubclass(w.category, UserWarning)
+    ]
+    return scene, notes
+
+
 def prediction_for(scene, settings: SolveSettings):
     """(prediction, target_mse) of the core for these settings, no tracing."""
     from .core import predict, relative_rms_to_mse
@@ -135,7 +161,7 @@ def estimate(objects, settings: SolveSettings) -> dict:
     from .core import predict
 
     patches = make_patches(objects, settings.patch_size)
-    scene = patches.patch_scene()
+    scene, _ = scene_and_notes(patches)
     p, target = prediction_for(scene, settings)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     return {
@@ -160,11 +186,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     """
     from .core import solve
 
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        patches = make_patches(objects, settings.patch_size)
-        scene = patches.patch_scene()
-    notes = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+    patches = make_patches(objects, settings.patch_size)
+    scene, notes = scene_and_notes(patches)
     prediction, target = prediction_for(scene, settings)
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count))
