@@ -73,81 +73,37 @@ def _ensure_registered():
 
 
 def build_sample_scene(name):
-    """Objects for a sample_scenes scene: one object per part, faces = patches."""
+    """Objects for a sample_scenes scene (one object per part, one quad per patch), selected."""
     import bpy
     import sample_scenes
+    from sample_scenes.blender import to_blender
 
-    from .scenes import mesh_object
-
-    sample = sample_scenes.build(name)
-    tris = np.asarray(sample.triangles)
-    tp = np.asarray(sample.triangle_patch)
-    # materials: one per distinct (reflectivity, emission)
-    rows = np.concatenate([sample.reflectivity, sample.emission], axis=1)
-    uniq, mat_of_patch = np.unique(np.round(rows, 9), axis=0, return_inverse=True)
-    mat_of_patch = mat_of_patch.ravel()
-    materials = []
-    for k, row in enumerate(uniq):
-        m = bpy.data.materials.new(f"{name} material {k}")
-        node = m.node_tree.nodes.get("Principled BSDF")
-        node.inputs["Base Color"].default_value = (*row[:3], 1.0)
-        strength = float(row[3:].max())
-        node.inputs["Emission Color"].default_value = (*(row[3:] / strength if strength > 0 else row[3:]), 1.0)
-        node.inputs["Emission Strength"].default_value = strength
-        m.diffuse_color = (*row[:3], 1.0)
-        materials.append(m)
-    faces_of_patch = _patch_polygons(tris, tp, sample.patch_count)
-    objects = []
-    for part_index, part in enumerate(sample.part_names):
-        patches = np.flatnonzero(sample.patch_part == part_index)
-        faces = [faces_of_patch[p] for p in patches for _ in [0]]
-        flat = [f for fs in faces for f in fs]
-        face_patch = np.concatenate([[p] * len(faces_of_patch[p]) for p in patches])
-        used = np.unique(np.concatenate([np.asarray(f) for f in flat]))
-        remap = -np.ones(len(sample.vertices), dtype=np.int64)
-        remap[used] = np.arange(len(used))
-        local_faces = [tuple(remap[np.asarray(f)]) for f in flat]
-        mats_used, mat_index = np.unique(mat_of_patch[face_patch], return_inverse=True)
-        obj = mesh_object(part, sample.vertices[used], local_faces,
-                          [materials[m] for m in mats_used], mat_index.ravel())
-        objects.append(obj)
+    objects = to_blender(sample_scenes.build(name))
     for obj in bpy.context.view_layer.objects:
         obj.select_set(False)
     for obj in objects:
         obj.select_set(True)
     bpy.context.view_layer.objects.active = objects[0]
-    return objects, sample
+    return objects
 
 
-def _patch_polygons(tris, tp, patch_count):
-    """Per patch, its faces: a quad when the patch is two triangles sharing
-    an edge, else its triangles."""
-    counts = np.bincount(tp, minlength=patch_count)
-    order = np.argsort(tp, kind="stable")
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    out = []
-    for p in range(patch_count):  # building Python lists for from_pydata anyway
-        t = tris[order[starts[p]: starts[p] + counts[p]]]
-        if len(t) == 2:
-            a, b = t
-            shared = [v for v in a if v in b]
-            if len(shared) == 2:
-                x = [v for v in a if v not in b][0]
-                d = [v for v in b if v not in a][0]
-                i = list(a).index(x)
-                x, y, z = a[i], a[(i + 1) % 3], a[(i + 2) % 3]
-                out.append([(int(x), int(y), int(d), int(z))])
-                continue
-        out.append([tuple(int(v) for v in row) for row in t])
-    return out
+def world_bounds(objects):
+    """(lo, hi) corners of the objects' world-space bounding box, read with foreach_get."""
+    points = []
+    for o in objects:
+        co = np.empty(3 * len(o.data.vertices), dtype=np.float64)
+        o.data.vertices.foreach_get("co", co)
+        m = np.array(o.matrix_world, dtype=np.float64)
+        points.append(co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3])
+    points = np.concatenate(points)
+    return points.min(axis=0), points.max(axis=0)
 
 
 def _camera_for(objects):
     """A camera inside the bounding box's front, looking in (+y)."""
     import bpy
 
-    pts = np.concatenate([np.array([o.matrix_world @ v.co for v in o.data.vertices]) for o in objects])
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    lo, hi = world_bounds(objects)
     c = (lo + hi) / 2
     size = hi - lo
     data = bpy.data.cameras.new("Preview Camera")
@@ -246,8 +202,8 @@ def main(argv=None):
         # sample scenes come meshed as in the paper: keep their patches
         args.patch_size = 1e6
     if args.patch_size is None:
-        pts = np.concatenate([np.array([o.matrix_world @ v.co for v in o.data.vertices]) for o in sources])
-        args.patch_size = float(np.max(pts.max(axis=0) - pts.min(axis=0))) / 20.0
+        lo, hi = world_bounds(sources)
+        args.patch_size = float(np.max(hi - lo)) / 20.0
     settings.patch_size = args.patch_size
     settings.exit_point = args.exit_point
     settings.output = args.colours

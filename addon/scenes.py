@@ -21,7 +21,17 @@ def _material(name, base, emission=(0, 0, 0), strength=0.0):
 def mesh_object(name, vertices, faces, materials=(), face_materials=None, collection=None):
     """An object from vertex and face lists (faces as lists of vertex indices)."""
     mesh = bpy.data.meshes.new(name)
-    mesh.from_pydata([tuple(v) for v in np.asarray(vertices, float)], [], [tuple(f) for f in faces])
+    vertices = np.asarray(vertices, dtype=np.float32).reshape(-1, 3)
+    sizes = np.array([len(f) for f in faces], dtype=np.int32)
+    corners = np.concatenate([np.asarray(f, dtype=np.int32) for f in faces])
+    mesh.vertices.add(len(vertices))
+    mesh.vertices.foreach_set("co", vertices.ravel())
+    mesh.loops.add(len(corners))
+    mesh.loops.foreach_set("vertex_index", corners)
+    mesh.polygons.add(len(sizes))
+    mesh.polygons.foreach_set("loop_start", np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int32))
+    mesh.update(calc_edges=True)
+    mesh.validate()
     for m in materials:
         mesh.materials.append(m)
     if face_materials is not None:
