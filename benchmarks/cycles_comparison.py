@@ -1,0 +1,519 @@
+"""Time to a given patch error: this product's solve() against Cycles' COMBINED bake.
+
+    python -m benchmarks.cycles_comparison            # full run (about 15 minutes on 2 cores)
+    python -m benchmarks.cycles_comparison --quick    # a smoke run (about a minute), to out/
+    python -m benchmarks.cycles_comparison --recompute-reference   # redo the 5-minute reference
+
+The scene (issue 5): a closed room [0,1]^3 m, every face meshed into 10 x 10 square patches of
+0.1 m (600 patches), all with albedo 0.5 (pure Lambertian). The light is the 2 x 2 ceiling
+patches in [0.4,0.6]^2 at z = 1 (a 0.2 m square flush with the ceiling, facing down), emitting
+1 (Cycles: an Emission shader of strength 1 added to the Diffuse BSDF of albedo 0.5, so the
+light reflects like the walls). Both products see exactly these 600 patches.
+
+References. The discrete radiosity system B = E + R F B with exact form factors (closed-form
+contour integrals between the axis-aligned rectangles) is what this product's default
+``exit_point="random"`` converges to. Cycles, and our ``exit_point="hit"``, converge instead to
+the *continuous* solution averaged over each patch; we approximate it by solving the same system
+on 2x (2,400 patches) and 4x (9,600 patches) finer meshes, averaging back onto the 600 patches,
+and extrapolating with the observed order p (Richardson, from the 1x, 2x and 4x solutions). The
+size of the extrapolation step is the stated uncertainty of the continuous reference. The
+references are cached in ``benchmarks/results/cycles_comparison_reference.npz``.
+
+Metric. The relative RMS patch error sqrt(mean_i ((B_i - B*_i) / B*_i)^2) of the radiosity
+B = E + reflected over all 600 (equal-area) patches. Also reported: the panel's convention,
+RMS(B - B*) / mean reflected radiosity of the reference.
+
+Cycles: ``bpy.ops.object.bake(type="COMBINED")`` on CPU with 2 threads (fixed), into a float
+image in which each patch owns a block of BLOCK x BLOCK pixels exactly (pixel edges on patch
+edges, no margin), so the mean of a block is the patch average; max bounces 64 (diffuse 64), no
+clamping, no adaptive sampling, no denoising, default sampling pattern and light tree. Its time
+is the wall time of the bake call: Cycles' session and scene sync, BVH build, the path tracing
+and the write into the image (scene construction in bpy and reading the pixels back are
+excluded). A fit t = a + b * samples estimates the fixed part a, reported separately.
+
+Ours: ``solve(scene, "finite", paths=N, threads=2)``, timed from the construction of the
+PatchScene from arrays (validation, patch frames, Embree BVH) to the returned result.
+
+Both sides are measured alternately, level by level, in the same process, so both see the same
+machine load; wall-clock and process CPU time are both recorded. The time to reach an error
+level is interpolated on the log-log curve of (median time, RMS over repetitions of the error).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from addon.core import PatchScene, solve  # noqa: E402
+from addon.core.reference import rectangle_form_factors  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results"
+REFERENCE_FILE = RESULTS / "cycles_comparison_reference.npz"
+
+N = 10             # patches per side of each face
+ALBEDO = 0.5
+EMISSION = 1.0
+LIGHT = (0.4, 0.6)  # the light's x and y range on the ceiling
+BLOCK = 8          # pixels per side of a patch's block in the bake image
+COLUMNS = 25       # blocks per image row: 25 x 24 blocks = 600 patches, no unused pixel
+LEVELS = (0.01, 0.0025)
+THREADS = 2
+
+# Six faces of the unit box as (origin, u, v), u x v pointing into the box.
+FACES = (
+    ((0, 0, 0), (1, 0, 0), (0, 1, 0)),  # floor
+    ((0, 0, 1), (0, 1, 0), (1, 0, 0)),  # ceiling
+    ((0, 0, 0), (0, 1, 0), (0, 0, 1)),  # x = 0
+    ((1, 0, 0), (0, 0, 1), (0, 1, 0)),  # x = 1
+    ((0, 0, 0), (0, 0, 1), (1, 0, 0)),  # y = 0
+    ((0, 1, 0), (1, 0, 0), (0, 0, 1)),  # y = 1
+)
+
+
+# --- the scene -------------------------------------------------------------------------------
+
+def room_rectangles(n=N):
+    """(origin, u, v, light) of the n x n patches of every face; patch index face*n*n + i*n + j."""
+    origins, us, vs = [], [], []
+    for o, u, v in FACES:
+        o, u, v = (np.asarray(x, np.float64) for x in (o, u, v))
+        i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        i, j = i.ravel(), j.ravel()
+        origins.append(o + np.outer(i, u / n) + np.outer(j, v / n))
+        us.append(np.tile(u / n, (n * n, 1)))
+        vs.append(np.tile(v / n, (n * n, 1)))
+    origin, u, v = np.concatenate(origins), np.concatenate(us), np.concatenate(vs)
+    centre = origin + 0.5 * (u + v)
+    lo, hi = LIGHT
+    light = (np.abs(centre[:, 2] - 1) < 1e-9) & (centre[:, 0] > lo) & (centre[:, 0] < hi) \
+        & (centre[:, 1] > lo) & (centre[:, 1] < hi)
+    return origin, u, v, light
+
+
+def to_coarse(values, n, m=N):
+    """Average a per-patch array of the n x n mesh onto the m x m one (equal-area children)."""
+    f = n // m
+    return np.asarray(values).reshape(6, m, f, m, f).mean(axis=(2, 4)).reshape(-1)
+
+
+def quads(origin, u, v):
+    return np.stack([origin, origin + u, origin + u + v, origin + v], axis=1)  # (P,4,3), normal u x v
+
+
+def patch_scene():
+    origin, u, v, light = room_rectangles()
+    P = origin.shape[0]
+    vertices = quads(origin, u, v).reshape(-1, 3)
+    base = 4 * np.arange(P)[:, None]
+    triangles = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3)
+    return PatchScene(vertices, triangles, np.repeat(np.arange(P), 2), np.full(P, ALBEDO), EMISSION * light)
+
+
+# --- references ------------------------------------------------------------------------------
+
+def discrete_solution(n):
+    origin, u, v, light = room_rectangles(n)
+    F = rectangle_form_factors(origin, u, v, block=16 if n > 20 else 64)
+    E = EMISSION * light.astype(np.float64)
+    B = E.copy()
+    # B = E + R F B by its Neumann series: R F has norm R = 0.5 in a closed box, 80 terms ~ 1e-24.
+    for _ in range(80):
+        B = E + ALBEDO * (F @ B)
+    return B
+
+
+def references(recompute=False, log=print):
+    key = np.array([N, ALBEDO, EMISSION, *LIGHT])
+    if REFERENCE_FILE.exists() and not recompute:
+        data = np.load(REFERENCE_FILE)
+        if data["key"].shape == key.shape and np.allclose(data["key"], key):
+            return {k: data[k] for k in data.files}
+    solutions = {}
+    for factor in (1, 2, 4):
+        t = time.perf_counter()
+        solutions[factor] = to_coarse(discrete_solution(N * factor), N * factor)
+        log(f"reference: {N * factor} x {N * factor} per face solved in {time.perf_counter() - t:.0f} s")
+    b1, b2, b4 = solutions[1], solutions[2], solutions[4]
+    d12 = np.sqrt(np.mean((b2 - b1) ** 2))
+    d24 = np.sqrt(np.mean((b4 - b2) ** 2))
+    order = math.log2(d12 / d24)
+    continuous = b4 + (b4 - b2) / (2**order - 1)
+    out = dict(key=key, discrete=b1, fine2=b2, fine4=b4, continuous=continuous, order=np.array(order))
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    np.savez(REFERENCE_FILE, **out)
+    return out
+
+
+def relative_rms(B, ref):
+    return float(np.sqrt(np.mean(((B - ref) / ref) ** 2)))
+
+
+def rms_over_mean_reflected(B, ref):
+    return float(np.sqrt(np.mean((B - ref) ** 2)) / np.mean(ref - EMISSION * room_rectangles()[3]))
+
+
+# --- Cycles ----------------------------------------------------------------------------------
+
+class CyclesBaker:
+    """The room as one Blender mesh of 600 quads, UV-mapped so each patch owns a pixel block."""
+
+    def __init__(self, block=BLOCK, threads=THREADS):
+        import bpy
+
+        self.bpy = bpy
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        origin, u, v, light = room_rectangles()
+        P = origin.shape[0]
+        self.block, self.rows = block, math.ceil(P / COLUMNS)
+        self.width, self.height = COLUMNS * block, self.rows * block
+        mesh = bpy.data.meshes.new("Room")
+        mesh.from_pydata(quads(origin, u, v).reshape(-1, 3).tolist(), [], np.arange(4 * P).reshape(P, 4).tolist())
+        bx = (np.arange(P) % COLUMNS) * block
+        by = (np.arange(P) // COLUMNS) * block
+        uv = np.stack([np.stack(c, axis=1) for c in ((bx, by), (bx + block, by), (bx + block, by + block), (bx, by + block))], axis=1)
+        uv = uv.astype(np.float64) / [self.width, self.height]
+        mesh.uv_layers.new(name="Patches").data.foreach_set("uv", uv.reshape(-1).astype(np.float32))
+        self.image = bpy.data.images.new("Bake", self.width, self.height, float_buffer=True, alpha=False)
+        mesh.materials.append(self._material("Wall", emit=False))
+        mesh.materials.append(self._material("Light", emit=True))
+        mesh.polygons.foreach_set("material_index", light.astype(np.int32))
+        mesh.update()
+        obj = bpy.data.objects.new("Room", mesh)
+        scene = bpy.context.scene
+        scene.collection.objects.link(obj)
+        obj.select_set(True)
+        bpy.context.view_layer.objects.active = obj
+        scene.render.engine = "CYCLES"
+        scene.render.threads_mode = "FIXED"
+        scene.render.threads = threads
+        c = scene.cycles
+        c.device = "CPU"
+        c.max_bounces = c.diffuse_bounces = 64
+        c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+        c.use_adaptive_sampling = False
+        c.use_denoising = False
+        bake = scene.render.bake
+        bake.target = "IMAGE_TEXTURES"
+        bake.margin = 0
+        bake.use_clear = True
+        self.scene = scene
+        self.patches = P
+        self.settings = {
+            "Blender": bpy.app.version_string, "threads": threads, "block": f"{block}x{block} px per patch",
+            "image": f"{self.width}x{self.height} float", "sampling pattern": c.sampling_pattern,
+            "light tree": c.use_light_tree, "max bounces": c.max_bounces,
+        }
+
+    def _material(self, name, emit):
+        m = self.bpy.data.materials.new(name)
+        tree = m.node_tree
+        for node in list(tree.nodes):
+            tree.nodes.remove(node)
+        out = tree.nodes.new("ShaderNodeOutputMaterial")
+        diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+        diffuse.inputs["Color"].default_value = (ALBEDO, ALBEDO, ALBEDO, 1.0)
+        shader = diffuse.outputs["BSDF"]
+        if emit:
+            emission = tree.nodes.new("ShaderNodeEmission")
+            emission.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+            emission.inputs["Strength"].default_value = EMISSION
+            add = tree.nodes.new("ShaderNodeAddShader")
+            tree.links.new(shader, add.inputs[0])
+            tree.links.new(emission.outputs["Emission"], add.inputs[1])
+            shader = add.outputs["Shader"]
+        tree.links.new(shader, out.inputs["Surface"])
+        texture = tree.nodes.new("ShaderNodeTexImage")  # the bake target: the active image node
+        texture.image = self.image
+        tree.nodes.active = texture
+        return m
+
+    def bake(self, samples, seed):
+        self.scene.cycles.samples = samples
+        self.scene.cycles.seed = seed
+        wall, cpu = time.perf_counter(), time.process_time()
+        result = self.bpy.ops.object.bake(type="COMBINED")
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        if result != {"FINISHED"}:
+            raise RuntimeError(f"Cycles bake failed: {result}")
+        pixels = np.empty(self.width * self.height * 4, np.float32)
+        self.image.pixels.foreach_get(pixels)
+        grey = pixels.reshape(self.height, self.width, 4)[..., :3].astype(np.float64).mean(axis=2)
+        k = self.block
+        B = grey.reshape(self.rows, k, COLUMNS, k).mean(axis=(1, 3)).reshape(-1)[: self.patches]
+        return B, wall, cpu
+
+
+# --- ours ------------------------------------------------------------------------------------
+
+def ours(paths, exit_point, seed, threads=THREADS, estimator="finite"):
+    wall, cpu = time.perf_counter(), time.process_time()
+    scene = patch_scene()
+    result = solve(scene, estimator, paths=paths, seed=seed, exit_point=exit_point, threads=threads)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    return result.radiosity.mean(axis=1), wall, cpu
+
+
+# --- analysis --------------------------------------------------------------------------------
+
+def time_to_reach(times, errors, target):
+    """Time at which the log-log curve (times, errors) crosses ``target``; beyond the measured
+    range, extrapolated with the Monte Carlo slope -1/2 from the nearest point (flagged)."""
+    t, e = np.log(np.asarray(times)), np.log(np.asarray(errors))
+    g = math.log(target)
+    for k in range(len(t) - 1):
+        if (e[k] - g) * (e[k + 1] - g) <= 0 and e[k] != e[k + 1]:
+            w = (e[k] - g) / (e[k] - e[k + 1])
+            return float(math.exp(t[k] + w * (t[k + 1] - t[k]))), False
+    k = 0 if g > e[0] else len(t) - 1
+    return float(math.exp(t[k] - 2.0 * (g - e[k]))), True
+
+
+SERIES = {
+    # name: (label, product, reference it converges to)
+    "cycles": ("Cycles COMBINED bake", "cycles", "continuous"),
+    "random": ('ours, exit_point="random"', "ours", "discrete"),
+    "hit": ('ours, exit_point="hit"', "ours", "continuous"),
+}
+
+
+def run(args, log=print):
+    refs = references(args.recompute_reference, log)
+    baker = CyclesBaker(block=args.block, threads=args.threads)
+    samples = [2**k for k in range(args.cycles_levels)]
+    paths = [args.first_paths * 2**k for k in range(args.our_levels)]
+    ours(20_000, "random", 0, args.threads)  # warm up imports and thread pools
+    baker.bake(1, 0)
+    records = []
+    for rep in range(args.reps):
+        for level in range(max(len(samples), len(paths))):
+            jobs = []
+            if level < len(samples):
+                jobs.append(("cycles", samples[level], lambda s=samples[level]: baker.bake(s, 1000 * rep + level)))
+            if level < len(paths):
+                for exit_point in ("random", "hit"):
+                    jobs.append((exit_point, paths[level],
+                                 lambda n=paths[level], x=exit_point: ours(n, x, 1000 * rep + level, args.threads)))
+            for series, amount, job in jobs:
+                B, wall, cpu = job()
+                rec = dict(series=series, amount=amount, rep=rep, wall=wall, cpu=cpu)
+                for ref in ("discrete", "continuous"):
+                    rec[f"rel_{ref}"] = relative_rms(B, refs[ref])
+                    rec[f"bave_{ref}"] = rms_over_mean_reflected(B, refs[ref])
+                records.append(rec)
+                log(f"rep {rep} {series:6s} {amount:>10d}  {wall:7.2f} s wall {cpu:7.2f} s cpu  "
+                    f"rel err vs discrete {rec['rel_discrete']:.4%} vs continuous {rec['rel_continuous']:.4%}")
+    return refs, baker.settings, records
+
+
+def curves(records, series, ref, metric="rel", clock="wall"):
+    """Per level: median time, RMS over repetitions of the error."""
+    rows = [r for r in records if r["series"] == series]
+    amounts = sorted({r["amount"] for r in rows})
+    t = [float(np.median([r[clock] for r in rows if r["amount"] == a])) for a in amounts]
+    e = [float(np.sqrt(np.mean([r[f"{metric}_{ref}"] ** 2 for r in rows if r["amount"] == a]))) for a in amounts]
+    return amounts, t, e
+
+
+def cycles_fixed_cost(records):
+    rows = [r for r in records if r["series"] == "cycles"]
+    s = np.array([r["amount"] for r in rows], float)
+    t = np.array([r["wall"] for r in rows])
+    slope, intercept = np.polyfit(s, t, 1)
+    return float(intercept), float(slope)
+
+
+def analyse(records):
+    table = {}
+    for metric in ("rel", "bave"):
+        for clock in ("wall", "cpu"):
+            for series, (_, _, native) in SERIES.items():
+                for ref in ("native", "continuous"):
+                    r = native if ref == "native" else "continuous"
+                    _, t, e = curves(records, series, r, metric, clock)
+                    for level in LEVELS:
+                        table[(metric, clock, series, ref, level)] = time_to_reach(t, e, level)
+    return table
+
+
+def plot(records, refs, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), sharey=True)
+    styles = {"cycles": ("tab:red", "o"), "random": ("tab:blue", "s"), "hit": ("tab:green", "^")}
+    for ax, clock in zip(axes, ("wall", "cpu")):
+        for series, (label, _, native) in SERIES.items():
+            colour, marker = styles[series]
+            _, t, e = curves(records, series, native, "rel", clock)
+            ax.loglog(t, e, marker=marker, color=colour, label=f"{label} vs {native} reference")
+            if native != "continuous":
+                _, t2, e2 = curves(records, series, "continuous", "rel", clock)
+                ax.loglog(t2, e2, marker=marker, color=colour, ls=":", alpha=0.6, mfc="none",
+                          label=f"{label} vs continuous reference")
+        for level in LEVELS:
+            ax.axhline(level, color="grey", lw=0.8, ls="--")
+            ax.text(ax.get_xlim()[0] if False else 0.02, level * 1.05, f"{level:.2%}", color="grey",
+                    transform=ax.get_yaxis_transform())
+        gap = relative_rms(refs["discrete"], refs["continuous"])
+        ax.axhline(gap, color="tab:purple", lw=0.8, ls="-.")
+        ax.text(0.55, gap * 1.05, f"discrete vs continuous reference: {gap:.2%}", color="tab:purple",
+                transform=ax.get_yaxis_transform(), fontsize=8)
+        ax.set_xlabel("wall-clock seconds (2 threads)" if clock == "wall" else "process CPU seconds (all threads)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("relative RMS patch error")
+    axes[0].legend(fontsize=8, loc="lower left")
+    fig.suptitle("Closed 1 m room, 600 patches, albedo 0.5, 0.2 m ceiling light: time to a patch error")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def fmt_time(value):
+    t, extrapolated = value
+    return f"{t:.2f}{'*' if extrapolated else ''}"
+
+
+def report(args, refs, settings, records, table, out, png_name, total_seconds):
+    a, b = cycles_fixed_cost(records)
+    gap = relative_rms(refs["discrete"], refs["continuous"])
+    uncertainty = relative_rms(refs["fine4"], refs["continuous"])
+    L = []
+    L.append("# Time to a patch error: solve() against Cycles' COMBINED bake (issue 5)")
+    L.append("")
+    L.append(f"`python -m benchmarks.cycles_comparison {' '.join(sys.argv[1:])}`".replace(" `", "`"))
+    L.append(f"Machine: {platform.machine()}, {os.cpu_count()} CPUs shared with other work, Python "
+             f"{platform.python_version()}; Blender {settings['Blender']} (bpy module); run took {total_seconds / 60:.1f} min.")
+    L.append("")
+    L.append("Scene: closed room [0,1]^3 m, 10 x 10 patches of 0.1 m per face (600 patches), albedo 0.5 "
+             "everywhere; the light is the 2 x 2 ceiling patches over [0.4,0.6]^2 (a 0.2 m square flush with "
+             "the ceiling), emission 1, reflecting like the walls. Both products see exactly these 600 patches.")
+    L.append("")
+    L.append("## References")
+    L.append(f"* discrete: B = E + R F B with exact form factors, 600 patches (what `exit_point=\"random\"` converges to);")
+    L.append(f"* continuous: the same system on 2,400 and 9,600 patches averaged back onto the 600, extrapolated "
+             f"with the observed order p = {float(refs['order']):.2f} (what Cycles and `exit_point=\"hit\"` converge to). "
+             f"Its uncertainty, taken as the size of the extrapolation step, is {uncertainty:.3%} relative RMS;")
+    L.append(f"* the two differ by {gap:.3%} relative RMS (largest on patches next to the room's edges), so a "
+             "product measured against the other one's reference cannot go below that.")
+    L.append("")
+    L.append("## Set-up")
+    L.append(f"* Cycles: `bpy.ops.object.bake(type=\"COMBINED\")`, CPU, {settings['threads']} threads, "
+             f"{settings['block']} ({settings['image']} image, one block per patch, block mean = patch mean), "
+             f"Diffuse BSDF, max bounces {settings['max bounces']}, no clamping, no adaptive sampling, no denoising, "
+             f"sampling pattern {settings['sampling pattern']}, light tree {settings['light tree']}. Time: the bake "
+             "call (session, scene sync, BVH, path tracing, writing the image); building the bpy scene and reading "
+             f"pixels back excluded. Fitted fixed part of a bake call: {a:.2f} s (+ {b * 1000:.1f} ms per sample).")
+    L.append(f"* Ours: `solve(scene, \"finite\", paths=N, threads={args.threads})`, timed from building the PatchScene "
+             "from arrays (validation, frames, Embree BVH) to the result.")
+    L.append(f"* {args.reps} repetitions; Cycles samples {', '.join(str(2**k) for k in range(args.cycles_levels))}; "
+             f"our paths {args.first_paths:,} x 2^k, k < {args.our_levels}. Runs alternate between the products level "
+             "by level. Curves: median time and RMS (over repetitions) of the error at each level; the time to "
+             "reach a level is interpolated on the log-log curve (* = extrapolated with slope -1/2).")
+    L.append("")
+    L.append("## Result: time to reach a relative RMS patch error")
+    L.append("")
+    L.append("Each product against the reference of what it converges to (ours `random` -> discrete; Cycles and "
+             "ours `hit` -> continuous). Ratio = ours / Cycles (issue 5: at most 0.5, aim 0.33).")
+    L.append("")
+    L.append("| error | clock | Cycles s | ours random s | ratio | ours hit s | ratio |")
+    L.append("|---|---|---:|---:|---:|---:|---:|")
+    for level in LEVELS:
+        for clock in ("wall", "cpu"):
+            c = table[("rel", clock, "cycles", "native", level)]
+            r = table[("rel", clock, "random", "native", level)]
+            h = table[("rel", clock, "hit", "native", level)]
+            L.append(f"| {level:.2%} | {clock} | {fmt_time(c)} | {fmt_time(r)} | {r[0] / c[0]:.2f} | "
+                     f"{fmt_time(h)} | {h[0] / c[0]:.2f} |")
+    L.append("")
+    L.append(f"Cycles without its fixed per-bake cost ({a:.2f} s subtracted from its wall time):")
+    L.append("")
+    L.append("| error | Cycles s | ratio ours random | ratio ours hit |")
+    L.append("|---|---:|---:|---:|")
+    for level in LEVELS:
+        c = table[("rel", "wall", "cycles", "native", level)][0] - a
+        r = table[("rel", "wall", "random", "native", level)][0]
+        h = table[("rel", "wall", "hit", "native", level)][0]
+        L.append(f"| {level:.2%} | {c:.2f} | {r / c:.2f} | {h / c:.2f} |")
+    L.append("")
+    L.append("All three against the continuous reference (wall clock); `-` = never reached, the error floor being "
+             "the discrete/continuous gap:")
+    L.append("")
+    L.append("| error | Cycles s | ours random s | ours hit s |")
+    L.append("|---|---:|---:|---:|")
+    for level in LEVELS:
+        cells = []
+        for s in ("cycles", "random", "hit"):
+            value = table[("rel", "wall", s, "continuous", level)]
+            _, _, e = curves(records, s, "continuous")
+            floor = s == "random" and level <= gap * 1.2
+            cells.append("-" if floor else fmt_time(value))
+        L.append(f"| {level:.2%} | " + " | ".join(cells) + " |")
+    L.append("")
+    L.append("The panel's convention, RMS(B - B*) / mean reflected radiosity, against each product's own reference "
+             "(wall clock):")
+    L.append("")
+    L.append("| error | Cycles s | ours random s | ratio | ours hit s | ratio |")
+    L.append("|---|---:|---:|---:|---:|---:|")
+    for level in LEVELS:
+        c = table[("bave", "wall", "cycles", "native", level)]
+        r = table[("bave", "wall", "random", "native", level)]
+        h = table[("bave", "wall", "hit", "native", level)]
+        L.append(f"| {level:.2%} | {fmt_time(c)} | {fmt_time(r)} | {r[0] / c[0]:.2f} | {fmt_time(h)} | {h[0] / c[0]:.2f} |")
+    L.append("")
+    L.append(f"![time against error]({png_name})")
+    L.append("")
+    L.append("## Measured points")
+    L.append("")
+    L.append("| product | samples / paths | median wall s | median CPU s | rel. RMS vs own ref. | vs continuous |")
+    L.append("|---|---:|---:|---:|---:|---:|")
+    for series, (label, _, native) in SERIES.items():
+        amounts, t, e = curves(records, series, native)
+        _, tc, _ = curves(records, series, native, clock="cpu")
+        _, _, ec = curves(records, series, "continuous")
+        for k, amount in enumerate(amounts):
+            L.append(f"| {label} | {amount:,} | {t[k]:.3f} | {tc[k]:.3f} | {e[k]:.3%} | {ec[k]:.3%} |")
+    L.append("")
+    out.write_text("\n".join(L) + "\n")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="few levels, one repetition, results under out/")
+    ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--threads", type=int, default=THREADS)
+    ap.add_argument("--block", type=int, default=BLOCK, help="pixels per side of a patch's block")
+    ap.add_argument("--cycles-levels", type=int, default=10, help="Cycles samples 1, 2, 4, ... (this many)")
+    ap.add_argument("--first-paths", type=int, default=125_000)
+    ap.add_argument("--our-levels", type=int, default=10, help="our paths first-paths x 1, 2, 4, ... (this many)")
+    ap.add_argument("--recompute-reference", action="store_true")
+    ap.add_argument("--out", default=None, help="directory for the markdown, plot and JSON")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.reps, args.cycles_levels, args.our_levels = 1, 6, 6
+    out = Path(args.out) if args.out else (ROOT / "out" / "cycles_comparison_quick" if args.quick else RESULTS)
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    refs, settings, records = run(args)
+    table = analyse(records)
+    png = "cycles_comparison.png"
+    plot(records, refs, out / png)
+    (out / "cycles_comparison.json").write_text(json.dumps({"settings": settings, "records": records}, indent=1))
+    report(args, refs, settings, records, table, out / "cycles_comparison.md", png, time.perf_counter() - start)
+    print((out / "cycles_comparison.md").read_text())
+
+
+if __name__ == "__main__":
+    main()
