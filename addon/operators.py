@@ -46,6 +46,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
     _job = None
     _timer = None
     _notes = ()
+    _scene_uid = None
 
     @classmethod
     def poll(cls, context):
@@ -98,6 +99,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             return {"CANCELLED"}
         settings = context.scene.radiosity.solve_settings()
         self._notes = notes
+        self._scene_uid = context.scene.session_uid  # results go to the scene solved
         self._job = worker.SolveJob(objects, settings)
         if threaded:
             worker.set_running_job(self._job)
@@ -134,14 +136,19 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             self.report({"ERROR"}, f"Radiosity: {', '.join(repr(n) for n in missing)} was deleted while "
                         "solving; the result was discarded and the scene is unchanged")
             return {"CANCELLED"}
+        uid = getattr(self, "_scene_uid", None)
+        scene = next((sc for sc in bpy.data.scenes if sc.session_uid == uid), None) if uid else context.scene
+        if scene is None:
+            self.report({"ERROR"}, "Radiosity: the scene was deleted while solving; the result was discarded")
+            return {"CANCELLED"}
         r = output.result
         if r.paths == 0:
             self.report({"ERROR"}, f"Radiosity: the time limit ({job.settings.max_seconds:g} s) ended the run "
                         "before the first batch of paths; nothing was written. Raise the time limit")
             return {"CANCELLED"}
-        settings = context.scene.radiosity
+        settings = scene.radiosity
         try:
-            scene_io.write_results(context, output, job.settings.output)
+            scene_io.write_results(context, output, job.settings.output, scene=scene)
         except Exception as exc:  # noqa: BLE001 - report, never a traceback
             import traceback
 

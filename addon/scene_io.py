@@ -472,14 +472,15 @@ def show_attribute_in_solid_view():
                     space.shading.color_type = "VERTEX"
 
 
-def write_results(context, output_data, output_mode):
+def write_results(context, output_data, output_mode, scene=None):
     """Replace the previous results with one object per source object.
 
     All new objects are built first and only then swapped in for the old ones, so a failure
     part-way leaves the previous results as they were (never a half-written set).
-    ``output_data`` is a worker.SolveOutput.  Returns the new objects.
+    ``output_data`` is a worker.SolveOutput; ``scene`` the scene that was solved (by default
+    the context's).  Returns the new objects.
     """
-    scene = context.scene
+    scene = scene if scene is not None else context.scene
     created = []
     try:
         material = result_material()
