@@ -8,9 +8,11 @@ and averages in a worker thread, and the main thread writes the result.
 from __future__ import annotations
 
 import atexit
+import hashlib
 import threading
 import time
 import warnings
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -62,17 +64,82 @@ class Patches:
     combined: meshing.CombinedPatches
     reflectivity: np.ndarray  # (P,3)
     emission: np.ndarray  # (P,3)
+    geometry_key: str | None = None  # fingerprint of the meshed geometry (see _GeometryCache)
 
     def patch_scene(self):
+        """The core scene; geometry, sampling tables and the Embree scene are built once per
+        geometry and reused when only materials (or estimator, target, seed) change."""
+        return _GEOMETRY_CACHE.scene(self)
+
+
+class _GeometryCache:
+    """The last few meshed geometries and their core scenes, keyed by a fingerprint of the
+    objects' arrays and the patch size: the panel's estimate and a re-run neither re-mesh
+    nor rebuild the ray tracer."""
+
+    size = 2
+
+    def __init__(self):
+        self._entries = OrderedDict()  # key -> {"meshes", "combined", "scene", "warnings"}
+        self._lock = threading.Lock()
+
+    @staticmethod
+    def key(objects, patch_size):
+        digest = hashlib.blake2b(digest_size=16)
+        digest.update(np.float64(patch_size).tobytes())
+        for o in objects:
+            for array in (o.vertices, o.face_sizes, o.corner_verts, o.triangles, o.triangle_face):
+                array = np.ascontiguousarray(array)
+                digest.update(f"{array.dtype}{array.shape}".encode())
+                digest.update(array.tobytes())
+        return digest.hexdigest()
+
+    def meshes(self, key):
+        with self._lock:
+            entry = self._entries.get(key)
+            if entry is not None:
+                self._entries.move_to_end(key)
+                return entry["meshes"], entry["combined"]
+        return None
+
+    def store(self, key, meshes, combined):
+        with self._lock:
+            self._entries[key] = {"meshes": meshes, "combined": combined, "scene": None, "warnings": []}
+            while len(self._entries) > self.size:
+                self._entries.popitem(last=False)
+
+    def scene(self, patches):
         from .core import PatchScene
 
-        return PatchScene(
-            self.combined.vertices,
-            self.combined.triangles,
-            self.combined.triangle_patch,
-            self.reflectivity,
-            self.emission,
-        )
+        with self._lock:
+            entry = self._entries.get(patches.geometry_key)
+            base = entry["scene"] if entry is not None else None
+            if base is not None and base.patch_count == patches.combined.patch_count:
+                for message in entry["warnings"]:  # what building it said, said again
+                    warnings.warn(message, UserWarning, stacklevel=2)
+                return base.with_materials(patches.reflectivity, patches.emission)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                scene = PatchScene(
+                    patches.combined.vertices,
+                    patches.combined.triangles,
+                    patches.combined.triangle_patch,
+                    patches.reflectivity,
+                    patches.emission,
+                )
+            for w in caught:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            if entry is not None:
+                entry["scene"] = scene
+                entry["warnings"] = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+            return scene
+
+    def clear(self):
+        with self._lock:
+            self._entries.clear()
+
+
+_GEOMETRY_CACHE = _GeometryCache()
 
 
 @dataclass
@@ -95,7 +162,13 @@ class SolveOutput:
 
 
 def make_patches(objects, patch_size) -> Patches:
-    """Mesh every object into patches and gather per-patch materials."""
+    """Mesh every object into patches and gather per-patch materials (the meshing of an
+    unchanged geometry comes from the cache)."""
+    key = _GeometryCache.key(objects, patch_size)
+    cached = _GEOMETRY_CACHE.meshes(key)
+    if cached is not None:
+        meshes, combined = cached
+        return _with_materials(objects, meshes, combined, key)
     meshes = [
         meshing.mesh_patches(
             o.vertices,
@@ -110,13 +183,18 @@ def make_patches(objects, patch_size) -> Patches:
     combined = meshing.concatenate(meshes)
     if combined.patch_count == 0:
         raise ValueError("the selected objects have no faces")
+    _GEOMETRY_CACHE.store(key, meshes, combined)
+    return _with_materials(objects, meshes, combined, key)
+
+
+def _with_materials(objects, meshes, combined, key) -> Patches:
     reflectivity = np.concatenate(
         [o.face_reflectivity[m.patch_face] for o, m in zip(objects, meshes)]
     ).reshape(-1, 3)
     emission = np.concatenate(
         [o.face_emission[m.patch_face] for o, m in zip(objects, meshes)]
     ).reshape(-1, 3)
-    return Patches(list(objects), meshes, combined, reflectivity, emission)
+    return Patches(list(objects), meshes, combined, reflectivity, emission, key)
 
 
 def objects_of_patches(patches: Patches, indices) -> str:

@@ -1,0 +1,52 @@
+"""The extension's worker reuses meshing, geometry tables and the Embree scene when only the
+materials (or estimator, target, seed) change: the panel's estimate and a re-run neither
+re-mesh nor rebuild. (addon.worker imports no bpy.)"""
+import numpy as np
+
+from addon import worker
+
+
+def box_object(name="Box", size=1.0, reflectivity=0.5):
+    """A closed cube of 6 quads wound inwards, the top one emitting."""
+    s = size
+    vertices = np.array([[0, 0, 0], [s, 0, 0], [s, s, 0], [0, s, 0], [0, 0, s], [s, 0, s], [s, s, s], [0, s, s]], float)
+    faces = np.array([[0, 1, 2, 3], [4, 7, 6, 5], [0, 3, 7, 4], [1, 5, 6, 2], [0, 4, 5, 1], [3, 2, 6, 7]])
+    triangles = np.concatenate([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]])
+    triangle_face = np.concatenate([np.arange(6), np.arange(6)])
+    emission = np.zeros((6, 3))
+    emission[1] = 1.0
+    return worker.ObjectArrays(
+        name=name,
+        vertices=vertices,
+        face_sizes=np.full(6, 4),
+        corner_verts=faces.ravel(),
+        triangles=triangles,
+        triangle_face=triangle_face,
+        face_reflectivity=np.full((6, 3), reflectivity),
+        face_emission=emission,
+    )
+
+
+def test_materials_change_reuses_meshes_geometry_and_tracer():
+    worker._GEOMETRY_CACHE.clear()
+    first = worker.make_patches([box_object(reflectivity=0.5)], patch_size=0.25)
+    scene_a = first.patch_scene()
+    tracer = scene_a.tracer
+    second = worker.make_patches([box_object(reflectivity=0.3)], patch_size=0.25)
+    scene_b = second.patch_scene()
+    assert second.meshes is first.meshes and second.combined is first.combined
+    assert scene_b.geometry is scene_a.geometry and scene_b.tracer is tracer
+    np.testing.assert_allclose(scene_b.reflectivity, 0.3)
+    np.testing.assert_allclose(scene_a.reflectivity, 0.5)
+
+
+def test_geometry_or_patch_size_change_rebuilds_and_the_last_two_are_kept():
+    worker._GEOMETRY_CACHE.clear()
+    make = lambda size=1.0, patch=0.25: worker.make_patches([box_object(size=size)], patch_size=patch).patch_scene()  # noqa: E731
+    base = make()
+    finer = make(patch=0.2)
+    assert finer.geometry is not base.geometry and finer.patch_count > base.patch_count
+    assert make().geometry is base.geometry          # the two most recent are kept
+    bigger = make(size=2.0)                          # evicts the least recent (finer)
+    assert bigger.geometry is not base.geometry
+    assert make(patch=0.2).geometry is not finer.geometry
