@@ -64,8 +64,11 @@ def paper_sampling():
     return {"sampling": "independent"} if "sampling" in inspect.signature(solve).parameters else {}
 
 
-def cumulative_runs(scene, estimator, batches, seed, threshold=1e-3, threads=None, exit_point="random"):
-    """Run independent batches of ``batches[k]`` paths; yield the combined estimate after each."""
+def cumulative_runs(scene, estimator, batches, seed, threshold=1e-3, threads=None, exit_point="random", sampling=None):
+    """Run independent batches of ``batches[k]`` paths; yield the combined estimate after each.
+
+    ``sampling`` None runs the paper's estimator; "stratified" the core's option beyond it."""
+    how = paper_sampling() if sampling is None else {"sampling": sampling}
     from addon.core import solve
 
     total_paths = 0
@@ -78,7 +81,7 @@ def cumulative_runs(scene, estimator, batches, seed, threshold=1e-3, threads=Non
     for k, n in enumerate(batches):
         c0 = time.process_time()
         r = solve(scene, estimator, paths=int(n), threshold=threshold, seed=int(seed) * 1000 + k,
-                  threads=threads, exit_point=exit_point, **paper_sampling())
+                  threads=threads, exit_point=exit_point, **how)
         cpu += time.process_time() - c0
         total_paths += r.paths
         total_rays += r.rays

@@ -363,6 +363,11 @@ def run_room(which, c, threads, out):
         res[f"{key}_expected_path_length"] = pr.expected_path_length
         res["formula4"] = predict(scene, "biased_infinite", threshold=1e-3).relative_efficiency
         log(f"  {key}: " + ", ".join(f"{r['paths']:,}: {r['corrected'] / r['expected']:.3f}" for r in rows))
+    # Beyond the paper: the finite estimator with stratified sources and a low-discrepancy first ray.
+    pts = ex.cumulative_runs(scene, "finite", runs["finite"], seed=9, threads=threads, sampling="stratified")
+    res["rows"]["finite_stratified"] = [
+        {"paths": p.paths, "rays": p.rays, "seconds": p.seconds, "cpu_seconds": p.cpu_seconds,
+         "corrected": ex.mse(p.radiosity, ref.radiosity, area) - ref.mse} for p in pts]
     re = [ex.relative_efficiency_measured(b["corrected"], b["rays"], f["corrected"], f["rays"])
           for b in res["rows"]["biased"] for f in res["rows"]["finite"]]
     res["re_measured"] = ex.geometric_mean(re)
@@ -456,6 +461,10 @@ def run_cornell(c, threads, out):
                              "percent_area": ex.percent_area_error(p.radiosity, ref.radiosity, area)} for p in pts]
         res[f"{key}_expected_path_length"] = pr.expected_path_length
         res[f"{key}_mean_path_length"] = pts[-1].rays / pts[-1].paths
+    pts = ex.cumulative_runs(sample.scene, "finite", batches, seed=12, threads=threads, sampling="stratified")
+    res["rows"]["finite_stratified"] = [
+        {"paths": p.paths, "rays": p.rays, "seconds": p.seconds, "cpu_seconds": p.cpu_seconds,
+         "corrected": ex.mse(p.radiosity, ref.radiosity, area) - ref.mse} for p in pts]
     lines = ["# Cornell box (`sample_scenes.cornell_box`, open front, RGB)", "",
              f"{sample.patch_count} patches, R_ave = {sample.r_ave:.3f} (channel mean). The front is open, so paths "
              "escape and formula (2)/(3), derived for closed scenes, is only indicative. Reference: finite run of "
@@ -494,16 +503,21 @@ def write_time_vs_error(summary, out):
                        ("cornell", "Cornell box")):
         if key in summary:
             rows = summary[key]["rows"]
-            panels.append((title, {
+            curves = {
                 "finite": ([r["cpu_seconds"] for r in rows["finite"]], [r["corrected"] for r in rows["finite"]]),
                 "biased t=0.001": ([r["cpu_seconds"] for r in rows["biased"]], [r["corrected"] for r in rows["biased"]]),
-            }))
+            }
+            if "finite_stratified" in rows:
+                curves["finite, stratified (beyond the paper)"] = (
+                    [r["cpu_seconds"] for r in rows["finite_stratified"]], [r["corrected"] for r in rows["finite_stratified"]])
+            panels.append((title, curves))
     if not panels:
         return
     cols = 3
     rows_n = math.ceil(len(panels) / cols)
     fig, axes = plt.subplots(rows_n, cols, figsize=(5 * cols, 3.9 * rows_n), squeeze=False)
-    styles = {"finite": ("-s", "tab:blue"), "biased t=0.001": (":o", "tab:purple"), "biased t=0.01": (":^", "tab:orange")}
+    styles = {"finite": ("-s", "tab:blue"), "biased t=0.001": (":o", "tab:purple"), "biased t=0.01": (":^", "tab:orange"),
+              "finite, stratified (beyond the paper)": ("--d", "tab:green")}
     for ax, (title, curves) in zip(axes.ravel(), panels):
         for label, (s, m) in curves.items():
             s, m = np.asarray(s), np.asarray(m)
