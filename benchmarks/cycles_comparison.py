@@ -351,6 +351,7 @@ def plot(records, refs, path):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), sharey=True)
     styles = {"cycles": ("tab:red", "o"), "random": ("tab:blue", "s"), "hit": ("tab:green", "^")}
@@ -365,16 +366,19 @@ def plot(records, refs, path):
                           label=f"{label} vs continuous reference")
         for level in LEVELS:
             ax.axhline(level, color="grey", lw=0.8, ls="--")
-            ax.text(ax.get_xlim()[0] if False else 0.02, level * 1.05, f"{level:.2%}", color="grey",
-                    transform=ax.get_yaxis_transform())
+            ax.text(0.02, level * 1.05, f"{level:.2%}", color="grey", transform=ax.get_yaxis_transform())
         gap = relative_rms(refs["discrete"], refs["continuous"])
         ax.axhline(gap, color="tab:purple", lw=0.8, ls="-.")
         ax.text(0.55, gap * 1.05, f"discrete vs continuous reference: {gap:.2%}", color="tab:purple",
                 transform=ax.get_yaxis_transform(), fontsize=8)
         ax.set_xlabel("wall-clock seconds (2 threads)" if clock == "wall" else "process CPU seconds (all threads)")
         ax.grid(True, which="both", alpha=0.3)
+        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_minor_formatter(NullFormatter())
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f"{100 * y:g}%"))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g} s"))
     axes[0].set_ylabel("relative RMS patch error")
-    axes[0].legend(fontsize=8, loc="lower left")
+    axes[0].legend(fontsize=8, loc="upper right")
     fig.suptitle("Closed 1 m room, 600 patches, albedo 0.5, 0.2 m ceiling light: time to a patch error")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -386,14 +390,14 @@ def fmt_time(value):
     return f"{t:.2f}{'*' if extrapolated else ''}"
 
 
-def report(args, refs, settings, records, table, out, png_name, total_seconds):
+def report(command, refs, settings, records, table, out, png_name, total_seconds):
     a, b = cycles_fixed_cost(records)
     gap = relative_rms(refs["discrete"], refs["continuous"])
     uncertainty = relative_rms(refs["fine4"], refs["continuous"])
     L = []
     L.append("# Time to a patch error: solve() against Cycles' COMBINED bake (issue 5)")
     L.append("")
-    L.append(f"`python -m benchmarks.cycles_comparison {' '.join(sys.argv[1:])}`".replace(" `", "`"))
+    L.append(f"`python -m benchmarks.cycles_comparison {command}`".replace(" `", "`"))
     L.append(f"Machine: {platform.machine()}, {os.cpu_count()} CPUs shared with other work, Python "
              f"{platform.python_version()}; Blender {settings['Blender']} (bpy module); run took {total_seconds / 60:.1f} min.")
     L.append("")
@@ -406,8 +410,13 @@ def report(args, refs, settings, records, table, out, png_name, total_seconds):
     L.append(f"* continuous: the same system on 2,400 and 9,600 patches averaged back onto the 600, extrapolated "
              f"with the observed order p = {float(refs['order']):.2f} (what Cycles and `exit_point=\"hit\"` converge to). "
              f"Its uncertainty, taken as the size of the extrapolation step, is {uncertainty:.3%} relative RMS;")
-    L.append(f"* the two differ by {gap:.3%} relative RMS (largest on patches next to the room's edges), so a "
-             "product measured against the other one's reference cannot go below that.")
+    d = ((refs["discrete"] - refs["continuous"]) / refs["continuous"]).reshape(6, N, N)
+    edge = np.zeros((N, N), bool)
+    edge[[0, -1], :] = edge[:, [0, -1]] = True
+    L.append(f"* the two differ by {gap:.3%} relative RMS: {np.sqrt(np.mean(d[1] ** 2)):.2%} on the ceiling (lit only "
+             f"by reflected light), {np.sqrt(np.mean(d[:, edge] ** 2)):.2%} on patches along the room's edges and "
+             f"{np.sqrt(np.mean(d[:, ~edge] ** 2)):.2%} on the others; a product measured against the other one's "
+             "reference cannot go below that.")
     L.append("")
     L.append("## Set-up")
     L.append(f"* Cycles: `bpy.ops.object.bake(type=\"COMBINED\")`, CPU, {settings['threads']} threads, "
@@ -416,10 +425,13 @@ def report(args, refs, settings, records, table, out, png_name, total_seconds):
              f"sampling pattern {settings['sampling pattern']}, light tree {settings['light tree']}. Time: the bake "
              "call (session, scene sync, BVH, path tracing, writing the image); building the bpy scene and reading "
              f"pixels back excluded. Fitted fixed part of a bake call: {a:.2f} s (+ {b * 1000:.1f} ms per sample).")
-    L.append(f"* Ours: `solve(scene, \"finite\", paths=N, threads={args.threads})`, timed from building the PatchScene "
+    L.append(f"* Ours: `solve(scene, \"finite\", paths=N, threads={settings['threads']})`, timed from building the PatchScene "
              "from arrays (validation, frames, Embree BVH) to the result.")
-    L.append(f"* {args.reps} repetitions; Cycles samples {', '.join(str(2**k) for k in range(args.cycles_levels))}; "
-             f"our paths {args.first_paths:,} x 2^k, k < {args.our_levels}. Runs alternate between the products level "
+    reps = len({r["rep"] for r in records})
+    samples = sorted({r["amount"] for r in records if r["series"] == "cycles"})
+    paths = sorted({r["amount"] for r in records if r["series"] != "cycles"})
+    L.append(f"* {reps} repetitions; Cycles samples {', '.join(str(s) for s in samples)}; "
+             f"our paths {paths[0]:,} to {paths[-1]:,} (doubling). Runs alternate between the products level "
              "by level. Curves: median time and RMS (over repetitions) of the error at each level; the time to "
              "reach a level is interpolated on the log-log curve (* = extrapolated with slope -1/2).")
     L.append("")
@@ -500,18 +512,32 @@ def main(argv=None):
     ap.add_argument("--our-levels", type=int, default=10, help="our paths first-paths x 1, 2, 4, ... (this many)")
     ap.add_argument("--recompute-reference", action="store_true")
     ap.add_argument("--out", default=None, help="directory for the markdown, plot and JSON")
+    ap.add_argument("--replot", default=None, metavar="JSON", help="redo the tables and plot from a run's JSON")
     args = ap.parse_args(argv)
+    if args.replot:
+        data = json.loads(Path(args.replot).read_text())
+        out = Path(args.out) if args.out else Path(args.replot).parent
+        write(data["command"] if "command" in data else "", references(), data["settings"], data["records"], out,
+              data.get("seconds", float("nan")))
+        return
     if args.quick:
         args.reps, args.cycles_levels, args.our_levels = 1, 6, 6
     out = Path(args.out) if args.out else (ROOT / "out" / "cycles_comparison_quick" if args.quick else RESULTS)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     refs, settings, records = run(args)
+    command = " ".join(sys.argv[1:] if argv is None else argv)
+    seconds = time.perf_counter() - start
+    (out / "cycles_comparison.json").write_text(
+        json.dumps({"command": command, "seconds": seconds, "settings": settings, "records": records}, indent=1))
+    write(command, refs, settings, records, out, seconds)
+
+
+def write(command, refs, settings, records, out, seconds):
     table = analyse(records)
     png = "cycles_comparison.png"
     plot(records, refs, out / png)
-    (out / "cycles_comparison.json").write_text(json.dumps({"settings": settings, "records": records}, indent=1))
-    report(args, refs, settings, records, table, out / "cycles_comparison.md", png, time.perf_counter() - start)
+    report(command, refs, settings, records, table, out / "cycles_comparison.md", png, seconds)
     print((out / "cycles_comparison.md").read_text())
 
 
