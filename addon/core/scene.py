@@ -16,10 +16,11 @@ import numpy as np
 
 CHANNELS = 3
 
-# Rays leave a patch from a point pushed this far along its normal, relative to the scene's
-# bounding-box diagonal. Geometry is centred on its bounding box before it is converted to
-# float32, so the offset is ~100 float32 ulps at the scene's extent whatever its scale or
-# distance from the origin.
+# The ray tracer works in unit space: positions (world - centre) / diagonal, where centre and
+# diagonal are the bounding box's, so that float32 precision and Embree's internal tolerances
+# (its barycentrics fail below a scene size of ~1e-8) see the same scene at any scale or
+# distance from the origin. Rays leave a patch from a point pushed this far along its normal
+# (~170 float32 ulps at the scene's extent).
 RELATIVE_RAY_OFFSET = 1e-5
 
 # Points where rays leave a patch keep this distance (relative to the diagonal, ~17 float32
@@ -105,17 +106,18 @@ class Geometry:
     """Geometry arrays derived once and shared by every material set on the same patches.
 
     Triangles are stored sorted by patch (the ray tracer's primitive ids index this order).
-    Positions are relative to ``centre`` (the bounding-box centre) in float32.
+    Positions are in unit space, (world - centre) / diagonal, in float32; areas are in the
+    scene's units.
     """
 
     centre: np.ndarray            # (3,) float64
     diagonal: float               # bounding-box diagonal, scene units
-    ray_offset: float             # distance a ray origin is pushed along the normal
+    ray_offset: float             # distance a ray origin is pushed along the normal (unit space)
     triangle_index: np.ndarray    # (T,) original index of each sorted triangle
     triangle_patch: np.ndarray    # (T,) int32 patch of each sorted triangle
     triangle_area: np.ndarray     # (T,) float64
     triangle_normal: np.ndarray   # (T,3) float32 unit normals
-    triangle_corners: np.ndarray  # (T,3,3) float32 centred corners, the ray tracer's input
+    triangle_corners: np.ndarray  # (T,3,3) float32 unit-space corners, the ray tracer's input
     patch_area: np.ndarray        # (P,) float64
     patch_normal: np.ndarray      # (P,3) float32
     patch_first_triangle: np.ndarray  # (P,) int64 first sorted triangle of each patch
@@ -137,6 +139,10 @@ class Geometry:
     @cached_property
     def max_triangles_per_patch(self):
         return int(self.patch_triangle_count.max())
+
+    def to_world(self, points):
+        """Unit-space points (n,3) back in the scene's coordinates, float64."""
+        return np.asarray(points, dtype=np.float64) * self.diagonal + self.centre
 
     @cached_property
     def patch_normal_rows(self):
@@ -207,13 +213,13 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             "scene units: rescale it (radiosity does not depend on the unit of length)"
         )
 
-    corners = V[T] - centre                       # (T,3,3) float64, centred
+    corners = (V[T] - centre) / diagonal          # (T,3,3) float64, unit space
     e1 = corners[:, 1] - corners[:, 0]
     e2 = corners[:, 2] - corners[:, 0]
     cross = np.cross(e1, e2)
     double_area = np.linalg.norm(cross, axis=1)
-    area = 0.5 * double_area
-    degenerate = area <= RELATIVE_DEGENERATE_AREA * diagonal**2
+    area = 0.5 * double_area                      # unit space
+    degenerate = area <= RELATIVE_DEGENERATE_AREA
     if degenerate.any():
         warnings.warn(
             f"dropped {int(degenerate.sum())} degenerate (zero-area) triangles: {_indices_text(degenerate)}",
@@ -258,10 +264,10 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     fraction = (cumulative - before_patch[tp_sorted]) / patch_area[tp_sorted]
     last = first + count - 1
     fraction[last] = 1.0  # exact upper end, whatever the rounding
-    ray_offset = RELATIVE_RAY_OFFSET * diagonal
+    ray_offset = RELATIVE_RAY_OFFSET
     sorted_corners = corners[order]
-    inset = RELATIVE_EDGE_INSET * diagonal
-    is_parallelogram, parallelogram = _parallelograms(sorted_corners, first, count, diagonal, inset)
+    inset = RELATIVE_EDGE_INSET
+    is_parallelogram, parallelogram = _parallelograms(sorted_corners, first, count, inset)
     parallelogram[:, :3] += ray_offset * patch_normal
     leave_corners = _inset_triangles(sorted_corners, inset)
 
@@ -272,10 +278,10 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         ray_offset=ray_offset,
         triangle_index=order,
         triangle_patch=tp_sorted.astype(np.int32),
-        triangle_area=sorted_area,
+        triangle_area=sorted_area * diagonal**2,
         triangle_normal=f32(normal),
         triangle_corners=f32(sorted_corners),
-        patch_area=patch_area,
+        patch_area=patch_area * diagonal**2,
         patch_normal=f32(patch_normal),
         patch_first_triangle=first,
         patch_triangle_count=count,
@@ -309,7 +315,7 @@ def _inset_triangles(corners, inset):
     return incentre[:, None, :] + (1 - shrink)[:, None, None] * (corners - incentre[:, None, :])
 
 
-def _parallelograms(sorted_corners, first, count, diagonal, inset=0.0):
+def _parallelograms(sorted_corners, first, count, inset=0.0):
     """Which patches are two triangles forming a parallelogram, and its (corner, a, b).
 
     Such a patch (any quad with parallel sides: the grids meshing makes) is sampled as
@@ -322,7 +328,7 @@ def _parallelograms(sorted_corners, first, count, diagonal, inset=0.0):
         return np.zeros(P, bool), frame
     t0 = sorted_corners[first[two]]          # (n,3,3)
     t1 = sorted_corners[first[two] + 1]
-    tolerance = 1e-7 * diagonal
+    tolerance = 1e-7  # unit space
     distance = np.linalg.norm(t0[:, :, None, :] - t1[:, None, :, :], axis=-1)  # (n,3,3)
     shared = distance < tolerance
     shared_in_t0 = shared.any(axis=2)        # (n,3)

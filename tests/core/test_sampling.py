@@ -57,9 +57,9 @@ def test_points_are_uniform_on_patches():
     rng = np.random.default_rng(2)
     patch = np.zeros(n, dtype=np.int64)  # the floor: [0,2] x [0,1] at z = 0
     u = rng.random((3, n), dtype=np.float32)
-    p = points_on_triangles(g, choose_triangles(g, patch, u[0]), u[1], u[2]) + g.centre
+    p = g.to_world(points_on_triangles(g, choose_triangles(g, patch, u[0]), u[1], u[2]))
     # Pushed off the floor by the ray offset, inside the rectangle, uniform in x and y.
-    np.testing.assert_allclose(p[:, 2], g.ray_offset, rtol=1e-3, atol=1e-6)
+    np.testing.assert_allclose(p[:, 2], g.ray_offset * g.diagonal, rtol=1e-3, atol=1e-6)
     assert p[:, 0].min() >= -1e-6 and p[:, 0].max() <= 2 + 1e-6
     for coordinate, length in ((0, 2.0), (1, 1.0)):
         hist = np.histogram(p[:, coordinate], bins=20, range=(0, length))[0]
@@ -87,7 +87,7 @@ def test_parallelogram_and_triangle_patches_sample_alike():
     for patch_index, (x0, y0) in ((0, (0, 0)), (1, (0, 2))):
         patch = np.full(n, patch_index)
         u = rng.random((3, n), dtype=np.float32)
-        p = points_on_patches(g, patch, u[0], u[1], u[2]) + g.centre
+        p = g.to_world(points_on_patches(g, patch, u[0], u[1], u[2]))
         assert p[:, 0].min() >= x0 - 1e-6 and p[:, 0].max() <= x0 + 2 + 1e-6
         assert p[:, 1].min() >= y0 - 1e-6 and p[:, 1].max() <= y0 + 1 + 1e-6
         hist = np.histogram2d(p[:, 0], p[:, 1], bins=(8, 4), range=((x0, x0 + 2), (y0, y0 + 1)))[0].ravel()
