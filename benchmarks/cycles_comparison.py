@@ -1,6 +1,6 @@
 """Time to a given patch error: this product's solve() against Cycles' COMBINED bake.
 
-    python -m benchmarks.cycles_comparison            # full run (about 15 minutes on 2 cores)
+    python -m benchmarks.cycles_comparison            # full run (about 25 minutes on 2 cores)
     python -m benchmarks.cycles_comparison --quick    # a smoke run (about a minute), to out/
     python -m benchmarks.cycles_comparison --recompute-reference   # redo the 5-minute reference
 
@@ -36,7 +36,8 @@ PatchScene from arrays (validation, patch frames, Embree BVH) to the returned re
 
 Both sides are measured alternately, level by level, in the same process, so both see the same
 machine load; wall-clock and process CPU time are both recorded. The time to reach an error
-level is interpolated on the log-log curve of (median time, RMS over repetitions of the error).
+level comes from a line fitted in log-log to the (median time, RMS over repetitions of the error)
+points near that level.
 """
 from __future__ import annotations
 
@@ -266,17 +267,22 @@ def ours(paths, exit_point, seed, threads=THREADS, estimator="finite"):
 
 # --- analysis --------------------------------------------------------------------------------
 
-def time_to_reach(times, errors, target):
-    """Time at which the log-log curve (times, errors) crosses ``target``; beyond the measured
-    range, extrapolated with the Monte Carlo slope -1/2 from the nearest point (flagged)."""
+def time_to_reach(times, errors, target, span=3.0):
+    """Time at which the log-log curve (times, errors) reaches ``target``: a least-squares line
+    in log-log through the points whose error lies within a factor ``span`` of the target (at
+    least the two nearest), which averages out the noise of single points. Beyond the measured
+    range it is extrapolated with the Monte Carlo slope -1/2 from the nearest point (flagged)."""
     t, e = np.log(np.asarray(times)), np.log(np.asarray(errors))
     g = math.log(target)
-    for k in range(len(t) - 1):
-        if (e[k] - g) * (e[k + 1] - g) <= 0 and e[k] != e[k + 1]:
-            w = (e[k] - g) / (e[k] - e[k + 1])
-            return float(math.exp(t[k] + w * (t[k + 1] - t[k]))), False
-    k = 0 if g > e[0] else len(t) - 1
-    return float(math.exp(t[k] - 2.0 * (g - e[k]))), True
+    if g > e.max() or g < e.min():
+        k = int(np.argmin(np.abs(e - g)))
+        return float(math.exp(t[k] - 2.0 * (g - e[k]))), True
+    near = np.abs(e - g) <= math.log(span)
+    if near.sum() < 2:
+        near = np.zeros_like(near)
+        near[np.argsort(np.abs(e - g))[:2]] = True
+    slope, intercept = np.polyfit(e[near], t[near], 1)
+    return float(math.exp(intercept + slope * g)), False
 
 
 SERIES = {
@@ -316,6 +322,22 @@ def run(args, log=print):
     return refs, baker.settings, records
 
 
+def block_check(refs, threads, samples_per_patch=4096, reps=2, log=print):
+    """Cycles' time and error at equal samples per patch with 4x4, 8x8 and 16x16 pixel blocks:
+    whether the block size chosen for the comparison handicaps it."""
+    rows = []
+    for block in (4, 8, 16):
+        baker = CyclesBaker(block=block, threads=threads)
+        baker.bake(1, 0)
+        samples = samples_per_patch // (block * block)
+        for rep in range(reps):
+            B, wall, cpu = baker.bake(samples, 5000 + rep)
+            rows.append(dict(block=block, samples=samples, rep=rep, wall=wall, cpu=cpu,
+                             rel_continuous=relative_rms(B, refs["continuous"])))
+            log(f"block check: {block}x{block} px, {samples} samples: {wall:.2f} s, {rows[-1]['rel_continuous']:.3%}")
+    return rows
+
+
 def curves(records, series, ref, metric="rel", clock="wall"):
     """Per level: median time, RMS over repetitions of the error."""
     rows = [r for r in records if r["series"] == series]
@@ -326,11 +348,8 @@ def curves(records, series, ref, metric="rel", clock="wall"):
 
 
 def cycles_fixed_cost(records):
-    rows = [r for r in records if r["series"] == "cycles"]
-    s = np.array([r["amount"] for r in rows], float)
-    t = np.array([r["wall"] for r in rows])
-    slope, intercept = np.polyfit(s, t, 1)
-    return float(intercept), float(slope)
+    """An upper bound on the fixed part of a bake call: the median time of a 1-sample bake."""
+    return float(np.median([r["wall"] for r in records if r["series"] == "cycles" and r["amount"] == 1]))
 
 
 def analyse(records):
@@ -390,8 +409,8 @@ def fmt_time(value):
     return f"{t:.2f}{'*' if extrapolated else ''}"
 
 
-def report(command, refs, settings, records, table, out, png_name, total_seconds):
-    a, b = cycles_fixed_cost(records)
+def report(command, refs, settings, records, table, out, png_name, total_seconds, blocks=()):
+    a = cycles_fixed_cost(records)
     gap = relative_rms(refs["discrete"], refs["continuous"])
     uncertainty = relative_rms(refs["fine4"], refs["continuous"])
     L = []
@@ -424,7 +443,7 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
              f"Diffuse BSDF, max bounces {settings['max bounces']}, no clamping, no adaptive sampling, no denoising, "
              f"sampling pattern {settings['sampling pattern']}, light tree {settings['light tree']}. Time: the bake "
              "call (session, scene sync, BVH, path tracing, writing the image); building the bpy scene and reading "
-             f"pixels back excluded. Fitted fixed part of a bake call: {a:.2f} s (+ {b * 1000:.1f} ms per sample).")
+             f"pixels back excluded. A whole 1-sample bake takes {a:.2f} s, an upper bound on the fixed part of a call.")
     L.append(f"* Ours: `solve(scene, \"finite\", paths=N, threads={settings['threads']})`, timed from building the PatchScene "
              "from arrays (validation, frames, Embree BVH) to the result.")
     reps = len({r["rep"] for r in records})
@@ -433,7 +452,8 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
     L.append(f"* {reps} repetitions; Cycles samples {', '.join(str(s) for s in samples)}; "
              f"our paths {paths[0]:,} to {paths[-1]:,} (doubling). Runs alternate between the products level "
              "by level. Curves: median time and RMS (over repetitions) of the error at each level; the time to "
-             "reach a level is interpolated on the log-log curve (* = extrapolated with slope -1/2).")
+             "reach an error level comes from a straight line in log-log fitted to the points within a factor 3 "
+             "of that error (* = beyond the measured range, extrapolated with slope -1/2).")
     L.append("")
     L.append("## Result: time to reach a relative RMS patch error")
     L.append("")
@@ -450,7 +470,8 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
             L.append(f"| {level:.2%} | {clock} | {fmt_time(c)} | {fmt_time(r)} | {r[0] / c[0]:.2f} | "
                      f"{fmt_time(h)} | {h[0] / c[0]:.2f} |")
     L.append("")
-    L.append(f"Cycles without its fixed per-bake cost ({a:.2f} s subtracted from its wall time):")
+    L.append(f"Cycles with the time of a whole 1-sample bake ({a:.2f} s, more than its fixed per-call cost) "
+             "subtracted from its wall time, in its favour:")
     L.append("")
     L.append("| error | Cycles s | ratio ours random | ratio ours hit |")
     L.append("|---|---:|---:|---:|")
@@ -485,6 +506,18 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
         h = table[("bave", "wall", "hit", "native", level)]
         L.append(f"| {level:.2%} | {fmt_time(c)} | {fmt_time(r)} | {r[0] / c[0]:.2f} | {fmt_time(h)} | {h[0] / c[0]:.2f} |")
     L.append("")
+    if blocks:
+        L.append("Does the pixel block size matter to Cycles? The same samples per patch with other blocks "
+                 "(median of the repetitions):")
+        L.append("")
+        L.append("| block | samples | wall s | CPU s | rel. RMS vs continuous |")
+        L.append("|---|---:|---:|---:|---:|")
+        for block in sorted({b["block"] for b in blocks}):
+            rows = [b for b in blocks if b["block"] == block]
+            L.append(f"| {block}x{block} | {rows[0]['samples']} | {np.median([b['wall'] for b in rows]):.2f} | "
+                     f"{np.median([b['cpu'] for b in rows]):.2f} | "
+                     f"{np.sqrt(np.mean([b['rel_continuous'] ** 2 for b in rows])):.3%} |")
+        L.append("")
     L.append(f"![time against error]({png_name})")
     L.append("")
     L.append("## Measured points")
@@ -504,7 +537,7 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="few levels, one repetition, results under out/")
-    ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--threads", type=int, default=THREADS)
     ap.add_argument("--block", type=int, default=BLOCK, help="pixels per side of a patch's block")
     ap.add_argument("--cycles-levels", type=int, default=10, help="Cycles samples 1, 2, 4, ... (this many)")
@@ -517,8 +550,8 @@ def main(argv=None):
     if args.replot:
         data = json.loads(Path(args.replot).read_text())
         out = Path(args.out) if args.out else Path(args.replot).parent
-        write(data["command"] if "command" in data else "", references(), data["settings"], data["records"], out,
-              data.get("seconds", float("nan")))
+        write(data.get("command", ""), references(), data["settings"], data["records"], out,
+              data.get("seconds", float("nan")), data.get("blocks", ()))
         return
     if args.quick:
         args.reps, args.cycles_levels, args.our_levels = 1, 6, 6
@@ -526,18 +559,19 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     refs, settings, records = run(args)
+    blocks = [] if args.quick else block_check(refs, args.threads)
     command = " ".join(sys.argv[1:] if argv is None else argv)
     seconds = time.perf_counter() - start
-    (out / "cycles_comparison.json").write_text(
-        json.dumps({"command": command, "seconds": seconds, "settings": settings, "records": records}, indent=1))
-    write(command, refs, settings, records, out, seconds)
+    (out / "cycles_comparison.json").write_text(json.dumps(
+        {"command": command, "seconds": seconds, "settings": settings, "records": records, "blocks": blocks}, indent=1))
+    write(command, refs, settings, records, out, seconds, blocks)
 
 
-def write(command, refs, settings, records, out, seconds):
+def write(command, refs, settings, records, out, seconds, blocks=()):
     table = analyse(records)
     png = "cycles_comparison.png"
     plot(records, refs, out / png)
-    report(command, refs, settings, records, table, out / "cycles_comparison.md", png, seconds)
+    report(command, refs, settings, records, table, out / "cycles_comparison.md", png, seconds, blocks)
     print((out / "cycles_comparison.md").read_text())
 
 
