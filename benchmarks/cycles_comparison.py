@@ -520,6 +520,7 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
         L.append("")
     L.append(f"![time against error]({png_name})")
     L.append("")
+    L += reading(refs, settings, records, table)
     L.append("## Measured points")
     L.append("")
     L.append("| product | samples / paths | median wall s | median CPU s | rel. RMS vs own ref. | vs continuous |")
@@ -532,6 +533,70 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
             L.append(f"| {label} | {amount:,} | {t[k]:.3f} | {tc[k]:.3f} | {e[k]:.3%} | {ec[k]:.3%} |")
     L.append("")
     out.write_text("\n".join(L) + "\n")
+
+
+def first_bounce_share():
+    """Exact split of the finite estimator's per-path variance (table 1) in this room: the share
+    due to the first bounce from the light alone (a multinomial count of first hits)."""
+    from addon.core.reference import path_variances
+
+    origin, u, v, light = room_rectangles()
+    F = rectangle_form_factors(origin, u, v)
+    area = np.linalg.norm(np.cross(u, v), axis=1)
+    R = np.full(len(area), ALBEDO)
+    E = EMISSION * light
+    total, _ = path_variances(F, R, E, area)
+    power = E * area
+    first = (power[light, None] * F[light]).sum(axis=0) / power.sum()  # P(first hit on j)
+    score = R * power.sum() / area                                   # what a visit scores
+    direct = score**2 * first * (1 - first)
+    lit = ~light
+    return float(direct.sum() / total.sum()), float(np.mean(direct[lit] / total[lit]))
+
+
+def reading(refs, settings, records, table):
+    L = ["## Reading", ""]
+    for level in LEVELS:
+        r = table[("rel", "wall", "random", "native", level)][0] / table[("rel", "wall", "cycles", "native", level)][0]
+        h = table[("rel", "wall", "hit", "native", level)][0] / table[("rel", "wall", "cycles", "native", level)][0]
+        rc = table[("rel", "cpu", "random", "native", level)][0] / table[("rel", "cpu", "cycles", "native", level)][0]
+        if max(r, h) <= 1 / 3:
+            verdict = "meets the aim (a third)"
+        elif max(r, h) <= 0.5:
+            verdict = "meets the target (at most half), not the aim (a third)"
+        elif min(r, h) <= 0.5:
+            verdict = "meets the target (at most half) with one exit point only"
+        else:
+            verdict = "misses the target (at most half) on wall-clock time"
+        L.append(f"* {level:.2%}: ours needs {r:.2f} (random) / {h:.2f} (hit) of Cycles' wall-clock time, "
+                 f"{rc:.2f} of its CPU time: {verdict}.")
+    last = max(a for a in (r["amount"] for r in records if r["series"] == "cycles"))
+    cyc = [r for r in records if r["series"] == "cycles" and r["amount"] == last]
+    n_px = 600 * int(settings["block"].split("x")[0]) ** 2
+    cw, cc_ = float(np.median([r["wall"] for r in cyc])), float(np.median([r["cpu"] for r in cyc]))
+    top = max(r["amount"] for r in records if r["series"] == "random")
+    our = [r for r in records if r["series"] == "random" and r["amount"] == top]
+    ow, oc = float(np.median([r["wall"] for r in our])), float(np.median([r["cpu"] for r in our]))
+    L.append(f"* Speeds at the longest runs: Cycles {n_px * last / cw / 1e6:.2f} M pixel samples/s "
+             f"(each a path with next-event estimation), {cc_ / cw:.2f} cores busy; ours {top / ow / 1e6:.1f} M paths/s "
+             f"(about 2 rays each at albedo 0.5), {oc / ow:.2f} cores busy. The wall-clock ratio is above the CPU one "
+             "where our two threads are less busy than Cycles' (short runs, Python work between ray casts).")
+    share, mean_share = first_bounce_share()
+    L.append(f"* Why the lead is not larger: the room is convex and the light small, so Cycles' next-event "
+             "estimation sees the light from every wall and floor point, so its direct light has little noise; "
+             "our shooting walks have no such term and count first hits instead. By the exact variances "
+             f"of table 1, the first bounce alone is {share:.0%} of our per-path variance (summed over patches; "
+             f"{mean_share:.0%} on average per patch). Stratifying the starting points and the first bounce (issue 5, "
+             "'beyond the paper') attacks exactly that part; a higher ray rate helps everywhere.")
+    L.append("* Both curves fall as t^-1/2 down to about 0.2% against their own references, so neither shows a "
+             "bias above that (and both give the light patches B = 1.004: the same units).")
+    L.append("* Under the panel's convention (RMS / mean reflected radiosity) our ratio is worse: that measure is "
+             "dominated by the bright patches under the light, where the shooting estimator's variance "
+             "(proportional to b_i) is largest and where Cycles' direct light is easiest; the per-patch relative "
+             "measure weighs the dim patches (the ceiling, reached only by reflected light) as much, and there "
+             "Cycles has to find the light through bounces.")
+    L.append("")
+    return L
 
 
 def main(argv=None):
