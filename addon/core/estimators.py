@@ -138,8 +138,8 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         rays += n
 
         missed = hit < 0
-        hit_safe = np.where(missed, 0, hit)
-        facing = np.einsum("ij,ij->i", directions, np.take(g.triangle_normal, hit_safe, axis=0)) < 0
+        # A miss (-1) gathers the last triangle's normal: harmless, masked out by ``missed``.
+        facing = np.einsum("ij,ij->i", directions, np.take(g.triangle_normal, hit, axis=0)) < 0
         front = facing & ~missed
         if not front.all():
             back = ~missed & ~facing
