@@ -54,6 +54,50 @@ def _indices(mask_or_indices):
     return np.flatnonzero(a) if a.dtype == bool else a
 
 
+class CoincidentFacesWarning(UserWarning):
+    """Triangles lying exactly on top of others; ``patches`` holds the patches involved."""
+
+    def __init__(self, message, patches):
+        super().__init__(message)
+        self.patches = patches
+
+
+def _warn_coincident(corners, triangle_patch):
+    """Warn about triangles with exactly the same corners as another (in any order or winding):
+    a ray hits one of them at random, so each shows only part of the light it gets."""
+    # A key that does not depend on the corners' order: each corner's projection, sorted, then
+    # projected again. Equal triangles get equal keys; neighbours with equal keys are then
+    # compared exactly (corners in lexicographic order). O(T log T), no false positives.
+    per_corner = np.sort(corners @ np.array([1.0, 1.37, 1.73]), axis=1)
+    key = per_corner @ np.array([1.0, 2.3, 3.1])
+    by_key = np.argsort(key, kind="stable")
+    candidates = np.flatnonzero(key[by_key[1:]] == key[by_key[:-1]])
+    if candidates.size == 0:
+        return
+    first, second = by_key[candidates], by_key[candidates + 1]
+
+    def canonical(c):
+        order = np.lexsort((c[:, :, 2], c[:, :, 1], c[:, :, 0]), axis=-1)
+        return np.take_along_axis(c, order[:, :, None], axis=1)
+
+    same = (canonical(corners[first]) == canonical(corners[second])).all(axis=(1, 2))
+    if not same.any():
+        return
+    flagged = np.zeros(len(corners), dtype=bool)
+    flagged[first[same]] = True
+    flagged[second[same]] = True
+    patches = np.unique(triangle_patch[flagged])
+    warnings.warn(
+        CoincidentFacesWarning(
+            f"{int(flagged.sum())} triangles lie exactly on top of others (duplicated faces), on patches "
+            f"{_indices_text(patches)}: a ray hits one of each pair at random, so each shows only part "
+            "of the light; delete the duplicates",
+            patches,
+        ),
+        stacklevel=4,
+    )
+
+
 def _indices_text(mask_or_indices, limit=10):
     idx = np.flatnonzero(mask_or_indices) if np.asarray(mask_or_indices).dtype == bool else np.asarray(mask_or_indices)
     shown = ", ".join(str(int(i)) for i in idx[:limit])
@@ -226,6 +270,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             stacklevel=3,
         )
     keep = np.flatnonzero(~degenerate)
+    _warn_coincident(corners[keep], tp[keep])
     patch_area = np.bincount(tp[keep], weights=area[keep], minlength=patch_count)
     empty = patch_area <= 0
     if empty.any():
