@@ -381,3 +381,90 @@ def test_furnace_through_blender_with_ngons_modifiers_mirror_and_linked_duplicat
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     names = sorted(o["radiosity_source"] for o in result_objects())
     assert names == ["Block", "Block Twin", "Room"]
+
+
+# ---------------------------------------------------------------------------------------------
+# Geometry the user should hear about: flipped normals, duplicated faces
+# ---------------------------------------------------------------------------------------------
+
+def test_flipped_normals_are_reported(blender):
+    """A room whose faces point out: the lamp's light lands on back sides and is absorbed. The
+    run finishes (the numbers are right for the geometry given) and says what happened."""
+    build_test_scene()
+    room = bpy.data.objects["Room"]
+    room.data.flip_normals()
+    configure(blender)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}
+    warning = [text for kind, text in reports if kind == "WARNING" and "back of faces" in text]
+    assert warning, reports
+    share = float(warning[0].split("%")[0])
+    assert share > 50  # most of the light: the room is inside out
+    # The normal scene stays below the warning threshold (its one-sided lamp's back takes ~3%).
+    room.data.flip_normals()
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"} and not any("back of faces" in text for _, text in reports)
+
+
+def test_duplicated_faces_are_reported_with_their_objects(blender):
+    """A block duplicated in place (Shift+D, then cancelling the move): every face lies on top
+    of another. The solve runs and says which objects hold the duplicates."""
+    build_test_scene()
+    block = bpy.data.objects["Block"]
+    copy = block.copy()
+    copy.data = block.data.copy()
+    copy.name = "Block Copy"
+    blender.scene.collection.objects.link(copy)
+    copy.select_set(True)
+    configure(blender)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}
+    assert any(kind == "WARNING" and "duplicated faces" in text and "'Block'" in text and "'Block Copy'" in text
+               for kind, text in reports), reports
+
+
+def test_switching_scene_while_solving_writes_into_the_scene_solved(blender):
+    build_test_scene()
+    configure(blender)
+    solved = blender.scene
+    op = _modal_operator()
+    assert op._start_job(blender, threaded=True) is None
+    other = bpy.data.scenes.new("Other")
+    blender.window.scene = other  # the user switches scene while it runs
+    assert bpy.context.scene == other
+    assert _drive(op, bpy.context) == {"FINISHED"}
+    assert len(result_objects()) == 3
+    radiosity = bpy.data.collections["Radiosity"]
+    assert radiosity.name in solved.collection.children and radiosity.name not in other.collection.children
+    assert solved.radiosity.last_paths > 0 and other.radiosity.last_paths == 0
+
+
+def test_the_load_handler_comes_and_goes_with_the_extension():
+    import addon
+    from addon.operators import _on_load_pre
+
+    addon.register()
+    assert _on_load_pre in bpy.app.handlers.load_pre
+    addon.unregister()
+    assert _on_load_pre not in bpy.app.handlers.load_pre
+
+
+def test_escape_stops_a_batch_of_endless_paths_promptly(blender):
+    """Albedo 0.99999: a batch takes seconds and no path ends in the first 0.3 s; Esc still
+    ends the run within a few seconds, the scene unchanged and the worker gone."""
+    v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    make_object("Room", v, f, [principled("Glow", (0.99999,) * 3, (1, 1, 1), 1.0)]).select_set(True)
+    configure(blender)
+    before = _snapshot()
+    op = _modal_operator()
+    assert op._start_job(blender, threaded=True) is None
+    time.sleep(0.3)
+    assert op._job.snapshot()["paths"] == 0 and op._job.alive
+    t0 = time.perf_counter()
+    from .test_extension import FakeEvent
+
+    assert op.modal(blender, FakeEvent("ESC", "PRESS")) == {"RUNNING_MODAL"}
+    assert _drive(op, blender, seconds=10) == {"CANCELLED"}
+    assert time.perf_counter() - t0 < 3.0
+    assert not op._job.alive and worker.running_job() is None
+    assert not result_objects() and _snapshot() == before
