@@ -32,6 +32,10 @@ RELATIVE_EDGE_INSET = 1e-6
 # and float64 areas stay far from overflow and underflow inside it.
 MIN_DIAGONAL, MAX_DIAGONAL = 1e-12, 1e12
 
+# The finite walk's survival test compares a float32 uniform (a multiple of 2^-24, at most
+# 1 - 2^-24) with the patch's mean reflectivity: above this, no path would ever end.
+MAX_MEAN_REFLECTIVITY = 1.0 - 2.0**-24
+
 # A triangle whose area is below this fraction of diagonal**2 is degenerate.
 RELATIVE_DEGENERATE_AREA = 1e-14
 
@@ -139,6 +143,13 @@ def validate_materials(reflectivity, emission, patch_count):
             f"reflectivity must lie in [0, 1) but does not on patches {_indices_text(outside)} "
             "(a reflectivity of 1 or more creates energy or never lets a path end)",
             _indices(outside),
+        )
+    unresolved = R.mean(axis=1) > MAX_MEAN_REFLECTIVITY
+    if unresolved.any():
+        raise PatchError(
+            f"reflectivity is within 2^-24 of 1 (mean over channels above {MAX_MEAN_REFLECTIVITY:.9f}) on patches "
+            f"{_indices_text(unresolved)}: the walk's survival test cannot resolve it and a path would never end",
+            _indices(unresolved),
         )
     if not (E > 0).any():
         raise ValueError("the scene has no emitting patch: every emission is zero")
