@@ -13,7 +13,7 @@ import threading
 import time
 import warnings
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -65,6 +65,7 @@ class Patches:
     reflectivity: np.ndarray  # (P,3)
     emission: np.ndarray  # (P,3)
     geometry_key: str | None = None  # fingerprint of the meshed geometry (see _GeometryCache)
+    notes: list = field(default_factory=list)  # what reading the geometry left out, for the user
 
     def patch_scene(self):
         """The core scene; geometry, sampling tables and the Embree scene are built once per
@@ -116,7 +117,7 @@ class _GeometryCache:
             base = entry["scene"] if entry is not None else None
             if base is not None and base.patch_count == patches.combined.patch_count:
                 for message in entry["warnings"]:  # what building it said, said again
-                    warnings.warn(message, UserWarning, stacklevel=2)
+                    warnings.warn(message, stacklevel=2)  # the Warning itself: keeps its .patches
                 return base.with_materials(patches.reflectivity, patches.emission)
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
@@ -131,7 +132,7 @@ class _GeometryCache:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
             if entry is not None:
                 entry["scene"] = scene
-                entry["warnings"] = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+                entry["warnings"] = [w.message for w in caught if issubclass(w.category, UserWarning)]
             return scene
 
     def clear(self):
@@ -161,9 +162,62 @@ class SolveOutput:
         return float(np.sum(energy["blocked"])) / emitted if emitted > 0 else 0.0
 
 
+def drop_zero_area_faces(objects):
+    """(objects, notes): faces with no area at the core's tolerance left out, objects left
+    without faces skipped. Such faces (collinear or coincident corners, common in imported
+    meshes) are invisible, and a patch made of them only would make the core refuse the scene."""
+    from .core.scene import RELATIVE_DEGENERATE_AREA
+
+    used = [o.vertices[np.unique(o.triangles)] for o in objects if len(o.triangles)]
+    if not used:
+        return [], [f"'{o.name}': every face has zero area; the object was skipped" for o in objects]
+    used = np.vstack(used)
+    diagonal = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
+    threshold = RELATIVE_DEGENERATE_AREA * diagonal**2
+    kept, notes = [], []
+    for o in objects:
+        F = len(o.face_sizes)
+        area = meshing.triangle_areas(o.vertices, o.triangles) if len(o.triangles) else np.zeros(0)
+        face_area = np.bincount(o.triangle_face, weights=np.where(area > threshold, area, 0.0), minlength=F)
+        flat = face_area <= 0
+        if not flat.any():
+            kept.append(o)
+            continue
+        if flat.all():
+            notes.append(f"'{o.name}': every face has zero area; the object was skipped")
+            continue
+        count = int(flat.sum())
+        notes.append(f"'{o.name}': {count} face{'s' if count > 1 else ''} of zero area "
+                     "(collinear or coincident corners) left out")
+        keep = ~flat
+        corner_face = np.repeat(np.arange(F), o.face_sizes)
+        new_index = np.cumsum(keep) - 1
+        keep_triangle = keep[o.triangle_face]
+        kept.append(replace(
+            o,
+            face_sizes=o.face_sizes[keep],
+            corner_verts=o.corner_verts[keep[corner_face]],
+            triangles=o.triangles[keep_triangle],
+            triangle_face=new_index[o.triangle_face[keep_triangle]],
+            face_reflectivity=o.face_reflectivity[keep],
+            face_emission=o.face_emission[keep],
+            face_slot=None if o.face_slot is None else o.face_slot[keep],
+        ))
+    return kept, notes
+
+
 def make_patches(objects, patch_size) -> Patches:
     """Mesh every object into patches and gather per-patch materials (the meshing of an
-    unchanged geometry comes from the cache)."""
+    unchanged geometry comes from the cache). Faces of zero area are left out first."""
+    objects, notes = drop_zero_area_faces(objects)
+    if not objects:
+        raise ValueError("the selected objects have no faces of non-zero area")
+    patches = _make_patches(objects, patch_size)
+    patches.notes = notes
+    return patches
+
+
+def _make_patches(objects, patch_size) -> Patches:
     key = _GeometryCache.key(objects, patch_size)
     cached = _GEOMETRY_CACHE.meshes(key)
     if cached is not None:
@@ -215,7 +269,7 @@ def scene_and_notes(patches: Patches):
         except ValueError as exc:
             where = objects_of_patches(patches, getattr(exc, "patches", None))
             raise ValueError(f"{exc}{where}") from exc
-    notes = [
+    notes = list(patches.notes) + [
         f"{w.message}{objects_of_patches(patches, getattr(w.message, 'patches', None))}"
         for w in caught
         if issubclass(w.category, UserWarning)

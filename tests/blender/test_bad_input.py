@@ -417,10 +417,33 @@ def test_duplicated_faces_are_reported_with_their_objects(blender):
     blender.scene.collection.objects.link(copy)
     copy.select_set(True)
     configure(blender)
+    for run in range(2):  # the second run reuses the cached geometry: still said, still named
+        state, reports = _run_sync(blender)
+        assert state == {"FINISHED"}
+        assert any(kind == "WARNING" and "duplicated faces" in text and "'Block'" in text
+                   and "'Block Copy'" in text for kind, text in reports), (run, reports)
+
+
+def test_zero_area_faces_are_left_out_with_a_note(blender):
+    """Imported meshes often hold faces with collinear or coincident corners. They are left out
+    (they are invisible) instead of making the whole scene fail; an object of nothing but such
+    faces is skipped. Both said."""
+    build_test_scene()
+    v = [(0.1, 0.1, 0.5), (0.2, 0.1, 0.5), (0.3, 0.1, 0.5), (0.5, 0.5, 0.5), (0.5, 0.5, 0.5), (0.5, 0.5, 0.5),
+         (0.6, 0.6, 0.2), (0.7, 0.6, 0.2), (0.7, 0.7, 0.2), (0.6, 0.7, 0.2)]
+    make_object("Junk", v, [(0, 1, 2), (3, 4, 5), (6, 7, 8, 9)]).select_set(True)
+    make_object("Dust", [(0.4, 0.4, 0.4), (0.45, 0.4, 0.4), (0.5, 0.4, 0.4)], [(0, 1, 2)]).select_set(True)
+    configure(blender)
     state, reports = _run_sync(blender)
-    assert state == {"FINISHED"}
-    assert any(kind == "WARNING" and "duplicated faces" in text and "'Block'" in text and "'Block Copy'" in text
-               for kind, text in reports), reports
+    assert state == {"FINISHED"}, reports
+    assert ("WARNING", "'Junk': 2 faces of zero area (collinear or coincident corners) left out") in reports
+    assert ("WARNING", "'Dust': every face has zero area; the object was skipped") in reports
+    names = sorted(o["radiosity_source"] for o in result_objects())
+    assert names == ["Block", "Junk", "Lamp", "Room"]
+    junk = bpy.data.objects["Junk Radiosity"].data
+    assert len(junk.polygons) >= 1
+    colours = read_colours(junk, "Radiosity")[1]
+    assert np.isfinite(colours).all() and (colours[:, :3] > 0).all()  # the good quad is lit
 
 
 def test_switching_scene_while_solving_writes_into_the_scene_solved(blender):
