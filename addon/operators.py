@@ -97,6 +97,13 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         except ValueError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        except Exception as exc:  # noqa: BLE001 - an unforeseen scene: a report, never a traceback
+            import traceback
+
+            print(traceback.format_exc())
+            self.report({"ERROR"}, f"Reading the selection failed ({type(exc).__name__}: {exc}); "
+                        "the scene is unchanged")
+            return {"CANCELLED"}
         settings = context.scene.radiosity.solve_settings()
         self._notes = notes
         self._scene_uid = context.scene.session_uid  # results go to the scene solved

@@ -491,3 +491,14 @@ def test_escape_stops_a_batch_of_endless_paths_promptly(blender):
     assert time.perf_counter() - t0 < 3.0
     assert not op._job.alive and worker.running_job() is None
     assert not result_objects() and _snapshot() == before
+
+
+def test_an_unforeseen_error_while_reading_is_a_report(blender, monkeypatch):
+    build_test_scene()
+    configure(blender)
+
+    def broken(*args, **kwargs):
+        raise AttributeError("'NoneType' object has no attribute 'vertices'")
+
+    monkeypatch.setattr(scene_io, "read_object", broken)
+    _unchanged_after_error(blender, r"Reading the selection failed \(AttributeError: .*\); the scene is unchanged")
