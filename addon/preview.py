@@ -36,7 +36,7 @@ def invalidate(*_args):
 
 def _key(context):
     settings = context.scene.radiosity
-    names = tuple(o.name for o in scene_io.source_objects(context))
+    names = tuple(o.name for o in (*scene_io.source_objects(context), *scene_io.skipped_objects(context)))
     return (
         context.scene.name, names, settings.estimator, round(settings.threshold, 9),
         round(settings.target_error, 6), round(settings.patch_size, 9), STATE.generation,

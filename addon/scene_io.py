@@ -220,13 +220,44 @@ def _get(collection, attr, count, dtype, width=1):
 
 def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
     """Arrays of one object: evaluated (modifiers), world space, outward winding."""
-    evaluated = obj.evaluated_get(depsgraph)
+    return _read_evaluated(obj.evaluated_get(depsgraph), obj.matrix_world, obj.name, obj.session_uid, notes)
+
+
+def read_instances(parents, depsgraph, notes):
+    """Mesh instances made by the given objects -- collection instances, geometry-nodes
+    instances, instancing on vertices or faces -- each as its own arrays, named 'Parent [k]'
+    and tied to its parent (for the check that the source still exists)."""
+    by_uid = {p.session_uid: p for p in parents}
+    out, counts, other = [], {}, {}
+    for inst in depsgraph.object_instances:
+        if not inst.is_instance or inst.parent is None:
+            continue
+        parent = inst.parent.original
+        if parent.session_uid not in by_uid:
+            continue
+        obj = inst.object
+        if obj.type != "MESH" or is_result_object(obj.original):
+            other[parent.name] = other.get(parent.name, 0) + (obj.type != "MESH")
+            continue
+        k = counts.get(parent.name, 0)
+        counts[parent.name] = k + 1
+        arrays = _read_evaluated(obj, inst.matrix_world.copy(), f"{parent.name} [{k}]", parent.session_uid, notes)
+        if arrays is not None:
+            out.append(arrays)
+    for name, n in other.items():
+        if n:
+            notes.append(f"'{name}': {n} instances that are not meshes were skipped")
+    return out
+
+
+def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays | None:
     mesh = evaluated.to_mesh()
     try:
         V = len(mesh.vertices)
         F = len(mesh.polygons)
         if F == 0:
-            notes.append(f"'{obj.name}' has no faces and was skipped")
+            if not _has_instances(evaluated):
+                notes.append(f"'{name}' has no faces and was skipped")
             return None
         co = _get(mesh.vertices, "co", V, np.float32, 3).astype(np.float64)
         face_sizes = _get(mesh.polygons, "loop_total", F, np.int32).astype(np.int64)
@@ -236,7 +267,7 @@ def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
         # corners face by face (loop_start is normally already in order)
         order = np.argsort(loop_start, kind="stable")
         if np.any(order != np.arange(F)) or (F and loop_start[0] != 0):
-            raise SceneError(f"'{obj.name}': unexpected corner order")
+            raise SceneError(f"'{name}': unexpected corner order")
         corner_verts = loop_vertex
         mesh.calc_loop_triangles()
         T = len(mesh.loop_triangles)
@@ -245,15 +276,15 @@ def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
         R_slots, E_slots, slot_names = _slot_tables(evaluated, notes)
     finally:
         evaluated.to_mesh_clear()
-    M = np.array(obj.matrix_world, dtype=np.float64)
+    M = np.array(matrix_world, dtype=np.float64)
     vertices = co @ M[:3, :3].T + M[:3, 3]
     if np.linalg.det(M[:3, :3]) < 0:  # negative scale: keep normals outward
         corner_verts = meshing.reverse_faces(face_sizes, corner_verts)
         triangles = triangles[:, ::-1].copy()
     slot = np.clip(material_index, 0, len(R_slots) - 1)
     return ObjectArrays(
-        name=obj.name,
-        uid=int(obj.session_uid),
+        name=name,
+        uid=int(uid),
         face_slot=slot,
         slot_names=slot_names,
         vertices=vertices,
@@ -266,11 +297,19 @@ def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
     )
 
 
+def _has_instances(evaluated):
+    try:
+        geometry = evaluated.evaluated_geometry()  # held: the point cloud lives in it
+        points = geometry.instances_pointcloud()
+        return points is not None and len(points.points) > 0
+    except Exception:  # noqa: BLE001 - older Blender: no evaluated_geometry
+        return False
+
+
 def _describe(obj):
     kind = obj.type.lower()
     if obj.type == "EMPTY" and obj.instance_type == "COLLECTION" and obj.instance_collection is not None:
-        return (f"'{obj.name}' instances collection '{obj.instance_collection.name}' (make the "
-                "instances real first: Object > Apply > Make Instances Real)")
+        return f"'{obj.name}' instances collection '{obj.instance_collection.name}', which holds no mesh"
     if obj.type in ("CURVE", "FONT", "SURFACE", "META"):
         return f"'{obj.name}' is a {kind} (convert it to a mesh first)"
     return f"'{obj.name}' is a {kind}"
@@ -301,13 +340,9 @@ def read_selection(context):
     """
     notes = []
     candidates = source_objects(context)
-    skipped = skipped_objects(context)
-    if not candidates:
-        if skipped:
-            raise SceneError("No mesh among the selected objects: " + "; ".join(_describe(o) for o in skipped))
+    others = skipped_objects(context)
+    if not candidates and not others:
         raise SceneError("Select one or more mesh objects (result objects in 'Radiosity' do not count)")
-    for o in skipped:
-        notes.append(_describe(o) + ": skipped")
     settings = getattr(context.scene, "radiosity", None)
     clamp = bool(getattr(settings, "clamp_reflectivity", False))
     depsgraph = context.evaluated_depsgraph_get()
@@ -316,8 +351,18 @@ def read_selection(context):
         arrays = read_object(obj, depsgraph, notes)
         if arrays is not None:
             objects.append(arrays)
+    # Instances (collection instances, geometry nodes, instancing on vertices or faces) are
+    # realised: each instance is read as an object of its own.
+    instances = read_instances([*candidates, *others], depsgraph, notes)
+    objects.extend(instances)
+    instancers = {o.uid for o in instances}
+    skipped = [o for o in others if o.session_uid not in instancers]
     if not objects:
+        if skipped and not candidates:
+            raise SceneError("No mesh among the selected objects: " + "; ".join(_describe(o) for o in skipped))
         raise SceneError("The selected mesh objects have no faces")
+    for o in skipped:
+        notes.append(_describe(o) + ": skipped")
     for o in objects:
         for name, values in (("base colour", o.face_reflectivity), ("emission", o.face_emission)):
             bad = ~np.isfinite(values).all(axis=1)

@@ -61,7 +61,7 @@ def test_nothing_selected_and_no_mesh_selected(blender):
     _select("Camera", "Sun", "Instancer")
     _unchanged_after_error(
         blender, r"No mesh among the selected objects: 'Camera' is a camera; 'Instancer' instances collection "
-        r"'Props' \(make the instances real first.*; 'Sun' is a light")
+        r"'Props', which holds no mesh; 'Sun' is a light")
     # With meshes too, the others are skipped with a note.
     _select("Camera", "Instancer", "Room", "Lamp", "Block")
     state, reports = _run_sync(blender)
@@ -502,3 +502,54 @@ def test_an_unforeseen_error_while_reading_is_a_report(blender, monkeypatch):
 
     monkeypatch.setattr(scene_io, "read_object", broken)
     _unchanged_after_error(blender, r"Reading the selection failed \(AttributeError: .*\); the scene is unchanged")
+
+
+
+def test_collection_and_geometry_node_instances_are_realised(blender):
+    """Instances are part of the scene the artist sees: a collection instance (an empty) and a
+    geometry-nodes scatter (Instance on Points) are each solved as objects of their own, placed
+    where the instances are, and get result objects 'Parent [k] Radiosity'."""
+    build_test_scene()
+    props = bpy.data.collections.new("Props")  # not linked to the scene: only instanced
+    v, f = box_arrays((0.0, 0.0, 0.0), (0.1, 0.1, 0.1), inward=False)
+    crate = make_object("Crate", v, f)
+    blender.scene.collection.objects.unlink(crate)
+    props.objects.link(crate)
+    instancer = bpy.data.objects.new("Instancer", None)
+    instancer.instance_type = "COLLECTION"
+    instancer.instance_collection = props
+    instancer.location = (0.6, 0.6, 0.0)
+    blender.scene.collection.objects.link(instancer)
+    # A plane scattering a small cube on its 4 corners with geometry nodes.
+    scatter = make_object("Scatter", [(0.2, 0.6, 0.3), (0.4, 0.6, 0.3), (0.4, 0.8, 0.3), (0.2, 0.8, 0.3)],
+                          [(0, 1, 2, 3)])
+    tree = bpy.data.node_groups.new("Scatter cubes", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group_in, group_out = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+    cube = tree.nodes.new("GeometryNodeMeshCube")
+    cube.inputs["Size"].default_value = (0.05, 0.05, 0.05)
+    on_points = tree.nodes.new("GeometryNodeInstanceOnPoints")
+    tree.links.new(group_in.outputs[0], on_points.inputs["Points"])
+    tree.links.new(cube.outputs["Mesh"], on_points.inputs["Instance"])
+    tree.links.new(on_points.outputs[0], group_out.inputs[0])
+    scatter.modifiers.new("Scatter", "NODES").node_group = tree
+    _select("Room", "Lamp", "Block", "Instancer", "Scatter")
+    configure(blender)
+    objects, notes = scene_io.read_selection(blender)
+    names = sorted(o.name for o in objects)
+    assert names == ["Block", "Instancer [0]", "Lamp", "Room", "Scatter [0]", "Scatter [1]", "Scatter [2]",
+                     "Scatter [3]"], names
+    crate_arrays = next(o for o in objects if o.name == "Instancer [0]")
+    np.testing.assert_allclose(crate_arrays.vertices.min(axis=0), [0.6, 0.6, 0.0], atol=1e-6)
+    np.testing.assert_allclose(crate_arrays.vertices.max(axis=0), [0.7, 0.7, 0.1], atol=1e-6)
+    corners = sorted(tuple(np.round(o.vertices.mean(axis=0), 6)) for o in objects if o.name.startswith("Scatter"))
+    assert corners == [(0.2, 0.6, 0.3), (0.2, 0.8, 0.3), (0.4, 0.6, 0.3), (0.4, 0.8, 0.3)]
+    assert not any("skipped" in n for n in notes)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
+    results = sorted(o["radiosity_source"] for o in result_objects())
+    assert results == names
+    for o in result_objects():
+        colours = read_colours(o.data, "Radiosity")[1]
+        assert np.isfinite(colours).all() and (colours[:, :3] > 0).any()
