@@ -198,6 +198,11 @@ def _slot_tables(obj, notes):
 # Reading objects
 # ---------------------------------------------------------------------------
 
+#: Object types whose evaluated geometry becomes a mesh (curves, text, surfaces and metaballs
+#: as Blender tessellates them for display and render).
+SOURCE_TYPES = ("MESH", "CURVE", "FONT", "SURFACE", "META")
+
+
 def is_result_object(obj) -> bool:
     return obj is not None and SOURCE_PROPERTY in obj.keys()
 
@@ -207,7 +212,7 @@ def source_objects(context):
     selected = getattr(context, "selected_objects", None)
     if selected is None:  # window-less contexts (timers): the view layer's selection
         selected = [o for o in context.view_layer.objects if o.select_get()]
-    objs = [o for o in selected if o.type == "MESH" and not is_result_object(o)]
+    objs = [o for o in selected if o.type in SOURCE_TYPES and not is_result_object(o)]
     return sorted(objs, key=lambda o: o.name)
 
 
@@ -236,8 +241,10 @@ def read_instances(parents, depsgraph, notes):
         if parent.session_uid not in by_uid:
             continue
         obj = inst.object
-        if obj.type != "MESH" or is_result_object(obj.original):
-            other[parent.name] = other.get(parent.name, 0) + (obj.type != "MESH")
+        if parent.type != "MESH" and obj.original == parent:
+            continue  # a curve's or text's own tessellation, already read through to_mesh
+        if obj.type not in SOURCE_TYPES or is_result_object(obj.original):
+            other[parent.name] = other.get(parent.name, 0) + (obj.type not in SOURCE_TYPES)
             continue
         k = counts.get(parent.name, 0)
         counts[parent.name] = k + 1
@@ -310,8 +317,6 @@ def _describe(obj):
     kind = obj.type.lower()
     if obj.type == "EMPTY" and obj.instance_type == "COLLECTION" and obj.instance_collection is not None:
         return f"'{obj.name}' instances collection '{obj.instance_collection.name}', which holds no mesh"
-    if obj.type in ("CURVE", "FONT", "SURFACE", "META"):
-        return f"'{obj.name}' is a {kind} (convert it to a mesh first)"
     return f"'{obj.name}' is a {kind}"
 
 
@@ -320,7 +325,7 @@ def skipped_objects(context):
     selected = getattr(context, "selected_objects", None)
     if selected is None:
         selected = [o for o in context.view_layer.objects if o.select_get()]
-    return sorted((o for o in selected if o.type != "MESH"), key=lambda o: o.name)
+    return sorted((o for o in selected if o.type not in SOURCE_TYPES), key=lambda o: o.name)
 
 
 def _materials_where(o, bad_faces):

@@ -553,3 +553,30 @@ def test_collection_and_geometry_node_instances_are_realised(blender):
     for o in result_objects():
         colours = read_colours(o.data, "Radiosity")[1]
         assert np.isfinite(colours).all() and (colours[:, :3] > 0).any()
+
+
+def test_text_and_curves_are_tessellated_like_meshes(blender):
+    """A glowing text object (a sign) lights the room: text, curves, surfaces and metaballs are
+    read through their evaluated mesh, as Blender renders them. A flat curve without faces is
+    skipped with a note."""
+    build_test_scene()
+    text_data = bpy.data.curves.new("Sign", "FONT")
+    text_data.body = "EXIT"
+    text_data.size = 0.15
+    sign = bpy.data.objects.new("Sign", text_data)
+    sign.location = (0.3, 0.5, 0.6)
+    sign.data.materials.append(principled("Neon", (0.5, 0.5, 0.5), (0.2, 1.0, 0.2), 5.0))
+    blender.scene.collection.objects.link(sign)
+    wire = bpy.data.curves.new("Wire", "CURVE")
+    spline = wire.splines.new("POLY")
+    spline.points.add(1)
+    wire_object = bpy.data.objects.new("Wire", wire)
+    blender.scene.collection.objects.link(wire_object)
+    _select("Room", "Block", "Sign", "Wire")  # the lamp is off: the sign is the only emitter
+    configure(blender)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
+    assert ("WARNING", "'Wire' has no faces and was skipped") in reports
+    assert sorted(o["radiosity_source"] for o in result_objects()) == ["Block", "Room", "Sign"]
+    room = read_colours(bpy.data.objects["Room Radiosity"].data, "Radiosity")[1]
+    assert (room[:, 1] > room[:, 0]).mean() > 0.6  # lit green by the sign (5 of 6 walls are white)
