@@ -301,10 +301,10 @@ def test_quitting_while_solving_stops_the_worker(tmp_path, hook):
     t0 = time.perf_counter()
     try:
         proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                              timeout=20 if hook else 8)
+                              timeout=20 if hook else 5)
     except subprocess.TimeoutExpired:
         assert not hook, "the process did not exit within 20 s with the hook"
-        return  # the control case: stuck in the batch until killed
+        return  # the control case: still stuck in the batch when killed after 5 s
     elapsed = time.perf_counter() - t0
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "quitting" in proc.stdout
