@@ -95,7 +95,8 @@ def _warn_coincident(corners, triangle_patch):
         CoincidentFacesWarning(
             f"{int(flagged.sum())} triangles lie exactly on top of others (duplicated faces), on patches "
             f"{_indices_text(patches)}: a ray hits one of each pair at random, so each shows only part "
-            "of the light; delete the duplicates",
+            "of the light (and where they face opposite ways, the one seen from behind absorbs it); "
+            "delete the duplicates, or give a two-sided wall some thickness",
             patches,
         ),
         stacklevel=4,
