@@ -32,8 +32,8 @@ RELATIVE_EDGE_INSET = 1e-6
 # and float64 areas stay far from overflow and underflow inside it.
 MIN_DIAGONAL, MAX_DIAGONAL = 1e-12, 1e12
 
-# The finite walk's survival test compares a float32 uniform (a multiple of 2^-24, at most
-# 1 - 2^-24) with the patch's mean reflectivity: above this, no path would ever end.
+# Above this mean reflectivity a finite path takes on average more than 2^24 (16.7 million)
+# bounces on the patch's neighbourhood: such a run would never end in practice, so it is refused.
 MAX_MEAN_REFLECTIVITY = 1.0 - 2.0**-24
 
 # A triangle whose area is below this fraction of diagonal**2 is degenerate.
@@ -149,7 +149,8 @@ def validate_materials(reflectivity, emission, patch_count):
     if unresolved.any():
         raise PatchError(
             f"reflectivity is within 2^-24 of 1 (mean over channels above {MAX_MEAN_REFLECTIVITY:.9f}) on patches "
-            f"{_indices_text(unresolved)}: the walk's survival test cannot resolve it and a path would never end",
+            f"{_indices_text(unresolved)}: a path would take more than 16 million bounces there and would never end "
+            "in practice",
             _indices(unresolved),
         )
     if not (E > 0).any():

@@ -99,10 +99,9 @@ def test_reflectivity_of_one_or_more_is_refused_with_the_reason(value):
 
 
 def test_reflectivity_closer_to_one_than_the_survival_test_resolves_is_refused():
-    """The survival test draws float32 uniforms (multiples of 2^-24, at most 1 - 2^-24): a mean
-    reflectivity above 1 - 2^-24 would survive every hit, a path that never ends (a hang, not a
-    long run). Refused; 1 - 2^-24 itself is the largest accepted (expected 2^24 bounces)."""
-    with pytest.raises(ValueError, match=r"within 2\^-24 of 1 .* on patches 2: .*would never end"):
+    """A mean reflectivity above 1 - 2^-24 means more than 2^24 bounces per path: a run that
+    never ends in practice. Refused; 1 - 2^-24 itself is the largest accepted."""
+    with pytest.raises(ValueError, match=r"within 2\^-24 of 1 .* on patches 2: .*never end"):
         box_scene([0.5, 0.5, 1 - 2.0**-25, 0.5, 0.5, 0.5], [1.0] * 6, SIZE)
     scene, _, _ = box_scene([1 - 2.0**-24] * 6, [1.0] * 6, SIZE)
     assert scene.mean_reflectivity.max() == 1 - 2.0**-24
