@@ -40,6 +40,10 @@ def _parser():
                    help="largest patch edge in scene units (default: 1/20 of the scene's size; "
                    "sample_scenes keep the paper's patches)")
     p.add_argument("--exit-point", choices=["random", "hit"], default="random")
+    p.add_argument("--sampling", choices=["independent", "stratified"], default="independent",
+                   help="independent (the paper's) or stratified sources and low-discrepancy first rays")
+    p.add_argument("--stop-rule", choices=["predicted", "measured"], default="predicted",
+                   help="run the predicted paths, or until the measured error meets the target")
     p.add_argument("--colours", choices=["FACE", "VERTEX", "BOTH"], default="BOTH",
                    help="face colours (CORNER), vertex colours (POINT) or both")
     p.add_argument("--seed", type=int, default=0)
@@ -206,6 +210,8 @@ def main(argv=None):
         args.patch_size = float(np.max(hi - lo)) / 20.0
     settings.patch_size = args.patch_size
     settings.exit_point = args.exit_point
+    settings.sampling = args.sampling
+    settings.stop_rule = args.stop_rule
     settings.output = args.colours
     settings.seed = args.seed
     settings.time_limit = args.time_limit

@@ -55,6 +55,26 @@ class RadiositySettings(bpy.types.PropertyGroup):
         ],
         default="random",
     )
+    sampling: EnumProperty(
+        name="Sampling",
+        items=[
+            ("independent", "Plain (paper)", "Sources and first rays drawn independently, as in the paper: "
+             "the predicted path counts are derived for this"),
+            ("stratified", "Stratified", "Paths allotted to sources in proportion to power and a randomly "
+             "shifted low-discrepancy first ray: same expected result, usually less noise for the same time"),
+        ],
+        default="independent",
+    )
+    stop_rule: EnumProperty(
+        name="Stop at",
+        items=[
+            ("predicted", "Predicted paths", "Run the number of paths the paper's formula predicts for the "
+             "error target"),
+            ("measured", "Measured error", "Run until the run's own estimate of its error (from independent "
+             "batches) meets the target, at most 64 times the predicted paths"),
+        ],
+        default="predicted",
+    )
     output: EnumProperty(
         name="Output",
         items=[
@@ -99,6 +119,8 @@ class RadiositySettings(bpy.types.PropertyGroup):
             relative_rms=float(self.target_error) / 100.0,
             patch_size=float(self.patch_size),
             exit_point=self.exit_point,
+            sampling=self.sampling,
+            stop_rule=self.stop_rule,
             seed=int(self.seed),
             max_seconds=float(self.time_limit) or None,
             threads=int(self.threads) or None,

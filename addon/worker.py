@@ -49,6 +49,8 @@ class SolveSettings:
     paths: int | None = None  # fixed path count instead of the error target
     patch_size: float = 0.5
     exit_point: str = "random"  # "random" | "hit"
+    sampling: str = "independent"  # "independent" (the paper's) | "stratified"
+    stop_rule: str = "predicted"  # "predicted" (formula paths) | "measured" (batch error estimate)
     seed: int = 0
     max_seconds: float | None = None
     threads: int | None = None
@@ -331,7 +333,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         threshold=settings.threshold,
         seed=int(settings.seed),
         exit_point=settings.exit_point,
-        stop_rule="predicted",
+        sampling=settings.sampling,
+        stop_rule=settings.stop_rule if target is not None else "predicted",
         progress=progress,
         should_stop=should_stop,
         max_seconds=settings.max_seconds or None,

@@ -76,7 +76,7 @@ def test_register_and_unregister_leave_no_trace():
 # Solve and results
 # ---------------------------------------------------------------------------
 
-def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1):
+def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1, **solve_options):
     """The core on the same patches, meshed from the test's own arrays."""
     names = sorted(spec)
     meshes = [mesh_patches(spec[n][0], [len(f) for f in spec[n][1]], np.concatenate(spec[n][1]), PATCH_SIZE)
@@ -86,7 +86,7 @@ def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1):
     E = np.concatenate([spec[n][3][m.patch_face] for n, m in zip(names, meshes)])
     scene = PatchScene(c.vertices, c.triangles, c.triangle_patch, R, E)
     target = relative_rms_to_mse(predict(scene), relative_rms)
-    result = solve(scene, "finite", target_mse=target, seed=seed, threads=threads)
+    result = solve(scene, "finite", target_mse=target, seed=seed, threads=threads, **solve_options)
     return names, meshes, c, result
 
 
@@ -122,6 +122,23 @@ def test_solve_matches_core_on_the_same_patches(blender):
     attribute = next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeAttribute")
     assert attribute.attribute_name == "Radiosity"
     assert objs[0].data.color_attributes.active_color.name == "Radiosity"
+
+
+def test_stratified_sampling_and_measured_stop_reach_the_core(blender):
+    """The panel's Sampling and Stop settings are the core's sampling and stop_rule."""
+    spec = build_test_scene()
+    s = configure(blender)
+    s.sampling = "stratified"
+    s.stop_rule = "measured"
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    names, meshes, combined, ref = reference(spec, sampling="stratified", stop_rule="measured")
+    assert ref.sampling == "stratified" and ref.stopped == "target"
+    assert s.last_paths == ref.paths and s.last_rays == ref.rays and s.last_stopped == "target"
+    assert 0 < s.last_measured_mse <= ref.prediction.target_mse
+    for k, obj in enumerate(result_objects()):
+        domain, colours = read_colours(obj.data, "Radiosity")
+        expected = ref.radiosity[combined.patch_slice(k)].astype(np.float32)
+        np.testing.assert_array_equal(colours[:, :3], np.repeat(expected, meshes[k].face_sizes, axis=0))
 
 
 def test_vertex_colours_are_area_weighted_averages(blender):
