@@ -1,6 +1,10 @@
 """Throughput of solve() against Embree's raw ray rate, measured in the same run.
 
-    python -m benchmarks.throughput [--scene room_fig4|cornell] [--threads 1 2] [--seconds 3]
+    python -m benchmarks.throughput [--scene small_room cornell room_fig4] [--threads 1 2] [--seconds 3]
+
+Scenes: ``small_room`` is the Cycles comparison's closed room (10 x 10 patches per face, 1,200
+triangles), ``cornell`` the coloured Cornell box (5,080 triangles), ``room_fig4`` the paper's
+figure 4 room (133,144 triangles).
 
 The raw rate traces the same kind of rays (uniform points on patches, cosine directions,
 drawn once beforehand) with embreex alone, split over the same number of threads; the
@@ -81,6 +85,10 @@ def paired_ratio(scene, estimator, threads, seconds, rounds=3, **kw):
 
 
 def build_scene(name):
+    if name == "small_room":
+        from benchmarks.cycles_comparison import patch_scene
+
+        return patch_scene()
     if name == "room_fig4":
         from sample_scenes import room_fig4
 
@@ -94,7 +102,7 @@ def build_scene(name):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scene", nargs="+", default=["cornell", "room_fig4"])
+    ap.add_argument("--scene", nargs="+", default=["small_room", "cornell", "room_fig4"])
     ap.add_argument("--threads", nargs="+", type=int, default=[1, 2])
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--out", default=str(RESULTS / "throughput.md"))

@@ -133,13 +133,14 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         directions = cosine_directions(g, patch, u[2], u[3])
         if tables.exit_random:
             hit = tables.tracer.first_hit(origins, directions)
+            # A miss (-1) gathers the last triangle's normal: harmless, masked out by ``missed``.
+            hit_normal = np.take(g.triangle_normal, hit, axis=0)
         else:
-            hit, bary_u, bary_v = tables.tracer.first_hit_barycentric(origins, directions)
+            hit, bary_u, bary_v, hit_normal = tables.tracer.first_hit_barycentric(origins, directions)
         rays += n
 
         missed = hit < 0
-        # A miss (-1) gathers the last triangle's normal: harmless, masked out by ``missed``.
-        facing = np.einsum("ij,ij->i", directions, np.take(g.triangle_normal, hit, axis=0)) < 0
+        facing = np.einsum("ij,ij->i", directions, hit_normal) < 0
         front = facing & ~missed
         if not front.all():
             back = ~missed & ~facing
