@@ -89,10 +89,11 @@ class Aborted(Exception):
 
 
 def _weight_sum(weights, mask):
-    """Sum of the carried weights of the masked paths, per channel."""
+    """Sum of the carried weights of the masked paths, per channel (a product with the
+    boolean mask: no copy of the selected columns)."""
     if weights is None:
         return np.array([float(np.count_nonzero(mask))])
-    return weights[:, mask].sum(axis=1)
+    return np.einsum("cn,n->c", weights, mask)
 
 
 def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=None) -> ChunkTally:
@@ -112,7 +113,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
     else:
         patch = tables.sources.choose(rng.random(paths))
     weights = None if tables.unit_weights else np.take(tables.start_weight, patch, axis=1)
-    emitted = _weight_sum(weights, slice(None)) if weights is not None else np.array([float(paths)])
+    emitted = weights.sum(axis=1) if weights is not None else np.array([float(paths)])
     accumulated = np.ones(paths) if not finite else None  # product of R_bar along the path
     leave_from = None  # hit points, for exit_point="hit"
     rays = 0
@@ -183,7 +184,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             accumulated = accumulated * tables.mean_reflectivity[patch]
             cut = accumulated < tables.threshold
             if cut.any():
-                undistributed += weights[:, cut].sum(axis=1)
+                undistributed += _weight_sum(weights, cut)
                 ended["threshold"] += int(np.count_nonzero(cut))
                 go_on = np.flatnonzero(~cut)
                 patch, hit_triangle = patch[go_on], hit_triangle[go_on]
