@@ -272,6 +272,14 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     np.testing.assert_array_equal(R, 0)
     R, E, _ = scene_io.material_colours(None)
     np.testing.assert_allclose(R, 0.8)
+    # No shader the reader knows (here: nothing linked to the output): the viewport colour.
+    v = bpy.data.materials.new("Viewport only")
+    v.node_tree.nodes.remove(v.node_tree.nodes["Principled BSDF"])
+    v.diffuse_color = (0.3, 0.6, 0.1, 1)
+    R, E, notes = scene_io.material_colours(v)
+    np.testing.assert_allclose(R, [0.3, 0.6, 0.1], rtol=1e-6)
+    np.testing.assert_array_equal(E, 0)
+    assert any("viewport colour" in n for n in notes)
 
 
 def test_closed_box_gives_cycles_units(blender):
