@@ -72,8 +72,11 @@ def _warn_coincident(corners, triangle_patch):
     # A key that does not depend on the corners' order: each corner's projection, sorted, then
     # projected again. Equal triangles get equal keys; neighbours with equal keys are then
     # compared exactly (corners in lexicographic order). O(T log T), no false positives.
-    per_corner = np.sort(corners @ np.array([1.0, 1.37, 1.73]), axis=1)
-    key = per_corner @ np.array([1.0, 2.3, 3.1])
+    projected = corners @ np.array([1.0, 1.37, 1.73])  # (T,3)
+    a, b, c = projected[:, 0], projected[:, 1], projected[:, 2]
+    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    middle = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))  # exact, order-free
+    key = low + 2.3 * middle + 3.1 * high
     by_key = np.argsort(key, kind="stable")
     candidates = np.flatnonzero(key[by_key[1:]] == key[by_key[:-1]])
     if candidates.size == 0:
@@ -257,7 +260,9 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             f"(the scene has {patch_count} patches, one per row of reflectivity and emission)"
         )
 
-    used = V[np.unique(T)]
+    is_used = np.zeros(V.shape[0], dtype=bool)
+    is_used[T.ravel()] = True
+    used = V[is_used]
     lo, hi = used.min(axis=0), used.max(axis=0)
     centre = 0.5 * (lo + hi)
     with np.errstate(over="ignore", invalid="ignore"):
@@ -387,8 +392,8 @@ def _parallelograms(sorted_corners, first, count, inset=0.0):
     t0 = sorted_corners[first[two]]          # (n,3,3)
     t1 = sorted_corners[first[two] + 1]
     tolerance = 1e-7  # unit space
-    distance = np.linalg.norm(t0[:, :, None, :] - t1[:, None, :, :], axis=-1)  # (n,3,3)
-    shared = distance < tolerance
+    between = t0[:, :, None, :] - t1[:, None, :, :]  # (n,3,3,3): every corner of t0 to every corner of t1
+    shared = np.einsum("...k,...k->...", between, between) < tolerance**2  # (n,3,3)
     shared_in_t0 = shared.any(axis=2)        # (n,3)
     shared_in_t1 = shared.any(axis=1)
     ok = (shared_in_t0.sum(axis=1) == 2) & (shared_in_t1.sum(axis=1) == 2) & (shared.sum(axis=(1, 2)) == 2)
