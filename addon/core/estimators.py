@@ -66,8 +66,11 @@ class WalkTables:
         if not self.geometry.all_parallelograms:
             self.row_triangle = self.uniforms_per_ray
             self.uniforms_per_ray += 1
-        # In a grey finite walk every weight stays exactly 1: no weight arrays at all.
+        # In a grey finite walk every weight stays exactly 1: no weight arrays at all. In a grey
+        # biased walk the weight is the product of reflectivities, which is the product of mean
+        # reflectivities the threshold test keeps anyway (exactly: R_bar = R in grey): one array.
         self.unit_weights = estimator == FINITE and self.channels == 1
+        self.weight_is_accumulated = estimator != FINITE and self.channels == 1
 
 
 @dataclass
@@ -112,9 +115,14 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         patch, first_uniforms = tables.sources.stratified(paths, rng)
     else:
         patch = tables.sources.choose(rng.random(paths))
-    weights = None if tables.unit_weights else np.take(tables.start_weight, patch, axis=1)
-    emitted = weights.sum(axis=1) if weights is not None else np.array([float(paths)])
     accumulated = np.ones(paths) if not finite else None  # product of R_bar along the path
+    if tables.unit_weights:
+        weights = None
+    elif tables.weight_is_accumulated:
+        weights = accumulated[None]  # a view: (1,n)
+    else:
+        weights = np.take(tables.start_weight, patch, axis=1)
+    emitted = weights.sum(axis=1) if weights is not None else np.array([float(paths)])
     leave_from = None  # hit points, for exit_point="hit"
     rays = 0
     n = paths
@@ -155,10 +163,12 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             keep = np.flatnonzero(front)
             hit = hit[keep]
             u_survive = u_survive[keep] if finite else None
-            if weights is not None:
-                weights = np.take(weights, keep, axis=1)
             if accumulated is not None:
                 accumulated = accumulated[keep]
+            if tables.weight_is_accumulated:
+                weights = accumulated[None]
+            elif weights is not None:
+                weights = np.take(weights, keep, axis=1)
             if not tables.exit_random:
                 bary_u, bary_v = bary_u[keep], bary_v[keep]
         if hit.size == 0:
@@ -180,15 +190,20 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             if weights is not None:
                 weights = np.take(weights, go_on, axis=1) * np.take(tables.survivor_weight, patch, axis=1)
         else:
-            weights = weights * np.take(tables.reflectivity, patch, axis=1)
+            # New arrays, never in place: the weights just scored may be a view of ``accumulated``.
             accumulated = accumulated * tables.mean_reflectivity[patch]
+            if tables.weight_is_accumulated:
+                weights = accumulated[None]
+            else:
+                weights = weights * np.take(tables.reflectivity, patch, axis=1)
             cut = accumulated < tables.threshold
             if cut.any():
                 undistributed += _weight_sum(weights, cut)
                 ended["threshold"] += int(np.count_nonzero(cut))
                 go_on = np.flatnonzero(~cut)
                 patch, hit_triangle = patch[go_on], hit_triangle[go_on]
-                weights, accumulated = np.take(weights, go_on, axis=1), accumulated[go_on]
+                accumulated = accumulated[go_on]
+                weights = accumulated[None] if tables.weight_is_accumulated else np.take(weights, go_on, axis=1)
             else:
                 go_on = slice(None)
 

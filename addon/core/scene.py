@@ -483,8 +483,14 @@ class PatchScene:
     # --- grey quantities of the paper ------------------------------------------------------
     @cached_property
     def mean_reflectivity(self):
-        """R_bar_i: the channel mean of each patch's reflectivity (the survival probability)."""
-        return self.reflectivity.mean(axis=1)
+        """R_bar_i: the channel mean of each patch's reflectivity (the survival probability);
+        exactly R_i where the three channels are equal (a float mean of three equal numbers
+        may differ from them in the last bit)."""
+        R = self.reflectivity
+        mean = R.mean(axis=1)
+        grey = (R == R[:, :1]).all(axis=1)
+        mean[grey] = R[grey, 0]
+        return mean
 
     @cached_property
     def is_grey(self):
