@@ -20,6 +20,7 @@ ATTRIBUTE_NAME = "Radiosity"
 POINT_ATTRIBUTE_NAME = "Radiosity Vertex"  # the POINT colours when both are written
 MATERIAL_NAME = "Radiosity Result"
 SOURCE_PROPERTY = "radiosity_source"  # custom property marking result objects
+COLLECTION_PROPERTY = "radiosity_results"  # custom property marking a scene's results collection
 DEFAULT_GREY = (0.8, 0.8, 0.8)
 RESULT_SUFFIX = " Radiosity"
 
@@ -439,19 +440,26 @@ def result_material():
     return material
 
 
-def result_collection(scene):
-    collection = bpy.data.collections.get(COLLECTION_NAME)
-    if collection is None:
-        collection = bpy.data.collections.new(COLLECTION_NAME)
-    if collection.name not in scene.collection.children:
-        scene.collection.children.link(collection)
+def result_collection(scene, create=True):
+    """The scene's results collection: "Radiosity" for the first scene solved, "Radiosity.001"
+    and so on for others, so that each scene of a file keeps its own results. Found by a
+    marker among the scene's top-level collections (the name may be taken or changed)."""
+    for collection in scene.collection.children:
+        if collection.get(COLLECTION_PROPERTY):
+            return collection
+    if not create:
+        return None
+    collection = bpy.data.collections.new(COLLECTION_NAME)
+    collection[COLLECTION_PROPERTY] = True
+    scene.collection.children.link(collection)
     return collection
 
 
-def previous_results():
-    """The result objects a re-run replaces: marked objects in the 'Radiosity' collection only.
-    A result the user copied or moved elsewhere is theirs and is left alone."""
-    collection = bpy.data.collections.get(COLLECTION_NAME)
+def previous_results(scene=None):
+    """The result objects a re-run in ``scene`` (default: the context's) replaces: marked
+    objects in that scene's results collection only. A result the user copied or moved
+    elsewhere is theirs, and other scenes' results are theirs: both are left alone."""
+    collection = result_collection(scene if scene is not None else bpy.context.scene, create=False)
     if collection is None:
         return []
     return [o for o in collection.objects if is_result_object(o)]
@@ -465,8 +473,8 @@ def _remove_objects(objects):
             bpy.data.meshes.remove(mesh)
 
 
-def remove_previous_results():
-    _remove_objects(previous_results())
+def remove_previous_results(scene=None):
+    _remove_objects(previous_results(scene))
 
 
 def _rgba(values):
@@ -552,7 +560,7 @@ def write_results(context, output_data, output_mode, scene=None):
     except Exception:
         _remove_objects(created)
         raise
-    remove_previous_results()
+    remove_previous_results(scene)
     collection = result_collection(scene)
     for obj in created:
         collection.objects.link(obj)

@@ -161,3 +161,37 @@ def test_undo_removes_the_results_and_redo_brings_them_back(blender):
     objects, materials = _snapshot()
     assert objects == before[0]
     assert {k: v for k, v in materials.items() if k != scene_io.MATERIAL_NAME} == before[1]
+
+
+def _collection_colours(collection):
+    return {o.name: read_colours(o.data, "Radiosity")[1].tobytes() for o in collection.objects}
+
+
+def test_each_scene_keeps_its_own_results(blender):
+    build_test_scene()
+    configure(blender)
+    first = blender.scene
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    first_results = scene_io.result_collection(first, create=False)
+    assert first_results.name == "Radiosity"
+    kept = _collection_colours(first_results)
+    # A second scene of the same file with objects of its own, solved there.
+    second = bpy.data.scenes.new("Second")
+    blender.window.scene = second
+    build_test_scene()
+    configure(bpy.context, seed=11)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    second_results = scene_io.result_collection(second, create=False)
+    assert second_results is not None and second_results != first_results
+    assert len(second_results.objects) == 3
+    assert first_results.name not in second.collection.children
+    assert second_results.name not in first.collection.children
+    assert _collection_colours(first_results) == kept  # the first scene's results untouched
+    # A re-run in the first scene replaces its own results only.
+    second_kept = _collection_colours(second_results)
+    blender.window.scene = first
+    configure(bpy.context, seed=12)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    assert _collection_colours(first_results).keys() == kept.keys()
+    assert _collection_colours(first_results) != kept
+    assert _collection_colours(second_results) == second_kept
