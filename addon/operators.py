@@ -107,6 +107,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         settings = context.scene.radiosity.solve_settings()
         self._notes = notes
         self._scene_uid = context.scene.session_uid  # results go to the scene solved
+        self._placements = _placements({o.uid for o in objects if o.uid is not None})
         self._job = worker.SolveJob(objects, settings)
         if threaded:
             worker.set_running_job(self._job)
@@ -172,12 +173,33 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
                         "Face Orientation; give thin walls thickness with a Solidify modifier)")
         if r.stopped == "time_limit":
             self.report({"WARNING"}, f"Time limit reached after {r.paths:,} paths; the result is noisier than asked")
+        moved = _moved_sources(getattr(self, "_placements", {}))
+        if moved:
+            self.report({"WARNING"}, f"Radiosity: {', '.join(repr(n) for n in moved)} moved while solving; the "
+                        "result shows the scene as it was when Solve was pressed (solve again to update it)")
         self.report(
             {"INFO"},
             f"Radiosity: {settings.last_patches:,} patches, {r.paths:,} paths, {r.rays:,} rays "
             f"in {r.seconds:.1f} s",
         )
         return {"FINISHED"}
+
+
+def _placements(uids):
+    """World matrix of each source object (by session_uid), to notice objects moved during a run."""
+    return {o.session_uid: _matrix_values(o) for o in bpy.data.objects if o.session_uid in uids}
+
+
+def _matrix_values(obj):
+    return tuple(value for row in obj.matrix_world for value in row)
+
+
+def _moved_sources(placements):
+    """Names of the source objects whose world matrix changed since the run started."""
+    return sorted(
+        o.name for o in bpy.data.objects
+        if o.session_uid in placements and _matrix_values(o) != placements[o.session_uid]
+    )
 
 
 def _missing_sources(output):

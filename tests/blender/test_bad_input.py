@@ -580,3 +580,31 @@ def test_text_and_curves_are_tessellated_like_meshes(blender):
     assert sorted(o["radiosity_source"] for o in result_objects()) == ["Block", "Room", "Sign"]
     room = read_colours(bpy.data.objects["Room Radiosity"].data, "Radiosity")[1]
     assert (room[:, 1] > room[:, 0]).mean() > 0.6  # lit green by the sign (5 of 6 walls are white)
+
+
+def test_object_moved_while_solving_is_reported(blender):
+    build_test_scene()
+    configure(blender)
+    s = blender.scene.radiosity
+    s.target_error = 0.05
+    s.time_limit = 1.0
+    op = _modal_operator()
+    assert op._start_job(blender, threaded=True) is None
+    block = bpy.data.objects["Block"]
+    block.location = (0.1, 0.0, 0.0)  # the user moves it while the worker runs
+    bpy.context.view_layer.update()  # matrix_world follows the location
+    assert _drive(op, blender) == {"FINISHED"}
+    warnings = [text for kind, text in op.reports if kind == "WARNING"]
+    assert any("'Block' moved while solving" in text for text in warnings)
+    assert not any("'Room'" in text and "moved" in text for text in warnings)
+    assert len(result_objects()) == 3  # the complete result of the scene as it was is written
+    assert not op._job.alive and worker.running_job() is None
+
+
+def test_unmoved_objects_give_no_moved_warning(blender):
+    build_test_scene()
+    configure(blender)
+    op = _modal_operator()
+    assert op._start_job(blender, threaded=True) is None
+    assert _drive(op, blender) == {"FINISHED"}
+    assert not any("moved while solving" in text for _, text in op.reports)
