@@ -35,7 +35,7 @@ def sample_rays(scene, count, seed=0):
     cdf = np.cumsum(g.patch_area) / g.patch_area.sum()
     patch = np.minimum(np.searchsorted(cdf, rng.random(count), side="right"), scene.patch_count - 1)
     u = rng.random((5, count), dtype=np.float32)
-    return points_on_patches(g, patch, u[0], u[1], u[2]), cosine_directions(g, patch, u[3], u[4])
+    return points_on_patches(g, patch, u[0], u[1], u[2]), cosine_directions(g, patch, u[3], u[4], normalize=False)
 
 
 def raw_rate(scene, threads, seconds, batch=1 << 16):

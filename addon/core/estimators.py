@@ -139,7 +139,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             origins = points_on_patches(g, patch, u_triangle, u[0], u[1])
         else:
             origins = leave_from
-        directions = cosine_directions(g, patch, u[2], u[3])
+        directions = cosine_directions(g, patch, u[2], u[3], normalize=False)
         if tables.exit_random:
             hit = tables.tracer.first_hit(origins, directions)
             # A miss (-1) gathers the last triangle's normal: harmless, masked out by ``missed``.

@@ -9,6 +9,7 @@ import threading
 import numpy as np
 
 TWO_PI = np.float32(2.0 * np.pi)
+Z_TOP = np.float32(1.0 - 2.0**-24)  # z = Z_TOP - 2 u: the midpoints of float32's [0, 1) grid
 
 
 class SourceTable:
@@ -145,25 +146,25 @@ def points_on_patches(geometry, patch, u_triangle, u1, u2):
     return points
 
 
-def cosine_directions(geometry, patch, u1, u2):
-    """Directions about each patch's normal with density cos(theta)/pi. float32 (n,3) unit.
+def cosine_directions(geometry, patch, u1, u2, normalize=True):
+    """Directions about each patch's normal with density cos(theta)/pi. float32 (n,3).
 
     A uniform point s on the unit sphere, added to the normal, gives the direction n + s of a
     uniform point on the unit sphere resting on the surface, and such directions are
     cosine-distributed (Malley's method seen from the sphere). One gather, no frame.
+
+    z = (1 - 2^-24) - 2 u1 takes the midpoints of u1's float32 grid: symmetric about 0 and
+    never +-1, so s is never exactly -n for an axis-aligned normal (n + s = 0 would be no
+    direction at all). The ray tracer needs no unit length: with ``normalize=False`` (what the
+    walks use) the directions keep the length |n + s| in (0, 2].
     """
-    z = 1 - 2 * u1
-    r = np.sqrt(np.maximum(1 - z * z, 0))
+    z = Z_TOP - 2 * u1
+    r = np.sqrt(1 - z * z)
     phi = TWO_PI * u2
     d = np.take(geometry.patch_normal_rows, patch, axis=1)  # (3,n)
     d[0] += r * np.cos(phi)
     d[1] += r * np.sin(phi)
     d[2] += z
-    length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    # s = -n has probability zero, but float32 can land there: fall back to the normal.
-    degenerate = np.flatnonzero(length < 1e-6)
-    if degenerate.size:
-        d[:, degenerate] = np.take(geometry.patch_normal_rows, patch[degenerate], axis=1)
-        length[degenerate] = 1
-    d /= length
+    if normalize:
+        d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     return np.ascontiguousarray(d.T)

@@ -48,6 +48,24 @@ def test_cosine_directions_moments():
     # Tangential components average to zero (uniform azimuth), per patch orientation.
     tangential = d - c[:, None] * g.patch_normal[patch]
     assert np.abs(tangential.mean(axis=0)).max() < 5 * np.sqrt(0.25 / n)
+    # The walks' unnormalised directions point the same way.
+    raw = cosine_directions(g, patch, u[0], u[1], normalize=False).astype(np.float64)
+    length = np.linalg.norm(raw, axis=1)
+    assert length.min() > 0 and length.max() <= 2 + 1e-6
+    np.testing.assert_allclose(raw / length[:, None], d, atol=1e-6)
+
+
+def test_cosine_directions_never_vanish_at_the_grid_ends():
+    """u1 = 0 and u1 = 1 - 2^-24 (the ends of float32's grid) give z = +-(1 - 2^-24), never
+    +-1: for a normal along an axis, n + s is never zero (that would be no direction)."""
+    scene, _, _ = box_scene([0.5] * 6, [1] * 6, n=1)
+    g = scene.geometry
+    ends = np.array([0.0, 1 - 2.0**-24], np.float32)
+    u1 = np.repeat(ends, 1000)
+    u2 = np.tile(np.linspace(0, 1, 1000, endpoint=False, dtype=np.float32), 2)
+    for patch in range(6):
+        d = cosine_directions(g, np.full(u1.size, patch), u1, u2, normalize=False).astype(np.float64)
+        assert (np.einsum("ij,j->i", d, g.patch_normal[patch]) > 0).all()  # into the hemisphere
 
 
 def test_points_are_uniform_on_patches():
