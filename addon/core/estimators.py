@@ -186,7 +186,8 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             ended["absorbed"] += int(survive.size - np.count_nonzero(survive))
             go_on = np.flatnonzero(survive)
             patch = patch[go_on]
-            hit_triangle = hit_triangle[go_on]
+            if not tables.exit_random:  # only a hit-point exit needs the triangle again
+                hit_triangle = hit_triangle[go_on]
             if weights is not None:
                 weights = np.take(weights, go_on, axis=1) * np.take(tables.survivor_weight, patch, axis=1)
         else:
@@ -201,7 +202,9 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 undistributed += _weight_sum(weights, cut)
                 ended["threshold"] += int(np.count_nonzero(cut))
                 go_on = np.flatnonzero(~cut)
-                patch, hit_triangle = patch[go_on], hit_triangle[go_on]
+                patch = patch[go_on]
+                if not tables.exit_random:
+                    hit_triangle = hit_triangle[go_on]
                 accumulated = accumulated[go_on]
                 weights = accumulated[None] if tables.weight_is_accumulated else np.take(weights, go_on, axis=1)
             else:
