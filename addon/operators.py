@@ -22,18 +22,36 @@ def _redraw(context):
             area.tag_redraw()
 
 
-def _store_stats(settings, output):
+def _run_stats(output):
+    """The statistics to keep, as plain Python values (computed before anything is written).
+
+    Path and ray counts go beyond 2^31 in long runs: they are kept as exact integers (stored
+    as text, see ``properties``), never through a 32-bit property."""
     r = output.result
-    settings.last_paths = int(r.paths)
-    settings.last_rays = float(r.rays)
-    settings.last_seconds = float(r.seconds)
-    settings.last_mean_path_length = float(r.mean_path_length)
-    settings.last_predicted_mse = float(r.predicted_mse)
     measured = float(r.measured_mse)
-    settings.last_measured_mse = measured if measured == measured else -1.0  # NaN -> -1
-    settings.last_patches = int(output.patches.combined.patch_count)
-    settings.last_stopped = str(r.stopped)
-    settings.last_estimator = str(r.estimator)
+    return {
+        "last_paths": int(r.paths),
+        "last_rays": int(r.rays),
+        "last_seconds": float(r.seconds),
+        "last_mean_path_length": float(r.mean_path_length),
+        "last_predicted_mse": float(r.predicted_mse),
+        "last_measured_mse": measured if measured == measured else -1.0,  # NaN -> -1
+        "last_patches": int(output.patches.combined.patch_count),
+        "last_stopped": str(r.stopped),
+        "last_estimator": str(r.estimator),
+    }
+
+
+def _store_stats(settings, stats):
+    """Store the statistics; returns the names that could not be stored (never raises: the
+    results are already written and the undo step must not be lost)."""
+    failed = []
+    for name, value in stats.items():
+        try:
+            setattr(settings, name, value)
+        except Exception:  # noqa: BLE001 - a statistic out of a property's range
+            failed.append(name)
+    return failed
 
 
 class RADIOSITY_OT_solve(bpy.types.Operator):
@@ -154,8 +172,8 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             self.report({"ERROR"}, f"Radiosity: the time limit ({job.settings.max_seconds:g} s) ended the run "
                         "before the first batch of paths; nothing was written. Raise the time limit")
             return {"CANCELLED"}
-        settings = scene.radiosity
         try:
+            stats = _run_stats(output)
             scene_io.write_results(context, output, job.settings.output, scene=scene)
         except Exception as exc:  # noqa: BLE001 - report, never a traceback
             import traceback
@@ -163,26 +181,42 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             print(traceback.format_exc())
             self.report({"ERROR"}, f"Writing the result failed, the scene is unchanged: {exc}")
             return {"CANCELLED"}
-        _store_stats(settings, output)
-        for note in [*self._notes, *output.notes]:
-            self.report({"WARNING"}, note)
-        blocked = output.blocked_fraction()
-        if blocked > BLOCKED_WARNING:
-            self.report({"WARNING"}, f"{blocked * 100:.1f}% of the light reached the back of faces and was "
-                        "absorbed there: one-sided faces seen from behind, or flipped normals (see Overlays > "
-                        "Face Orientation; give thin walls thickness with a Solidify modifier)")
-        if r.stopped == "time_limit":
-            self.report({"WARNING"}, f"Time limit reached after {r.paths:,} paths; the result is noisier than asked")
-        moved = _moved_sources(getattr(self, "_placements", {}))
-        if moved:
-            self.report({"WARNING"}, f"Radiosity: {', '.join(repr(n) for n in moved)} moved while solving; the "
-                        "result shows the scene as it was when Solve was pressed (solve again to update it)")
-        self.report(
-            {"INFO"},
-            f"Radiosity: {settings.last_patches:,} patches, {r.paths:,} paths, {r.rays:,} rays "
-            f"in {r.seconds:.1f} s",
-        )
+        # The results are written: from here on nothing may raise, or the operator would end
+        # without its undo step (and with a traceback) over a scene that holds the new results.
+        try:
+            _after_writing(self, scene.radiosity, output, stats)
+        except Exception as exc:  # noqa: BLE001
+            import traceback
+
+            print(traceback.format_exc())
+            self.report({"WARNING"}, f"Radiosity: the result was written, but reporting on the run failed ({exc})")
         return {"FINISHED"}
+
+
+def _after_writing(op, settings, output, stats):
+    """Statistics and reports of operator ``op`` once the results are written."""
+    failed = _store_stats(settings, stats)
+    if failed:
+        op.report({"WARNING"}, f"Radiosity: could not store the run's {', '.join(failed)}")
+    for note in [*op._notes, *output.notes]:
+        op.report({"WARNING"}, note)
+    blocked = output.blocked_fraction()
+    if blocked > BLOCKED_WARNING:
+        op.report({"WARNING"}, f"{blocked * 100:.1f}% of the light reached the back of faces and was "
+                  "absorbed there: one-sided faces seen from behind, or flipped normals (see Overlays > "
+                  "Face Orientation; give thin walls thickness with a Solidify modifier)")
+    if stats["last_stopped"] == "time_limit":
+        op.report({"WARNING"}, f"Time limit reached after {stats['last_paths']:,} paths; the result is "
+                  "noisier than asked")
+    moved = _moved_sources(getattr(op, "_placements", {}))
+    if moved:
+        op.report({"WARNING"}, f"Radiosity: {', '.join(repr(n) for n in moved)} moved while solving; the "
+                  "result shows the scene as it was when Solve was pressed (solve again to update it)")
+    op.report(
+        {"INFO"},
+        f"Radiosity: {stats['last_patches']:,} patches, {stats['last_paths']:,} paths, "
+        f"{stats['last_rays']:,} rays in {stats['last_seconds']:.1f} s",
+    )
 
 
 def _placements(uids):

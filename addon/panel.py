@@ -12,6 +12,8 @@ from . import preview, worker
 def _number(x):
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "-"
+    if abs(x) >= 1e9:
+        return f"{x / 1e9:.2f} G"
     if abs(x) >= 1e6:
         return f"{x / 1e6:.2f} M"
     if abs(x) >= 1e4:

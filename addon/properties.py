@@ -14,6 +14,13 @@ def _changed(self, context):
     preview.invalidate()
 
 
+def _count(text) -> int:
+    try:
+        return int(text)
+    except ValueError:  # edited by hand or a script: no statistics rather than an error in the panel
+        return 0
+
+
 class RadiositySettings(bpy.types.PropertyGroup):
     estimator: EnumProperty(
         name="Estimator",
@@ -101,9 +108,11 @@ class RadiositySettings(bpy.types.PropertyGroup):
         description="Worker threads for the ray tracing (0: automatic). Same seed and threads give the same result",
     )
 
-    # statistics of the last finished run (written with the results)
-    last_paths: IntProperty(name="Paths", default=0)
-    last_rays: FloatProperty(name="Rays", default=0.0)
+    # statistics of the last finished run (written with the results). Path and ray counts pass
+    # 2^31 in long runs: an IntProperty is 32-bit and a FloatProperty single precision, so they
+    # are kept exactly as decimal text and read as Python ints through ``last_paths``/``last_rays``.
+    last_path_count: StringProperty(name="Paths", default="0", description="Paths of the last run (decimal)")
+    last_ray_count: StringProperty(name="Rays", default="0", description="Rays of the last run (decimal)")
     last_seconds: FloatProperty(name="Seconds", default=0.0)
     last_mean_path_length: FloatProperty(name="Mean path length", default=0.0)
     last_predicted_mse: FloatProperty(name="Predicted MSE", default=0.0)
@@ -111,6 +120,22 @@ class RadiositySettings(bpy.types.PropertyGroup):
     last_patches: IntProperty(name="Patches", default=0)
     last_stopped: StringProperty(name="Stopped by", default="")
     last_estimator: StringProperty(name="Estimator", default="")
+
+    @property
+    def last_paths(self) -> int:
+        return _count(self.last_path_count)
+
+    @last_paths.setter
+    def last_paths(self, value):
+        self.last_path_count = str(int(value))
+
+    @property
+    def last_rays(self) -> int:
+        return _count(self.last_ray_count)
+
+    @last_rays.setter
+    def last_rays(self, value):
+        self.last_ray_count = str(int(value))
 
     def solve_settings(self) -> SolveSettings:
         return SolveSettings(

@@ -608,3 +608,58 @@ def test_unmoved_objects_give_no_moved_warning(blender):
     assert op._start_job(blender, threaded=True) is None
     assert _drive(op, blender) == {"FINISHED"}
     assert not any("moved while solving" in text for _, text in op.reports)
+
+
+# ---------------------------------------------------------------------------------------------
+# Statistics of long runs, and nothing after the results are written may lose the undo step
+# ---------------------------------------------------------------------------------------------
+
+def _with_huge_counts(monkeypatch, paths=3_000_000_017, rays=9_876_543_210_123):
+    """Make the worker report path and ray counts beyond 2^31 (a long run, without running it)."""
+    import dataclasses
+
+    real = worker.run_solve
+
+    def run_solve(*args, **kwargs):
+        out = real(*args, **kwargs)
+        out.result = dataclasses.replace(out.result, paths=paths, rays=rays)
+        return out
+
+    monkeypatch.setattr(worker, "run_solve", run_solve)
+    return paths, rays
+
+
+def test_path_and_ray_counts_beyond_32_bits_are_stored_exactly(blender, monkeypatch):
+    from .test_extension import draw_panel
+
+    build_test_scene()
+    configure(blender)
+    paths, rays = _with_huge_counts(monkeypatch)
+    bpy.ops.ed.undo_push(message="scene built")
+    assert bpy.ops.radiosity.solve("EXEC_DEFAULT", True) == {"FINISHED"}
+    s = blender.scene.radiosity
+    assert s.last_paths == paths and s.last_rays == rays  # exact, as Python ints
+    assert len(result_objects()) == 3
+    labels = " ".join(t for k, t in draw_panel(blender) if k == "label")
+    assert "Paths: 3.00 G" in labels and "Rays: 9876.54 G" in labels
+    # the solve kept its undo step: Ctrl+Z removes results and statistics
+    assert bpy.ops.ed.undo() == {"FINISHED"}
+    assert not result_objects() and bpy.context.scene.radiosity.last_paths == 0
+
+
+def test_a_failure_after_writing_keeps_the_results_and_finishes(blender, monkeypatch):
+    """Whatever goes wrong once the results are written (statistics, reports), the operator
+    finishes -- with its undo step -- and says so, instead of raising over a changed scene."""
+    from addon import operators
+
+    build_test_scene()
+    configure(blender)
+
+    def broken(_placements):
+        raise RuntimeError("broken on purpose")
+
+    monkeypatch.setattr(operators, "_moved_sources", broken)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}
+    assert len(result_objects()) == 3 and blender.scene.radiosity.last_paths > 0
+    assert any(kind == "WARNING" and "broken on purpose" in text for kind, text in reports)
