@@ -23,6 +23,10 @@ from .core import meshing
 #: need R < 1; without the setting, a base colour of 1 or more is refused).
 MAX_REFLECTIVITY = 0.99
 
+#: A patch size that would make more patches than this is refused before meshing (memory and
+#: time grow with the patch count: a tiny patch size could otherwise exhaust the memory).
+MAX_PATCHES = 2_000_000
+
 
 @dataclass
 class ObjectArrays:
@@ -208,12 +212,89 @@ def drop_zero_area_faces(objects):
     return kept, notes
 
 
+def _longest_per_face(lengths, starts):
+    """Largest of each face's consecutive entries (faces given by their first index)."""
+    return np.maximum.reduceat(lengths, starts) if len(starts) else np.zeros(0)
+
+
+def patch_count(objects, patch_size) -> float:
+    """How many patches ``meshing.mesh_patches`` makes of these objects at this patch size,
+    counted from edge lengths alone (no meshing; a float, so that absurd counts do not overflow).
+
+    The same rule as the meshing: a face whose longest edge (n-gons: also the edges of their
+    triangulation) is within the patch size stays one patch; a larger quad becomes an
+    n_u x n_v grid, a larger triangle or n-gon n^2 triangles per triangle, n = ceil(edge / size).
+    """
+    patch_size = float(patch_size)
+    if not np.isfinite(patch_size) or patch_size <= 0:
+        raise ValueError(f"patch size must be a positive number, got {patch_size!r}")
+    limit = patch_size * (1.0 + 1e-9)  # as in mesh_patches: a face exactly patch_size long is kept
+    total = 0.0
+    for o in objects:
+        sizes = np.asarray(o.face_sizes, dtype=np.int64)
+        if not len(sizes):
+            continue
+        corners = np.asarray(o.corner_verts, dtype=np.int64)
+        points = np.asarray(o.vertices, dtype=np.float64)
+        starts = np.zeros(len(sizes), dtype=np.int64)
+        np.cumsum(sizes[:-1], out=starts[1:])
+        following = np.arange(len(corners)) + 1
+        last = starts + sizes - 1
+        following[last] = starts  # the edge from a face's last corner back to its first
+        edge = np.linalg.norm(points[corners[following]] - points[corners], axis=1)
+        longest = _longest_per_face(edge, starts)
+        triangles = np.asarray(o.triangles, dtype=np.int64).reshape(-1, 3)
+        triangle_face = np.asarray(o.triangle_face, dtype=np.int64)
+        p = points[triangles]
+        triangle_longest = np.linalg.norm(p[:, [1, 2, 0]] - p, axis=2).max(axis=1) if len(p) else np.zeros(0)
+        ngon = sizes > 4
+        if ngon.any() and len(triangles):
+            diagonal = np.zeros(len(sizes))
+            np.maximum.at(diagonal, triangle_face, triangle_longest)
+            longest = np.where(ngon, np.maximum(longest, diagonal), longest)
+        big = longest > limit
+        total += float(np.count_nonzero(~big))
+        quad = big & (sizes == 4)
+        if quad.any():
+            e = edge[starts[quad][:, None] + np.arange(4)]  # edges 01 12 23 30
+            n_u = np.maximum(np.ceil(np.maximum(e[:, 0], e[:, 2]) / limit), 1.0)
+            n_v = np.maximum(np.ceil(np.maximum(e[:, 1], e[:, 3]) / limit), 1.0)
+            total += float(np.sum(n_u * n_v))
+        split = (big & (sizes != 4))[triangle_face] if len(triangle_face) else np.zeros(0, bool)
+        if split.any():
+            n = np.maximum(np.ceil(triangle_longest[split] / limit), 1.0)
+            total += float(np.sum(n * n))
+    return total
+
+
+def check_patch_count(objects, patch_size, limit=None):
+    """ValueError, suggesting a larger patch size, when the patch size would make more than
+    ``limit`` (default MAX_PATCHES) patches; returns the count otherwise."""
+    limit = MAX_PATCHES if limit is None else limit
+    count = patch_count(objects, patch_size)
+    if count <= limit:
+        return count
+    suggested = float(patch_size) * max(1.0, (count / limit) ** 0.5)
+    for _ in range(64):  # the count falls as the size grows: a few steps up to a size that fits
+        suggested = float(f"{suggested:.2g}")
+        if patch_count(objects, suggested) <= limit:
+            break
+        suggested *= 1.25
+    raise ValueError(
+        f"A patch size of {float(patch_size):.3g} would make {count:,.0f} patches, more than the limit of "
+        f"{limit:,} (memory and time grow with the patch count). Use a larger patch size "
+        f"({suggested:.2g} or more)"
+    )
+
+
 def make_patches(objects, patch_size) -> Patches:
     """Mesh every object into patches and gather per-patch materials (the meshing of an
-    unchanged geometry comes from the cache). Faces of zero area are left out first."""
+    unchanged geometry comes from the cache). Faces of zero area are left out first, and a
+    patch size that would make more than MAX_PATCHES patches is refused before any meshing."""
     objects, notes = drop_zero_area_faces(objects)
     if not objects:
         raise ValueError("the selected objects have no faces of non-zero area")
+    check_patch_count(objects, patch_size)
     patches = _make_patches(objects, patch_size)
     patches.notes = notes
     return patches

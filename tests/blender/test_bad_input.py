@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
-from addon import scene_io, worker
+from addon import preview, scene_io, worker
 
 from .conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
 from .test_extension import _drive, _modal_operator, _snapshot, configure
@@ -663,3 +663,68 @@ def test_a_failure_after_writing_keeps_the_results_and_finishes(blender, monkeyp
     assert state == {"FINISHED"}
     assert len(result_objects()) == 3 and blender.scene.radiosity.last_paths > 0
     assert any(kind == "WARNING" and "broken on purpose" in text for kind, text in reports)
+
+
+# ---------------------------------------------------------------------------------------------
+# Patch count limit
+# ---------------------------------------------------------------------------------------------
+
+def _mixed_objects(context):
+    """Quads, triangles and n-gons (a cylinder's caps, concave too), scaled unevenly."""
+    build_test_scene()
+    bpy.ops.mesh.primitive_cylinder_add(vertices=7, radius=0.4, depth=0.7, location=(2, 0, 0))
+    bpy.context.active_object.scale = (1.0, 2.5, 1.0)
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=0.3, location=(0, 2, 0))
+    concave = make_object("Concave", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0.5, 0.3, 0), (0, 1, 0), (0.2, 0.5, 0)],
+                          [(0, 1, 2, 3, 4, 5)], location=(-2, 0, 0))
+    for o in bpy.data.objects:
+        o.select_set(True)
+    assert concave.select_get()
+    objects, _ = scene_io.read_selection(context)
+    assert {len(o.face_sizes) for o in objects} >= {1, 9}
+    return objects
+
+
+def test_patch_count_is_the_meshings_count_without_meshing(blender):
+    from addon.core import meshing
+
+    objects = _mixed_objects(blender)
+    for size in (10.0, 1.0, 0.5, 0.31, 0.25, 0.1, 0.037):
+        meshed = sum(
+            meshing.mesh_patches(o.vertices, o.face_sizes, o.corner_verts, size, face_triangles=o.triangles,
+                                 triangle_face=o.triangle_face).patch_count
+            for o in objects
+        )
+        assert worker.patch_count(objects, size) == meshed, size
+
+
+def test_a_patch_size_that_makes_too_many_patches_is_refused_before_meshing(blender, monkeypatch):
+    objects = _mixed_objects(blender)
+    assert worker.MAX_PATCHES == 2_000_000
+    # the smallest patch size the setting allows: ~10^9 patches; refused at once, never meshed
+    blender.scene.radiosity.patch_size = 1e-4
+    meshed = []
+    real_mesh = worker.meshing.mesh_patches
+    monkeypatch.setattr(worker.meshing, "mesh_patches", lambda *a, **k: meshed.append(1) or real_mesh(*a, **k))
+    t0 = time.perf_counter()
+    value = preview.compute(blender)  # what the panel's estimate shows
+    assert time.perf_counter() - t0 < 5
+    assert not meshed
+    message = value["error"]
+    assert "more than the limit of 2,000,000" in message and "Use a larger patch size" in message
+    count = worker.patch_count(objects, blender.scene.radiosity.patch_size)  # 1e-4 as a float32
+    assert f"{count:,.0f} patches" in message
+    # the size suggested fits under the limit
+    suggested = float(message.rsplit("(", 1)[1].split()[0])
+    assert worker.patch_count(objects, suggested) <= worker.MAX_PATCHES < count
+    # a lower limit, to check the boundary exactly (and that a solve refuses the same way)
+    blender.scene.radiosity.patch_size = 0.1
+    at = worker.patch_count(objects, blender.scene.radiosity.patch_size)
+    monkeypatch.setattr(worker, "MAX_PATCHES", int(at))
+    assert preview.compute(blender)["patches"] == at
+    monkeypatch.setattr(worker, "MAX_PATCHES", int(at) - 1)
+    assert "more than the limit" in preview.compute(blender)["error"]
+    before = _snapshot()
+    with pytest.raises(RuntimeError, match="Use a larger patch size"):
+        bpy.ops.radiosity.solve()
+    assert _snapshot() == before and not result_objects()
