@@ -4,6 +4,8 @@ path length and relative efficiency, for the current selection and settings.
 The panel only reads a cache.  When the selection, the settings or the scene
 change, a timer reads the selection (main thread, arrays only) and a thread
 meshes and predicts (no ray tracing), so the interface never waits for it.
+The thread touches no bpy (not thread-safe): it only sets the cache, and a
+timer registered on the main thread polls it and redraws when it is done.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import bpy
 from . import scene_io, worker
 
 DELAY_SECONDS = 0.3
+POLL_SECONDS = 0.1
 
 
 class _State:
@@ -95,14 +98,25 @@ def _start():
             value = {"error": str(exc)}
         except Exception as exc:  # noqa: BLE001
             value = {"error": f"{type(exc).__name__}: {exc}"}
+        # plain Python state only: bpy is not thread-safe (the main thread's _poll redraws)
         with STATE.lock:
             STATE.value, STATE.key = value, key
             if STATE.pending_key == key:
                 STATE.pending_key = None
-        bpy.app.timers.register(_redraw_all, first_interval=0.0)
 
     STATE.thread = threading.Thread(target=run, name="radiosity-estimate", daemon=True)
     STATE.thread.start()
+    if not bpy.app.timers.is_registered(_poll):  # registered here, on the main thread
+        bpy.app.timers.register(_poll, first_interval=POLL_SECONDS)
+    return None
+
+
+def _poll():
+    """Timer (main thread): wait for the estimate thread, then redraw the panels."""
+    thread = STATE.thread
+    if thread is not None and thread.is_alive():
+        return POLL_SECONDS
+    _redraw_all()
     return None
 
 
@@ -133,7 +147,7 @@ def register():
 def unregister():
     if _on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
-    for fn in (_start, _redraw_all):
+    for fn in (_start, _poll, _redraw_all):
         if bpy.app.timers.is_registered(fn):
             bpy.app.timers.unregister(fn)
     STATE.key = STATE.pending_key = STATE.value = None

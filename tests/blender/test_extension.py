@@ -629,3 +629,30 @@ def test_modifiers_are_applied(blender):
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     co2, sizes2, _ = mesh_arrays(bpy.data.objects["Block Radiosity"].data)
     assert len(sizes2) * 2 == len(sizes)
+
+
+def test_the_estimate_thread_leaves_bpy_to_the_main_thread(blender, monkeypatch):
+    """bpy is not thread-safe: the estimate thread only sets the cache; timers are registered on
+    the main thread, and a main-thread timer notices the result and redraws."""
+    import threading
+
+    build_test_scene()
+    configure(blender)
+    calls = []
+    real = bpy.app.timers.register
+
+    def register(function, *args, **kwargs):
+        calls.append((function.__name__, threading.current_thread() is threading.main_thread()))
+        return real(function, *args, **kwargs)
+
+    monkeypatch.setattr(bpy.app.timers, "register", register)
+    blender.evaluated_depsgraph_get()  # the new scene evaluated (its updates invalidate the cache)
+    assert preview._start() is None  # the timer's work, called as Blender would: main thread
+    preview.STATE.thread.join(timeout=60)
+    assert not preview.STATE.thread.is_alive()
+    assert calls and all(on_main for _name, on_main in calls), calls
+    assert preview.STATE.key == preview._key(blender) and preview.STATE.value["patches"] > 0
+    # the main-thread poll: done, so it redraws and ends
+    poll = getattr(preview, "_poll", None)
+    assert poll is not None and bpy.app.timers.is_registered(poll)
+    assert poll() is None
