@@ -92,15 +92,31 @@ def build_sample_scene(name):
 
 
 def world_bounds(objects):
-    """(lo, hi) corners of the objects' world-space bounding box, read with foreach_get."""
-    points = []
+    """(lo, hi) corners of the objects' world-space bounding box as Blender evaluates them:
+    modifiers applied, and curves, text, surfaces and metaballs as tessellated -- the evaluated
+    geometry's vertices (``to_mesh``, read with foreach_get; an evaluated curve's bound box
+    holds its control points, not its bevel or extrusion). (0, 0) when there is no geometry."""
+    import bpy
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    lows, highs = [], []
     for o in objects:
-        co = np.empty(3 * len(o.data.vertices), dtype=np.float64)
-        o.data.vertices.foreach_get("co", co)
-        m = np.array(o.matrix_world, dtype=np.float64)
-        points.append(co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3])
-    points = np.concatenate(points)
-    return points.min(axis=0), points.max(axis=0)
+        evaluated = o.evaluated_get(depsgraph)
+        mesh = evaluated.to_mesh()
+        try:
+            co = np.empty(3 * len(mesh.vertices), dtype=np.float32)
+            mesh.vertices.foreach_get("co", co)
+        finally:
+            evaluated.to_mesh_clear()
+        if not len(co):
+            continue
+        m = np.array(evaluated.matrix_world, dtype=np.float64)
+        points = co.reshape(-1, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+        lows.append(points.min(axis=0))
+        highs.append(points.max(axis=0))
+    if not lows:
+        return np.zeros(3), np.zeros(3)
+    return np.min(lows, axis=0), np.max(highs, axis=0)
 
 
 def _camera_for(objects):
@@ -120,41 +136,142 @@ def _camera_for(objects):
     return cam
 
 
-def render_preview(path, sources, width=480, samples=16, exposure=0.0):
-    """Render the result objects (their baked colours as emission) with Cycles.
+class SceneChanges:
+    """Settings changed for the preview, and how to undo them: ``restore()`` sets every value
+    back (in the order recorded: a view transform before its look) and then removes what was
+    made for the preview (a camera, a world). Restoring never raises."""
 
-    The source objects are hidden from the render only while it runs.
+    def __init__(self):
+        self._values = []  # (owner, name, original value), each setting once
+        self._seen = set()
+        self._made = []  # callables removing what was created
+
+    def keep(self, *names, owner):
+        """Remember the original values of settings that setting others may change (a view
+        transform's look, a file format's colour depth), before changing anything."""
+        for name in names:
+            key = (owner.as_pointer(), name)
+            if hasattr(owner, name) and key not in self._seen:
+                self._seen.add(key)
+                self._values.append((owner, name, getattr(owner, name)))
+
+    def set(self, owner, name, value):
+        if hasattr(owner, name):
+            self.keep(name, owner=owner)
+            setattr(owner, name, value)
+
+    def made(self, remove):
+        self._made.append(remove)
+
+    def restore(self):
+        failed = []
+        for owner, name, value in self._values:
+            try:
+                if getattr(owner, name) != value:
+                    setattr(owner, name, value)
+            except Exception:  # noqa: BLE001 - the rest is still restored
+                failed.append(name)
+        for remove in reversed(self._made):
+            try:
+                remove()
+            except Exception:  # noqa: BLE001
+                failed.append(getattr(remove, "__name__", "cleanup"))
+        self._values, self._made = [], []
+        if failed:
+            print(f"warning: could not restore {', '.join(failed)} after the preview", file=sys.stderr)
+
+
+def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> SceneChanges:
+    """Set the scene up to render the result objects' baked colours: Cycles without bounces
+    (the light transport is in the colours), no denoising, Standard view, the given exposure,
+    a black world of its own, PNG output, and a camera if the scene has none. Returns the
+    changes, for ``restore()``."""
+    import bpy
+
+    changes = SceneChanges()
+    render = scene.render
+    if scene.camera is None:
+        changes.set(scene, "camera", None)
+        camera = _camera_for(sources)
+
+        def remove_camera(camera=camera):
+            data = camera.data
+            bpy.data.objects.remove(camera, do_unlink=True)
+            if data is not None and data.users == 0:
+                bpy.data.cameras.remove(data)
+
+        changes.made(remove_camera)
+        height = int(width * 3 / 4)
+    else:  # the scene's own camera and frame shape
+        height = max(1, round(width * render.resolution_y / max(render.resolution_x, 1)))
+    changes.set(render, "engine", "CYCLES")
+    changes.set(scene.cycles, "device", "CPU")
+    changes.set(scene.cycles, "samples", samples)
+    changes.set(scene.cycles, "max_bounces", 0)  # the light transport is baked in the colours
+    changes.set(scene.cycles, "use_denoising", False)
+    changes.set(render, "resolution_x", width)
+    changes.set(render, "resolution_y", height)
+    changes.set(render, "resolution_percentage", 100)
+    image = render.image_settings
+    changes.keep("media_type", "file_format", "color_mode", "color_depth", owner=image)
+    changes.set(image, "media_type", "IMAGE")
+    changes.set(image, "file_format", "PNG")
+    changes.set(image, "color_management", "FOLLOW_SCENE")
+    view = scene.view_settings
+    changes.keep("view_transform", "look", owner=view)
+    changes.set(view, "view_transform", "Standard")
+    changes.set(view, "look", "None")
+    changes.set(view, "exposure", exposure)
+    world = bpy.data.worlds.new("Radiosity Preview World")
+    world.color = (0.0, 0.0, 0.0)
+    if world.node_tree is not None:
+        background = world.node_tree.nodes.get("Background")
+        if background is not None:
+            background.inputs["Color"].default_value = (0, 0, 0, 1)
+    changes.set(scene, "world", world)
+    changes.made(lambda world=world: bpy.data.worlds.remove(world))
+    changes.keep("filepath", owner=render)
+    return changes
+
+
+def render_preview(path, sources, width=480, samples=16, exposure=0.0, keep_settings=False):
+    """Render the result objects (their baked colours as emission) with Cycles to ``path``.
+
+    The source objects are hidden from the render only while it runs; the preview's settings
+    (``preview_settings``) are undone afterwards unless ``keep_settings``.
     """
     import bpy
 
     scene = bpy.context.scene
+    changes = preview_settings(scene, sources, width, samples, exposure)
     hidden = [(o, o.hide_render) for o in sources]
-    for o, _ in hidden:
-        o.hide_render = True
     try:
-        scene.render.engine = "CYCLES"
-        scene.cycles.device = "CPU"
-        scene.cycles.samples = samples
-        scene.cycles.max_bounces = 0  # the light transport is baked in the colours
-        scene.cycles.use_denoising = False
-        scene.render.resolution_x = width
-        scene.render.resolution_y = int(width * 3 / 4) if scene.camera.data.lens < 30 else width
-        scene.render.resolution_percentage = 100
-        scene.render.image_settings.file_format = "PNG"
-        scene.view_settings.view_transform = "Standard"
-        scene.view_settings.exposure = exposure
-        if scene.world is None:
-            scene.world = bpy.data.worlds.new("World")
-        scene.world.color = (0.0, 0.0, 0.0)
-        if scene.world.node_tree is not None:
-            bg = scene.world.node_tree.nodes.get("Background")
-            if bg is not None:
-                bg.inputs["Color"].default_value = (0, 0, 0, 1)
+        for o, _ in hidden:
+            o.hide_render = True
         scene.render.filepath = os.path.abspath(path)
         bpy.ops.render.render(write_still=True)
     finally:
         for o, h in hidden:
             o.hide_render = h
+        if not keep_settings:
+            changes.restore()
+
+
+def _one_line(exc) -> str:
+    """An error raised through ``bpy.ops`` (RuntimeError 'Error: ...') as one line."""
+    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
+    if any(line.startswith("Traceback") or "Python: Traceback" in line for line in lines):
+        lines = lines[-1:]  # an exception inside an operator: its last line says what
+    text = " ".join(lines)
+    for prefix in ("Error:", "Python:"):
+        if text.startswith(prefix):
+            text = text[len(prefix):].strip()
+    return text or type(exc).__name__
+
+
+def _fail(message, status=1):
+    print(f"error: {message}", file=sys.stderr)
+    return status
 
 
 def main(argv=None):
@@ -173,14 +290,21 @@ def main(argv=None):
     t0 = time.perf_counter()
     scene_name = args.scene or "cornell"
     if args.open:
-        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.open))
+        path = os.path.abspath(args.open)
+        if not os.path.isfile(path):
+            return _fail(f"no such file: {path}", 2)
+        try:
+            bpy.ops.wm.open_mainfile(filepath=path)
+        except RuntimeError as exc:
+            return _fail(f"cannot open {path}: {_one_line(exc)}", 2)
         scene_name = os.path.splitext(os.path.basename(args.open))[0]
     elif args.current:
         scene_name = os.path.splitext(os.path.basename(bpy.data.filepath))[0] or "scene"
     else:
         bpy.ops.wm.read_factory_settings(use_empty=True)
     _ensure_registered()
-    if not (args.open or args.current):
+    own_scene = not (args.open or args.current)  # built here, not the user's
+    if own_scene:
         if scene_name == "cornell":
             from .scenes import cornell_box
 
@@ -188,27 +312,27 @@ def main(argv=None):
         elif scene_name in _sample_scene_names():
             build_sample_scene(scene_name)
         else:
-            print(f"error: unknown scene {scene_name!r}; choose from: {', '.join(names)}", file=sys.stderr)
-            return 2
+            return _fail(f"unknown scene {scene_name!r}; choose from: {', '.join(names)}", 2)
     if args.select_all:
         for o in bpy.context.view_layer.objects:
             o.select_set(o.type == "MESH" and not scene_io.is_result_object(o))
     sources = scene_io.source_objects(bpy.context)
     if not sources:
-        print("error: no mesh object selected (use --select-all)", file=sys.stderr)
-        return 2
+        return _fail("no mesh object selected (use --select-all)", 2)
 
     settings = bpy.context.scene.radiosity
     settings.estimator = args.estimator
     settings.threshold = args.threshold
     settings.target_error = args.error
-    if args.patch_size is None and scene_name in _sample_scene_names() and not (args.open or args.current):
+    if args.patch_size is None and scene_name in _sample_scene_names() and own_scene:
         # sample scenes come meshed as in the paper: keep their patches
         args.patch_size = 1e6
     if args.patch_size is None:
         lo, hi = world_bounds(sources)
-        args.patch_size = float(np.max(hi - lo)) / 20.0
-    settings.patch_size = args.patch_size
+        if np.max(hi - lo) > 0:  # else the setting's own value
+            args.patch_size = float(np.max(hi - lo)) / 20.0
+    if args.patch_size is not None:
+        settings.patch_size = args.patch_size
     settings.exit_point = args.exit_point
     settings.sampling = args.sampling
     settings.stop_rule = args.stop_rule
@@ -217,27 +341,34 @@ def main(argv=None):
     settings.time_limit = args.time_limit
     settings.threads = args.threads
 
-    result = bpy.ops.radiosity.solve()
+    try:
+        result = bpy.ops.radiosity.solve()
+    except RuntimeError as exc:  # the operator's error report (bad input, time limit, ...)
+        return _fail(_one_line(exc))
     if "FINISHED" not in result:
-        print("error: the solve did not finish", file=sys.stderr)
-        return 1
+        return _fail("the solve did not finish")
     print(
         f"{scene_name}: {settings.last_patches} patches, {settings.last_paths} paths, "
-        f"{int(settings.last_rays)} rays, {settings.last_seconds:.2f} s, "
+        f"{settings.last_rays} rays, {settings.last_seconds:.2f} s, "
         f"mean path length {settings.last_mean_path_length:.2f}, predicted MSE {settings.last_predicted_mse:.3g}"
     )
-    out_blend = args.output or os.path.join("out", f"{scene_name}.blend")
-    os.makedirs(os.path.dirname(os.path.abspath(out_blend)), exist_ok=True)
-
-    if not args.no_preview:
-        if bpy.context.scene.camera is None:
-            _camera_for(sources)
-        exposure = _auto_exposure(scene_io)
-        png = args.preview or os.path.splitext(out_blend)[0] + ".png"
-        render_preview(png, sources, args.resolution, args.samples, exposure)
-        print(f"preview: {os.path.abspath(png)}")
-    bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(out_blend))
-    print(f"saved: {os.path.abspath(out_blend)}  ({time.perf_counter() - t0:.1f} s in all)")
+    out_blend = os.path.abspath(args.output or os.path.join("out", f"{scene_name}.blend"))
+    os.makedirs(os.path.dirname(out_blend), exist_ok=True)
+    png = None if args.no_preview else os.path.abspath(args.preview or os.path.splitext(out_blend)[0] + ".png")
+    try:
+        if png and own_scene:
+            # a scene built here: saved with the preview's settings, so F12 renders the same
+            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io), keep_settings=True)
+        # the user's scene is saved as it is, plus the results (a copy: the open file stays the same)
+        bpy.ops.wm.save_as_mainfile(filepath=out_blend, copy=True)
+        if png and not own_scene:
+            # then the preview, with temporary settings undone afterwards
+            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io))
+    except RuntimeError as exc:
+        return _fail(_one_line(exc))
+    if png:
+        print(f"preview: {png}")
+    print(f"saved: {out_blend}  ({time.perf_counter() - t0:.1f} s in all)")
     return 0
 
 

@@ -89,6 +89,7 @@ def cornell_box(size=2.0, light_strength=12.0):
     camera.location = (s / 2, -1.4 * s, s / 2)
     camera.rotation_euler = (np.pi / 2, 0.0, 0.0)
     bpy.context.scene.camera = camera
+    bpy.context.scene.render.resolution_x = bpy.context.scene.render.resolution_y = 1024  # the box is square
 
     for obj in bpy.context.view_layer.objects:
         obj.select_set(False)

@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -58,3 +59,247 @@ def test_cli_reopens_a_file_and_reports_unknown_scenes(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "addon", "--scene", "nope", "--no-preview"], cwd=str(tmp_path),
                           capture_output=True, text=True, env={**os.environ, "PYTHONPATH": ROOT}, timeout=120)
     assert proc.returncode == 2 and "unknown scene" in proc.stderr and "cornell" in proc.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# Bad input on the command line: one line on stderr, a non-zero status, no traceback
+# ---------------------------------------------------------------------------------------------
+
+def _run_failing(args, cwd):
+    proc = subprocess.run([sys.executable, "-m", "addon", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=300, env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode != 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert "Traceback" not in proc.stdout + proc.stderr, proc.stdout[-3000:] + proc.stderr[-3000:]
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1, proc.stderr
+    return proc.returncode, errors[0]
+
+
+def _save_scene(path, build):
+    """Build a scene in a fresh file with ``build()`` and save it; back to an empty file after."""
+    import bpy
+
+    import addon
+
+    addon.unregister()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    addon.register()
+    try:
+        build()
+        bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    finally:
+        addon.unregister()
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def test_cli_failures_are_one_line_and_a_non_zero_status(tmp_path):
+    import bpy
+
+    from .conftest import box_arrays, build_test_scene, make_object, principled
+
+    def no_emitter():
+        build_test_scene()
+        bpy.data.objects["Lamp"].select_set(False)
+
+    def nothing_selected():
+        build_test_scene()
+        for o in bpy.data.objects:
+            o.select_set(False)
+
+    def slow_batches():  # albedo 0.99999: the first batch takes far longer than the time limit
+        v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+        make_object("Room", v, f, [principled("Glow", (0.99999,) * 3, (1, 1, 1), 1.0)]).select_set(True)
+
+    for name, build in (("no_emitter", no_emitter), ("nothing", nothing_selected), ("slow", slow_batches)):
+        _save_scene(tmp_path / f"{name}.blend", build)
+    common = ["--no-preview", "--patch-size", "0.5", "--threads", "1"]
+    status, line = _run_failing(["--open", str(tmp_path / "no_emitter.blend"), "-o", str(tmp_path / "a.blend"),
+                                 *common], str(tmp_path))
+    assert status == 1 and line.startswith("error: No emitter among the selected objects")
+    status, line = _run_failing(["--open", str(tmp_path / "nothing.blend"), "-o", str(tmp_path / "b.blend"),
+                                 *common], str(tmp_path))
+    assert status == 2 and "no mesh object selected" in line
+    status, line = _run_failing(["--open", str(tmp_path / "slow.blend"), "-o", str(tmp_path / "c.blend"),
+                                 "--time-limit", "0.01", *common], str(tmp_path))
+    assert status == 1 and "before the first batch" in line and "nothing was written" in line
+    status, line = _run_failing(["--open", str(tmp_path / "missing.blend"), *common], str(tmp_path))
+    assert status == 2 and "no such file" in line
+    assert not any((tmp_path / n).exists() for n in ("a.blend", "b.blend", "c.blend"))
+
+
+# ---------------------------------------------------------------------------------------------
+# Curves, text, surfaces, metaballs and modifiers on the command line
+# ---------------------------------------------------------------------------------------------
+
+def _curvy_scene():
+    """Text, a bevelled curve, a metaball and a NURBS surface patch, a plane arrayed by a modifier and
+    an emitter above them, all selected. Returns the expected world bounds."""
+    import bpy
+
+    from .conftest import make_object, principled
+
+    bpy.ops.object.text_add(location=(0, 0, 0))
+    bpy.context.active_object.data.extrude = 0.05
+    bpy.ops.curve.primitive_bezier_circle_add(radius=0.5, location=(3, 0, 0))
+    bpy.context.active_object.data.bevel_depth = 0.1  # tessellated: a tube around the circle
+    bpy.ops.object.metaball_add(type="BALL", radius=0.4, location=(0, 3, 0))
+    bpy.ops.surface.primitive_nurbs_surface_surface_add(radius=0.5, location=(3, 3, 0))
+    floor = make_object("Floor", [(-0.5, -3.5, -1), (0.5, -3.5, -1), (0.5, -2.5, -1), (-0.5, -2.5, -1)],
+                        [(0, 1, 2, 3)], [principled("Grey", (0.5, 0.5, 0.5))])
+    array = floor.modifiers.new("Array", "ARRAY")
+    array.count = 6  # the floor reaches x = 5.5 only through the modifier
+    make_object("Sky", [(-1, -4, 2), (6, -4, 2), (6, 4, 2), (-1, 4, 2)], [(0, 3, 2, 1)],
+                [principled("Light", (0.5, 0.5, 0.5), (1, 1, 1), 5.0)])
+    for o in bpy.data.objects:
+        o.select_set(True)
+    assert {o.type for o in bpy.data.objects} == {"FONT", "CURVE", "META", "SURFACE", "MESH"}
+    return np.array([-1.0, -4.0, -1.0]), np.array([6.0, 4.0, 2.0])
+
+
+def test_cli_reads_curves_text_surfaces_metaballs_and_modifiers(blender, tmp_path):
+    import bpy
+
+    from addon.__main__ import main, world_bounds
+
+    lo, hi = _curvy_scene()
+    sources = [o for o in bpy.data.objects if o.name not in ("Sky", "Floor")]
+    b_lo, b_hi = world_bounds(sources)  # the tessellated geometry, in world space
+    # the metaball's surface (x and z = -0.22), the bevelled circle's tube (y = -0.6, x = 3.6) and
+    # the NURBS patch (y up to 3.25, bulging to z = 0.46); control points would give other numbers
+    np.testing.assert_allclose(b_lo, [-0.223, -0.6, -0.223], atol=0.01)
+    np.testing.assert_allclose(b_hi, [3.6, 3.25, 0.459], atol=0.01)
+    np.testing.assert_allclose(world_bounds([bpy.data.objects["Floor"]]),
+                               [[-0.5, -3.5, -1], [5.5, -2.5, -1]], atol=1e-6)  # with the array modifier
+    np.testing.assert_allclose(world_bounds(list(bpy.data.objects)), [lo, hi], atol=1e-6)
+    blend = tmp_path / "curvy.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    out = tmp_path / "out.blend"
+    assert main(["--current", "--no-preview", "--error", "30", "--threads", "1", "-o", str(out)]) == 0
+    assert blender.scene.radiosity.patch_size == pytest.approx(np.max(hi - lo) / 20, rel=1e-6)
+    sources = {o["radiosity_source"] for o in bpy.data.objects if "radiosity_source" in o.keys()}
+    assert sources == {o.name for o in bpy.data.objects if "radiosity_source" not in o.keys()}
+
+
+# ---------------------------------------------------------------------------------------------
+# The user's scene is saved as it was (plus the results): the preview's settings are temporary
+# ---------------------------------------------------------------------------------------------
+
+def _user_settings(with_camera):
+    """A scene with render settings of its own (none of them the preview's)."""
+    import bpy
+
+    from .conftest import build_test_scene
+
+    build_test_scene()
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_WORKBENCH"
+    scene.cycles.samples = 77
+    scene.cycles.max_bounces = 5
+    scene.cycles.use_denoising = True
+    scene.cycles.device = "CPU"
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 320, 200, 50
+    scene.render.image_settings.file_format = "JPEG"
+    scene.render.filepath = "//renders/frame_"
+    scene.view_settings.view_transform = "AgX"
+    scene.view_settings.look = "AgX - Punchy"
+    scene.view_settings.exposure = 0.7
+    world = bpy.data.worlds.new("Sky")
+    world.color = (0.2, 0.3, 0.4)
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.2, 0.3, 0.4, 1.0)
+    scene.world = world
+    if with_camera:
+        camera = bpy.data.objects.new("My Camera", bpy.data.cameras.new("My Camera"))
+        scene.collection.objects.link(camera)
+        camera.location = (0.5, -2.0, 0.5)
+        camera.rotation_euler = (1.5708, 0.0, 0.0)
+        scene.camera = camera
+
+
+def _settings_of(scene):
+    """What the preview must not leave behind in the user's scene."""
+    import bpy
+
+    render, cycles, view = scene.render, scene.cycles, scene.view_settings
+    world = scene.world
+    return {
+        "render": (render.engine, render.resolution_x, render.resolution_y, render.resolution_percentage,
+                   render.filepath, render.image_settings.file_format, render.image_settings.color_mode),
+        "cycles": (cycles.samples, cycles.max_bounces, cycles.use_denoising, cycles.device),
+        "view": (view.view_transform, view.look, round(view.exposure, 6)),
+        "world": world and (world.name, tuple(round(c, 6) for c in world.color),
+                            tuple(round(c, 6) for c in world.node_tree.nodes["Background"].inputs["Color"].default_value)),
+        "camera": scene.camera and scene.camera.name,
+        "objects": sorted(o.name for o in bpy.data.objects if "radiosity_source" not in o.keys()),
+        "cameras": sorted(c.name for c in bpy.data.cameras),
+        "worlds": sorted(w.name for w in bpy.data.worlds),
+        "hidden": sorted(o.name for o in bpy.data.objects if o.hide_render),
+    }
+
+
+PREVIEW_ARGS = ["--error", "20", "--patch-size", "0.5", "--threads", "1", "--resolution", "32", "--samples", "1"]
+
+
+def test_cli_open_saves_the_users_settings_unchanged(tmp_path):
+    """--open: the saved .blend holds the user's render settings, world and camera as they were,
+    plus the results; the preview's temporary camera (for a scene with none) is not kept."""
+    import bpy
+
+    from .conftest import result_objects
+
+    for with_camera in (True, False):
+        source = tmp_path / f"user_{with_camera}.blend"
+        _save_scene(source, lambda: _user_settings(with_camera))
+        bpy.ops.wm.open_mainfile(filepath=str(source))
+        expected = _settings_of(bpy.context.scene)
+        assert (expected["camera"] is not None) == with_camera
+        out, png = tmp_path / f"out_{with_camera}.blend", tmp_path / f"out_{with_camera}.png"
+        run(["--open", str(source), "-o", str(out), "--preview", str(png), *PREVIEW_ARGS], cwd=str(tmp_path))
+        assert png.exists()
+        bpy.ops.wm.open_mainfile(filepath=str(out))
+        assert _settings_of(bpy.context.scene) == expected
+        assert sorted(o["radiosity_source"] for o in result_objects()) == ["Block", "Lamp", "Room"]
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# The README's  blender --background file.blend --python-expr "...main(['--current'])"
+# ---------------------------------------------------------------------------------------------
+
+def test_cli_current_solves_the_loaded_file(blender, tmp_path):
+    import bpy
+
+    from addon.__main__ import main
+
+    from .conftest import read_colours, result_objects
+
+    source = tmp_path / "room.blend"
+    _save_scene(source, lambda: _user_settings(with_camera=True))
+    # an unselected mesh takes no part
+    bpy.ops.wm.open_mainfile(filepath=str(source))
+    from .conftest import make_object
+
+    make_object("Bystander", [(0, 0, 2), (1, 0, 2), (1, 1, 2)], [(0, 1, 2)]).select_set(False)
+    bpy.ops.wm.save_mainfile()
+    bpy.ops.wm.open_mainfile(filepath=str(source))
+    assert sorted(o.name for o in bpy.context.selected_objects) == ["Block", "Lamp", "Room"]
+    before = _settings_of(bpy.context.scene)
+    out, png = tmp_path / "out" / "room_solved.blend", tmp_path / "out" / "room_solved.png"
+    assert main(["--current", "-o", str(out), "--preview", str(png), *PREVIEW_ARGS]) == 0
+    # the loaded file: results added, everything else as it was, still the same file
+    assert bpy.data.filepath == str(source)
+    assert sorted(o["radiosity_source"] for o in result_objects()) == ["Block", "Lamp", "Room"]
+    assert _settings_of(bpy.context.scene) == before
+    assert bpy.context.scene.radiosity.last_paths > 0
+    # the outputs: a preview that shows something, a .blend with the results and the user's settings
+    image = bpy.data.images.load(str(png))
+    pixels = np.empty(len(image.pixels), dtype=np.float32)
+    image.pixels.foreach_get(pixels)
+    assert (image.size[0], image.size[1]) == (32, 20)  # the scene's own frame shape, 320 x 200
+    assert pixels.reshape(-1, 4)[:, :3].max() > 0.05
+    colours = {o["radiosity_source"]: read_colours(o.data, "Radiosity")[1].copy() for o in result_objects()}
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    assert _settings_of(bpy.context.scene) == before
+    saved = {o["radiosity_source"]: read_colours(o.data, "Radiosity")[1] for o in result_objects()}
+    assert saved.keys() == colours.keys()
+    for name in saved:
+        np.testing.assert_array_equal(saved[name], colours[name])
