@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from .estimators import BIASED_INFINITE, ESTIMATORS, FINITE
 
 
@@ -87,19 +89,29 @@ class Prediction:
         return max(1, math.ceil(self.mse_per_path / target_mse))
 
 
+def _is_whole(value):
+    """A Python or numpy integer (not a bool)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_number(value):
+    """A Python or numpy real number (not a bool)."""
+    return _is_whole(value) or isinstance(value, (float, np.floating))
+
+
 def check_estimator(estimator, threshold):
     if estimator not in ESTIMATORS:
         raise ValueError(f"estimator must be one of {', '.join(ESTIMATORS)}; got {estimator!r}")
     if estimator == BIASED_INFINITE:
-        if not (isinstance(threshold, (int, float)) and math.isfinite(threshold) and 0 < threshold < 1):
+        if not (_is_number(threshold) and math.isfinite(threshold) and 0 < threshold < 1):
             raise ValueError(f"threshold t must be a number in (0, 1) for the biased infinite estimator; got {threshold!r}")
 
 
 def check_positive(name, value, integer=False):
     if value is None:
         return
-    kind = (int,) if integer else (int, float)
-    if isinstance(value, bool) or not isinstance(value, kind) or not math.isfinite(value) or value <= 0:
+    kind = _is_whole if integer else _is_number
+    if not kind(value) or not math.isfinite(value) or value <= 0:
         what = "a positive whole number" if integer else "a positive number"
         raise ValueError(f"{name} must be {what}; got {value!r}")
 

@@ -1,7 +1,10 @@
 """The two shooting random walk estimators of Sbert & Brusi, advanced as a wavefront.
 
-Every path of a batch ("chunk") advances one bounce per step: the live paths' rays go to the
-ray tracer together, and their scores accumulate with ``np.bincount``.
+A batch of paths ("chunk") is traced as a wavefront: every live path advances one bounce per
+step, and the live paths' rays go to the ray tracer together. As paths end, new ones start from
+the sources in their places, so every step traces about ``WAVEFRONT_PATHS`` rays (arrays that
+stay in the processor's cache) until the chunk's last paths run out. Scores accumulate with
+``np.bincount``.
 
 Weights are relative: a path from source i starts with per-channel weight E_ic / E_bar_i (1 in a
 grey scene), and the true carried power is that weight times Phi_T / N. What a chunk tallies is
@@ -17,6 +20,10 @@ b_j = R_j I_j (Phi_T / N) / A_j.
 
 Rays that hit nothing escape; rays that hit a patch's back side are absorbed there ("blocked"):
 radiosity leaves only the front side of a patch.
+
+Gathers use ``take(..., mode="wrap")``: every index is valid by construction (a ray tracer's
+miss, -1, is only ever gathered to be masked out), and numpy's wrapping gather is about twice
+as fast as its checking one.
 """
 from __future__ import annotations
 
@@ -24,7 +31,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sampling import SourceTable, cosine_directions, points_at_barycentric, points_on_patches
+from .sampling import (
+    SourceTable,
+    add_sphere_points,
+    barycentric_point_rows,
+    frame_points,
+    patch_point_rows,
+)
+
+# Rays per step while the chunk still has paths to start: big enough that numpy's per-call
+# cost is small next to the work, small enough that a step's arrays stay in cache.
+WAVEFRONT_PATHS = 1 << 14
+# Scored hits are kept per step and added up (one bincount) every this many hits.
+SCORE_FLUSH = 1 << 18
 
 FINITE = "finite"
 BIASED_INFINITE = "biased_infinite"
@@ -57,10 +76,12 @@ class WalkTables:
             start = np.where(mean_emission > 0, scene.emission.T / mean_emission, 0.0)
         self.survivor_weight = np.ascontiguousarray(ratio[: self.channels])  # R_jc / R_bar_j (C,P)
         self.start_weight = np.ascontiguousarray(start[: self.channels])      # E_ic / E_bar_i (C,P)
-        # float32 uniforms per ray: point (2), direction (2), then a triangle choice unless every
-        # patch is a parallelogram. The finite estimator's survival test draws float64 (a float32
-        # draw would quantise the survival probability to multiples of 2^-24: a relative bias
-        # of up to 2^-24 / (1 - R) in 1 - R, 0.6% at R = 0.99999).
+        # float32 uniforms for a ray leaving from a new point of its patch: point (2),
+        # direction (2), then a triangle choice unless every patch is a parallelogram. A ray
+        # leaving from the hit point needs the direction's two only. The finite estimator's
+        # survival test draws float64 (a float32 draw would quantise the survival probability
+        # to multiples of 2^-24: a relative bias of up to 2^-24 / (1 - R) in 1 - R, 0.6% at
+        # R = 0.99999).
         self.uniforms_per_ray = 4
         self.row_triangle = None
         if not self.geometry.all_parallelograms:
@@ -71,16 +92,46 @@ class WalkTables:
         # reflectivities the threshold test keeps anyway (exactly: R_bar = R in grey): one array.
         self.unit_weights = estimator == FINITE and self.channels == 1
         self.weight_is_accumulated = estimator != FINITE and self.channels == 1
+        # Paths of a grey finite walk leaving from random points are interchangeable: a path
+        # is nothing but the patch it is on. The walk then keeps them sorted by patch, so that
+        # rays leaving one patch go to the ray tracer together (coherent rays trace faster and
+        # the table gathers read memory in order); the order changes nothing in the estimate.
+        self.exchangeable = self.unit_weights and self.exit_random
+        if self.geometry.all_parallelograms:
+            self.leave_table = self.geometry.leave_table
+        self.triangle_normal_rows = self.geometry.triangle_normal_rows
+
+    def leave_random(self, patch, u):
+        """Rays leaving the given patches from uniform points, in cosine-distributed
+        directions: (origins, directions), each (3,n) float32 rows (unit space)."""
+        g = self.geometry
+        if g.all_parallelograms:
+            frame = self.leave_table.take(patch, axis=1, mode="wrap")  # (12,n): corner, a, b, normal
+            origins = frame_points(frame, u[0], u[1])
+            directions = frame[9:12]
+        else:
+            u_triangle = u[self.row_triangle]
+            origins = patch_point_rows(g, patch, u_triangle, u[0], u[1])
+            directions = g.patch_normal_rows.take(patch, axis=1, mode="wrap")
+        add_sphere_points(directions, u[2], u[3])
+        return origins, directions
 
 
 @dataclass
 class ChunkTally:
-    """What one batch of paths produced, in relative weights (multiply by Phi_T / N)."""
+    """What one batch of paths produced, in relative weights (multiply by Phi_T / N).
+
+    The power accounts balance path by path: every unit of weight a path starts with ends
+    absorbed at a hit (the weight arriving minus the weight leaving), escaped, blocked or,
+    for the biased estimator, undistributed; so emitted = absorbed + escaped + blocked +
+    undistributed to rounding, in every channel.
+    """
 
     paths: int
     rays: int
     incident: np.ndarray                 # (C,P) power incident on each patch's front side
     emitted: np.ndarray                  # (C,) total starting weight
+    absorbed: np.ndarray                 # (C,) weight arriving at front hits minus weight leaving them
     escaped: np.ndarray                  # (C,) carried by rays that hit nothing
     blocked: np.ndarray                  # (C,) carried by rays that hit a back side
     undistributed: np.ndarray            # (C,) left on paths cut by the threshold
@@ -99,60 +150,111 @@ def _weight_sum(weights, mask):
     return np.einsum("cn,n->c", weights, mask)
 
 
+def _total(weights, n):
+    """Total carried weight per channel, (C,): n paths of weight 1 where weights is None."""
+    return np.array([float(n)]) if weights is None else weights.sum(axis=1)
+
+
+def _facing(directions, normals):
+    """direction . normal < 0 per column of two (3,n) row arrays (``normals`` is overwritten)."""
+    normals *= directions
+    dot = normals[0]
+    dot += normals[1]
+    dot += normals[2]
+    return dot < 0
+
+
 def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=None) -> ChunkTally:
     """Trace ``paths`` random walks from the sources to their end; return their tallies."""
     g = tables.geometry
     C, P = tables.channels, tables.patch_count
     finite = tables.estimator == FINITE
-    scored_patches, scored_weights = [], []  # per step; one bincount per chunk at the end
+    exit_random = tables.exit_random
+    scores = _Scores(C, P)
+    absorbed = np.zeros(C)
     escaped = np.zeros(C)
     blocked = np.zeros(C)
     undistributed = np.zeros(C)
+    emitted = np.zeros(C)
     ended = {"escaped": 0, "blocked": 0, "absorbed": 0, "threshold": 0}
 
-    first_step = True
+    # Every path's source, drawn at once (grouped by source); paths start as places free up.
+    first_uniforms = None
     if tables.stratified:
-        patch, first_uniforms = tables.sources.stratified(paths, rng)
+        source, first_uniforms = tables.sources.stratified(paths, rng)
     else:
-        patch = tables.sources.choose(rng.random(paths))
-    accumulated = np.ones(paths) if not finite else None  # product of R_bar along the path
-    if tables.unit_weights:
-        weights = None
-    elif tables.weight_is_accumulated:
-        weights = accumulated[None]  # a view: (1,n)
-    else:
-        weights = np.take(tables.start_weight, patch, axis=1)
-    emitted = weights.sum(axis=1) if weights is not None else np.array([float(paths)])
-    leave_from = None  # hit points, for exit_point="hit"
+        source = tables.sources.sample(paths, rng)
+    started = 0
+
+    # The live paths: the patch each is on, and what it carries.
+    patch = source[:0]
+    accumulated = None if finite else np.ones(0)  # product of R_bar along the path
+    weights = None if tables.unit_weights else np.zeros((C, 0))
+    leave_from = None  # (triangle, u, v) of the live paths' hit points, for exit_point="hit"
     rays = 0
-    n = paths
-    while n:
+    while True:
         if abort is not None and abort.is_set():
             raise Aborted
-        u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
+        n_live = patch.size
+        new = min(WAVEFRONT_PATHS - n_live, paths - started) if started < paths else 0
+        if new > 0:
+            new_patch = source[started : started + new]
+            patch = np.concatenate((patch, new_patch)) if n_live else new_patch
+            if accumulated is not None:
+                accumulated = np.concatenate((accumulated, np.ones(new)))
+            if tables.weight_is_accumulated:
+                weights = accumulated[None]
+                emitted += new
+            elif weights is not None:
+                new_weights = tables.start_weight.take(new_patch, axis=1, mode="wrap")
+                weights = np.concatenate((weights, new_weights), axis=1)
+                emitted += new_weights.sum(axis=1)
+            else:
+                emitted += new
+        elif n_live == 0:
+            break
+        n = patch.size
+
+        # The rays: from new uniform points of the patches (random exit, and new paths), or
+        # from the hit points (exit_point="hit"), in cosine-distributed directions.
+        if exit_random or n_live == 0:
+            u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
+            if first_uniforms is not None and new > 0:
+                # A path's first ray: a randomly shifted low-discrepancy set (stratified).
+                u[:4, n_live:] = first_uniforms[:, started : started + new]
+            origins, directions = tables.leave_random(patch, u)
+        else:
+            u = rng.random((2, n), dtype=np.float32)
+            origins = np.empty((3, n), np.float32)
+            origins[:, :n_live] = barycentric_point_rows(g, *leave_from)
+            if new > 0:
+                u_new = rng.random((tables.uniforms_per_ray, new), dtype=np.float32)
+                if first_uniforms is not None:
+                    u_new[:4] = first_uniforms[:, started : started + new]
+                    u[:, n_live:] = u_new[2:4]
+                u_triangle = None if tables.row_triangle is None else u_new[tables.row_triangle]
+                origins[:, n_live:] = patch_point_rows(g, patch[n_live:], u_triangle, u_new[0], u_new[1])
+            directions = add_sphere_points(g.patch_normal_rows.take(patch, axis=1, mode="wrap"), u[0], u[1])
+        started += max(new, 0)
         u_survive = rng.random(n) if finite else None
-        if first_step and tables.stratified:
-            u[:4] = first_uniforms  # the first ray: a randomly shifted low-discrepancy set
-        first_step = False
-        if leave_from is None:
-            u_triangle = None if tables.row_triangle is None else u[tables.row_triangle]
-            origins = points_on_patches(g, patch, u_triangle, u[0], u[1])
+
+        # The ray tracer reads (n,3) views of the (3,n) rows: no transposed copies.
+        if exit_random:
+            hit = tables.tracer.first_hit(origins.T, directions.T)
+            # A miss (-1) wraps to the last triangle's normal: harmless, masked out below.
+            front = _facing(directions, tables.triangle_normal_rows.take(hit, axis=1, mode="wrap"))
         else:
-            origins = leave_from
-        directions = cosine_directions(g, patch, u[2], u[3], normalize=False)
-        if tables.exit_random:
-            hit = tables.tracer.first_hit(origins, directions)
-            # A miss (-1) gathers the last triangle's normal: harmless, masked out by ``missed``.
-            hit_normal = np.take(g.triangle_normal, hit, axis=0)
-        else:
-            hit, bary_u, bary_v, hit_normal = tables.tracer.first_hit_barycentric(origins, directions)
+            hit, bary_u, bary_v, hit_normal = tables.tracer.first_hit_barycentric(origins.T, directions.T)
+            dot = hit_normal[:, 0] * directions[0]
+            dot += hit_normal[:, 1] * directions[1]
+            dot += hit_normal[:, 2] * directions[2]
+            front = dot < 0
         rays += n
 
-        missed = hit < 0
-        facing = np.einsum("ij,ij->i", directions, hit_normal) < 0
-        front = facing & ~missed
+        front &= hit >= 0
         if not front.all():
-            back = ~missed & ~facing
+            missed = hit < 0
+            back = ~missed & ~front
             n_missed, n_back = int(np.count_nonzero(missed)), int(np.count_nonzero(back))
             if n_missed:
                 escaped += _weight_sum(weights, missed)
@@ -161,76 +263,115 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 blocked += _weight_sum(weights, back)
                 ended["blocked"] += n_back
             keep = np.flatnonzero(front)
-            hit = hit[keep]
-            u_survive = u_survive[keep] if finite else None
+            hit = hit.take(keep, mode="wrap")
+            if finite:
+                u_survive = u_survive.take(keep, mode="wrap")
             if accumulated is not None:
-                accumulated = accumulated[keep]
+                accumulated = accumulated.take(keep, mode="wrap")
             if tables.weight_is_accumulated:
                 weights = accumulated[None]
             elif weights is not None:
-                weights = np.take(weights, keep, axis=1)
-            if not tables.exit_random:
-                bary_u, bary_v = bary_u[keep], bary_v[keep]
-        if hit.size == 0:
-            break
-        hit_triangle = hit
-        patch = g.triangle_patch[hit_triangle]
+                weights = weights.take(keep, axis=1, mode="wrap")
+            if not exit_random:
+                bary_u, bary_v = bary_u.take(keep, mode="wrap"), bary_v.take(keep, mode="wrap")
+        patch = g.triangle_patch.take(hit, mode="wrap")
 
         # Score: the power arriving at the hit patch.
-        scored_patches.append(patch)
-        if weights is not None:
-            scored_weights.append(weights)
+        scores.add(patch, weights)
+        arriving = _total(weights, patch.size)
 
+        go_on = None  # which of the hit paths go on (None: all of them)
         if finite:
-            survive = u_survive < tables.mean_reflectivity[patch]
-            ended["absorbed"] += int(survive.size - np.count_nonzero(survive))
-            go_on = np.flatnonzero(survive)
-            patch = patch[go_on]
-            if not tables.exit_random:  # only a hit-point exit needs the triangle again
-                hit_triangle = hit_triangle[go_on]
-            if weights is not None:
-                weights = np.take(weights, go_on, axis=1) * np.take(tables.survivor_weight, patch, axis=1)
+            survive = u_survive < tables.mean_reflectivity.take(patch, mode="wrap")
+            if tables.exchangeable:
+                # Survivors leave in patch order (any order is the same estimate).
+                patch = _sorted_patches(patch.compress(survive), P)
+            else:
+                go_on = np.flatnonzero(survive)
+                patch = patch.take(go_on, mode="wrap")
+                if weights is not None:
+                    weights = weights.take(go_on, axis=1, mode="wrap")
+                    weights *= tables.survivor_weight.take(patch, axis=1, mode="wrap")
+            ended["absorbed"] += int(survive.size - patch.size)
+            absorbed += arriving - _total(weights, patch.size)
         else:
             # New arrays, never in place: the weights just scored may be a view of ``accumulated``.
-            accumulated = accumulated * tables.mean_reflectivity[patch]
+            accumulated = accumulated * tables.mean_reflectivity.take(patch, mode="wrap")
             if tables.weight_is_accumulated:
                 weights = accumulated[None]
             else:
-                weights = weights * np.take(tables.reflectivity, patch, axis=1)
+                weights = weights * tables.reflectivity.take(patch, axis=1, mode="wrap")
+            absorbed += arriving - _total(weights, patch.size)  # (1 - R) of what arrived
             cut = accumulated < tables.threshold
             if cut.any():
                 undistributed += _weight_sum(weights, cut)
                 ended["threshold"] += int(np.count_nonzero(cut))
                 go_on = np.flatnonzero(~cut)
-                patch = patch[go_on]
-                if not tables.exit_random:
-                    hit_triangle = hit_triangle[go_on]
-                accumulated = accumulated[go_on]
-                weights = accumulated[None] if tables.weight_is_accumulated else np.take(weights, go_on, axis=1)
-            else:
-                go_on = slice(None)
+                patch = patch.take(go_on, mode="wrap")
+                accumulated = accumulated.take(go_on, mode="wrap")
+                if tables.weight_is_accumulated:
+                    weights = accumulated[None]
+                else:
+                    weights = weights.take(go_on, axis=1, mode="wrap")
 
-        if not tables.exit_random:
+        if not exit_random:
             # Leave from the hit point, re-made from its barycentric coordinates on the
             # triangle's leaving frame: on the surface (inset, pushed off), whatever the distance.
-            if not isinstance(go_on, slice):
-                bary_u, bary_v = bary_u[go_on], bary_v[go_on]
-            leave_from = points_at_barycentric(g, hit_triangle, bary_u, bary_v)
-        n = patch.size
+            if go_on is not None:
+                hit, bary_u, bary_v = (a.take(go_on, mode="wrap") for a in (hit, bary_u, bary_v))
+            leave_from = (hit, bary_u, bary_v)
 
-    patches = np.concatenate(scored_patches) if scored_patches else np.zeros(0, np.int32)
-    if tables.unit_weights:
-        incident = np.bincount(patches, minlength=P)[None].astype(np.float64)
-    else:
-        w = np.concatenate(scored_weights, axis=1) if scored_weights else np.zeros((C, 0))
-        incident = np.stack([np.bincount(patches, weights=w[c], minlength=P) for c in range(C)])
     return ChunkTally(
         paths=paths,
         rays=rays,
-        incident=incident,
+        incident=scores.total(),
         emitted=emitted,
+        absorbed=absorbed,
         escaped=escaped,
         blocked=blocked,
         undistributed=undistributed,
         ended=ended,
     )
+
+
+class _Scores:
+    """The hits of a chunk, kept per step and summed per patch (one bincount per channel)
+    whenever SCORE_FLUSH of them have gathered: (C,P) float64."""
+
+    def __init__(self, channels, patch_count):
+        self.incident = np.zeros((channels, patch_count))
+        self.patches, self.weights, self.count = [], [], 0
+
+    def add(self, patch, weights):
+        self.patches.append(patch)
+        if weights is not None:
+            self.weights.append(weights)
+        self.count += patch.size
+        if self.count >= SCORE_FLUSH:
+            self.flush()
+
+    def flush(self):
+        if not self.patches:
+            return
+        patches = np.concatenate(self.patches)
+        C, P = self.incident.shape
+        if not self.weights:
+            self.incident[0] += np.bincount(patches, minlength=P)
+        else:
+            w = np.concatenate(self.weights, axis=1)
+            for c in range(C):
+                self.incident[c] += np.bincount(patches, weights=w[c], minlength=P)
+        self.patches, self.weights, self.count = [], [], 0
+
+    def total(self):
+        self.flush()
+        return self.incident
+
+
+def _sorted_patches(patch, patch_count):
+    """The same patches in increasing order: a counting sort (bincount, repeat) when there
+    are more of them than patches, a comparison sort otherwise."""
+    if patch.size >= patch_count:
+        return np.repeat(np.arange(patch_count, dtype=patch.dtype), np.bincount(patch, minlength=patch_count))
+    patch.sort()
+    return patch

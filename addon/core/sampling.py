@@ -10,6 +10,10 @@ import numpy as np
 
 TWO_PI = np.float32(2.0 * np.pi)
 Z_TOP = np.float32(1.0 - 2.0**-24)  # z = Z_TOP - 2 u: the midpoints of float32's [0, 1) grid
+LAST_BELOW_ONE = np.nextafter(1.0, 0.0)
+# SourceTable.sample draws multinomial counts when there are at least this many paths per
+# source (a binomial draw per source costs about as much as this many per-path choices).
+MULTINOMIAL_PATHS_PER_SOURCE = 8
 
 
 class SourceTable:
@@ -42,6 +46,7 @@ class SourceTable:
         path's numbers are still uniform. Returns (patch (count,), uniforms (4, count) float32).
         """
         u = (np.arange(count) + rng.random()) / count
+        np.minimum(u, LAST_BELOW_ONE, out=u)  # (count - 1 + r) / count can round up to 1
         patch = self.choose(u)
         k = np.searchsorted(self.cdf, u, side="right")
         start = np.searchsorted(k, k, side="left")  # first path of each path's source
@@ -60,6 +65,20 @@ class SourceTable:
                 if table is None or table.shape[1] < count:
                     table = self._halton = halton(np.arange(count), (2, 3, 5, 7))
         return table
+
+    def sample(self, count, rng):
+        """``count`` independent source choices (the walks treat paths alike whatever their
+        order).
+
+        With few sources, the counts per source are one multinomial draw (the joint law of
+        ``count`` independent choices, without their order), O(sources), and the paths come
+        grouped by source (rays leaving one patch together are coherent); otherwise each path
+        draws its own uniform, O(count).
+        """
+        if self.patches.size * MULTINOMIAL_PATHS_PER_SOURCE <= count:
+            counts = rng.multinomial(count, self.probability)
+            return np.repeat(self.patches, counts)
+        return self.choose(rng.random(count))
 
     def choose(self, u):
         """Patch index for each uniform u in [0, 1): the first k with u < cdf[k]."""
@@ -111,18 +130,35 @@ def points_on_triangles(geometry, triangle, u1, u2):
     The square [0,1)^2 is folded onto the triangle (u1 + u2 > 1 reflects), which is uniform
     and needs no square root. float32 (n,3), centred coordinates.
     """
+    return np.ascontiguousarray(triangle_point_rows(geometry, triangle, u1, u2).T)
+
+
+def triangle_point_rows(geometry, triangle, u1, u2):
+    """:func:`points_on_triangles` as (3,n) rows, one coordinate per row."""
     fold = (u1 + u2) > 1
-    return points_at_barycentric(geometry, triangle, np.where(fold, 1 - u1, u1), np.where(fold, 1 - u2, u2))
+    return barycentric_point_rows(geometry, triangle, np.where(fold, 1 - u1, u1), np.where(fold, 1 - u2, u2))
 
 
 def points_at_barycentric(geometry, triangle, a, b):
     """The points corner0 + a edge1 + b edge2 of the given triangles' leaving frames (inset
     from the edges, pushed off along the normal). float32 (n,3), centred coordinates."""
+    return np.ascontiguousarray(barycentric_point_rows(geometry, triangle, a, b).T)
+
+
+def barycentric_point_rows(geometry, triangle, a, b):
+    """:func:`points_at_barycentric` as (3,n) rows."""
     frame = np.take(geometry.triangle_frame, triangle, axis=1)  # one gather: (9,n)
+    return frame_points(frame, a, b)
+
+
+def frame_points(frame, a, b):
+    """corner + a edge_a + b edge_b from gathered (>=9,n) frame rows [corner, edge_a, edge_b]:
+    (3,n) float32 rows."""
     points = frame[3:6] * a
     points += frame[0:3]
-    points += frame[6:9] * b
-    return np.ascontiguousarray(points.T)
+    edge = frame[6:9] * b
+    points += edge
+    return points
 
 
 def points_on_patches(geometry, patch, u_triangle, u1, u2):
@@ -131,18 +167,19 @@ def points_on_patches(geometry, patch, u_triangle, u1, u2):
     Parallelogram patches take corner + u1 a + u2 b; others choose a triangle by area
     (``u_triangle``, which may be None when every patch is a parallelogram) and a point on it.
     """
+    return np.ascontiguousarray(patch_point_rows(geometry, patch, u_triangle, u1, u2).T)
+
+
+def patch_point_rows(geometry, patch, u_triangle, u1, u2):
+    """:func:`points_on_patches` as (3,n) rows."""
     if geometry.all_parallelograms:
-        frame = np.take(geometry.parallelogram_frame, patch, axis=1)
-        points = frame[3:6] * u1
-        points += frame[0:3]
-        points += frame[6:9] * u2
-        return np.ascontiguousarray(points.T)
-    points = points_on_triangles(geometry, choose_triangles(geometry, patch, u_triangle), u1, u2)
+        return frame_points(np.take(geometry.parallelogram_frame, patch, axis=1), u1, u2)
+    points = triangle_point_rows(geometry, choose_triangles(geometry, patch, u_triangle), u1, u2)
     if geometry.any_parallelograms:
         some = np.flatnonzero(geometry.patch_parallelogram[patch])
         if some.size:
             frame = np.take(geometry.parallelogram_frame, patch[some], axis=1)
-            points[some] = (frame[0:3] + frame[3:6] * u1[some] + frame[6:9] * u2[some]).T
+            points[:, some] = frame_points(frame, u1[some], u2[some])
     return points
 
 
@@ -158,13 +195,28 @@ def cosine_directions(geometry, patch, u1, u2, normalize=True):
     direction at all). The ray tracer needs no unit length: with ``normalize=False`` (what the
     walks use) the directions keep the length |n + s| in (0, 2].
     """
-    z = Z_TOP - 2 * u1
-    r = np.sqrt(1 - z * z)
-    phi = TWO_PI * u2
     d = np.take(geometry.patch_normal_rows, patch, axis=1)  # (3,n)
-    d[0] += r * np.cos(phi)
-    d[1] += r * np.sin(phi)
-    d[2] += z
+    add_sphere_points(d, u1, u2)
     if normalize:
         d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     return np.ascontiguousarray(d.T)
+
+
+def add_sphere_points(rows, u1, u2):
+    """Adds to each column of ``rows`` (3,n) a uniform point s of the unit sphere, made from
+    z = (1 - 2^-24) - 2 u1 and the angle 2 pi u2: turns gathered unit normals n into the
+    cosine-distributed directions n + s (see :func:`cosine_directions`), in place."""
+    z = u1 * np.float32(-2.0)
+    z += Z_TOP
+    r = z * z
+    np.subtract(1, r, out=r)
+    np.sqrt(r, out=r)
+    phi = u2 * TWO_PI
+    term = np.cos(phi)
+    term *= r
+    rows[0] += term
+    np.sin(phi, out=term)
+    term *= r
+    rows[1] += term
+    rows[2] += z
+    return rows

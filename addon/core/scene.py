@@ -210,6 +210,18 @@ class Geometry:
         return np.ascontiguousarray(self.patch_normal.T)
 
     @cached_property
+    def leave_table(self):
+        """(12,P) float32: each parallelogram patch's corner (pushed off), edge a, edge b, then
+        its normal, one coordinate per row: one gather gives a random exit's origin frame and
+        the normal its direction is built on."""
+        return np.ascontiguousarray(np.vstack([self.parallelogram_frame, self.patch_normal_rows]))
+
+    @cached_property
+    def triangle_normal_rows(self):
+        """(3,T) float32: the triangle normals one coordinate per row, for column gathers."""
+        return np.ascontiguousarray(self.triangle_normal.T)
+
+    @cached_property
     def all_parallelograms(self):
         return bool(self.patch_parallelogram.all())
 

@@ -31,10 +31,12 @@ STOP_TIME_LIMIT = "time_limit"
 STOP_RULES = ("predicted", "measured")
 SAMPLINGS = ("independent", "stratified")
 
-# A chunk aims at about this many rays: big enough that per-step Python overhead is small,
-# small enough that progress, cancel and the batch error estimate come often.
-RAYS_PER_CHUNK = 1 << 18
-MAX_CHUNK_PATHS = 1 << 16
+# A chunk aims at about this many rays: many wavefront steps (estimators.WAVEFRONT_PATHS
+# rays each), so that the few short steps at its end, when its last paths run out, cost
+# little; few enough that progress and the batch error estimate come often (cancel is
+# honoured at every step).
+RAYS_PER_CHUNK = 1 << 20
+MAX_CHUNK_PATHS = 1 << 19
 MIN_CHUNK_PATHS = 128
 # The batch estimate wants this many chunks in a run when the run is small.
 MIN_CHUNKS = 32
@@ -89,6 +91,7 @@ class _Accumulator:
         self.incident = np.zeros((C, P))
         self.incident_sq = np.zeros((C, P))  # sum_k I_k^2 / n_k
         self.emitted = np.zeros(C)
+        self.absorbed = np.zeros(C)
         self.escaped = np.zeros(C)
         self.blocked = np.zeros(C)
         self.undistributed = np.zeros(C)
@@ -105,6 +108,7 @@ class _Accumulator:
         self.incident += tally.incident
         self.incident_sq += tally.incident**2 / tally.paths
         self.emitted += tally.emitted
+        self.absorbed += tally.absorbed
         self.escaped += tally.escaped
         self.blocked += tally.blocked
         self.undistributed += tally.undistributed
@@ -142,7 +146,10 @@ class _Accumulator:
         """Power balance of the run in the scene's units, per channel (3,)."""
         scale = self.scene.total_power / self.paths if self.paths else 0.0
         expand = (lambda a: np.repeat(a, 3)) if self.channels == 1 else (lambda a: a)
-        absorbed = ((1 - self.reflectivity) * self.incident).sum(axis=1) + self.blocked
+        # Absorbed as the paths tallied it (what arrived at each hit minus what left it, plus
+        # what back sides stopped): the accounts balance path by path, so emitted = absorbed +
+        # escaped + undistributed to rounding. Its expectation is sum_j (1 - R_j) I_j + blocked.
+        absorbed = self.absorbed + self.blocked
         return {
             "emitted": expand(self.emitted * scale),
             "absorbed": expand(absorbed * scale),
@@ -202,6 +209,7 @@ def solve(
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
         raise ValueError(f"seed must be a non-negative whole number; got {seed!r}")
     threads = int(threads or min(os.cpu_count() or 1, 8))
+    paths = None if paths is None else int(paths)  # numpy integers welcome
     start = time.perf_counter()
 
     prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
@@ -226,7 +234,8 @@ def solve(
         return min(chunk, cap - k * chunk)
 
     chunk_count = math.ceil(cap / chunk)
-    done_rule = STOP_TARGET if (target_mse is not None and not measured_rule) else STOP_PATHS
+    # Running the predicted paths for a target ends as "target"; running given paths, "paths".
+    done_rule = STOP_TARGET if (paths is None and not measured_rule) else STOP_PATHS
     stopped = None
     pending = deque()
     next_chunk = 0

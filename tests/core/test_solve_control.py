@@ -36,6 +36,23 @@ def test_predicted_stop_rule_runs_the_predicted_paths(scene):
     assert r.predicted_mse <= target
 
 
+def test_given_paths_end_as_paths_even_with_a_target(scene):
+    """With both paths= and target_mse= under the predicted rule, paths= is what runs."""
+    r = solve(scene, "finite", paths=3_000, target_mse=1.0, seed=1)
+    assert r.paths == 3_000 and r.stopped == "paths"
+
+
+def test_numpy_numbers_are_accepted(scene):
+    r = solve(scene, "biased_infinite", paths=np.int64(2_000), threshold=np.float32(1e-3), seed=np.int64(3))
+    assert r.paths == 2_000
+    p = predict(scene, "finite", target_mse=np.float32(1e-4))
+    assert p.paths == predict(scene, "finite", target_mse=float(np.float32(1e-4))).paths
+    with pytest.raises(ValueError, match="paths"):
+        solve(scene, "finite", paths=np.float64(10.0))
+    with pytest.raises(ValueError, match="paths"):
+        solve(scene, "finite", paths=np.bool_(True))
+
+
 def test_measured_stop_rule_stops_at_the_target(scene):
     target = 2e-4
     r = solve(scene, "biased_infinite", target_mse=target, stop_rule="measured", seed=2)

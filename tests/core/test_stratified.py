@@ -28,6 +28,42 @@ def test_allotment_is_floor_or_ceil_of_the_expected_count():
         assert u.shape == (4, count) and u.min() >= 0 and u.max() < 1
 
 
+def test_a_shift_just_below_one_stays_inside_the_table():
+    """(count - 1 + r) / count rounds to 1.0 for r within ~count 2^-53 of 1: the last path
+    still gets the last source."""
+
+    class AlmostOne:
+        def random(self, size=None):
+            return np.nextafter(1.0, 0.0) if size is None else np.full(size, 0.5)
+
+    table = SourceTable(np.ones(3), np.ones((3, 3)))
+    patch, u = table.stratified(3, AlmostOne())  # an IndexError before the clamp
+    assert patch[-1] == 2 and ((patch >= 0) & (patch < 3)).all()
+
+
+def test_sample_draws_the_law_of_independent_choices():
+    """SourceTable.sample (multinomial counts with few sources, per-path choices otherwise)
+    gives each source its share: a chi-square test of the counts against count p_i."""
+    rng = np.random.default_rng(2)
+    area = rng.uniform(0.1, 2, 40)
+    emission = np.zeros((40, 3))
+    emission[::3] = rng.uniform(0.1, 1, (14, 3))
+    table = SourceTable(area, emission)
+    for count in (20, 100_000):  # per-path choices, then multinomial counts
+        total = np.zeros(table.patches.size)
+        rounds = 200_000 // count
+        for _ in range(rounds):
+            patch = table.sample(count, rng)
+            assert patch.size == count
+            if count >= 100_000:
+                assert (np.diff(patch) >= 0).all()  # multinomial counts come grouped by source
+            total += np.bincount(patch, minlength=40)[table.patches]
+        expected = rounds * count * table.probability
+        chi2 = ((total - expected) ** 2 / expected).sum()
+        dof = table.patches.size - 1
+        assert chi2 < dof + 5 * np.sqrt(2 * dof), chi2
+
+
 def test_first_ray_uniforms_are_uniform():
     """Each path's four numbers are uniform (random shift modulo 1): their means over many
     chunks are 1/2 within the standard error of a uniform."""
