@@ -12,7 +12,17 @@ larger than the patch size are subdivided:
   e.g. Blender's loop triangles, or a fan) and each triangle is then
   subdivided as a triangle.
 
-Faces that are small enough are kept as they are: one face, one patch.  Every
+Faces that are small enough are kept as they are: one face, one patch.
+
+A patch must be coplanar triangles (the core refuses a patch whose triangles
+face different ways).  A quad or n-gon that is not planar (a twisted quad, a
+sculpted or deformed mesh, a NURBS surface's tessellation) is therefore never
+one patch nor a grid of bilinear cells: it is split into the triangles of its
+triangulation, each of which is a patch of its own (subdivided as a triangle
+when larger than the patch size).  A face is planar when every triangle of its
+triangulation is within PLANAR_ANGLE_DEGREES of the face's area-weighted
+normal; triangles of no area at the core's tolerance do not count (their normal
+is rounding noise) and, in split faces, are left out.  Every
 face of the resulting *patch mesh* is one patch; points generated on the same
 source edge at the same fraction are welded, so neighbouring patches share
 vertices wherever their subdivisions agree.
@@ -28,9 +38,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .scene import RELATIVE_DEGENERATE_AREA
+
 __all__ = [
     "PatchMesh",
     "mesh_patches",
+    "nonplanar_faces",
+    "default_min_area",
+    "PLANAR_ANGLE_DEGREES",
     "concatenate",
     "reverse_faces",
     "fan_triangulation",
@@ -38,6 +53,17 @@ __all__ = [
     "point_average",
     "corner_values",
 ]
+
+
+# A quad or n-gon is one patch (or a grid of patches) only if every triangle of its
+# triangulation is within this angle of the face's area-weighted normal; otherwise each of its
+# triangles is a patch.  Far below the core's limit (a triangle at most 60 degrees from its
+# patch's normal, MIN_PATCH_NORMAL_COSINE), also for the cells of a grid (a bilinear cell of a
+# quad within the angle is within about twice the angle); far above float32 rounding, which
+# tilts a triangle by ~1e-7 x (distance from the origin / face size) radians, so faces that are
+# planar but for the rounding of their vertices stay whole.
+PLANAR_ANGLE_DEGREES = 1.0
+PLANAR_COSINE = float(np.cos(np.radians(PLANAR_ANGLE_DEGREES)))
 
 
 @dataclass
@@ -146,6 +172,50 @@ def fan_triangulation(face_sizes, corner_verts):
         axis=1,
     )
     return triangles.reshape(-1, 3), triangle_face
+
+
+def default_min_area(points, triangles) -> float:
+    """The core's degenerate-triangle area for a scene made of this mesh alone:
+    RELATIVE_DEGENERATE_AREA x (bounding-box diagonal of the vertices the triangles use)**2."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if not len(triangles):
+        return 0.0
+    used = points[np.unique(triangles)]
+    diagonal = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
+    return RELATIVE_DEGENERATE_AREA * diagonal**2
+
+
+def nonplanar_faces(points, face_count, face_triangles, triangle_face, min_area=None):
+    """Which faces are not planar, and which triangles have an area: (nonplanar (F,), has_area (T,)).
+
+    A triangle has an area when its area exceeds ``min_area`` (by default
+    :func:`default_min_area`; pass the whole scene's, RELATIVE_DEGENERATE_AREA x its
+    diagonal**2, to match the core exactly: it drops triangles of that area or less).  A face
+    is non-planar when one of its triangles with an area is further than PLANAR_ANGLE_DEGREES
+    from the face's normal (the sum of those triangles' area vectors, as the core computes a
+    patch's normal), or when those area vectors cancel.  A face whose triangles all lack an
+    area counts as planar (it is left as it is; the caller decides about zero-area faces).
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    t = np.asarray(face_triangles, dtype=np.int64).reshape(-1, 3)
+    tf = np.asarray(triangle_face, dtype=np.int64).ravel()
+    if min_area is None:
+        min_area = default_min_area(points, t)
+    p = points[t]
+    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # 2 x area x normal
+    double_area = np.linalg.norm(cross, axis=1)
+    has_area = 0.5 * double_area > float(min_area)
+    w = np.where(has_area[:, None], cross, 0.0)
+    normal = np.stack([np.bincount(tf, weights=w[:, k], minlength=face_count) for k in range(3)], axis=1)
+    length = np.linalg.norm(normal, axis=1)
+    total = np.bincount(tf, weights=np.where(has_area, double_area, 0.0), minlength=face_count)
+    folded = (length <= 1e-12 * total) & (total > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cosine = np.einsum("ij,ij->i", cross, normal[tf]) / (double_area * length[tf])
+    tilted = has_area & ~(cosine >= PLANAR_COSINE)  # NaN (a folded face) counts as tilted
+    nonplanar = folded | (np.bincount(tf, weights=tilted, minlength=face_count) > 0)
+    return nonplanar, has_area
 
 
 # ---------------------------------------------------------------------------
@@ -310,6 +380,7 @@ def mesh_patches(
     patch_size: float,
     face_triangles=None,
     triangle_face=None,
+    min_area=None,
 ) -> PatchMesh:
     """Subdivide the faces of one mesh into patches no larger than ``patch_size``.
 
@@ -319,8 +390,15 @@ def mesh_patches(
     patch_size    largest patch edge, > 0
     face_triangles, triangle_face   optional triangulation of the source faces
                   (vertex indices, (T,3), and the face of each triangle), used
-                  to triangulate n-gons and kept faces; fan triangulation if
-                  not given.
+                  to triangulate n-gons, non-planar faces and kept faces; fan
+                  triangulation if not given.
+    min_area      triangles of this area or less are degenerate (see
+                  :func:`nonplanar_faces`): they do not make a face non-planar,
+                  and faces cut into triangles leave them out (the core would
+                  drop them, leaving empty patches).  Default: the core's
+                  tolerance for a scene of this mesh alone; pass
+                  RELATIVE_DEGENERATE_AREA x (scene diagonal)**2 when several
+                  meshes make one scene.
 
     Returns a :class:`PatchMesh` whose patches appear in source-face order
     (all patches of face 0 first, then face 1, ...).
@@ -370,11 +448,17 @@ def mesh_patches(
     limit = patch_size * (1.0 + 1e-9)
     ngon = face_sizes > 4
     big = np.where(ngon, np.maximum(longest, tri_longest), longest) > limit
+    # non-planar quads and n-gons: their triangles, each a patch (never a grid of
+    # bilinear cells, which would not be planar either)
+    nonplanar, has_area = nonplanar_faces(points, F, face_triangles, triangle_face, min_area)
+    kept_face = ~big & ~nonplanar
+    grid_face = big & (face_sizes == 4) & ~nonplanar
+    to_triangles = ~kept_face & ~grid_face
 
     b = _Builder()
 
     # --- kept faces: corners are source vertices --------------------------
-    kept = np.nonzero(~big)[0]
+    kept = np.nonzero(kept_face)[0]
     if len(kept):
         ksizes = face_sizes[kept]
         corner_idx = np.repeat(starts[kept], ksizes) + (
@@ -385,7 +469,7 @@ def mesh_patches(
         b.add_faces(ksizes, first + np.arange(len(verts)), kept, kept * 0)
 
     # --- quads into grids ---------------------------------------------------
-    quads = np.nonzero(big & (face_sizes == 4))[0]
+    quads = np.nonzero(grid_face)[0]
     if len(quads):
         q = corner_verts[starts[quads][:, None] + np.arange(4)]  # (Q,4)
         p = points[q]  # (Q,4,3)
@@ -437,9 +521,12 @@ def mesh_patches(
                 np.tile(np.arange(nc), G),
             )
 
-    # --- triangles and triangulated n-gons ----------------------------------
-    big_tri_faces = big & (face_sizes != 4)
-    tri_sel = np.nonzero(big_tri_faces[triangle_face])[0] if len(triangle_face) else np.zeros(0, np.int64)
+    # --- triangles, triangulated n-gons and non-planar faces ----------------
+    # triangles without an area are left out (faces with some area only: a face of
+    # no area at all stays, for the caller to refuse or drop)
+    face_has_area = np.bincount(triangle_face, weights=has_area, minlength=F) > 0
+    cut = to_triangles[triangle_face] & (has_area | ~face_has_area[triangle_face])
+    tri_sel = np.nonzero(cut)[0]
     if len(tri_sel):
         t = face_triangles[tri_sel]
         tf = triangle_face[tri_sel]
@@ -528,7 +615,7 @@ def mesh_patches(
     tris = np.zeros((0, 3), dtype=np.int64)
     # triangles and grid cells: fan (exact for a planar cell); kept quads and
     # kept n-gons: the source triangulation (Blender's, when given)
-    kept_patch = ~big[patch_face]
+    kept_patch = kept_face[patch_face]
     small = (sizes == 3) | ((sizes == 4) & ~kept_patch)
     if np.any(small):
         sp = np.nonzero(small)[0]
@@ -548,7 +635,7 @@ def mesh_patches(
         patch_of_face = -np.ones(F, dtype=np.int64)
         patch_of_face[src_face] = ng
         tsel = np.nonzero(patch_of_face[triangle_face] >= 0)[0]
-        tsel = tsel[~big[triangle_face[tsel]]]
+        tsel = tsel[kept_face[triangle_face[tsel]]]
         tris = np.concatenate([tris, vkey_point[face_triangles[tsel]]])
         tri_patch = np.concatenate([tri_patch, patch_of_face[triangle_face[tsel]]])
     order_t = np.argsort(tri_patch, kind="stable")
