@@ -168,18 +168,28 @@ class SolveOutput:
         return float(np.sum(energy["blocked"])) / emitted if emitted > 0 else 0.0
 
 
-def drop_zero_area_faces(objects):
-    """(objects, notes): faces with no area at the core's tolerance left out, objects left
-    without faces skipped. Such faces (collinear or coincident corners, common in imported
-    meshes) are invisible, and a patch made of them only would make the core refuse the scene."""
+def degenerate_area(objects) -> float:
+    """The core's degenerate-triangle area for the scene these objects make: triangles of this
+    area or less are dropped by the core (RELATIVE_DEGENERATE_AREA x the squared diagonal of the
+    vertices the triangles use). The meshing gets it too, so that the faces it cuts into
+    triangles (non-planar ones) never make a patch of dropped triangles only."""
     from .core.scene import RELATIVE_DEGENERATE_AREA
 
     used = [o.vertices[np.unique(o.triangles)] for o in objects if len(o.triangles)]
     if not used:
-        return [], [f"'{o.name}': every face has zero area; the object was skipped" for o in objects]
+        return 0.0
     used = np.vstack(used)
     diagonal = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
-    threshold = RELATIVE_DEGENERATE_AREA * diagonal**2
+    return RELATIVE_DEGENERATE_AREA * diagonal**2
+
+
+def drop_zero_area_faces(objects):
+    """(objects, notes): faces with no area at the core's tolerance left out, objects left
+    without faces skipped. Such faces (collinear or coincident corners, common in imported
+    meshes) are invisible, and a patch made of them only would make the core refuse the scene."""
+    if not any(len(o.triangles) for o in objects):
+        return [], [f"'{o.name}': every face has zero area; the object was skipped" for o in objects]
+    threshold = degenerate_area(objects)
     kept, notes = [], []
     for o in objects:
         F = len(o.face_sizes)
@@ -223,13 +233,16 @@ def patch_count(objects, patch_size) -> float:
 
     The same rule as the meshing: a face whose longest edge (n-gons: also the edges of their
     triangulation) is within the patch size stays one patch; a larger quad becomes an
-    n_u x n_v grid, a larger triangle or n-gon n^2 triangles per triangle, n = ceil(edge / size).
+    n_u x n_v grid, a larger triangle or n-gon n^2 triangles per triangle, n = ceil(edge / size);
+    a non-planar quad or n-gon n^2 triangles per triangle of its triangulation (n = 1 when the
+    triangle is within the patch size), triangles without an area left out.
     """
     patch_size = float(patch_size)
     if not np.isfinite(patch_size) or patch_size <= 0:
         raise ValueError(f"patch size must be a positive number, got {patch_size!r}")
     limit = patch_size * (1.0 + 1e-9)  # as in mesh_patches: a face exactly patch_size long is kept
     total = 0.0
+    min_area = degenerate_area(objects)
     for o in objects:
         sizes = np.asarray(o.face_sizes, dtype=np.int64)
         if not len(sizes):
@@ -253,14 +266,17 @@ def patch_count(objects, patch_size) -> float:
             np.maximum.at(diagonal, triangle_face, triangle_longest)
             longest = np.where(ngon, np.maximum(longest, diagonal), longest)
         big = longest > limit
-        total += float(np.count_nonzero(~big))
-        quad = big & (sizes == 4)
+        nonplanar, has_area = meshing.nonplanar_faces(points, len(sizes), triangles, triangle_face, min_area)
+        kept = ~big & ~nonplanar
+        total += float(np.count_nonzero(kept))
+        quad = big & (sizes == 4) & ~nonplanar
         if quad.any():
             e = edge[starts[quad][:, None] + np.arange(4)]  # edges 01 12 23 30
             n_u = np.maximum(np.ceil(np.maximum(e[:, 0], e[:, 2]) / limit), 1.0)
             n_v = np.maximum(np.ceil(np.maximum(e[:, 1], e[:, 3]) / limit), 1.0)
             total += float(np.sum(n_u * n_v))
-        split = (big & (sizes != 4))[triangle_face] if len(triangle_face) else np.zeros(0, bool)
+        face_has_area = np.bincount(triangle_face, weights=has_area, minlength=len(sizes)) > 0
+        split = (~kept & ~quad)[triangle_face] & (has_area | ~face_has_area[triangle_face])
         if split.any():
             n = np.maximum(np.ceil(triangle_longest[split] / limit), 1.0)
             total += float(np.sum(n * n))
@@ -306,6 +322,7 @@ def _make_patches(objects, patch_size) -> Patches:
     if cached is not None:
         meshes, combined = cached
         return _with_materials(objects, meshes, combined, key)
+    min_area = degenerate_area(objects)  # the scene's: what the core drops, across all objects
     meshes = [
         meshing.mesh_patches(
             o.vertices,
@@ -314,6 +331,7 @@ def _make_patches(objects, patch_size) -> Patches:
             patch_size,
             face_triangles=o.triangles,
             triangle_face=o.triangle_face,
+            min_area=min_area,
         )
         for o in objects
     ]
