@@ -62,23 +62,28 @@ def raw_rate(scene, threads, seconds, batch=1 << 16):
     return rays / max(t for _, t in results), rays / cpu
 
 
-def solve_rate(scene, estimator, threads, seconds, seed=1, **kw):
-    p = predict(scene, estimator, threshold=kw.get("threshold", 1e-3))
-    paths = int(seconds * 1e7 / p.expected_path_length * threads)  # more than fits: the time limit ends it
+def solve_rate(scene, estimator, threads, paths, seed=1, **kw):
+    """Rays per second of a whole solve of ``paths`` paths (wall clock, and per CPU second).
+
+    A fixed path count, not a time limit: a run stopped by its time limit drops the chunks
+    still in flight, whose rays would be traced but not counted."""
     cpu = time.process_time()
-    r = solve(scene, estimator, paths=paths, threads=threads, seed=seed, max_seconds=seconds, **kw)
+    r = solve(scene, estimator, paths=paths, threads=threads, seed=seed, **kw)
     cpu = time.process_time() - cpu
     return r.rays / r.seconds, r.rays / cpu
 
 
 def paired_ratio(scene, estimator, threads, seconds, rounds=3, **kw):
     """Alternate raw and end-to-end measurements so both see the same machine load; the
-    median of the per-round ratios is the result."""
+    median of the per-round ratios is the result. Each solve runs the paths that would take
+    about ``seconds`` at the raw rate just measured."""
+    p = predict(scene, estimator, threshold=kw.get("threshold", 1e-3))
     solve(scene, estimator, paths=20_000, threads=threads, **kw)  # warm up
     raws, rates = [], []
     for k in range(rounds):
         raws.append(raw_rate(scene, threads, seconds / 2))
-        rates.append(solve_rate(scene, estimator, threads, seconds, seed=k + 1, **kw))
+        paths = max(1, int(raws[-1][0] * seconds / p.expected_path_length))
+        rates.append(solve_rate(scene, estimator, threads, paths, seed=k + 1, **kw))
     raws, rates = np.array(raws), np.array(rates)  # columns: wall-clock rate, CPU-time rate
     ratios = rates / raws
     return float(np.median(raws[:, 0])), float(np.median(rates[:, 0])), float(np.median(ratios[:, 0])), float(np.median(ratios[:, 1]))

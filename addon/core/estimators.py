@@ -35,13 +35,15 @@ from .sampling import (
     SourceTable,
     add_sphere_points,
     barycentric_point_rows,
-    frame_points,
     patch_point_rows,
 )
 
 # Rays per step while the chunk still has paths to start: big enough that numpy's per-call
 # cost is small next to the work, small enough that a step's arrays stay in cache.
 WAVEFRONT_PATHS = 1 << 14
+# Walks sort their paths by patch at each step in scenes of at least this many patches (below
+# it every table fits in cache and the sort costs as much as coherent rays gain).
+SORT_MIN_PATCHES = 1 << 13
 # Scored hits are kept per step and added up (one bincount) every this many hits.
 SCORE_FLUSH = 1 << 18
 
@@ -93,10 +95,17 @@ class WalkTables:
         self.unit_weights = estimator == FINITE and self.channels == 1
         self.weight_is_accumulated = estimator != FINITE and self.channels == 1
         # Paths of a grey finite walk leaving from random points are interchangeable: a path
-        # is nothing but the patch it is on. The walk then keeps them sorted by patch, so that
-        # rays leaving one patch go to the ray tracer together (coherent rays trace faster and
-        # the table gathers read memory in order); the order changes nothing in the estimate.
+        # is nothing but the patch it is on. In big scenes the walk then keeps them sorted by
+        # patch, so that rays leaving one patch go to the ray tracer together (coherent rays
+        # trace faster and the table gathers read memory in order); the order changes nothing
+        # in the estimate.
         self.exchangeable = self.unit_weights and self.exit_random
+        # Other walks keep their paths grouped by patch too (by a 16-bit key, patch >> shift)
+        # when the scene is big enough for coherence to pay for the sort.
+        big = scene.patch_count >= SORT_MIN_PATCHES
+        self.sort_paths = not self.exchangeable and big
+        self.sort_exchangeable = self.exchangeable and big
+        self.patch_key_shift = max(0, int(scene.patch_count - 1).bit_length() - 16)
         if self.geometry.all_parallelograms:
             self.leave_table = self.geometry.leave_table
         self.triangle_normal_rows = self.geometry.triangle_normal_rows
@@ -107,7 +116,11 @@ class WalkTables:
         g = self.geometry
         if g.all_parallelograms:
             frame = self.leave_table.take(patch, axis=1, mode="wrap")  # (12,n): corner, a, b, normal
-            origins = frame_points(frame, u[0], u[1])
+            frame[3:6] *= u[0]
+            frame[6:9] *= u[1]
+            origins = frame[0:3]
+            origins += frame[3:6]
+            origins += frame[6:9]  # corner + u0 a + u1 b
             directions = frame[9:12]
         else:
             u_triangle = u[self.row_triangle]
@@ -156,12 +169,8 @@ def _total(weights, n):
 
 
 def _facing(directions, normals):
-    """direction . normal < 0 per column of two (3,n) row arrays (``normals`` is overwritten)."""
-    normals *= directions
-    dot = normals[0]
-    dot += normals[1]
-    dot += normals[2]
-    return dot < 0
+    """direction . normal < 0 per column of two (3,n) row arrays."""
+    return np.einsum("ij,ij->j", directions, normals) < 0
 
 
 def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=None) -> ChunkTally:
@@ -280,20 +289,19 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         scores.add(patch, weights)
         arriving = _total(weights, patch.size)
 
-        go_on = None  # which of the hit paths go on (None: all of them)
+        go_on = None  # which of the hit paths go on, in the order they go on (None: all, as they are)
         if finite:
             survive = u_survive < tables.mean_reflectivity.take(patch, mode="wrap")
             if tables.exchangeable:
-                # Survivors leave in patch order (any order is the same estimate).
-                patch = _sorted_patches(patch.compress(survive), P)
-            else:
-                go_on = np.flatnonzero(survive)
-                patch = patch.take(go_on, mode="wrap")
-                if weights is not None:
-                    weights = weights.take(go_on, axis=1, mode="wrap")
-                    weights *= tables.survivor_weight.take(patch, axis=1, mode="wrap")
-            ended["absorbed"] += int(survive.size - patch.size)
-            absorbed += arriving - _total(weights, patch.size)
+                patch = patch.compress(survive)
+                if tables.sort_exchangeable:
+                    # Survivors leave in patch order (any order is the same estimate).
+                    patch = _sorted_patches(patch, P)
+                ended["absorbed"] += int(survive.size - patch.size)
+                absorbed += arriving - patch.size
+                continue
+            go_on = np.flatnonzero(survive)
+            ended["absorbed"] += int(survive.size - go_on.size)
         else:
             # New arrays, never in place: the weights just scored may be a view of ``accumulated``.
             accumulated = accumulated * tables.mean_reflectivity.take(patch, mode="wrap")
@@ -307,18 +315,27 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 undistributed += _weight_sum(weights, cut)
                 ended["threshold"] += int(np.count_nonzero(cut))
                 go_on = np.flatnonzero(~cut)
-                patch = patch.take(go_on, mode="wrap")
-                accumulated = accumulated.take(go_on, mode="wrap")
-                if tables.weight_is_accumulated:
-                    weights = accumulated[None]
-                else:
-                    weights = weights.take(go_on, axis=1, mode="wrap")
+        if tables.sort_paths and patch.size:
+            # Paths go on grouped by patch: coherent rays, gathers in memory order.
+            go_on = _patch_order(patch, go_on, tables.patch_key_shift)
 
+        if go_on is not None:
+            patch = patch.take(go_on, mode="wrap")
+            if accumulated is not None:
+                accumulated = accumulated.take(go_on, mode="wrap")
+            if tables.weight_is_accumulated:
+                weights = accumulated[None]
+            elif weights is not None:
+                weights = weights.take(go_on, axis=1, mode="wrap")
+            if not exit_random:
+                hit, bary_u, bary_v = (a.take(go_on, mode="wrap") for a in (hit, bary_u, bary_v))
+        if finite:
+            if weights is not None:
+                weights *= tables.survivor_weight.take(patch, axis=1, mode="wrap")
+            absorbed += arriving - _total(weights, patch.size)
         if not exit_random:
             # Leave from the hit point, re-made from its barycentric coordinates on the
             # triangle's leaving frame: on the surface (inset, pushed off), whatever the distance.
-            if go_on is not None:
-                hit, bary_u, bary_v = (a.take(go_on, mode="wrap") for a in (hit, bary_u, bary_v))
             leave_from = (hit, bary_u, bary_v)
 
     return ChunkTally(
@@ -366,6 +383,18 @@ class _Scores:
     def total(self):
         self.flush()
         return self.incident
+
+
+def _patch_order(patch, selected, shift):
+    """Indices of the ``selected`` entries of ``patch`` (all where None), ordered by patch
+    (patch >> shift: a 16-bit key, sorted by numpy's radix sort)."""
+    if selected is None:
+        selected = np.arange(patch.size)
+    key = patch.take(selected, mode="wrap")
+    if shift:
+        key = key >> shift
+    order = np.argsort(key.astype(np.uint16), kind="stable")
+    return selected.take(order, mode="wrap")
 
 
 def _sorted_patches(patch, patch_count):
