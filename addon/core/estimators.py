@@ -41,8 +41,9 @@ from .sampling import (
 # Rays per step while the chunk still has paths to start: big enough that numpy's per-call
 # cost is small next to the work, small enough that a step's arrays stay in cache.
 WAVEFRONT_PATHS = 1 << 14
-# Walks sort their paths by patch at each step in scenes of at least this many patches (below
-# it every table fits in cache and the sort costs as much as coherent rays gain).
+# Interchangeable paths are sorted by patch at each step in scenes of at least this many
+# patches (below it every table fits in cache and the sort costs as much as coherent rays
+# gain). Sorting other walks' paths (a permutation of all they carry) gained nothing measurable.
 SORT_MIN_PATCHES = 1 << 13
 # Scored hits are kept per step and added up (one bincount) every this many hits.
 SCORE_FLUSH = 1 << 18
@@ -100,14 +101,12 @@ class WalkTables:
         # trace faster and the table gathers read memory in order); the order changes nothing
         # in the estimate.
         self.exchangeable = self.unit_weights and self.exit_random
-        # Other walks keep their paths grouped by patch too (by a 16-bit key, patch >> shift)
-        # when the scene is big enough for coherence to pay for the sort.
-        big = scene.patch_count >= SORT_MIN_PATCHES
-        self.sort_paths = not self.exchangeable and big
-        self.sort_exchangeable = self.exchangeable and big
-        self.patch_key_shift = max(0, int(scene.patch_count - 1).bit_length() - 16)
+        self.sort_exchangeable = self.exchangeable and scene.patch_count >= SORT_MIN_PATCHES
+        self.exit_table = None
         if self.geometry.all_parallelograms:
             self.leave_table = self.geometry.leave_table
+            if not self.exit_random:
+                self.exit_table = self.geometry.exit_table
         self.triangle_normal_rows = self.geometry.triangle_normal_rows
 
     def leave_random(self, patch, u):
@@ -226,7 +225,29 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
 
         # The rays: from new uniform points of the patches (random exit, and new paths), or
         # from the hit points (exit_point="hit"), in cosine-distributed directions.
-        if exit_random or n_live == 0:
+        if not exit_random and n_live and tables.exit_table is not None:
+            # Hit points and new paths' points from one gather of one table (triangle leaving
+            # frames, then patch parallelograms): corner + a edge1 + b edge2 for all.
+            u = rng.random((2, n), dtype=np.float32)
+            hit, bary_u, bary_v = leave_from
+            if new > 0:
+                u_new = rng.random((2, new), dtype=np.float32)
+                if first_uniforms is not None:
+                    u_new = first_uniforms[:2, started : started + new]
+                    u[:, n_live:] = first_uniforms[2:4, started : started + new]
+                column = np.concatenate((hit, patch[n_live:] + g.triangle_count))
+                bary_u = np.concatenate((bary_u, u_new[0]))
+                bary_v = np.concatenate((bary_v, u_new[1]))
+            else:
+                column = hit
+            frame = tables.exit_table.take(column, axis=1, mode="wrap")  # (12,n)
+            frame[3:6] *= bary_u
+            frame[6:9] *= bary_v
+            origins = frame[0:3]
+            origins += frame[3:6]
+            origins += frame[6:9]
+            directions = add_sphere_points(frame[9:12], u[0], u[1])
+        elif exit_random or n_live == 0:
             u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
             if first_uniforms is not None and new > 0:
                 # A path's first ray: a randomly shifted low-discrepancy set (stratified).
@@ -315,9 +336,6 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 undistributed += _weight_sum(weights, cut)
                 ended["threshold"] += int(np.count_nonzero(cut))
                 go_on = np.flatnonzero(~cut)
-        if tables.sort_paths and patch.size:
-            # Paths go on grouped by patch: coherent rays, gathers in memory order.
-            go_on = _patch_order(patch, go_on, tables.patch_key_shift)
 
         if go_on is not None:
             patch = patch.take(go_on, mode="wrap")
@@ -383,18 +401,6 @@ class _Scores:
     def total(self):
         self.flush()
         return self.incident
-
-
-def _patch_order(patch, selected, shift):
-    """Indices of the ``selected`` entries of ``patch`` (all where None), ordered by patch
-    (patch >> shift: a 16-bit key, sorted by numpy's radix sort)."""
-    if selected is None:
-        selected = np.arange(patch.size)
-    key = patch.take(selected, mode="wrap")
-    if shift:
-        key = key >> shift
-    order = np.argsort(key.astype(np.uint16), kind="stable")
-    return selected.take(order, mode="wrap")
 
 
 def _sorted_patches(patch, patch_count):

@@ -217,6 +217,14 @@ class Geometry:
         return np.ascontiguousarray(np.vstack([self.parallelogram_frame, self.patch_normal_rows]))
 
     @cached_property
+    def exit_table(self):
+        """(12,T+P) float32: a hit-point exit's table. Columns 0..T-1 are the triangles'
+        leaving frames (corner, edge1, edge2) with their patch's normal, columns T..T+P-1 the
+        rows of :attr:`leave_table` (for paths starting on a source)."""
+        triangle_columns = np.vstack([self.triangle_frame, self.patch_normal_rows[:, self.triangle_patch]])
+        return np.ascontiguousarray(np.hstack([triangle_columns, self.leave_table]))
+
+    @cached_property
     def triangle_normal_rows(self):
         """(3,T) float32: the triangle normals one coordinate per row, for column gathers."""
         return np.ascontiguousarray(self.triangle_normal.T)
