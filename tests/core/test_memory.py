@@ -1,11 +1,15 @@
 """Memory of a solve on the figure-4 room: under 1 GiB, and not growing with the paths (issue 5).
 
 Runs in a fresh Python process, so that its peak resident set is its own: the 66,572-patch room
-(sample_scenes.room_fig4) is solved with N paths and then with 4N paths. N = 32 x 65,536 is the
-smallest path count whose chunks have the maximum size, so both runs work with chunks of the
-same size and the second run's extra chunks (128 instead of 32) are the only difference. Its
-peak resident set may exceed the first run's by at most MARGIN_RSS, and its tracemalloc peak
-(numpy and Python allocations during the solve, exact) by at most MARGIN_TRACED.
+(sample_scenes.room_fig4) is solved with N paths and then with 4N paths, both with chunks of
+the maximum size (solver.chunk_paths_for), so the second run's extra chunks (96) are the only
+difference. To keep the test short the child caps chunks at 65,536 paths (production: 2^19 paths
+or 2^20 rays), so that N is 32 chunks: what a chunk holds while it runs does not depend on its
+size beyond the wavefront (estimators.WAVEFRONT_PATHS) and the scores kept between bincounts
+(estimators.SCORE_FLUSH), which are the same. The second run's peak resident set may exceed
+the first run's by at most MARGIN_RSS, and its tracemalloc peak (numpy and Python allocations
+during the solve, exact) by at most MARGIN_TRACED. benchmarks/memory.py measures the
+production chunk sizes.
 
 What this catches: anything kept per chunk or per path (chunk tallies retained, per-path
 records, growing lists of scores): one (1, P) float64 tally is 0.5 MB here, so 96 extra retained
@@ -36,13 +40,17 @@ CHILD = textwrap.dedent(
     import json, resource, sys, tracemalloc
     sys.path.insert(0, {root!r})
     import numpy as np
-    from addon.core import solve
+    import addon.core.solver as solver
+    from addon.core import predict, solve
 
     from sample_scenes import room_fig4
 
     scene = room_fig4.build().scene
-    out = {{"patches": scene.patch_count}}
-    for name, paths in (("small", 32 * 65536), ("large", 128 * 65536)):
+    solver.MAX_CHUNK_PATHS = 1 << 16
+    chunk = solver.chunk_paths_for(predict(scene, "finite").expected_path_length, 10**12)
+    assert chunk == 1 << 16 and solver.chunk_paths_for(2.0, solver.MIN_CHUNKS * chunk) == chunk
+    out = {{"patches": scene.patch_count, "chunk": chunk}}
+    for name, paths in (("small", solver.MIN_CHUNKS * chunk), ("large", 4 * solver.MIN_CHUNKS * chunk)):
         tracemalloc.start()
         result = solve(scene, "finite", paths=paths, threads=2, seed=1)
         traced = tracemalloc.get_traced_memory()[1]
