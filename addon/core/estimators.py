@@ -31,12 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sampling import (
-    SourceTable,
-    add_sphere_points,
-    barycentric_point_rows,
-    patch_point_rows,
-)
+from .sampling import SourceTable, add_sphere_points, choose_triangles
 
 # Rays per step while the chunk still has paths to start: big enough that numpy's per-call
 # cost is small next to the work, small enough that a step's arrays stay in cache.
@@ -102,31 +97,53 @@ class WalkTables:
         # in the estimate.
         self.exchangeable = self.unit_weights and self.exit_random
         self.sort_exchangeable = self.exchangeable and scene.patch_count >= SORT_MIN_PATCHES
-        self.exit_table = None
+        # Where rays leave from: parallelogram patches (all of them, usually) from one column
+        # each of the leave table; other patches from a triangle of theirs, chosen by area,
+        # in the exit table, which also holds every triangle for the hit-point exit.
         if self.geometry.all_parallelograms:
             self.leave_table = self.geometry.leave_table
-            if not self.exit_random:
-                self.exit_table = self.geometry.exit_table
+        if not (self.geometry.all_parallelograms and self.exit_random):
+            self.exit_table = self.geometry.exit_table
         self.triangle_normal_rows = self.geometry.triangle_normal_rows
 
     def leave_random(self, patch, u):
-        """Rays leaving the given patches from uniform points, in cosine-distributed
-        directions: (origins, directions), each (3,n) float32 rows (unit space)."""
+        """Rays leaving the given patches from uniform points (``u[0]``, ``u[1]``, and
+        ``u[row_triangle]`` to choose a triangle), in cosine-distributed directions (``u[2]``,
+        ``u[3]``): (origins, directions), each (3,n) float32 rows (unit space)."""
+        if self.geometry.all_parallelograms:
+            frame = self.leave_table.take(patch, axis=1, mode="wrap")
+        else:
+            frame = self.exit_table.take(self.leave_columns(patch, u), axis=1, mode="wrap")
+        return _rays_from_frames(frame, u[0], u[1], u[2:4])
+
+    def leave_columns(self, patch, u):
+        """The exit-table column each path leaves from: its patch's parallelogram, or a
+        triangle of the patch chosen by area with ``u[row_triangle]``. Where that is a
+        triangle, folds (u[0], u[1]) onto it in place (u0 + u1 > 1 reflects: uniform)."""
         g = self.geometry
         if g.all_parallelograms:
-            frame = self.leave_table.take(patch, axis=1, mode="wrap")  # (12,n): corner, a, b, normal
-            frame[3:6] *= u[0]
-            frame[6:9] *= u[1]
-            origins = frame[0:3]
-            origins += frame[3:6]
-            origins += frame[6:9]  # corner + u0 a + u1 b
-            directions = frame[9:12]
-        else:
-            u_triangle = u[self.row_triangle]
-            origins = patch_point_rows(g, patch, u_triangle, u[0], u[1])
-            directions = g.patch_normal_rows.take(patch, axis=1, mode="wrap")
-        add_sphere_points(directions, u[2], u[3])
-        return origins, directions
+            return patch + g.triangle_count
+        column = choose_triangles(g, patch, u[self.row_triangle])
+        fold = u[0] + u[1] > 1
+        if g.any_parallelograms:
+            parallelogram = g.patch_parallelogram.take(patch, mode="wrap")
+            column = np.where(parallelogram, patch + g.triangle_count, column)
+            fold &= ~parallelogram
+        np.subtract(1, u[0], out=u[0], where=fold)
+        np.subtract(1, u[1], out=u[1], where=fold)
+        return column
+
+
+def _rays_from_frames(frame, a, b, u_direction):
+    """Rays from gathered (12,n) frame rows [corner, edge a, edge b, normal]: origins
+    corner + a edge_a + b edge_b, directions normal + a uniform sphere point (cosine
+    distributed), computed in place in ``frame``. Returns two (3,n) views of it."""
+    frame[3:6] *= a
+    frame[6:9] *= b
+    origins = frame[0:3]
+    origins += frame[3:6]
+    origins += frame[6:9]
+    return origins, add_sphere_points(frame[9:12], u_direction[0], u_direction[1])
 
 
 @dataclass
@@ -225,46 +242,28 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
 
         # The rays: from new uniform points of the patches (random exit, and new paths), or
         # from the hit points (exit_point="hit"), in cosine-distributed directions.
-        if not exit_random and n_live and tables.exit_table is not None:
-            # Hit points and new paths' points from one gather of one table (triangle leaving
-            # frames, then patch parallelograms): corner + a edge1 + b edge2 for all.
-            u = rng.random((2, n), dtype=np.float32)
-            hit, bary_u, bary_v = leave_from
-            if new > 0:
-                u_new = rng.random((2, new), dtype=np.float32)
-                if first_uniforms is not None:
-                    u_new = first_uniforms[:2, started : started + new]
-                    u[:, n_live:] = first_uniforms[2:4, started : started + new]
-                column = np.concatenate((hit, patch[n_live:] + g.triangle_count))
-                bary_u = np.concatenate((bary_u, u_new[0]))
-                bary_v = np.concatenate((bary_v, u_new[1]))
-            else:
-                column = hit
-            frame = tables.exit_table.take(column, axis=1, mode="wrap")  # (12,n)
-            frame[3:6] *= bary_u
-            frame[6:9] *= bary_v
-            origins = frame[0:3]
-            origins += frame[3:6]
-            origins += frame[6:9]
-            directions = add_sphere_points(frame[9:12], u[0], u[1])
-        elif exit_random or n_live == 0:
+        if exit_random or n_live == 0:
+            # From new uniform points of the patches.
             u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
             if first_uniforms is not None and new > 0:
                 # A path's first ray: a randomly shifted low-discrepancy set (stratified).
                 u[:4, n_live:] = first_uniforms[:, started : started + new]
             origins, directions = tables.leave_random(patch, u)
         else:
+            # From the hit points, and new paths from new points of their sources: one gather
+            # of the exit table (triangle leaving frames, then patch parallelograms) and
+            # corner + a edge1 + b edge2 for all.
             u = rng.random((2, n), dtype=np.float32)
-            origins = np.empty((3, n), np.float32)
-            origins[:, :n_live] = barycentric_point_rows(g, *leave_from)
+            column, bary_u, bary_v = leave_from
             if new > 0:
                 u_new = rng.random((tables.uniforms_per_ray, new), dtype=np.float32)
                 if first_uniforms is not None:
                     u_new[:4] = first_uniforms[:, started : started + new]
                     u[:, n_live:] = u_new[2:4]
-                u_triangle = None if tables.row_triangle is None else u_new[tables.row_triangle]
-                origins[:, n_live:] = patch_point_rows(g, patch[n_live:], u_triangle, u_new[0], u_new[1])
-            directions = add_sphere_points(g.patch_normal_rows.take(patch, axis=1, mode="wrap"), u[0], u[1])
+                column = np.concatenate((column, tables.leave_columns(patch[n_live:], u_new)))
+                bary_u = np.concatenate((bary_u, u_new[0]))
+                bary_v = np.concatenate((bary_v, u_new[1]))
+            origins, directions = _rays_from_frames(tables.exit_table.take(column, axis=1, mode="wrap"), bary_u, bary_v, u)
         started += max(new, 0)
         u_survive = rng.random(n) if finite else None
 

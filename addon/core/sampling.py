@@ -110,10 +110,10 @@ def choose_triangles(geometry, patch, u):
     Patches of one or two triangles (the common case: quads) need one comparison; larger
     patches search their cumulative areas.
     """
-    first = geometry.patch_first_triangle[patch]
+    first = geometry.patch_first_triangle.take(patch, mode="wrap")
     if geometry.max_triangles_per_patch == 1:
         return first
-    triangle = first + (u >= geometry.patch_first_fraction[patch])
+    triangle = first + (u >= geometry.patch_first_fraction.take(patch, mode="wrap"))
     if geometry.max_triangles_per_patch > 2:
         many = np.flatnonzero(geometry.patch_triangle_count[patch] > 2)
         if many.size:
