@@ -1,0 +1,42 @@
+"""What a scene does not need costs nothing (issue 5): a scene that reflects nothing traces one
+bounce per path; grey walks never touch per-channel weights; rays that leave an open scene end
+at once (test_stress.test_open_scene_everything_escapes)."""
+import numpy as np
+import pytest
+
+from addon.core import solve
+from addon.core.estimators import WalkTables, walk_chunk
+from boxes import box_scene
+
+
+@pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
+@pytest.mark.parametrize("exit_point", ["random", "hit"])
+@pytest.mark.parametrize("colour", [False, True])
+def test_a_scene_that_reflects_nothing_traces_one_bounce(estimator, exit_point, colour):
+    emission = [[0, 0, 0], [1.0, 0.5, 0.2], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]] if colour else [0, 1.0, 0, 0, 0, 0]
+    scene, _, _ = box_scene([0.0] * 6, emission, (1.0, 1.4, 0.8), n=2)
+    N = 20_000
+    r = solve(scene, estimator, paths=N, seed=3, exit_point=exit_point)
+    assert r.rays == N  # every path: one ray, then it ends
+    ended = "absorbed" if estimator == "finite" else "threshold"
+    assert r.path_ends[ended] == N
+    assert np.array_equal(r.radiosity, scene.emission)
+    e = r.energy
+    np.testing.assert_allclose(e["absorbed"], e["emitted"], rtol=1e-12)
+    assert (e["undistributed"] == 0).all()
+
+
+@pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
+@pytest.mark.parametrize("exit_point", ["random", "hit"])
+def test_grey_walks_never_touch_per_channel_weights(estimator, exit_point):
+    scene, _, _ = box_scene([0.3, 0.5, 0.7, 0.9, 0.6, 0.8], [0, 2.0, 0, 0, 0, 0], n=2)
+    assert scene.is_grey
+    tables = WalkTables(scene, estimator, 1e-3, exit_point)
+    assert tables.channels == 1
+    reference = walk_chunk(tables, 5_000, np.random.default_rng(1))
+    # Without the per-channel tables at all the walk runs, and gives the same numbers.
+    tables.survivor_weight = tables.start_weight = tables.reflectivity = None
+    bare = walk_chunk(tables, 5_000, np.random.default_rng(1))
+    assert bare.rays == reference.rays
+    assert np.array_equal(bare.incident, reference.incident)
+    assert bare.incident.shape == (1, scene.patch_count)
