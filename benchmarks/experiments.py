@@ -194,3 +194,93 @@ def geometric_mean(values):
 
 def paper_path_length(R, t):
     return 1 + math.log(t) / math.log(R)
+
+
+# --------------------------------------------------------------------------------------------
+# Why the rooms' paths are shorter than the formulas say (grey scenes)
+# --------------------------------------------------------------------------------------------
+
+def first_hit_distribution(scene, paths=2_000_000, seed=31, threads=None):
+    """Fraction of the emitted power whose first hit is each patch, (P,).
+
+    A biased run in which every patch reflects 0.5 and t = 0.9 stops every path at its first
+    hit (0.5 < 0.9), so its reflected radiosity is 0.5 x the directly incident power / area."""
+    from addon.core import solve
+
+    P = scene.patch_count
+    probe = scene.with_materials(np.full(P, 0.5), scene.emission.mean(axis=1))
+    r = solve(probe, "biased_infinite", paths=int(paths), threshold=0.9, seed=seed, threads=threads,
+              **paper_sampling())
+    power = r.reflected.mean(axis=1) * scene.patch_area / 0.5
+    return power / power.sum()
+
+
+def biased_length_model(reflectivity, area, threshold, first_hit=None, walks=400_000, seed=5, max_hits=200):
+    """Mean rays per biased path when the k-th hit's reflectivity is drawn independently:
+    hit 1 from ``first_hit`` (or by area), later hits by area (the stationary distribution of
+    the form-factor walk in a closed scene). A path ends at the first hit after which the product
+    of reflectivities is below t (a reflectivity of 0 ends it at once)."""
+    rng = np.random.default_rng(seed)
+    R = np.asarray(reflectivity, float)
+    p_area = np.asarray(area, float) / np.sum(area)
+    p_first = p_area if first_hit is None else np.asarray(first_hit, float)
+    log_t = math.log(threshold)
+    with np.errstate(divide="ignore"):
+        logR = np.log(R)
+    acc = np.zeros(walks)
+    alive = np.ones(walks, bool)
+    hits = np.zeros(walks)
+    for k in range(max_hits):
+        n = int(alive.sum())
+        if n == 0:
+            break
+        idx = rng.choice(R.size, size=n, p=p_first if k == 0 else p_area)
+        hits[alive] += 1
+        acc[alive] += logR[idx]
+        alive[alive] = acc[alive] >= log_t
+    return float(hits.mean())
+
+
+def finite_length_model(reflectivity, area, first_hit):
+    """1 + E[R_1] / (1 - R_ave): the first hit from ``first_hit``, the rest the formula's."""
+    R = np.asarray(reflectivity, float)
+    r_ave = float(np.sum(area * R) / np.sum(area))
+    return 1.0 + float(np.sum(first_hit * R)) / (1.0 - r_ave)
+
+
+def path_length_analysis(scene, threshold, threads=None, first_hit_paths=2_000_000):
+    """Mean rays per path, from the formulas to what the rooms' walks see (grey scenes)."""
+    R = scene.mean_reflectivity
+    area = scene.patch_area
+    r_ave = float(np.sum(area * R) / area.sum())
+    positive = R > 0
+    geo = math.exp(float(np.sum(area[positive] * np.log(R[positive])) / area[positive].sum()))
+    first = first_hit_distribution(scene, first_hit_paths, threads=threads)
+    return {
+        "R_ave": r_ave,
+        "geometric_mean_R": geo,               # area-weighted, reflecting patches only
+        "absorbing_area_fraction": float(area[~positive].sum() / area.sum()),
+        "first_hit_mean_R": float(np.sum(first * R)),
+        "biased_formula": 1 + math.log(threshold) / math.log(r_ave),
+        "biased_geometric": 1 + math.log(threshold) / math.log(geo),
+        "biased_model_area_reflecting": biased_length_model(R[positive], area[positive], threshold),
+        "biased_model_area": biased_length_model(R, area, threshold),
+        "biased_model_first_hit": biased_length_model(R, area, threshold, first_hit=first),
+        "finite_formula": 1 / (1 - r_ave),
+        "finite_model_first_hit": finite_length_model(R, area, first),
+    }
+
+
+def formula1_infinite_per_path(scene, paths=4_000_000, seed=41, threads=None):
+    """The infinite estimator's step before averaging: Phi_T / A_T * sum_i beta_i, with beta_i
+    the reflected radiosity of the scene with every reflectivity squared (table 1), estimated by
+    two independent finite runs of that scene (paths/2 each). Returns (value, the two halves'
+    relative difference / 2, an estimate of the value's relative standard error)."""
+    from addon.core import solve
+
+    R = scene.mean_reflectivity
+    squared = scene.with_materials(R**2, scene.emission.mean(axis=1))
+    sums = [float(solve(squared, "finite", paths=int(paths) // 2, seed=seed + k, threads=threads,
+                        **paper_sampling()).reflected.mean(axis=1).sum()) for k in range(2)]
+    total = 0.5 * (sums[0] + sums[1])
+    return scene.total_power / scene.total_area * total, abs(sums[0] - sums[1]) / 2 / total
