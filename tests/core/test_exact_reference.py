@@ -71,11 +71,19 @@ def test_infinite_random_exit_matches_direct_solve(coarse):
     assert np.abs(z).max() < Z, z
 
 
-def test_colour_random_exit_matches_direct_solve():
-    """Colour: one path serves three channels (survival by the mean, weights R_c / R_bar)."""
+@pytest.mark.parametrize("sorted_paths", [False, True])
+def test_colour_random_exit_matches_direct_solve(sorted_paths, monkeypatch):
+    """Colour: one path serves three channels (survival by the mean, weights R_c / R_bar).
+    With sorted_paths, the walk regroups its paths by patch at every step (what it does in big
+    scenes), carrying their weights along: the same answer."""
+    import addon.core.estimators as estimators
+
+    if sorted_paths:
+        monkeypatch.setattr(estimators, "SORT_MIN_PATCHES", 1)
     R = np.array([[0.7, 0.2, 0.2], [0.6, 0.6, 0.6], [0.2, 0.7, 0.2], [0.5, 0.5, 0.5], [0.3, 0.4, 0.8], [0.6, 0.5, 0.4]])
     E = np.array([[0, 0, 0], [1.0, 0.8, 0.5], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]])
     scene, F, _ = box_scene(R, E, SIZE, n=2)
+    assert estimators.WalkTables(scene, "finite", 1e-3, "random").sort_paths == sorted_paths
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)
     result = solve(scene, "finite", paths=600_000, seed=5)
     z = (result.reflected - (B - scene.emission)) / np.sqrt(result.reflected_variance)
@@ -88,8 +96,16 @@ def test_colour_random_exit_matches_direct_solve():
     assert np.abs(z).max() < 5.0, np.abs(z).max()
 
 
-def test_hit_exit_matches_continuous_solution(coarse):
+@pytest.mark.parametrize("sorted_paths", [False, True])
+def test_hit_exit_matches_continuous_solution(coarse, sorted_paths, monkeypatch):
+    """(sorted_paths: the paths regrouped by patch at every step with their hit points, as in
+    big scenes.)"""
+    import addon.core.estimators as estimators
+
+    if sorted_paths:
+        monkeypatch.setattr(estimators, "SORT_MIN_PATCHES", 1)
     scene, _, B_discrete = coarse
+    assert estimators.WalkTables(scene, "finite", 1e-3, "hit").sort_paths == sorted_paths
     fine = {}
     for n in (4, 8):
         s, F, _ = box_scene(R_FACES, E_FACES, SIZE, n=n)
