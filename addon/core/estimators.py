@@ -178,11 +178,11 @@ class Aborted(Exception):
 
 
 def _weight_sum(weights, mask):
-    """Sum of the carried weights of the masked paths, per channel (a product with the
-    boolean mask: no copy of the selected columns)."""
+    """Sum of the carried weights of the masked paths, per channel (the masked paths are
+    usually few: their columns are picked out first)."""
     if weights is None:
         return np.array([float(np.count_nonzero(mask))])
-    return np.einsum("cn,n->c", weights, mask)
+    return weights.compress(mask, axis=1).sum(axis=1)
 
 
 def _total(weights, n):
