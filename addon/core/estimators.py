@@ -266,6 +266,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 if first_uniforms is not None:
                     u_new[:4] = first_uniforms[:, started : started + new]
                     u[:, n_live:] = u_new[2:4]
+                # (leave_columns first: it folds u_new[0], u_new[1] onto triangles in place.)
                 column = np.concatenate((column, tables.leave_columns(patch[n_live:], u_new)))
                 bary_u = np.concatenate((bary_u, u_new[0]))
                 bary_v = np.concatenate((bary_v, u_new[1]))
