@@ -1,8 +1,12 @@
 """Time to a given patch error: this product's solve() against Cycles' COMBINED bake.
 
-    python -m benchmarks.cycles_comparison            # full run (about 25 minutes on 2 cores)
+    python -m benchmarks.cycles_comparison            # full run (about 12 minutes on 2 cores, +5 without the cached reference)
     python -m benchmarks.cycles_comparison --quick    # a smoke run (about a minute), to out/
     python -m benchmarks.cycles_comparison --recompute-reference   # redo the 5-minute reference
+    python -m benchmarks.cycles_comparison --replot benchmarks/results/cycles_comparison.json   # report only
+
+A run's JSON may carry a list "notes": checks made by hand after the run, printed at the end of the
+reading (and kept by --replot).
 
 The scene (issue 5): a closed room [0,1]^3 m, every face meshed into 10 x 10 square patches of
 0.1 m (600 patches), all with albedo 0.5 (pure Lambertian). The light is the 2 x 2 ceiling
@@ -330,7 +334,17 @@ def run(args, log=print):
                 records.append(rec)
                 log(f"rep {rep} {series:6s} {amount:>10d}  {wall:7.2f} s wall {cpu:7.2f} s cpu  "
                     f"rel err vs discrete {rec['rel_discrete']:.4%} vs continuous {rec['rel_continuous']:.4%}")
-    return refs, baker.settings, records
+    return refs, dict(baker.settings, cpu=cpu_model()), records
+
+
+def cpu_model():
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
 
 
 def block_check(refs, threads, samples_per_patch=4096, reps=2, log=print):
@@ -383,7 +397,7 @@ def plot(records, refs, path):
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 6.2), sharey=True)
     styles = {"cycles": ("tab:red", "o"), "random": ("tab:blue", "s"), "hit": ("tab:green", "^"),
               "stratified": ("tab:orange", "D")}
     for ax, clock in zip(axes, ("wall", "cpu")):
@@ -409,9 +423,11 @@ def plot(records, refs, path):
         ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f"{100 * y:g}%"))
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g} s"))
     axes[0].set_ylabel("relative RMS patch error")
-    axes[0].legend(fontsize=8, loc="upper right")
+    # below the plots: inside, the legend would hide the first points of the curves
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=3, frameon=False)
     fig.suptitle("Closed 1 m room, 600 patches, albedo 0.5, 0.2 m ceiling light: time to a patch error")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.09, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -421,7 +437,7 @@ def fmt_time(value):
     return f"{t:.2f}{'*' if extrapolated else ''}"
 
 
-def report(command, refs, settings, records, table, out, png_name, total_seconds, blocks=()):
+def report(command, refs, settings, records, table, out, png_name, total_seconds, blocks=(), notes=()):
     a = cycles_fixed_cost(records)
     gap = relative_rms(refs["discrete"], refs["continuous"])
     uncertainty = relative_rms(refs["fine4"], refs["continuous"])
@@ -429,7 +445,8 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
     L.append("# Time to a patch error: solve() against Cycles' COMBINED bake (issue 5)")
     L.append("")
     L.append(f"`python -m benchmarks.cycles_comparison {command}`".replace(" `", "`"))
-    L.append(f"Machine: {platform.machine()}, {os.cpu_count()} CPUs shared with other work, Python "
+    cpu = f" ({settings['cpu']})" if settings.get("cpu") else ""
+    L.append(f"Machine: {platform.machine()}{cpu}, {os.cpu_count()} CPUs shared with other work, Python "
              f"{platform.python_version()}; Blender {settings['Blender']} (bpy module); run took {total_seconds / 60:.1f} min.")
     L.append("")
     L.append("Scene: closed room [0,1]^3 m, 10 x 10 patches of 0.1 m per face (600 patches), albedo 0.5 "
@@ -532,6 +549,8 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
     L.append(f"![time against error]({png_name})")
     L.append("")
     L += reading(refs, settings, records, table)
+    if notes:
+        L[-1:-1] = [f"* Checked by hand after this run: {note}" for note in notes]
     L.append("## Measured points")
     L.append("")
     L.append("| product | samples / paths | median wall s | median CPU s | rel. RMS vs own ref. | vs continuous |")
@@ -567,22 +586,37 @@ def first_bounce_share():
 
 def reading(refs, settings, records, table):
     L = ["## Reading", ""]
-    for level in LEVELS:
-        r = table[("rel", "wall", "random", "native", level)][0] / table[("rel", "wall", "cycles", "native", level)][0]
-        h = table[("rel", "wall", "hit", "native", level)][0] / table[("rel", "wall", "cycles", "native", level)][0]
-        rc = table[("rel", "cpu", "random", "native", level)][0] / table[("rel", "cpu", "cycles", "native", level)][0]
-        if max(r, h) <= 1 / 3:
-            verdict = "meets the aim (a third)"
-        elif max(r, h) <= 0.5:
-            verdict = "meets the target (at most half), not the aim (a third)"
-        elif min(r, h) <= 0.5:
-            verdict = "meets the target (at most half) with one exit point only"
+
+    def ratio(series, clock, level, metric="rel"):
+        return (table[(metric, clock, series, "native", level)][0]
+                / table[(metric, clock, "cycles", "native", level)][0])
+
+    def verdict(values):
+        """Issue 5's target (at most half of Cycles' time) and aim (a third), for all of ``values``."""
+        worst = max(values)
+        if worst <= 1 / 3:
+            text = "meets the target (at most half) and the aim (a third)"
+            if worst > 1 / 3 - 0.02:
+                text += f" by a narrow margin (largest ratio {worst:.3f})"
+        elif worst <= 0.5:
+            text = "meets the target (at most half), not the aim (a third)"
+        elif min(values) <= 0.5:
+            text = "meets the target (at most half) only in part"
         else:
-            verdict = "misses the target (at most half) on wall-clock time"
-        L.append(f"* {level:.2%}: ours needs {r:.2f} (random) / {h:.2f} (hit) of Cycles' wall-clock time, "
-                 f"{rc:.2f} of its CPU time: {verdict}.")
-    ratios = {clock: np.mean([table[("rel", clock, x, "native", level)][0] / table[("rel", clock, "cycles", "native", level)][0]
-                              for x in ("random", "hit") for level in LEVELS]) for clock in ("wall", "cpu")}
+            text = "misses the target (at most half)"
+        return text
+
+    for level in LEVELS:
+        w = [ratio(x, "wall", level) for x in ("random", "hit")]
+        c = [ratio(x, "cpu", level) for x in ("random", "hit")]
+        cw = table[("rel", "wall", "cycles", "native", level)][0] - cycles_fixed_cost(records)
+        f = [table[("rel", "wall", x, "native", level)][0] / cw for x in ("random", "hit")]
+        L.append(f"* {level:.2%}: the plain estimator needs {w[0]:.2f} (exit `random`) / {w[1]:.2f} (exit `hit`) of "
+                 f"Cycles' wall-clock time and {c[0]:.2f} / {c[1]:.2f} of its CPU time: {verdict(w + c)} on both clocks"
+                 f" with both exit points. With Cycles' 1-sample bake time subtracted (in its favour): {f[0]:.2f} / "
+                 f"{f[1]:.2f}, {verdict(f)}.")
+    ratios = {clock: np.mean([ratio(x, clock, level) for x in ("random", "hit") for level in LEVELS])
+              for clock in ("wall", "cpu")}
     if ratios["wall"] > ratios["cpu"] + 0.03:
         clocks = (f" Our ratios are worse on wall-clock time ({ratios['wall']:.2f} on average) than on CPU time "
                   f"({ratios['cpu']:.2f}): our two threads are less busy than Cycles' (Python work between ray casts).")
@@ -591,14 +625,16 @@ def reading(refs, settings, records, table):
     clocks += (" Other work on this shared 2-CPU machine makes the wall-clock curves jagged (both products alike, "
                "being measured alternately); the CPU-time curves are the smoother ones.")
     if "stratified" in present(records):
-        parts = []
+        parts, values = [], []
         for level in LEVELS:
             w = [table[("rel", "wall", k, "native", level)][0] for k in ("cycles", "random", "stratified")]
             c = [table[("rel", "cpu", k, "native", level)][0] for k in ("cycles", "random", "stratified")]
+            values += [w[2] / w[0], c[2] / c[0]]
             parts.append(f"{level:.2%}: {w[2] / w[0]:.2f} of Cycles' wall-clock time ({c[2] / c[0]:.2f} CPU), "
                          f"{w[2] / w[1]:.2f} of the plain estimator's ({c[2] / c[1]:.2f} CPU)")
         L.append("* `sampling=\"stratified\"` (systematic sources, Halton first ray; off by default because the "
-                 "paper's path-count predictions are derived for the plain estimator): " + "; ".join(parts) + ".")
+                 "paper's path-count predictions are derived for the plain estimator): " + "; ".join(parts)
+                 + f": {verdict(values)} at both levels on both clocks.")
     gap = relative_rms(refs["discrete"], refs["continuous"])
     c1 = table[("rel", "wall", "cycles", "continuous", LEVELS[0])][0]
     r1 = table[("rel", "wall", "random", "continuous", LEVELS[0])][0]
@@ -625,7 +661,12 @@ def reading(refs, settings, records, table):
              "'beyond the paper') attacks exactly that part; a higher ray rate helps everywhere.")
     L.append("* Both curves fall as t^-1/2 down to about 0.2% against their own references, so neither shows a "
              "bias above that (and both give the light patches B = 1.004: the same units).")
-    L.append("* Under the panel's convention (RMS / mean reflected radiosity) our ratio is worse: that measure is "
+    ours_ = [k for k in ("random", "hit", "stratified") if k in present(records)]
+    panel = np.mean([ratio(k, "wall", level, "bave") for k in ours_ for level in LEVELS])
+    relative = np.mean([ratio(k, "wall", level) for k in ours_ for level in LEVELS])
+    L.append(f"* Under the panel's convention (RMS / mean reflected radiosity) our ratio is "
+             f"{'worse' if panel > relative else 'not worse'} ({panel:.2f} against {relative:.2f} on average over "
+             "our series and both levels, wall clock): that measure is "
              "dominated by the bright patches under the light, where the shooting estimator's variance "
              "(proportional to b_i) is largest and where Cycles' direct light is easiest; the per-patch relative "
              "measure weighs the dim patches (the ceiling, reached only by reflected light) as much, and there "
@@ -650,8 +691,9 @@ def main(argv=None):
     if args.replot:
         data = json.loads(Path(args.replot).read_text())
         out = Path(args.out) if args.out else Path(args.replot).parent
+        out.mkdir(parents=True, exist_ok=True)
         write(data.get("command", ""), references(), data["settings"], data["records"], out,
-              data.get("seconds", float("nan")), data.get("blocks", ()))
+              data.get("seconds", float("nan")), data.get("blocks", ()), data.get("notes", ()))
         return
     if args.quick:
         args.reps, args.cycles_levels, args.our_levels = 1, 6, 6
@@ -667,11 +709,11 @@ def main(argv=None):
     write(command, refs, settings, records, out, seconds, blocks)
 
 
-def write(command, refs, settings, records, out, seconds, blocks=()):
+def write(command, refs, settings, records, out, seconds, blocks=(), notes=()):
     table = analyse(records)
     png = "cycles_comparison.png"
     plot(records, refs, out / png)
-    report(command, refs, settings, records, table, out / "cycles_comparison.md", png, seconds, blocks)
+    report(command, refs, settings, records, table, out / "cycles_comparison.md", png, seconds, blocks, notes)
     print((out / "cycles_comparison.md").read_text())
 
 
