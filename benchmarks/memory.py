@@ -1,6 +1,6 @@
 """Peak memory of a solve on the figure-4 room (66,572 patches), at several path counts (issue 5).
 
-    python -m benchmarks.memory                 # 1M, 4M, 16M and 64M paths, into benchmarks/results/memory.md
+    python -m benchmarks.memory                 # 1M, 4M, 16M, 64M and 256M paths, into benchmarks/results/memory.md
     python -m benchmarks.memory --quick         # 250k and 1M paths, into out/
 
 Every measurement runs in a fresh Python process, so its peak resident set (``ru_maxrss``) is its
@@ -82,6 +82,9 @@ def child(paths, threads, use_tracemalloc, scene_name):
     out["current_after_solve"] = current_rss()
     out["rays"] = result.rays
     out["chunks"] = result.chunks
+    from addon.core.solver import chunk_paths_for
+
+    out["max_chunk"] = chunk_paths_for(result.prediction.expected_path_length, 10**15)
     print(json.dumps(out))
 
 
@@ -106,7 +109,7 @@ def main(argv=None):
     if args.child is not None:
         child(args.child, args.threads, args.tracemalloc, args.scene)
         return
-    paths = args.paths or ([250_000, 1_000_000] if args.quick else [1_000_000, 4_000_000, 16_000_000, 64_000_000])
+    paths = args.paths or ([250_000, 1_000_000] if args.quick else [1_000_000, 4_000_000, 16_000_000, 64_000_000, 256_000_000])
     out = Path(args.out) if args.out else (ROOT / "out" / "memory_quick" if args.quick else RESULTS)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -141,7 +144,12 @@ def main(argv=None):
             f"{traced['traced_peak'] / MIB:.1f} | {traced['traced_after'] / MIB:.2f} |"
         )
     peaks = [p["after_solve"] for p, _ in rows]
-    full = next((k for k, n in enumerate(paths) if n >= 32 * 65536), len(paths) - 1)
+    from addon.core import solver
+
+    # The smallest run whose chunks have the maximum size (smaller runs split into MIN_CHUNKS).
+    max_chunk = rows[0][0]["max_chunk"]
+    full_size = solver.MIN_CHUNKS * max_chunk
+    full = next((k for k, n in enumerate(paths) if n >= full_size), len(paths) - 1)
     traced = [t["traced_peak"] for _, t in rows]
     L += [
         "",
@@ -152,9 +160,10 @@ def main(argv=None):
            f"{(traced[-1] - traced[full]) / MIB:+.1f} MiB." if full < len(paths) - 1 else "."),
         "",
         "What the solve holds: per-patch tallies (a few float64 arrays of P per channel), and up to threads + 1 "
-        "chunks in flight, each at most 65,536 paths (about 2^18 rays); chunk tallies are added in order and "
-        "dropped, so nothing scales with the path count. Path counts below 32 x 65,536 = 2.1M use smaller chunks, "
-        "hence a slightly smaller peak there.",
+        f"chunks in flight, each at most {max_chunk:,} paths (about {solver.RAYS_PER_CHUNK:,} rays) with its "
+        "paths' sources, a wavefront of about 16k paths and the scores of at most 2^18 hits; chunk tallies are "
+        f"added in order and dropped, so nothing scales with the path count. Runs below {solver.MIN_CHUNKS} x "
+        f"{max_chunk:,} = {full_size / 1e6:.1f}M paths use smaller chunks, hence a smaller peak there.",
     ]
     (out / "memory.md").write_text("\n".join(L) + "\n")
     (out / "memory.json").write_text(json.dumps([{"plain": p, "traced": t} for p, t in rows], indent=1))

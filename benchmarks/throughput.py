@@ -73,20 +73,34 @@ def solve_rate(scene, estimator, threads, paths, seed=1, **kw):
     return r.rays / r.seconds, r.rays / cpu
 
 
-def paired_ratio(scene, estimator, threads, seconds, rounds=3, **kw):
-    """Alternate raw and end-to-end measurements so both see the same machine load; the
-    median of the per-round ratios is the result. Each solve runs the paths that would take
-    about ``seconds`` at the raw rate just measured."""
+def paired_ratio(scene, estimator, threads, seconds, rounds=5, **kw):
+    """Raw and end-to-end rates measured in alternation, so both see the same machine load:
+    each round brackets one solve between two raw measurements and takes the solve's rate over
+    their mean. Each solve runs the paths that would take about ``seconds`` at the raw rate.
+    Returns the medians of the raw and solve rates, and the median, lowest and highest per-round
+    ratio, by wall clock and per CPU second."""
     p = predict(scene, estimator, threshold=kw.get("threshold", 1e-3))
     solve(scene, estimator, paths=20_000, threads=threads, **kw)  # warm up
-    raws, rates = [], []
+    raws, rates, ratios = [], [], []
+    before = np.array(raw_rate(scene, threads, seconds / 4))
     for k in range(rounds):
-        raws.append(raw_rate(scene, threads, seconds / 2))
-        paths = max(1, int(raws[-1][0] * seconds / p.expected_path_length))
-        rates.append(solve_rate(scene, estimator, threads, paths, seed=k + 1, **kw))
-    raws, rates = np.array(raws), np.array(rates)  # columns: wall-clock rate, CPU-time rate
-    ratios = rates / raws
-    return float(np.median(raws[:, 0])), float(np.median(rates[:, 0])), float(np.median(ratios[:, 0])), float(np.median(ratios[:, 1]))
+        paths = max(1, int(before[0] * seconds / p.expected_path_length))
+        rate = np.array(solve_rate(scene, estimator, threads, paths, seed=k + 1, **kw))
+        after = np.array(raw_rate(scene, threads, seconds / 4))
+        raw = (before + after) / 2  # columns: wall-clock rate, CPU-time rate
+        raws.append(raw)
+        rates.append(rate)
+        ratios.append(rate / raw)
+        before = after
+    raws, rates, ratios = np.array(raws), np.array(rates), np.array(ratios)
+    return {
+        "raw": float(np.median(raws[:, 0])),
+        "solve": float(np.median(rates[:, 0])),
+        "ratio": float(np.median(ratios[:, 0])),
+        "ratio_low": float(ratios[:, 0].min()),
+        "ratio_high": float(ratios[:, 0].max()),
+        "cpu_ratio": float(np.median(ratios[:, 1])),
+    }
 
 
 def build_scene(name):
@@ -118,25 +132,30 @@ def main(argv=None):
         for threads in args.threads:
             for estimator, kw in (("finite", {}), ("biased_infinite", {"threshold": 1e-3})):
                 for exit_point in ("random", "hit"):
-                    raw, rate, ratio, cpu_ratio = paired_ratio(scene, estimator, threads, args.seconds, exit_point=exit_point, **kw)
-                    row = (name, scene.triangle_count, threads, estimator, exit_point, raw / 1e6, rate / 1e6, ratio, cpu_ratio)
+                    m = paired_ratio(scene, estimator, threads, args.seconds, exit_point=exit_point, **kw)
+                    row = (name, scene.triangle_count, threads, estimator, exit_point, m["raw"] / 1e6, m["solve"] / 1e6,
+                           m["ratio"], m["ratio_low"], m["ratio_high"], m["cpu_ratio"])
                     rows.append(row)
-                    print("{:10s} {:7d} tris  {} thr  {:16s} {:6s}  raw {:6.2f} Mray/s  solve {:6.2f} Mray/s  ratio {:.2f}  (per CPU second {:.2f})".format(*row), flush=True)
+                    print("{:10s} {:7d} tris  {} thr  {:16s} {:6s}  raw {:6.2f} Mray/s  solve {:6.2f} Mray/s  "
+                          "ratio {:.2f} ({:.2f}-{:.2f})  (per CPU second {:.2f})".format(*row), flush=True)
     lines = [
         "# Throughput: solve() against Embree's raw ray rate",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {platform.python_version()}; "
         f"`python -m benchmarks.throughput {' '.join(sys.argv[1:])}`.",
-        "Raw: embreex alone on pre-drawn rays of the same kind over the same threads. Raw and end-to-end runs alternate "
-        "(3 rounds) so both see the same load; the ratio is the median of the per-round ratios.",
+        "Raw: embreex alone on pre-drawn rays of the same kind over the same threads. Each of 5 rounds brackets one "
+        "solve between two raw measurements, so both see the same load; the ratio is the median of the per-round "
+        "ratios, with the lowest and highest round beside it (the spread is the machine's noise: these machines are "
+        "shared).",
         "",
         "The ratio per CPU second divides rays by the process's CPU time instead of wall time: it is",
-        "immune to other processes on the machine but blind to threads waiting for each other.",
+        "immune to other processes taking the processor, but not to their use of caches and memory,",
+        "and blind to threads waiting for each other.",
         "",
-        "| scene | triangles | threads | estimator | exit point | raw Mray/s | solve Mray/s | ratio | ratio per CPU second |",
-        "|---|---:|---:|---|---|---:|---:|---:|---:|",
+        "| scene | triangles | threads | estimator | exit point | raw Mray/s | solve Mray/s | ratio | rounds | ratio per CPU second |",
+        "|---|---:|---:|---|---|---:|---:|---:|---:|---:|",
     ]
-    lines += ["| {} | {} | {} | {} | {} | {:.2f} | {:.2f} | {:.2f} | {:.2f} |".format(*r) for r in rows]
+    lines += ["| {} | {} | {} | {} | {} | {:.2f} | {:.2f} | **{:.2f}** | {:.2f}–{:.2f} | {:.2f} |".format(*r) for r in rows]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
