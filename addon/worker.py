@@ -222,65 +222,18 @@ def drop_zero_area_faces(objects):
     return kept, notes
 
 
-def _longest_per_face(lengths, starts):
-    """Largest of each face's consecutive entries (faces given by their first index)."""
-    return np.maximum.reduceat(lengths, starts) if len(starts) else np.zeros(0)
-
-
 def patch_count(objects, patch_size) -> float:
     """How many patches ``meshing.mesh_patches`` makes of these objects at this patch size,
-    counted from edge lengths alone (no meshing; a float, so that absurd counts do not overflow).
-
-    The same rule as the meshing: a face whose longest edge (n-gons: also the edges of their
-    triangulation) is within the patch size stays one patch; a larger quad becomes an
-    n_u x n_v grid, a larger triangle or n-gon n^2 triangles per triangle, n = ceil(edge / size);
-    a non-planar quad or n-gon n^2 triangles per triangle of its triangulation (n = 1 when the
-    triangle is within the patch size), triangles without an area left out.
-    """
-    patch_size = float(patch_size)
-    if not np.isfinite(patch_size) or patch_size <= 0:
-        raise ValueError(f"patch size must be a positive number, got {patch_size!r}")
-    limit = patch_size * (1.0 + 1e-9)  # as in mesh_patches: a face exactly patch_size long is kept
-    total = 0.0
+    counted without meshing (``meshing.count_patches``; a float, so that absurd counts do not
+    overflow)."""
     min_area = degenerate_area(objects)
-    for o in objects:
-        sizes = np.asarray(o.face_sizes, dtype=np.int64)
-        if not len(sizes):
-            continue
-        corners = np.asarray(o.corner_verts, dtype=np.int64)
-        points = np.asarray(o.vertices, dtype=np.float64)
-        starts = np.zeros(len(sizes), dtype=np.int64)
-        np.cumsum(sizes[:-1], out=starts[1:])
-        following = np.arange(len(corners)) + 1
-        last = starts + sizes - 1
-        following[last] = starts  # the edge from a face's last corner back to its first
-        edge = np.linalg.norm(points[corners[following]] - points[corners], axis=1)
-        longest = _longest_per_face(edge, starts)
-        triangles = np.asarray(o.triangles, dtype=np.int64).reshape(-1, 3)
-        triangle_face = np.asarray(o.triangle_face, dtype=np.int64)
-        p = points[triangles]
-        triangle_longest = np.linalg.norm(p[:, [1, 2, 0]] - p, axis=2).max(axis=1) if len(p) else np.zeros(0)
-        ngon = sizes > 4
-        if ngon.any() and len(triangles):
-            diagonal = np.zeros(len(sizes))
-            np.maximum.at(diagonal, triangle_face, triangle_longest)
-            longest = np.where(ngon, np.maximum(longest, diagonal), longest)
-        big = longest > limit
-        nonplanar, has_area = meshing.nonplanar_faces(points, len(sizes), triangles, triangle_face, min_area)
-        kept = ~big & ~nonplanar
-        total += float(np.count_nonzero(kept))
-        quad = big & (sizes == 4) & ~nonplanar
-        if quad.any():
-            e = edge[starts[quad][:, None] + np.arange(4)]  # edges 01 12 23 30
-            n_u = np.maximum(np.ceil(np.maximum(e[:, 0], e[:, 2]) / limit), 1.0)
-            n_v = np.maximum(np.ceil(np.maximum(e[:, 1], e[:, 3]) / limit), 1.0)
-            total += float(np.sum(n_u * n_v))
-        face_has_area = np.bincount(triangle_face, weights=has_area, minlength=len(sizes)) > 0
-        split = (~kept & ~quad)[triangle_face] & (has_area | ~face_has_area[triangle_face])
-        if split.any():
-            n = np.maximum(np.ceil(triangle_longest[split] / limit), 1.0)
-            total += float(np.sum(n * n))
-    return total
+    return sum(
+        meshing.count_patches(
+            o.vertices, o.face_sizes, o.corner_verts, patch_size, o.triangles, o.triangle_face, min_area
+        )
+        for o in objects
+        if len(o.face_sizes)
+    )
 
 
 def check_patch_count(objects, patch_size, limit=None):

@@ -373,6 +373,104 @@ def _weld(keys, n_vertices):
     return keys[first_index], first_index, inverse
 
 
+def _prepare(vertices, face_sizes, corner_verts, patch_size, face_triangles, triangle_face):
+    """Checked arrays for :func:`mesh_patches` and :func:`count_patches` (a fan triangulation
+    where none is given)."""
+    points = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    face_sizes = np.asarray(face_sizes, dtype=np.int64).ravel()
+    corner_verts = np.asarray(corner_verts, dtype=np.int64).ravel()
+    patch_size = float(patch_size)
+    if not np.isfinite(patch_size) or patch_size <= 0:
+        raise ValueError(f"patch size must be a positive number, got {patch_size!r}")
+    if face_sizes.sum() != len(corner_verts):
+        raise ValueError("face_sizes do not add up to the number of corners")
+    if len(face_sizes) and face_sizes.min() < 3:
+        raise ValueError("every face needs at least 3 corners")
+    if len(corner_verts) and (corner_verts.min() < 0 or corner_verts.max() >= len(points)):
+        raise ValueError("corner_verts index outside the vertices")
+    if not np.all(np.isfinite(points)):
+        raise ValueError("vertex positions contain NaN or infinity")
+    if face_triangles is None:
+        face_triangles, triangle_face = fan_triangulation(face_sizes, corner_verts)
+    else:
+        face_triangles = np.asarray(face_triangles, dtype=np.int64).reshape(-1, 3)
+        triangle_face = np.asarray(triangle_face, dtype=np.int64).ravel()
+        if len(triangle_face) != len(face_triangles):
+            raise ValueError("triangle_face must have one entry per triangle")
+    return points, face_sizes, corner_verts, patch_size, face_triangles, triangle_face
+
+
+@dataclass
+class _FacePlan:
+    """What the meshing does with each face: keep it (one patch), cut a quad into an
+    n_u x n_v grid, or cut it into its triangles, each into n_t^2 triangles."""
+
+    starts: np.ndarray        # (F,) first corner of each face
+    limit: float              # the patch size, with a tolerance
+    kept_face: np.ndarray     # (F,) bool
+    quads: np.ndarray         # (Q,) faces cut into grids
+    quad_corners: np.ndarray  # (Q,4) their vertices
+    n_u: np.ndarray           # (Q,) grid cells along edges 01 / 23
+    n_v: np.ndarray           # (Q,) grid cells along edges 12 / 30
+    cut: np.ndarray           # (T,) bool: triangles of the triangulation that become patches
+
+
+def _plan_faces(points, face_sizes, corner_verts, patch_size, face_triangles, triangle_face, min_area):
+    F = len(face_sizes)
+    starts = _starts(face_sizes)
+    longest = _longest_edges(points, face_sizes, corner_verts, starts)
+    # n-gons: also look at the diagonals of their triangulation
+    tri_longest = np.zeros(F)
+    if len(face_triangles):
+        np.maximum.at(tri_longest, triangle_face, _triangle_longest_edges(points, face_triangles))
+    # tolerance so that a face exactly patch_size long is not cut in two
+    limit = patch_size * (1.0 + 1e-9)
+    ngon = face_sizes > 4
+    big = np.where(ngon, np.maximum(longest, tri_longest), longest) > limit
+    # non-planar quads and n-gons: their triangles, each a patch (never a grid of
+    # bilinear cells, which would not be planar either)
+    nonplanar, has_area = nonplanar_faces(points, F, face_triangles, triangle_face, min_area)
+    kept_face = ~big & ~nonplanar
+    grid_face = big & (face_sizes == 4) & ~nonplanar
+    to_triangles = ~kept_face & ~grid_face
+    quads = np.nonzero(grid_face)[0]
+    q = corner_verts[starts[quads][:, None] + np.arange(4)]  # (Q,4)
+    e = np.linalg.norm(points[q][:, [1, 2, 3, 0]] - points[q], axis=2)  # edges 01 12 23 30
+    n_u = np.maximum(np.ceil(np.maximum(e[:, 0], e[:, 2]) / limit), 1).astype(np.int64)
+    n_v = np.maximum(np.ceil(np.maximum(e[:, 1], e[:, 3]) / limit), 1).astype(np.int64)
+    # triangles without an area are left out (faces with some area only: a face of
+    # no area at all stays, for the caller to refuse or drop)
+    face_has_area = np.bincount(triangle_face, weights=has_area, minlength=F) > 0
+    cut = to_triangles[triangle_face] & (has_area | ~face_has_area[triangle_face])
+    return _FacePlan(starts, limit, kept_face, quads, q, n_u, n_v, cut)
+
+
+def _triangle_longest_edges(points, triangles):
+    p = points[triangles]
+    return np.linalg.norm(p[:, [1, 2, 0]] - p, axis=2).max(axis=1)
+
+
+def _triangle_subdivisions(points, triangles, limit):
+    """n of each triangle cut into n^2 triangles no longer than ``limit``."""
+    if not len(triangles):
+        return np.zeros(0, dtype=np.int64)
+    return np.maximum(np.ceil(_triangle_longest_edges(points, triangles) / limit), 1).astype(np.int64)
+
+
+def count_patches(vertices, face_sizes, corner_verts, patch_size, face_triangles=None, triangle_face=None, min_area=None) -> float:
+    """How many patches :func:`mesh_patches` makes of these faces (same arguments), without
+    making them: O(faces), a float so that absurd counts cannot overflow."""
+    args = _prepare(vertices, face_sizes, corner_verts, patch_size, face_triangles, triangle_face)
+    points, face_triangles = args[0], args[4]
+    plan = _plan_faces(*args, min_area)
+    n_t = _triangle_subdivisions(points, face_triangles[plan.cut], plan.limit)
+    return (
+        float(np.count_nonzero(plan.kept_face))
+        + float(np.sum(plan.n_u.astype(np.float64) * plan.n_v))
+        + float(np.sum(n_t.astype(np.float64) ** 2))
+    )
+
+
 def mesh_patches(
     vertices,
     face_sizes,
@@ -403,57 +501,11 @@ def mesh_patches(
     Returns a :class:`PatchMesh` whose patches appear in source-face order
     (all patches of face 0 first, then face 1, ...).
     """
-    points = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    face_sizes = np.asarray(face_sizes, dtype=np.int64).ravel()
-    corner_verts = np.asarray(corner_verts, dtype=np.int64).ravel()
-    patch_size = float(patch_size)
-    if not np.isfinite(patch_size) or patch_size <= 0:
-        raise ValueError(f"patch size must be a positive number, got {patch_size!r}")
-    if face_sizes.sum() != len(corner_verts):
-        raise ValueError("face_sizes do not add up to the number of corners")
-    if len(face_sizes) and face_sizes.min() < 3:
-        raise ValueError("every face needs at least 3 corners")
-    if len(corner_verts) and (corner_verts.min() < 0 or corner_verts.max() >= len(points)):
-        raise ValueError("corner_verts index outside the vertices")
-    if not np.all(np.isfinite(points)):
-        raise ValueError("vertex positions contain NaN or infinity")
-    if face_triangles is None:
-        face_triangles, triangle_face = fan_triangulation(face_sizes, corner_verts)
-    else:
-        face_triangles = np.asarray(face_triangles, dtype=np.int64).reshape(-1, 3)
-        triangle_face = np.asarray(triangle_face, dtype=np.int64).ravel()
-        if len(triangle_face) != len(face_triangles):
-            raise ValueError("triangle_face must have one entry per triangle")
-
+    args = _prepare(vertices, face_sizes, corner_verts, patch_size, face_triangles, triangle_face)
+    points, face_sizes, corner_verts, patch_size, face_triangles, triangle_face = args
+    plan = _plan_faces(*args, min_area)
     F = len(face_sizes)
-    starts = _starts(face_sizes)
-    longest = _longest_edges(points, face_sizes, corner_verts, starts)
-    # n-gons: also look at the diagonals of their triangulation
-    tri_longest = np.zeros(F)
-    if len(face_triangles):
-        t = face_triangles
-        tl = np.max(
-            np.stack(
-                [
-                    np.linalg.norm(points[t[:, 1]] - points[t[:, 0]], axis=1),
-                    np.linalg.norm(points[t[:, 2]] - points[t[:, 1]], axis=1),
-                    np.linalg.norm(points[t[:, 0]] - points[t[:, 2]], axis=1),
-                ],
-                axis=1,
-            ),
-            axis=1,
-        )
-        np.maximum.at(tri_longest, triangle_face, tl)
-    # tolerance so that a face exactly patch_size long is not cut in two
-    limit = patch_size * (1.0 + 1e-9)
-    ngon = face_sizes > 4
-    big = np.where(ngon, np.maximum(longest, tri_longest), longest) > limit
-    # non-planar quads and n-gons: their triangles, each a patch (never a grid of
-    # bilinear cells, which would not be planar either)
-    nonplanar, has_area = nonplanar_faces(points, F, face_triangles, triangle_face, min_area)
-    kept_face = ~big & ~nonplanar
-    grid_face = big & (face_sizes == 4) & ~nonplanar
-    to_triangles = ~kept_face & ~grid_face
+    starts, limit, kept_face = plan.starts, plan.limit, plan.kept_face
 
     b = _Builder()
 
@@ -469,13 +521,11 @@ def mesh_patches(
         b.add_faces(ksizes, first + np.arange(len(verts)), kept, kept * 0)
 
     # --- quads into grids ---------------------------------------------------
-    quads = np.nonzero(grid_face)[0]
+    quads = plan.quads
     if len(quads):
-        q = corner_verts[starts[quads][:, None] + np.arange(4)]  # (Q,4)
+        q = plan.quad_corners
         p = points[q]  # (Q,4,3)
-        e = np.linalg.norm(p[:, [1, 2, 3, 0]] - p, axis=2)  # edges 01 12 23 30
-        n_u = np.maximum(np.ceil(np.maximum(e[:, 0], e[:, 2]) / limit), 1).astype(np.int64)
-        n_v = np.maximum(np.ceil(np.maximum(e[:, 1], e[:, 3]) / limit), 1).astype(np.int64)
+        n_u, n_v = plan.n_u, plan.n_v
         shapes, shape_of = np.unique(np.stack([n_u, n_v], axis=1), axis=0, return_inverse=True)
         shape_of = shape_of.ravel()
         for s, (n, m) in enumerate(shapes):
@@ -522,11 +572,7 @@ def mesh_patches(
             )
 
     # --- triangles, triangulated n-gons and non-planar faces ----------------
-    # triangles without an area are left out (faces with some area only: a face of
-    # no area at all stays, for the caller to refuse or drop)
-    face_has_area = np.bincount(triangle_face, weights=has_area, minlength=F) > 0
-    cut = to_triangles[triangle_face] & (has_area | ~face_has_area[triangle_face])
-    tri_sel = np.nonzero(cut)[0]
+    tri_sel = np.nonzero(plan.cut)[0]
     if len(tri_sel):
         t = face_triangles[tri_sel]
         tf = triangle_face[tri_sel]
@@ -534,8 +580,7 @@ def mesh_patches(
             srt = np.argsort(tf, kind="stable")
             t, tf = t[srt], tf[srt]
         p = points[t]
-        e = np.linalg.norm(p[:, [1, 2, 0]] - p, axis=2)
-        n_t = np.maximum(np.ceil(e.max(axis=1) / limit), 1).astype(np.int64)
+        n_t = _triangle_subdivisions(points, t, limit)
         # rank of each triangle inside its face, to keep patches in face order
         order_in_face = np.arange(len(tf)) - np.searchsorted(tf, tf)
         for n in np.unique(n_t):

@@ -540,6 +540,25 @@ def test_random_displaced_meshes_are_accepted_and_cover_their_triangulation(seed
     assert np.all(m.face_sizes[nonplanar[m.patch_face]] == 3)
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31), st.integers(2, 7), st.floats(0.0, 0.6), st.floats(0.05, 3.0))
+def test_count_patches_is_the_number_mesh_patches_makes(seed, n, bump, patch_size):
+    """The patch limit is checked from count_patches before meshing: it must be exact, for
+    grids, kept faces, n-gons and non-planar faces alike."""
+    rng = np.random.default_rng(seed)
+    v, fs, cv = saddle(n=n, height=0.0)
+    v = v.copy()
+    v[:, 2] = bump * rng.uniform(-1, 1, len(v)) / n
+    # plus a triangle and a pentagon, big or small
+    base = len(v)
+    v = np.vstack([v, [[2, 0, 0], [3, 0, 0], [2, 1, 0], [2, 2, 0], [3, 2, 0], [3.5, 2.5, 0.2], [3, 3, 0], [2, 3, 0]]])
+    fs = np.concatenate([fs, [3, 5]])
+    cv = np.concatenate([cv, base + np.array([0, 1, 2, 3, 4, 5, 6, 7])])
+    tris, tf = fan_triangulation(fs, cv)
+    m = mesh_patches(v, fs, cv, patch_size, face_triangles=tris, triangle_face=tf)
+    assert meshing.count_patches(v, fs, cv, patch_size, tris, tf) == m.patch_count
+
+
 def test_large_displaced_mesh_is_fast():
     n = 200
     rng = np.random.default_rng(1)
