@@ -302,12 +302,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             hit = hit.take(keep, mode="wrap")
             if finite:
                 u_survive = u_survive.take(keep, mode="wrap")
-            if accumulated is not None:
-                accumulated = accumulated.take(keep, mode="wrap")
-            if tables.weight_is_accumulated:
-                weights = accumulated[None]
-            elif weights is not None:
-                weights = weights.take(keep, axis=1, mode="wrap")
+            accumulated, weights = _carried(keep, accumulated, weights, tables)
             if not exit_random:
                 bary_u, bary_v = bary_u.take(keep, mode="wrap"), bary_v.take(keep, mode="wrap")
         patch = g.triangle_patch.take(hit, mode="wrap")
@@ -348,12 +343,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             go_on = _patch_order(patch, go_on, tables.patch_key_shift)
         if go_on is not None:
             patch = patch.take(go_on, mode="wrap")
-            if accumulated is not None:
-                accumulated = accumulated.take(go_on, mode="wrap")
-            if tables.weight_is_accumulated:
-                weights = accumulated[None]
-            elif weights is not None:
-                weights = weights.take(go_on, axis=1, mode="wrap")
+            accumulated, weights = _carried(go_on, accumulated, weights, tables)
             if not exit_random:
                 hit, bary_u, bary_v = (a.take(go_on, mode="wrap") for a in (hit, bary_u, bary_v))
         if finite:
@@ -376,6 +366,18 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         undistributed=undistributed,
         ended=ended,
     )
+
+
+def _carried(index, accumulated, weights, tables):
+    """What the paths at ``index`` carry: (accumulated, weights) taken there (in a grey biased
+    walk the weights are a view of the accumulated reflectivity)."""
+    if accumulated is not None:
+        accumulated = accumulated.take(index, mode="wrap")
+    if tables.weight_is_accumulated:
+        return accumulated, accumulated[None]
+    if weights is not None:
+        weights = weights.take(index, axis=1, mode="wrap")
+    return accumulated, weights
 
 
 class _Scores:
