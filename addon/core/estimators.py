@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sampling import SourceTable, add_sphere_points, choose_triangles
+from .sampling import SourceTable, add_sphere_points, choose_triangles, frame_points
 
 # Rays per step while the chunk still has paths to start: big enough that numpy's per-call
 # cost is small next to the work, small enough that a step's arrays stay in cache.
@@ -144,12 +144,7 @@ def _rays_from_frames(frame, a, b, u_direction):
     """Rays from gathered (12,n) frame rows [corner, edge a, edge b, normal]: origins
     corner + a edge_a + b edge_b, directions normal + a uniform sphere point (cosine
     distributed), computed in place in ``frame``. Returns two (3,n) views of it."""
-    frame[3:6] *= a
-    frame[6:9] *= b
-    origins = frame[0:3]
-    origins += frame[3:6]
-    origins += frame[6:9]
-    return origins, add_sphere_points(frame[9:12], u_direction[0], u_direction[1])
+    return frame_points(frame, a, b), add_sphere_points(frame[9:12], u_direction[0], u_direction[1])
 
 
 @dataclass

@@ -152,12 +152,13 @@ def barycentric_point_rows(geometry, triangle, a, b):
 
 
 def frame_points(frame, a, b):
-    """corner + a edge_a + b edge_b from gathered (>=9,n) frame rows [corner, edge_a, edge_b]:
-    (3,n) float32 rows."""
-    points = frame[3:6] * a
-    points += frame[0:3]
-    edge = frame[6:9] * b
-    points += edge
+    """corner + a edge_a + b edge_b from gathered (>=9,n) frame rows [corner, edge_a, edge_b],
+    computed in place in ``frame`` (a fresh gather): (3,n) float32 rows, a view of it."""
+    frame[3:6] *= a
+    frame[6:9] *= b
+    points = frame[0:3]
+    points += frame[3:6]
+    points += frame[6:9]
     return points
 
 

@@ -100,7 +100,6 @@ class _Accumulator:
         self.rays = 0
         self.chunks = 0
         # b_j = (R_j Phi_T / A_j) I_j / N
-        self.reflectivity = tables.reflectivity  # (C,P)
         self.score = tables.reflectivity * (scene.total_power / scene.patch_area)  # (C,P)
         self.weight = scene.patch_area / scene.total_area
 
