@@ -36,13 +36,17 @@ from .sampling import SourceTable, add_sphere_points, choose_triangles, frame_po
 # Rays per step while the chunk still has paths to start: big enough that numpy's per-call
 # cost is small next to the work, small enough that a step's arrays stay in cache.
 WAVEFRONT_PATHS = 1 << 14
-# Paths are sorted by patch at each step in scenes of at least this many patches (below it
-# every table fits in cache and the sort costs as much as coherent rays and in-order gathers
-# gain; above it, on the figure-4 room, the random exit's frame gather takes 75 instead of
-# 180 us a step and the tracing 4% less).
+# Paths that carry weights or hit points are sorted by patch at each step in scenes of at
+# least this many patches (below it every table fits in cache and the sort costs as much as
+# coherent rays and in-order gathers gain; above it, on the figure-4 room, the random exit's
+# frame gather takes 75 instead of 180 us a step and the tracing 4% less).
 SORT_MIN_PATCHES = 1 << 13
 # Scored hits are kept per step and added up (one bincount) every this many hits.
 SCORE_FLUSH = 1 << 18
+# A grey finite walk leaving from random points, in a scene of at most this many patches,
+# counts its hits per patch and outcome at every step (one bincount) and restarts the
+# survivors from those counts, instead of selecting them path by path (see _walk_exchangeable).
+COUNTED_MAX_PATCHES = 1 << 12
 
 FINITE = "finite"
 BIASED_INFINITE = "biased_infinite"
@@ -92,16 +96,13 @@ class WalkTables:
         self.unit_weights = estimator == FINITE and self.channels == 1
         self.weight_is_accumulated = estimator != FINITE and self.channels == 1
         # Paths of a grey finite walk leaving from random points are interchangeable: a path
-        # is nothing but the patch it is on. In big scenes the walk then keeps them sorted by
-        # patch, so that rays leaving one patch go to the ray tracer together (coherent rays
-        # trace faster and the table gathers read memory in order); the order changes nothing
-        # in the estimate.
+        # is nothing but the patch it is on (_walk_exchangeable: counted in small scenes,
+        # sorted by patch in bigger ones).
         self.exchangeable = self.unit_weights and self.exit_random
+        self.counted = self.exchangeable and scene.patch_count <= COUNTED_MAX_PATCHES
         # Other walks keep their paths grouped by patch too in big scenes (a permutation of
         # what they carry, by a 16-bit key patch >> shift and numpy's radix sort).
-        big = scene.patch_count >= SORT_MIN_PATCHES
-        self.sort_exchangeable = self.exchangeable and big
-        self.sort_paths = not self.exchangeable and big
+        self.sort_paths = not self.exchangeable and scene.patch_count >= SORT_MIN_PATCHES
         self.patch_key_shift = max(0, int(scene.patch_count - 1).bit_length() - 16)
         # Where rays leave from: parallelogram patches (all of them, usually) from one column
         # each of the leave table; other patches from a triangle of theirs, chosen by area,
@@ -192,6 +193,8 @@ def _facing(directions, normals):
 
 def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=None) -> ChunkTally:
     """Trace ``paths`` random walks from the sources to their end; return their tallies."""
+    if tables.exchangeable:
+        return _walk_exchangeable(tables, paths, rng, abort)
     g = tables.geometry
     C, P = tables.channels, tables.patch_count
     finite = tables.estimator == FINITE
@@ -309,14 +312,6 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         go_on = None  # which of the hit paths go on, in the order they go on (None: all, as they are)
         if finite:
             survive = u_survive < tables.mean_reflectivity.take(patch, mode="wrap")
-            if tables.exchangeable:
-                patch = patch.compress(survive)
-                if tables.sort_exchangeable:
-                    # Survivors leave in patch order (any order is the same estimate).
-                    patch = _sorted_patches(patch, P)
-                ended["absorbed"] += int(survive.size - patch.size)
-                absorbed += arriving - patch.size
-                continue
             go_on = np.flatnonzero(survive)
             ended["absorbed"] += int(survive.size - go_on.size)
         else:
@@ -360,6 +355,105 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         blocked=blocked,
         undistributed=undistributed,
         ended=ended,
+    )
+
+
+def _walk_exchangeable(tables, paths, rng, abort=None):
+    """``walk_chunk`` for a grey finite walk leaving from random points (the paper's plain
+    estimator): every path carries the same power and leaves each patch from a new point, so a
+    path is nothing but the patch it is on, and the live paths may be kept in any order
+    without changing the estimate.
+
+    Every ray ends one of four ways: escaped (no hit), blocked (a back side), absorbed (a front
+    hit, then the survival test with R_bar fails) or surviving. Instead of selecting the
+    survivors path by path (a data-dependent branch per path, the costliest numpy step here),
+    a step keys each ray by its outcome and lets one whole-array operation regroup them:
+
+    - in a scene of at most COUNTED_MAX_PATCHES patches, the key is 2 patch + survives (rays
+      that do not hit a front side: 2P) and one bincount counts the step's hits by patch and
+      outcome; survivors restart from the counts, patch j s_j times, in patch order;
+    - in a bigger scene the key is the patch of a survivor (P for the others) and a sort puts
+      the survivors first, in patch order, so that rays leaving one patch go to the ray tracer
+      together (coherent rays trace faster, and table gathers read memory in order).
+    """
+    g = tables.geometry
+    P = tables.patch_count
+    counted = tables.counted
+    # The ended rays' key (past every patch), as the walk's index type.
+    past = np.int32(2 * P if counted else P)
+    first_uniforms = None
+    if tables.stratified:
+        source, first_uniforms = tables.sources.stratified(paths, rng)
+    else:
+        source = tables.sources.sample(paths, rng)
+    source = source.astype(np.int32)
+    if counted:
+        outcome = np.zeros(2 * P + 1, dtype=np.int64)  # hits by 2 patch + survives; [2P]: none
+        patch_index = np.arange(P, dtype=np.int32)
+    else:
+        scores = _Scores(1, P + 1)  # front hits by patch; [P]: none
+    escaped = blocked = absorbed = 0
+    started = rays = 0
+    patch = source[:0]
+    while True:
+        if abort is not None and abort.is_set():
+            raise Aborted
+        n_live = patch.size
+        new = min(WAVEFRONT_PATHS - n_live, paths - started)
+        if new > 0:
+            new_patch = source[started : started + new]
+            patch = np.concatenate((patch, new_patch)) if n_live else new_patch
+        elif n_live == 0:
+            break
+        n = patch.size
+        u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
+        if first_uniforms is not None and new > 0:
+            u[:4, n_live:] = first_uniforms[:, started : started + new]
+        started += max(new, 0)
+        origins, directions = tables.leave_random(patch, u)
+        u_survive = rng.random(n)
+        hit = tables.tracer.first_hit(origins.T, directions.T)
+        rays += n
+        # A miss (-1) wraps to the last triangle: harmless, keyed out below.
+        front = _facing(directions, tables.triangle_normal_rows.take(hit, axis=1, mode="wrap"))
+        front &= hit >= 0
+        n_front = int(np.count_nonzero(front))
+        if n_front < n:
+            n_missed = int(np.count_nonzero(hit < 0))
+            escaped += n_missed
+            blocked += n - n_front - n_missed
+        hit_patch = g.triangle_patch.take(hit, mode="wrap")
+        survive = u_survive < tables.mean_reflectivity.take(hit_patch, mode="wrap")
+        if counted:
+            key = hit_patch * np.int32(2)
+            key += survive
+            step = np.bincount(np.where(front, key, past), minlength=2 * P + 1)
+            outcome += step
+            survivors = step[1 : 2 * P : 2]
+            patch = np.repeat(patch_index, survivors)
+        else:
+            scored = np.where(front, hit_patch, past)
+            scores.add(scored, None)
+            key = np.where(survive, scored, past)
+            key.sort()
+            patch = key[: int(np.searchsorted(key, past))]
+        absorbed += n_front - patch.size
+
+    if counted:
+        incident = (outcome[0 : 2 * P : 2] + outcome[1 : 2 * P : 2]).astype(np.float64)[None]
+    else:
+        incident = np.ascontiguousarray(scores.total()[:, :P])
+    one = lambda count: np.array([float(count)])  # noqa: E731
+    return ChunkTally(
+        paths=paths,
+        rays=rays,
+        incident=incident,
+        emitted=one(paths),
+        absorbed=one(absorbed),
+        escaped=one(escaped),
+        blocked=one(blocked),
+        undistributed=one(0),
+        ended={"escaped": escaped, "blocked": blocked, "absorbed": absorbed, "threshold": 0},
     )
 
 
@@ -419,12 +513,3 @@ def _patch_order(patch, selected, shift):
         key = key >> shift
     order = np.argsort(key.astype(np.uint16), kind="stable")
     return selected.take(order, mode="wrap")
-
-
-def _sorted_patches(patch, patch_count):
-    """The same patches in increasing order: a counting sort (bincount, repeat) when there
-    are more of them than patches, a comparison sort otherwise."""
-    if patch.size >= patch_count:
-        return np.repeat(np.arange(patch_count, dtype=patch.dtype), np.bincount(patch, minlength=patch_count))
-    patch.sort()
-    return patch

@@ -125,15 +125,20 @@ def test_hit_exit_matches_continuous_solution(coarse, sorted_paths, monkeypatch)
     assert np.abs(z_discrete).max() > Z, np.abs(z_discrete).max()
 
 
-def test_sorted_interchangeable_paths_match_direct_solve(coarse, monkeypatch):
-    """Big scenes keep a grey finite walk's paths sorted by patch (coherent rays): forced on
-    for this small scene, the estimate still agrees with the direct solve within table 1's
-    variance, and every path still ends exactly once."""
+@pytest.mark.parametrize("counted", [True, False])
+def test_interchangeable_paths_match_direct_solve(coarse, counted, monkeypatch):
+    """A grey finite walk's paths are interchangeable: small scenes count each step's hits by
+    patch and outcome and restart the survivors from the counts; big scenes sort the survivors
+    by patch (coherent rays). Either way (the sorted one forced on for this small scene), the
+    estimate agrees with the direct solve within table 1's variance, and every path ends
+    exactly once."""
     import addon.core.estimators as estimators
 
-    monkeypatch.setattr(estimators, "SORT_MIN_PATCHES", 1)
+    if not counted:
+        monkeypatch.setattr(estimators, "COUNTED_MAX_PATCHES", 0)
     scene, F, B = coarse
-    assert estimators.WalkTables(scene, "finite", 1e-3, "random").sort_exchangeable
+    tables = estimators.WalkTables(scene, "finite", 1e-3, "random")
+    assert tables.exchangeable and tables.counted == counted
     N = 250_000
     runs, b = _mean_over_seeds(scene, "finite", N)
     assert all(sum(r.path_ends.values()) == N for r in runs)
