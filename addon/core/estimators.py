@@ -41,8 +41,10 @@ WAVEFRONT_PATHS = 1 << 14
 # coherent rays and in-order gathers gain; above it, on the figure-4 room, the random exit's
 # frame gather takes 75 instead of 180 us a step and the tracing 4% less).
 SORT_MIN_PATCHES = 1 << 13
-# Scored hits are kept per step and added up (one bincount) every this many hits.
+# Scored hits are kept per step and added up (one bincount) every this many hits, or every
+# this many per patch if that is fewer.
 SCORE_FLUSH = 1 << 18
+SCORE_FLUSH_PER_PATCH = 4
 # A grey finite walk leaving from random points, in a scene of at most this many patches,
 # counts its hits per patch and outcome at every step (one bincount) and restarts the
 # survivors from those counts, instead of selecting them path by path (see _walk_exchangeable).
@@ -471,18 +473,22 @@ def _carried(index, accumulated, weights, tables):
 
 class _Scores:
     """The hits of a chunk, kept per step and summed per patch (one bincount per channel)
-    whenever SCORE_FLUSH of them have gathered: (C,P) float64."""
+    whenever SCORE_FLUSH_PER_PATCH times the patch count of them have gathered, at most
+    SCORE_FLUSH: (C,P) float64. (A bincount costs a pass over the P patches, so big scenes
+    gather the hits of many steps first; small scenes add every step's hits while they are
+    still in cache.)"""
 
     def __init__(self, channels, patch_count):
         self.incident = np.zeros((channels, patch_count))
         self.patches, self.weights, self.count = [], [], 0
+        self.flush_at = min(SCORE_FLUSH, SCORE_FLUSH_PER_PATCH * patch_count)
 
     def add(self, patch, weights):
         self.patches.append(patch)
         if weights is not None:
             self.weights.append(weights)
         self.count += patch.size
-        if self.count >= SCORE_FLUSH:
+        if self.count >= self.flush_at:
             self.flush()
 
     def flush(self):
