@@ -21,6 +21,11 @@ b_j = R_j I_j (Phi_T / N) / A_j.
 Rays that hit nothing escape; rays that hit a patch's back side are absorbed there ("blocked"):
 radiosity leaves only the front side of a patch.
 
+A grey finite walk leaving from random points (the paper's plain estimator, and the default)
+has interchangeable paths: each is nothing but the patch it is on. It runs in its own loop
+(``_walk_exchangeable``) that regroups a step's rays by outcome with one bincount or one sort
+instead of selecting survivors path by path.
+
 Gathers use ``take(..., mode="wrap")``: every index is valid by construction (a ray tracer's
 miss, -1, is only ever gathered to be masked out), and numpy's wrapping gather is about twice
 as fast as its checking one.

@@ -36,8 +36,16 @@ def test_biased_infinite_balance_is_exact(open_scene):
     np.testing.assert_allclose(e["absorbed"] + e["escaped"] + e["undistributed"], e["emitted"], rtol=1e-9)
 
 
-def test_finite_balance(open_scene):
+@pytest.mark.parametrize("counted", [True, False])
+def test_finite_balance(open_scene, counted, monkeypatch):
+    """(A grey finite walk from random points: its hits counted per patch and outcome at
+    each step, as in small scenes, or its survivors sorted by patch, as in big ones.)"""
+    import addon.core.estimators as estimators
+
+    if not counted:
+        monkeypatch.setattr(estimators, "COUNTED_MAX_PATCHES", 0)
     grey = open_scene.with_materials(open_scene.mean_reflectivity, open_scene.emission.mean(axis=1))
+    assert estimators.WalkTables(grey, "finite", 1e-3, "random").counted == counted
     N = 200_000
     r = solve(grey, "finite", paths=N, seed=2)
     e = r.energy
