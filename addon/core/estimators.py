@@ -118,7 +118,12 @@ class WalkTables:
             self.leave_table = self.geometry.leave_table
         if not (self.geometry.all_parallelograms and self.exit_random):
             self.exit_table = self.geometry.exit_table
-        self.triangle_normal_rows = self.geometry.triangle_normal_rows
+        # The facing test of a ray leaving from a random point: in a scene of parallelograms
+        # (two exactly coplanar triangles each) against the hit patch's normal, read from the
+        # rows of the leave table that the next step gathers again for the survivors (the
+        # walk touches less memory between ray casts); otherwise against the triangle's.
+        self.facing_by_patch = self.geometry.all_parallelograms
+        self.facing_rows = self.leave_table[9:12] if self.facing_by_patch else self.geometry.triangle_normal_rows
 
     def leave_random(self, patch, u):
         """Rays leaving the given patches from uniform points (``u[0]``, ``u[1]``, and
@@ -282,10 +287,16 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         # The ray tracer reads (n,3) views of the (3,n) rows: no transposed copies.
         if exit_random:
             hit = tables.tracer.first_hit(origins.T, directions.T)
-            # A miss (-1) wraps to the last triangle's normal: harmless, masked out below.
-            front = _facing(directions, tables.triangle_normal_rows.take(hit, axis=1, mode="wrap"))
+            # A miss (-1) wraps to the last triangle: harmless, masked out below.
+            if tables.facing_by_patch:
+                hit_patch = g.triangle_patch.take(hit, mode="wrap")
+                front = _facing(directions, tables.facing_rows.take(hit_patch, axis=1, mode="wrap"))
+            else:
+                hit_patch = None
+                front = _facing(directions, tables.facing_rows.take(hit, axis=1, mode="wrap"))
         else:
             hit, bary_u, bary_v, hit_normal = tables.tracer.first_hit_barycentric(origins.T, directions.T)
+            hit_patch = None
             dot = hit_normal[:, 0] * directions[0]
             dot += hit_normal[:, 1] * directions[1]
             dot += hit_normal[:, 2] * directions[2]
@@ -304,13 +315,16 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 blocked += _weight_sum(weights, back)
                 ended["blocked"] += n_back
             keep = np.flatnonzero(front)
-            hit = hit.take(keep, mode="wrap")
+            if hit_patch is None:
+                hit = hit.take(keep, mode="wrap")
+            else:
+                hit_patch = hit_patch.take(keep, mode="wrap")
             if finite:
                 u_survive = u_survive.take(keep, mode="wrap")
             accumulated, weights = _carried(keep, accumulated, weights, tables)
             if not exit_random:
                 bary_u, bary_v = bary_u.take(keep, mode="wrap"), bary_v.take(keep, mode="wrap")
-        patch = g.triangle_patch.take(hit, mode="wrap")
+        patch = g.triangle_patch.take(hit, mode="wrap") if hit_patch is None else hit_patch
 
         # Score: the power arriving at the hit patch.
         scores.add(patch, weights)
@@ -422,14 +436,15 @@ def _walk_exchangeable(tables, paths, rng, abort=None):
         hit = tables.tracer.first_hit(origins.T, directions.T)
         rays += n
         # A miss (-1) wraps to the last triangle: harmless, keyed out below.
-        front = _facing(directions, tables.triangle_normal_rows.take(hit, axis=1, mode="wrap"))
+        hit_patch = g.triangle_patch.take(hit, mode="wrap")
+        facing = tables.facing_rows.take(hit_patch if tables.facing_by_patch else hit, axis=1, mode="wrap")
+        front = _facing(directions, facing)
         front &= hit >= 0
         n_front = int(np.count_nonzero(front))
         if n_front < n:
             n_missed = int(np.count_nonzero(hit < 0))
             escaped += n_missed
             blocked += n - n_front - n_missed
-        hit_patch = g.triangle_patch.take(hit, mode="wrap")
         survive = u_survive < tables.mean_reflectivity.take(hit_patch, mode="wrap")
         if counted:
             key = hit_patch * np.int32(2)
