@@ -40,3 +40,36 @@ def test_grey_walks_never_touch_per_channel_weights(estimator, exit_point):
     assert bare.rays == reference.rays
     assert np.array_equal(bare.incident, reference.incident)
     assert bare.incident.shape == (1, scene.patch_count)
+
+
+@pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
+@pytest.mark.parametrize("exit_point", ["random", "hit"])
+def test_patches_no_path_can_reach_cost_nothing(estimator, exit_point):
+    """A room with a closed crate in it, and the same room where the crate also has inner
+    walls (facing into the crate, which no ray from outside can reach): with the same seed,
+    every path is the same ray for ray, the unreachable patches get nothing, and no ray is
+    spent on them."""
+    from addon.core import PatchScene
+    from boxes import box_rectangles, rectangles_to_mesh
+
+    room = box_rectangles((1.0, 1.0, 1.0), n=3)
+    crate = box_rectangles((0.3, 0.3, 0.3), n=2, offset=(0.35, 0.35, 0.05))
+    crate_out = (crate[0], crate[2], crate[1])  # u and v swapped: faces turned outwards
+    inner = box_rectangles((0.26, 0.26, 0.26), n=4, offset=(0.37, 0.37, 0.07))[:3]  # facing in
+
+    def scene(parts):
+        origin, u, v = (np.concatenate(x) for x in zip(*parts))
+        V, T, TP = rectangles_to_mesh(origin, u, v)
+        P = origin.shape[0]
+        E = np.zeros(P)
+        E[9 + 4] = 3.0  # the ceiling's middle patch
+        return PatchScene(V, T, TP, np.full(P, 0.6), E)
+
+    plain = scene([room[:3], crate_out])
+    with_inner = scene([room[:3], crate_out, inner])
+    assert with_inner.patch_count == plain.patch_count + 96
+    a = solve(plain, estimator, paths=40_000, seed=81, exit_point=exit_point)
+    b = solve(with_inner, estimator, paths=40_000, seed=81, exit_point=exit_point)
+    assert a.rays == b.rays and a.path_ends == b.path_ends
+    np.testing.assert_array_equal(b.radiosity[: plain.patch_count], a.radiosity)
+    assert not b.reflected[plain.patch_count :].any()
