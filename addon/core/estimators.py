@@ -272,10 +272,16 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             u = rng.random((2, n), dtype=np.float32)
             column, bary_u, bary_v = leave_from
             if new > 0:
-                u_new = rng.random((tables.uniforms_per_ray, new), dtype=np.float32)
+                # The new paths' points (their directions take u's rows like every path's), and
+                # a triangle choice where patches are not parallelograms.
+                u_new = np.empty((tables.uniforms_per_ray, new), dtype=np.float32)
                 if first_uniforms is not None:
                     u_new[:4] = first_uniforms[:, started : started + new]
                     u[:, n_live:] = u_new[2:4]
+                else:
+                    rng.random(dtype=np.float32, out=u_new[:2])
+                if tables.row_triangle is not None:
+                    rng.random(dtype=np.float32, out=u_new[tables.row_triangle])
                 # (leave_columns first: it folds u_new[0], u_new[1] onto triangles in place.)
                 column = np.concatenate((column, tables.leave_columns(patch[n_live:], u_new)))
                 bary_u = np.concatenate((bary_u, u_new[0]))

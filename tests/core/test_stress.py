@@ -453,3 +453,31 @@ def test_flipped_normals_give_no_light_and_say_where_it_went(emitter_inside):
     where = "blocked" if emitter_inside else "escaped"
     assert r.path_ends[where] == 20_000
     np.testing.assert_allclose(r.energy[where], r.energy["emitted"], rtol=1e-12)
+
+
+@pytest.mark.parametrize("exit_point", ["random", "hit"])
+@pytest.mark.parametrize("sampling", ["independent", "stratified"])
+def test_first_rays_leave_uniformly_from_sources_beside_triangle_patches(exit_point, sampling):
+    """A 1 m square light under a 0.3 m square card near one of its corners, facing it, and a
+    stray triangle patch far away (so the scene is not all parallelograms and new paths take
+    the general exit, in a hit-point walk too). Nothing reflects but the card, which faces only
+    the black light: the card is hit by first rays only, each with the exact form factor F,
+    and a path's first point must be uniform on the light for that (a fixed point would give
+    another F)."""
+    from addon.core import estimators
+
+    origin = np.array([[0.0, 0, 0], [0.05, 0.05, 0.4], [5.0, 5, -3]])
+    u = np.array([[1.0, 0, 0], [0, 0.3, 0], [0.2, 0, 0]])
+    v = np.array([[0.0, 1, 0], [0.3, 0, 0], [0, 0.2, 0]])  # the card's normal is -z
+    V, T, TP = rectangles_to_mesh(origin, u, v)
+    V = np.vstack([V[:8], V[8:11]])  # the third patch: one triangle only
+    T, TP = T[:5], TP[:5]
+    scene = PatchScene(V, T, TP, [0.0, 0.5, 0.5], [1.0, 0.0, 0.0])
+    assert not scene.geometry.all_parallelograms
+    F = rectangle_form_factors(origin[:2], u[:2], v[:2])[0, 1]
+    N = 1_000_000  # chunks of more paths than a wavefront: most paths start in later steps
+    r = solve(scene, "finite", paths=N, seed=83, exit_point=exit_point, sampling=sampling)
+    assert N / r.chunks > estimators.WAVEFRONT_PATHS
+    hits = r.reflected[1, 0] * scene.patch_area[1] / 0.5 / (scene.total_power / N)
+    # Binomial count of first rays reaching the card (stratified sampling can only do better).
+    assert abs(hits - N * F) < Z * math.sqrt(N * F * (1 - F)), (hits, N * F)
