@@ -125,6 +125,11 @@ class WalkTables:
         self.facing_by_patch = self.geometry.all_parallelograms
         self.facing_rows = self.leave_table[9:12] if self.facing_by_patch else self.geometry.triangle_normal_rows
 
+    def facing(self, directions, hit, hit_patch):
+        """Whether each ray (a (3,n) direction row) meets the front side of what it hit."""
+        normals = self.facing_rows.take(hit_patch if self.facing_by_patch else hit, axis=1, mode="wrap")
+        return _facing(directions, normals)
+
     def leave_random(self, patch, u):
         """Rays leaving the given patches from uniform points (``u[0]``, ``u[1]``, and
         ``u[row_triangle]`` to choose a triangle), in cosine-distributed directions (``u[2]``,
@@ -294,12 +299,8 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         if exit_random:
             hit = tables.tracer.first_hit(origins.T, directions.T)
             # A miss (-1) wraps to the last triangle: harmless, masked out below.
-            if tables.facing_by_patch:
-                hit_patch = g.triangle_patch.take(hit, mode="wrap")
-                front = _facing(directions, tables.facing_rows.take(hit_patch, axis=1, mode="wrap"))
-            else:
-                hit_patch = None
-                front = _facing(directions, tables.facing_rows.take(hit, axis=1, mode="wrap"))
+            hit_patch = g.triangle_patch.take(hit, mode="wrap")
+            front = tables.facing(directions, hit, hit_patch)
         else:
             hit, bary_u, bary_v, hit_normal = tables.tracer.first_hit_barycentric(origins.T, directions.T)
             hit_patch = None
@@ -443,8 +444,7 @@ def _walk_exchangeable(tables, paths, rng, abort=None):
         rays += n
         # A miss (-1) wraps to the last triangle: harmless, keyed out below.
         hit_patch = g.triangle_patch.take(hit, mode="wrap")
-        facing = tables.facing_rows.take(hit_patch if tables.facing_by_patch else hit, axis=1, mode="wrap")
-        front = _facing(directions, facing)
+        front = tables.facing(directions, hit, hit_patch)
         front &= hit >= 0
         n_front = int(np.count_nonzero(front))
         if n_front < n:
