@@ -21,6 +21,13 @@ def _count(text) -> int:
         return 0
 
 
+def _decimal_count(name):
+    """A whole-number property kept in the string property ``name`` (Blender's IntProperty
+    stops at 2^31)."""
+    return property(lambda self: _count(getattr(self, name)),
+                    lambda self, value: setattr(self, name, str(int(value))))
+
+
 class RadiositySettings(bpy.types.PropertyGroup):
     estimator: EnumProperty(
         name="Estimator",
@@ -121,21 +128,8 @@ class RadiositySettings(bpy.types.PropertyGroup):
     last_stopped: StringProperty(name="Stopped by", default="")
     last_estimator: StringProperty(name="Estimator", default="")
 
-    @property
-    def last_paths(self) -> int:
-        return _count(self.last_path_count)
-
-    @last_paths.setter
-    def last_paths(self, value):
-        self.last_path_count = str(int(value))
-
-    @property
-    def last_rays(self) -> int:
-        return _count(self.last_ray_count)
-
-    @last_rays.setter
-    def last_rays(self, value):
-        self.last_ray_count = str(int(value))
+    last_paths = _decimal_count("last_path_count")
+    last_rays = _decimal_count("last_ray_count")
 
     def solve_settings(self) -> SolveSettings:
         return SolveSettings(
