@@ -118,6 +118,8 @@ class WalkTables:
             self.leave_table = self.geometry.leave_table
         if not (self.geometry.all_parallelograms and self.exit_random):
             self.exit_table = self.geometry.exit_table
+        if not self.exit_random:
+            self.edge_barycentric = self.geometry.edge_barycentric
         # The facing test of a ray leaving from a random point: in a scene of parallelograms
         # (two exactly coplanar triangles each) against the hit patch's normal, read from the
         # rows of the leave table that the next step gathers again for the survivors (the
@@ -129,6 +131,34 @@ class WalkTables:
         """Whether each ray (a (3,n) direction row) meets the front side of what it hit."""
         normals = self.facing_rows.take(hit_patch if self.facing_by_patch else hit, axis=1, mode="wrap")
         return _facing(directions, normals)
+
+    def hit_points(self, origins, directions, distance, hit, u, v, front):
+        """Where the rays that hit a front side (``front``) go on from, not yet pushed off the
+        surface: (3,n) rows, computed in place in ``origins`` (``directions`` is overwritten).
+
+        The hit point is origin + t direction, which the walk has at hand: no table of
+        triangles is read, so the ray tracer's structure stays in the caches. Within the
+        clearance of an edge of its triangle (barycentric coordinate below the triangle's
+        ``edge_barycentric``), float32 rounding could put that point past the edge, behind an
+        adjacent wall; those few points are the hit's barycentric coordinates mapped onto the
+        triangle's inset leaving frame, as in :meth:`leave_random`."""
+        with np.errstate(invalid="ignore"):  # t = inf for misses, whose points are dropped
+            directions *= distance
+        origins += directions
+        nearest = np.minimum(u, v)
+        np.minimum(nearest, 1 - u - v, out=nearest)
+        near = nearest < self.edge_barycentric.take(hit, mode="wrap")
+        near &= front
+        index = np.flatnonzero(near)
+        if index.size:
+            frame = self.exit_table.take(hit.take(index, mode="wrap"), axis=1, mode="wrap")
+            # The frame's corner is pushed off along the triangle's normal; the walk pushes
+            # every hit point along its patch's normal (frame rows 9:12): take that off here.
+            pushed_back = frame[9:12] * np.float32(self.geometry.ray_offset)
+            points = frame_points(frame, u.take(index, mode="wrap"), v.take(index, mode="wrap"))
+            points -= pushed_back
+            origins[:, index] = points
+        return origins
 
     def leave_random(self, patch, u):
         """Rays leaving the given patches from uniform points (``u[0]``, ``u[1]``, and
@@ -236,7 +266,8 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
     patch = source[:0]
     accumulated = None if finite else np.ones(0)  # product of R_bar along the path
     weights = None if tables.unit_weights else np.zeros((C, 0))
-    leave_from = None  # (triangle, u, v) of the live paths' hit points, for exit_point="hit"
+    leave_from = None  # (3,n) the live paths' hit points, not yet pushed off (exit_point="hit")
+    ray_offset = np.float32(g.ray_offset)
     rays = 0
     while True:
         if abort is not None and abort.is_set():
@@ -271,11 +302,12 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 u[:4, n_live:] = first_uniforms[:, started : started + new]
             origins, directions = tables.leave_random(patch, u)
         else:
-            # From the hit points, and new paths from new points of their sources: one gather
-            # of the exit table (triangle leaving frames, then patch parallelograms) and
-            # corner + a edge1 + b edge2 for all.
+            # From the hit points, pushed off along their patch's normal, and new paths from new
+            # points of their sources; every direction about its patch's normal.
             u = rng.random((2, n), dtype=np.float32)
-            column, bary_u, bary_v = leave_from
+            normals = g.patch_normal_rows.take(patch, axis=1, mode="wrap")
+            origins = leave_from
+            origins += normals[:, :n_live] * ray_offset
             if new > 0:
                 # The new paths' points (their directions take u's rows like every path's), and
                 # a triangle choice where patches are not parallelograms.
@@ -288,10 +320,9 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 if tables.row_triangle is not None:
                     rng.random(dtype=np.float32, out=u_new[tables.row_triangle])
                 # (leave_columns first: it folds u_new[0], u_new[1] onto triangles in place.)
-                column = np.concatenate((column, tables.leave_columns(patch[n_live:], u_new)))
-                bary_u = np.concatenate((bary_u, u_new[0]))
-                bary_v = np.concatenate((bary_v, u_new[1]))
-            origins, directions = _rays_from_frames(tables.exit_table.take(column, axis=1, mode="wrap"), bary_u, bary_v, u)
+                frame = tables.exit_table.take(tables.leave_columns(patch[n_live:], u_new), axis=1, mode="wrap")
+                origins = np.concatenate((origins, frame_points(frame, u_new[0], u_new[1])), axis=1)
+            directions = add_sphere_points(normals, u[0], u[1])
         started += max(new, 0)
         u_survive = rng.random(n) if finite else None
 
@@ -302,7 +333,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             hit_patch = g.triangle_patch.take(hit, mode="wrap")
             front = tables.facing(directions, hit, hit_patch)
         else:
-            hit, bary_u, bary_v, hit_normal = tables.tracer.first_hit_barycentric(origins.T, directions.T)
+            hit, bary_u, bary_v, distance, hit_normal = tables.tracer.first_hit_barycentric(origins.T, directions.T)
             hit_patch = None
             dot = hit_normal[:, 0] * directions[0]
             dot += hit_normal[:, 1] * directions[1]
@@ -311,6 +342,8 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
         rays += n
 
         front &= hit >= 0
+        if not exit_random:
+            points = tables.hit_points(origins, directions, distance, hit, bary_u, bary_v, front)
         if not front.all():
             missed = hit < 0
             back = ~missed & ~front
@@ -330,7 +363,7 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
                 u_survive = u_survive.take(keep, mode="wrap")
             accumulated, weights = _carried(keep, accumulated, weights, tables)
             if not exit_random:
-                bary_u, bary_v = bary_u.take(keep, mode="wrap"), bary_v.take(keep, mode="wrap")
+                points = points.take(keep, axis=1, mode="wrap")
         patch = g.triangle_patch.take(hit, mode="wrap") if hit_patch is None else hit_patch
 
         # Score: the power arriving at the hit patch.
@@ -363,15 +396,13 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
             patch = patch.take(go_on, mode="wrap")
             accumulated, weights = _carried(go_on, accumulated, weights, tables)
             if not exit_random:
-                hit, bary_u, bary_v = (a.take(go_on, mode="wrap") for a in (hit, bary_u, bary_v))
+                points = points.take(go_on, axis=1, mode="wrap")
         if finite:
             if weights is not None:
                 weights *= tables.survivor_weight.take(patch, axis=1, mode="wrap")
             absorbed += arriving - _total(weights, patch.size)
         if not exit_random:
-            # Leave from the hit point, re-made from its barycentric coordinates on the
-            # triangle's leaving frame: on the surface (inset, pushed off), whatever the distance.
-            leave_from = (hit, bary_u, bary_v)
+            leave_from = points
 
     return ChunkTally(
         paths=paths,

@@ -29,9 +29,10 @@ class RayTracer:
         return self._scene.run(origins, directions)
 
     def first_hit_barycentric(self, origins, directions):
-        """(triangle index, u, v, Ng) of each ray's first hit: the hit point is
-        corner0 + u (corner1 - corner0) + v (corner2 - corner0), and Ng (n,3) is the hit
-        triangle's unnormalised geometric normal, oriented like (corner1 - corner0) x
-        (corner2 - corner0) (Embree computes it anyway; its sign is all the walk needs)."""
+        """(triangle index, u, v, t, Ng) of each ray's first hit: the hit point is
+        corner0 + u (corner1 - corner0) + v (corner2 - corner0), and origin + t direction
+        (t is inf for a miss); Ng (n,3) is the hit triangle's unnormalised geometric normal,
+        oriented like (corner1 - corner0) x (corner2 - corner0) (Embree computes it anyway;
+        its sign is all the walk needs)."""
         out = self._scene.run(origins, directions, output=1)
-        return out["primID"], out["u"], out["v"], out["Ng"]
+        return out["primID"], out["u"], out["v"], out["tfar"], out["Ng"]

@@ -28,6 +28,13 @@ RELATIVE_RAY_OFFSET = 1e-5
 # origin on the far side of an adjacent wall, where its ray would hit that wall's back.
 RELATIVE_EDGE_INSET = 1e-6
 
+# A ray leaving from where the previous one hit starts at that hit point (origin + t direction,
+# pushed off along the normal) if the point lies at least this far (relative to the diagonal)
+# from every edge of its triangle: four times the edge inset, which leaves room for float32's
+# error in the point (~2e-7 in unit space). Closer to an edge, the hit's barycentric
+# coordinates are mapped onto the triangle's inset leaving frame instead.
+RELATIVE_HIT_EDGE_CLEARANCE = 4 * RELATIVE_EDGE_INSET
+
 # Scenes whose bounding-box diagonal lies outside this range are refused: float32 ray tracing
 # and float64 areas stay far from overflow and underflow inside it.
 MIN_DIAGONAL, MAX_DIAGONAL = 1e-12, 1e12
@@ -223,6 +230,20 @@ class Geometry:
         rows of :attr:`leave_table` (for paths starting on a source)."""
         triangle_columns = np.vstack([self.triangle_frame, self.patch_normal_rows[:, self.triangle_patch]])
         return np.ascontiguousarray(np.hstack([triangle_columns, self.leave_table]))
+
+    @cached_property
+    def edge_barycentric(self):
+        """(T,) float32: the barycentric coordinate below which a point of each triangle may lie
+        closer than RELATIVE_HIT_EDGE_CLEARANCE to one of its edges (the clearance over the
+        triangle's smallest altitude, 2 area / longest edge; 1 for triangles too small to
+        have such points)."""
+        corners = self.triangle_corners.astype(np.float64)
+        edges = corners[:, [1, 2, 0]] - corners
+        longest = np.linalg.norm(edges, axis=2).max(axis=1)
+        twice_area = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            threshold = RELATIVE_HIT_EDGE_CLEARANCE * longest / twice_area
+        return np.where(np.isfinite(threshold), np.minimum(threshold, 1.0), 1.0).astype(np.float32)
 
     @cached_property
     def triangle_normal_rows(self):

@@ -1,4 +1,5 @@
-"""The ray tracer's two queries agree, and Embree's geometric normal has our orientation."""
+"""The ray tracer's two queries agree, its hit point by distance is its hit point by barycentric
+coordinates, and Embree's geometric normal has our orientation."""
 import numpy as np
 
 from addon.core.sampling import cosine_directions, points_on_patches
@@ -22,7 +23,7 @@ def test_barycentric_query_matches_first_hit_and_normal_orientation():
         o = np.ascontiguousarray(origins - 0.01 * directions) if behind else origins
         d = directions
         hit = scene.tracer.first_hit(o, d)
-        hit_b, bu, bv, ng = scene.tracer.first_hit_barycentric(o, d)
+        hit_b, bu, bv, t, ng = scene.tracer.first_hit_barycentric(o, d)
         np.testing.assert_array_equal(hit, hit_b)
         ok = hit >= 0
         assert ok.mean() > 0.99
@@ -32,3 +33,10 @@ def test_barycentric_query_matches_first_hit_and_normal_orientation():
         # Ng is parallel to our unit normal and points the same way, for every hit.
         assert (dot > 0).all()
         assert ((bu[ok] >= 0) & (bv[ok] >= 0) & (bu[ok] + bv[ok] <= 1 + 1e-6)).all()
+        # origin + t direction and the barycentric point are the same point (to float32's
+        # rounding at the scene's unit size); a miss has t = inf.
+        c = scene.geometry.triangle_corners[hit[ok]].astype(np.float64)
+        by_barycentric = c[:, 0] + bu[ok, None] * (c[:, 1] - c[:, 0]) + bv[ok, None] * (c[:, 2] - c[:, 0])
+        by_distance = o[ok] + t[ok, None].astype(np.float64) * d[ok]
+        assert np.abs(by_distance - by_barycentric).max() < 1e-6
+        assert np.isinf(t[~ok]).all()
