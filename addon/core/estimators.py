@@ -430,7 +430,11 @@ def _walk_exchangeable(tables, paths, rng, abort=None):
 
     - in a scene of at most COUNTED_MAX_PATCHES patches, the key is 2 patch + survives (rays
       that do not hit a front side: 2P) and one bincount counts the step's hits by patch and
-      outcome; survivors restart from the counts, patch j s_j times, in patch order;
+      outcome; survivors restart from the counts, patch j s_j times, in patch order. The live
+      paths are then nothing but a count per patch: in a scene of parallelograms (and unless
+      the first rays are stratified, which pairs each new path with its own numbers) new
+      paths join those counts, and the step's leaving frames are the leave table's columns
+      repeated that many times (np.repeat, at less than half the cost of a gather by patch);
     - in a bigger scene the key is the patch of a survivor (P for the others) and a sort puts
       the survivors first, in patch order, so that rays leaving one patch go to the ray tracer
       together (coherent rays trace faster, and table gathers read memory in order).
@@ -454,22 +458,30 @@ def _walk_exchangeable(tables, paths, rng, abort=None):
     escaped = blocked = absorbed = 0
     started = rays = 0
     patch = source[:0]
+    # Live paths as counts per patch (see above), or None: as an array of their patches.
+    live = np.zeros(P, dtype=np.int64) if counted and g.all_parallelograms and first_uniforms is None else None
+    n_live = 0
     while True:
         if abort is not None and abort.is_set():
             raise Aborted
-        n_live = patch.size
         new = min(WAVEFRONT_PATHS - n_live, paths - started)
-        if new > 0:
-            new_patch = source[started : started + new]
-            patch = np.concatenate((patch, new_patch)) if n_live else new_patch
-        elif n_live == 0:
+        if new <= 0 and n_live == 0:
             break
-        n = patch.size
+        n = n_live + max(new, 0)
         u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
-        if first_uniforms is not None and new > 0:
-            u[:4, n_live:] = first_uniforms[:, started : started + new]
+        if live is not None:
+            if new > 0:
+                live += np.bincount(source[started : started + new], minlength=P)
+            frame = np.repeat(tables.leave_table, live, axis=1)
+            origins, directions = _rays_from_frames(frame, u[0], u[1], u[2:4])
+        else:
+            if new > 0:
+                new_patch = source[started : started + new]
+                patch = np.concatenate((patch, new_patch)) if n_live else new_patch
+            if first_uniforms is not None and new > 0:
+                u[:4, n_live:] = first_uniforms[:, started : started + new]
+            origins, directions = tables.leave_random(patch, u)
         started += max(new, 0)
-        origins, directions = tables.leave_random(patch, u)
         u_survive = rng.random(n)
         hit = tables.tracer.first_hit(origins.T, directions.T)
         rays += n
@@ -489,14 +501,20 @@ def _walk_exchangeable(tables, paths, rng, abort=None):
             step = np.bincount(np.where(front, key, past), minlength=2 * P + 1)
             outcome += step
             survivors = step[1 : 2 * P : 2]
-            patch = np.repeat(patch_index, survivors)
+            if live is not None:
+                live = survivors
+                n_live = int(live.sum())
+            else:
+                patch = np.repeat(patch_index, survivors)
+                n_live = patch.size
         else:
             scored = np.where(front, hit_patch, past)
             scores.add(scored, None)
             key = np.where(survive, scored, past)
             key.sort()
             patch = key[: int(np.searchsorted(key, past))]
-        absorbed += n_front - patch.size
+            n_live = patch.size
+        absorbed += n_front - n_live
 
     if counted:
         incident = (outcome[0 : 2 * P : 2] + outcome[1 : 2 * P : 2]).astype(np.float64)[None]
