@@ -55,6 +55,10 @@ SCORE_FLUSH_PER_PATCH = 4
 # survivors from those counts, instead of selecting them path by path (see _walk_exchangeable).
 COUNTED_MAX_PATCHES = 1 << 12
 
+# Where a ray that missed "hits" when a hit-point exit makes points of every ray (unit space;
+# float32 holds it times a direction of length <= 2 without overflow).
+MISS_DISTANCE = np.float32(1e30)
+
 FINITE = "finite"
 BIASED_INFINITE = "biased_infinite"
 ESTIMATORS = (FINITE, BIASED_INFINITE)
@@ -142,8 +146,10 @@ class WalkTables:
         ``edge_barycentric``), float32 rounding could put that point past the edge, behind an
         adjacent wall; those few points are the hit's barycentric coordinates mapped onto the
         triangle's inset leaving frame, as in :meth:`leave_random`."""
-        with np.errstate(invalid="ignore"):  # t = inf for misses, whose points are dropped
-            directions *= distance
+        # A miss has t = inf: clamped to a finite MISS_DISTANCE (inf x 0 would be NaN, with a
+        # warning), its point is far away and dropped with the miss.
+        np.minimum(distance, MISS_DISTANCE, out=distance)
+        directions *= distance
         origins += directions
         nearest = np.minimum(u, v)
         np.minimum(nearest, 1 - u - v, out=nearest)
