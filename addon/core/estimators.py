@@ -21,6 +21,11 @@ b_j = R_j I_j (Phi_T / N) / A_j.
 Rays that hit nothing escape; rays that hit a patch's back side are absorbed there ("blocked"):
 radiosity leaves only the front side of a patch.
 
+Rays leave a patch from a new uniform point of it (``exit_point="random"``, the paper's
+discrete method and the default) or from where the ray arrived (``"hit"``: origin + t
+direction, see ``WalkTables.hit_points``), in a cosine-distributed direction about the patch's
+normal, from a point pushed off the surface.
+
 A grey finite walk leaving from random points (the paper's plain estimator, and the default)
 has interchangeable paths: each is nothing but the patch it is on. It runs in its own loop
 (``_walk_exchangeable``) that regroups a step's rays by outcome with one bincount or one sort
@@ -117,7 +122,8 @@ class WalkTables:
         self.patch_key_shift = max(0, int(scene.patch_count - 1).bit_length() - 16)
         # Where rays leave from: parallelogram patches (all of them, usually) from one column
         # each of the leave table; other patches from a triangle of theirs, chosen by area,
-        # in the exit table, which also holds every triangle for the hit-point exit.
+        # in the exit table, which also holds every triangle: a hit-point exit maps hits near
+        # a triangle's edges onto its inset frame there (hit_points).
         if self.geometry.all_parallelograms:
             self.leave_table = self.geometry.leave_table
         if not (self.geometry.all_parallelograms and self.exit_random):

@@ -225,9 +225,10 @@ class Geometry:
 
     @cached_property
     def exit_table(self):
-        """(12,T+P) float32: a hit-point exit's table. Columns 0..T-1 are the triangles'
-        leaving frames (corner, edge1, edge2) with their patch's normal, columns T..T+P-1 the
-        rows of :attr:`leave_table` (for paths starting on a source)."""
+        """(12,T+P) float32: the leaving frames of triangles and patches. Columns 0..T-1 are the
+        triangles' leaving frames (corner, edge1, edge2) with their patch's normal (random
+        points of patches that are not parallelograms; a hit-point exit's hits near an edge),
+        columns T..T+P-1 the rows of :attr:`leave_table` (parallelogram patches)."""
         triangle_columns = np.vstack([self.triangle_frame, self.patch_normal_rows[:, self.triangle_patch]])
         return np.ascontiguousarray(np.hstack([triangle_columns, self.leave_table]))
 
