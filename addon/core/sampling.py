@@ -139,14 +139,9 @@ def triangle_point_rows(geometry, triangle, u1, u2):
     return barycentric_point_rows(geometry, triangle, np.where(fold, 1 - u1, u1), np.where(fold, 1 - u2, u2))
 
 
-def points_at_barycentric(geometry, triangle, a, b):
-    """The points corner0 + a edge1 + b edge2 of the given triangles' leaving frames (inset
-    from the edges, pushed off along the normal). float32 (n,3), centred coordinates."""
-    return np.ascontiguousarray(barycentric_point_rows(geometry, triangle, a, b).T)
-
-
 def barycentric_point_rows(geometry, triangle, a, b):
-    """:func:`points_at_barycentric` as (3,n) rows."""
+    """The points corner0 + a edge1 + b edge2 of the given triangles' leaving frames (inset
+    from the edges, pushed off along the normal): (3,n) float32 rows, unit space."""
     frame = np.take(geometry.triangle_frame, triangle, axis=1)  # one gather: (9,n)
     return frame_points(frame, a, b)
 
