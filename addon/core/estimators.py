@@ -265,8 +265,12 @@ def _facing(directions, normals):
 
 def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=None) -> ChunkTally:
     """Trace ``paths`` random walks from the sources to their end; return their tallies."""
-    if tables.exchangeable:
-        return _walk_exchangeable(tables, paths, rng, abort)
+    return walk_chunks(tables, [paths], rng, abort)[0]
+
+
+def _walk_paths(tables, paths, rng, abort=None):
+    """``walk_chunk`` for walks whose paths carry something of their own (weights, hit points,
+    an accumulated reflectivity): the live paths are arrays, selected path by path."""
     g = tables.geometry
     C, P = tables.channels, tables.patch_count
     finite = tables.estimator == FINITE
@@ -442,49 +446,86 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
     )
 
 
-def _walk_exchangeable(tables, paths, rng, abort=None):
-    """``walk_chunk`` for a grey finite walk leaving from random points (the paper's plain
+def walk_chunks(tables: WalkTables, sizes, rng: np.random.Generator, abort=None) -> list:
+    """Trace the paths of several chunks (``sizes``, a path count each); return each chunk's
+    own tallies, in order.
+
+    In a walk whose paths are interchangeable (``tables.exchangeable``) the chunks are traced
+    as one wavefront, every path tagged with its chunk: the steps of a chunk's end, when its
+    last paths run out and each step traces few rays for the same numpy work, overlap the
+    next chunk's start. Small runs, whose chunks are small (the batch error estimate wants
+    many of them), trace about twice as fast. Each chunk's paths are drawn for it alone and
+    scored to it alone, so the chunks stay independent batches. Other walks trace the chunks
+    one after the other, from the same generator."""
+    sizes = [int(n) for n in sizes]
+    if tables.exchangeable:
+        return _walk_exchangeable(tables, sizes, rng, abort)
+    return [_walk_paths(tables, n, rng, abort) for n in sizes]
+
+
+def _walk_exchangeable(tables, sizes, rng, abort=None):
+    """``walk_chunks`` for a grey finite walk leaving from random points (the paper's plain
     estimator): every path carries the same power and leaves each patch from a new point, so a
-    path is nothing but the patch it is on, and the live paths may be kept in any order
-    without changing the estimate.
+    path is nothing but the patch it is on (and its chunk), and the live paths may be kept in
+    any order without changing the estimate.
 
     Every ray ends one of four ways: escaped (no hit), blocked (a back side), absorbed (a front
     hit, then the survival test with R_bar fails) or surviving. Instead of selecting the
     survivors path by path (a data-dependent branch per path, the costliest numpy step here),
-    a step keys each ray by its outcome and lets one whole-array operation regroup them:
+    a step puts each ray in a bin of its chunk's K bins by outcome, and one whole-array
+    operation regroups them:
 
-    - in a scene of at most COUNTED_MAX_PATCHES patches, the key is 2 patch + survives (rays
-      that do not hit a front side: 2P) and one bincount counts the step's hits by patch and
-      outcome; survivors restart from the counts, patch j s_j times, in patch order. The live
-      paths are then nothing but a count per patch: in a scene of parallelograms (and unless
-      the first rays are stratified, which pairs each new path with its own numbers) new
-      paths join those counts, and the step's leaving frames are the leave table's columns
-      repeated that many times (np.repeat, at less than half the cost of a gather by patch);
-    - in a bigger scene the key is the patch of a survivor (P for the others) and a sort puts
-      the survivors first, in patch order, so that rays leaving one patch go to the ray tracer
-      together (coherent rays trace faster, and table gathers read memory in order).
+    - in a scene of at most COUNTED_MAX_PATCHES patches the bins are 2 patch + survives, then
+      escaped (2P) and blocked (2P + 1), and one bincount counts the step's rays by chunk,
+      patch and outcome; survivors restart from the counts, patch j s_j times, in patch
+      order. The live paths are then nothing but a count per chunk and patch: in a scene of
+      parallelograms (and unless the first rays are stratified, which pairs each new path
+      with its own numbers) new paths join those counts, and the step's leaving frames are
+      the leave table's columns repeated that many times (np.repeat, at less than half the
+      cost of a gather by patch);
+    - in a bigger scene the bins are the front-hit patch, then escaped (P) and blocked
+      (P + 1); the step's bins are scored, and a sort puts the survivors first, in order of
+      chunk and patch, so that rays leaving one patch go to the ray tracer together (coherent
+      rays trace faster, and table gathers read memory in order).
+
+    A chunk's bins hold all its accounts: its rays (every ray lands in one bin), its escaped
+    and blocked paths, and so its absorbed ones (every path ends once).
     """
     g = tables.geometry
     P = tables.patch_count
+    G = len(sizes)
+    paths = sum(sizes)
     counted = tables.counted
-    # The ended rays' key (past every patch), as the walk's index type.
-    past = np.int32(2 * P if counted else P)
+    tagged = G > 1
+    K = 2 * P + 2 if counted else P + 2  # bins per chunk: [2 patch + survives | patch], escaped, blocked
+    escaped_bin = np.int32(K - 2)
+    past = np.int32(G * K)  # a sort key past every bin: paths that do not go on
+    # Each chunk's sources drawn for it alone (a source sample may come out grouped by source).
     first_uniforms = None
     if tables.stratified:
-        source, first_uniforms = tables.sources.stratified(paths, rng)
+        drawn = [tables.sources.stratified(n, rng) for n in sizes]
+        source = np.concatenate([d[0] for d in drawn])
+        first_uniforms = np.concatenate([d[1] for d in drawn], axis=1)
     else:
-        source = tables.sources.sample(paths, rng)
+        source = np.concatenate([tables.sources.sample(n, rng) for n in sizes])
     source = source.astype(np.int32)
+    source_chunk = np.repeat(np.arange(G, dtype=np.int32), sizes) if tagged else None
     if counted:
-        outcome = np.zeros(2 * P + 1, dtype=np.int64)  # hits by 2 patch + survives; [2P]: none
+        bins = np.zeros((G, K), dtype=np.int64)
         patch_index = np.arange(P, dtype=np.int32)
+        if tagged:  # (patch, chunk) pairs in patch-major order
+            patch_of_pair = np.repeat(patch_index, G)
+            chunk_of_pair = np.tile(np.arange(G, dtype=np.int32), P)
     else:
-        scores = _Scores(1, P + 1)  # front hits by patch; [P]: none
-    escaped = blocked = absorbed = 0
-    started = rays = 0
+        scores = _Scores(1, G * K)
+    started = 0
     patch = source[:0]
-    # Live paths as counts per patch (see above), or None: as an array of their patches.
-    live = np.zeros(P, dtype=np.int64) if counted and g.all_parallelograms and first_uniforms is None else None
+    chunk = source_chunk[:0] if tagged else None
+    # Live paths as counts per chunk and patch (see above), or None: as arrays of their
+    # patches (and chunks).
+    live = None
+    if counted and g.all_parallelograms and first_uniforms is None:
+        live = np.zeros((G, P), dtype=np.int64)
     n_live = 0
     while True:
         if abort is not None and abort.is_set():
@@ -496,67 +537,97 @@ def _walk_exchangeable(tables, paths, rng, abort=None):
         u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
         if live is not None:
             if new > 0:
-                live += np.bincount(source[started : started + new], minlength=P)
-            frame = np.repeat(tables.leave_table, live, axis=1)
+                new_patch = source[started : started + new]
+                if tagged:
+                    pair = source_chunk[started : started + new] * np.int32(P)
+                    pair += new_patch
+                    live += np.bincount(pair, minlength=G * P).reshape(G, P)
+                else:
+                    live[0] += np.bincount(new_patch, minlength=P)
+            if tagged:
+                frame = np.repeat(tables.leave_table, live.sum(axis=0), axis=1)
+                chunk = np.repeat(chunk_of_pair, live.T.ravel())
+            else:
+                frame = np.repeat(tables.leave_table, live[0], axis=1)
             origins, directions = _rays_from_frames(frame, u[0], u[1], u[2:4])
         else:
             if new > 0:
                 new_patch = source[started : started + new]
                 patch = np.concatenate((patch, new_patch)) if n_live else new_patch
+                if tagged:
+                    new_chunk = source_chunk[started : started + new]
+                    chunk = np.concatenate((chunk, new_chunk)) if n_live else new_chunk
             if first_uniforms is not None and new > 0:
                 u[:4, n_live:] = first_uniforms[:, started : started + new]
             origins, directions = tables.leave_random(patch, u)
         started += max(new, 0)
         u_survive = rng.random(n)
         hit = tables.tracer.first_hit(origins.T, directions.T)
-        rays += n
-        # A miss (-1) wraps to the last triangle: harmless, keyed out below.
+        # A miss (-1) wraps to the last triangle: harmless, binned out below.
         hit_patch = g.triangle_patch.take(hit, mode="wrap")
         front = tables.facing(directions, hit, hit_patch)
-        front &= hit >= 0
-        n_front = int(np.count_nonzero(front))
-        if n_front < n:
-            n_missed = int(np.count_nonzero(hit < 0))
-            escaped += n_missed
-            blocked += n - n_front - n_missed
+        reached = hit >= 0
+        front &= reached
+        ended_bin = escaped_bin + reached  # escaped, or blocked where it reached a back side
         survive = u_survive < tables.mean_reflectivity.take(hit_patch, mode="wrap")
         if counted:
             key = hit_patch * np.int32(2)
             key += survive
-            step = np.bincount(_select(front, key, past), minlength=2 * P + 1)
-            outcome += step
-            survivors = step[1 : 2 * P : 2]
+            key = _select(front, key, ended_bin)
+            if tagged:
+                key += chunk * np.int32(K)
+            step = np.bincount(key, minlength=G * K).reshape(G, K)
+            bins += step
+            survivors = step[:, 1 : 2 * P : 2]
             if live is not None:
                 live = survivors
                 n_live = int(live.sum())
+            elif tagged:
+                pairs = survivors.T.ravel()
+                patch = np.repeat(patch_of_pair, pairs)
+                chunk = np.repeat(chunk_of_pair, pairs)
+                n_live = patch.size
             else:
-                patch = np.repeat(patch_index, survivors)
+                patch = np.repeat(patch_index, survivors[0])
                 n_live = patch.size
         else:
-            scored = _select(front, hit_patch, past)
-            scores.add(scored, None)
-            key = _select(survive, scored, past)
+            key = _select(front, hit_patch, ended_bin)
+            if tagged:
+                key += chunk * np.int32(K)
+            scores.add(key, None)
+            survive &= front
+            key = _select(survive, key, past)
             key.sort()
-            patch = key[: int(np.searchsorted(key, past))]
+            key = key[: int(np.searchsorted(key, past))]
+            if tagged:
+                chunk = key // np.int32(K)
+                patch = key - chunk * np.int32(K)
+            else:
+                patch = key
             n_live = patch.size
-        absorbed += n_front - n_live
 
     if counted:
-        incident = (outcome[0 : 2 * P : 2] + outcome[1 : 2 * P : 2]).astype(np.float64)[None]
+        incident = bins[:, 0 : 2 * P : 2] + bins[:, 1 : 2 * P : 2]
     else:
-        incident = np.ascontiguousarray(scores.total()[:, :P])
-    one = lambda count: np.array([float(count)])  # noqa: E731
-    return ChunkTally(
-        paths=paths,
-        rays=rays,
-        incident=incident,
-        emitted=one(paths),
-        absorbed=one(absorbed),
-        escaped=one(escaped),
-        blocked=one(blocked),
-        undistributed=one(0),
-        ended={"escaped": escaped, "blocked": blocked, "absorbed": absorbed, "threshold": 0},
-    )
+        bins = scores.total()[0].reshape(G, K)
+        incident = bins[:, :P]
+    tallies = []
+    for k, n in enumerate(sizes):
+        escaped, blocked = int(bins[k, K - 2]), int(bins[k, K - 1])
+        absorbed = n - escaped - blocked  # every path ends once
+        one = lambda count: np.array([float(count)])  # noqa: E731
+        tallies.append(ChunkTally(
+            paths=n,
+            rays=int(bins[k].sum()),
+            incident=incident[k : k + 1].astype(np.float64),
+            emitted=one(n),
+            absorbed=one(absorbed),
+            escaped=one(escaped),
+            blocked=one(blocked),
+            undistributed=one(0),
+            ended={"escaped": escaped, "blocked": blocked, "absorbed": absorbed, "threshold": 0},
+        ))
+    return tallies
 
 
 def _carried(index, accumulated, weights, tables):

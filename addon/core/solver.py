@@ -1,7 +1,8 @@
 """solve(): runs the random walks in chunks over threads, to a path count or an error target.
 
 Chunk k of a run draws its random numbers from its own stream, SeedSequence(seed, spawn_key=(k,)),
-and chunk tallies are added in chunk order, so a run's result depends only on the seed and the
+(a group of small chunks traced together, see ``chunks_per_group``, from its first chunk's), and
+chunk tallies are added in chunk order, so a run's result depends only on the seed and the
 chunk plan, never on the number of threads or on timing: bitwise reproducible.
 
 Chunks are also the independent batches of the a-posteriori error estimate ("batch means"):
@@ -22,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .error_model import check_estimator, check_positive, predict
-from .estimators import EXIT_POINTS, EXIT_RANDOM, FINITE, WalkTables, walk_chunk
+from .estimators import EXIT_POINTS, EXIT_RANDOM, FINITE, WalkTables, walk_chunks
 
 STOP_PATHS = "paths"
 STOP_TARGET = "target"
@@ -40,6 +41,12 @@ MAX_CHUNK_PATHS = 1 << 19
 MIN_CHUNK_PATHS = 128
 # The batch estimate wants this many chunks in a run when the run is small.
 MIN_CHUNKS = 32
+# Small chunks end in many steps of few rays each, which cost numpy's per-step work for little
+# tracing: walks whose paths are interchangeable trace up to GROUP_MAX_CHUNKS chunks as one
+# wavefront (estimators.walk_chunks) while a chunk has fewer than GROUP_RAYS rays. (At most 4:
+# a run of MIN_CHUNKS chunks still makes 8 tasks for the threads.)
+GROUP_RAYS = 1 << 18
+GROUP_MAX_CHUNKS = 4
 # With stop_rule="measured": never stop on fewer chunks than this, nor run past this many
 # times the predicted paths (unless paths= is given as the cap).
 MIN_MEASURED_CHUNKS = 8
@@ -79,6 +86,16 @@ def chunk_paths_for(expected_path_length, planned_paths):
     by_rays = int(RAYS_PER_CHUNK / max(expected_path_length, 1.0))
     by_batches = math.ceil(planned_paths / MIN_CHUNKS)
     return int(min(MAX_CHUNK_PATHS, max(MIN_CHUNK_PATHS, min(by_rays, by_batches))))
+
+
+def chunks_per_group(tables, chunk_paths, expected_path_length):
+    """How many chunks a task traces together (estimators.walk_chunks): 1 unless the walk's
+    paths are interchangeable and its chunks small. It depends on the chunk plan alone, never
+    on the threads, so runs stay bitwise reproducible."""
+    if not tables.exchangeable:
+        return 1
+    chunk_rays = max(1.0, chunk_paths * expected_path_length)
+    return int(min(GROUP_MAX_CHUNKS, max(1, GROUP_RAYS // chunk_rays)))
 
 
 class _Accumulator:
@@ -225,14 +242,17 @@ def solve(
     abort = threading.Event()
     seed_root = int(seed)
 
-    def run_chunk(k, n):
+    def run_chunks(k, sizes):
+        # Chunks k, k+1, ... of a group (estimators.walk_chunks) draw from the generator of
+        # their first chunk.
         rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed_root, spawn_key=(k,))))
-        return walk_chunk(tables, n, rng, abort)
+        return walk_chunks(tables, sizes, rng, abort)
 
     def chunk_size(k):
         return min(chunk, cap - k * chunk)
 
     chunk_count = math.ceil(cap / chunk)
+    group = chunks_per_group(tables, chunk, prediction.expected_path_length)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
     done_rule = STOP_TARGET if (paths is None and not measured_rule) else STOP_PATHS
     stopped = None
@@ -243,38 +263,40 @@ def solve(
         while stopped is None:
             # Keep every thread busy, with one chunk queued beyond those running.
             while next_chunk < chunk_count and len(pending) < threads + 1:
-                pending.append(executor.submit(run_chunk, next_chunk, chunk_size(next_chunk)))
-                next_chunk += 1
+                sizes = [chunk_size(k) for k in range(next_chunk, min(next_chunk + group, chunk_count))]
+                pending.append(executor.submit(run_chunks, next_chunk, sizes))
+                next_chunk += len(sizes)
             if not pending:
                 stopped = done_rule
                 break
-            tally = None
-            while tally is None and stopped is None:
+            tallies = None
+            while tallies is None and stopped is None:
                 try:
-                    tally = pending[0].result(timeout=POLL_SECONDS)
+                    tallies = pending[0].result(timeout=POLL_SECONDS)
                 except TimeoutError:
                     stopped = _interrupted(should_stop, max_seconds, start)
             if stopped:
                 break
             pending.popleft()
-            total.add(tally)
-            elapsed = time.perf_counter() - start
-            mse_now = total.measured_mse()
-            if progress is not None:
-                fraction = total.paths / cap
-                if measured_rule and mse_now > 0:  # NaN compares False
-                    fraction = max(fraction, target_mse / mse_now)
-                progress(
-                    min(1.0, fraction),
-                    {
-                        "paths": total.paths,
-                        "rays": total.rays,
-                        "seconds": elapsed,
-                        "rays_per_second": total.rays / elapsed if elapsed > 0 else math.nan,
-                        "measured_mse": mse_now,
-                        "predicted_mse": prediction.mse_for(total.paths),
-                    },
-                )
+            for tally in tallies:  # progress once per chunk
+                total.add(tally)
+                elapsed = time.perf_counter() - start
+                mse_now = total.measured_mse()
+                if progress is not None:
+                    fraction = total.paths / cap
+                    if measured_rule and mse_now > 0:  # NaN compares False
+                        fraction = max(fraction, target_mse / mse_now)
+                    progress(
+                        min(1.0, fraction),
+                        {
+                            "paths": total.paths,
+                            "rays": total.rays,
+                            "seconds": elapsed,
+                            "rays_per_second": total.rays / elapsed if elapsed > 0 else math.nan,
+                            "measured_mse": mse_now,
+                            "predicted_mse": prediction.mse_for(total.paths),
+                        },
+                    )
             if measured_rule and total.chunks >= MIN_MEASURED_CHUNKS and mse_now <= target_mse:
                 stopped = STOP_TARGET
             elif total.paths >= cap:

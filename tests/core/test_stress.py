@@ -237,17 +237,18 @@ def test_1e8_paths_equal_their_two_halves_and_the_exact_solution(monkeypatch):
     assert chunk_count >= 100  # enough batches for the variance check below
     half_chunks = chunk_count // 2
     halves = np.zeros((2, scene.patch_count), dtype=np.int64)
-    real_walk = solver_module.walk_chunk
+    real_walk = solver_module.walk_chunks
     lock = threading.Lock()
 
-    def locked_walk(tables, paths, rng, abort=None):
-        tally = real_walk(tables, paths, rng, abort)
-        (k,) = rng.bit_generator.seed_seq.spawn_key
+    def locked_walk(tables, sizes, rng, abort=None):
+        tallies = real_walk(tables, sizes, rng, abort)
+        (first,) = rng.bit_generator.seed_seq.spawn_key
         with lock:
-            halves[int(k >= half_chunks)] += tally.incident[0].astype(np.int64)
-        return tally
+            for k, tally in enumerate(tallies, start=first):
+                halves[int(k >= half_chunks)] += tally.incident[0].astype(np.int64)
+        return tallies
 
-    monkeypatch.setattr(solver_module, "walk_chunk", locked_walk)
+    monkeypatch.setattr(solver_module, "walk_chunks", locked_walk)
     full = solve(scene, "finite", paths=N, seed=66, threads=2)
     assert full.paths == N and full.chunks == chunk_count
     hits = _incident(full, scene)

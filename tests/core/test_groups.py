@@ -1,0 +1,151 @@
+"""Small chunks traced together (estimators.walk_chunks): every chunk keeps its own accounts and
+stays an independent batch.
+
+A walk of interchangeable paths traces a group of chunks as one wavefront, each path tagged
+with its chunk. Mixing up the tags would move paths, rays or hits between chunks; these tests
+give the chunks of one group very different sizes, so that any such mix-up shows.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from addon.core import PatchScene, solve
+from addon.core import solver
+from addon.core.estimators import WalkTables, walk_chunk, walk_chunks
+from addon.core.reference import path_variances
+from boxes import box_rectangles, box_scene, rectangles_to_mesh
+
+Z = 4.5  # two-sided normal bound, about 7e-6 per test (several per test, all far apart)
+SIZES = [700, 30_000, 3_000, 128]
+
+
+def _kinds(scene):
+    """The exchangeable walk's three ways of keeping live paths: counts per chunk and patch,
+    arrays of patches and chunks after a count (stratified first rays), and sorted keys (bigger
+    scenes; forced here)."""
+    counts = WalkTables(scene, "finite", 1e-3, "random")
+    arrays = WalkTables(scene, "finite", 1e-3, "random", stratified=True)
+    ordered = WalkTables(scene, "finite", 1e-3, "random")
+    ordered.counted = False
+    assert counts.exchangeable and counts.counted and arrays.counted
+    return {"counts": counts, "arrays": arrays, "sorted": ordered}
+
+
+@pytest.mark.parametrize("kind", ["counts", "arrays", "sorted"])
+def test_each_chunk_of_a_group_has_its_own_paths_and_rays(kind):
+    """Closed box, R = 0.6 everywhere: each chunk's paths all end absorbed, its rays are its
+    hits, and its rays per path are geometric with mean 1 / (1 - R), chunk by chunk."""
+    R = 0.6
+    scene, _, _ = box_scene([R] * 6, [0, 1.0, 0, 0, 0, 0], n=3)
+    tables = _kinds(scene)[kind]
+    tallies = walk_chunks(tables, SIZES, np.random.default_rng(11))
+    assert len(tallies) == len(SIZES)
+    for n, t in zip(SIZES, tallies):
+        assert t.paths == n and t.emitted[0] == n
+        assert t.ended == {"escaped": 0, "blocked": 0, "absorbed": n, "threshold": 0}
+        assert t.incident.shape == (1, scene.patch_count)
+        assert t.incident.sum() == t.rays  # every ray of a closed box scores once
+        length_sd = math.sqrt(R) / (1 - R) / math.sqrt(n)
+        assert abs(t.rays / n - 1 / (1 - R)) < Z * length_sd, (n, t.rays / n)
+
+
+@pytest.mark.parametrize("kind", ["counts", "arrays", "sorted"])
+def test_each_chunk_of_a_group_balances_escapes_and_back_hits(kind):
+    """Open box with a card hit from behind: every chunk's paths end once (absorbed, escaped or
+    blocked), its rays are its front hits plus its escaped and blocked rays, and its share of
+    escapes matches the group's (a binomial proportion per chunk)."""
+    origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=2)
+    keep = face != 1  # open at the top
+    origin = np.vstack([origin[keep], [[0.3, 0.3, 0.5]]])
+    u, v = np.vstack([u[keep], [[0, 0.4, 0]]]), np.vstack([v[keep], [[0.4, 0, 0]]])
+    V, T, TP = rectangles_to_mesh(origin, u, v)
+    P = origin.shape[0]
+    E = np.zeros(P)
+    E[:4] = 1.0
+    scene = PatchScene(V, T, TP, np.full(P, 0.6), E)
+    tallies = walk_chunks(_kinds(scene)[kind], SIZES, np.random.default_rng(12))
+    escaped = sum(t.ended["escaped"] for t in tallies) / sum(SIZES)
+    for n, t in zip(SIZES, tallies):
+        e = t.ended
+        assert e["absorbed"] + e["escaped"] + e["blocked"] == n == t.paths
+        assert t.absorbed[0] == e["absorbed"] and t.escaped[0] == e["escaped"] and t.blocked[0] == e["blocked"]
+        assert t.rays == t.incident.sum() + e["escaped"] + e["blocked"]
+        assert abs(e["escaped"] / n - escaped) < Z * math.sqrt(escaped * (1 - escaped) / n), (n, e)
+    assert sum(t.ended["blocked"] for t in tallies) > 100
+
+
+@pytest.mark.parametrize("kind", ["counts", "arrays", "sorted"])
+def test_a_chunk_of_one_path_stays_in_its_box(kind):
+    """Two closed boxes apart, each lit from its ceiling, R = 0.9: a path never leaves the box
+    it starts in. In a group of 64 one-path chunks and one big chunk (whose paths fill the
+    wavefront beside them), every one-path chunk scores in one box only. Tags that moved
+    between paths would spread a chunk's hits over both boxes (while keeping every chunk's
+    expected counts, which the tests above would not see)."""
+    R = 0.9
+    boxes = [box_rectangles(n=2, offset=(2.0 * k, 0, 0)) for k in (0, 1)]
+    origin, u, v, face = (np.concatenate(parts) for parts in zip(*boxes))
+    V, T, TP = rectangles_to_mesh(origin, u, v)
+    P = origin.shape[0]
+    scene = PatchScene(V, T, TP, np.full(P, R), (face == 1).astype(float))
+    tables = _kinds(scene)[kind]
+    in_second_box = np.arange(P) >= P // 2
+    tallies = walk_chunks(tables, [1] * 64 + [3_000], np.random.default_rng(13))
+    both = [t for t in tallies[:64] if t.incident[0, in_second_box].sum() and t.incident[0, ~in_second_box].sum()]
+    assert not both
+    lengths = [t.rays for t in tallies[:64]]
+    assert max(lengths) > 20  # paths long enough to have crossed, had their tags moved
+    for t in tallies[:64]:
+        assert t.paths == 1 and t.incident.sum() == t.rays
+
+
+def test_one_chunk_is_walk_chunk():
+    scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    (a,) = walk_chunks(tables, [5_000], np.random.default_rng(3))
+    b = walk_chunk(tables, 5_000, np.random.default_rng(3))
+    assert a.rays == b.rays and a.ended == b.ended
+    np.testing.assert_array_equal(a.incident, b.incident)
+
+
+@pytest.mark.parametrize("kind", ["counts", "sorted"])
+def test_chunks_of_groups_are_independent_batches(kind):
+    """200 chunks of 400 paths, traced in groups of 4: the spread of the chunks' per-patch
+    estimates is table 1's variance for 400 paths. (Tags mixed between the chunks of a group,
+    or paths shared, would shrink or grow it.) K = 200 batches: each patch's variance ratio
+    has a standard deviation of sqrt(2 / 199); the area-weighted mean over patches, which are
+    correlated, is bounded by the same band."""
+    scene, F, _ = box_scene([0.3, 0.6, 0.7, 0.5, 0.4, 0.65], [0, 1.0, 0, 0, 0, 0], (1.0, 1.4, 0.8), n=2)
+    tables = _kinds(scene)[kind]
+    n = 400
+    estimates = []
+    for group in range(50):
+        for t in walk_chunks(tables, [n] * 4, np.random.default_rng(1000 + group)):
+            # b_j = R_j I_j Phi_T / (A_j n)
+            estimates.append(scene.reflectivity[:, 0] * t.incident[0] * scene.total_power / (scene.patch_area * n))
+    estimates = np.array(estimates)
+    var, _ = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], scene.patch_area)
+    ratio = estimates.var(axis=0, ddof=1) / (var / n)
+    band = Z * math.sqrt(2 / (len(estimates) - 1))
+    assert np.abs(ratio - 1).max() < band, ratio
+    mean_ratio = float((scene.patch_area * ratio).sum() / scene.total_area)
+    assert abs(mean_ratio - 1) < band / 2, mean_ratio
+
+
+def test_small_runs_group_their_chunks_and_report_every_chunk():
+    """A small run of the plain estimator traces its chunks in groups (fewer, fuller
+    wavefronts), still reports progress once per chunk, and is the same run whatever the
+    threads. Walks whose paths carry something of their own trace chunks one by one."""
+    scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
+    plain = WalkTables(scene, "finite", 1e-3, "random")
+    assert solver.chunks_per_group(plain, 500, 2.0) == solver.GROUP_MAX_CHUNKS
+    assert solver.chunks_per_group(plain, solver.GROUP_RAYS, 2.0) == 1
+    for other in (WalkTables(scene, "biased_infinite", 1e-3, "random"), WalkTables(scene, "finite", 1e-3, "hit")):
+        assert solver.chunks_per_group(other, 500, 2.0) == 1
+    fractions = []
+    a = solve(scene, "finite", paths=20_000, seed=3, threads=1, progress=lambda f, s: fractions.append(f))
+    b = solve(scene, "finite", paths=20_000, seed=3, threads=2)
+    assert a.chunks == solver.MIN_CHUNKS and len(fractions) == a.chunks
+    assert all(y > x for x, y in zip(fractions, fractions[1:])) and fractions[-1] == 1.0
+    np.testing.assert_array_equal(a.radiosity, b.radiosity)
+    assert a.rays == b.rays
