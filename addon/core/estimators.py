@@ -235,19 +235,6 @@ class Aborted(Exception):
     """The walk was asked to stop; its partial chunk is discarded."""
 
 
-def _weight_sum(weights, mask):
-    """Sum of the carried weights of the masked paths, per channel (the masked paths are
-    usually few: their columns are picked out first)."""
-    if weights is None:
-        return np.array([float(np.count_nonzero(mask))])
-    return weights.compress(mask, axis=1).sum(axis=1)
-
-
-def _total(weights, n):
-    """Total carried weight per channel, (C,): n paths of weight 1 where weights is None."""
-    return np.array([float(n)]) if weights is None else weights.sum(axis=1)
-
-
 def _select(mask, value, other):
     """np.where(mask, value, other) for integers, as other + (value - other) mask: np.where
     branches on every element, and on a random mask (which rays survive) its mispredictions
@@ -268,36 +255,65 @@ def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=N
     return walk_chunks(tables, [paths], rng, abort)[0]
 
 
-def _walk_paths(tables, paths, rng, abort=None):
-    """``walk_chunk`` for walks whose paths carry something of their own (weights, hit points,
-    an accumulated reflectivity): the live paths are arrays, selected path by path."""
+def _walk_paths(tables, sizes, rng, abort=None):
+    """``walk_chunks`` for walks whose paths carry something of their own (weights, hit points,
+    an accumulated reflectivity): the live paths are arrays, selected path by path.
+
+    In a group (more than one chunk) each path also carries its chunk, and the live paths stay
+    in chunk order: a chunk's paths all start before the next chunk's, selections keep the
+    order, and the sort by patch of bigger scenes sorts by chunk first. Every account of a
+    chunk is then a sum over one contiguous run of paths (``_chunk_sums``), and a chunk scores
+    in its own P columns."""
     g = tables.geometry
     C, P = tables.channels, tables.patch_count
+    G = len(sizes)
+    grouped = G > 1
+    paths = sum(sizes)
     finite = tables.estimator == FINITE
     exit_random = tables.exit_random
-    scores = _Scores(C, P)
-    absorbed = np.zeros(C)
-    escaped = np.zeros(C)
-    blocked = np.zeros(C)
-    undistributed = np.zeros(C)
-    emitted = np.zeros(C)
-    ended = {"escaped": 0, "blocked": 0, "absorbed": 0, "threshold": 0}
+    scores = _Scores(C, G * P)
+    absorbed = np.zeros((G, C))
+    escaped = np.zeros((G, C))
+    blocked = np.zeros((G, C))
+    undistributed = np.zeros((G, C))
+    emitted = np.zeros((G, C))
+    ended = {name: np.zeros(G, dtype=np.int64) for name in ("escaped", "blocked", "absorbed", "threshold")}
 
-    # Every path's source, drawn at once (grouped by source); paths start as places free up.
+    # Every path's source, drawn at once for each chunk; paths start as places free up.
     first_uniforms = None
     if tables.stratified:
-        source, first_uniforms = tables.sources.stratified(paths, rng)
+        drawn = [tables.sources.stratified(n, rng) for n in sizes]
+        source = np.concatenate([d[0] for d in drawn])
+        first_uniforms = np.concatenate([d[1] for d in drawn], axis=1)
     else:
-        source = tables.sources.sample(paths, rng)
+        source = np.concatenate([tables.sources.sample(n, rng) for n in sizes])
     started = 0
+    source_chunk = np.repeat(np.arange(G, dtype=np.int32), sizes) if grouped else None
+    chunk_key_bits = int(G - 1).bit_length()  # in the sort key by patch (sort_paths)
 
-    # The live paths: the patch each is on, and what it carries.
+    # The live paths: the patch each is on, what it carries, and its chunk (in a group).
     patch = source[:0]
+    chunk = source_chunk[:0] if grouped else None
     accumulated = None if finite else np.ones(0)  # product of R_bar along the path
     weights = None if tables.unit_weights else np.zeros((C, 0))
     leave_from = None  # (3,n) the live paths' hit points, not yet pushed off (exit_point="hit")
     ray_offset = np.float32(g.ray_offset)
-    rays = 0
+    rays = np.zeros(G, dtype=np.int64)
+
+    def per_chunk(w, mask=None):
+        """(G,C) weight ``w`` carried by the live paths (the masked ones), per chunk."""
+        if not grouped:
+            return (_total(w, patch.size) if mask is None else _weight_sum(w, mask))[None]
+        if mask is None:
+            return _chunk_sums(w, chunk, G)
+        return _chunk_sums(None if w is None else w.compress(mask, axis=1), chunk.compress(mask), G)
+
+    def count(mask):
+        """Number of masked live paths, (G,) per chunk."""
+        if not grouped:
+            return np.count_nonzero(mask)
+        return _chunk_counts(chunk.compress(mask), G)
+
     while True:
         if abort is not None and abort.is_set():
             raise Aborted
@@ -306,17 +322,17 @@ def _walk_paths(tables, paths, rng, abort=None):
         if new > 0:
             new_patch = source[started : started + new]
             patch = np.concatenate((patch, new_patch)) if n_live else new_patch
+            if grouped:
+                new_chunk = source_chunk[started : started + new]
+                chunk = np.concatenate((chunk, new_chunk)) if n_live else new_chunk
             if accumulated is not None:
                 accumulated = np.concatenate((accumulated, np.ones(new)))
             if tables.weight_is_accumulated:
                 weights = accumulated[None]
-                emitted += new
             elif weights is not None:
                 new_weights = tables.start_weight.take(new_patch, axis=1, mode="wrap")
                 weights = np.concatenate((weights, new_weights), axis=1)
-                emitted += new_weights.sum(axis=1)
-            else:
-                emitted += new
+            emitted += _new_weight(weights, n_live, new, None if chunk is None else chunk[n_live:], G)
         elif n_live == 0:
             break
         n = patch.size
@@ -368,9 +384,8 @@ def _walk_paths(tables, paths, rng, abort=None):
             dot += hit_normal[:, 1] * directions[1]
             dot += hit_normal[:, 2] * directions[2]
             front = dot < 0
-        rays += n
-
         front &= hit >= 0
+        rays += n if chunk is None else _chunk_counts(chunk, G)
         if not exit_random:
             points = tables.hit_points(origins, directions, distance, hit, bary_u, bary_v, front)
         if not front.all():
@@ -378,11 +393,11 @@ def _walk_paths(tables, paths, rng, abort=None):
             back = ~missed & ~front
             n_missed, n_back = int(np.count_nonzero(missed)), int(np.count_nonzero(back))
             if n_missed:
-                escaped += _weight_sum(weights, missed)
-                ended["escaped"] += n_missed
+                escaped += per_chunk(weights, missed)
+                ended["escaped"] += count(missed)
             if n_back:
-                blocked += _weight_sum(weights, back)
-                ended["blocked"] += n_back
+                blocked += per_chunk(weights, back)
+                ended["blocked"] += count(back)
             keep = np.flatnonzero(front)
             if hit_patch is None:
                 hit = hit.take(keep, mode="wrap")
@@ -390,20 +405,20 @@ def _walk_paths(tables, paths, rng, abort=None):
                 hit_patch = hit_patch.take(keep, mode="wrap")
             if finite:
                 u_survive = u_survive.take(keep, mode="wrap")
-            accumulated, weights = _carried(keep, accumulated, weights, tables)
+            accumulated, weights, chunk = _carried(keep, accumulated, weights, chunk, tables)
             if not exit_random:
                 points = points.take(keep, axis=1, mode="wrap")
         patch = g.triangle_patch.take(hit, mode="wrap") if hit_patch is None else hit_patch
 
-        # Score: the power arriving at the hit patch.
-        scores.add(patch, weights)
-        arriving = _total(weights, patch.size)
+        # Score: the power arriving at the hit patch (in a group, in its chunk's columns).
+        scores.add(patch if chunk is None else chunk * np.int32(P) + patch, weights)
+        arriving = per_chunk(weights)
 
         go_on = None  # which of the hit paths go on, in the order they go on (None: all, as they are)
         if finite:
             survive = u_survive < tables.mean_reflectivity.take(patch, mode="wrap")
             go_on = np.flatnonzero(survive)
-            ended["absorbed"] += int(survive.size - go_on.size)
+            ended["absorbed"] += count(~survive) if grouped else int(survive.size - go_on.size)
         else:
             # New arrays, never in place: the weights just scored may be a view of ``accumulated``.
             accumulated = accumulated * tables.mean_reflectivity.take(patch, mode="wrap")
@@ -411,56 +426,104 @@ def _walk_paths(tables, paths, rng, abort=None):
                 weights = accumulated[None]
             else:
                 weights = weights * tables.reflectivity.take(patch, axis=1, mode="wrap")
-            absorbed += arriving - _total(weights, patch.size)  # (1 - R) of what arrived
+            absorbed += arriving - per_chunk(weights)  # (1 - R) of what arrived
             cut = accumulated < tables.threshold
             if cut.any():
-                undistributed += _weight_sum(weights, cut)
-                ended["threshold"] += int(np.count_nonzero(cut))
+                undistributed += per_chunk(weights, cut)
+                ended["threshold"] += count(cut)
                 go_on = np.flatnonzero(~cut)
 
         if tables.sort_paths and patch.size:
             # Paths go on grouped by patch: coherent rays, gathers in memory order.
-            go_on = _patch_order(patch, go_on, tables.patch_key_shift)
+            go_on = _patch_order(patch, go_on, tables.patch_key_shift, chunk, chunk_key_bits)
         if go_on is not None:
             patch = patch.take(go_on, mode="wrap")
-            accumulated, weights = _carried(go_on, accumulated, weights, tables)
+            accumulated, weights, chunk = _carried(go_on, accumulated, weights, chunk, tables)
             if not exit_random:
                 points = points.take(go_on, axis=1, mode="wrap")
         if finite:
             if weights is not None:
                 weights *= tables.survivor_weight.take(patch, axis=1, mode="wrap")
-            absorbed += arriving - _total(weights, patch.size)
+            absorbed += arriving - per_chunk(weights)
         if not exit_random:
             leave_from = points
 
-    return ChunkTally(
-        paths=paths,
-        rays=rays,
-        incident=scores.total(),
-        emitted=emitted,
-        absorbed=absorbed,
-        escaped=escaped,
-        blocked=blocked,
-        undistributed=undistributed,
-        ended=ended,
-    )
+    incident = scores.total().reshape(C, G, P)
+    return [
+        ChunkTally(
+            paths=n,
+            rays=int(rays[k]),
+            incident=np.ascontiguousarray(incident[:, k]),
+            emitted=emitted[k],
+            absorbed=absorbed[k],
+            escaped=escaped[k],
+            blocked=blocked[k],
+            undistributed=undistributed[k],
+            ended={name: int(counts[k]) for name, counts in ended.items()},
+        )
+        for k, n in enumerate(sizes)
+    ]
+
+
+def _chunk_starts(chunk, G):
+    """Where each chunk's run begins in ``chunk`` (in chunk order), and its end: (G+1,)."""
+    return np.searchsorted(chunk, np.arange(G + 1, dtype=chunk.dtype))
+
+
+def _chunk_counts(chunk, G):
+    """(G,) number of entries of each chunk in ``chunk`` (in chunk order)."""
+    return np.diff(_chunk_starts(chunk, G))
+
+
+def _chunk_sums(weights, chunk, G):
+    """(G,C) sums of the columns of ``weights`` (C,n) by their chunk (n,), which comes in
+    chunk order: one contiguous run of columns per chunk. None is weight 1 on one channel."""
+    start = _chunk_starts(chunk, G)
+    if weights is None:
+        return np.diff(start).astype(np.float64)[:, None]
+    sums = np.zeros((G, weights.shape[0]))
+    filled = start[:-1] < start[1:]
+    if filled.any():
+        # Each non-empty run, up to the next one's start (empty runs between take no columns).
+        sums[filled] = np.add.reduceat(weights, start[:-1][filled], axis=1).T
+    return sums
+
+
+def _new_weight(weights, n_live, new, new_chunk, G):
+    """(G,C) starting weight of the ``new`` paths just added after the ``n_live`` live ones
+    (``new_chunk`` their chunks, None outside a group)."""
+    w = None if weights is None else weights[:, n_live:]
+    if new_chunk is None:
+        return _total(w, new)[None]
+    return _chunk_sums(w, new_chunk, G)
+
+
+def _weight_sum(weights, mask):
+    """Sum of the carried weights of the masked paths, per channel (the masked paths are
+    usually few: their columns are picked out first)."""
+    if weights is None:
+        return np.array([float(np.count_nonzero(mask))])
+    return weights.compress(mask, axis=1).sum(axis=1)
+
+
+def _total(weights, n):
+    """Total carried weight per channel, (C,): n paths of weight 1 where weights is None."""
+    return np.array([float(n)]) if weights is None else weights.sum(axis=1)
 
 
 def walk_chunks(tables: WalkTables, sizes, rng: np.random.Generator, abort=None) -> list:
-    """Trace the paths of several chunks (``sizes``, a path count each); return each chunk's
-    own tallies, in order.
+    """Trace the paths of several chunks (``sizes``, a path count each) as one wavefront, every
+    path tagged with its chunk; return each chunk's own tallies, in order.
 
-    In a walk whose paths are interchangeable (``tables.exchangeable``) the chunks are traced
-    as one wavefront, every path tagged with its chunk: the steps of a chunk's end, when its
-    last paths run out and each step traces few rays for the same numpy work, overlap the
-    next chunk's start. Small runs, whose chunks are small (the batch error estimate wants
-    many of them), trace about twice as fast. Each chunk's paths are drawn for it alone and
-    scored to it alone, so the chunks stay independent batches. Other walks trace the chunks
-    one after the other, from the same generator."""
+    A chunk ends in steps of few rays each, when its last paths run out, which cost numpy's
+    per-step work for little tracing; in a group they overlap the next chunk's start. Small
+    runs, whose chunks are small (the batch error estimate wants many of them), trace up to
+    twice as fast. Each chunk's sources are drawn for it alone and every hit, escape and
+    weight is counted to it alone, so the chunks stay independent batches."""
     sizes = [int(n) for n in sizes]
     if tables.exchangeable:
         return _walk_exchangeable(tables, sizes, rng, abort)
-    return [_walk_paths(tables, n, rng, abort) for n in sizes]
+    return _walk_paths(tables, sizes, rng, abort)
 
 
 def _walk_exchangeable(tables, sizes, rng, abort=None):
@@ -630,16 +693,18 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
     return tallies
 
 
-def _carried(index, accumulated, weights, tables):
-    """What the paths at ``index`` carry: (accumulated, weights) taken there (in a grey biased
-    walk the weights are a view of the accumulated reflectivity)."""
+def _carried(index, accumulated, weights, chunk, tables):
+    """What the paths at ``index`` carry: (accumulated, weights, chunk) taken there (in a grey
+    biased walk the weights are a view of the accumulated reflectivity)."""
+    if chunk is not None:
+        chunk = chunk.take(index, mode="wrap")
     if accumulated is not None:
         accumulated = accumulated.take(index, mode="wrap")
     if tables.weight_is_accumulated:
-        return accumulated, accumulated[None]
+        return accumulated, accumulated[None], chunk
     if weights is not None:
         weights = weights.take(index, axis=1, mode="wrap")
-    return accumulated, weights
+    return accumulated, weights, chunk
 
 
 class _Scores:
@@ -680,13 +745,16 @@ class _Scores:
         return self.incident
 
 
-def _patch_order(patch, selected, shift):
+def _patch_order(patch, selected, shift, chunk=None, chunk_bits=0):
     """Indices of the ``selected`` entries of ``patch`` (all where None), ordered by patch
-    (by the 16-bit key patch >> shift, which numpy sorts with a radix sort)."""
+    (by the 16-bit key patch >> shift, which numpy sorts with a radix sort). With ``chunk``,
+    by chunk first: its ``chunk_bits`` lead the key, and the patch takes the rest."""
     if selected is None:
         selected = np.arange(patch.size)
     key = patch.take(selected, mode="wrap")
-    if shift:
-        key = key >> shift
+    if shift + chunk_bits:
+        key = key >> (shift + chunk_bits)
+    if chunk is not None:
+        key |= chunk.take(selected, mode="wrap") << (16 - chunk_bits)
     order = np.argsort(key.astype(np.uint16), kind="stable")
     return selected.take(order, mode="wrap")

@@ -1,9 +1,10 @@
 """Small chunks traced together (estimators.walk_chunks): every chunk keeps its own accounts and
 stays an independent batch.
 
-A walk of interchangeable paths traces a group of chunks as one wavefront, each path tagged
-with its chunk. Mixing up the tags would move paths, rays or hits between chunks; these tests
-give the chunks of one group very different sizes, so that any such mix-up shows.
+A group of chunks is traced as one wavefront, each path tagged with its chunk. Mixing up the
+tags would move paths, rays, hits or weight between chunks; these tests give the chunks of one
+group very different sizes, and chunks of one path that cannot leave their box, so that any
+such mix-up shows. Every way the walk keeps its live paths is covered.
 """
 import math
 
@@ -18,43 +19,79 @@ from boxes import box_rectangles, box_scene, rectangles_to_mesh
 
 Z = 4.5  # two-sided normal bound, about 7e-6 per test (several per test, all far apart)
 SIZES = [700, 30_000, 3_000, 128]
+THRESHOLD = 1e-3
+# The grey finite walk leaving from random points has interchangeable paths, kept as counts per
+# chunk and patch, as arrays after a count (stratified first rays), or as sorted keys (bigger
+# scenes; forced here). Other walks keep arrays of what each path carries, sorted by patch in
+# bigger scenes (forced here too).
+KINDS = {
+    "counts": ("finite", "random", {}),
+    "arrays": ("finite", "random", {"stratified": True}),
+    "sorted": ("finite", "random", {"counted": False}),
+    "finite hit": ("finite", "hit", {}),
+    "biased": ("biased_infinite", "random", {}),
+    "biased hit sorted": ("biased_infinite", "hit", {"sort_paths": True}),
+    "colour": ("finite", "random", {"colour": True}),
+    "colour biased sorted": ("biased_infinite", "random", {"colour": True, "sort_paths": True}),
+    "finite paths": ("finite", "random", {"exchangeable": False}),
+}
+EXCHANGEABLE = ("counts", "arrays", "sorted")
+COLOUR = np.array([0.05, 0.0, -0.05])  # added to a grey reflectivity: the same mean
 
 
-def _kinds(scene):
-    """The exchangeable walk's three ways of keeping live paths: counts per chunk and patch,
-    arrays of patches and chunks after a count (stratified first rays), and sorted keys (bigger
-    scenes; forced here)."""
-    counts = WalkTables(scene, "finite", 1e-3, "random")
-    arrays = WalkTables(scene, "finite", 1e-3, "random", stratified=True)
-    ordered = WalkTables(scene, "finite", 1e-3, "random")
-    ordered.counted = False
-    assert counts.exchangeable and counts.counted and arrays.counted
-    return {"counts": counts, "arrays": arrays, "sorted": ordered}
+def _tables(kind, scene):
+    """The kind's walk tables on a grey scene (made colour, same mean reflectivity, for the
+    colour kinds)."""
+    estimator, exit_point, options = KINDS[kind]
+    if options.get("colour"):
+        scene = scene.with_materials(scene.reflectivity[:, :1] + COLOUR, scene.emission[:, :1] * [1.0, 0.5, 0.25])
+    tables = WalkTables(scene, estimator, THRESHOLD, exit_point, stratified=options.get("stratified", False))
+    for name in ("exchangeable", "counted", "sort_paths"):
+        if name in options:
+            setattr(tables, name, options[name])
+    return scene, tables
 
 
-@pytest.mark.parametrize("kind", ["counts", "arrays", "sorted"])
+def _closed_box(kind, R, n=3):
+    scene, _, _ = box_scene([R] * 6, [0, 1.0, 0, 0, 0, 0], n=n)
+    return _tables(kind, scene)
+
+
+def _balanced(t):
+    """Every unit of weight a chunk's paths started with ended somewhere."""
+    np.testing.assert_allclose(t.emitted, t.absorbed + t.escaped + t.blocked + t.undistributed, rtol=1e-10)
+
+
+@pytest.mark.parametrize("kind", KINDS)
 def test_each_chunk_of_a_group_has_its_own_paths_and_rays(kind):
-    """Closed box, R = 0.6 everywhere: each chunk's paths all end absorbed, its rays are its
-    hits, and its rays per path are geometric with mean 1 / (1 - R), chunk by chunk."""
+    """Closed box, R = 0.6 everywhere (on average over the channels): each chunk's paths all
+    end absorbed (finite: its rays per path are geometric with mean 1 / (1 - R)) or at the
+    threshold (biased: 14 rays each, 0.6^14 < 1e-3 < 0.6^13), its rays are its hits, and its
+    weight balances."""
     R = 0.6
-    scene, _, _ = box_scene([R] * 6, [0, 1.0, 0, 0, 0, 0], n=3)
-    tables = _kinds(scene)[kind]
+    scene, tables = _closed_box(kind, R)
     tallies = walk_chunks(tables, SIZES, np.random.default_rng(11))
     assert len(tallies) == len(SIZES)
+    finite = tables.estimator == "finite"
     for n, t in zip(SIZES, tallies):
-        assert t.paths == n and t.emitted[0] == n
-        assert t.ended == {"escaped": 0, "blocked": 0, "absorbed": n, "threshold": 0}
-        assert t.incident.shape == (1, scene.patch_count)
-        assert t.incident.sum() == t.rays  # every ray of a closed box scores once
-        length_sd = math.sqrt(R) / (1 - R) / math.sqrt(n)
-        assert abs(t.rays / n - 1 / (1 - R)) < Z * length_sd, (n, t.rays / n)
+        assert t.paths == n
+        assert t.ended == {"escaped": 0, "blocked": 0, "absorbed": n if finite else 0, "threshold": 0 if finite else n}
+        assert t.incident.shape == (tables.channels, scene.patch_count)
+        if tables.channels == 1 and finite:
+            assert t.emitted[0] == n and t.incident.sum() == t.rays  # every ray of a closed box scores once
+        _balanced(t)
+        if finite:
+            length_sd = math.sqrt(R) / (1 - R) / math.sqrt(n)
+            assert abs(t.rays / n - 1 / (1 - R)) < Z * length_sd, (n, t.rays / n)
+        else:
+            assert t.rays == 14 * n
 
 
-@pytest.mark.parametrize("kind", ["counts", "arrays", "sorted"])
+@pytest.mark.parametrize("kind", KINDS)
 def test_each_chunk_of_a_group_balances_escapes_and_back_hits(kind):
-    """Open box with a card hit from behind: every chunk's paths end once (absorbed, escaped or
-    blocked), its rays are its front hits plus its escaped and blocked rays, and its share of
-    escapes matches the group's (a binomial proportion per chunk)."""
+    """Open box with a card hit from behind: every chunk's paths end once (absorbed, escaped,
+    blocked or at the threshold), its weight balances, and its share of escaped paths matches
+    the group's (a binomial proportion per chunk)."""
     origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=2)
     keep = face != 1  # open at the top
     origin = np.vstack([origin[keep], [[0.3, 0.3, 0.5]]])
@@ -63,60 +100,62 @@ def test_each_chunk_of_a_group_balances_escapes_and_back_hits(kind):
     P = origin.shape[0]
     E = np.zeros(P)
     E[:4] = 1.0
-    scene = PatchScene(V, T, TP, np.full(P, 0.6), E)
-    tallies = walk_chunks(_kinds(scene)[kind], SIZES, np.random.default_rng(12))
+    _, tables = _tables(kind, PatchScene(V, T, TP, np.full(P, 0.6), E))
+    tallies = walk_chunks(tables, SIZES, np.random.default_rng(12))
     escaped = sum(t.ended["escaped"] for t in tallies) / sum(SIZES)
     for n, t in zip(SIZES, tallies):
         e = t.ended
-        assert e["absorbed"] + e["escaped"] + e["blocked"] == n == t.paths
-        assert t.absorbed[0] == e["absorbed"] and t.escaped[0] == e["escaped"] and t.blocked[0] == e["blocked"]
-        assert t.rays == t.incident.sum() + e["escaped"] + e["blocked"]
+        assert e["absorbed"] + e["escaped"] + e["blocked"] + e["threshold"] == n == t.paths
+        _balanced(t)
+        if tables.unit_weights:
+            assert t.absorbed[0] == e["absorbed"] and t.escaped[0] == e["escaped"] and t.blocked[0] == e["blocked"]
+            assert t.rays == t.incident.sum() + e["escaped"] + e["blocked"]
         assert abs(e["escaped"] / n - escaped) < Z * math.sqrt(escaped * (1 - escaped) / n), (n, e)
     assert sum(t.ended["blocked"] for t in tallies) > 100
 
 
-@pytest.mark.parametrize("kind", ["counts", "arrays", "sorted"])
+@pytest.mark.parametrize("kind", KINDS)
 def test_a_chunk_of_one_path_stays_in_its_box(kind):
     """Two closed boxes apart, each lit from its ceiling, R = 0.9: a path never leaves the box
     it starts in. In a group of 64 one-path chunks and one big chunk (whose paths fill the
-    wavefront beside them), every one-path chunk scores in one box only. Tags that moved
-    between paths would spread a chunk's hits over both boxes (while keeping every chunk's
-    expected counts, which the tests above would not see)."""
+    wavefront beside them), every one-path chunk scores in one box only, and its weight
+    balances. Tags that moved between paths would spread a chunk's hits over both boxes
+    (while keeping every chunk's expected counts, which the tests above would not see)."""
     R = 0.9
     boxes = [box_rectangles(n=2, offset=(2.0 * k, 0, 0)) for k in (0, 1)]
     origin, u, v, face = (np.concatenate(parts) for parts in zip(*boxes))
     V, T, TP = rectangles_to_mesh(origin, u, v)
     P = origin.shape[0]
-    scene = PatchScene(V, T, TP, np.full(P, R), (face == 1).astype(float))
-    tables = _kinds(scene)[kind]
+    _, tables = _tables(kind, PatchScene(V, T, TP, np.full(P, R), (face == 1).astype(float)))
     in_second_box = np.arange(P) >= P // 2
     tallies = walk_chunks(tables, [1] * 64 + [3_000], np.random.default_rng(13))
-    both = [t for t in tallies[:64] if t.incident[0, in_second_box].sum() and t.incident[0, ~in_second_box].sum()]
+    both = [t for t in tallies[:64] if t.incident[:, in_second_box].sum() and t.incident[:, ~in_second_box].sum()]
     assert not both
-    lengths = [t.rays for t in tallies[:64]]
-    assert max(lengths) > 20  # paths long enough to have crossed, had their tags moved
+    assert max(t.rays for t in tallies[:64]) > 20  # paths long enough to have crossed, had their tags moved
     for t in tallies[:64]:
-        assert t.paths == 1 and t.incident.sum() == t.rays
+        assert t.paths == 1
+        _balanced(t)
 
 
-def test_one_chunk_is_walk_chunk():
-    scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
-    tables = WalkTables(scene, "finite", 1e-3, "random")
+@pytest.mark.parametrize("kind", KINDS)
+def test_one_chunk_is_walk_chunk(kind):
+    _, tables = _closed_box(kind, 0.5, n=2)
     (a,) = walk_chunks(tables, [5_000], np.random.default_rng(3))
     b = walk_chunk(tables, 5_000, np.random.default_rng(3))
     assert a.rays == b.rays and a.ended == b.ended
     np.testing.assert_array_equal(a.incident, b.incident)
 
 
-@pytest.mark.parametrize("kind", ["counts", "sorted"])
+@pytest.mark.parametrize("kind", ["counts", "sorted", "finite paths"])
 def test_chunks_of_groups_are_independent_batches(kind):
-    """200 chunks of 400 paths, traced in groups of 4: the spread of the chunks' per-patch
-    estimates is table 1's variance for 400 paths. (Tags mixed between the chunks of a group,
+    """200 chunks of 400 paths, traced in groups of 4 (by the plain estimator's walk, and by
+    the walk that keeps arrays of paths): the spread of the chunks' per-patch estimates is
+    table 1's variance for 400 paths. (Tags mixed between the chunks of a group,
     or paths shared, would shrink or grow it.) K = 200 batches: each patch's variance ratio
     has a standard deviation of sqrt(2 / 199); the area-weighted mean over patches, which are
     correlated, is bounded by the same band."""
     scene, F, _ = box_scene([0.3, 0.6, 0.7, 0.5, 0.4, 0.65], [0, 1.0, 0, 0, 0, 0], (1.0, 1.4, 0.8), n=2)
-    tables = _kinds(scene)[kind]
+    scene, tables = _tables(kind, scene)
     n = 400
     estimates = []
     for group in range(50):
@@ -132,20 +171,29 @@ def test_chunks_of_groups_are_independent_batches(kind):
     assert abs(mean_ratio - 1) < band / 2, mean_ratio
 
 
-def test_small_runs_group_their_chunks_and_report_every_chunk():
-    """A small run of the plain estimator traces its chunks in groups (fewer, fuller
-    wavefronts), still reports progress once per chunk, and is the same run whatever the
-    threads. Walks whose paths carry something of their own trace chunks one by one."""
+@pytest.mark.parametrize("estimator, exit_point", [("finite", "random"), ("biased_infinite", "hit")])
+def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_point, monkeypatch):
+    """A small run traces its chunks in groups (fewer, fuller wavefronts), still reports
+    progress once per chunk, and is the same run whatever the threads."""
+    groups = []
+    real = solver.walk_chunks
+
+    def recorded(tables, sizes, rng, abort=None):
+        groups.append(len(sizes))
+        return real(tables, sizes, rng, abort)
+
+    monkeypatch.setattr(solver, "walk_chunks", recorded)
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
-    plain = WalkTables(scene, "finite", 1e-3, "random")
-    assert solver.chunks_per_group(plain, 500, 2.0) == solver.GROUP_MAX_CHUNKS
-    assert solver.chunks_per_group(plain, solver.GROUP_RAYS, 2.0) == 1
-    for other in (WalkTables(scene, "biased_infinite", 1e-3, "random"), WalkTables(scene, "finite", 1e-3, "hit")):
-        assert solver.chunks_per_group(other, 500, 2.0) == 1
+    tables = WalkTables(scene, estimator, THRESHOLD, exit_point)
+    limit = solver.GROUP_RAYS_COUNTED if tables.exchangeable else solver.GROUP_RAYS
+    assert solver.chunks_per_group(tables, 500, 2.0) == solver.GROUP_MAX_CHUNKS
+    assert solver.chunks_per_group(tables, limit // 2, 2.0) == 1
     fractions = []
-    a = solve(scene, "finite", paths=20_000, seed=3, threads=1, progress=lambda f, s: fractions.append(f))
-    b = solve(scene, "finite", paths=20_000, seed=3, threads=2)
+    kw = dict(paths=20_000, seed=3, exit_point=exit_point)
+    a = solve(scene, estimator, threads=1, progress=lambda f, s: fractions.append(f), **kw)
+    b = solve(scene, estimator, threads=2, **kw)
     assert a.chunks == solver.MIN_CHUNKS and len(fractions) == a.chunks
+    assert groups[: a.chunks // 4] == [4] * (a.chunks // 4)  # the first run's tasks
     assert all(y > x for x, y in zip(fractions, fractions[1:])) and fractions[-1] == 1.0
     np.testing.assert_array_equal(a.radiosity, b.radiosity)
     assert a.rays == b.rays
