@@ -115,3 +115,52 @@ def test_hit_points_keep_clear_of_edges():
     away = bary.min(axis=1) > 1e-3
     assert away.sum() > n // 3
     assert np.abs(points[away] - target[away]).max() < 1e-6
+
+
+def test_walks_on_threads_take_turns_at_their_numpy_work(monkeypatch):
+    """A walk holds the tables' numpy turn except while it traces: its numpy work (here, the
+    scoring) runs holding it, its ray casts without. A walk whose ray cast is held up (until
+    another thread's whole walk has run) lets that other walk take its turns meanwhile."""
+    import threading
+
+    from addon.core import estimators
+    from boxes import box_scene
+
+    scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
+    tables = WalkTables(scene, "biased_infinite", 1e-3, "random")  # a walk that scores with _Scores
+    tracer = scene.geometry.tracer
+    real_trace, real_add = tracer.first_hit, estimators._Scores.add
+    held = {"tracing": [], "scoring": []}
+    other_done = threading.Event()
+    first_cast = threading.Event()
+
+    def tracing(origins, directions):
+        held["tracing"].append(tables.numpy_turn.locked())
+        if threading.current_thread().name == "held-up" and not first_cast.is_set():
+            first_cast.set()
+            assert other_done.wait(timeout=30), "the other walk never got the numpy turn"
+        return real_trace(origins, directions)
+
+    def scoring(self, patch, weights):
+        held["scoring"].append(tables.numpy_turn.locked())
+        return real_add(self, patch, weights)
+
+    monkeypatch.setattr(tracer, "first_hit", tracing)
+    monkeypatch.setattr(estimators._Scores, "add", scoring)
+    results = {}
+
+    def walk(name, seed):
+        results[name] = walk_chunk(tables, 3_000, np.random.default_rng(seed))
+
+    held_up = threading.Thread(target=walk, args=("held-up", 1), name="held-up", daemon=True)
+    held_up.start()
+    assert first_cast.wait(timeout=30)
+    # The other walk needs the turn while the held-up walk is inside its ray cast.
+    other = threading.Thread(target=walk, args=("other", 2), daemon=True)
+    other.start()
+    other.join(timeout=30)
+    other_done.set()
+    held_up.join(timeout=60)
+    assert set(results) == {"held-up", "other"} and all(r.paths == 3_000 for r in results.values())
+    assert held["scoring"] and all(held["scoring"])  # numpy work under the turn
+    assert not tables.numpy_turn.locked()
