@@ -1,6 +1,7 @@
 """Throughput of solve() against Embree's raw ray rate, measured in the same run.
 
     python -m benchmarks.throughput [--scene small_room cornell room_fig4] [--threads 1 2] [--seconds 3]
+    python -m benchmarks.throughput --short     # short runs: ratio against the path count
 
 Scenes: ``small_room`` is the Cycles comparison's closed room (10 x 10 patches per face, 1,200
 triangles), ``cornell`` the coloured Cornell box (5,080 triangles), ``room_fig4`` the paper's
@@ -156,6 +157,111 @@ def breakdown(scene, estimator, rounds=4, **kw):
     return np.median(np.array(rows), axis=0)
 
 
+SHORT_PATHS = (30_000, 100_000, 300_000, 1_000_000, 3_000_000)
+
+
+def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
+    """The default estimator's ratio to the raw rate in short runs, whose chunks are small (a
+    run makes at least solver.MIN_CHUNKS of them): with small chunks traced in groups
+    (estimators.walk_chunks, the default) and one by one (solver.GROUP_MAX_CHUNKS = 1, as
+    before groups). Each round brackets one solve of each kind, in alternating order, between
+    two raw measurements. Returns {paths: (ratio grouped, ratio one by one, seconds grouped)},
+    medians over the rounds."""
+    from addon.core import solver
+
+    solve(scene, "finite", paths=20_000, threads=threads)  # warm up
+    out = {}
+    for paths in path_counts:
+        ratios = {True: [], False: []}
+        seconds = []
+        before = raw_rate(scene, threads, 0.25)[0]
+        for k in range(rounds):
+            rates = {}
+            for grouped in ((True, False) if k % 2 == 0 else (False, True)):
+                solver.GROUP_MAX_CHUNKS = 4 if grouped else 1
+                try:
+                    r = solve(scene, "finite", paths=paths, threads=threads, seed=k)
+                finally:
+                    solver.GROUP_MAX_CHUNKS = 4
+                rates[grouped] = r.rays / r.seconds
+                if grouped:
+                    seconds.append(r.seconds)
+            after = raw_rate(scene, threads, 0.25)[0]
+            raw = (before + after) / 2
+            for grouped, rate in rates.items():
+                ratios[grouped].append(rate / raw)
+            before = after
+        out[paths] = (float(np.median(ratios[True])), float(np.median(ratios[False])), float(np.median(seconds)))
+    return out
+
+
+def write_short(args):
+    scenes = [name for name in args.scene]
+    results = {}
+    for name in scenes:
+        scene = build_scene(name)
+        for threads in args.threads:
+            results[name, threads] = short_runs(scene, threads)
+            for paths, (g, one, sec) in results[name, threads].items():
+                print(f"{name:10s} {threads} thr {paths:>9,d} paths  {sec:6.3f} s  ratio grouped {g:.2f}  one by one {one:.2f}",
+                      flush=True)
+    lines = [
+        "# Short runs: solve() against Embree's raw ray rate, by path count",
+        "",
+        f"`python -m benchmarks.throughput --short {' '.join(a for a in sys.argv[1:] if a != '--short')}`; "
+        f"{platform.processor() or platform.machine()}, {platform.python_version()}. Default estimator "
+        "(finite, random exit, independent sampling).",
+        "",
+        "A run of N paths makes at least 32 chunks (the batch error estimate wants them), so short runs have",
+        "small chunks, and a chunk ends in steps of few rays each. Small chunks are traced up to 4 at a",
+        "time as one wavefront (`estimators.walk_chunks`, each path tagged with its chunk); *one by one* is",
+        "the same solve with `solver.GROUP_MAX_CHUNKS = 1`, as before groups. Ratio: rays per second of the",
+        "whole solve (tables, threads, walks, sums) over embreex's raw rate on pre-drawn rays, bracketing",
+        "each round; medians of 5 rounds. The Cornell box is coloured (its walk carries weights); the others",
+        "are grey.",
+        "",
+        "| scene | threads | paths | seconds | ratio, grouped | ratio, one by one | speed-up |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for (name, threads), rows in results.items():
+        for paths, (g, one, sec) in rows.items():
+            lines.append(f"| {name} | {threads} | {paths:,} | {sec:.3f} | **{g:.2f}** | {one:.2f} | x{g / one:.2f} |")
+    out = Path(args.out).with_name("throughput_short.md")
+    out.write_text("\n".join(lines) + "\n")
+    plot_short(results, out.with_suffix(".png"))
+    print(f"wrote {out} and {out.with_suffix('.png')}")
+
+
+def plot_short(results, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    thread_counts = sorted({t for _, t in results})
+    fig, axes = plt.subplots(1, len(thread_counts), figsize=(5.2 * len(thread_counts), 4.2), sharey=True, squeeze=False)
+    colours = dict(zip(sorted({n for n, _ in results}), ("tab:blue", "tab:orange", "tab:green", "tab:red")))
+    for ax, threads in zip(axes[0], thread_counts):
+        for (name, t), rows in results.items():
+            if t != threads:
+                continue
+            paths = list(rows)
+            ax.plot(paths, [rows[p][0] for p in paths], "o-", color=colours[name], label=f"{name}, grouped")
+            ax.plot(paths, [rows[p][1] for p in paths], "o--", color=colours[name], alpha=0.6, label=f"{name}, one by one")
+        ax.axhline(0.8, color="grey", lw=0.8, ls=":")
+        ax.set_xscale("log")
+        ax.set_xlabel("paths in the run")
+        ax.set_title(f"{threads} thread{'s' if threads > 1 else ''}")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].set_ylabel("solve rate / Embree's raw rate")
+    axes[0][0].set_ylim(0, 1.0)
+    axes[0][-1].legend(fontsize=8, loc="lower right")
+    fig.suptitle("Short runs: the share of Embree's speed a whole solve keeps")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def build_scene(name):
     if name == "small_room":
         from benchmarks.cycles_comparison import patch_scene
@@ -180,9 +286,13 @@ def main(argv=None):
     ap.add_argument("--out", default=str(RESULTS / "throughput.md"))
     ap.add_argument("--breakdown", action="store_true",
                     help="where a walk's time goes (1 thread), into results/throughput_breakdown.md")
+    ap.add_argument("--short", action="store_true",
+                    help="short runs (3e4 to 3e6 paths), chunks grouped or one by one, into results/throughput_short.md")
     args = ap.parse_args(argv)
     if args.breakdown:
         return write_breakdown(args)
+    if args.short:
+        return write_short(args)
     rows = []
     for name in args.scene:
         scene = build_scene(name)
