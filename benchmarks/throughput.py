@@ -210,13 +210,17 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
     run makes at least solver.MIN_CHUNKS of them): with small chunks traced in groups
     (estimators.walk_chunks, the default) and one by one (solver.GROUP_MAX_CHUNKS = 1, as
     before groups). Each round brackets one solve of each kind, in alternating order, between
-    two raw measurements. Returns {paths: (ratio grouped, ratio one by one, seconds grouped)},
-    medians over the rounds."""
+    two raw measurements. Returns {paths: (ratio grouped, ratio one by one, seconds grouped,
+    chunks per group)}, medians over the rounds."""
     from addon.core import solver
+    from addon.core.estimators import WalkTables
 
     solve(scene, "finite", paths=20_000, threads=threads)  # warm up
+    length = predict(scene, "finite").expected_path_length
+    tables = WalkTables(scene, "finite", 1e-3, "random")
     out = {}
     for paths in path_counts:
+        group = solver.chunks_per_group(tables, solver.chunk_paths_for(length, paths), length)
         ratios = {True: [], False: []}
         seconds = []
         before = raw_rate(scene, threads, 0.25)[0]
@@ -236,7 +240,7 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
             for grouped, rate in rates.items():
                 ratios[grouped].append(rate / raw)
             before = after
-        out[paths] = (float(np.median(ratios[True])), float(np.median(ratios[False])), float(np.median(seconds)))
+        out[paths] = (float(np.median(ratios[True])), float(np.median(ratios[False])), float(np.median(seconds)), group)
     return out
 
 
@@ -247,9 +251,9 @@ def write_short(args):
         scene = build_scene(name)
         for threads in args.threads:
             results[name, threads] = short_runs(scene, threads)
-            for paths, (g, one, sec) in results[name, threads].items():
-                print(f"{name:10s} {threads} thr {paths:>9,d} paths  {sec:6.3f} s  ratio grouped {g:.2f}  one by one {one:.2f}",
-                      flush=True)
+            for paths, (g, one, sec, group) in results[name, threads].items():
+                print(f"{name:10s} {threads} thr {paths:>9,d} paths  {sec:6.3f} s  {group} chunks a group  "
+                      f"ratio grouped {g:.2f}  one by one {one:.2f}", flush=True)
     lines = [
         "# Short runs: solve() against Embree's raw ray rate, by path count",
         "",
@@ -263,14 +267,15 @@ def write_short(args):
         "the same solve with `solver.GROUP_MAX_CHUNKS = 1`, as before groups. Ratio: rays per second of the",
         "whole solve (tables, threads, walks, sums) over embreex's raw rate on pre-drawn rays, bracketing",
         "each round; medians of 5 rounds. The Cornell box is coloured (its walk carries weights); the others",
-        "are grey.",
+        "are grey. Where a group is 1 chunk, both columns run the same code: their difference is the",
+        "machine's noise.",
         "",
-        "| scene | threads | paths | seconds | ratio, grouped | ratio, one by one | speed-up |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        "| scene | threads | paths | chunks a group | seconds | ratio, grouped | ratio, one by one | speed-up |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for (name, threads), rows in results.items():
-        for paths, (g, one, sec) in rows.items():
-            lines.append(f"| {name} | {threads} | {paths:,} | {sec:.3f} | **{g:.2f}** | {one:.2f} | x{g / one:.2f} |")
+        for paths, (g, one, sec, group) in rows.items():
+            lines.append(f"| {name} | {threads} | {paths:,} | {group} | {sec:.3f} | **{g:.2f}** | {one:.2f} | x{g / one:.2f} |")
     out = Path(args.out).with_name("throughput_short.md")
     out.write_text("\n".join(lines) + "\n")
     plot_short(results, out.with_suffix(".png"))
