@@ -4,7 +4,9 @@ A batch of paths ("chunk") is traced as a wavefront: every live path advances on
 step, and the live paths' rays go to the ray tracer together. As paths end, new ones start from
 the sources in their places, so every step traces about ``WAVEFRONT_PATHS`` rays (arrays that
 stay in the processor's cache) until the chunk's last paths run out. Scores accumulate with
-``np.bincount``.
+``np.bincount``. Small chunks go through in groups (``walk_chunks``): one wavefront, each path
+tagged with its chunk, every chunk with its own tallies. Walks on several threads take turns
+at their numpy work (``WalkTables.numpy_turn``) and trace at the same time.
 
 Weights are relative: a path from source i starts with per-channel weight E_ic / E_bar_i (1 in a
 grey scene), and the true carried power is that weight times Phi_T / N. What a chunk tallies is
@@ -143,17 +145,16 @@ class WalkTables:
 
     def first_hit(self, origins, directions):
         """The ray tracer's first hits, traced outside the numpy turn."""
-        self.numpy_turn.release()
-        try:
-            return self.tracer.first_hit(origins, directions)
-        finally:
-            self.numpy_turn.acquire()
+        return self._outside_turn(self.tracer.first_hit, origins, directions)
 
     def first_hit_barycentric(self, origins, directions):
         """The ray tracer's first hits with their points and normals, outside the numpy turn."""
+        return self._outside_turn(self.tracer.first_hit_barycentric, origins, directions)
+
+    def _outside_turn(self, trace, origins, directions):
         self.numpy_turn.release()
         try:
-            return self.tracer.first_hit_barycentric(origins, directions)
+            return trace(origins, directions)
         finally:
             self.numpy_turn.acquire()
 

@@ -55,3 +55,18 @@ def box_scene(reflectivity_by_face, emission_by_face, size=(1.0, 1.0, 1.0), n=1,
     E = np.asarray(emission_by_face, np.float64)[face]
     scene = PatchScene(vertices, triangles, triangle_patch, R, E)
     return scene, rectangle_form_factors(origin, u, v), face
+
+
+def open_box_with_card(reflectivity=0.6):
+    """A unit box open at the top (n = 2) with a card facing down at half height, which rays
+    from above hit from behind; the first 4 patches (the floor) emit 1: rays escape and are
+    blocked. PatchScene."""
+    origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=2)
+    keep = face != CEILING
+    origin = np.vstack([origin[keep], [[0.3, 0.3, 0.5]]])
+    u, v = np.vstack([u[keep], [[0, 0.4, 0]]]), np.vstack([v[keep], [[0.4, 0, 0]]])
+    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
+    P = origin.shape[0]
+    emission = np.zeros(P)
+    emission[:4] = 1.0
+    return PatchScene(vertices, triangles, triangle_patch, np.full(P, reflectivity), emission)

@@ -15,7 +15,7 @@ from addon.core import PatchScene, solve
 from addon.core import solver
 from addon.core.estimators import WalkTables, walk_chunk, walk_chunks
 from addon.core.reference import path_variances
-from boxes import box_rectangles, box_scene, rectangles_to_mesh
+from boxes import box_rectangles, box_scene, open_box_with_card, rectangles_to_mesh
 
 Z = 4.5  # two-sided normal bound, about 7e-6 per test (several per test, all far apart)
 SIZES = [700, 30_000, 3_000, 128]
@@ -92,15 +92,7 @@ def test_each_chunk_of_a_group_balances_escapes_and_back_hits(kind):
     """Open box with a card hit from behind: every chunk's paths end once (absorbed, escaped,
     blocked or at the threshold), its weight balances, and its share of escaped paths matches
     the group's (a binomial proportion per chunk)."""
-    origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=2)
-    keep = face != 1  # open at the top
-    origin = np.vstack([origin[keep], [[0.3, 0.3, 0.5]]])
-    u, v = np.vstack([u[keep], [[0, 0.4, 0]]]), np.vstack([v[keep], [[0.4, 0, 0]]])
-    V, T, TP = rectangles_to_mesh(origin, u, v)
-    P = origin.shape[0]
-    E = np.zeros(P)
-    E[:4] = 1.0
-    _, tables = _tables(kind, PatchScene(V, T, TP, np.full(P, 0.6), E))
+    _, tables = _tables(kind, open_box_with_card())
     tallies = walk_chunks(tables, SIZES, np.random.default_rng(12))
     escaped = sum(t.ended["escaped"] for t in tallies) / sum(SIZES)
     for n, t in zip(SIZES, tallies):

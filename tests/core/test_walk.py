@@ -34,19 +34,9 @@ def test_facing_by_patch_normal_is_facing_by_triangle_normal(estimator):
     """In a scene of parallelograms the random exit's facing test reads the hit patch's normal
     (from the leave table) instead of the triangle's: the two triangles of a parallelogram are
     coplanar, so with the same random numbers every path is the same, back-side hits included."""
-    from boxes import box_rectangles, rectangles_to_mesh
-    from addon.core import PatchScene
+    from boxes import open_box_with_card
 
-    origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=2)
-    keep = face != 1  # open at the top
-    # A card facing down at half height: rays from above hit its back.
-    origin = np.vstack([origin[keep], [[0.3, 0.3, 0.5]]])
-    u, v = np.vstack([u[keep], [[0, 0.4, 0]]]), np.vstack([v[keep], [[0.4, 0, 0]]])
-    V, T, TP = rectangles_to_mesh(origin, u, v)
-    P = origin.shape[0]
-    E = np.zeros(P)
-    E[:4] = 1.0
-    scene = PatchScene(V, T, TP, np.full(P, 0.6), E)
+    scene = open_box_with_card()  # rays escape at the top and hit a card's back
     by_patch = WalkTables(scene, estimator, 1e-3, "random")
     by_triangle = WalkTables(scene, estimator, 1e-3, "random")
     assert by_patch.facing_by_patch
