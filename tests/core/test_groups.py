@@ -160,7 +160,7 @@ def test_chunks_of_groups_are_independent_batches(kind):
     band = Z * math.sqrt(2 / (len(estimates) - 1))
     assert np.abs(ratio - 1).max() < band, ratio
     mean_ratio = float((scene.patch_area * ratio).sum() / scene.total_area)
-    assert abs(mean_ratio - 1) < band / 2, mean_ratio
+    assert abs(mean_ratio - 1) < band, mean_ratio
 
 
 @pytest.mark.parametrize("estimator, exit_point", [("finite", "random"), ("biased_infinite", "hit")])
