@@ -216,6 +216,7 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
     from addon.core.estimators import WalkTables
 
     solve(scene, "finite", paths=20_000, threads=threads)  # warm up
+    most = solver.GROUP_MAX_CHUNKS
     length = predict(scene, "finite").expected_path_length
     tables = WalkTables(scene, "finite", 1e-3, "random")
     out = {}
@@ -227,11 +228,11 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
         for k in range(rounds):
             rates = {}
             for grouped in ((True, False) if k % 2 == 0 else (False, True)):
-                solver.GROUP_MAX_CHUNKS = 4 if grouped else 1
+                solver.GROUP_MAX_CHUNKS = most if grouped else 1
                 try:
                     r = solve(scene, "finite", paths=paths, threads=threads, seed=k)
                 finally:
-                    solver.GROUP_MAX_CHUNKS = 4
+                    solver.GROUP_MAX_CHUNKS = most
                 rates[grouped] = r.rays / r.seconds
                 if grouped:
                     seconds.append(r.seconds)
@@ -262,7 +263,7 @@ def write_short(args):
         "(finite, random exit, independent sampling).",
         "",
         "A run of N paths makes at least 32 chunks (the batch error estimate wants them), so short runs have",
-        "small chunks, and a chunk ends in steps of few rays each. Small chunks are traced up to 4 at a",
+        "small chunks, and a chunk ends in steps of few rays each. Small chunks are traced up to 16 at a",
         "time as one wavefront (`estimators.walk_chunks`, each path tagged with its chunk); *one by one* is",
         "the same solve with `solver.GROUP_MAX_CHUNKS = 1`, as before groups. Ratio: rays per second of the",
         "whole solve (tables, threads, walks, sums) over embreex's raw rate on pre-drawn rays, bracketing",

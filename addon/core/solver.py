@@ -43,14 +43,17 @@ MIN_CHUNK_PATHS = 128
 MIN_CHUNKS = 32
 # Small chunks end in many steps of few rays each, which cost numpy's per-step work for little
 # tracing: up to GROUP_MAX_CHUNKS chunks are traced as one wavefront (estimators.walk_chunks)
-# while a chunk has fewer rays than GROUP_RAYS, or GROUP_RAYS_COUNTED in the walk of
+# while a group's chunks have fewer rays than GROUP_RAYS, or GROUP_RAYS_COUNTED in the walk of
 # interchangeable paths (whose steps also cost a pass over the patches: it gains up to chunks of
 # about 60k rays, where the other walks, which keep every account per chunk in a group, gain
-# below about 16k rays and lose about 7% at 57k). At most 4 chunks a group: a run of
-# MIN_CHUNKS chunks still makes 8 tasks for the threads.
+# below about 16k rays and lose about 7% at 57k). A group is a power of two of chunks, so that
+# a run of MIN_CHUNKS chunks makes an even number of tasks for the threads: 2 (16 chunks a group)
+# for the smallest runs, where steps cost more than threads gain, and 8 (4 a group) from runs of
+# about 10^6 rays. Its scores take at most GROUP_SCORES float64s (channels x patches a chunk).
 GROUP_RAYS = 1 << 16
 GROUP_RAYS_COUNTED = 1 << 18
-GROUP_MAX_CHUNKS = 4
+GROUP_MAX_CHUNKS = 16
+GROUP_SCORES = 1 << 22
 # With stop_rule="measured": never stop on fewer chunks than this, nor run past this many
 # times the predicted paths (unless paths= is given as the cap).
 MIN_MEASURED_CHUNKS = 8
@@ -94,11 +97,13 @@ def chunk_paths_for(expected_path_length, planned_paths):
 
 def chunks_per_group(tables, chunk_paths, expected_path_length):
     """How many chunks a task traces together (estimators.walk_chunks): 1 unless the chunks
-    are small. It depends on the walk and the chunk plan alone, never on the threads, so runs
-    stay bitwise reproducible."""
+    are small, else a power of two (see GROUP_RAYS). It depends on the walk and the chunk plan
+    alone, never on the threads, so runs stay bitwise reproducible."""
     chunk_rays = max(1.0, chunk_paths * expected_path_length)
     group_rays = GROUP_RAYS_COUNTED if tables.exchangeable else GROUP_RAYS
-    return int(min(GROUP_MAX_CHUNKS, max(1, group_rays // chunk_rays)))
+    by_scores = GROUP_SCORES // (tables.channels * tables.patch_count)
+    most = int(min(GROUP_MAX_CHUNKS, group_rays // chunk_rays, by_scores))
+    return 1 << (most.bit_length() - 1) if most > 1 else 1
 
 
 class _Accumulator:

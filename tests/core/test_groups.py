@@ -178,14 +178,22 @@ def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_po
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
     tables = WalkTables(scene, estimator, THRESHOLD, exit_point)
     limit = solver.GROUP_RAYS_COUNTED if tables.exchangeable else solver.GROUP_RAYS
-    assert solver.chunks_per_group(tables, 500, 2.0) == solver.GROUP_MAX_CHUNKS
+    assert solver.chunks_per_group(tables, 100, 2.0) == solver.GROUP_MAX_CHUNKS
     assert solver.chunks_per_group(tables, limit // 2, 2.0) == 1
+    # Powers of two: a run of 32 chunks makes an even number of tasks.
+    assert solver.chunks_per_group(tables, limit // 2 // 5, 2.0) == 4
+    # A group's scores stay small in big colour scenes: 3 channels x 500,000 patches a chunk.
+    from types import SimpleNamespace
+
+    big = SimpleNamespace(exchangeable=tables.exchangeable, channels=3, patch_count=500_000)
+    assert solver.chunks_per_group(big, 100, 2.0) == 2
     fractions = []
     kw = dict(paths=20_000, seed=3, exit_point=exit_point)
     a = solve(scene, estimator, threads=1, progress=lambda f, s: fractions.append(f), **kw)
     b = solve(scene, estimator, threads=2, **kw)
     assert a.chunks == solver.MIN_CHUNKS and len(fractions) == a.chunks
-    assert groups[: a.chunks // 4] == [4] * (a.chunks // 4)  # the first run's tasks
+    group = solver.chunks_per_group(tables, 20_000 // a.chunks, a.prediction.expected_path_length)
+    assert group > 1 and groups[: a.chunks // group] == [group] * (a.chunks // group)  # the first run's tasks
     assert all(y > x for x, y in zip(fractions, fractions[1:])) and fractions[-1] == 1.0
     np.testing.assert_array_equal(a.radiosity, b.radiosity)
     assert a.rays == b.rays
