@@ -301,15 +301,8 @@ def _walk_paths(tables, sizes, rng, abort=None):
     ended = {name: np.zeros(G, dtype=np.int64) for name in ("escaped", "blocked", "absorbed", "threshold")}
 
     # Every path's source, drawn at once for each chunk; paths start as places free up.
-    first_uniforms = None
-    if tables.stratified:
-        drawn = [tables.sources.stratified(n, rng) for n in sizes]
-        source = np.concatenate([d[0] for d in drawn])
-        first_uniforms = np.concatenate([d[1] for d in drawn], axis=1)
-    else:
-        source = np.concatenate([tables.sources.sample(n, rng) for n in sizes])
+    source, source_chunk, first_uniforms = _draw_sources(tables, sizes, rng)
     started = 0
-    source_chunk = np.repeat(np.arange(G, dtype=np.int32), sizes) if grouped else None
     chunk_key_bits = int(G - 1).bit_length()  # in the sort key by patch (sort_paths)
 
     # The live paths: the patch each is on, what it carries, and its chunk (in a group).
@@ -342,10 +335,7 @@ def _walk_paths(tables, sizes, rng, abort=None):
         new = min(WAVEFRONT_PATHS - n_live, paths - started) if started < paths else 0
         if new > 0:
             new_patch = source[started : started + new]
-            patch = np.concatenate((patch, new_patch)) if n_live else new_patch
-            if grouped:
-                new_chunk = source_chunk[started : started + new]
-                chunk = np.concatenate((chunk, new_chunk)) if n_live else new_chunk
+            patch, chunk = _joined(patch, chunk, new_patch, source_chunk, started, n_live)
             if accumulated is not None:
                 accumulated = np.concatenate((accumulated, np.ones(new)))
             if tables.weight_is_accumulated:
@@ -486,6 +476,31 @@ def _walk_paths(tables, sizes, rng, abort=None):
     ]
 
 
+def _draw_sources(tables, sizes, rng):
+    """Every path's source for chunks of ``sizes`` paths, each chunk's drawn for it alone (a
+    sample may come out grouped by source): (source, its chunk or None for one chunk, the
+    stratified first rays' uniforms or None)."""
+    first_uniforms = None
+    if tables.stratified:
+        drawn = [tables.sources.stratified(n, rng) for n in sizes]
+        source = np.concatenate([d[0] for d in drawn])
+        first_uniforms = np.concatenate([d[1] for d in drawn], axis=1)
+    else:
+        source = np.concatenate([tables.sources.sample(n, rng) for n in sizes])
+    source_chunk = np.repeat(np.arange(len(sizes), dtype=np.int32), sizes) if len(sizes) > 1 else None
+    return source, source_chunk, first_uniforms
+
+
+def _joined(patch, chunk, new_patch, source_chunk, started, n_live):
+    """The live paths' patches and chunks (None outside a group) with the new paths after them
+    (``new_patch``, from ``started`` in the sources)."""
+    new_chunk = None if source_chunk is None else source_chunk[started : started + new_patch.size]
+    if not n_live:
+        return new_patch, new_chunk
+    patch = np.concatenate((patch, new_patch))
+    return patch, None if new_chunk is None else np.concatenate((chunk, new_chunk))
+
+
 def _chunk_starts(chunk, G):
     """Where each chunk's run begins in ``chunk`` (in chunk order), and its end: (G+1,)."""
     return np.searchsorted(chunk, np.arange(G + 1, dtype=chunk.dtype))
@@ -590,16 +605,8 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
     K = 2 * P + 2 if counted else P + 2  # bins per chunk: [2 patch + survives | patch], escaped, blocked
     escaped_bin = np.int32(K - 2)
     past = np.int32(G * K)  # a sort key past every bin: paths that do not go on
-    # Each chunk's sources drawn for it alone (a source sample may come out grouped by source).
-    first_uniforms = None
-    if tables.stratified:
-        drawn = [tables.sources.stratified(n, rng) for n in sizes]
-        source = np.concatenate([d[0] for d in drawn])
-        first_uniforms = np.concatenate([d[1] for d in drawn], axis=1)
-    else:
-        source = np.concatenate([tables.sources.sample(n, rng) for n in sizes])
+    source, source_chunk, first_uniforms = _draw_sources(tables, sizes, rng)
     source = source.astype(np.int32)
-    source_chunk = np.repeat(np.arange(G, dtype=np.int32), sizes) if tagged else None
     if counted:
         bins = np.zeros((G, K), dtype=np.int64)
         patch_index = np.arange(P, dtype=np.int32)
@@ -643,10 +650,7 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
         else:
             if new > 0:
                 new_patch = source[started : started + new]
-                patch = np.concatenate((patch, new_patch)) if n_live else new_patch
-                if tagged:
-                    new_chunk = source_chunk[started : started + new]
-                    chunk = np.concatenate((chunk, new_chunk)) if n_live else new_chunk
+                patch, chunk = _joined(patch, chunk, new_patch, source_chunk, started, n_live)
             if first_uniforms is not None and new > 0:
                 u[:4, n_live:] = first_uniforms[:, started : started + new]
             origins, directions = tables.leave_random(patch, u)
