@@ -491,6 +491,27 @@ def _draw_sources(tables, sizes, rng):
     return source, source_chunk, first_uniforms
 
 
+class _SourceRuns:
+    """The sources of chunks of ``sizes`` paths drawn as counts per source (the same numbers
+    ``_draw_sources`` draws when every chunk's source table draws counts): the chunk-ordered
+    paths come in runs, one per chunk and source, and a wavefront takes them in order."""
+
+    def __init__(self, sources, sizes, rng):
+        counts = np.concatenate([sources.counts(n, rng) for n in sizes])
+        self.end = np.cumsum(counts)
+        self.start = self.end - counts
+        self.chunk = np.repeat(np.arange(len(sizes)), sources.patches.size)
+        self.patch = np.tile(sources.patches, len(sizes))
+
+    def add_window(self, live, first, last):
+        """Adds paths ``first`` to ``last`` (exclusive) to the (chunks, patches) counts ``live``:
+        from each run overlapping them, as many as overlap (O(runs overlapping), not O(paths))."""
+        i = np.searchsorted(self.end, first, side="right")
+        j = np.searchsorted(self.start, last, side="left")
+        overlap = np.minimum(self.end[i:j], last) - np.maximum(self.start[i:j], first)
+        live[self.chunk[i:j], self.patch[i:j]] += overlap  # one run per chunk and source
+
+
 def _joined(patch, chunk, new_patch, source_chunk, started, n_live):
     """The live paths' patches and chunks (None outside a group) with the new paths after them
     (``new_patch``, from ``started`` in the sources)."""
@@ -605,8 +626,20 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
     K = 2 * P + 2 if counted else P + 2  # bins per chunk: [2 patch + survives | patch], escaped, blocked
     escaped_bin = np.int32(K - 2)
     past = np.int32(G * K)  # a sort key past every bin: paths that do not go on
-    source, source_chunk, first_uniforms = _draw_sources(tables, sizes, rng)
-    source = source.astype(np.int32)
+    # Live paths as counts per chunk and patch (see above), or None: as arrays of their
+    # patches (and chunks). New paths join the counts from their sources' counts where each
+    # chunk draws those (``SourceTable.counts``: a chunk's paths come in runs, one per source),
+    # else from every path's source.
+    live = runs = None
+    if counted and g.all_parallelograms and not tables.stratified:
+        live = np.zeros((G, P), dtype=np.int64)
+        if all(tables.sources.draws_counts(n) for n in sizes):
+            runs = _SourceRuns(tables.sources, sizes, rng)
+    if runs is None:
+        source, source_chunk, first_uniforms = _draw_sources(tables, sizes, rng)
+        source = source.astype(np.int32)
+        patch = source[:0]
+        chunk = source_chunk[:0] if tagged else None
     if counted:
         bins = np.zeros((G, K), dtype=np.int64)
         patch_index = np.arange(P, dtype=np.int32)
@@ -616,13 +649,6 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
     else:
         scores = _Scores(1, G * K)
     started = 0
-    patch = source[:0]
-    chunk = source_chunk[:0] if tagged else None
-    # Live paths as counts per chunk and patch (see above), or None: as arrays of their
-    # patches (and chunks).
-    live = None
-    if counted and g.all_parallelograms and first_uniforms is None:
-        live = np.zeros((G, P), dtype=np.int64)
     n_live = 0
     while True:
         if abort is not None and abort.is_set():
@@ -633,7 +659,9 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
         n = n_live + max(new, 0)
         u = rng.random((tables.uniforms_per_ray, n), dtype=np.float32)
         if live is not None:
-            if new > 0:
+            if new > 0 and runs is not None:
+                runs.add_window(live, started, started + new)
+            elif new > 0:
                 new_patch = source[started : started + new]
                 if tagged:
                     pair = source_chunk[started : started + new] * np.int32(P)

@@ -75,10 +75,19 @@ class SourceTable:
         grouped by source (rays leaving one patch together are coherent); otherwise each path
         draws its own uniform, O(count).
         """
-        if self.patches.size * MULTINOMIAL_PATHS_PER_SOURCE <= count:
-            counts = rng.multinomial(count, self.probability)
-            return np.repeat(self.patches, counts)
+        if self.draws_counts(count):
+            return np.repeat(self.patches, self.counts(count, rng))
         return self.choose(rng.random(count))
+
+    def draws_counts(self, count):
+        """Whether :meth:`sample` draws ``count`` choices as counts per source."""
+        return self.patches.size * MULTINOMIAL_PATHS_PER_SOURCE <= count
+
+    def counts(self, count, rng):
+        """The number of paths from each source (in the order of ``patches``) among ``count``
+        independent choices: one multinomial draw, the numbers :meth:`sample` draws when
+        :meth:`draws_counts`."""
+        return rng.multinomial(count, self.probability)
 
     def choose(self, u):
         """Patch index for each uniform u in [0, 1): the first k with u < cdf[k]."""

@@ -197,3 +197,31 @@ def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_po
     assert all(y > x for x, y in zip(fractions, fractions[1:])) and fractions[-1] == 1.0
     np.testing.assert_array_equal(a.radiosity, b.radiosity)
     assert a.rays == b.rays
+
+
+def test_sources_drawn_as_counts_join_the_wavefront_as_the_paths_would():
+    """The walk of interchangeable paths kept as counts takes its new paths from each chunk's
+    counts per source (estimators._SourceRuns) instead of from every path's source: any window
+    of the chunk-ordered paths adds exactly the counts of the sources in it, chunk by chunk,
+    including sources that drew no path (a source of tiny power)."""
+    from addon.core.estimators import _SourceRuns, _draw_sources
+
+    scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=3)
+    emission = scene.emission.copy()
+    emission[np.flatnonzero(emission[:, 0])[:2]] *= [[1e-9], [1e-3]]  # draws no path, and few
+    _, tables = _tables("counts", scene.with_materials(scene.reflectivity, emission))
+    sizes = [3_000, 500, 72, 10_000]
+    assert all(tables.sources.draws_counts(n) for n in sizes)
+    source, source_chunk, _ = _draw_sources(tables, sizes, np.random.default_rng(5))
+    runs = _SourceRuns(tables.sources, sizes, np.random.default_rng(5))  # the same numbers
+    assert np.any(runs.end == runs.start)  # a source with no path
+    P = tables.patch_count
+    rng = np.random.default_rng(6)
+    cuts = np.unique(np.concatenate(([0, sum(sizes)], np.cumsum(sizes), rng.integers(0, sum(sizes), 40))))
+    for first, last in zip(cuts[:-1], cuts[1:]):
+        live = np.zeros((len(sizes), P), dtype=np.int64)
+        runs.add_window(live, first, last)
+        expected = np.bincount(source_chunk[first:last] * P + source[first:last], minlength=len(sizes) * P)
+        np.testing.assert_array_equal(live.ravel(), expected)
+    # The tables' own sample draws the same numbers.
+    np.testing.assert_array_equal(tables.sources.sample(3_000, np.random.default_rng(5)), source[:3_000])
