@@ -35,6 +35,11 @@ RELATIVE_EDGE_INSET = 1e-6
 # coordinates are mapped onto the triangle's inset leaving frame instead.
 RELATIVE_HIT_EDGE_CLEARANCE = 4 * RELATIVE_EDGE_INSET
 
+# At most this many distinct leaving-frame shapes (edges and normal) are kept as a table of
+# their own (Geometry.leave_shapes; 2^12 shapes take 144 kB): more, and the table is no
+# smaller than the patches' own rows.
+LEAVE_SHAPES_MAX = 1 << 12
+
 # Scenes whose bounding-box diagonal lies outside this range are refused: float32 ray tracing
 # and float64 areas stay far from overflow and underflow inside it.
 MIN_DIAGONAL, MAX_DIAGONAL = 1e-12, 1e12
@@ -222,6 +227,25 @@ class Geometry:
         its normal, one coordinate per row: one gather gives a random exit's origin frame and
         the normal its direction is built on."""
         return np.ascontiguousarray(np.vstack([self.parallelogram_frame, self.patch_normal_rows]))
+
+    @cached_property
+    def leave_shapes(self):
+        """The distinct shapes of the parallelogram patches' leaving frames: ((9,K) float32
+        rows edge a, edge b, normal, one column per distinct shape; (P,) uint16 the shape of
+        each patch), bit for bit equal, or None where there are more than LEAVE_SHAPES_MAX.
+        A patch's frame is its corner and its shape: patches meshed from one face share one
+        (a wall of a room, a box's side). Compared as bits: a shared shape is the same
+        float32 numbers, and -0.0 stays apart from 0.0."""
+        rows = self.leave_table[3:12]
+        shapes, shape_of_patch = np.unique(
+            np.ascontiguousarray(rows.T).view(np.uint32), axis=0, return_inverse=True
+        )
+        if shapes.shape[0] > LEAVE_SHAPES_MAX:
+            return None
+        return (
+            np.ascontiguousarray(shapes.view(np.float32).T),
+            shape_of_patch.reshape(-1).astype(np.uint16),
+        )
 
     @cached_property
     def exit_table(self):

@@ -80,6 +80,7 @@ def test_colour_random_exit_matches_direct_solve(sorted_paths, monkeypatch):
 
     if sorted_paths:
         monkeypatch.setattr(estimators, "SORT_MIN_PATCHES", 1)
+        monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)  # patch classes, as in big scenes
     R = np.array([[0.7, 0.2, 0.2], [0.6, 0.6, 0.6], [0.2, 0.7, 0.2], [0.5, 0.5, 0.5], [0.3, 0.4, 0.8], [0.6, 0.5, 0.4]])
     E = np.array([[0, 0, 0], [1.0, 0.8, 0.5], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]])
     scene, F, _ = box_scene(R, E, SIZE, n=2)
@@ -104,6 +105,7 @@ def test_hit_exit_matches_continuous_solution(coarse, sorted_paths, monkeypatch)
 
     if sorted_paths:
         monkeypatch.setattr(estimators, "SORT_MIN_PATCHES", 1)
+        monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)  # patch classes, as in big scenes
     scene, _, B_discrete = coarse
     assert estimators.WalkTables(scene, "finite", 1e-3, "hit").sort_paths == sorted_paths
     fine = {}
@@ -136,9 +138,11 @@ def test_interchangeable_paths_match_direct_solve(coarse, counted, monkeypatch):
 
     if not counted:
         monkeypatch.setattr(estimators, "COUNTED_MAX_PATCHES", 0)
+        monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)  # patch classes, as in big scenes
     scene, F, B = coarse
     tables = estimators.WalkTables(scene, "finite", 1e-3, "random")
     assert tables.exchangeable and tables.counted == counted
+    assert (tables.patch_class is None) == counted
     N = 250_000
     runs, b = _mean_over_seeds(scene, "finite", N)
     assert all(sum(r.path_ends.values()) == N for r in runs)

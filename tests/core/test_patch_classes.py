@@ -1,0 +1,122 @@
+"""Patch classes (estimators._patch_classes): big scenes of parallelograms read a patch's leaving
+frame as its corner and its class's shape, and a hit patch's normal and R_bar as its class's.
+The classes must give back every patch's own numbers bit for bit, so the walks give the same
+results bit for bit with and without them."""
+import numpy as np
+import pytest
+
+from addon.core import estimators, scene as scene_module
+from addon.core.estimators import WalkTables, walk_chunks
+from addon.core import PatchScene
+from boxes import box_rectangles, box_scene, rectangles_to_mesh
+
+R_FACES = [0.3, 0.5, 0.7, 0.5, 0.6, 0.45]
+E_FACES = [0, 2.0, 0, 0, 0, 0]
+COLOUR = np.array([0.05, 0.0, -0.05])  # added to a grey reflectivity: the same mean
+SIZES = [3_000, 700, 128]
+
+# (estimator, exit point, colour, attributes forced on the tables: what bigger scenes do)
+KINDS = {
+    "sorted keys": ("finite", "random", False, {"counted": False}),
+    "finite hit sorted": ("finite", "hit", False, {"sort_paths": True}),
+    "biased sorted": ("biased_infinite", "random", False, {"sort_paths": True}),
+    "biased hit sorted": ("biased_infinite", "hit", False, {"sort_paths": True}),
+    "colour sorted": ("finite", "random", True, {"sort_paths": True}),
+    "colour biased hit": ("biased_infinite", "hit", True, {}),
+}
+
+
+def _scene(colour=False, n=4):
+    scene, _, _ = box_scene(R_FACES, E_FACES, size=(1.0, 1.3, 0.8), n=n)
+    if colour:
+        scene = scene.with_materials(scene.reflectivity[:, :1] + COLOUR, scene.emission[:, :1] * [1.0, 0.5, 0.25])
+    return scene
+
+
+def _tables(scene, estimator, exit_point, options, classes):
+    tables = WalkTables(scene, estimator, 1e-3, exit_point)
+    assert (tables.patch_class is not None) == classes
+    for name, value in options.items():
+        setattr(tables, name, value)
+    return tables
+
+
+def test_classes_give_back_every_patch_frame_normal_and_reflectivity_bit_for_bit(monkeypatch):
+    monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
+    scene = _scene(n=5)
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    g = scene.geometry
+    patch = np.arange(scene.patch_count)
+    bits = lambda a: np.ascontiguousarray(a).view(np.uint32)  # noqa: E731
+    np.testing.assert_array_equal(bits(tables.leave_frames(patch, None)), bits(g.leave_table))
+    np.testing.assert_array_equal(bits(tables.patch_normals(patch)), bits(g.patch_normal_rows))
+    np.testing.assert_array_equal(
+        tables.mean_reflectivity_at(patch).view(np.uint64), scene.mean_reflectivity.view(np.uint64)
+    )
+    # Patches meshed from one face share their shape: far fewer classes than patches, and at
+    # least one per face (each face has its own normal, and R_FACES has 5 values).
+    assert 6 <= tables.class_shape.shape[1] < scene.patch_count // 4
+    assert tables.patch_class.dtype == np.uint16
+
+
+def test_shapes_are_told_apart_by_their_bits():
+    """Two parallelograms whose edges differ in one float32 ulp are two shapes; -0.0 and 0.0
+    are too."""
+    table = np.zeros((12, 3), dtype=np.float32)
+    table[3:12] = np.array([1, 0, 0, 0, 1, 0, 0, 0, 1], dtype=np.float32)[:, None]
+    table[3, 1] = np.nextafter(np.float32(1), np.float32(2))
+    table[4, 2] = np.float32(-0.0)
+
+    class Frames:
+        leave_table = table
+
+    shapes, shape_of_patch = scene_module.Geometry.leave_shapes.func(Frames())
+    assert shapes.shape == (9, 3)
+    assert len(set(shape_of_patch.tolist())) == 3
+    np.testing.assert_array_equal(shapes[:, shape_of_patch].view(np.uint32), table[3:12].view(np.uint32))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("sizes", [[3_000], SIZES], ids=["one chunk", "group"])
+def test_walks_with_classes_are_the_walks_without_bit_for_bit(kind, sizes, monkeypatch):
+    estimator, exit_point, colour, options = KINDS[kind]
+    scene = _scene(colour)
+    plain = walk_chunks(_tables(scene, estimator, exit_point, options, False), sizes, np.random.default_rng(7))
+    monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
+    classed = walk_chunks(_tables(scene, estimator, exit_point, options, True), sizes, np.random.default_rng(7))
+    for a, b in zip(plain, classed):
+        assert a.rays == b.rays and a.ended == b.ended
+        np.testing.assert_array_equal(a.incident, b.incident)
+        for field in ("emitted", "absorbed", "escaped", "blocked", "undistributed"):
+            np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+
+
+def test_too_many_classes_or_shapes_keep_the_patch_tables(monkeypatch):
+    monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
+    scene = _scene()
+    classes = WalkTables(scene, "finite", 1e-3, "random").class_shape.shape[1]
+    monkeypatch.setattr(estimators, "PATCH_CLASSES_MAX", classes - 1)
+    assert WalkTables(scene, "finite", 1e-3, "random").patch_class is None
+    monkeypatch.setattr(estimators, "PATCH_CLASSES_MAX", classes)
+    assert WalkTables(scene, "finite", 1e-3, "random").patch_class is not None
+    monkeypatch.setattr(scene_module, "LEAVE_SHAPES_MAX", 1)
+    fresh = _scene()  # a new geometry: the shapes are cached per geometry
+    assert fresh.geometry.leave_shapes is None
+    assert WalkTables(fresh, "finite", 1e-3, "random").patch_class is None
+
+
+def test_small_scenes_and_scenes_with_other_patches_keep_the_patch_tables(monkeypatch):
+    """Below CLASSES_MIN_PATCHES, and where a patch is not a parallelogram, the walk reads
+    per-patch tables as before."""
+    assert WalkTables(_scene(), "finite", 1e-3, "random").patch_class is None
+    monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
+    origin, u, v, face = box_rectangles(n=2)
+    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
+    P = origin.shape[0]
+    # One more patch, a triangle (a card inside the box).
+    vertices = np.vstack([vertices, [[0.2, 0.2, 0.5], [0.8, 0.2, 0.5], [0.5, 0.8, 0.5]]])
+    triangles = np.vstack([triangles, [[len(vertices) - 3, len(vertices) - 2, len(vertices) - 1]]])
+    triangle_patch = np.append(triangle_patch, P)
+    scene = PatchScene(vertices, triangles, triangle_patch, np.full(P + 1, 0.5), np.append(np.ones(P), 0.0))
+    assert not scene.geometry.all_parallelograms
+    assert WalkTables(scene, "finite", 1e-3, "random").patch_class is None
