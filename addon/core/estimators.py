@@ -153,6 +153,9 @@ class WalkTables:
                 self.patch_class, self.class_shape, self.class_mean_reflectivity = classes
                 self.class_normals = np.ascontiguousarray(self.class_shape[6:9])
                 self.leave_corners = self.leave_table[0:3]  # contiguous: the table's first rows
+        # The patch of a hit triangle: in a scene of parallelograms the triangles come in pairs,
+        # in patch order (triangle t is half of patch t >> 1), so no table is read for it.
+        self.paired_triangles = self.geometry.all_parallelograms
         if not (self.geometry.all_parallelograms and self.exit_random):
             self.exit_table = self.geometry.exit_table
         if not self.exit_random:
@@ -181,6 +184,14 @@ class WalkTables:
             return trace(origins, directions)
         finally:
             self.numpy_turn.acquire()
+
+    def hit_patches(self, hit):
+        """The patch of each hit triangle, int32. A miss (-1) gives -1 or the last patch, which
+        gathers with mode="wrap" both read as the last patch's: harmless, as misses are
+        dropped."""
+        if self.paired_triangles:
+            return hit >> 1
+        return self.geometry.triangle_patch.take(hit, mode="wrap")
 
     def facing(self, directions, hit, hit_patch):
         """Whether each ray (a (3,n) direction row) meets the front side of what it hit."""
@@ -456,8 +467,8 @@ def _walk_paths(tables, sizes, rng, abort=None):
         # The ray tracer reads (n,3) views of the (3,n) rows: no transposed copies.
         if exit_random:
             hit = tables.first_hit(origins.T, directions.T)
-            # A miss (-1) wraps to the last triangle: harmless, masked out below.
-            hit_patch = g.triangle_patch.take(hit, mode="wrap")
+            # A miss (-1) reads as the last patch: harmless, masked out below.
+            hit_patch = tables.hit_patches(hit)
             front = tables.facing(directions, hit, hit_patch)
         else:
             hit, bary_u, bary_v, distance, hit_normal = tables.first_hit_barycentric(origins.T, directions.T)
@@ -490,7 +501,7 @@ def _walk_paths(tables, sizes, rng, abort=None):
             accumulated, weights, chunk = _carried(keep, accumulated, weights, chunk, tables)
             if not exit_random:
                 points = points.take(keep, axis=1, mode="wrap")
-        patch = g.triangle_patch.take(hit, mode="wrap") if hit_patch is None else hit_patch
+        patch = tables.hit_patches(hit) if hit_patch is None else hit_patch
 
         # Score: the power arriving at the hit patch (in a group, in its chunk's columns).
         scores.add(patch if chunk is None else chunk * np.int32(P) + patch, weights)
@@ -756,8 +767,8 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
         started += max(new, 0)
         u_survive = rng.random(n)
         hit = tables.first_hit(origins.T, directions.T)
-        # A miss (-1) wraps to the last triangle: harmless, binned out below.
-        hit_patch = g.triangle_patch.take(hit, mode="wrap")
+        # A miss (-1) reads as the last patch: harmless, binned out below.
+        hit_patch = tables.hit_patches(hit)
         front = tables.facing(directions, hit, hit_patch)
         reached = hit >= 0
         front &= reached

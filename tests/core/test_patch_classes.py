@@ -34,8 +34,11 @@ def _scene(colour=False, n=4):
 
 
 def _tables(scene, estimator, exit_point, options, classes):
+    """The walk's tables; without classes, also without reading hit patches from pairs (the
+    per-triangle table instead: the walk before either)."""
     tables = WalkTables(scene, estimator, 1e-3, exit_point)
     assert (tables.patch_class is not None) == classes
+    tables.paired_triangles = classes
     for name, value in options.items():
         setattr(tables, name, value)
     return tables
@@ -78,7 +81,7 @@ def test_shapes_are_told_apart_by_their_bits():
 
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("sizes", [[3_000], SIZES], ids=["one chunk", "group"])
-def test_walks_with_classes_are_the_walks_without_bit_for_bit(kind, sizes, monkeypatch):
+def test_walks_with_classes_and_paired_triangles_are_the_walks_without_bit_for_bit(kind, sizes, monkeypatch):
     estimator, exit_point, colour, options = KINDS[kind]
     scene = _scene(colour)
     plain = walk_chunks(_tables(scene, estimator, exit_point, options, False), sizes, np.random.default_rng(7))
@@ -120,3 +123,24 @@ def test_small_scenes_and_scenes_with_other_patches_keep_the_patch_tables(monkey
     scene = PatchScene(vertices, triangles, triangle_patch, np.full(P + 1, 0.5), np.append(np.ones(P), 0.0))
     assert not scene.geometry.all_parallelograms
     assert WalkTables(scene, "finite", 1e-3, "random").patch_class is None
+
+
+@pytest.mark.parametrize("n", [1, 3])
+def test_the_triangles_of_a_scene_of_parallelograms_come_in_pairs_in_patch_order(n):
+    """What WalkTables.hit_patches reads without a table: triangle t is half of patch t >> 1
+    (misses, -1, read as the last patch in the gathers that follow, as before)."""
+    scene = _scene(n=n)
+    g = scene.geometry
+    assert g.all_parallelograms
+    np.testing.assert_array_equal(g.triangle_patch, np.arange(g.triangle_count) >> 1)
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    assert tables.paired_triangles
+    hit = np.array([0, 1, 2, 5, g.triangle_count - 1, -1], dtype=np.int32)
+    patch = tables.hit_patches(hit)
+    assert patch.dtype == np.int32
+    np.testing.assert_array_equal(
+        scene.mean_reflectivity.take(patch, mode="wrap"),
+        scene.mean_reflectivity.take(g.triangle_patch.take(hit, mode="wrap"), mode="wrap"),
+    )
+    tables.paired_triangles = False
+    np.testing.assert_array_equal(patch[:-1], tables.hit_patches(hit)[:-1])
