@@ -154,9 +154,14 @@ def breakdown(scene, estimator, rounds=4, **kw):
     inside the walk, the same rays traced again on their own (with the walk's query: the
     hit-point exit asks for the hit's distance, barycentrics and normal too), and the raw rate
     on pre-drawn random rays (first hits only). Medians over ``rounds`` chunks of a full-size
-    chunk each."""
+    chunk each. The walk is timed as it runs in a solve; its rays are kept from a second walk
+    with the same random numbers (the same rays), so that copying them does not disturb the
+    timed one. Where the processor's counters can be read (``benchmarks.counters``), also the
+    lines Embree fetches from memory a ray, inside the walk and alone; else those are NaN."""
     from addon.core.estimators import WalkTables, walk_chunk
     from addon.core.solver import chunk_paths_for
+
+    from .counters import Counters
 
     threshold = kw.get("threshold", 1e-3)
     tables = WalkTables(scene, estimator, threshold, kw.get("exit_point", "random"))
@@ -164,40 +169,66 @@ def breakdown(scene, estimator, rounds=4, **kw):
     tracer = scene.tracer
     query = "first_hit" if tables.exit_random else "first_hit_barycentric"
     real = getattr(tracer, query)
-    rng = np.random.default_rng(1)
-    walk_chunk(tables, paths // 8, rng)
+    walk_chunk(tables, paths // 8, np.random.default_rng(0))
     o_raw, d_raw = sample_rays(scene, 1 << 16)
+    counters = Counters.open()
+
+    def misses():
+        return counters.read()["from_memory"] if counters else np.nan
+
+    def counted(trace, origins, directions):
+        if counters:
+            counters.start()
+        try:
+            return trace(origins, directions)
+        finally:
+            if counters:
+                counters.stop()
+
     rows = []
-    for _ in range(rounds):
+    for k in range(rounds):
         inside = {"cpu": 0.0, "rays": 0}
-        kept = []
 
         def timed(origins, directions):
             cpu = time.process_time()
-            hit = real(origins, directions)
+            hit = counted(real, origins, directions)
             inside["cpu"] += time.process_time() - cpu
             inside["rays"] += len(origins)
-            kept.append((origins.copy(), directions.copy()))  # every cast of the chunk
             return hit
 
+        kept = []
+
+        def keep(origins, directions):
+            kept.append((origins.copy(), directions.copy()))  # every cast of the chunk
+            return real(origins, directions)
+
+        before = misses()
         setattr(tracer, query, timed)
         try:
             cpu = time.process_time()
-            rays = walk_chunk(tables, paths, rng).rays
+            rays = walk_chunk(tables, paths, np.random.default_rng(k + 1)).rays
             total = time.process_time() - cpu
+            setattr(tracer, query, keep)
+            walk_chunk(tables, paths, np.random.default_rng(k + 1))  # the same rays again
         finally:
             delattr(tracer, query)
+        misses_inside = (misses() - before) / rays
+        before = misses()
         cpu, again = time.process_time(), 0
         for origins, directions in kept:
-            real(origins, directions)
+            counted(real, origins, directions)
             again += len(origins)
+        misses_alone = (misses() - before) / again
         again /= time.process_time() - cpu
         cpu, raw = time.process_time(), 0
         while raw < 1_000_000:
             tracer.first_hit(o_raw, d_raw)
             raw += len(o_raw)
         raw /= time.process_time() - cpu
-        rows.append((rays / total, inside["cpu"] / total, inside["rays"] / inside["cpu"], again, raw))
+        rows.append((rays / total, inside["cpu"] / total, inside["rays"] / inside["cpu"], again, raw,
+                     misses_inside, misses_alone))
+    if counters:
+        counters.close()
     return np.median(np.array(rows), axis=0)
 
 
@@ -396,16 +427,20 @@ def write_breakdown(args):
         "full-size chunks, CPU time, medians of 4 chunks.",
         "",
         "| scene | estimator | exit point | walk Mray/s | share of the walk inside Embree | Embree inside the walk Mray/s "
-        "| the same rays again, alone Mray/s | raw (pre-drawn random rays) Mray/s | walk / raw |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|",
+        "| the same rays again, alone Mray/s | Embree's lines from memory a ray, inside / alone "
+        "| raw (pre-drawn random rays) Mray/s | walk / raw |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for name in args.scene:
         scene = build_scene(name)
         for estimator in ("finite", "biased_infinite"):
             for exit_point in ("random", "hit"):
-                walk, share, inside, again, raw = breakdown(scene, estimator, exit_point=exit_point)
+                walk, share, inside, again, raw, misses_inside, misses_alone = breakdown(
+                    scene, estimator, exit_point=exit_point
+                )
+                fetched = "n/a" if np.isnan(misses_inside) else f"{misses_inside:.2f} / {misses_alone:.2f}"
                 row = (f"| {name} | {estimator} | {exit_point} | {walk / 1e6:.2f} | {share:.2f} | {inside / 1e6:.2f} "
-                       f"| {again / 1e6:.2f} | {raw / 1e6:.2f} | {walk / raw:.2f} |")
+                       f"| {again / 1e6:.2f} | {fetched} | {raw / 1e6:.2f} | {walk / raw:.2f} |")
                 print(row, flush=True)
                 lines.append(row)
     lines += [
@@ -415,14 +450,17 @@ def write_breakdown(args):
         "survival, scoring) and how fast Embree traces inside the walk compared with the raw run. In",
         "big scenes Embree traces the walk's rays more slowly between numpy steps than the same rays",
         "(every cast of the chunk) traced again on their own, back to back. The processor's counters",
-        "say why: inside the walk Embree fetches lines of its scene (about 10 MB in the figure 4 room)",
-        "from memory, where alone it finds them in the L3 cache (32 MB, shared with the host's other",
-        "cores, so how much of it is ours changes by the hour). What the numpy work reads between casts",
-        "evicts them, and is evicted in turn. Big scenes of parallelograms therefore read a leaving",
-        "frame as the patch's corner and its class's shape, and a hit patch's normal and R_bar as its",
-        "class's (estimators.CLASSES_MIN_PATCHES), and a hit patch is the hit triangle's index >> 1:",
-        "a figure 4 room step reads about 1 MB of tables (3 rows of corners, 2 bytes a patch), not",
-        "4.3 MB.",
+        "say why (lines from memory: fills from DRAM on AMD Zen 3 and later, last-level read misses",
+        "elsewhere; `benchmarks/counters.py`): inside the walk Embree fetches more lines of its scene",
+        "(about 10 MB in the figure 4 room) from memory, where alone it finds more of them in the L3",
+        "cache (32 MB here, shared with the host's other cores, so how much of it is ours changes by",
+        "the hour, and every figure in this table with it). What the numpy work reads between casts",
+        "evicts them. Big scenes of parallelograms therefore read a leaving frame as the patch's",
+        "corner and its class's shape, and a hit patch's normal and R_bar as its class's",
+        "(estimators.CLASSES_MIN_PATCHES), and a hit patch is the hit triangle's index >> 1: a figure",
+        "4 room step reads about 1 MB of tables (3 rows of corners, 2 bytes a patch), not 4.3 MB.",
+        "The walk is timed alone; its rays are kept from a second walk with the same random numbers,",
+        "so that copying them (about 24 MB a chunk) does not disturb the timed walk.",
         "",
         "A walk leaving from hit points asks Embree for the hit's distance, barycentric coordinates and",
         "normal as well (embreex's `output=1`), which costs it a few percent against the raw run's",
