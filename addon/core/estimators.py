@@ -150,7 +150,9 @@ class WalkTables:
         if self.geometry.all_parallelograms and self.patch_count >= CLASSES_MIN_PATCHES:
             classes = _patch_classes(self.geometry, self.mean_reflectivity)
             if classes is not None:
-                self.patch_class, self.class_shape, self.class_mean_reflectivity = classes
+                self.patch_class, self.class_shape, self.class_mean_reflectivity, class_shape_index = classes
+                # (the hit-point exit's edge thresholds, one per shape: Geometry.edge_barycentric)
+                self.class_edge_barycentric = self.geometry.shape_edge_barycentric[class_shape_index]
                 self.class_normals = np.ascontiguousarray(self.class_shape[6:9])
                 self.leave_corners = self.leave_table[0:3]  # contiguous: the table's first rows
         # The patch of a hit triangle: in a scene of parallelograms the triangles come in pairs,
@@ -210,7 +212,7 @@ class WalkTables:
             return self.class_mean_reflectivity.take(self.patch_class.take(patch, mode="wrap"), mode="wrap")
         return self.mean_reflectivity.take(patch, mode="wrap")
 
-    def hit_points(self, origins, directions, distance, hit, u, v, front):
+    def hit_points(self, origins, directions, distance, hit, hit_patch, u, v, front):
         """Where the rays that hit a front side (``front``) go on from, not yet pushed off the
         surface: (3,n) rows, computed in place in ``origins`` (``directions`` is overwritten).
 
@@ -227,7 +229,14 @@ class WalkTables:
         origins += directions
         nearest = np.minimum(u, v)
         np.minimum(nearest, 1 - u - v, out=nearest)
-        near = nearest < self.edge_barycentric.take(np.maximum(hit, 0), mode="wrap")  # (see hit_patches)
+        if self.patch_class is not None:
+            # (a random gather from a small table, not from one of T triangles: the tables a
+            # step reads between ray casts stay small, see CLASSES_MIN_PATCHES)
+            hit_class = self.patch_class.take(hit_patch, mode="wrap")
+            limit = self.class_edge_barycentric.take(hit_class, mode="wrap")
+        else:
+            limit = self.edge_barycentric.take(np.maximum(hit, 0), mode="wrap")  # (see hit_patches)
+        near = nearest < limit
         near &= front
         index = np.flatnonzero(near)
         if index.size:
@@ -291,8 +300,8 @@ class WalkTables:
 def _patch_classes(geometry, mean_reflectivity):
     """The patches of a scene of parallelograms in classes of one leaving-frame shape (edge a,
     edge b, normal: Geometry.leave_shapes) and one mean reflectivity each, bit for bit:
-    ((P,) uint16 class of each patch, (9,K) float32 shape rows and (K,) R_bar of each class),
-    or None where there are more than PATCH_CLASSES_MAX classes."""
+    ((P,) uint16 class of each patch, (9,K) float32 shape rows, (K,) R_bar and (K,) shape index
+    of each class), or None where there are more than PATCH_CLASSES_MAX classes."""
     shapes = geometry.leave_shapes
     if shapes is None:
         return None
@@ -302,10 +311,12 @@ def _patch_classes(geometry, mean_reflectivity):
     keys, patch_class = np.unique(key, return_inverse=True)
     if keys.size > PATCH_CLASSES_MAX:
         return None
+    shape = keys // values.size
     return (
         patch_class.reshape(-1).astype(np.uint16),
-        np.ascontiguousarray(shape_table[:, keys // values.size]),
+        np.ascontiguousarray(shape_table[:, shape]),
         values[keys % values.size],
+        shape,
     )
 
 
@@ -475,7 +486,7 @@ def _walk_paths(tables, sizes, rng, abort=None):
             front = tables.facing(directions, hit, hit_patch)
         else:
             hit, bary_u, bary_v, distance, hit_normal = tables.first_hit_barycentric(origins.T, directions.T)
-            hit_patch = None
+            hit_patch = tables.hit_patches(hit)
             dot = hit_normal[:, 0] * directions[0]
             dot += hit_normal[:, 1] * directions[1]
             dot += hit_normal[:, 2] * directions[2]
@@ -483,7 +494,7 @@ def _walk_paths(tables, sizes, rng, abort=None):
         front &= hit >= 0
         rays += n if chunk is None else _chunk_counts(chunk, G)
         if not exit_random:
-            points = tables.hit_points(origins, directions, distance, hit, bary_u, bary_v, front)
+            points = tables.hit_points(origins, directions, distance, hit, hit_patch, bary_u, bary_v, front)
         if not front.all():
             missed = hit < 0
             back = ~missed & ~front

@@ -261,7 +261,28 @@ class Geometry:
         """(T,) float32: the barycentric coordinate below which a point of each triangle may lie
         closer than RELATIVE_HIT_EDGE_CLEARANCE to one of its edges (the clearance over the
         triangle's smallest altitude, 2 area / longest edge; 1 for triangles too small to
-        have such points)."""
+        have such points). Where patches have leaving-frame shapes (:attr:`leave_shapes`), every
+        triangle of a shape's patches takes the largest of their thresholds
+        (:attr:`shape_edge_barycentric`), which a walk reads per patch class: a larger
+        threshold only sends a few more hit points through the exact remap onto the frame."""
+        if self.shape_edge_barycentric is not None:
+            _, shape_of_patch = self.leave_shapes
+            return self.shape_edge_barycentric[shape_of_patch[self.triangle_patch]]
+        return self._own_edge_barycentric()
+
+    @cached_property
+    def shape_edge_barycentric(self):
+        """(K,) float32: the largest :attr:`edge_barycentric` of the triangles of each shape of
+        :attr:`leave_shapes`, or None where the patches are not all parallelograms or have no
+        shape table."""
+        if not self.all_parallelograms or self.leave_shapes is None:
+            return None
+        _, shape_of_patch = self.leave_shapes
+        largest = np.zeros(shape_of_patch.max() + 1, dtype=np.float32)
+        np.maximum.at(largest, shape_of_patch[self.triangle_patch], self._own_edge_barycentric())
+        return largest
+
+    def _own_edge_barycentric(self):
         corners = self.triangle_corners.astype(np.float64)
         edges = corners[:, [1, 2, 0]] - corners
         longest = np.linalg.norm(edges, axis=2).max(axis=1)

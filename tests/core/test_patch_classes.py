@@ -33,6 +33,17 @@ def _scene(colour=False, n=4):
     return scene
 
 
+def _box_with_a_triangle_card():
+    """A closed box of 2 x 2 parallelograms a face (emitting) and one more patch, a triangle
+    (a card inside the box)."""
+    origin, u, v, _ = box_rectangles(n=2)
+    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
+    P = origin.shape[0]
+    vertices = np.vstack([vertices, [[0.2, 0.2, 0.5], [0.8, 0.2, 0.5], [0.5, 0.8, 0.5]]])
+    triangles = np.vstack([triangles, [[len(vertices) - 3, len(vertices) - 2, len(vertices) - 1]]])
+    return PatchScene(vertices, triangles, np.append(triangle_patch, P), np.full(P + 1, 0.5), np.append(np.ones(P), 0.0))
+
+
 def _tables(scene, estimator, exit_point, options, classes):
     """The walk's tables; without classes, also without reading hit patches from pairs (the
     per-triangle table instead: the walk before either)."""
@@ -113,14 +124,7 @@ def test_small_scenes_and_scenes_with_other_patches_keep_the_patch_tables(monkey
     per-patch tables as before."""
     assert WalkTables(_scene(), "finite", 1e-3, "random").patch_class is None
     monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
-    origin, u, v, face = box_rectangles(n=2)
-    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
-    P = origin.shape[0]
-    # One more patch, a triangle (a card inside the box).
-    vertices = np.vstack([vertices, [[0.2, 0.2, 0.5], [0.8, 0.2, 0.5], [0.5, 0.8, 0.5]]])
-    triangles = np.vstack([triangles, [[len(vertices) - 3, len(vertices) - 2, len(vertices) - 1]]])
-    triangle_patch = np.append(triangle_patch, P)
-    scene = PatchScene(vertices, triangles, triangle_patch, np.full(P + 1, 0.5), np.append(np.ones(P), 0.0))
+    scene = _box_with_a_triangle_card()
     assert not scene.geometry.all_parallelograms
     assert WalkTables(scene, "finite", 1e-3, "random").patch_class is None
 
@@ -143,3 +147,22 @@ def test_the_triangles_of_a_scene_of_parallelograms_come_in_pairs_in_patch_order
     tables.paired_triangles = False
     np.testing.assert_array_equal(tables.hit_patches(hit), expected)
     np.testing.assert_array_equal(hit[-1], -1)  # the hits themselves are left alone
+
+
+def test_edge_thresholds_are_one_per_shape_and_never_below_a_triangles_own():
+    """A hit-point exit's edge threshold (Geometry.edge_barycentric) is the largest of its
+    shape's triangles' own: one per shape, so a walk can read it per patch class, and never
+    smaller than a triangle's own (a larger one only remaps a few more points exactly). Without
+    shapes (a triangle patch), every triangle keeps its own."""
+    scene, _, _ = box_scene(R_FACES, E_FACES, size=(1.0, 1.3, 0.8), n=5)
+    g = scene.geometry
+    own = g._own_edge_barycentric()
+    _, shape_of_patch = g.leave_shapes
+    shape_of_triangle = shape_of_patch[g.triangle_patch]
+    assert (g.edge_barycentric >= own).all()
+    for shape in np.unique(shape_of_triangle):
+        members = shape_of_triangle == shape
+        assert g.edge_barycentric[members].min() == g.edge_barycentric[members].max() == own[members].max()
+    mixed = _box_with_a_triangle_card()
+    assert mixed.geometry.shape_edge_barycentric is None
+    np.testing.assert_array_equal(mixed.geometry.edge_barycentric, mixed.geometry._own_edge_barycentric())

@@ -49,14 +49,16 @@ def test_facing_by_patch_normal_is_facing_by_triangle_normal(estimator):
     np.testing.assert_array_equal(a.incident, b.incident)
 
 
-def test_hit_points_keep_clear_of_edges():
+@pytest.mark.parametrize("classes", [False, True])
+def test_hit_points_keep_clear_of_edges(classes, monkeypatch):
     """A hit-point exit goes on from origin + t direction, except within the clearance of an
     edge of the hit triangle, where it maps the hit's barycentric coordinates onto the
     triangle's inset leaving frame. Rays aimed at points on and next to the edges (down to 0)
     of a box turned off the axes: every point lies in its triangle's plane and at least the
     edge inset inside each of its edges (float32 rounding would otherwise put some past the
-    edge, behind the adjacent wall), and points away from the edges are the hit points."""
-    from addon.core import PatchScene
+    edge, behind the adjacent wall), and points away from the edges are the hit points. With
+    classes (as in big scenes) the edge thresholds are read per patch class."""
+    from addon.core import PatchScene, estimators
     from addon.core.scene import RELATIVE_EDGE_INSET
     from boxes import box_rectangles, rectangles_to_mesh
 
@@ -86,8 +88,13 @@ def test_hit_points_keep_clear_of_edges():
     hit, bu, bv, t, ng = g.tracer.first_hit_barycentric(o, d)
     front = (np.einsum("ij,ij->i", ng, d) < 0) & (hit >= 0)
     assert front.all()
+    if classes:
+        monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
     tables = WalkTables(scene, "finite", 1e-3, "hit")
-    points = tables.hit_points(np.ascontiguousarray(o.T), np.ascontiguousarray(d.T), t, hit, bu, bv, front).T.astype(np.float64)
+    assert (tables.patch_class is not None) == classes
+    points = tables.hit_points(
+        np.ascontiguousarray(o.T), np.ascontiguousarray(d.T), t, hit, tables.hit_patches(hit), bu, bv, front
+    ).T.astype(np.float64)
 
     c = g.triangle_corners[hit].astype(np.float64)
     normal = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
