@@ -90,6 +90,21 @@ def test_shapes_are_told_apart_by_their_bits():
     np.testing.assert_array_equal(shapes[:, shape_of_patch].view(np.uint32), table[3:12].view(np.uint32))
 
 
+def test_shapes_that_share_a_hash_are_still_told_apart(monkeypatch):
+    """Shapes are grouped by a hash of their bits, then checked row by row: where every shape
+    shares one hash (all multipliers 0), the rows themselves are sorted, and the shapes are
+    the same as with the hash."""
+    hashed = _scene(n=3).geometry.leave_shapes
+    monkeypatch.setattr(scene_module, "_SHAPE_HASH", np.zeros(9, dtype=np.uint64))
+    geometry = _scene(n=3).geometry  # a new geometry: the shapes are cached per geometry
+    shapes, shape_of_patch = geometry.leave_shapes
+    assert shapes.shape[1] == hashed[0].shape[1] > 1
+    np.testing.assert_array_equal(shapes[:, shape_of_patch].view(np.uint32), geometry.leave_table[3:12].view(np.uint32))
+    # The same partition of the patches, whatever the shapes' order.
+    pairs = set(zip(shape_of_patch.tolist(), hashed[1].tolist()))
+    assert len(pairs) == shapes.shape[1]
+
+
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("sizes", [[3_000], SIZES], ids=["one chunk", "group"])
 def test_walks_with_classes_and_paired_triangles_are_the_walks_without_bit_for_bit(kind, sizes, monkeypatch):
