@@ -208,7 +208,7 @@ class WalkTables:
 
     def mean_reflectivity_at(self, patch):
         """R_bar of each of the given patches (float64)."""
-        if self.patch_class is not None:
+        if self.patch_class is not None and self.class_mean_reflectivity is not None:
             return self.class_mean_reflectivity.take(self.patch_class.take(patch, mode="wrap"), mode="wrap")
         return self.mean_reflectivity.take(patch, mode="wrap")
 
@@ -300,8 +300,10 @@ class WalkTables:
 def _patch_classes(geometry, mean_reflectivity):
     """The patches of a scene of parallelograms in classes of one leaving-frame shape (edge a,
     edge b, normal: Geometry.leave_shapes) and one mean reflectivity each, bit for bit:
-    ((P,) uint16 class of each patch, (9,K) float32 shape rows, (K,) R_bar and (K,) shape index
-    of each class), or None where there are more than PATCH_CLASSES_MAX classes."""
+    ((P,) uint16 class of each patch, (9,K) float32 shape rows, (K,) R_bar or None, and (K,)
+    shape index of each class). Where shape and R_bar together make more than
+    PATCH_CLASSES_MAX classes (R_bar varies from patch to patch), the classes are the shapes
+    alone and R_bar None (read per patch); None where the shapes alone are too many."""
     shapes = geometry.leave_shapes
     if shapes is None:
         return None
@@ -310,7 +312,9 @@ def _patch_classes(geometry, mean_reflectivity):
     key = shape_of_patch.astype(np.int64) * values.size + value_of_patch.reshape(-1)
     keys, patch_class = np.unique(key, return_inverse=True)
     if keys.size > PATCH_CLASSES_MAX:
-        return None
+        if shape_table.shape[1] > PATCH_CLASSES_MAX:
+            return None
+        return shape_of_patch, shape_table, None, np.arange(shape_table.shape[1])
     shape = keys // values.size
     return (
         patch_class.reshape(-1).astype(np.uint16),

@@ -26,8 +26,12 @@ KINDS = {
 }
 
 
-def _scene(colour=False, n=4):
+def _scene(colour=False, n=4, varied=False):
+    """A closed box, one reflectivity a face (varied: three a face, patch by patch), made colour
+    with the same mean reflectivity."""
     scene, _, _ = box_scene(R_FACES, E_FACES, size=(1.0, 1.3, 0.8), n=n)
+    if varied:
+        scene = scene.with_materials(scene.reflectivity + 0.05 * (np.arange(scene.patch_count) % 3)[:, None], scene.emission)
     if colour:
         scene = scene.with_materials(scene.reflectivity[:, :1] + COLOUR, scene.emission[:, :1] * [1.0, 0.5, 0.25])
     return scene
@@ -107,11 +111,15 @@ def test_shapes_that_share_a_hash_are_still_told_apart(monkeypatch):
 
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("sizes", [[3_000], SIZES], ids=["one chunk", "group"])
-def test_walks_with_classes_and_paired_triangles_are_the_walks_without_bit_for_bit(kind, sizes, monkeypatch):
+@pytest.mark.parametrize("by_shape", [False, True], ids=["shape and R_bar", "shape alone"])
+def test_walks_with_classes_and_paired_triangles_are_the_walks_without_bit_for_bit(kind, sizes, by_shape, monkeypatch):
     estimator, exit_point, colour, options = KINDS[kind]
-    scene = _scene(colour)
+    scene = _scene(colour, varied=by_shape)
     plain = walk_chunks(_tables(scene, estimator, exit_point, options, False), sizes, np.random.default_rng(7))
     monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
+    if by_shape:  # fewer classes allowed than shape and R_bar make: the shapes alone
+        monkeypatch.setattr(estimators, "PATCH_CLASSES_MAX", scene.geometry.leave_shapes[0].shape[1])
+        assert WalkTables(scene, estimator, 1e-3, exit_point).class_mean_reflectivity is None
     classed = walk_chunks(_tables(scene, estimator, exit_point, options, True), sizes, np.random.default_rng(7))
     for a, b in zip(plain, classed):
         assert a.rays == b.rays and a.ended == b.ended
@@ -121,10 +129,21 @@ def test_walks_with_classes_and_paired_triangles_are_the_walks_without_bit_for_b
 
 
 def test_too_many_classes_or_shapes_keep_the_patch_tables(monkeypatch):
+    """Too many classes of shape and R_bar: the classes are the shapes alone, and R_bar is read
+    per patch (the walk the same bit for bit); too many shapes: no classes."""
     monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
-    scene = _scene()
+    scene = _scene(varied=True)
     classes = WalkTables(scene, "finite", 1e-3, "random").class_shape.shape[1]
+    shapes = scene.geometry.leave_shapes[0].shape[1]
+    assert shapes < classes
     monkeypatch.setattr(estimators, "PATCH_CLASSES_MAX", classes - 1)
+    by_shape = WalkTables(scene, "finite", 1e-3, "hit")
+    assert by_shape.class_shape.shape[1] == shapes and by_shape.class_mean_reflectivity is None
+    patch = np.arange(scene.patch_count)
+    np.testing.assert_array_equal(by_shape.mean_reflectivity_at(patch), scene.mean_reflectivity)
+    np.testing.assert_array_equal(by_shape.leave_frames(patch, None), scene.geometry.leave_table)
+    np.testing.assert_array_equal(by_shape.patch_normals(patch), scene.geometry.patch_normal_rows)
+    monkeypatch.setattr(estimators, "PATCH_CLASSES_MAX", shapes - 1)
     assert WalkTables(scene, "finite", 1e-3, "random").patch_class is None
     monkeypatch.setattr(estimators, "PATCH_CLASSES_MAX", classes)
     assert WalkTables(scene, "finite", 1e-3, "random").patch_class is not None
