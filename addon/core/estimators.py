@@ -66,7 +66,8 @@ COUNTED_MAX_PATCHES = 1 << 12
 # In scenes of at least CLASSES_MIN_PATCHES parallelograms, whose per-patch tables outgrow the
 # caches, patches are put in classes of one leaving-frame shape and one mean reflectivity
 # (patches meshed from one face share a shape, and a material its reflectivity), if there are
-# at most PATCH_CLASSES_MAX classes (2^12 classes take 200 kB). The walk then reads a leaving
+# at most PATCH_CLASSES_MAX classes (2^12 classes take 200 kB; more, and the classes are the
+# shapes alone, R_bar read per patch: _patch_classes). The walk then reads a leaving
 # frame as the patch's corner and its class's shape, and a hit patch's normal and R_bar as its
 # class's: between two ray casts it reads 3 rows of P corners and 2 bytes a patch where it read
 # 12 rows of P and 8 bytes. In the figure 4 room (66,572 patches, 23 classes) that is about
