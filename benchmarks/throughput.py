@@ -173,7 +173,7 @@ def breakdown(scene, estimator, rounds=4, **kw):
     o_raw, d_raw = sample_rays(scene, 1 << 16)
     counters = Counters.open()
 
-    def misses():
+    def from_memory():
         return counters.read()["from_memory"] if counters else np.nan
 
     def counted(trace, origins, directions):
@@ -202,7 +202,7 @@ def breakdown(scene, estimator, rounds=4, **kw):
             kept.append((origins.copy(), directions.copy()))  # every cast of the chunk
             return real(origins, directions)
 
-        before = misses()
+        before = from_memory()
         setattr(tracer, query, timed)
         try:
             cpu = time.process_time()
@@ -212,13 +212,13 @@ def breakdown(scene, estimator, rounds=4, **kw):
             walk_chunk(tables, paths, np.random.default_rng(k + 1))  # the same rays again
         finally:
             delattr(tracer, query)
-        misses_inside = (misses() - before) / rays
-        before = misses()
+        from_memory_inside = (from_memory() - before) / rays
+        before = from_memory()
         cpu, again = time.process_time(), 0
         for origins, directions in kept:
             counted(real, origins, directions)
             again += len(origins)
-        misses_alone = (misses() - before) / again
+        from_memory_alone = (from_memory() - before) / again
         again /= time.process_time() - cpu
         cpu, raw = time.process_time(), 0
         while raw < 1_000_000:
@@ -226,7 +226,7 @@ def breakdown(scene, estimator, rounds=4, **kw):
             raw += len(o_raw)
         raw /= time.process_time() - cpu
         rows.append((rays / total, inside["cpu"] / total, inside["rays"] / inside["cpu"], again, raw,
-                     misses_inside, misses_alone))
+                     from_memory_inside, from_memory_alone))
     if counters:
         counters.close()
     return np.median(np.array(rows), axis=0)
@@ -435,10 +435,10 @@ def write_breakdown(args):
         scene = build_scene(name)
         for estimator in ("finite", "biased_infinite"):
             for exit_point in ("random", "hit"):
-                walk, share, inside, again, raw, misses_inside, misses_alone = breakdown(
+                walk, share, inside, again, raw, from_memory_inside, from_memory_alone = breakdown(
                     scene, estimator, exit_point=exit_point
                 )
-                fetched = "n/a" if np.isnan(misses_inside) else f"{misses_inside:.2f} / {misses_alone:.2f}"
+                fetched = "n/a" if np.isnan(from_memory_inside) else f"{from_memory_inside:.2f} / {from_memory_alone:.2f}"
                 row = (f"| {name} | {estimator} | {exit_point} | {walk / 1e6:.2f} | {share:.2f} | {inside / 1e6:.2f} "
                        f"| {again / 1e6:.2f} | {fetched} | {raw / 1e6:.2f} | {walk / raw:.2f} |")
                 print(row, flush=True)
@@ -469,6 +469,7 @@ def write_breakdown(args):
         "from new random points gathers a leaving frame and a normal for the facing test.",
     ]
     out = Path(args.out).with_name("throughput_breakdown.md")
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
     print(f"wrote {out}")
 

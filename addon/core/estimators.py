@@ -511,16 +511,13 @@ def _walk_paths(tables, sizes, rng, abort=None):
                 blocked += per_chunk(weights, back)
                 ended["blocked"] += count(back)
             keep = np.flatnonzero(front)
-            if hit_patch is None:
-                hit = hit.take(keep, mode="wrap")
-            else:
-                hit_patch = hit_patch.take(keep, mode="wrap")
+            hit_patch = hit_patch.take(keep, mode="wrap")
             if finite:
                 u_survive = u_survive.take(keep, mode="wrap")
             accumulated, weights, chunk = _carried(keep, accumulated, weights, chunk, tables)
             if not exit_random:
                 points = points.take(keep, axis=1, mode="wrap")
-        patch = tables.hit_patches(hit) if hit_patch is None else hit_patch
+        patch = hit_patch
 
         # Score: the power arriving at the hit patch (in a group, in its chunk's columns).
         scores.add(patch if chunk is None else chunk * np.int32(P) + patch, weights)
