@@ -41,10 +41,11 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
-from .sampling import SourceTable, add_sphere_points, choose_triangles, frame_points
+from .sampling import SourceTable, add_sphere_points, channel_sum, choose_triangles, frame_points
 
 # Rays per step while the chunk still has paths to start: big enough that numpy's per-call
 # cost is small next to the work, small enough that a step's arrays stay in cache.
@@ -107,12 +108,7 @@ class WalkTables:
         # Grey scenes carry one channel; colour scenes three.
         self.channels = 1 if scene.is_grey else 3
         self.reflectivity = np.ascontiguousarray(R[:, : self.channels].T)  # (C,P)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = np.where(self.mean_reflectivity > 0, R.T / self.mean_reflectivity, 0.0)
-            mean_emission = scene.emission.mean(axis=1)
-            start = np.where(mean_emission > 0, scene.emission.T / mean_emission, 0.0)
-        self.survivor_weight = np.ascontiguousarray(ratio[: self.channels])  # R_jc / R_bar_j (C,P)
-        self.start_weight = np.ascontiguousarray(start[: self.channels])      # E_ic / E_bar_i (C,P)
+        self.emission = scene.emission  # (P,3), for start_weight
         # float32 uniforms for a ray leaving from a new point of its patch: point (2),
         # direction (2), then a triangle choice unless every patch is a parallelogram. A ray
         # leaving from the hit point needs the direction's two only. The finite estimator's
@@ -172,6 +168,23 @@ class WalkTables:
         # Walks on several threads take turns at their numpy work: a walk holds this lock
         # except while it traces (see walk_chunks).
         self.numpy_turn = threading.Lock()
+
+    # A colour walk's per-channel weights, made when a walk first reads them (a grey walk never
+    # does: it carries no per-channel weights).
+    @cached_property
+    def survivor_weight(self):
+        """R_jc / R_bar_j (C,P): what survivors multiply each channel's weight by."""
+        R = self.reflectivity
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.mean_reflectivity > 0, R / self.mean_reflectivity, 0.0)
+
+    @cached_property
+    def start_weight(self):
+        """E_ic / E_bar_i (C,P): a path's starting weight from source i."""
+        E = self.emission
+        mean_emission = channel_sum(E) / 3  # bit for bit E.mean(axis=1), at a tenth of its cost
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(mean_emission > 0, E[:, : self.channels].T / mean_emission, 0.0)
 
     def first_hit(self, origins, directions):
         """The ray tracer's first hits, traced outside the numpy turn."""
@@ -311,7 +324,7 @@ def _patch_classes(geometry, mean_reflectivity):
     shape_table, shape_of_patch = shapes
     values, value_of_patch = np.unique(mean_reflectivity, return_inverse=True)
     key = shape_of_patch.astype(np.int64) * values.size + value_of_patch.reshape(-1)
-    keys, patch_class = np.unique(key, return_inverse=True)
+    keys, patch_class = _unique_keys(key, shape_table.shape[1] * values.size)
     if keys.size > PATCH_CLASSES_MAX:
         if shape_table.shape[1] > PATCH_CLASSES_MAX:
             return None
@@ -323,6 +336,18 @@ def _patch_classes(geometry, mean_reflectivity):
         values[keys % values.size],
         shape,
     )
+
+
+def _unique_keys(key, key_count):
+    """np.unique(key, return_inverse=True) for (P,) int64 keys in [0, key_count): where the
+    key range is not much bigger than P, a table of the keys present replaces the sort."""
+    if key_count > 4 * key.size:
+        return np.unique(key, return_inverse=True)
+    present = np.zeros(key_count, dtype=bool)
+    present[key] = True
+    keys = np.flatnonzero(present)
+    rank = np.cumsum(present) - 1  # a present key's place among the keys present
+    return keys, rank.take(key, mode="wrap")
 
 
 def _rays_from_frames(frame, a, b, u_direction):

@@ -127,10 +127,14 @@ class _Accumulator:
         # b_j = (R_j Phi_T / A_j) I_j / N
         self.score = tables.reflectivity * (scene.total_power / scene.patch_area)  # (C,P)
         self.weight = scene.patch_area / scene.total_area
+        self._mse_weight = None  # (C*P,) score^2 A_j / (C A_T), made on first use
+        self._mse_at = (0, math.nan)  # (chunks, measured_mse at that many chunks)
 
     def add(self, tally):
         self.incident += tally.incident
-        self.incident_sq += tally.incident**2 / tally.paths
+        square = np.square(tally.incident)  # (in place from here: no more (C,P) temporaries)
+        square /= tally.paths
+        self.incident_sq += square
         self.emitted += tally.emitted
         self.absorbed += tally.absorbed
         self.escaped += tally.escaped
@@ -152,19 +156,39 @@ class _Accumulator:
         """Batch-means estimate of Var(b_j) per channel and patch, (C,P); NaN below 2 chunks."""
         if self.chunks < 2:
             return np.full_like(self.incident, math.nan)
-        N = self.paths
-        spread = np.maximum(self.incident_sq - self.incident**2 / N, 0.0)
-        return self.score**2 * spread / ((self.chunks - 1) * N)
+        variance = self._spread()
+        variance *= self.score**2
+        variance /= (self.chunks - 1) * self.paths
+        return variance
+
+    def _spread(self):
+        """sum_k I_k^2 / n_k - I^2 / N per channel and patch (C,P), at least 0: N (chunks - 1)
+        times the batch variance of I / N. (A new array, computed in place.)"""
+        spread = np.square(self.incident)
+        spread /= self.paths
+        np.subtract(self.incident_sq, spread, out=spread)
+        np.maximum(spread, 0.0, out=spread)
+        return spread
 
     def reflected_variance(self):
         v = self.variance_of_mean().T
         return np.repeat(v, 3, axis=1) if self.channels == 1 else v
 
     def measured_mse(self):
-        """Batch-means estimate of the MSE of the current result (its variance part)."""
+        """Batch-means estimate of the MSE of the current result (its variance part): the
+        area-weighted mean over patches (and channels) of variance_of_mean, computed as one sum
+        of its spread times score^2 A_j / (C A_T). Kept for the chunk count it was made at."""
         if self.chunks < 2:
             return math.nan
-        return float((self.variance_of_mean().mean(axis=0) * self.weight).sum())
+        if self._mse_at[0] == self.chunks:
+            return self._mse_at[1]
+        if self._mse_weight is None:
+            self._mse_weight = (self.score**2 * (self.weight / self.channels)).ravel()
+        # (einsum, not a BLAS dot: OpenBLAS's threads would spin beside the walks' threads)
+        spread_sum = float(np.einsum("i,i->", self._spread().ravel(), self._mse_weight))
+        mse = spread_sum / ((self.chunks - 1) * self.paths)
+        self._mse_at = (self.chunks, mse)
+        return mse
 
     def energy(self):
         """Power balance of the run in the scene's units, per channel (3,)."""
@@ -288,9 +312,9 @@ def solve(
             pending.popleft()
             for tally in tallies:  # progress once per chunk
                 total.add(tally)
-                elapsed = time.perf_counter() - start
-                mse_now = total.measured_mse()
                 if progress is not None:
+                    elapsed = time.perf_counter() - start
+                    mse_now = total.measured_mse()
                     fraction = total.paths / cap
                     if measured_rule and mse_now > 0:  # NaN compares False
                         fraction = max(fraction, target_mse / mse_now)
@@ -305,7 +329,8 @@ def solve(
                             "predicted_mse": prediction.mse_for(total.paths),
                         },
                     )
-            if measured_rule and total.chunks >= MIN_MEASURED_CHUNKS and mse_now <= target_mse:
+            # (The batch estimate costs passes over the patches: made only where it is used.)
+            if measured_rule and total.chunks >= MIN_MEASURED_CHUNKS and total.measured_mse() <= target_mse:
                 stopped = STOP_TARGET
             elif total.paths >= cap:
                 stopped = done_rule

@@ -34,6 +34,8 @@ def test_grey_walks_never_touch_per_channel_weights(estimator, exit_point):
     tables = WalkTables(scene, estimator, 1e-3, exit_point)
     assert tables.channels == 1
     reference = walk_chunk(tables, 5_000, np.random.default_rng(1))
+    # It never even makes the per-channel tables (made when a colour walk first reads them).
+    assert "survivor_weight" not in vars(tables) and "start_weight" not in vars(tables)
     # Without the per-channel tables at all the walk runs, and gives the same numbers.
     tables.survivor_weight = tables.start_weight = tables.reflectivity = None
     bare = walk_chunk(tables, 5_000, np.random.default_rng(1))

@@ -200,3 +200,16 @@ def test_edge_thresholds_are_one_per_shape_and_never_below_a_triangles_own():
     mixed = _box_with_a_triangle_card()
     assert mixed.geometry.shape_edge_barycentric is None
     np.testing.assert_array_equal(mixed.geometry.edge_barycentric, mixed.geometry._own_edge_barycentric())
+
+
+@pytest.mark.parametrize("size, key_count", [(66_572, 23 * 7), (5_000, 5_000), (1_000, 50), (10, 1_000), (300, 1 << 40)])
+def test_unique_keys_are_numpys_unique(size, key_count):
+    """Class keys are made unique with a table of the keys present where their range is small,
+    with a sort otherwise: the same keys and the same inverse as np.unique either way."""
+    rng = np.random.default_rng(size)
+    key = rng.integers(0, key_count, size).astype(np.int64)
+    keys, inverse = estimators._unique_keys(key, key_count)
+    expected_keys, expected_inverse = np.unique(key, return_inverse=True)
+    np.testing.assert_array_equal(keys, expected_keys)
+    np.testing.assert_array_equal(inverse, expected_inverse)
+    np.testing.assert_array_equal(keys[inverse], key)

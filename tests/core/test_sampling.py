@@ -111,3 +111,19 @@ def test_parallelogram_and_triangle_patches_sample_alike():
         hist = np.histogram2d(p[:, 0], p[:, 1], bins=(8, 4), range=((x0, x0 + 2), (y0, y0 + 1)))[0].ravel()
         expected = n / 32
         assert ((hist - expected) ** 2 / expected).sum() < 31 + 5 * np.sqrt(62)
+
+
+def test_channel_sum_is_numpys_sum_bit_for_bit():
+    """Source powers (and colour walks' mean emission) add the three channels as
+    (v0 + v1) + v2, which is what values.sum(axis=1) computes: the same numbers to the bit, so
+    the sources drawn do not change."""
+    from addon.core.sampling import channel_sum
+
+    rng = np.random.default_rng(3)
+    for dtype in (np.float64, np.float32):
+        values = rng.random((50_000, 3)) * rng.choice([1e-30, 1e-3, 1.0, 7.0, 1e3, 1e30], (50_000, 3))
+        values = values.astype(dtype)
+        np.testing.assert_array_equal(channel_sum(values), values.sum(axis=1))
+        np.testing.assert_array_equal(channel_sum(values) / 3, values.mean(axis=1))
+        # ... and not the other grouping, which differs somewhere on such data.
+        assert not np.array_equal(values[:, 0] + (values[:, 1] + values[:, 2]), values.sum(axis=1))

@@ -117,3 +117,57 @@ def test_scale_and_position_do_not_matter(scale, offset):
     z = (a.reflected - b.reflected) / np.sqrt(a.reflected_variance + b.reflected_variance)
     assert np.abs(z[:, 0]).max() < 4.5
     assert b.path_ends["escaped"] == 0 and b.path_ends["blocked"] == 0
+
+
+def test_batch_estimate_is_made_only_where_it_is_used(scene, monkeypatch):
+    """The batch MSE costs passes over the patches: a run without progress under the predicted
+    rule makes it once, for its result; with progress, once per chunk; and it is the
+    area-weighted mean of the per-patch batch variances either way."""
+    from addon.core import solver
+
+    made = []
+    real = solver._Accumulator.measured_mse
+
+    def counted(self):
+        made.append(self.chunks)
+        return real(self)
+
+    monkeypatch.setattr(solver._Accumulator, "measured_mse", counted)
+    r = solve(scene, "finite", paths=40_000, seed=2, threads=2)
+    assert r.chunks >= 32 and made == [r.chunks]
+    made.clear()
+    calls = []
+    p = solve(scene, "finite", paths=40_000, seed=2, threads=2, progress=lambda f, s: calls.append(s["measured_mse"]))
+    assert made == list(range(1, p.chunks + 1)) + [p.chunks]
+    assert p.measured_mse == r.measured_mse == calls[-1]
+    variance = p.reflected_variance.mean(axis=1)  # per patch, over channels
+    expected = float((variance * scene.patch_area).sum() / scene.total_area)
+    assert p.measured_mse == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
+def test_measured_stop_rule_reads_the_estimate_once_a_group(scene, monkeypatch, estimator):
+    """Under the measured rule the estimate is read after each task's chunks are all added:
+    the run stops as soon as it meets the target there, on whole chunks."""
+    from addon.core import solver
+
+    made = []
+    real = solver._Accumulator.measured_mse
+    monkeypatch.setattr(solver._Accumulator, "measured_mse", lambda self: (made.append(self.chunks), real(self))[1])
+    target = 3 * predict(scene, estimator, paths=200_000).predicted_mse
+    r = solve(scene, estimator, target_mse=target, stop_rule="measured", seed=5, threads=1)
+    assert r.stopped == "target" and r.measured_mse <= target
+    # Read at MIN_MEASURED_CHUNKS chunks and after, once per task, then for the result.
+    assert made[-2:] == [r.chunks, r.chunks] and made[0] >= solver.MIN_MEASURED_CHUNKS
+    assert all(b > a for a, b in zip(made[:-1], made[1:-1]))
+
+
+def test_batch_estimate_of_a_colour_scene_is_the_mean_over_channels():
+    R = [[0.3, 0.5, 0.7], [0.6, 0.2, 0.4], [0.7, 0.7, 0.1], [0.5, 0.5, 0.5], [0.4, 0.6, 0.2], [0.65, 0.3, 0.5]]
+    E = [[0, 0, 0], [1.0, 0.5, 2.0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]]
+    colour, _, _ = box_scene(R, E, (1.0, 1.4, 0.8), n=2)
+    assert not colour.is_grey
+    r = solve(colour, "finite", paths=20_000, seed=4, threads=1)
+    variance = r.reflected_variance.mean(axis=1)
+    expected = float((variance * colour.patch_area).sum() / colour.total_area)
+    assert r.measured_mse == pytest.approx(expected, rel=1e-12)
