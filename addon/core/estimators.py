@@ -587,7 +587,7 @@ def _walk_paths(tables, sizes, rng, abort=None):
         ChunkTally(
             paths=n,
             rays=int(rays[k]),
-            incident=np.ascontiguousarray(incident[:, k]),
+            incident=incident[:, k].astype(np.float64),  # (a copy, contiguous)
             emitted=emitted[k],
             absorbed=absorbed[k],
             escaped=escaped[k],
@@ -856,6 +856,7 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
     else:
         bins = scores.total()[0].reshape(G, K)
         incident = bins[:, :P]
+    rays = bins.sum(axis=1)
     tallies = []
     for k, n in enumerate(sizes):
         escaped, blocked = int(bins[k, K - 2]), int(bins[k, K - 1])
@@ -863,7 +864,7 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
         one = lambda count: np.array([float(count)])  # noqa: E731
         tallies.append(ChunkTally(
             paths=n,
-            rays=int(bins[k].sum()),
+            rays=int(rays[k]),
             incident=incident[k : k + 1].astype(np.float64),
             emitted=one(n),
             absorbed=one(absorbed),
@@ -892,12 +893,14 @@ def _carried(index, accumulated, weights, chunk, tables):
 class _Scores:
     """The hits of a chunk, kept per step and summed per patch (one bincount per channel)
     whenever SCORE_FLUSH_PER_PATCH times the patch count of them have gathered, at most
-    SCORE_FLUSH: (C,P) float64. (A bincount costs a pass over the P patches, so big scenes
-    gather the hits of many steps first; small scenes add every step's hits while they are
-    still in cache.)"""
+    SCORE_FLUSH: (C,P), float64 sums of weights, or int64 counts of unweighted hits. (A
+    bincount costs a pass over the P patches, so big scenes gather the hits of many steps
+    first; small scenes add every step's hits while they are still in cache. The first sums
+    are the sums: a group's scores, chunks x patches, are neither zeroed nor added to first.)"""
 
     def __init__(self, channels, patch_count):
-        self.incident = np.zeros((channels, patch_count))
+        self.shape = (channels, patch_count)
+        self.incident = None  # until the first flush
         self.patches, self.weights, self.count = [], [], 0
         self.flush_at = min(SCORE_FLUSH, SCORE_FLUSH_PER_PATCH * patch_count)
 
@@ -913,17 +916,24 @@ class _Scores:
         if not self.patches:
             return
         patches = np.concatenate(self.patches)
-        C, P = self.incident.shape
+        C, P = self.shape
         if not self.weights:
-            self.incident[0] += np.bincount(patches, minlength=P)
+            sums = np.bincount(patches, minlength=P)[None]
         else:
             w = np.concatenate(self.weights, axis=1)
+            sums = [np.bincount(patches, weights=w[c], minlength=P) for c in range(C)]
+        if self.incident is None:
+            self.incident = np.array(sums) if self.weights else sums
+        else:
             for c in range(C):
-                self.incident[c] += np.bincount(patches, weights=w[c], minlength=P)
+                self.incident[c] += sums[c]
         self.patches, self.weights, self.count = [], [], 0
 
     def total(self):
+        """(C,P) float64 sums, or int64 counts where no hit carried a weight."""
         self.flush()
+        if self.incident is None:
+            return np.zeros(self.shape)
         return self.incident
 
 

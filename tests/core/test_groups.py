@@ -77,6 +77,8 @@ def test_each_chunk_of_a_group_has_its_own_paths_and_rays(kind):
         assert t.paths == n
         assert t.ended == {"escaped": 0, "blocked": 0, "absorbed": n if finite else 0, "threshold": 0 if finite else n}
         assert t.incident.shape == (tables.channels, scene.patch_count)
+        # (scores may be kept as counts, but a tally is float64, each its own array)
+        assert t.incident.dtype == np.float64 and t.incident.flags.c_contiguous and t.incident.flags.owndata
         if tables.channels == 1 and finite:
             assert t.emitted[0] == n and t.incident.sum() == t.rays  # every ray of a closed box scores once
         _balanced(t)
