@@ -184,7 +184,8 @@ class WalkTables:
         E = self.emission
         mean_emission = channel_sum(E) / 3  # bit for bit E.mean(axis=1), at a tenth of its cost
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(mean_emission > 0, E[:, : self.channels].T / mean_emission, 0.0)
+            start = np.where(mean_emission > 0, E[:, : self.channels].T / mean_emission, 0.0)
+        return np.ascontiguousarray(start)  # (E.T's rows: the division keeps its column order)
 
     def first_hit(self, origins, directions):
         """The ray tracer's first hits, traced outside the numpy turn."""

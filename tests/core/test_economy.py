@@ -44,6 +44,25 @@ def test_grey_walks_never_touch_per_channel_weights(estimator, exit_point):
     assert bare.incident.shape == (1, scene.patch_count)
 
 
+def test_colour_walks_make_their_weight_tables_when_first_read():
+    R = [[0.3, 0.5, 0.7], [0.6, 0.2, 0.4], [0.7, 0.7, 0.1], [0.5, 0.5, 0.5], [0.4, 0.6, 0.2], [0.0, 0.0, 0.0]]
+    E = [[0, 0, 0], [1.0, 0.5, 2.0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0.5, 0.5, 0.5]]
+    scene, _, _ = box_scene(R, E, n=2)
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    assert tables.channels == 3 and "start_weight" not in vars(tables)
+    walk_chunk(tables, 2_000, np.random.default_rng(1))
+    # R_jc / R_bar_j (0 where R_bar is 0) and E_ic / E_bar_i (0 where nothing is emitted),
+    # rows of patches, contiguous: the walk gathers their columns at every step.
+    R_bar = scene.reflectivity.mean(axis=1)
+    E_bar = scene.emission.mean(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        expected_survivor = np.where(R_bar > 0, scene.reflectivity.T / R_bar, 0.0)
+        expected_start = np.where(E_bar > 0, scene.emission.T / E_bar, 0.0)
+    for table, expected in ((tables.survivor_weight, expected_survivor), (tables.start_weight, expected_start)):
+        assert table.shape == (3, scene.patch_count) and table.flags.c_contiguous
+        np.testing.assert_array_equal(table, expected)
+
+
 @pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
 @pytest.mark.parametrize("exit_point", ["random", "hit"])
 def test_patches_no_path_can_reach_cost_nothing(estimator, exit_point):
