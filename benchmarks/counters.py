@@ -26,7 +26,7 @@ _FLAGS = (1 << 0) | (1 << 5) | (1 << 6)  # disabled, exclude_kernel, exclude_hv
 
 
 class Counters:
-    """Cycles and cache misses of the calling thread, while started. ``read()`` gives the totals
+    """Cycles and lines fetched from memory of the calling thread, while started. ``read()`` gives the totals
     so far as a dict."""
 
     names = ("cycles", "from_memory")
