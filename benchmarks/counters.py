@@ -26,8 +26,8 @@ _FLAGS = (1 << 0) | (1 << 5) | (1 << 6)  # disabled, exclude_kernel, exclude_hv
 
 
 class Counters:
-    """Cycles and lines fetched from memory of the calling thread, while started. ``read()`` gives the totals
-    so far as a dict."""
+    """Cycles and lines fetched from memory of the calling thread, while started. ``read()``
+    gives the totals so far as a dict."""
 
     names = ("cycles", "from_memory")
 
