@@ -152,12 +152,19 @@ def paired_ratio(scene, estimator, threads, seconds, rounds=5, **kw):
 def breakdown(scene, estimator, rounds=4, **kw):
     """Where a walk's time goes (one thread): the share spent inside Embree, Embree's rate
     inside the walk, the same rays traced again on their own (with the walk's query: the
-    hit-point exit asks for the hit's distance, barycentrics and normal too), and the raw rate
-    on pre-drawn random rays (first hits only). Medians over ``rounds`` chunks of a full-size
-    chunk each. The walk is timed as it runs in a solve; its rays are kept from a second walk
-    with the same random numbers (the same rays), so that copying them does not disturb the
-    timed one. Where the processor's counters can be read (``benchmarks.counters``), also the
-    lines Embree fetches from memory a ray, inside the walk and alone; else those are NaN."""
+    hit-point exit asks for the hit's distance, barycentrics and normal too), twice, and the
+    raw rate on pre-drawn random rays (first hits only). Medians over ``rounds`` chunks of a
+    full-size chunk each. The walk is timed as it runs in a solve; its rays are kept from a
+    second walk with the same random numbers (the same rays), so that copying them does not
+    disturb the timed one.
+
+    The two replays, in alternating order: back to back, and with a pause before each cast as
+    long as the walk's numpy work before it (the walk's time outside Embree, shared out by
+    rays), spent spinning in Python, which reads next to no memory. If Embree is as slow after
+    such pauses as inside the walk, what slows it there is the time away from its scene (the
+    host's other cores use the shared cache meanwhile), not what the numpy work reads. Where
+    the processor's counters can be read (``benchmarks.counters``), also the lines Embree
+    fetches from memory a ray: inside the walk, back to back and after pauses; else NaN."""
     from addon.core.estimators import WalkTables, walk_chunk
     from addon.core.solver import chunk_paths_for
 
@@ -213,23 +220,38 @@ def breakdown(scene, estimator, rounds=4, **kw):
         finally:
             delattr(tracer, query)
         from_memory_inside = (from_memory() - before) / rays
-        before = from_memory()
-        cpu, again = time.process_time(), 0
-        for origins, directions in kept:
-            counted(real, origins, directions)
-            again += len(origins)
-        from_memory_alone = (from_memory() - before) / again
-        again /= time.process_time() - cpu
+        numpy_seconds_a_ray = (total - inside["cpu"]) / rays
+        replays = {}
+        for pause in ((0.0, numpy_seconds_a_ray) if k % 2 == 0 else (numpy_seconds_a_ray, 0.0)):
+            replays[pause > 0] = replay(real, kept, pause, counted, from_memory)
+        (again, from_memory_alone), (paused, from_memory_paused) = replays[False], replays[True]
         cpu, raw = time.process_time(), 0
         while raw < 1_000_000:
             tracer.first_hit(o_raw, d_raw)
             raw += len(o_raw)
         raw /= time.process_time() - cpu
-        rows.append((rays / total, inside["cpu"] / total, inside["rays"] / inside["cpu"], again, raw,
-                     from_memory_inside, from_memory_alone))
+        rows.append((rays / total, inside["cpu"] / total, inside["rays"] / inside["cpu"], again, paused, raw,
+                     from_memory_inside, from_memory_alone, from_memory_paused))
     if counters:
         counters.close()
     return np.median(np.array(rows), axis=0)
+
+
+def replay(trace, casts, pause_a_ray, counted, from_memory):
+    """Traces ``casts`` again, one by one, each after spinning ``pause_a_ray`` seconds per ray
+    of it (0: back to back). Returns Embree's rays per CPU second over the casts alone, and
+    the lines it fetched from memory a ray."""
+    before, seconds, rays = from_memory(), 0.0, 0
+    for origins, directions in casts:
+        if pause_a_ray:
+            until = time.perf_counter() + pause_a_ray * len(origins)
+            while time.perf_counter() < until:
+                pass
+        cpu = time.process_time()
+        counted(trace, origins, directions)
+        seconds += time.process_time() - cpu
+        rays += len(origins)
+    return rays / seconds, (from_memory() - before) / rays
 
 
 SHORT_PATHS = (30_000, 100_000, 300_000, 1_000_000, 3_000_000)
@@ -427,20 +449,19 @@ def write_breakdown(args):
         "full-size chunks, CPU time, medians of 4 chunks.",
         "",
         "| scene | estimator | exit point | walk Mray/s | share of the walk inside Embree | Embree inside the walk Mray/s "
-        "| the same rays again, alone Mray/s | Embree's lines from memory a ray, inside / alone "
+        "| the same rays again, back to back Mray/s | the same rays again, after pauses Mray/s "
+        "| Embree's lines from memory a ray: inside / back to back / after pauses "
         "| raw (pre-drawn random rays) Mray/s | walk / raw |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for name in args.scene:
         scene = build_scene(name)
         for estimator in ("finite", "biased_infinite"):
             for exit_point in ("random", "hit"):
-                walk, share, inside, again, raw, from_memory_inside, from_memory_alone = breakdown(
-                    scene, estimator, exit_point=exit_point
-                )
-                fetched = "n/a" if np.isnan(from_memory_inside) else f"{from_memory_inside:.2f} / {from_memory_alone:.2f}"
+                walk, share, inside, again, paused, raw, *fetched = breakdown(scene, estimator, exit_point=exit_point)
+                fetched = "n/a" if np.isnan(fetched[0]) else " / ".join(f"{lines:.2f}" for lines in fetched)
                 row = (f"| {name} | {estimator} | {exit_point} | {walk / 1e6:.2f} | {share:.2f} | {inside / 1e6:.2f} "
-                       f"| {again / 1e6:.2f} | {fetched} | {raw / 1e6:.2f} | {walk / raw:.2f} |")
+                       f"| {again / 1e6:.2f} | {paused / 1e6:.2f} | {fetched} | {raw / 1e6:.2f} | {walk / raw:.2f} |")
                 print(row, flush=True)
                 lines.append(row)
     lines += [
@@ -450,17 +471,24 @@ def write_breakdown(args):
         "survival, scoring) and how fast Embree traces inside the walk compared with the raw run. In",
         "big scenes Embree traces the walk's rays more slowly between numpy steps than the same rays",
         "(every cast of the chunk) traced again on their own, back to back. The processor's counters",
-        "say why (lines from memory: fills from DRAM on AMD Zen 3 and later, last-level read misses",
-        "elsewhere; `benchmarks/counters.py`): inside the walk Embree fetches more lines of its scene",
-        "(about 10 MB in the figure 4 room) from memory, where alone it finds more of them in the L3",
-        "cache (32 MB here, shared with the host's other cores, so how much of it is ours changes by",
-        "the hour, and every figure in this table with it). What the numpy work reads between casts",
-        "evicts them. Big scenes of parallelograms therefore read a leaving frame as the patch's",
-        "corner and its class's shape, and a hit patch's normal and R_bar as its class's",
-        "(estimators.CLASSES_MIN_PATCHES), and a hit patch is the hit triangle's index >> 1: a figure",
-        "4 room step reads about 1 MB of tables (3 rows of corners, 2 bytes a patch), not 4.3 MB.",
-        "The walk is timed alone; its rays are kept from a second walk with the same random numbers,",
-        "so that copying them (about 24 MB a chunk) does not disturb the timed walk.",
+        "say where that time goes (lines from memory: fills from DRAM on AMD Zen 3 and later,",
+        "last-level read misses elsewhere; `benchmarks/counters.py`): inside the walk Embree fetches",
+        "more lines of its scene (about 10 MB in the figure 4 room) from memory, where back to back",
+        "it finds more of them in the L3 cache (32 MB here, shared with the host's other cores, so",
+        "how much of it is ours changes by the hour, and every figure in this table with it).",
+        "",
+        "Two things take those lines out of the cache between casts: what the numpy work reads and",
+        "writes, and the time itself, during which the host's other cores use the shared cache. The",
+        "third replay separates them: the same casts again, each after a pause as long as the walk's",
+        "numpy work before it, spent spinning in Python (which reads next to no memory). Where Embree",
+        "after pauses is as slow as inside the walk, the time away explains the difference; where it",
+        "is as fast as back to back, the numpy work's memory does. Big scenes of parallelograms keep",
+        "that memory small: they read a leaving frame as the patch's corner and its class's shape,",
+        "and a hit patch's normal and R_bar as its class's (estimators.CLASSES_MIN_PATCHES), and a",
+        "hit patch is the hit triangle's index >> 1: a figure 4 room step reads about 1 MB of tables",
+        "(3 rows of corners, 2 bytes a patch), not 4.3 MB. The walk is timed alone; its rays are kept",
+        "from a second walk with the same random numbers, so that copying them (about 24 MB a chunk)",
+        "does not disturb the timed walk.",
         "",
         "A walk leaving from hit points asks Embree for the hit's distance, barycentric coordinates and",
         "normal as well (embreex's `output=1`), which costs it a few percent against the raw run's",
