@@ -213,10 +213,14 @@ class WalkTables:
             return triangle
         return self.geometry.triangle_patch.take(triangle, mode="wrap")
 
+    def _class_of(self, patch):
+        """The class of each of the given patches (a big scene's patch classes only)."""
+        return self.patch_class.take(patch, mode="wrap")
+
     def facing(self, directions, hit, hit_patch):
         """Whether each ray (a (3,n) direction row) meets the front side of what it hit."""
         if self.patch_class is not None:
-            hit_class = self.patch_class.take(hit_patch, mode="wrap")
+            hit_class = self._class_of(hit_patch)
             return _facing(directions, self.class_normals.take(hit_class, axis=1, mode="wrap"))
         normals = self.facing_rows.take(hit_patch if self.facing_by_patch else np.maximum(hit, 0), axis=1, mode="wrap")
         return _facing(directions, normals)
@@ -224,7 +228,7 @@ class WalkTables:
     def mean_reflectivity_at(self, patch):
         """R_bar of each of the given patches (float64)."""
         if self.patch_class is not None and self.class_mean_reflectivity is not None:
-            return self.class_mean_reflectivity.take(self.patch_class.take(patch, mode="wrap"), mode="wrap")
+            return self.class_mean_reflectivity.take(self._class_of(patch), mode="wrap")
         return self.mean_reflectivity.take(patch, mode="wrap")
 
     def hit_points(self, origins, directions, distance, hit, hit_patch, u, v, front):
@@ -247,7 +251,7 @@ class WalkTables:
         if self.patch_class is not None:
             # (a random gather from a small table, not from one of T triangles: the tables a
             # step reads between ray casts stay small, see CLASSES_MIN_PATCHES)
-            hit_class = self.patch_class.take(hit_patch, mode="wrap")
+            hit_class = self._class_of(hit_patch)
             limit = self.class_edge_barycentric.take(hit_class, mode="wrap")
         else:
             limit = self.edge_barycentric.take(np.maximum(hit, 0), mode="wrap")  # (see hit_patches)
@@ -277,7 +281,7 @@ class WalkTables:
         if self.patch_class is not None:
             frame = np.empty((12, patch.size), dtype=np.float32)
             self.leave_corners.take(patch, axis=1, mode="wrap", out=frame[0:3])
-            patch_class = self.patch_class.take(patch, mode="wrap")
+            patch_class = self._class_of(patch)
             self.class_shape.take(patch_class, axis=1, mode="wrap", out=frame[3:12])
             return frame
         if self.geometry.all_parallelograms:
@@ -287,7 +291,7 @@ class WalkTables:
     def patch_normals(self, patch):
         """(3,n) float32 rows: the given patches' normals."""
         if self.patch_class is not None:
-            patch_class = self.patch_class.take(patch, mode="wrap")
+            patch_class = self._class_of(patch)
             return self.class_normals.take(patch_class, axis=1, mode="wrap")
         return self.geometry.patch_normal_rows.take(patch, axis=1, mode="wrap")
 
