@@ -96,7 +96,6 @@ class WalkTables:
 
     def __init__(self, scene, estimator, threshold, exit_point, stratified=False):
         self.geometry = scene.geometry
-        self.tracer = scene.tracer
         self.estimator = estimator
         self.threshold = float(threshold)
         self.exit_random = exit_point == EXIT_RANDOM
@@ -155,6 +154,12 @@ class WalkTables:
         # The patch of a hit triangle: in a scene of parallelograms the triangles come in pairs,
         # in patch order (triangle t is half of patch t >> 1), so no table is read for it.
         self.paired_triangles = self.geometry.all_parallelograms
+        # Rays leaving from random points need nothing of a hit but its patch: where the
+        # patches tile grids, Embree traces the grids (two triangles each) and a hit's patch is
+        # its grid cell (patch_grids), and "hits" are patches (-1 a miss).
+        self.grids = self.geometry.patch_grids if self.exit_random else None
+        # The Embree scene the walk traces, built here (once per geometry), not on a thread.
+        self.tracer = self.geometry.tracer if self.grids is None else self.grids.tracer
         if not (self.geometry.all_parallelograms and self.exit_random):
             self.exit_table = self.geometry.exit_table
         if not self.exit_random:
@@ -188,7 +193,11 @@ class WalkTables:
         return np.ascontiguousarray(start)  # (E.T's rows: the division keeps its column order)
 
     def first_hit(self, origins, directions):
-        """The ray tracer's first hits, traced outside the numpy turn."""
+        """What each ray hits first, traced outside the numpy turn: its triangle, or where the
+        walk traces grids its patch; -1 where it hits nothing."""
+        if self.grids is not None:
+            triangle, u, v, _, _ = self._outside_turn(self.tracer.first_hit_barycentric, origins, directions)
+            return self.grids.hit_patches(triangle, u, v)
         return self._outside_turn(self.tracer.first_hit, origins, directions)
 
     def first_hit_barycentric(self, origins, directions):
@@ -208,6 +217,8 @@ class WalkTables:
         index's sign, a mispredicted branch per miss, which tripled a 3-row gather's cost in an
         open scene."""
         triangle = np.maximum(hit, 0)
+        if self.grids is not None:
+            return triangle  # (hits are patches)
         if self.paired_triangles:
             triangle >>= 1
             return triangle

@@ -316,6 +316,17 @@ class Geometry:
         return bool(self.patch_parallelogram.any())
 
     @cached_property
+    def patch_grids(self):
+        """The patches merged into the grids they tile (:mod:`.patch_grids`), which walks
+        leaving from random points trace instead of the triangles; None where the patches are
+        not all parallelograms or the grids would save too few triangles."""
+        from .patch_grids import patch_grids
+
+        if not self.all_parallelograms:
+            return None
+        return patch_grids(self.triangle_corners, self.patch_first_triangle, self.patch_triangle_count, self.patch_count)
+
+    @cached_property
     def tracer(self):
         """The Embree scene over these triangles, built on first use and then reused."""
         from .raytrace import RayTracer
@@ -484,11 +495,28 @@ def _parallelograms(sorted_corners, first, count, inset=0.0):
     """
     P = first.shape[0]
     frame = np.zeros((P, 9))
-    two = np.flatnonzero(count == 2)
+    two, ok, (p, s1, s2, _) = parallelogram_corners(sorted_corners, first, count)
     if two.size == 0:
         return np.zeros(P, bool), frame
-    t0 = sorted_corners[first[two]]          # (n,3,3)
-    t1 = sorted_corners[first[two] + 1]
+    edge_a, edge_b = s1 - p, s2 - p
+    # Inset every side by ``inset`` (at most a quarter of the patch): corner + d_a a + d_b b.
+    d_a = np.minimum(inset / np.linalg.norm(edge_a, axis=1), 0.25)[:, None]
+    d_b = np.minimum(inset / np.linalg.norm(edge_b, axis=1), 0.25)[:, None]
+    frame[two] = np.hstack([p + d_a * edge_a + d_b * edge_b, (1 - 2 * d_a) * edge_a, (1 - 2 * d_b) * edge_b])
+    flags = np.zeros(P, bool)
+    flags[two[ok]] = True
+    return flags, frame
+
+
+def parallelogram_corners(sorted_corners, first, count):
+    """The corners of the patches made of two triangles: (patches with two triangles (n,),
+    whether each is a parallelogram (n,), and its corners (p, s1, s2, q), each (n,3) float64).
+    p is the first triangle's own corner, s1 and s2 the two corners the triangles share (the
+    edges are a = s1 - p and b = s2 - p), q the second triangle's own corner (p + a + b to
+    within rounding)."""
+    two = np.flatnonzero(count == 2)
+    t0 = np.asarray(sorted_corners[first[two]], dtype=np.float64)  # (n,3,3)
+    t1 = np.asarray(sorted_corners[first[two] + 1], dtype=np.float64)
     tolerance = 1e-7  # unit space
     between = t0[:, :, None, :] - t1[:, None, :, :]  # (n,3,3,3): every corner of t0 to every corner of t1
     shared = np.einsum("...k,...k->...", between, between) < tolerance**2  # (n,3,3)
@@ -502,14 +530,7 @@ def _parallelograms(sorted_corners, first, count, inset=0.0):
     s1 = t0[rows, order[:, 0]]
     s2 = t0[rows, order[:, 1]]
     ok &= np.linalg.norm(p + q - s1 - s2, axis=1) < tolerance  # the diagonals bisect each other
-    edge_a, edge_b = s1 - p, s2 - p
-    # Inset every side by ``inset`` (at most a quarter of the patch): corner + d_a a + d_b b.
-    d_a = np.minimum(inset / np.linalg.norm(edge_a, axis=1), 0.25)[:, None]
-    d_b = np.minimum(inset / np.linalg.norm(edge_b, axis=1), 0.25)[:, None]
-    frame[two] = np.hstack([p + d_a * edge_a + d_b * edge_b, (1 - 2 * d_a) * edge_a, (1 - 2 * d_b) * edge_b])
-    flags = np.zeros(P, bool)
-    flags[two[ok]] = True
-    return flags, frame
+    return two, ok, (p, s1, s2, q)
 
 
 class PatchScene:

@@ -40,6 +40,7 @@ def test_facing_by_patch_normal_is_facing_by_triangle_normal(estimator):
     by_patch = WalkTables(scene, estimator, 1e-3, "random")
     by_triangle = WalkTables(scene, estimator, 1e-3, "random")
     assert by_patch.facing_by_patch
+    by_patch.grids = by_triangle.grids = None  # (both trace the triangles: hits are triangles)
     by_triangle.facing_by_patch = False
     by_triangle.facing_rows = scene.geometry.triangle_normal_rows
     a = walk_chunk(by_patch, 20_000, np.random.default_rng(7))
@@ -125,8 +126,9 @@ def test_walks_on_threads_take_turns_at_their_numpy_work(monkeypatch):
 
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
     tables = WalkTables(scene, "biased_infinite", 1e-3, "random")  # a walk that scores with _Scores
-    tracer = scene.geometry.tracer
-    real_trace, real_add = tracer.first_hit, estimators._Scores.add
+    # (a random exit traces the box's grids, with their barycentric query)
+    tracer, query = tables.grids.tracer, "first_hit_barycentric"
+    real_trace, real_add = getattr(tracer, query), estimators._Scores.add
     held = {"tracing": [], "scoring": []}
     other_done = threading.Event()
     first_cast = threading.Event()
@@ -142,7 +144,7 @@ def test_walks_on_threads_take_turns_at_their_numpy_work(monkeypatch):
         held["scoring"].append(tables.numpy_turn.locked())
         return real_add(self, patch, weights)
 
-    monkeypatch.setattr(tracer, "first_hit", tracing)
+    monkeypatch.setattr(tracer, query, tracing)
     monkeypatch.setattr(estimators._Scores, "add", scoring)
     results = {}
 

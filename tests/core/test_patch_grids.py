@@ -1,0 +1,201 @@
+"""Patches merged back into grids (addon/core/patch_grids.py): the ray tracer's scene for walks
+leaving from random points. A ray must score on the patch whose triangles it would have hit."""
+import numpy as np
+import pytest
+from boxes import box_rectangles, box_scene, rectangles_to_mesh
+
+from addon.core import patch_grids as PG
+from addon.core.estimators import WalkTables
+from addon.core.scene import build_geometry, parallelogram_corners
+
+
+def _rotation(seed):
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    return q
+
+
+def _geometry(origin, u, v, rotation=None):
+    V, T, TP = rectangles_to_mesh(origin, u, v)
+    if rotation is not None:
+        V = V @ rotation.T
+    return build_geometry(V, T, TP, origin.shape[0])
+
+
+def _plane_grid(n_a, n_b, keep=None, column_shift=None):
+    """An n_a x n_b grid of unit-square patches in the plane z = 0 (normal +z), those with
+    ``keep`` True; ``column_shift`` = (k, d) moves the line x = k by d (patches k-1 and k then
+    differ in width). Returns (origin, u, v, cell (i, j) of each patch)."""
+    x = np.arange(n_a + 1, dtype=np.float64)
+    if column_shift is not None:
+        x[column_shift[0]] += column_shift[1]
+    i, j = np.meshgrid(np.arange(n_a), np.arange(n_b), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    if keep is not None:
+        i, j = i[keep.ravel()], j[keep.ravel()]
+    origin = np.column_stack([x[i], j.astype(float), np.zeros(i.size)])
+    u = np.column_stack([x[i + 1] - x[i], np.zeros(i.size), np.zeros(i.size)])
+    v = np.tile([0.0, 1.0, 0.0], (i.size, 1))
+    return origin, u, v, np.column_stack([i, j])
+
+
+def _grids_of(g):
+    return PG.patch_grids(g.triangle_corners, g.patch_first_triangle, g.patch_triangle_count, g.patch_count)
+
+
+def _both(g, grids, o, d):
+    """The patch each ray hits by the patches' triangles and by the grids (-1: a miss)."""
+    hit = g.tracer.first_hit(o, d)
+    by_triangles = np.where(hit >= 0, g.triangle_patch[np.maximum(hit, 0)], -1)
+    triangle, u, v, _, _ = grids.tracer.first_hit_barycentric(o, d)
+    return by_triangles, grids.hit_patches(triangle, u, v)
+
+
+def _down_onto(points_world, g):
+    """Rays straight down (-z) onto world points of the plane z = 0, in unit space."""
+    above = points_world + [0.0, 0.0, 1.0]
+    o = ((above - g.centre) / g.diagonal).astype(np.float32)
+    d = np.tile(np.float32([0.0, 0.0, -1.0]), (len(o), 1))
+    return o, d
+
+
+def test_a_turned_box_of_patches_is_traced_as_its_six_faces():
+    """A box of 6 x 7 x 7 patches turned off the axes: 6 rectangles, 12 triangles, and every
+    patch in exactly one cell."""
+    origin, u, v, _ = box_rectangles((1.0, 1.3, 0.8), n=7)
+    g = _geometry(origin, u, v, _rotation(3))
+    grids = _grids_of(g)
+    assert grids.rectangles == 6 and grids.triangle_count == 12
+    assert grids.cell_patch[-1] == -1
+    np.testing.assert_array_equal(np.sort(grids.cell_patch[:-1]), np.arange(g.patch_count))
+
+
+def test_rays_score_on_the_patch_whose_triangles_they_hit():
+    """Rays from inside a turned box to points of its triangles, half of them on or next to an
+    edge (down to 0): the grids give every ray the patch its triangles give it, except rays
+    that end within float32's rounding of a side the patch shares with its neighbour."""
+    origin, u, v, _ = box_rectangles((1.0, 1.0, 1.0), n=6)
+    g = _geometry(origin - 0.5, u, v, _rotation(5))
+    grids = _grids_of(g)
+    assert grids.rectangles == 6
+    rng = np.random.default_rng(8)
+    n = 200_000
+    triangle = rng.integers(0, g.triangle_count, n)
+    bary = rng.dirichlet((1.0, 1.0, 1.0), n)
+    m = n // 2
+    tiny = np.where(rng.random(m) < 0.2, 0.0, 10.0 ** -rng.integers(3, 13, m))
+    side = rng.integers(0, 3, m)
+    rest = bary[:m].copy()
+    rest[np.arange(m), side] = 0
+    rest *= ((1 - tiny) / rest.sum(axis=1))[:, None]
+    rest[np.arange(m), side] = tiny
+    bary[:m] = rest
+    target = np.einsum("nk,nkj->nj", bary, g.triangle_corners[triangle].astype(np.float64))
+    o = (0.05 * rng.uniform(-1, 1, (n, 3))).astype(np.float32)
+    d = (target - o).astype(np.float32)
+    by_triangles, by_grids = _both(g, grids, o, d)
+    assert (by_triangles >= 0).all() and (by_grids >= 0).all()  # a closed box
+    # Where they differ, the target lies on a side of its triangle (to within about 10^-6 of
+    # the unit-space scene: a fifth of the targets lie exactly on one, where either patch is
+    # right).
+    differ = np.flatnonzero(by_triangles != by_grids)
+    near_side = bary.min(axis=1) < 1e-5  # (the triangles' altitudes are about 0.07)
+    assert differ.size > 0 and near_side[differ].all()
+    assert (by_triangles[~near_side] == by_grids[~near_side]).all()
+    assert (~near_side).sum() > n // 2
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_holes_and_ragged_edges_are_covered_by_rectangles_of_the_patches_alone(seed):
+    """A 9 x 7 grid with a third of its patches missing at random: the rectangles cover the
+    patches that are there and nothing else. Rays down onto every cell's inside hit the
+    patch there, or miss where there is none."""
+    rng = np.random.default_rng(seed)
+    keep = rng.random((9, 7)) < 0.67
+    origin, u, v, cell = _plane_grid(9, 7, keep)
+    g = _geometry(origin, u, v)
+    grids = PG.patch_grids(g.triangle_corners, g.patch_first_triangle, g.patch_triangle_count, g.patch_count)
+    assert grids is not None and grids.rectangles < g.patch_count // 2
+    # 30 points inside every cell (at least 1% of a cell from its sides).
+    i, j = np.meshgrid(np.arange(9), np.arange(7), indexing="ij")
+    k = np.repeat(np.column_stack([i.ravel(), j.ravel()]), 30, axis=0)
+    points = np.column_stack([k + rng.uniform(0.01, 0.99, k.shape), np.zeros(len(k))])
+    by_triangles, by_grids = _both(g, grids, *_down_onto(points, g))
+    np.testing.assert_array_equal(by_grids, by_triangles)
+    present = keep[k[:, 0], k[:, 1]]
+    assert (by_grids[~present] == -1).all() and (by_grids[present] >= 0).all()
+
+
+def test_an_uneven_grid_is_traced_as_its_patches():
+    """One line of a 6 x 5 grid moved by 5e-7 of the grid's size: the patches still group as
+    one lattice (their edges agree to within GRID_QUANTUM), but their corners lie off the even
+    subdivision by more than CORNER_TOLERANCE, so the rectangle is refused and the patches
+    keep their triangles. With the check switched off the grid is one rectangle, and rays
+    between the moved line and where the even subdivision puts it score on the wrong patch."""
+    diagonal = np.hypot(6, 5)
+    shift = 5e-7 * diagonal
+    origin, u, v, cell = _plane_grid(6, 5, column_shift=(3, shift))
+    g = _geometry(origin, u, v)
+    _, _, (p, s1, s2, _) = parallelogram_corners(g.triangle_corners, g.patch_first_triangle, g.patch_triangle_count)
+    assert np.unique(PG._groups(p, s1 - p, s2 - p)).size == 1  # the corner check tells them apart
+    assert _grids_of(g) is None  # every patch alone: nothing saved
+    saved = PG.CORNER_TOLERANCE
+    try:
+        PG.CORNER_TOLERANCE = np.inf
+        unchecked = _grids_of(g)
+    finally:
+        PG.CORNER_TOLERANCE = saved
+    assert unchecked.rectangles == 1
+    y = np.random.default_rng(2).uniform(0.1, 4.9, 200)
+    points = np.column_stack([np.full(200, 3 + shift / 2), y, np.zeros(200)])
+    by_triangles, by_unchecked = _both(g, unchecked, *_down_onto(points, g))
+    assert (by_triangles == np.flatnonzero((cell[:, 0] == 2) & (cell[:, 1] == 0))[0] + y.astype(int)).all()
+    assert (by_unchecked != by_triangles).sum() > 190
+
+
+def test_cells_two_patches_share_are_rectangles_of_their_own():
+    """Two patches on one cell (two faces in one place): each is its own rectangle; the rest of
+    the group still joins into rectangles."""
+    I = np.array([0, 0, 1, 1, 1, 0])
+    J = np.array([0, 1, 0, 1, 1, 2])
+    group = np.zeros(6, dtype=np.int64)
+    rect = PG._rectangles(group, I, J)
+    n_cells = rect.n_a * rect.n_b
+    assert n_cells.sum() == 6
+    shared = rect.of_cell[[3, 4]]
+    assert shared[0] != shared[1] and (n_cells[shared] == 1).all()
+    # cells (0,0), (0,1), (1,0): a run of 2 and a run of 1, (0,2) joins the first row's run
+    assert np.sort(n_cells).tolist() == [1, 1, 1, 3]
+    np.testing.assert_array_equal(np.sort(rect.cell), np.arange(6))
+
+
+def test_scenes_the_grids_would_not_shrink_are_traced_as_triangles():
+    """Patches that tile nothing bigger (each a different size) keep their triangles."""
+    origin = np.column_stack([np.arange(5) * 3.0, np.zeros(5), np.zeros(5)])
+    u = np.column_stack([1.0 + 0.1 * np.arange(5), np.zeros(5), np.zeros(5)])
+    v = np.tile([0.0, 1.0, 0.0], (5, 1))
+    assert _grids_of(_geometry(origin, u, v)) is None
+
+
+def test_random_exits_trace_the_grids_and_hit_exits_the_triangles():
+    """A walk leaving from random points traces the grids, built once per geometry (another
+    material set reuses them); one leaving from hit points needs the triangles' barycentrics
+    and traces the triangles."""
+    scene, _, _ = box_scene([0.5] * 6, [1.0, 0, 0, 0, 0, 0], n=4)
+    random_exit = WalkTables(scene, "finite", 1e-3, "random")
+    assert random_exit.grids is scene.geometry.patch_grids and random_exit.grids.rectangles == 6
+    assert random_exit.tracer is random_exit.grids.tracer
+    other = scene.with_materials(np.full(scene.patch_count, 0.3), scene.emission)
+    assert WalkTables(other, "biased_infinite", 1e-3, "random").tracer is random_exit.tracer
+    hit_exit = WalkTables(scene, "finite", 1e-3, "hit")
+    assert hit_exit.grids is None and hit_exit.tracer is scene.geometry.tracer
+
+
+def test_a_miss_reads_as_no_patch():
+    origin, u, v, _ = _plane_grid(4, 4)
+    g = _geometry(origin, u, v)
+    grids = _grids_of(g)
+    o = np.float32([[0.013, 0.021, 0.1], [0.013, 0.021, -0.1]])
+    d = np.float32([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    by_triangles, by_grids = _both(g, grids, o, d)
+    assert by_grids[0] == -1 and by_triangles[0] == -1
+    assert by_grids[1] == by_triangles[1] >= 0
