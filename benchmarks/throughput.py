@@ -40,10 +40,19 @@ def sample_rays(scene, count, seed=0):
     return points_on_patches(g, patch, u[0], u[1], u[2]), cosine_directions(g, patch, u[3], u[4], normalize=False)
 
 
-def raw_rate(scene, threads, seconds, batch=1 << 16):
-    """Rays per second of embreex alone on pre-drawn rays, over ``threads`` threads."""
+def walk_tracer(scene, exit_point="random"):
+    """The Embree scene a walk traces: a random exit's the patches' grids where the scene has
+    them (addon/core/patch_grids.py), else the patches' triangles."""
+    from addon.core.estimators import WalkTables
+
+    return WalkTables(scene, "finite", 1e-3, exit_point).tracer
+
+
+def raw_rate(scene, threads, seconds, batch=1 << 16, tracer=None):
+    """Rays per second of embreex alone (first hits) on pre-drawn rays, over ``threads``
+    threads, on ``tracer`` (default: the patches' triangles)."""
     origins, directions = sample_rays(scene, batch * 8)
-    tracer = scene.tracer
+    tracer = scene.tracer if tracer is None else tracer
     tracer.first_hit(origins[:batch], directions[:batch])  # warm up
 
     def worker(offset):
@@ -72,7 +81,7 @@ def own_rays_factor(scene, estimator, threads, paths, rounds=5, every=4, limit=1
     Returns the median ratio of the two rates. (A walk's rays are not the pre-drawn ones: paths
     start more often where light arrives, and walks trace rays grouped by patch; the issue's
     "the same rays" is this stricter reading.)"""
-    tracer = scene.tracer
+    tracer = walk_tracer(scene, kw.get("exit_point", "random"))
     casts, lock, calls = [], threading.Lock(), [0]
 
     def keep(origins, directions):
@@ -125,12 +134,13 @@ def paired_ratio(scene, estimator, threads, seconds, rounds=5, **kw):
     ratio, by wall clock and per CPU second."""
     p = predict(scene, estimator, threshold=kw.get("threshold", 1e-3))
     solve(scene, estimator, paths=20_000, threads=threads, **kw)  # warm up
+    tracer = walk_tracer(scene, kw.get("exit_point", "random"))
     raws, rates, ratios = [], [], []
-    before = np.array(raw_rate(scene, threads, seconds / 4))
+    before = np.array(raw_rate(scene, threads, seconds / 4, tracer=tracer))
     for k in range(rounds):
         paths = max(1, int(before[0] * seconds / p.expected_path_length))
         rate = np.array(solve_rate(scene, estimator, threads, paths, seed=k + 1, **kw))
-        after = np.array(raw_rate(scene, threads, seconds / 4))
+        after = np.array(raw_rate(scene, threads, seconds / 4, tracer=tracer))
         raw = (before + after) / 2  # columns: wall-clock rate, CPU-time rate
         raws.append(raw)
         rates.append(rate)
@@ -138,7 +148,11 @@ def paired_ratio(scene, estimator, threads, seconds, rounds=5, **kw):
         before = after
     raws, rates, ratios = np.array(raws), np.array(rates), np.array(ratios)
     own = own_rays_factor(scene, estimator, threads, paths, **kw)
+    # For scale: Embree on the patches' triangles (where the walk traces grids).
+    raw_triangles = raw_rate(scene, threads, seconds / 4)[0] if tracer is not scene.tracer else np.nan
     return {
+        "traced_triangles": tracer.triangle_count,
+        "raw_triangles": float(raw_triangles),
         "own_rays_factor": own,
         "raw": float(np.median(raws[:, 0])),
         "solve": float(np.median(rates[:, 0])),
@@ -173,8 +187,9 @@ def breakdown(scene, estimator, rounds=4, **kw):
     threshold = kw.get("threshold", 1e-3)
     tables = WalkTables(scene, estimator, threshold, kw.get("exit_point", "random"))
     paths = chunk_paths_for(predict(scene, estimator, threshold=threshold).expected_path_length, 10**15)
-    tracer = scene.tracer
-    query = "first_hit" if tables.exit_random else "first_hit_barycentric"
+    tracer = tables.tracer
+    # (a walk tracing grids asks for barycentrics: a hit's patch is its grid cell)
+    query = "first_hit" if tables.exit_random and tables.grids is None else "first_hit_barycentric"
     real = getattr(tracer, query)
     walk_chunk(tables, paths // 8, np.random.default_rng(0))
     o_raw, d_raw = sample_rays(scene, 1 << 16)
@@ -276,7 +291,7 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
         group = solver.chunks_per_group(tables, solver.chunk_paths_for(length, paths), length)
         ratios = {True: [], False: []}
         seconds = []
-        before = raw_rate(scene, threads, 0.25)[0]
+        before = raw_rate(scene, threads, 0.25, tracer=tables.tracer)[0]
         for k in range(rounds):
             rates = {}
             for grouped in ((True, False) if k % 2 == 0 else (False, True)):
@@ -288,7 +303,7 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
                 rates[grouped] = r.rays / r.seconds
                 if grouped:
                     seconds.append(r.seconds)
-            after = raw_rate(scene, threads, 0.25)[0]
+            after = raw_rate(scene, threads, 0.25, tracer=tables.tracer)[0]
             raw = (before + after) / 2
             for grouped, rate in rates.items():
                 ratios[grouped].append(rate / raw)
@@ -403,22 +418,26 @@ def main(argv=None):
             for estimator, kw in (("finite", {}), ("biased_infinite", {"threshold": 1e-3})):
                 for exit_point in ("random", "hit"):
                     m = paired_ratio(scene, estimator, threads, args.seconds, exit_point=exit_point, **kw)
-                    row = (name, scene.triangle_count, threads, estimator, exit_point, m["raw"] / 1e6, m["solve"] / 1e6,
-                           m["ratio"], m["ratio_low"], m["ratio_high"], m["cpu_ratio"], m["own_rays_factor"],
-                           m["ratio"] / m["own_rays_factor"])
+                    row = (name, scene.triangle_count, m["traced_triangles"], threads, estimator, exit_point,
+                           m["raw"] / 1e6, m["solve"] / 1e6, m["ratio"], m["ratio_low"], m["ratio_high"], m["cpu_ratio"],
+                           m["own_rays_factor"], m["ratio"] / m["own_rays_factor"], m["raw_triangles"] / 1e6,
+                           m["solve"] / m["raw_triangles"])
                     rows.append(row)
-                    print("{:10s} {:7d} tris  {} thr  {:16s} {:6s}  raw {:6.2f} Mray/s  solve {:6.2f} Mray/s  "
-                          "ratio {:.2f} ({:.2f}-{:.2f})  (per CPU second {:.2f})  own rays x{:.2f}: {:.2f}".format(*row),
+                    print("{:10s} {:7d} tris ({} traced)  {} thr  {:16s} {:6s}  raw {:6.2f} Mray/s  solve {:6.2f} Mray/s  "
+                          "ratio {:.2f} ({:.2f}-{:.2f})  (per CPU second {:.2f})  own rays x{:.2f}: {:.2f}  "
+                          "raw on the patch triangles {:.2f}: x{:.2f}".format(*row),
                           flush=True)
     lines = [
         "# Throughput: solve() against Embree's raw ray rate",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {platform.python_version()}; "
         f"`python -m benchmarks.throughput {' '.join(sys.argv[1:])}`.",
-        "Raw: embreex alone on pre-drawn rays of the same kind over the same threads. Each of 5 rounds brackets one "
-        "solve between two raw measurements, so both see the same load; the ratio is the median of the per-round "
-        "ratios, with the lowest and highest round beside it (the spread is the machine's noise: these machines are "
-        "shared).",
+        "Raw: embreex alone (first hits) on pre-drawn rays of the same kind over the same threads, on the scene the "
+        "solve traces: a walk leaving from random points traces the patches' grids, two triangles each, where the "
+        "patches tile them (*traced*; addon/core/patch_grids.py), a walk leaving from hit points the patches' "
+        "triangles. Each of 5 rounds brackets one solve between two raw measurements, so both see the same load; the "
+        "ratio is the median of the per-round ratios, with the lowest and highest round beside it (the spread is the "
+        "machine's noise: these machines are shared).",
         "",
         "The ratio per CPU second divides rays by the process's CPU time instead of wall time: it is",
         "immune to other processes taking the processor, but not to their use of caches and memory,",
@@ -427,15 +446,20 @@ def main(argv=None):
         "The walks' own rays are not the pre-drawn ones: paths start more often where light arrives, and",
         "walks send the rays leaving one patch together. *Own rays* is how much faster Embree alone traces",
         "a solve's own rays (every 4th ray cast of a solve, up to 2 million rays, traced again in the same",
-        "casts over the same threads) than the pre-drawn random rays, median of 5 alternations; the last",
-        "column is the ratio against that rate: the strict reading of \"the same rays\".",
+        "casts over the same threads) than the pre-drawn random rays, median of 5 alternations; the",
+        "column after it is the ratio against that rate: the strict reading of \"the same rays\".",
         "",
-        "| scene | triangles | threads | estimator | exit point | raw Mray/s | solve Mray/s | ratio | rounds "
-        "| ratio per CPU second | own rays | ratio, own rays |",
-        "|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        "The last two columns, for walks that trace grids: Embree alone on the patches' triangles (what",
+        "the walk traced before grids, measured once after the rounds), and the solve's rate over it.",
+        "",
+        "| scene | triangles | traced | threads | estimator | exit point | raw Mray/s | solve Mray/s | ratio | rounds "
+        "| ratio per CPU second | own rays | ratio, own rays | raw on the patch triangles Mray/s | solve / that |",
+        "|---|---:|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    lines += ["| {} | {} | {} | {} | {} | {:.2f} | {:.2f} | **{:.2f}** | {:.2f}–{:.2f} | {:.2f} | x{:.2f} | {:.2f} |".format(*r)
-              for r in rows]
+    for r in rows:
+        lines.append("| {} | {} | {} | {} | {} | {} | {:.2f} | {:.2f} | **{:.2f}** | {:.2f}–{:.2f} | {:.2f} | x{:.2f} "
+                     "| {:.2f} ".format(*r[:14])
+                     + ("| – | – |" if np.isnan(r[14]) else "| {:.2f} | x{:.2f} |".format(*r[14:])))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
