@@ -21,7 +21,9 @@ b_j = R_j I_j (Phi_T / N) / A_j.
   The power still carried at that moment is "undistributed".
 
 Rays that hit nothing escape; rays that hit a patch's back side are absorbed there ("blocked"):
-radiosity leaves only the front side of a patch.
+radiosity leaves only the front side of a patch. Where the patches tile grids, a walk leaving
+from random points traces the grids instead of the patches' triangles and reads a hit's patch
+off its grid cell (``patch_grids``): its "hits" are then patches.
 
 Rays leave a patch from a new uniform point of it (``exit_point="random"``, the paper's
 discrete method and the default) or from where the ray arrived (``"hit"``: origin + t
