@@ -70,3 +70,22 @@ def open_box_with_card(reflectivity=0.6):
     emission = np.zeros(P)
     emission[:4] = 1.0
     return PatchScene(vertices, triangles, triangle_patch, np.full(P, reflectivity), emission)
+
+
+def rays_to_triangle_points(g, rng, n, powers=(4, 13)):
+    """n rays (unit space, float32 origins and directions) from near the origin to points of
+    random triangles of Geometry ``g``, half of them on or next to an edge: one barycentric
+    coordinate 0 (a fifth of those) or 10^-k, k in range(*powers). Returns (o, d, bary, target)."""
+    triangle = rng.integers(0, g.triangle_count, n)
+    bary = rng.dirichlet((1.0, 1.0, 1.0), n)
+    m = n // 2
+    tiny = np.where(rng.random(m) < 0.2, 0.0, 10.0 ** -rng.integers(*powers, m))
+    side = rng.integers(0, 3, m)
+    rest = bary[:m].copy()
+    rest[np.arange(m), side] = 0
+    rest *= ((1 - tiny) / rest.sum(axis=1))[:, None]
+    rest[np.arange(m), side] = tiny
+    bary[:m] = rest
+    target = np.einsum("nk,nkj->nj", bary, g.triangle_corners[triangle].astype(np.float64))
+    o = (0.05 * rng.uniform(-1, 1, (n, 3))).astype(np.float32)
+    return o, (target - o).astype(np.float32), bary, target

@@ -2,7 +2,7 @@
 leaving from random points. A ray must score on the patch whose triangles it would have hit."""
 import numpy as np
 import pytest
-from boxes import box_rectangles, box_scene, rectangles_to_mesh
+from boxes import box_rectangles, box_scene, rays_to_triangle_points, rectangles_to_mesh
 
 from addon.core import patch_grids as PG
 from addon.core.estimators import WalkTables
@@ -77,21 +77,8 @@ def test_rays_score_on_the_patch_whose_triangles_they_hit():
     g = _geometry(origin - 0.5, u, v, _rotation(5))
     grids = _grids_of(g)
     assert grids.rectangles == 6
-    rng = np.random.default_rng(8)
     n = 200_000
-    triangle = rng.integers(0, g.triangle_count, n)
-    bary = rng.dirichlet((1.0, 1.0, 1.0), n)
-    m = n // 2
-    tiny = np.where(rng.random(m) < 0.2, 0.0, 10.0 ** -rng.integers(3, 13, m))
-    side = rng.integers(0, 3, m)
-    rest = bary[:m].copy()
-    rest[np.arange(m), side] = 0
-    rest *= ((1 - tiny) / rest.sum(axis=1))[:, None]
-    rest[np.arange(m), side] = tiny
-    bary[:m] = rest
-    target = np.einsum("nk,nkj->nj", bary, g.triangle_corners[triangle].astype(np.float64))
-    o = (0.05 * rng.uniform(-1, 1, (n, 3))).astype(np.float32)
-    d = (target - o).astype(np.float32)
+    o, d, bary, _ = rays_to_triangle_points(g, np.random.default_rng(8), n, powers=(3, 13))
     by_triangles, by_grids = _both(g, grids, o, d)
     assert (by_triangles >= 0).all() and (by_grids >= 0).all()  # a closed box
     # Where they differ, the target lies on a side of its triangle (to within about 10^-6 of

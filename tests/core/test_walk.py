@@ -61,31 +61,17 @@ def test_hit_points_keep_clear_of_edges(classes, monkeypatch):
     classes (as in big scenes) the edge thresholds are read per patch class."""
     from addon.core import PatchScene, estimators
     from addon.core.scene import RELATIVE_EDGE_INSET
-    from boxes import box_rectangles, rectangles_to_mesh
+    from boxes import box_rectangles, rays_to_triangle_points, rectangles_to_mesh
 
     origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=2)
     V, T, TP = rectangles_to_mesh(origin, u, v)
     q, _ = np.linalg.qr(np.random.default_rng(5).normal(size=(3, 3)))
     scene = PatchScene((V - 0.5) @ q.T, T, TP, np.full(len(origin), 0.5), (face == 1).astype(float))
     g = scene.geometry
-    rng = np.random.default_rng(8)
     n = 40_000
-    triangle = rng.integers(0, scene.triangle_count, n)
-    bary = rng.dirichlet((1.0, 1.0, 1.0), n)
-    # Half the targets on or next to an edge: one coordinate 0 or 10^-k (k = 4..12).
-    m = n // 2
-    tiny = np.where(rng.random(m) < 0.2, 0.0, 10.0 ** -rng.integers(4, 13, m))
-    side = rng.integers(0, 3, m)
-    rest = bary[:m].copy()
-    rest[np.arange(m), side] = 0
-    rest *= ((1 - tiny) / rest.sum(axis=1))[:, None]
-    rest[np.arange(m), side] = tiny
-    bary[:m] = rest
-    corners = g.triangle_corners[triangle].astype(np.float64)
-    target = np.einsum("nk,nkj->nj", bary, corners)
-    # From near the box's centre (unit space: the origin) to the targets.
-    o = (0.05 * rng.uniform(-1, 1, (n, 3))).astype(np.float32)
-    d = (target - o).astype(np.float32)
+    # From near the box's centre (unit space: the origin) to points of its triangles, half of
+    # them on or next to an edge.
+    o, d, bary, target = rays_to_triangle_points(g, np.random.default_rng(8), n)
     hit, bu, bv, t, ng = g.tracer.first_hit_barycentric(o, d)
     front = (np.einsum("ij,ij->i", ng, d) < 0) & (hit >= 0)
     assert front.all()
