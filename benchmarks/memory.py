@@ -5,7 +5,8 @@
 
 Every measurement runs in a fresh Python process, so its peak resident set (``ru_maxrss``) is its
 own. A child reports the peak resident set after the imports, after building the scene (meshing,
-validation, patch frames), after building the Embree BVH, and after ``solve``; the solve's own
+validation, patch frames), after building the Embree BVH the solve traces (the default walk's: the
+patches' grids, addon/core/patch_grids.py), and after ``solve``; the solve's own
 share is the last minus the one before. A second child per path count runs the same solve under
 ``tracemalloc``, whose peak counts the numpy and Python allocations made during the solve (not
 Embree's own, which are made once with the BVH, before it).
@@ -62,7 +63,11 @@ def child(paths, threads, use_tracemalloc, scene_name):
     out["patches"] = scene.patch_count
     out["triangles"] = scene.geometry.triangle_count
     out["after_scene"] = peak_rss()
-    scene.tracer  # the Embree BVH, built once per geometry
+    # The Embree scene the solve traces, built once per geometry: the default walk's, the
+    # patches' grids (addon/core/patch_grids.py); the patches' triangles are not built.
+    from addon.core.estimators import WalkTables
+
+    out["traced_triangles"] = WalkTables(scene, "finite", 1e-3, "random").tracer.triangle_count
     out["after_bvh"] = peak_rss()
     out["current_before_solve"] = current_rss()
     out["build_seconds"] = time.perf_counter() - t
@@ -126,7 +131,9 @@ def main(argv=None):
         "",
         f"`python -m benchmarks.memory {' '.join(a for a in (argv if argv is not None else sys.argv[1:]))}`".replace(" `", "`"),
         f"Machine: {platform.machine()}, Python {platform.python_version()}; scene `{args.scene}` "
-        f"({p0['patches']:,} patches, {p0['triangles']:,} triangles); finite estimator, {args.threads} threads; "
+        f"({p0['patches']:,} patches, {p0['triangles']:,} triangles, traced as {p0['traced_triangles']:,} triangles of "
+        "their grids); finite estimator, random exit, "
+        f"{args.threads} threads; "
         "each measurement in a fresh process.",
         "",
         "Peak resident set (ru_maxrss) after each stage, and the peak of numpy/Python allocations made during "
