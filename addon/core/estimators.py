@@ -214,10 +214,10 @@ class WalkTables:
             self.numpy_turn.acquire()
 
     def hit_patches(self, hit):
-        """The patch of each hit triangle, int32; a miss (-1) reads as triangle 0's (misses are
-        dropped). No negative index reaches a gather: with mode="wrap" numpy branches on each
-        index's sign, a mispredicted branch per miss, which tripled a 3-row gather's cost in an
-        open scene."""
+        """The patch of each hit triangle (where the walk traces grids, hits are patches already),
+        int32; a miss (-1) reads as triangle 0's (misses are dropped). No negative index reaches
+        a gather: with mode="wrap" numpy branches on each index's sign, a mispredicted branch per
+        miss, which tripled a 3-row gather's cost in an open scene."""
         triangle = np.maximum(hit, 0)
         if self.grids is not None:
             return triangle  # (hits are patches)

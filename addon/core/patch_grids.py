@@ -51,7 +51,7 @@ class PatchGrids:
     which a miss (-1) wraps to, points at a cell of patch -1;
     cell_patch: (P+1,) int32 patch of each cell, rectangle by rectangle, rows of n_b cells,
     then -1;
-    rectangles: (R,) the number of rectangles."""
+    rectangles: R, the number of rectangles."""
 
     corners: np.ndarray
     cell_table: np.ndarray
@@ -89,7 +89,7 @@ class PatchGrids:
         return RayTracer(self.corners)
 
 
-def patch_grids(triangle_corners, first_triangle, triangle_count, patch_count):
+def patch_grids(triangle_corners, first_triangle, patch_triangle_count, patch_count):
     """The grids of a scene whose patches are all parallelograms (two triangles each, sorted by
     patch: Geometry's layout), or None where they would not take at most
     MAX_TRIANGLE_FRACTION of the triangles."""
@@ -98,21 +98,20 @@ def patch_grids(triangle_corners, first_triangle, triangle_count, patch_count):
     P = patch_count
     if P == 0 or P >= MAX_CELLS:
         return None
-    two, ok, (p, s1, s2, q) = parallelogram_corners(triangle_corners, first_triangle, triangle_count)
+    two, ok, (p, s1, s2, q) = parallelogram_corners(triangle_corners, first_triangle, patch_triangle_count)
     if two.size != P or not ok.all():
         return None
     group = _groups(p, s1 - p, s2 - p)
     I, J, on_lattice = _lattice(p, s1 - p, s2 - p, group)
-    group = np.where(on_lattice, group, group.max() + 1 + np.arange(P))
+    group = _alone(group, ~on_lattice)
     rect = _rectangles(group, I, J)
     bad = _misplaced(rect, (p, s1, s2, q))
     if bad.any():
         # The cells of a failed rectangle become rectangles of their own.
-        alone = bad[rect.of_cell]
-        group = np.where(alone, group.max() + 1 + np.arange(P), group)
+        group = _alone(group, bad[rect.of_cell])
         rect = _rectangles(group, I, J)
     R = rect.first.size
-    if 2 * R > MAX_TRIANGLE_FRACTION * 2 * P:
+    if R > MAX_TRIANGLE_FRACTION * P:  # (2R triangles against the patches' 2P)
         return None
     c00, c10, c01, c11 = rect.corners((p, s1, s2, q))
     corners = np.empty((2 * R, 3, 3))
@@ -133,6 +132,11 @@ def patch_grids(triangle_corners, first_triangle, triangle_count, patch_count):
         cell_patch=cell_patch,
         rectangles=R,
     )
+
+
+def _alone(group, mask):
+    """``group`` with each patch of ``mask`` in a group of its own (a rectangle of one cell)."""
+    return np.where(mask, group.max() + 1 + np.arange(group.size), group)
 
 
 def _groups(p, a, b):
@@ -217,8 +221,7 @@ def _rectangles(group, I, J):
         # Cells of more than one patch: each patch its own group, and again.
         alone = np.zeros(P, dtype=bool)
         alone[order[shared]] = True
-        group = np.where(alone, group.max() + 1 + np.arange(P), group)
-        return _rectangles(group, I, J)
+        return _rectangles(_alone(group, alone), I, J)
     # Runs along J.
     run_start = np.ones(P, dtype=bool)
     run_start[1:] = (g[1:] != g[:-1]) | (i[1:] != i[:-1]) | (j[1:] != j[:-1] + 1)

@@ -100,7 +100,7 @@ def test_holes_and_ragged_edges_are_covered_by_rectangles_of_the_patches_alone(s
     keep = rng.random((9, 7)) < 0.67
     origin, u, v, cell = _plane_grid(9, 7, keep)
     g = _geometry(origin, u, v)
-    grids = PG.patch_grids(g.triangle_corners, g.patch_first_triangle, g.patch_triangle_count, g.patch_count)
+    grids = _grids_of(g)
     assert grids is not None and grids.rectangles < g.patch_count // 2
     # 30 points inside every cell (at least 1% of a cell from its sides).
     i, j = np.meshgrid(np.arange(9), np.arange(7), indexing="ij")
