@@ -156,9 +156,10 @@ class WalkTables:
         # The patch of a hit triangle: in a scene of parallelograms the triangles come in pairs,
         # in patch order (triangle t is half of patch t >> 1), so no table is read for it.
         self.paired_triangles = self.geometry.all_parallelograms
-        # Rays leaving from random points need nothing of a hit but its patch: where the
-        # patches tile grids, Embree traces the grids (two triangles each) and a hit's patch is
-        # its grid cell (patch_grids), and "hits" are patches (-1 a miss).
+        # Rays leaving from random points need nothing of a hit but its patch and side: where
+        # the patches tile grids, Embree traces the grids (two triangles each, beside the other
+        # patches' own triangles), a hit's patch is its grid cell (patch_grids) and "hits" are
+        # patches (-1 a miss); the facing test reads Embree's normal (cast).
         self.grids = self.geometry.patch_grids if self.exit_random else None
         # The Embree scene the walk traces, built here (once per geometry), not on a thread.
         self.tracer = self.geometry.tracer if self.grids is None else self.grids.tracer
@@ -166,7 +167,8 @@ class WalkTables:
             self.exit_table = self.geometry.exit_table
         if not self.exit_random:
             self.edge_barycentric = self.geometry.edge_barycentric
-        # The facing test of a ray leaving from a random point: in a scene of parallelograms
+        # The facing test of a ray leaving from a random point where the walk traces the
+        # patches' triangles (not grids, see cast): in a scene of parallelograms
         # (two exactly coplanar triangles each) against the hit patch's normal, read from the
         # rows of the leave table that the next step gathers again for the survivors (the
         # walk touches less memory between ray casts); otherwise against the triangle's.
@@ -194,13 +196,20 @@ class WalkTables:
             start = np.where(mean_emission > 0, E[:, : self.channels].T / mean_emission, 0.0)
         return np.ascontiguousarray(start)  # (E.T's rows: the division keeps its column order)
 
-    def first_hit(self, origins, directions):
-        """What each ray hits first, traced outside the numpy turn: its triangle, or where the
-        walk traces grids its patch; -1 where it hits nothing."""
+    def cast(self, origins, directions):
+        """A random exit's rays ((3,n) rows), traced outside the numpy turn: (hit, hit_patch,
+        front). ``hit`` is what each ray hits first, its triangle (where the walk traces grids,
+        its patch), -1 where it hits nothing; ``hit_patch`` its patch (a miss reads as patch 0);
+        ``front`` whether it meets that patch's front side (read only where it hit). On the
+        grids, a hit's patch is its grid cell and the facing test reads Embree's geometric
+        normal of the triangle hit, whose sign the grids keep (no table is read)."""
         if self.grids is not None:
-            triangle, u, v, _, _ = self._outside_turn(self.tracer.first_hit_barycentric, origins, directions)
-            return self.grids.hit_patches(triangle, u, v)
-        return self._outside_turn(self.tracer.first_hit, origins, directions)
+            triangle, u, v, _, normal = self._outside_turn(self.tracer.first_hit_barycentric, origins.T, directions.T)
+            hit = self.grids.hit_patches(triangle, u, v)
+            return hit, np.maximum(hit, 0), _meets_front(directions, normal)
+        hit = self._outside_turn(self.tracer.first_hit, origins.T, directions.T)
+        hit_patch = self.hit_patches(hit)
+        return hit, hit_patch, self.facing(directions, hit, hit_patch)
 
     def first_hit_barycentric(self, origins, directions):
         """The ray tracer's first hits with their points and normals, outside the numpy turn."""
@@ -214,13 +223,11 @@ class WalkTables:
             self.numpy_turn.acquire()
 
     def hit_patches(self, hit):
-        """The patch of each hit triangle (where the walk traces grids, hits are patches already),
-        int32; a miss (-1) reads as triangle 0's (misses are dropped). No negative index reaches
-        a gather: with mode="wrap" numpy branches on each index's sign, a mispredicted branch per
+        """The patch of each hit triangle of the patches (not of grids: see :meth:`cast`), int32;
+        a miss (-1) reads as triangle 0's (misses are dropped). No negative index reaches a
+        gather: with mode="wrap" numpy branches on each index's sign, a mispredicted branch per
         miss, which tripled a 3-row gather's cost in an open scene."""
         triangle = np.maximum(hit, 0)
-        if self.grids is not None:
-            return triangle  # (hits are patches)
         if self.paired_triangles:
             triangle >>= 1
             return triangle
@@ -415,6 +422,15 @@ def _facing(directions, normals):
     return np.einsum("ij,ij->j", directions, normals) < 0
 
 
+def _meets_front(directions, normal):
+    """direction . Ng < 0 for (3,n) direction rows and the ray tracer's (n,3) geometric normals
+    (three passes over Ng's strided columns: faster than einsum's)."""
+    dot = normal[:, 0] * directions[0]
+    dot += normal[:, 1] * directions[1]
+    dot += normal[:, 2] * directions[2]
+    return dot < 0
+
+
 def walk_chunk(tables: WalkTables, paths: int, rng: np.random.Generator, abort=None) -> ChunkTally:
     """Trace ``paths`` random walks from the sources to their end; return their tallies."""
     return walk_chunks(tables, [paths], rng, abort)[0]
@@ -528,17 +544,12 @@ def _walk_paths(tables, sizes, rng, abort=None):
 
         # The ray tracer reads (n,3) views of the (3,n) rows: no transposed copies.
         if exit_random:
-            hit = tables.first_hit(origins.T, directions.T)
             # A miss (-1) reads as patch 0: harmless, masked out below.
-            hit_patch = tables.hit_patches(hit)
-            front = tables.facing(directions, hit, hit_patch)
+            hit, hit_patch, front = tables.cast(origins, directions)
         else:
             hit, bary_u, bary_v, distance, hit_normal = tables.first_hit_barycentric(origins.T, directions.T)
             hit_patch = tables.hit_patches(hit)
-            dot = hit_normal[:, 0] * directions[0]
-            dot += hit_normal[:, 1] * directions[1]
-            dot += hit_normal[:, 2] * directions[2]
-            front = dot < 0
+            front = _meets_front(directions, hit_normal)
         front &= hit >= 0
         rays += n if chunk is None else _chunk_counts(chunk, G)
         if not exit_random:
@@ -825,10 +836,8 @@ def _walk_exchangeable(tables, sizes, rng, abort=None):
             origins, directions = tables.leave_random(patch, u)
         started += max(new, 0)
         u_survive = rng.random(n)
-        hit = tables.first_hit(origins.T, directions.T)
         # A miss (-1) reads as patch 0: harmless, binned out below.
-        hit_patch = tables.hit_patches(hit)
-        front = tables.facing(directions, hit, hit_patch)
+        hit, hit_patch, front = tables.cast(origins, directions)
         reached = hit >= 0
         front &= reached
         ended_bin = escaped_bin + reached  # escaped, or blocked where it reached a back side

@@ -3,13 +3,17 @@
 Meshing cuts a face into a grid of patches, and a walk must know which patch each ray hits;
 but the ray tracer need not see the patches. Patches that tile a parallelogram as a regular
 grid (a wall, a box's side) are traced as that parallelogram, two triangles, and the patch
-of a hit is its grid cell. In the figure 4 room that is 204 triangles instead of 133,144:
-Embree's scene is a few kB instead of about 10 MB, and it traces faster.
+of a hit is its grid cell. In the figure 4 room that is 196 triangles instead of 133,144:
+Embree's scene is a few kB instead of about 10 MB, and it traces faster. Patches that are not
+parallelograms (triangles, other quads) are traced as their own triangles, each a grid of one
+cell, beside the grids.
 
 A grid with corners c00, c10, c01, c11 (cells n_a along c10 - c00, n_b along c01 - c00) is
 the triangles (c00, c10, c11) and (c00, c11, c01). Embree's barycentric (u, v) of a hit puts
 it at c00 + s (c10 - c00) + t (c01 - c00), with (s, t) = (u + v, v) on the first triangle and
-(u, u + v) on the second; its cell is (floor(s n_a), floor(t n_b)).
+(u, u + v) on the second; its cell is (floor(s n_a), floor(t n_b)). The corners are ordered
+so that Embree's geometric normal Ng of both triangles points to the patches' front side: a
+walk's facing test is the sign of direction . Ng, for grid and own triangles alike.
 
 The grids are found from the patches alone: patches with the same edges a and b (to within
 GRID_QUANTUM) in the same plane are placed on the lattice corner + i a + j b of their group,
@@ -35,7 +39,8 @@ LATTICE_TOLERANCE = 1e-3
 # Every corner of a grid's patches must lie this close (unit space: about 8 float32 roundings at
 # the scene's extent) to where the grid's even subdivision puts it.
 CORNER_TOLERANCE = 2.5e-7
-# Grids are traced only if they take at most this fraction of the patches' triangles.
+# Grids are traced only if they (with the other patches' triangles) take at most this fraction
+# of the scene's triangles.
 MAX_TRIANGLE_FRACTION = 0.5
 # The cell arithmetic runs in float32, exact below 2^24 cells.
 MAX_CELLS = 1 << 24
@@ -43,14 +48,16 @@ MAX_CELLS = 1 << 24
 
 @dataclass(frozen=True)
 class PatchGrids:
-    """Rectangles of patches, traced as two triangles each.
+    """Rectangles of patches, traced as two triangles each, and the other patches' triangles.
 
-    corners: (2R,3,3) float32 unit-space triangles (rectangle r is triangles 2r and 2r+1);
-    cell_table: (7,2R+1) float32 rows per triangle: the coefficient of v in s, the coefficient
-    of u in t, n_a, n_b, n_a - 1, n_b - 1 and the rectangle's first cell; the last column,
-    which a miss (-1) wraps to, points at a cell of patch -1;
+    corners: (2R+L,3,3) float32 unit-space triangles (rectangle r is triangles 2r and 2r+1, then
+    the L triangles of the patches that are not in rectangles, in patch order);
+    cell_table: (7,2R+L+1) float32 rows per triangle: the coefficient of v in s, the coefficient
+    of u in t, n_a, n_b, n_a - 1, n_b - 1 and the rectangle's first cell (a one-cell grid for
+    each of the L triangles); the last column, which a miss (-1) wraps to, points at a cell of
+    patch -1;
     cell_patch: (P+1,) int32 patch of each cell, rectangle by rectangle, rows of n_b cells,
-    then -1;
+    then the other patches' cells, then -1;
     rectangles: R, the number of rectangles."""
 
     corners: np.ndarray
@@ -89,43 +96,75 @@ class PatchGrids:
         return RayTracer(self.corners)
 
 
-def patch_grids(triangle_corners, first_triangle, patch_triangle_count, patch_count):
-    """The grids of a scene whose patches are all parallelograms (two triangles each, sorted by
-    patch: Geometry's layout), or None where they would not take at most
-    MAX_TRIANGLE_FRACTION of the triangles."""
+def patch_grids(geometry):
+    """The grids of a scene's parallelogram patches, with every other patch's own triangles
+    (a grid of one cell each), or None where they would not take at most MAX_TRIANGLE_FRACTION
+    of the scene's triangles. ``geometry`` is a :class:`.scene.Geometry` (triangles sorted by
+    patch)."""
     from .scene import parallelogram_corners
 
-    P = patch_count
+    P, T = geometry.patch_count, geometry.triangle_count
     if P == 0 or P >= MAX_CELLS:
         return None
-    two, ok, (p, s1, s2, q) = parallelogram_corners(triangle_corners, first_triangle, patch_triangle_count)
-    if two.size != P or not ok.all():
+    two, ok, patch_corners = parallelogram_corners(
+        geometry.triangle_corners, geometry.patch_first_triangle, geometry.patch_triangle_count
+    )
+    merged = two[ok]  # the parallelogram patches, in patch order; grid cells 0..M-1
+    M = merged.size
+    if M == 0:
         return None
+    patch_corners = tuple(c[ok] for c in patch_corners)
+    p, s1, s2, _ = patch_corners
     group = _groups(p, s1 - p, s2 - p)
     I, J, on_lattice = _lattice(p, s1 - p, s2 - p, group)
     group = _alone(group, ~on_lattice)
     rect = _rectangles(group, I, J)
-    bad = _misplaced(rect, (p, s1, s2, q))
+    bad = _misplaced(rect, patch_corners)
     if bad.any():
         # The cells of a failed rectangle become rectangles of their own.
         group = _alone(group, bad[rect.of_cell])
         rect = _rectangles(group, I, J)
     R = rect.first.size
-    if R > MAX_TRIANGLE_FRACTION * P:  # (2R triangles against the patches' 2P)
+    # Every other patch is traced as its own triangles, each a grid of one cell: the patch's
+    # cell, M and on in patch order.
+    is_merged = np.zeros(P, dtype=bool)
+    is_merged[merged] = True
+    other_patch = np.flatnonzero(~is_merged)
+    other_triangle = np.flatnonzero(~is_merged[geometry.triangle_patch])
+    L = other_triangle.size
+    if 2 * R + L > MAX_TRIANGLE_FRACTION * T:
         return None
-    c00, c10, c01, c11 = rect.corners((p, s1, s2, q))
-    corners = np.empty((2 * R, 3, 3))
-    corners[0::2] = np.stack([c00, c10, c11], axis=1)  # s = u + v, t = v
-    corners[1::2] = np.stack([c00, c11, c01], axis=1)  # s = u, t = u + v
-    table = np.zeros((7, 2 * R + 1))
+    c00, c10, c01, c11 = rect.corners(patch_corners)
+    # A rectangle is wound so that Embree's geometric normal of its triangles, which points like
+    # (corner1 - corner0) x (corner2 - corner0), points like its patches' normals (the walk's
+    # facing test reads it): where (c10 - c00) x (c01 - c00) does not, its axes are swapped
+    # (the rectangle transposed: a patch's cell is first + j n_a + i).
+    normal = geometry.patch_normal[merged[rect.corner_patch[:, 0]]]
+    turned = np.einsum("ij,ij->i", np.cross(c10 - c00, c01 - c00), normal) < 0
+    end_a = np.where(turned[:, None], c01, c10)
+    end_b = np.where(turned[:, None], c10, c01)
+    n_a = np.where(turned, rect.n_b, rect.n_a)
+    n_b = np.where(turned, rect.n_a, rect.n_b)
+    r = rect.of_cell
+    cell = np.where(turned[r], rect.first[r] + rect.j * rect.n_a[r] + rect.i, rect.cell)
+    corners = np.empty((2 * R + L, 3, 3))
+    corners[0 : 2 * R : 2] = np.stack([c00, end_a, c11], axis=1)  # s = u + v, t = v
+    corners[1 : 2 * R : 2] = np.stack([c00, c11, end_b], axis=1)  # s = u, t = u + v
+    corners[2 * R :] = geometry.triangle_corners[other_triangle]
+    # Rows per triangle (s and t of one-cell grids are u and v: cs = ct = 0), then a miss's.
+    table = np.zeros((7, 2 * R + L + 1))
     table[0, 0 : 2 * R : 2] = 1.0
     table[1, 1 : 2 * R : 2] = 1.0
-    for row, values in ((2, rect.n_a), (3, rect.n_b), (4, rect.n_a - 1), (5, rect.n_b - 1), (6, rect.first)):
+    for row, values in ((2, n_a), (3, n_b), (4, n_a - 1), (5, n_b - 1), (6, rect.first)):
         table[row, : 2 * R] = np.repeat(values, 2)
-    table[2:4, 2 * R] = 1.0  # a miss: cell P, patch -1
-    table[6, 2 * R] = P
+    table[2:4, 2 * R :] = 1.0
+    other_cell = np.full(P, P)
+    other_cell[other_patch] = M + np.arange(other_patch.size)
+    table[6, 2 * R : -1] = other_cell[geometry.triangle_patch[other_triangle]]
+    table[6, -1] = P  # a miss (-1) wraps to the last column: cell P, patch -1
     cell_patch = np.full(P + 1, -1, dtype=np.int32)
-    cell_patch[rect.cell] = np.arange(P, dtype=np.int32)
+    cell_patch[cell] = merged
+    cell_patch[M:P] = other_patch
     return PatchGrids(
         corners=np.ascontiguousarray(corners, dtype=np.float32),
         cell_table=np.ascontiguousarray(table, dtype=np.float32),

@@ -317,14 +317,12 @@ class Geometry:
 
     @cached_property
     def patch_grids(self):
-        """The patches merged into the grids they tile (:mod:`.patch_grids`), which walks
-        leaving from random points trace instead of the triangles; None where the patches are
-        not all parallelograms or the grids would save too few triangles."""
+        """The parallelogram patches merged into the grids they tile, with the other patches'
+        own triangles (:mod:`.patch_grids`), which walks leaving from random points trace
+        instead of the triangles; None where that would save too few triangles."""
         from .patch_grids import patch_grids
 
-        if not self.all_parallelograms:
-            return None
-        return patch_grids(self.triangle_corners, self.patch_first_triangle, self.patch_triangle_count, self.patch_count)
+        return patch_grids(self)
 
     @cached_property
     def tracer(self):
