@@ -393,7 +393,50 @@ def build_scene(name):
         from sample_scenes import cornell_box
 
         return cornell_box.build().scene
+    if name == "room_fig4_sphere":
+        return room_with_sphere()
     raise SystemExit(f"unknown scene {name}")
+
+
+def icosphere(level):
+    """A unit icosphere: the icosahedron's faces cut into 4^level triangles, pushed onto the
+    sphere. (V,3) float64 vertices, (20 4^level, 3) int64 triangles wound outwards."""
+    t = (1 + 5**0.5) / 2
+    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], dtype=np.float64)
+    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
+                  [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
+                  [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    V /= np.linalg.norm(V, axis=1)[:, None]
+    for _ in range(level):
+        a, b, c = F.T
+        # each edge's midpoint once: edges keyed by their sorted vertex pair
+        edges = np.sort(np.stack([np.stack([a, b], 1), np.stack([b, c], 1), np.stack([c, a], 1)]), axis=2)
+        unique, inverse = np.unique(edges.reshape(-1, 2), axis=0, return_inverse=True)
+        mid = V[unique].mean(axis=1)
+        mid /= np.linalg.norm(mid, axis=1)[:, None]
+        ab, bc, ca = (V.shape[0] + inverse.reshape(3, -1))
+        V = np.vstack([V, mid])
+        F = np.concatenate([np.stack(f, 1) for f in ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
+    return V, F
+
+
+def room_with_sphere(level=4, centre=(5.0, 4.0, 0.61), radius=0.6, reflectivity=0.5):
+    """The figure 4 room with a sphere on its floor (a mixed scene: 66,572 square patches and
+    5,120 triangle patches, 138,264 triangles), grey."""
+    from addon.core import PatchScene
+    from sample_scenes import room_fig4
+
+    sample = room_fig4.build()
+    V, F = icosphere(level)
+    V = V * radius + np.asarray(centre)
+    P = sample.patch_count
+    vertices = np.vstack([sample.vertices, V])
+    triangles = np.vstack([sample.triangles, F + sample.vertices.shape[0]])
+    triangle_patch = np.concatenate([sample.triangle_patch, P + np.arange(F.shape[0])])
+    reflectivity = np.concatenate([sample.reflectivity[:, 0], np.full(F.shape[0], reflectivity)])
+    emission = np.concatenate([sample.emission[:, 0], np.zeros(F.shape[0])])
+    return PatchScene(vertices, triangles, triangle_patch, reflectivity, emission)
 
 
 def main(argv=None):
