@@ -1,11 +1,12 @@
 """Throughput of solve() against Embree's raw ray rate, measured in the same run.
 
-    python -m benchmarks.throughput [--scene small_room cornell room_fig4] [--threads 1 2] [--seconds 3]
+    python -m benchmarks.throughput [--scene small_room cornell room_fig4 room_fig4_sphere] [--threads 1 2] [--seconds 3]
     python -m benchmarks.throughput --short     # short runs: ratio against the path count
 
 Scenes: ``small_room`` is the Cycles comparison's closed room (10 x 10 patches per face, 1,200
 triangles), ``cornell`` the coloured Cornell box (5,080 triangles), ``room_fig4`` the paper's
-figure 4 room (133,144 triangles).
+figure 4 room (133,144 triangles), ``room_fig4_sphere`` that room with a sphere of 5,120
+triangle patches on its floor (138,264 triangles: a mixed scene, not all parallelograms).
 
 The raw rate traces the same kind of rays (uniform points on patches, cosine directions,
 drawn once beforehand) with embreex alone, split over the same number of threads; the
@@ -441,7 +442,7 @@ def room_with_sphere(level=4, centre=(5.0, 4.0, 0.61), radius=0.6, reflectivity=
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scene", nargs="+", default=["small_room", "cornell", "room_fig4"])
+    ap.add_argument("--scene", nargs="+", default=["small_room", "cornell", "room_fig4", "room_fig4_sphere"])
     ap.add_argument("--threads", nargs="+", type=int, default=[1, 2])
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--out", default=str(RESULTS / "throughput.md"))
