@@ -42,8 +42,8 @@ def sample_rays(scene, count, seed=0):
 
 
 def walk_tracer(scene, exit_point="random"):
-    """The Embree scene a walk traces: a random exit's the patches' grids where the scene has
-    them (addon/core/patch_grids.py), else the patches' triangles."""
+    """The Embree scene a walk traces: the patches' grids where the scene has them
+    (addon/core/patch_grids.py), else the patches' triangles."""
     from addon.core.estimators import WalkTables
 
     return WalkTables(scene, "finite", 1e-3, exit_point).tracer
@@ -477,9 +477,8 @@ def main(argv=None):
         f"Machine: {platform.processor() or platform.machine()}, {platform.python_version()}; "
         f"`python -m benchmarks.throughput {' '.join(sys.argv[1:])}`.",
         "Raw: embreex alone (first hits) on pre-drawn rays of the same kind over the same threads, on the scene the "
-        "solve traces: a walk leaving from random points traces the patches' grids, two triangles each, where the "
-        "patches tile them (*traced*; addon/core/patch_grids.py), a walk leaving from hit points the patches' "
-        "triangles. Each of 5 rounds brackets one solve between two raw measurements, so both see the same load; the "
+        "solve traces: the patches' grids, two triangles each, where the patches tile them, beside the other "
+        "patches' own triangles (*traced*; addon/core/patch_grids.py). Each of 5 rounds brackets one solve between two raw measurements, so both see the same load; the "
         "ratio is the median of the per-round ratios, with the lowest and highest round beside it (the spread is the "
         "machine's noise: these machines are shared).",
         "",
@@ -537,12 +536,12 @@ def write_breakdown(args):
         "The walk / raw ratio is the product of two factors: the share of the walk spent inside Embree",
         "(the rest is numpy: random numbers, the frame gather, points and directions, the facing test,",
         "survival, scoring) and how fast Embree traces inside the walk compared with the raw run. Walks",
-        "leaving from random points trace the patches' grids where the patches tile them (the raw run",
-        "too: addon/core/patch_grids.py), a scene of a few kB that stays in cache (the figure 4 room's",
+        "trace the patches' grids where the patches tile them (the raw run too:",
+        "addon/core/patch_grids.py), a scene of a few kB that stays in cache (the figure 4 room's",
         "196 triangles), and ask Embree for barycentrics, from which a hit's grid cell is its patch;",
         "their share inside Embree is lower because Embree is faster, not because numpy is slower.",
-        "Walks leaving from hit points trace the patches' triangles. There, in",
-        "big scenes Embree traces the walk's rays more slowly between numpy steps than the same rays",
+        "Until this stop, walks leaving from hit points traced the patches' triangles. There, in",
+        "big scenes Embree traced the walk's rays more slowly between numpy steps than the same rays",
         "(every cast of the chunk) traced again on their own, back to back. The processor's counters",
         "say where that time goes (lines from memory: fills from DRAM on AMD Zen 3 and later,",
         "last-level read misses elsewhere; `benchmarks/counters.py`): inside the walk Embree fetches",

@@ -21,9 +21,9 @@ b_j = R_j I_j (Phi_T / N) / A_j.
   The power still carried at that moment is "undistributed".
 
 Rays that hit nothing escape; rays that hit a patch's back side are absorbed there ("blocked"):
-radiosity leaves only the front side of a patch. Where the patches tile grids, a walk leaving
-from random points traces the grids instead of the patches' triangles and reads a hit's patch
-off its grid cell (``patch_grids``): its "hits" are then patches.
+radiosity leaves only the front side of a patch. Where the patches tile grids, walks trace the
+grids instead of the patches' triangles and read a hit's patch off its grid cell
+(``patch_grids``): a random exit's "hits" are then patches.
 
 Rays leave a patch from a new uniform point of it (``exit_point="random"``, the paper's
 discrete method and the default) or from where the ray arrived (``"hit"``: origin + t
@@ -156,17 +156,22 @@ class WalkTables:
         # The patch of a hit triangle: in a scene of parallelograms the triangles come in pairs,
         # in patch order (triangle t is half of patch t >> 1), so no table is read for it.
         self.paired_triangles = self.geometry.all_parallelograms
-        # Rays leaving from random points need nothing of a hit but its patch and side: where
-        # the patches tile grids, Embree traces the grids (two triangles each, beside the other
-        # patches' own triangles), a hit's patch is its grid cell (patch_grids) and "hits" are
-        # patches (-1 a miss); the facing test reads Embree's normal (cast).
-        self.grids = self.geometry.patch_grids if self.exit_random else None
+        # A walk needs nothing of a hit but its patch, its side and (leaving from hit points)
+        # where it is: where the patches tile grids, Embree traces the grids (two triangles
+        # each, beside the other patches' own triangles) and a hit's patch is its grid cell
+        # (patch_grids). A random exit's "hits" are then patches (-1 a miss), and its facing
+        # test reads Embree's normal (cast); a hit-point exit's hits are the grids' triangles.
+        self.grids = self.geometry.patch_grids
         # The Embree scene the walk traces, built here (once per geometry), not on a thread.
         self.tracer = self.geometry.tracer if self.grids is None else self.grids.tracer
-        if not (self.geometry.all_parallelograms and self.exit_random):
+        if not self.geometry.all_parallelograms:
             self.exit_table = self.geometry.exit_table
         if not self.exit_random:
-            self.edge_barycentric = self.geometry.edge_barycentric
+            # What a hit near an edge of the triangle traced is mapped onto (hit_points).
+            if self.grids is None:
+                self.hit_frames, self.edge_barycentric = self.geometry.exit_table, self.geometry.edge_barycentric
+            else:
+                self.hit_frames, self.edge_barycentric = self.grids.hit_frames, self.grids.edge_barycentric
         # The facing test of a ray leaving from a random point where the walk traces the
         # patches' triangles (not grids, see cast): in a scene of parallelograms
         # (two exactly coplanar triangles each) against the hit patch's normal, read from the
@@ -222,11 +227,14 @@ class WalkTables:
         finally:
             self.numpy_turn.acquire()
 
-    def hit_patches(self, hit):
-        """The patch of each hit triangle of the patches (not of grids: see :meth:`cast`), int32;
-        a miss (-1) reads as triangle 0's (misses are dropped). No negative index reaches a
-        gather: with mode="wrap" numpy branches on each index's sign, a mispredicted branch per
-        miss, which tripled a 3-row gather's cost in an open scene."""
+    def hit_patches(self, hit, u=None, v=None):
+        """The patch of each hit triangle, int32: where the walk traces grids, the cell of the
+        hit's barycentric (``u``, ``v``). A miss (-1) reads as patch 0 (misses are dropped). No
+        negative index reaches a gather: with mode="wrap" numpy branches on each index's sign, a
+        mispredicted branch per miss, which tripled a 3-row gather's cost in an open scene."""
+        if self.grids is not None:
+            patch = self.grids.hit_patches(hit, u, v)
+            return np.maximum(patch, 0, out=patch)
         triangle = np.maximum(hit, 0)
         if self.paired_triangles:
             triangle >>= 1
@@ -257,10 +265,12 @@ class WalkTables:
 
         The hit point is origin + t direction, which the walk has at hand: no table of
         triangles is read, so the ray tracer's structure stays in the caches. Within the
-        clearance of an edge of its triangle (barycentric coordinate below the triangle's
-        ``edge_barycentric``), float32 rounding could put that point past the edge, behind an
-        adjacent wall; those few points are the hit's barycentric coordinates mapped onto the
-        triangle's inset leaving frame, as in :meth:`leave_random`."""
+        clearance of an edge of the triangle traced (barycentric coordinate below the
+        triangle's ``edge_barycentric``), float32 rounding could put that point past the edge,
+        behind an adjacent wall; those few points are the hit's barycentric coordinates mapped
+        onto the triangle's ``hit_frames`` column: its inset leaving frame, as in
+        :meth:`leave_random`, or where the walk traces grids its rectangle's inset frame (or
+        another patch's triangle's)."""
         # A miss has t = inf: clamped to a finite MISS_DISTANCE (inf x 0 would be NaN, with a
         # warning), its point is far away and dropped with the miss.
         np.minimum(distance, MISS_DISTANCE, out=distance)
@@ -268,7 +278,7 @@ class WalkTables:
         origins += directions
         nearest = np.minimum(u, v)
         np.minimum(nearest, 1 - u - v, out=nearest)
-        if self.patch_class is not None:
+        if self.patch_class is not None and self.grids is None:
             # (a random gather from a small table, not from one of T triangles: the tables a
             # step reads between ray casts stay small, see CLASSES_MIN_PATCHES)
             hit_class = self._class_of(hit_patch)
@@ -279,7 +289,7 @@ class WalkTables:
         near &= front
         index = np.flatnonzero(near)
         if index.size:
-            frame = self.exit_table.take(hit.take(index, mode="wrap"), axis=1, mode="wrap")
+            frame = self.hit_frames.take(hit.take(index, mode="wrap"), axis=1, mode="wrap")
             # The frame's corner is pushed off along the triangle's normal; the walk pushes
             # every hit point along its patch's normal (frame rows 9:12): take that off here.
             pushed_back = frame[9:12] * np.float32(self.geometry.ray_offset)
@@ -548,7 +558,7 @@ def _walk_paths(tables, sizes, rng, abort=None):
             hit, hit_patch, front = tables.cast(origins, directions)
         else:
             hit, bary_u, bary_v, distance, hit_normal = tables.first_hit_barycentric(origins.T, directions.T)
-            hit_patch = tables.hit_patches(hit)
+            hit_patch = tables.hit_patches(hit, bary_u, bary_v)
             front = _meets_front(directions, hit_normal)
         front &= hit >= 0
         rays += n if chunk is None else _chunk_counts(chunk, G)

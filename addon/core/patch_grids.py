@@ -1,4 +1,4 @@
-"""The ray tracer's scene for random exits: parallelogram patches merged back into grids.
+"""The ray tracer's scene for the walks: parallelogram patches merged back into grids.
 
 Meshing cuts a face into a grid of patches, and a walk must know which patch each ray hits;
 but the ray tracer need not see the patches. Patches that tile a parallelogram as a regular
@@ -58,12 +58,23 @@ class PatchGrids:
     patch -1;
     cell_patch: (P+1,) int32 patch of each cell, rectangle by rectangle, rows of n_b cells,
     then the other patches' cells, then -1;
-    rectangles: R, the number of rectangles."""
+    rectangles: R, the number of rectangles;
+    hit_frames: (12,2R+L) float32, what a walk leaving from hit points maps a hit near an edge
+    onto (WalkTables.hit_points): per triangle a corner (pushed off along the normal), edges e1
+    and e2 and the patch's normal, so that corner + u e1 + v e2 at the hit's barycentric (u, v)
+    lies inside its rectangle inset by RELATIVE_EDGE_INSET (a grid triangle's frame is its
+    rectangle's inset one, A' and B', as the triangle's barycentrics see it: e1, e2 = A', A' + B'
+    on the first triangle, A' + B', B' on the second), or inside the inset triangle of another
+    patch;
+    edge_barycentric: (2R+L,) float32, the barycentric coordinate below which a hit on each
+    triangle may lie within RELATIVE_HIT_EDGE_CLEARANCE of one of its edges."""
 
     corners: np.ndarray
     cell_table: np.ndarray
     cell_patch: np.ndarray
     rectangles: int
+    hit_frames: np.ndarray
+    edge_barycentric: np.ndarray
 
     @property
     def triangle_count(self):
@@ -101,7 +112,7 @@ def patch_grids(geometry):
     (a grid of one cell each), or None where they would not take at most MAX_TRIANGLE_FRACTION
     of the scene's triangles. ``geometry`` is a :class:`.scene.Geometry` (triangles sorted by
     patch)."""
-    from .scene import parallelogram_corners
+    from .scene import RELATIVE_EDGE_INSET, edge_barycentric, parallelogram_corners
 
     P, T = geometry.patch_count, geometry.triangle_count
     if P == 0 or P >= MAX_CELLS:
@@ -165,11 +176,31 @@ def patch_grids(geometry):
     cell_patch = np.full(P + 1, -1, dtype=np.int32)
     cell_patch[cell] = merged
     cell_patch[M:P] = other_patch
+    # A hit-point exit's leaving frames (see PatchGrids): each rectangle inset by
+    # RELATIVE_EDGE_INSET on every side (d_a of A = c_a - c00 off the sides along B, which lie
+    # area / |B| apart), its corner pushed off along the patches' normal; the other patches'
+    # triangles keep theirs (Geometry.triangle_frame, with their patch's normal).
+    A, B = end_a - c00, end_b - c00
+    area = np.linalg.norm(np.cross(A, B), axis=1)
+    d_a = np.minimum(RELATIVE_EDGE_INSET * np.linalg.norm(B, axis=1) / area, 0.25)[:, None]
+    d_b = np.minimum(RELATIVE_EDGE_INSET * np.linalg.norm(A, axis=1) / area, 0.25)[:, None]
+    inset_a, inset_b = (1 - 2 * d_a) * A, (1 - 2 * d_b) * B
+    frames = np.empty((12, 2 * R + L))
+    frames[0:3, : 2 * R] = np.repeat((c00 + d_a * A + d_b * B + geometry.ray_offset * normal).T, 2, axis=1)
+    frames[3:6, 0 : 2 * R : 2] = inset_a.T  # u along A', v along A' + B': S = u + v, T = v
+    frames[6:9, 0 : 2 * R : 2] = (inset_a + inset_b).T
+    frames[3:6, 1 : 2 * R : 2] = (inset_a + inset_b).T  # S = u, T = u + v
+    frames[6:9, 1 : 2 * R : 2] = inset_b.T
+    frames[9:12, : 2 * R] = np.repeat(normal.T, 2, axis=1)
+    frames[0:9, 2 * R :] = geometry.triangle_frame[:, other_triangle]
+    frames[9:12, 2 * R :] = geometry.patch_normal_rows[:, geometry.triangle_patch[other_triangle]]
     return PatchGrids(
         corners=np.ascontiguousarray(corners, dtype=np.float32),
         cell_table=np.ascontiguousarray(table, dtype=np.float32),
         cell_patch=cell_patch,
         rectangles=R,
+        hit_frames=np.ascontiguousarray(frames, dtype=np.float32),
+        edge_barycentric=edge_barycentric(corners),
     )
 
 

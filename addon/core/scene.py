@@ -294,13 +294,7 @@ class Geometry:
         return largest
 
     def _own_edge_barycentric(self):
-        corners = self.triangle_corners.astype(np.float64)
-        edges = corners[:, [1, 2, 0]] - corners
-        longest = np.linalg.norm(edges, axis=2).max(axis=1)
-        twice_area = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            threshold = RELATIVE_HIT_EDGE_CLEARANCE * longest / twice_area
-        return np.where(np.isfinite(threshold), np.minimum(threshold, 1.0), 1.0).astype(np.float32)
+        return edge_barycentric(self.triangle_corners)
 
     @cached_property
     def triangle_normal_rows(self):
@@ -469,6 +463,20 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         patch_parallelogram=is_parallelogram,
         parallelogram_frame=f32(np.where(is_parallelogram[:, None], parallelogram, 0.0).T),
     )
+
+
+def edge_barycentric(corners):
+    """(T,) float32: for (T,3,3) unit-space triangles, the barycentric coordinate below which a
+    point may lie closer than RELATIVE_HIT_EDGE_CLEARANCE to one of the triangle's edges (the
+    clearance over its smallest altitude, 2 area / longest edge; 1 for triangles too small to
+    have such points)."""
+    corners = np.asarray(corners, dtype=np.float64)
+    edges = corners[:, [1, 2, 0]] - corners
+    longest = np.linalg.norm(edges, axis=2).max(axis=1)
+    twice_area = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        threshold = RELATIVE_HIT_EDGE_CLEARANCE * longest / twice_area
+    return np.where(np.isfinite(threshold), np.minimum(threshold, 1.0), 1.0).astype(np.float32)
 
 
 def _inset_triangles(corners, inset):

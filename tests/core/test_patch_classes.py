@@ -171,8 +171,9 @@ def test_the_triangles_of_a_scene_of_parallelograms_come_in_pairs_in_patch_order
     g = scene.geometry
     assert g.all_parallelograms
     np.testing.assert_array_equal(g.triangle_patch, np.arange(g.triangle_count) >> 1)
-    tables = WalkTables(scene, "finite", 1e-3, "hit")  # (a random exit traces grids: hits are patches)
-    assert tables.paired_triangles and tables.grids is None
+    tables = WalkTables(scene, "finite", 1e-3, "hit")
+    assert tables.paired_triangles
+    tables.grids = None  # (walks trace the grids where the patches tile them: not this test's case)
     hit = np.array([0, 1, 2, 5, g.triangle_count - 1, -1], dtype=np.int32)
     expected = np.append(g.triangle_patch[hit[:-1]], 0)
     patch = tables.hit_patches(hit)

@@ -163,10 +163,9 @@ def test_scenes_the_grids_would_not_shrink_are_traced_as_triangles():
     assert _grids_of(_geometry(origin, u, v)) is None
 
 
-def test_random_exits_trace_the_grids_and_hit_exits_the_triangles():
-    """A walk leaving from random points traces the grids, built once per geometry (another
-    material set reuses them); one leaving from hit points needs the triangles' barycentrics
-    and traces the triangles."""
+def test_walks_trace_the_grids_built_once_per_geometry():
+    """Walks leaving from random points and from hit points trace the grids, built once per
+    geometry (another material set reuses them)."""
     scene, _, _ = box_scene([0.5] * 6, [1.0, 0, 0, 0, 0, 0], n=4)
     random_exit = WalkTables(scene, "finite", 1e-3, "random")
     assert random_exit.grids is scene.geometry.patch_grids and random_exit.grids.rectangles == 6
@@ -174,7 +173,8 @@ def test_random_exits_trace_the_grids_and_hit_exits_the_triangles():
     other = scene.with_materials(np.full(scene.patch_count, 0.3), scene.emission)
     assert WalkTables(other, "biased_infinite", 1e-3, "random").tracer is random_exit.tracer
     hit_exit = WalkTables(scene, "finite", 1e-3, "hit")
-    assert hit_exit.grids is None and hit_exit.tracer is scene.geometry.tracer
+    assert hit_exit.grids is random_exit.grids and hit_exit.tracer is random_exit.tracer
+    assert hit_exit.hit_frames is random_exit.grids.hit_frames
 
 
 def test_a_miss_reads_as_no_patch():
@@ -263,26 +263,28 @@ def test_a_mixed_scene_traces_its_grids_beside_the_other_patches_triangles():
     assert front_share[0] > 0.5 and front_share[1] < 0.05
 
 
-@pytest.mark.parametrize("counted", [True, False])
-def test_a_walk_on_a_mixed_furnace_is_unbiased(counted, monkeypatch):
+@pytest.mark.parametrize("walk", ["counted", "sorted", "hit"])
+def test_a_walk_on_a_mixed_furnace_is_unbiased(walk, monkeypatch):
     """The mixed box without its card as a furnace (E = 1, R = 0.5: a closed box of uniform
-    emission and reflectivity has B = E / (1 - R) everywhere): a random exit traces its grids
-    and the triangle patches' own triangles, counting hits per patch (small scenes) or sorting
-    paths by patch, and every patch's reflected radiosity is E R / (1 - R) to within 5 of the
-    run's own batch standard errors (>= 32 batches; P(max |t| > 5) < 1e-3 over 160 patches)."""
+    emission and reflectivity has B = E / (1 - R) everywhere): walks trace its grids and the
+    triangle patches' own triangles, leaving from random points (counting hits per patch, as in
+    small scenes, or sorting paths by patch) or from hit points, and every patch's reflected
+    radiosity is E R / (1 - R) to within 5 of the run's own batch standard errors (>= 32
+    batches; P(max |t| > 5) < 1e-3 over 160 patches)."""
     from addon.core import PatchScene, solve
     from addon.core import estimators
 
     g = _mixed_box(n=4, card=False)
-    monkeypatch.setattr(estimators, "COUNTED_MAX_PATCHES", 1 << 12 if counted else 0)
+    monkeypatch.setattr(estimators, "COUNTED_MAX_PATCHES", 1 << 12 if walk == "counted" else 0)
+    exit_point = "hit" if walk == "hit" else "random"
     corners = g.triangle_corners.astype(np.float64).reshape(-1, 3)
     triangles = np.arange(corners.shape[0]).reshape(-1, 3)
     P = g.patch_count
     scene = PatchScene(corners, triangles, g.triangle_patch, np.full(P, 0.5), np.ones(P))
-    tables = WalkTables(scene, "finite", 1e-3, "random")
+    tables = WalkTables(scene, "finite", 1e-3, exit_point)
     assert tables.grids is not None and tables.grids.triangle_count < scene.geometry.triangle_count // 2
-    assert tables.counted == counted
-    result = solve(scene, "finite", paths=200_000, seed=5)
+    assert tables.counted == (walk == "counted")
+    result = solve(scene, "finite", paths=200_000, seed=5, exit_point=exit_point)
     assert result.chunks >= 32
     z = (result.reflected[:, 0] - 0.5 / (1 - 0.5)) / np.sqrt(result.reflected_variance[:, 0])
     assert np.abs(z).max() < 5.0, np.abs(z).max()

@@ -50,15 +50,18 @@ def test_facing_by_patch_normal_is_facing_by_triangle_normal(estimator):
     np.testing.assert_array_equal(a.incident, b.incident)
 
 
+@pytest.mark.parametrize("traced", ["triangles", "grids"])
 @pytest.mark.parametrize("classes", [False, True])
-def test_hit_points_keep_clear_of_edges(classes, monkeypatch):
+def test_hit_points_keep_clear_of_edges(classes, traced, monkeypatch):
     """A hit-point exit goes on from origin + t direction, except within the clearance of an
-    edge of the hit triangle, where it maps the hit's barycentric coordinates onto the
-    triangle's inset leaving frame. Rays aimed at points on and next to the edges (down to 0)
-    of a box turned off the axes: every point lies in its triangle's plane and at least the
-    edge inset inside each of its edges (float32 rounding would otherwise put some past the
-    edge, behind the adjacent wall), and points away from the edges are the hit points. With
-    classes (as in big scenes) the edge thresholds are read per patch class."""
+    edge of the triangle traced, where it maps the hit's barycentric coordinates onto the
+    triangle's inset leaving frame (on the grids, its rectangle's). Rays aimed at points on
+    and next to the edges (down to 0) of a box turned off the axes: every point lies in the
+    plane of what it hit and at least the edge inset inside each of its edges (the patch
+    triangle's, or on the grids the rectangle's: float32 rounding would otherwise put some
+    past the edge, behind the adjacent wall), and points away from the edges are the hit
+    points. With classes (as in big scenes) the triangles' edge thresholds are read per patch
+    class."""
     from addon.core import PatchScene, estimators
     from addon.core.scene import RELATIVE_EDGE_INSET
     from boxes import box_rectangles, rays_to_triangle_points, rectangles_to_mesh
@@ -68,29 +71,39 @@ def test_hit_points_keep_clear_of_edges(classes, monkeypatch):
     q, _ = np.linalg.qr(np.random.default_rng(5).normal(size=(3, 3)))
     scene = PatchScene((V - 0.5) @ q.T, T, TP, np.full(len(origin), 0.5), (face == 1).astype(float))
     g = scene.geometry
-    n = 40_000
-    # From near the box's centre (unit space: the origin) to points of its triangles, half of
-    # them on or next to an edge.
-    o, d, bary, target = rays_to_triangle_points(g, np.random.default_rng(8), n)
-    hit, bu, bv, t, ng = g.tracer.first_hit_barycentric(o, d)
-    front = (np.einsum("ij,ij->i", ng, d) < 0) & (hit >= 0)
-    assert front.all()
     if classes:
         monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
     tables = WalkTables(scene, "finite", 1e-3, "hit")
     assert (tables.patch_class is not None) == classes
+    assert tables.grids is not None and tables.grids.rectangles == 6
+    if traced == "triangles":
+        tables.grids, tables.tracer = None, g.tracer
+        tables.hit_frames, tables.edge_barycentric = g.exit_table, g.edge_barycentric
+    n = 40_000
+    # From near the box's centre (unit space: the origin) to points of its triangles, half of
+    # them on or next to an edge.
+    o, d, bary, target = rays_to_triangle_points(g, np.random.default_rng(8), n)
+    hit, bu, bv, t, ng = tables.tracer.first_hit_barycentric(o, d)
+    front = (np.einsum("ij,ij->i", ng, d) < 0) & (hit >= 0)
+    assert front.all()
     points = tables.hit_points(
-        np.ascontiguousarray(o.T), np.ascontiguousarray(d.T), t, hit, tables.hit_patches(hit), bu, bv, front
+        np.ascontiguousarray(o.T), np.ascontiguousarray(d.T), t, hit, tables.hit_patches(hit, bu, bv), bu, bv, front
     ).T.astype(np.float64)
 
-    c = g.triangle_corners[hit].astype(np.float64)
+    if traced == "triangles":
+        c = g.triangle_corners[hit].astype(np.float64)  # (n,3,3)
+    else:  # the rectangle: (c00, c_a, c11) and (c00, c11, c_b) -> (c00, c_a, c11, c_b)
+        grid = tables.grids.corners.astype(np.float64)
+        first = hit - hit % 2
+        c = np.stack([grid[first, 0], grid[first, 1], grid[first, 2], grid[first + 1, 2]], axis=1)
     normal = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
     normal /= np.linalg.norm(normal, axis=1)[:, None]
     assert np.abs(np.einsum("ij,ij->i", points - c[:, 0], normal)).max() < 1e-6  # in the plane
-    # Distance inside each edge (i, i+1): positive inside the triangle.
+    # Distance inside each edge (i, i+1): positive inside the triangle (rectangle).
     inside = []
-    for i in range(3):
-        a, b = c[:, i], c[:, (i + 1) % 3]
+    sides = c.shape[1]
+    for i in range(sides):
+        a, b = c[:, i], c[:, (i + 1) % sides]
         inward = np.cross(normal, b - a)
         inward /= np.linalg.norm(inward, axis=1)[:, None]
         inside.append(np.einsum("ij,ij->i", points - a, inward))
@@ -99,6 +112,15 @@ def test_hit_points_keep_clear_of_edges(classes, monkeypatch):
     away = bary.min(axis=1) > 1e-3
     assert away.sum() > n // 3
     assert np.abs(points[away] - target[away]).max() < 1e-6
+    # A remapped point moves from where the ray hit by at most the inset over the frame's
+    # shrink: 2 insets on a rectangle (d_a |A| + d_b |B|), on the box's right isosceles
+    # triangles (shrunk about the incentre) 2.61 insets; plus float32's rounding.
+    assert np.linalg.norm(points - target, axis=1).max() < 3 * RELATIVE_EDGE_INSET + 5e-7
+    if traced == "grids":
+        # Hits near the patches' own edges inside a rectangle are hit points too.
+        on_own_edge = (inside > 1e-3) & (bary.min(axis=1) < 1e-6)
+        assert on_own_edge.sum() > n // 20
+        assert np.abs(points[on_own_edge] - target[on_own_edge]).max() < 1e-6
 
 
 def test_walks_on_threads_take_turns_at_their_numpy_work(monkeypatch):
