@@ -126,7 +126,8 @@ def patch_grids(geometry):
         return None
     patch_corners = tuple(c[ok] for c in patch_corners)
     p, s1, s2, _ = patch_corners
-    group = _groups(p, s1 - p, s2 - p)
+    normal = geometry.patch_normal[merged]
+    group = _groups(p, s1 - p, s2 - p, normal)
     I, J, on_lattice = _lattice(p, s1 - p, s2 - p, group)
     group = _alone(group, ~on_lattice)
     rect = _rectangles(group, I, J)
@@ -150,7 +151,7 @@ def patch_grids(geometry):
     # (corner1 - corner0) x (corner2 - corner0), points like its patches' normals (the walk's
     # facing test reads it): where (c10 - c00) x (c01 - c00) does not, its axes are swapped
     # (the rectangle transposed: a patch's cell is first + j n_a + i).
-    normal = geometry.patch_normal[merged[rect.corner_patch[:, 0]]]
+    normal = normal[rect.corner_patch[:, 0]]
     turned = np.einsum("ij,ij->i", np.cross(c10 - c00, c01 - c00), normal) < 0
     end_a = np.where(turned[:, None], c01, c10)
     end_b = np.where(turned[:, None], c10, c01)
@@ -209,13 +210,17 @@ def _alone(group, mask):
     return np.where(mask, group.max() + 1 + np.arange(group.size), group)
 
 
-def _groups(p, a, b):
+def _groups(p, a, b, normal):
     """(P,) group of each patch: the same edges a, b and plane, each of their 7 coordinates
-    within GRID_QUANTUM of the next (clusters by gaps, which rounding to a grid would split)."""
+    within GRID_QUANTUM of the next (clusters by gaps, which rounding to a grid would split),
+    and the same side of the plane in front (``normal``, the patches' normals: two patches
+    with the same corners in the same order may face opposite ways, where their triangles
+    start at different corners, and a grid has one front)."""
     m = np.cross(a, b)
     m /= np.linalg.norm(m, axis=1)[:, None]
     offset = np.einsum("ij,ij->i", m, p)
-    key = np.column_stack([_clusters(x, GRID_QUANTUM) for x in (*a.T, *b.T, offset)])
+    front = np.einsum("ij,ij->i", m, normal) > 0
+    key = np.column_stack([_clusters(x, GRID_QUANTUM) for x in (*a.T, *b.T, offset)] + [front])
     order = np.lexsort(key.T[::-1])
     new = np.ones(key.shape[0], dtype=bool)
     new[1:] = (key[order[1:]] != key[order[:-1]]).any(axis=1)

@@ -312,8 +312,8 @@ class Geometry:
     @cached_property
     def patch_grids(self):
         """The parallelogram patches merged into the grids they tile, with the other patches'
-        own triangles (:mod:`.patch_grids`), which walks leaving from random points trace
-        instead of the triangles; None where that would save too few triangles."""
+        own triangles (:mod:`.patch_grids`), which walks trace instead of the triangles; None
+        where that would save too few triangles."""
         from .patch_grids import patch_grids
 
         return patch_grids(self)

@@ -123,7 +123,7 @@ def test_an_uneven_grid_is_traced_as_its_patches():
     origin, u, v, cell = _plane_grid(6, 5, column_shift=(3, shift))
     g = _geometry(origin, u, v)
     _, _, (p, s1, s2, _) = parallelogram_corners(g.triangle_corners, g.patch_first_triangle, g.patch_triangle_count)
-    assert np.unique(PG._groups(p, s1 - p, s2 - p)).size == 1  # the corner check tells them apart
+    assert np.unique(PG._groups(p, s1 - p, s2 - p, g.patch_normal)).size == 1  # the corner check tells them apart
     assert _grids_of(g) is None  # every patch alone: nothing saved
     saved = PG.CORNER_TOLERANCE
     try:
@@ -288,3 +288,33 @@ def test_a_walk_on_a_mixed_furnace_is_unbiased(walk, monkeypatch):
     assert result.chunks >= 32
     z = (result.reflected[:, 0] - 0.5 / (1 - 0.5)) / np.sqrt(result.reflected_variance[:, 0])
     assert np.abs(z).max() < 5.0, np.abs(z).max()
+
+
+def test_patches_facing_the_other_way_are_not_in_their_neighbours_grid():
+    """A 6 x 4 grid whose first three columns face down (their triangles start at another corner,
+    so their corners p, s1, s2 are the same vectors as their neighbours'): two rectangles, one
+    facing each way, and rays from above and from below meet the side the patches' own
+    triangles say, by the sign of Embree's normal of the grids."""
+    origin, u, v, cell = _plane_grid(6, 4)
+    V, T, TP = rectangles_to_mesh(origin, u, v)  # (0,1,2), (0,2,3) per patch: normal u x v = +z
+    T = T.reshape(-1, 2, 3)
+    down = cell[:, 0] < 3
+    quad = 4 * np.arange(len(origin))[down, None]
+    T[down] = np.stack([quad + [1, 0, 2], quad + [0, 3, 2]], axis=1)  # normal -z, same p, s1, s2
+    g = build_geometry(V, T.reshape(-1, 3), TP, len(origin))
+    np.testing.assert_array_equal(g.patch_normal[:, 2], np.where(down, -1.0, 1.0))
+    _, _, (p, s1, s2, _) = parallelogram_corners(g.triangle_corners, g.patch_first_triangle, g.patch_triangle_count)
+    assert np.unique(np.round(np.hstack([s1 - p, s2 - p]), 6), axis=0).shape[0] == 1  # one shape
+    grids = _grids_of(g)
+    assert grids.rectangles == 2
+    rng = np.random.default_rng(4)
+    k = np.repeat(cell, 20, axis=0)
+    points = np.column_stack([k + rng.uniform(0.01, 0.99, k.shape), np.zeros(len(k))])
+    o, d = _down_onto(points, g)
+    for origins, directions in ((o, d), (o - 2 * (o - ((points - g.centre) / g.diagonal).astype(np.float32)), -d)):
+        hit = g.tracer.first_hit(origins, directions)
+        triangle, bu, bv, _, normal = grids.tracer.first_hit_barycentric(origins, directions)
+        np.testing.assert_array_equal(grids.hit_patches(triangle, bu, bv), g.triangle_patch[hit])
+        front = np.einsum("ij,ij->i", directions, g.triangle_normal[hit]) < 0
+        np.testing.assert_array_equal(np.einsum("ij,ij->i", directions, normal) < 0, front)
+        assert 0.4 < front.mean() < 0.6
