@@ -149,8 +149,6 @@ class WalkTables:
             classes = _patch_classes(self.geometry, self.mean_reflectivity)
             if classes is not None:
                 self.patch_class, self.class_shape, self.class_mean_reflectivity, class_shape_index = classes
-                # (the hit-point exit's edge thresholds, one per shape: Geometry.edge_barycentric)
-                self.class_edge_barycentric = self.geometry.shape_edge_barycentric[class_shape_index]
                 self.class_normals = np.ascontiguousarray(self.class_shape[6:9])
                 self.leave_corners = self.leave_table[0:3]  # contiguous: the table's first rows
         # The patch of a hit triangle: in a scene of parallelograms the triangles come in pairs,
@@ -166,10 +164,15 @@ class WalkTables:
         self.tracer = self.geometry.tracer if self.grids is None else self.grids.tracer
         if not self.geometry.all_parallelograms:
             self.exit_table = self.geometry.exit_table
+        # A hit-point exit's edge thresholds and the frames a hit near an edge of the triangle
+        # traced is mapped onto (hit_points); on the patches' triangles with patch classes, the
+        # thresholds are read per class (one per shape: Geometry.edge_barycentric).
+        self.class_edge_barycentric = None
         if not self.exit_random:
-            # What a hit near an edge of the triangle traced is mapped onto (hit_points).
             if self.grids is None:
                 self.hit_frames, self.edge_barycentric = self.geometry.exit_table, self.geometry.edge_barycentric
+                if self.patch_class is not None:
+                    self.class_edge_barycentric = self.geometry.shape_edge_barycentric[class_shape_index]
             else:
                 self.hit_frames, self.edge_barycentric = self.grids.hit_frames, self.grids.edge_barycentric
         # The facing test of a ray leaving from a random point where the walk traces the
@@ -278,7 +281,7 @@ class WalkTables:
         origins += directions
         nearest = np.minimum(u, v)
         np.minimum(nearest, 1 - u - v, out=nearest)
-        if self.patch_class is not None and self.grids is None:
+        if self.class_edge_barycentric is not None:
             # (a random gather from a small table, not from one of T triangles: the tables a
             # step reads between ray casts stay small, see CLASSES_MIN_PATCHES)
             hit_class = self._class_of(hit_patch)

@@ -73,12 +73,13 @@ def test_hit_points_keep_clear_of_edges(classes, traced, monkeypatch):
     g = scene.geometry
     if classes:
         monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
+    assert g.patch_grids is not None and g.patch_grids.rectangles == 6
+    if traced == "triangles":
+        g.__dict__["patch_grids"] = None  # (the cached grids: as if the patches tiled none)
     tables = WalkTables(scene, "finite", 1e-3, "hit")
     assert (tables.patch_class is not None) == classes
-    assert tables.grids is not None and tables.grids.rectangles == 6
-    if traced == "triangles":
-        tables.grids, tables.tracer = None, g.tracer
-        tables.hit_frames, tables.edge_barycentric = g.exit_table, g.edge_barycentric
+    assert (tables.grids is None) == (traced == "triangles")
+    assert (tables.class_edge_barycentric is not None) == (classes and traced == "triangles")
     n = 40_000
     # From near the box's centre (unit space: the origin) to points of its triangles, half of
     # them on or next to an edge.
