@@ -163,10 +163,10 @@ def paired_ratio(scene, estimator, threads, seconds, rounds=5, **kw):
     # For scale: Embree on the patches' triangles (where the walk traces grids).
     raw_triangles = raw_rate(scene, threads, seconds / 4)[0] if tracer is not scene.tracer else np.nan
     return {
-        "own_rays_on_triangles_factor": own_on_triangles,
         "traced_triangles": tracer.triangle_count,
         "raw_triangles": float(raw_triangles),
         "own_rays_factor": own,
+        "own_rays_on_triangles_factor": own_on_triangles,
         "raw": float(np.median(raws[:, 0])),
         "solve": float(np.median(rates[:, 0])),
         "ratio": float(np.median(ratios[:, 0])),
