@@ -594,7 +594,9 @@ def _walk_paths(tables, sizes, rng, abort=None):
         if finite:
             survive = u_survive < tables.mean_reflectivity_at(patch)
             go_on = np.flatnonzero(survive)
-            ended["absorbed"] += count(~survive) if grouped else int(survive.size - go_on.size)
+            # The absorbed are the hit paths that do not go on, counted per chunk below from
+            # the chunks' runs (two searches a chunk, not a pass over the paths).
+            hit_count = _chunk_counts(chunk, G) if grouped else patch.size
         else:
             # New arrays, never in place: the weights just scored may be a view of ``accumulated``.
             accumulated = accumulated * tables.mean_reflectivity_at(patch)
@@ -618,6 +620,7 @@ def _walk_paths(tables, sizes, rng, abort=None):
             if not exit_random:
                 points = points.take(go_on, axis=1, mode="wrap")
         if finite:
+            ended["absorbed"] += hit_count - (_chunk_counts(chunk, G) if grouped else patch.size)
             if weights is not None:
                 weights *= tables.survivor_weight.take(patch, axis=1, mode="wrap")
             absorbed += arriving - per_chunk(weights)
