@@ -16,6 +16,8 @@ Machines here are shared and noisy, so only the ratio of the two is meaningful.
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import platform
 import sys
 import threading
@@ -138,27 +140,68 @@ def solve_rate(scene, estimator, threads, paths, seed=1, **kw):
     return r.rays / r.seconds, r.rays / cpu
 
 
-def paired_ratio(scene, estimator, threads, seconds, rounds=5, **kw):
+def stolen_seconds():
+    """CPU time the hypervisor has given to other guests while this machine's CPUs had work
+    (/proc/stat's steal, summed over CPUs), or NaN where the system does not say."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return math.nan
+
+
+def _with_steal(measure, threads):
+    """``measure()``'s result and the share of its ``threads`` CPUs' wall time stolen meanwhile."""
+    stolen, start = stolen_seconds(), time.perf_counter()
+    result = measure()
+    return result, (stolen_seconds() - stolen) / (threads * (time.perf_counter() - start))
+
+
+def is_quiet(stolen_shares, quiet_steal=0.02):
+    """Whether a round's measurements each lost at most ``quiet_steal`` of their CPU time to
+    other guests (True where steal cannot be read: NaN)."""
+    shares = np.asarray(stolen_shares, dtype=float)
+    return bool(np.isnan(shares).any() or (shares <= quiet_steal).all())
+
+
+def paired_ratio(scene, estimator, threads, seconds, rounds=5, max_rounds=12, quiet_steal=0.02, **kw):
     """Raw and end-to-end rates measured in alternation, so both see the same machine load:
     each round brackets one solve between two raw measurements and takes the solve's rate over
     their mean. Each solve runs the paths that would take about ``seconds`` at the raw rate.
-    Returns the medians of the raw and solve rates, and the median, lowest and highest per-round
-    ratio, by wall clock and per CPU second."""
+
+    The machines here are virtual, and their hypervisor lends the CPUs to other guests at
+    times (steal time). A stolen CPU hurts a 2-thread solve more than Embree alone: a walk
+    stalled while it holds the numpy turn stalls the other thread too, where Embree's
+    threads go on alone. A round is *quiet* when at most ``quiet_steal`` of its CPUs' time
+    was stolen during each of its three measurements; rounds run until ``rounds`` are quiet
+    (or ``max_rounds`` have run), and the medians are the quiet rounds' (every round's if
+    fewer than 3 are quiet, or where steal cannot be read).
+    Returns the medians of the raw and solve rates, the median, lowest and highest per-round
+    ratio, by wall clock and per CPU second, and the quiet and all rounds' counts."""
     p = predict(scene, estimator, threshold=kw.get("threshold", 1e-3))
     solve(scene, estimator, paths=20_000, threads=threads, **kw)  # warm up
     tracer = walk_tracer(scene, kw.get("exit_point", "random"))
-    raws, rates, ratios = [], [], []
-    before = np.array(raw_rate(scene, threads, seconds / 4, tracer=tracer))
-    for k in range(rounds):
+
+    def raw_now():
+        return _with_steal(lambda: np.array(raw_rate(scene, threads, seconds / 4, tracer=tracer)), threads)
+
+    raws, rates, ratios, quiet = [], [], [], []
+    before, before_steal = raw_now()
+    while len(raws) < max_rounds and sum(quiet) < rounds:
         paths = max(1, int(before[0] * seconds / p.expected_path_length))
-        rate = np.array(solve_rate(scene, estimator, threads, paths, seed=k + 1, **kw))
-        after = np.array(raw_rate(scene, threads, seconds / 4, tracer=tracer))
+        rate, solve_steal = _with_steal(
+            lambda: np.array(solve_rate(scene, estimator, threads, paths, seed=len(raws) + 1, **kw)), threads)
+        after, after_steal = raw_now()
         raw = (before + after) / 2  # columns: wall-clock rate, CPU-time rate
         raws.append(raw)
         rates.append(rate)
         ratios.append(rate / raw)
-        before = after
+        quiet.append(is_quiet((before_steal, solve_steal, after_steal), quiet_steal))
+        before, before_steal = after, after_steal
     raws, rates, ratios = np.array(raws), np.array(rates), np.array(ratios)
+    pick = np.array(quiet) if sum(quiet) >= 3 else np.ones(len(quiet), dtype=bool)
+    raws, rates, ratios = raws[pick], rates[pick], ratios[pick]
     own, own_on_triangles = own_rays_factor(scene, estimator, threads, paths, **kw)
     # For scale: Embree on the patches' triangles (where the walk traces grids).
     raw_triangles = raw_rate(scene, threads, seconds / 4)[0] if tracer is not scene.tracer else np.nan
@@ -173,6 +216,8 @@ def paired_ratio(scene, estimator, threads, seconds, rounds=5, **kw):
         "ratio_low": float(ratios[:, 0].min()),
         "ratio_high": float(ratios[:, 0].max()),
         "cpu_ratio": float(np.median(ratios[:, 1])),
+        "quiet_rounds": int(sum(quiet)),
+        "rounds": len(quiet),
     }
 
 
@@ -477,11 +522,13 @@ def main(argv=None):
                     row = (name, scene.triangle_count, m["traced_triangles"], threads, estimator, exit_point,
                            m["raw"] / 1e6, m["solve"] / 1e6, m["ratio"], m["ratio_low"], m["ratio_high"], m["cpu_ratio"],
                            m["own_rays_factor"], m["ratio"] / m["own_rays_factor"], m["raw_triangles"] / 1e6,
-                           m["solve"] / m["raw_triangles"], m["ratio"] / m["own_rays_on_triangles_factor"])
+                           m["solve"] / m["raw_triangles"], m["ratio"] / m["own_rays_on_triangles_factor"],
+                           m["quiet_rounds"], m["rounds"])
                     rows.append(row)
                     print("{:10s} {:7d} tris ({} traced)  {} thr  {:16s} {:6s}  raw {:6.2f} Mray/s  solve {:6.2f} Mray/s  "
                           "ratio {:.2f} ({:.2f}-{:.2f})  (per CPU second {:.2f})  own rays x{:.2f}: {:.2f}  "
-                          "raw on the patch triangles {:.2f}: x{:.2f}, own rays there: {:.2f}".format(*row),
+                          "raw on the patch triangles {:.2f}: x{:.2f}, own rays there: {:.2f}  "
+                          "({} of {} rounds quiet)".format(*row),
                           flush=True)
     lines = [
         "# Throughput: solve() against Embree's raw ray rate",
@@ -490,9 +537,15 @@ def main(argv=None):
         f"`python -m benchmarks.throughput {' '.join(sys.argv[1:])}`.",
         "Raw: embreex alone (first hits) on pre-drawn rays of the same kind over the same threads, on the scene the "
         "solve traces: the patches' grids, two triangles each, where the patches tile them, beside the other "
-        "patches' own triangles (*traced*; addon/core/patch_grids.py). Each of 5 rounds brackets one solve between two raw measurements, so both see the same load; the "
-        "ratio is the median of the per-round ratios, with the lowest and highest round beside it (the spread is the "
-        "machine's noise: these machines are shared).",
+        "patches' own triangles (*traced*; addon/core/patch_grids.py). Each round brackets one solve between two raw "
+        "measurements, so both see the same load; the ratio is the median of the per-round ratios, with the lowest "
+        "and highest round beside it (the spread is the machine's noise: these machines are shared).",
+        "",
+        "These machines are virtual: at times their hypervisor gives the CPUs to other guests (steal time, "
+        "/proc/stat). A stolen CPU costs a 2-thread solve more than Embree alone, since a walk stalled while it holds "
+        "the numpy turn stalls the other thread too. A round is *quiet* when at most 2% of its CPUs' time was stolen "
+        "during each of its three measurements. Rounds run until 5 are quiet, or 12 have run; the medians are over "
+        "the quiet rounds (over all, where fewer than 3 were quiet). *Rounds* gives how many were quiet of how many ran.",
         "",
         "The ratio per CPU second divides rays by the process's CPU time instead of wall time: it is",
         "immune to other processes taking the processor, but not to their use of caches and memory,",
@@ -517,9 +570,9 @@ def main(argv=None):
         "|---|---:|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
-        lines.append("| {} | {} | {} | {} | {} | {} | {:.2f} | {:.2f} | **{:.2f}** | {:.2f}–{:.2f} | {:.2f} | x{:.2f} "
-                     "| {:.2f} ".format(*r[:14])
-                     + ("| – | – | – |" if np.isnan(r[14]) else "| {:.2f} | x{:.2f} | x{:.2f} |".format(*r[14:])))
+        lines.append("| {} | {} | {} | {} | {} | {} | {:.2f} | {:.2f} | **{:.2f}** | {:.2f}–{:.2f} ({}/{} quiet) | {:.2f} | x{:.2f} "
+                     "| {:.2f} ".format(*r[:11], *r[17:19], *r[11:14])
+                     + ("| – | – | – |" if np.isnan(r[14]) else "| {:.2f} | x{:.2f} | x{:.2f} |".format(*r[14:17])))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")

@@ -55,3 +55,15 @@ def test_replay_without_pause_traces_back_to_back():
     assert len(calls) == 4
     assert np.isnan(lines_a_ray)  # no counters: NaN, as the breakdown prints n/a
     assert 2000 / rate >= 0.0035
+
+
+def test_steal_is_read_and_a_round_is_quiet_only_when_each_measurement_lost_little():
+    from benchmarks.throughput import is_quiet, stolen_seconds
+
+    first = stolen_seconds()
+    second = stolen_seconds()
+    assert np.isnan(first) or 0 <= first <= second  # a counter since boot (NaN off Linux)
+    assert is_quiet((0.0, 0.02, 0.004))
+    assert not is_quiet((0.0, 0.021, 0.0))  # the solve lost more than 2%
+    assert not is_quiet((0.05, 0.0, 0.0), quiet_steal=0.01)
+    assert is_quiet((np.nan, np.nan, np.nan))  # unreadable: every round counts
