@@ -512,24 +512,36 @@ def main(argv=None):
         return write_breakdown(args)
     if args.short:
         return write_short(args)
-    rows = []
+    def case_row(name, scene, threads, estimator, exit_point, kw):
+        m = paired_ratio(scene, estimator, threads, args.seconds, exit_point=exit_point, **kw)
+        row = (name, scene.triangle_count, m["traced_triangles"], threads, estimator, exit_point,
+               m["raw"] / 1e6, m["solve"] / 1e6, m["ratio"], m["ratio_low"], m["ratio_high"], m["cpu_ratio"],
+               m["own_rays_factor"], m["ratio"] / m["own_rays_factor"], m["raw_triangles"] / 1e6,
+               m["solve"] / m["raw_triangles"], m["ratio"] / m["own_rays_on_triangles_factor"],
+               m["quiet_rounds"], m["rounds"])
+        print("{:10s} {:7d} tris ({} traced)  {} thr  {:16s} {:6s}  raw {:6.2f} Mray/s  solve {:6.2f} Mray/s  "
+              "ratio {:.2f} ({:.2f}-{:.2f})  (per CPU second {:.2f})  own rays x{:.2f}: {:.2f}  "
+              "raw on the patch triangles {:.2f}: x{:.2f}, own rays there: {:.2f}  "
+              "({} of {} rounds quiet)".format(*row),
+              flush=True)
+        return row
+
+    rows, cases = [], []
     for name in args.scene:
         scene = build_scene(name)
         for threads in args.threads:
             for estimator, kw in (("finite", {}), ("biased_infinite", {"threshold": 1e-3})):
                 for exit_point in ("random", "hit"):
-                    m = paired_ratio(scene, estimator, threads, args.seconds, exit_point=exit_point, **kw)
-                    row = (name, scene.triangle_count, m["traced_triangles"], threads, estimator, exit_point,
-                           m["raw"] / 1e6, m["solve"] / 1e6, m["ratio"], m["ratio_low"], m["ratio_high"], m["cpu_ratio"],
-                           m["own_rays_factor"], m["ratio"] / m["own_rays_factor"], m["raw_triangles"] / 1e6,
-                           m["solve"] / m["raw_triangles"], m["ratio"] / m["own_rays_on_triangles_factor"],
-                           m["quiet_rounds"], m["rounds"])
-                    rows.append(row)
-                    print("{:10s} {:7d} tris ({} traced)  {} thr  {:16s} {:6s}  raw {:6.2f} Mray/s  solve {:6.2f} Mray/s  "
-                          "ratio {:.2f} ({:.2f}-{:.2f})  (per CPU second {:.2f})  own rays x{:.2f}: {:.2f}  "
-                          "raw on the patch triangles {:.2f}: x{:.2f}, own rays there: {:.2f}  "
-                          "({} of {} rounds quiet)".format(*row),
-                          flush=True)
+                    cases.append((name, scene, threads, estimator, exit_point, kw))
+                    rows.append(case_row(*cases[-1]))
+    # A case that met a noisy spell (fewer than 3 quiet rounds) runs once more at the end; the
+    # table keeps the run with more quiet rounds.
+    for k, case in enumerate(cases):
+        if rows[k][-2] < 3:
+            print("again, fewer than 3 rounds were quiet:", flush=True)
+            again = case_row(*case)
+            if again[-2] > rows[k][-2]:
+                rows[k] = again
     lines = [
         "# Throughput: solve() against Embree's raw ray rate",
         "",
@@ -545,7 +557,9 @@ def main(argv=None):
         "/proc/stat). A stolen CPU costs a 2-thread solve more than Embree alone, since a walk stalled while it holds "
         "the numpy turn stalls the other thread too. A round is *quiet* when at most 2% of its CPUs' time was stolen "
         "during each of its three measurements. Rounds run until 5 are quiet, or 12 have run; the medians are over "
-        "the quiet rounds (over all, where fewer than 3 were quiet). *Rounds* gives how many were quiet of how many ran.",
+        "the quiet rounds (over all, where fewer than 3 were quiet). *Rounds* gives how many were quiet of how many ran. "
+        "A case with fewer than 3 quiet rounds runs once more after the others, and the table keeps the run with "
+        "more quiet rounds.",
         "",
         "The ratio per CPU second divides rays by the process's CPU time instead of wall time: it is",
         "immune to other processes taking the processor, but not to their use of caches and memory,",
