@@ -512,6 +512,7 @@ def main(argv=None):
         return write_breakdown(args)
     if args.short:
         return write_short(args)
+
     def case_row(name, scene, threads, estimator, exit_point, kw):
         m = paired_ratio(scene, estimator, threads, args.seconds, exit_point=exit_point, **kw)
         row = (name, scene.triangle_count, m["traced_triangles"], threads, estimator, exit_point,
