@@ -173,7 +173,7 @@ def degenerate_area(objects) -> float:
     area or less are dropped by the core (RELATIVE_DEGENERATE_AREA x the squared diagonal of the
     vertices the triangles use). The meshing gets it too, so that the faces it cuts into
     triangles (non-planar ones) never make a patch of dropped triangles only."""
-    from .core.scene import RELATIVE_DEGENERATE_AREA
+    from .core import RELATIVE_DEGENERATE_AREA
 
     used = [o.vertices[np.unique(o.triangles)] for o in objects if len(o.triangles)]
     if not used:

@@ -250,7 +250,7 @@ def finite_length_model(reflectivity, area, first_hit):
 
 def path_length_analysis(scene, threshold, threads=None, first_hit_paths=2_000_000):
     """Mean rays per path, from the formulas to what the rooms' walks see (grey scenes)."""
-    R = scene.mean_reflectivity
+    R = scene.grey_reflectivity
     area = scene.patch_area
     r_ave = float(np.sum(area * R) / area.sum())
     positive = R > 0
@@ -278,7 +278,7 @@ def formula1_infinite_per_path(scene, paths=4_000_000, seed=41, threads=None):
     relative difference / 2, an estimate of the value's relative standard error)."""
     from addon.core import solve
 
-    R = scene.mean_reflectivity
+    R = scene.grey_reflectivity
     squared = scene.with_materials(R**2, scene.emission.mean(axis=1))
     sums = [float(solve(squared, "finite", paths=int(paths) // 2, seed=seed + k, threads=threads,
                         **paper_sampling()).reflected.mean(axis=1).sum()) for k in range(2)]

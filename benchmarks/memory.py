@@ -65,7 +65,7 @@ def child(paths, threads, use_tracemalloc, scene_name):
     out["after_scene"] = peak_rss()
     # The Embree scene the solve traces, built once per geometry: the default walk's, the
     # patches' grids (addon/core/patch_grids.py); the patches' triangles are not built.
-    from addon.core.estimators import WalkTables
+    from addon.core.tables import WalkTables
 
     out["traced_triangles"] = WalkTables(scene, "finite", 1e-3, "random").tracer.triangle_count
     out["after_bvh"] = peak_rss()

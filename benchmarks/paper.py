@@ -204,7 +204,7 @@ def run_fig12(c, threads, out):
 def formula1_per_path(scene, B_ref):
     """Formula (1) before the paper's averaging: Phi_T / A_T * sum_i b_i R_i, with b from a reference."""
     b = (np.asarray(B_ref) - scene.emission).mean(axis=1)
-    return float(scene.total_power / scene.total_area * np.sum(b * scene.mean_reflectivity))
+    return float(scene.total_power / scene.total_area * np.sum(b * scene.grey_reflectivity))
 
 
 def write_fig12(res, out):
@@ -541,7 +541,7 @@ def run_cornell(c, threads, out):
     # formulas are for grey scenes; formula (2)/(3) gives the same prediction for both).
     from addon.core import solve
 
-    grey = sample.scene.with_materials(sample.scene.mean_reflectivity, sample.scene.emission.mean(axis=1))
+    grey = sample.scene.with_materials(sample.scene.grey_reflectivity, sample.scene.emission.mean(axis=1))
     res["colour_vs_grey"] = {}
     for name, sc in (("colour", sample.scene), ("grey", grey)):
         for est, key in (("finite", "finite"), ("biased_infinite", "biased")):

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from addon.core import predict, solve
+from addon.core import Speedups, predict, solve
 from addon.core.sampling import cosine_directions, points_on_patches
 
 RESULTS = Path(__file__).parent / "results"
@@ -46,7 +46,7 @@ def sample_rays(scene, count, seed=0):
 def walk_tracer(scene, exit_point="random"):
     """The Embree scene a walk traces: the patches' grids where the scene has them
     (addon/core/patch_grids.py), else the patches' triangles."""
-    from addon.core.estimators import WalkTables
+    from addon.core.tables import WalkTables
 
     return WalkTables(scene, "finite", 1e-3, exit_point).tracer
 
@@ -237,7 +237,8 @@ def breakdown(scene, estimator, rounds=4, **kw):
     host's other cores use the shared cache meanwhile), not what the numpy work reads. Where
     the processor's counters can be read (``benchmarks.counters``), also the lines Embree
     fetches from memory a ray: inside the walk, back to back and after pauses; else NaN."""
-    from addon.core.estimators import WalkTables, walk_chunk
+    from addon.core.tables import WalkTables
+    from addon.core.walk import walk_chunk
     from addon.core.solver import chunk_paths_for
 
     from .counters import Counters
@@ -333,15 +334,14 @@ SHORT_PATHS = (30_000, 100_000, 300_000, 1_000_000, 3_000_000)
 def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
     """The default estimator's ratio to the raw rate in short runs, whose chunks are small (a
     run makes at least solver.MIN_CHUNKS of them): with small chunks traced in groups
-    (estimators.walk_chunks, the default) and one by one (solver.GROUP_MAX_CHUNKS = 1, as
+    (walk.walk_chunks, the default) and one by one (Speedups(grouped_chunks=False), as
     before groups). Each round brackets one solve of each kind, in alternating order, between
     two raw measurements. Returns {paths: (ratio grouped, ratio one by one, seconds grouped,
     chunks per group)}, medians over the rounds."""
     from addon.core import solver
-    from addon.core.estimators import WalkTables
+    from addon.core.tables import WalkTables
 
     solve(scene, "finite", paths=20_000, threads=threads)  # warm up
-    most = solver.GROUP_MAX_CHUNKS
     length = predict(scene, "finite").expected_path_length
     tables = WalkTables(scene, "finite", 1e-3, "random")
     out = {}
@@ -353,11 +353,7 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
         for k in range(rounds):
             rates = {}
             for grouped in ((True, False) if k % 2 == 0 else (False, True)):
-                solver.GROUP_MAX_CHUNKS = most if grouped else 1
-                try:
-                    r = solve(scene, "finite", paths=paths, threads=threads, seed=k)
-                finally:
-                    solver.GROUP_MAX_CHUNKS = most
+                r = solve(scene, "finite", paths=paths, threads=threads, seed=k, speedups=Speedups(grouped_chunks=grouped))
                 rates[grouped] = r.rays / r.seconds
                 if grouped:
                     seconds.append(r.seconds)
@@ -389,8 +385,8 @@ def write_short(args):
         "",
         "A run of N paths makes at least 32 chunks (the batch error estimate wants them), so short runs have",
         "small chunks, and a chunk ends in steps of few rays each. Small chunks are traced up to 16 at a",
-        "time as one wavefront (`estimators.walk_chunks`, each path tagged with its chunk); *one by one* is",
-        "the same solve with `solver.GROUP_MAX_CHUNKS = 1`, as before groups. Ratio: rays per second of the",
+        "time as one wavefront (`walk.walk_chunks`, each path tagged with its chunk); *one by one* is",
+        "the same solve with `Speedups(grouped_chunks=False)`, as before groups. Ratio: rays per second of the",
         "whole solve (tables, threads, walks, sums) over embreex's raw rate on pre-drawn rays, bracketing",
         "each round; medians of 5 rounds. The Cornell box is coloured (its walk carries weights); the others",
         "are grey. Where a group is 1 chunk, both columns run the same code: their difference is the",

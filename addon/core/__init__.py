@@ -10,9 +10,11 @@ the biased infinite one, with the paper's heuristic MSE formulas (2), (3) and th
 efficiency (4).
 """
 from .error_model import Prediction, mse_to_relative_rms, predict, relative_rms_to_mse
-from .estimators import BIASED_INFINITE, FINITE
-from .scene import PatchError, PatchScene
+from .names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE
+from .scene import PatchScene
 from .solver import SolveResult, solve
+from .speedups import Speedups
+from .validation import RELATIVE_DEGENERATE_AREA, PatchError
 
 __all__ = [
     "PatchScene",
@@ -23,6 +25,10 @@ __all__ = [
     "SolveResult",
     "relative_rms_to_mse",
     "mse_to_relative_rms",
+    "Speedups",
     "FINITE",
     "BIASED_INFINITE",
+    "EXIT_RANDOM",
+    "EXIT_HIT",
+    "RELATIVE_DEGENERATE_AREA",
 ]

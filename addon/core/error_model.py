@@ -15,11 +15,11 @@ area-weighted mean over patches of the squared error of B, averaged over channel
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .estimators import BIASED_INFINITE, ESTIMATORS, FINITE
+from .names import BIASED_INFINITE, ESTIMATORS, FINITE
 
 
 def mse_scale(Phi_T, A_T, A_ave):
@@ -153,8 +153,6 @@ def predict(scene, estimator=FINITE, *, target_mse=None, threshold=1e-3, paths=N
     n = paths if paths is not None else (prediction.paths_for(target_mse) if target_mse is not None else None)
     if n is None:
         return prediction
-    from dataclasses import replace
-
     return replace(prediction, paths=n, expected_rays=n * length, predicted_mse=prediction.mse_for(n))
 
 

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .scene import RELATIVE_DEGENERATE_AREA
+from .validation import RELATIVE_DEGENERATE_AREA
 
 __all__ = [
     "PatchMesh",

@@ -30,6 +30,9 @@ from functools import cached_property
 
 import numpy as np
 
+from .frames import RELATIVE_EDGE_INSET, edge_barycentric, parallelogram_corners
+from .raytrace import RayTracer
+
 # Unit space (the scene's diagonal is 1): patch edges and plane offsets that agree to within
 # this (from one patch to the next, in sorted order) are taken as equal when patches are
 # grouped; a group is then checked corner by corner.
@@ -102,18 +105,14 @@ class PatchGrids:
     @cached_property
     def tracer(self):
         """The Embree scene of the grids' triangles, built on first use."""
-        from .raytrace import RayTracer
-
         return RayTracer(self.corners)
 
 
 def patch_grids(geometry):
     """The grids of a scene's parallelogram patches, with every other patch's own triangles
     (a grid of one cell each), or None where they would not take at most MAX_TRIANGLE_FRACTION
-    of the scene's triangles. ``geometry`` is a :class:`.scene.Geometry` (triangles sorted by
+    of the scene's triangles. ``geometry`` is a :class:`.geometry.Geometry` (triangles sorted by
     patch)."""
-    from .scene import RELATIVE_EDGE_INSET, edge_barycentric, parallelogram_corners
-
     P, T = geometry.patch_count, geometry.triangle_count
     if P == 0 or P >= MAX_CELLS:
         return None

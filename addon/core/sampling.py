@@ -233,3 +233,39 @@ def add_sphere_points(rows, u1, u2):
     rows[1] += term
     rows[2] += z
     return rows
+
+
+def draw_sources(sources, sizes, rng, stratified=False):
+    """Every path's source for chunks of ``sizes`` paths, each chunk's drawn for it alone (a
+    sample may come out grouped by source): (source, its chunk or None for one chunk, the
+    stratified first rays' uniforms or None)."""
+    first_uniforms = None
+    if stratified:
+        drawn = [sources.stratified(n, rng) for n in sizes]
+        source = np.concatenate([d[0] for d in drawn])
+        first_uniforms = np.concatenate([d[1] for d in drawn], axis=1)
+    else:
+        source = np.concatenate([sources.sample(n, rng) for n in sizes])
+    source_chunk = np.repeat(np.arange(len(sizes), dtype=np.int32), sizes) if len(sizes) > 1 else None
+    return source, source_chunk, first_uniforms
+
+
+class SourceRuns:
+    """The sources of chunks of ``sizes`` paths drawn as counts per source (the same numbers
+    ``draw_sources`` draws when every chunk's source table draws counts): the chunk-ordered
+    paths come in runs, one per chunk and source, and a wavefront takes them in order."""
+
+    def __init__(self, sources, sizes, rng):
+        counts = np.concatenate([sources.counts(n, rng) for n in sizes])
+        self.end = np.cumsum(counts)
+        self.start = self.end - counts
+        self.chunk = np.repeat(np.arange(len(sizes)), sources.patches.size)
+        self.patch = np.tile(sources.patches, len(sizes))
+
+    def add_window(self, live, first, last):
+        """Adds paths ``first`` to ``last`` (exclusive) to the (chunks, patches) counts ``live``:
+        from each run overlapping them, as many as overlap (O(runs overlapping), not O(paths))."""
+        i = np.searchsorted(self.end, first, side="right")
+        j = np.searchsorted(self.start, last, side="left")
+        overlap = np.minimum(self.end[i:j], last) - np.maximum(self.start[i:j], first)
+        live[self.chunk[i:j], self.patch[i:j]] += overlap  # one run per chunk and source

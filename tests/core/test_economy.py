@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from addon.core import solve
-from addon.core.estimators import WalkTables, walk_chunk
+from addon.core.tables import WalkTables
+from addon.core.walk import walk_chunk
 from boxes import box_scene
 
 

@@ -6,7 +6,7 @@ card that rays hit from behind (absorbed there: radiosity leaves only the front 
 import numpy as np
 import pytest
 
-from addon.core import PatchScene, solve
+from addon.core import PatchScene, Speedups, solve
 from boxes import box_rectangles, rectangles_to_mesh
 
 
@@ -37,17 +37,13 @@ def test_biased_infinite_balance_is_exact(open_scene):
 
 
 @pytest.mark.parametrize("counted", [True, False])
-def test_finite_balance(open_scene, counted, monkeypatch):
+def test_finite_balance(open_scene, counted):
     """(A grey finite walk from random points: its hits counted per patch and outcome at
     each step, as in small scenes, or its survivors sorted by patch, as in big ones.)"""
-    import addon.core.estimators as estimators
-
-    if not counted:
-        monkeypatch.setattr(estimators, "COUNTED_MAX_PATCHES", 0)
-    grey = open_scene.with_materials(open_scene.mean_reflectivity, open_scene.emission.mean(axis=1))
-    assert estimators.WalkTables(grey, "finite", 1e-3, "random").counted == counted
+    grey = open_scene.with_materials(open_scene.grey_reflectivity, open_scene.emission.mean(axis=1))
     N = 200_000
-    r = solve(grey, "finite", paths=N, seed=2)
+    r = solve(grey, "finite", paths=N, seed=2, speedups=Speedups(counted=counted))
+    assert r.speedups.counted == counted
     e = r.energy
     assert (e["escaped"] > 0).all() and (e["blocked"] > 0).all()
     # Every path ends exactly once: absorbed at a hit, escaped, or blocked by a back side.
@@ -62,8 +58,8 @@ def test_finite_balance(open_scene, counted, monkeypatch):
     # The expected absorption sum_j (1 - R_j) I_j (+ blocked), which the radiosity implies,
     # matches the deaths within the binomial noise of the survival tests: variance
     # sum_j I_j R_j (1 - R_j) (in path units).
-    incident = r.reflected[:, 0] * grey.patch_area / grey.mean_reflectivity / scale
-    R = grey.mean_reflectivity
+    incident = r.reflected[:, 0] * grey.patch_area / grey.grey_reflectivity / scale
+    R = grey.grey_reflectivity
     sd = np.sqrt((incident * R * (1 - R)).sum()) * scale
     expected_absorbed = ((1 - R) * incident).sum() * scale
     assert abs(expected_absorbed - died) < 4 * sd

@@ -12,7 +12,8 @@ are split into 2 x 2 rectangles: every patch sees every non-coplanar patch whole
 import numpy as np
 import pytest
 
-from addon.core import solve
+from addon.core import Speedups, solve
+from addon.core.tables import WalkTables
 from addon.core.reference import path_variances, solve_radiosity_system
 from boxes import box_scene
 
@@ -56,7 +57,7 @@ def test_finite_random_exit_matches_direct_solve(coarse):
     scene, F, B = coarse
     N = 250_000
     _, b = _mean_over_seeds(scene, "finite", N)
-    var, _ = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], scene.patch_area)
+    var, _ = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
     z = (b[:, 0] - (B[:, 0] - scene.emission[:, 0])) / np.sqrt(var / (N * len(SEEDS)))
     assert np.abs(z).max() < Z, z
 
@@ -66,48 +67,40 @@ def test_infinite_random_exit_matches_direct_solve(coarse):
     scene, F, B = coarse
     N = 60_000
     _, b = _mean_over_seeds(scene, "biased_infinite", N, threshold=1e-9)
-    _, var = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], scene.patch_area)
+    _, var = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
     z = (b[:, 0] - (B[:, 0] - scene.emission[:, 0])) / np.sqrt(var / (N * len(SEEDS)))
     assert np.abs(z).max() < Z, z
 
 
 @pytest.mark.parametrize("sorted_paths", [False, True])
-def test_colour_random_exit_matches_direct_solve(sorted_paths, monkeypatch):
+def test_colour_random_exit_matches_direct_solve(sorted_paths):
     """Colour: one path serves three channels (survival by the mean, weights R_c / R_bar).
     With sorted_paths, the walk regroups its paths by patch at every step (what it does in big
-    scenes), carrying their weights along: the same answer."""
-    import addon.core.estimators as estimators
-
-    if sorted_paths:
-        monkeypatch.setattr(estimators, "SORT_MIN_PATCHES", 1)
-        monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)  # patch classes, as in big scenes
+    scenes), carrying their weights along, and reads frames by patch class: the same answer."""
+    speedups = Speedups(sorted_paths=sorted_paths, patch_classes=sorted_paths)
     R = np.array([[0.7, 0.2, 0.2], [0.6, 0.6, 0.6], [0.2, 0.7, 0.2], [0.5, 0.5, 0.5], [0.3, 0.4, 0.8], [0.6, 0.5, 0.4]])
     E = np.array([[0, 0, 0], [1.0, 0.8, 0.5], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]])
     scene, F, _ = box_scene(R, E, SIZE, n=2)
-    assert estimators.WalkTables(scene, "finite", 1e-3, "random").sort_paths == sorted_paths
+    assert WalkTables(scene, "finite", 1e-3, "random", speedups=speedups).speedups.sorted_paths == sorted_paths
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)
-    result = solve(scene, "finite", paths=600_000, seed=5)
+    result = solve(scene, "finite", paths=600_000, seed=5, speedups=speedups)
     z = (result.reflected - (B - scene.emission)) / np.sqrt(result.reflected_variance)
     # 72 channel-patches, variances estimated from >= 32 batches (t with >= 31 d.o.f.):
     # P(max |t| > 5) < 2e-3.
     assert result.chunks >= 32
     assert np.abs(z).max() < 5.0, np.abs(z).max()
-    biased = solve(scene, "biased_infinite", paths=150_000, threshold=1e-9, seed=6)
+    biased = solve(scene, "biased_infinite", paths=150_000, threshold=1e-9, seed=6, speedups=speedups)
     z = (biased.reflected - (B - scene.emission)) / np.sqrt(biased.reflected_variance)
     assert np.abs(z).max() < 5.0, np.abs(z).max()
 
 
 @pytest.mark.parametrize("sorted_paths", [False, True])
-def test_hit_exit_matches_continuous_solution(coarse, sorted_paths, monkeypatch):
-    """(sorted_paths: the paths regrouped by patch at every step with their hit points, as in
-    big scenes.)"""
-    import addon.core.estimators as estimators
-
-    if sorted_paths:
-        monkeypatch.setattr(estimators, "SORT_MIN_PATCHES", 1)
-        monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)  # patch classes, as in big scenes
+def test_hit_exit_matches_continuous_solution(coarse, sorted_paths):
+    """(sorted_paths: the paths regrouped by patch at every step with their hit points, and
+    patch classes, as in big scenes.)"""
+    speedups = Speedups(sorted_paths=sorted_paths, patch_classes=sorted_paths)
     scene, _, B_discrete = coarse
-    assert estimators.WalkTables(scene, "finite", 1e-3, "hit").sort_paths == sorted_paths
+    assert WalkTables(scene, "finite", 1e-3, "hit", speedups=speedups).speedups.sorted_paths == sorted_paths
     fine = {}
     for n in (4, 8):
         s, F, _ = box_scene(R_FACES, E_FACES, SIZE, n=n)
@@ -116,7 +109,7 @@ def test_hit_exit_matches_continuous_solution(coarse, sorted_paths, monkeypatch)
     reference_error = np.abs(fine[8] - fine[4]) / 2
     reference = fine[8] - scene.emission[:, 0]
     N = 400_000
-    runs, b = _mean_over_seeds(scene, "finite", N, exit_point="hit")
+    runs, b = _mean_over_seeds(scene, "finite", N, exit_point="hit", speedups=speedups)
     var = np.mean([r.reflected_variance[:, 0] for r in runs], axis=0) / len(SEEDS)
     sd = np.sqrt(var + reference_error**2)
     z = (b[:, 0] - reference) / sd
@@ -128,24 +121,20 @@ def test_hit_exit_matches_continuous_solution(coarse, sorted_paths, monkeypatch)
 
 
 @pytest.mark.parametrize("counted", [True, False])
-def test_interchangeable_paths_match_direct_solve(coarse, counted, monkeypatch):
+def test_interchangeable_paths_match_direct_solve(coarse, counted):
     """A grey finite walk's paths are interchangeable: small scenes count each step's hits by
     patch and outcome and restart the survivors from the counts; big scenes sort the survivors
     by patch (coherent rays). Either way (the sorted one forced on for this small scene), the
     estimate agrees with the direct solve within table 1's variance, and every path ends
     exactly once."""
-    import addon.core.estimators as estimators
-
-    if not counted:
-        monkeypatch.setattr(estimators, "COUNTED_MAX_PATCHES", 0)
-        monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)  # patch classes, as in big scenes
+    speedups = Speedups(counted=counted, patch_classes=not counted)  # (classes, as in big scenes)
     scene, F, B = coarse
-    tables = estimators.WalkTables(scene, "finite", 1e-3, "random")
-    assert tables.exchangeable and tables.counted == counted
+    tables = WalkTables(scene, "finite", 1e-3, "random", speedups=speedups)
+    assert tables.speedups.interchangeable and tables.speedups.counted == counted
     assert (tables.patch_class is None) == counted
     N = 250_000
-    runs, b = _mean_over_seeds(scene, "finite", N)
+    runs, b = _mean_over_seeds(scene, "finite", N, speedups=speedups)
     assert all(sum(r.path_ends.values()) == N for r in runs)
-    var, _ = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], scene.patch_area)
+    var, _ = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
     z = (b[:, 0] - (B[:, 0] - scene.emission[:, 0])) / np.sqrt(var / (N * len(SEEDS)))
     assert np.abs(z).max() < Z, z

@@ -39,7 +39,7 @@ def test_finite_furnace(furnace, exit_point):
     assert abs(mean_b - E * R / (1 - R)) < Z_TOTAL * sd
     if exit_point == "random":
         # Per patch: table 1's exact variance (the random-exit walk is a Markov chain on patches).
-        var_finite, _ = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], A)
+        var_finite, _ = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], A)
         z = (B - E / (1 - R)) / np.sqrt(var_finite / N)
         assert np.abs(z).max() < Z_PATCH, np.abs(z).max()
     assert result.stopped == "paths" and result.paths == N

@@ -1,4 +1,4 @@
-"""Small chunks traced together (estimators.walk_chunks): every chunk keeps its own accounts and
+"""Small chunks traced together (walk.walk_chunks): every chunk keeps its own accounts and
 stays an independent batch.
 
 A group of chunks is traced as one wavefront, each path tagged with its chunk. Mixing up the
@@ -11,9 +11,10 @@ import math
 import numpy as np
 import pytest
 
-from addon.core import PatchScene, solve
-from addon.core import solver
-from addon.core.estimators import WalkTables, walk_chunk, walk_chunks
+from addon.core import PatchScene, Speedups, solve
+from addon.core import runners, solver
+from addon.core.tables import WalkTables
+from addon.core.walk import walk_chunk, walk_chunks
 from addon.core.reference import path_variances
 from boxes import box_rectangles, box_scene, open_box_with_card, rectangles_to_mesh
 
@@ -30,12 +31,12 @@ KINDS = {
     "sorted": ("finite", "random", {"counted": False}),
     "finite hit": ("finite", "hit", {}),
     "biased": ("biased_infinite", "random", {}),
-    "biased hit sorted": ("biased_infinite", "hit", {"sort_paths": True}),
+    "biased hit sorted": ("biased_infinite", "hit", {"sorted_paths": True}),
     "colour": ("finite", "random", {"colour": True}),
-    "colour biased sorted": ("biased_infinite", "random", {"colour": True, "sort_paths": True}),
-    "finite paths": ("finite", "random", {"exchangeable": False}),
+    "colour biased sorted": ("biased_infinite", "random", {"colour": True, "sorted_paths": True}),
+    "finite paths": ("finite", "random", {"interchangeable": False}),
 }
-EXCHANGEABLE = ("counts", "arrays", "sorted")
+INTERCHANGEABLE = ("counts", "arrays", "sorted")
 COLOUR = np.array([0.05, 0.0, -0.05])  # added to a grey reflectivity: the same mean
 
 
@@ -45,11 +46,9 @@ def _tables(kind, scene):
     estimator, exit_point, options = KINDS[kind]
     if options.get("colour"):
         scene = scene.with_materials(scene.reflectivity[:, :1] + COLOUR, scene.emission[:, :1] * [1.0, 0.5, 0.25])
-    tables = WalkTables(scene, estimator, THRESHOLD, exit_point, stratified=options.get("stratified", False))
-    for name in ("exchangeable", "counted", "sort_paths"):
-        if name in options:
-            setattr(tables, name, options[name])
-    return scene, tables
+    sampling = "stratified" if options.get("stratified") else "independent"
+    speedups = Speedups(**{k: v for k, v in options.items() if k in ("interchangeable", "counted", "sorted_paths")})
+    return scene, WalkTables(scene, estimator, THRESHOLD, exit_point, sampling, speedups)
 
 
 def _closed_box(kind, R, n=3):
@@ -157,7 +156,7 @@ def test_chunks_of_groups_are_independent_batches(kind):
             # b_j = R_j I_j Phi_T / (A_j n)
             estimates.append(scene.reflectivity[:, 0] * t.incident[0] * scene.total_power / (scene.patch_area * n))
     estimates = np.array(estimates)
-    var, _ = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], scene.patch_area)
+    var, _ = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
     ratio = estimates.var(axis=0, ddof=1) / (var / n)
     band = Z * math.sqrt(2 / (len(estimates) - 1))
     assert np.abs(ratio - 1).max() < band, ratio
@@ -170,16 +169,16 @@ def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_po
     """A small run traces its chunks in groups (fewer, fuller wavefronts), still reports
     progress once per chunk, and is the same run whatever the threads."""
     groups = []
-    real = solver.walk_chunks
+    real = runners.walk_chunks
 
     def recorded(tables, sizes, rng, abort=None):
         groups.append(len(sizes))
         return real(tables, sizes, rng, abort)
 
-    monkeypatch.setattr(solver, "walk_chunks", recorded)
+    monkeypatch.setattr(runners, "walk_chunks", recorded)
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
     tables = WalkTables(scene, estimator, THRESHOLD, exit_point)
-    limit = solver.GROUP_RAYS_COUNTED if tables.exchangeable else solver.GROUP_RAYS
+    limit = solver.GROUP_RAYS_COUNTED if tables.speedups.interchangeable else solver.GROUP_RAYS
     assert solver.chunks_per_group(tables, 100, 2.0) == solver.GROUP_MAX_CHUNKS
     assert solver.chunks_per_group(tables, limit // 2, 2.0) == 1
     # Powers of two: a run of 32 chunks makes an even number of tasks.
@@ -187,7 +186,7 @@ def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_po
     # A group's scores stay small in big colour scenes: 3 channels x 500,000 patches a chunk.
     from types import SimpleNamespace
 
-    big = SimpleNamespace(exchangeable=tables.exchangeable, channels=3, patch_count=500_000)
+    big = SimpleNamespace(speedups=tables.speedups, channels=3, patch_count=500_000)
     assert solver.chunks_per_group(big, 100, 2.0) == 2
     fractions = []
     kw = dict(paths=20_000, seed=3, exit_point=exit_point)
@@ -203,10 +202,10 @@ def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_po
 
 def test_sources_drawn_as_counts_join_the_wavefront_as_the_paths_would():
     """The walk of interchangeable paths kept as counts takes its new paths from each chunk's
-    counts per source (estimators._SourceRuns) instead of from every path's source: any window
+    counts per source (sampling.SourceRuns) instead of from every path's source: any window
     of the chunk-ordered paths adds exactly the counts of the sources in it, chunk by chunk,
     including sources that drew no path (a source of tiny power)."""
-    from addon.core.estimators import _SourceRuns, _draw_sources
+    from addon.core.sampling import SourceRuns, draw_sources
 
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=3)
     emission = scene.emission.copy()
@@ -214,8 +213,8 @@ def test_sources_drawn_as_counts_join_the_wavefront_as_the_paths_would():
     _, tables = _tables("counts", scene.with_materials(scene.reflectivity, emission))
     sizes = [3_000, 500, 72, 10_000]
     assert all(tables.sources.draws_counts(n) for n in sizes)
-    source, source_chunk, _ = _draw_sources(tables, sizes, np.random.default_rng(5))
-    runs = _SourceRuns(tables.sources, sizes, np.random.default_rng(5))  # the same numbers
+    source, source_chunk, _ = draw_sources(tables.sources, sizes, np.random.default_rng(5))
+    runs = SourceRuns(tables.sources, sizes, np.random.default_rng(5))  # the same numbers
     assert np.any(runs.end == runs.start)  # a source with no path
     P = tables.patch_count
     rng = np.random.default_rng(6)

@@ -5,8 +5,8 @@ Runs in a fresh Python process, so that its peak resident set is its own: the 66
 the maximum size (solver.chunk_paths_for), so the second run's extra chunks (96) are the only
 difference. To keep the test short the child caps chunks at 65,536 paths (production: 2^19 paths
 or 2^20 rays), so that N is 32 chunks: what a chunk holds while it runs does not depend on its
-size beyond the wavefront (estimators.WAVEFRONT_PATHS) and the scores kept between bincounts
-(estimators.SCORE_FLUSH), which are the same. The second run's peak resident set may exceed
+size beyond the wavefront (path_walk.WAVEFRONT_PATHS) and the scores kept between bincounts
+(tallies.SCORE_FLUSH), which are the same. The second run's peak resident set may exceed
 the first run's by at most MARGIN_RSS, and its tracemalloc peak (numpy and Python allocations
 during the solve, exact) by at most MARGIN_TRACED. benchmarks/memory.py measures the
 production chunk sizes.

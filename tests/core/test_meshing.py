@@ -415,7 +415,7 @@ def test_planar_faces_are_unchanged_by_rotation_and_float32_rounding():
 
 def test_tolerance_is_one_degree_and_cells_of_a_nearly_planar_quad_stay_flat():
     from addon.core.meshing import PLANAR_COSINE
-    from addon.core.scene import MIN_PATCH_NORMAL_COSINE
+    from addon.core.validation import MIN_PATCH_NORMAL_COSINE
 
     # a face within the tolerance, or a grid cell of one (within about twice it), is far
     # inside the core's limit on a patch's triangles

@@ -5,8 +5,9 @@ import pytest
 from boxes import box_rectangles, box_scene, rays_to_triangle_points, rectangles_to_mesh
 
 from addon.core import patch_grids as PG
-from addon.core.estimators import WalkTables
-from addon.core.scene import build_geometry, parallelogram_corners
+from addon.core.tables import WalkTables
+from addon.core.frames import parallelogram_corners
+from addon.core.geometry import build_geometry
 
 
 def _rotation(seed):
@@ -264,27 +265,26 @@ def test_a_mixed_scene_traces_its_grids_beside_the_other_patches_triangles():
 
 
 @pytest.mark.parametrize("walk", ["counted", "sorted", "hit"])
-def test_a_walk_on_a_mixed_furnace_is_unbiased(walk, monkeypatch):
+def test_a_walk_on_a_mixed_furnace_is_unbiased(walk):
     """The mixed box without its card as a furnace (E = 1, R = 0.5: a closed box of uniform
     emission and reflectivity has B = E / (1 - R) everywhere): walks trace its grids and the
     triangle patches' own triangles, leaving from random points (counting hits per patch, as in
     small scenes, or sorting paths by patch) or from hit points, and every patch's reflected
     radiosity is E R / (1 - R) to within 5 of the run's own batch standard errors (>= 32
     batches; P(max |t| > 5) < 1e-3 over 160 patches)."""
-    from addon.core import PatchScene, solve
-    from addon.core import estimators
+    from addon.core import PatchScene, Speedups, solve
 
     g = _mixed_box(n=4, card=False)
-    monkeypatch.setattr(estimators, "COUNTED_MAX_PATCHES", 1 << 12 if walk == "counted" else 0)
+    speedups = Speedups(counted=walk == "counted")
     exit_point = "hit" if walk == "hit" else "random"
     corners = g.triangle_corners.astype(np.float64).reshape(-1, 3)
     triangles = np.arange(corners.shape[0]).reshape(-1, 3)
     P = g.patch_count
     scene = PatchScene(corners, triangles, g.triangle_patch, np.full(P, 0.5), np.ones(P))
-    tables = WalkTables(scene, "finite", 1e-3, exit_point)
+    tables = WalkTables(scene, "finite", 1e-3, exit_point, speedups=speedups)
     assert tables.grids is not None and tables.grids.triangle_count < scene.geometry.triangle_count // 2
-    assert tables.counted == (walk == "counted")
-    result = solve(scene, "finite", paths=200_000, seed=5, exit_point=exit_point)
+    assert tables.speedups.counted == (walk == "counted")
+    result = solve(scene, "finite", paths=200_000, seed=5, exit_point=exit_point, speedups=speedups)
     assert result.chunks >= 32
     z = (result.reflected[:, 0] - 0.5 / (1 - 0.5)) / np.sqrt(result.reflected_variance[:, 0])
     assert np.abs(z).max() < 5.0, np.abs(z).max()
@@ -321,26 +321,25 @@ def test_patches_facing_the_other_way_are_not_in_their_neighbours_grid():
 
 
 @pytest.mark.parametrize("estimator, counted", [("finite", True), ("finite", False), ("biased_infinite", False)])
-def test_random_exits_on_the_grids_are_the_walks_on_the_triangles(estimator, counted, monkeypatch):
+def test_random_exits_on_the_grids_are_the_walks_on_the_triangles(estimator, counted):
     """In the mixed box with its card (rays blocked by the card's back, triangle patches, both
     corner orders), a walk leaving from random points gives the same tallies, bit for bit, on
     the grids as on the patches' triangles with the same random numbers: the grids change which
     triangle Embree reports, not which patch or side a ray meets (but for rays within float32's
     rounding of a side, none of which these walks cast)."""
-    from addon.core import PatchScene, estimators
-    from addon.core.estimators import walk_chunk
+    from addon.core import PatchScene, Speedups
+    from addon.core.walk import walk_chunk
 
-    monkeypatch.setattr(estimators, "COUNTED_MAX_PATCHES", 1 << 12 if counted else 0)
     g = _mixed_box(n=4, rotation=_rotation(2))
     corners = g.triangle_corners.astype(np.float64).reshape(-1, 3)
     P = g.patch_count
     reflectivity = np.random.default_rng(1).uniform(0.2, 0.8, P)
     emission = (np.arange(P) % 7 == 0).astype(float)
     scene = PatchScene(corners, np.arange(corners.shape[0]).reshape(-1, 3), g.triangle_patch, reflectivity, emission)
-    on_grids = WalkTables(scene, estimator, 1e-3, "random")
-    on_triangles = WalkTables(scene, estimator, 1e-3, "random")
-    assert on_grids.grids is not None and on_grids.counted == counted
-    on_triangles.grids, on_triangles.tracer = None, scene.geometry.tracer
+    on_grids = WalkTables(scene, estimator, 1e-3, "random", speedups=Speedups(counted=counted))
+    on_triangles = WalkTables(scene, estimator, 1e-3, "random", speedups=Speedups(counted=counted, grids=False))
+    assert on_grids.grids is not None and on_triangles.grids is None
+    assert on_grids.speedups.counted == (counted and estimator == "finite")
     a = walk_chunk(on_grids, 30_000, np.random.default_rng(9))
     b = walk_chunk(on_triangles, 30_000, np.random.default_rng(9))
     assert a.ended["blocked"] > 100  # the card's back

@@ -123,16 +123,16 @@ def test_batch_estimate_is_made_only_where_it_is_used(scene, monkeypatch):
     """The batch MSE costs passes over the patches: a run without progress under the predicted
     rule makes it once, for its result; with progress, once per chunk; and it is the
     area-weighted mean of the per-patch batch variances either way."""
-    from addon.core import solver
+    from addon.core.batches import Batches
 
     made = []
-    real = solver._Accumulator.measured_mse
+    real = Batches.measured_mse
 
     def counted(self):
         made.append(self.chunks)
         return real(self)
 
-    monkeypatch.setattr(solver._Accumulator, "measured_mse", counted)
+    monkeypatch.setattr(Batches, "measured_mse", counted)
     r = solve(scene, "finite", paths=40_000, seed=2, threads=2)
     assert r.chunks >= 32 and made == [r.chunks]
     made.clear()
@@ -150,10 +150,11 @@ def test_measured_stop_rule_reads_the_estimate_once_a_group(scene, monkeypatch, 
     """Under the measured rule the estimate is read after each task's chunks are all added:
     the run stops as soon as it meets the target there, on whole chunks."""
     from addon.core import solver
+    from addon.core.batches import Batches
 
     made = []
-    real = solver._Accumulator.measured_mse
-    monkeypatch.setattr(solver._Accumulator, "measured_mse", lambda self: (made.append(self.chunks), real(self))[1])
+    real = Batches.measured_mse
+    monkeypatch.setattr(Batches, "measured_mse", lambda self: (made.append(self.chunks), real(self))[1])
     target = 3 * predict(scene, estimator, paths=200_000).predicted_mse
     r = solve(scene, estimator, target_mse=target, stop_rule="measured", seed=5, threads=1)
     assert r.stopped == "target" and r.measured_mse <= target

@@ -65,7 +65,7 @@ def test_finite_furnace_near_one(R, N):
     assert mean_b == pytest.approx(R * E * r.mean_path_length, rel=1e-12)
     assert abs(mean_b - E * R / (1 - R)) < Z * R * E * length_sd
     # Per patch: table 1's variance.
-    var, _ = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], scene.patch_area)
+    var, _ = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
     z = (r.radiosity[:, 0] - E / (1 - R)) / np.sqrt(var / N)
     assert np.abs(z).max() < Z, np.abs(z).max()
     # Progress kept moving: once per chunk, strictly increasing, ending at 1.
@@ -104,7 +104,7 @@ def test_reflectivity_closer_to_one_than_the_survival_test_resolves_is_refused()
     with pytest.raises(ValueError, match=r"within 2\^-24 of 1 .* on patches 2: .*never end"):
         box_scene([0.5, 0.5, 1 - 2.0**-25, 0.5, 0.5, 0.5], [1.0] * 6, SIZE)
     scene, _, _ = box_scene([1 - 2.0**-24] * 6, [1.0] * 6, SIZE)
-    assert scene.mean_reflectivity.max() == 1 - 2.0**-24
+    assert scene.grey_reflectivity.max() == 1 - 2.0**-24
 
 
 # ---------------------------------------------------------------------------------------------
@@ -157,7 +157,7 @@ def test_biased_tiny_threshold_matches_the_direct_solve():
     r = solve(scene, "biased_infinite", paths=N, threshold=1e-9, seed=63, threads=2)
     _sane(r, scene)
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)
-    _, var = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], scene.patch_area)
+    _, var = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
     z = (r.radiosity[:, 0] - B[:, 0]) / np.sqrt(var / N)
     assert np.abs(z).max() < Z, np.abs(z).max()
 
@@ -218,7 +218,7 @@ def test_sizes_beyond_float32_tracing_are_refused_not_miscomputed(scale):
 
 def _incident(result, scene):
     """Front-side hits per patch (exact integers in a grey finite run): b A N / (R Phi_T)."""
-    return result.reflected[:, 0] * scene.patch_area * result.paths / (scene.mean_reflectivity * scene.total_power)
+    return result.reflected[:, 0] * scene.patch_area * result.paths / (scene.grey_reflectivity * scene.total_power)
 
 
 @pytest.mark.slow
@@ -227,7 +227,7 @@ def test_1e8_paths_equal_their_two_halves_and_the_exact_solution(monkeypatch):
     sums of its chunks' tallies taken in two halves (the first and second half of its chunks,
     recorded as the run makes them); the radiosity matches table 1 at a noise of ~1e-4, and the
     batch variance agrees with table 1's."""
-    import addon.core.solver as solver_module
+    import addon.core.runners as runners
 
     R = 0.2
     scene, F, _ = box_scene([R] * 6, [0, 1.0, 0, 0, 0, 0], SIZE, n=1)
@@ -237,7 +237,7 @@ def test_1e8_paths_equal_their_two_halves_and_the_exact_solution(monkeypatch):
     assert chunk_count >= 100  # enough batches for the variance check below
     half_chunks = chunk_count // 2
     halves = np.zeros((2, scene.patch_count), dtype=np.int64)
-    real_walk = solver_module.walk_chunks
+    real_walk = runners.walk_chunks
     lock = threading.Lock()
 
     def locked_walk(tables, sizes, rng, abort=None):
@@ -248,7 +248,7 @@ def test_1e8_paths_equal_their_two_halves_and_the_exact_solution(monkeypatch):
                 halves[int(k >= half_chunks)] += tally.incident[0].astype(np.int64)
         return tallies
 
-    monkeypatch.setattr(solver_module, "walk_chunks", locked_walk)
+    monkeypatch.setattr(runners, "walk_chunks", locked_walk)
     full = solve(scene, "finite", paths=N, seed=66, threads=2)
     assert full.paths == N and full.chunks == chunk_count
     hits = _incident(full, scene)
@@ -258,7 +258,7 @@ def test_1e8_paths_equal_their_two_halves_and_the_exact_solution(monkeypatch):
     assert full.path_ends["escaped"] == 0 and full.path_ends["blocked"] == 0
     _sane(full, scene)
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)[:, 0]
-    var, _ = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], scene.patch_area)
+    var, _ = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
     z = (full.radiosity[:, 0] - B) / np.sqrt(var / N)
     assert np.abs(z).max() < Z, np.abs(z).max()
     # The batch-means variance agrees with table 1's (K batches: ratio within 4 * sqrt(2/(K-1))).
@@ -465,7 +465,7 @@ def test_first_rays_leave_uniformly_from_sources_beside_triangle_patches(exit_po
     the black light: the card is hit by first rays only, each with the exact form factor F,
     and a path's first point must be uniform on the light for that (a fixed point would give
     another F)."""
-    from addon.core import estimators
+    from addon.core.path_walk import WAVEFRONT_PATHS
 
     origin = np.array([[0.0, 0, 0], [0.05, 0.05, 0.4], [5.0, 5, -3]])
     u = np.array([[1.0, 0, 0], [0, 0.3, 0], [0.2, 0, 0]])
@@ -478,7 +478,7 @@ def test_first_rays_leave_uniformly_from_sources_beside_triangle_patches(exit_po
     F = rectangle_form_factors(origin[:2], u[:2], v[:2])[0, 1]
     N = 1_000_000  # chunks of more paths than a wavefront: most paths start in later steps
     r = solve(scene, "finite", paths=N, seed=83, exit_point=exit_point, sampling=sampling)
-    assert N / r.chunks > estimators.WAVEFRONT_PATHS
+    assert N / r.chunks > WAVEFRONT_PATHS
     hits = r.reflected[1, 0] * scene.patch_area[1] / 0.5 / (scene.total_power / N)
     # Binomial count of first rays reaching the card (stratified sampling can only do better).
     assert abs(hits - N * F) < Z * math.sqrt(N * F * (1 - F)), (hits, N * F)

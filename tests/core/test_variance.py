@@ -22,7 +22,7 @@ def runs():
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)
     N = 20_000
     results = [solve(scene, "finite", paths=N, seed=s, threads=1) for s in SEEDS]
-    var, _ = path_variances(F, scene.mean_reflectivity, scene.emission[:, 0], scene.patch_area)
+    var, _ = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
     expected = float((scene.patch_area * var).sum() / scene.total_area / N)
     return scene, B, results, expected, N
 

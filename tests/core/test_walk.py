@@ -2,7 +2,9 @@
 import numpy as np
 import pytest
 
-from addon.core.estimators import WalkTables, walk_chunk
+from addon.core import Speedups
+from addon.core.tables import WalkTables
+from addon.core.walk import walk_chunk
 from boxes import box_scene
 
 
@@ -24,9 +26,9 @@ def test_grey_biased_weights_are_the_accumulated_reflectivity(exit_point):
         np.testing.assert_allclose(getattr(a, field), getattr(b, field), rtol=1e-12)
 
 
-def test_grey_mean_reflectivity_is_exact():
+def test_grey_reflectivity_is_exact_in_grey_scenes():
     scene, _, _ = box_scene([0.1, 0.7, 0.3, 0.9, 0.6, 0.2], [1.0] * 6)
-    np.testing.assert_array_equal(scene.mean_reflectivity, scene.reflectivity[:, 0])
+    np.testing.assert_array_equal(scene.grey_reflectivity, scene.reflectivity[:, 0])
 
 
 @pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
@@ -37,10 +39,10 @@ def test_facing_by_patch_normal_is_facing_by_triangle_normal(estimator):
     from boxes import open_box_with_card
 
     scene = open_box_with_card()  # rays escape at the top and hit a card's back
-    by_patch = WalkTables(scene, estimator, 1e-3, "random")
-    by_triangle = WalkTables(scene, estimator, 1e-3, "random")
-    assert by_patch.facing_by_patch
-    by_patch.grids = by_triangle.grids = None  # (both trace the triangles: hits are triangles)
+    triangles = Speedups(grids=False)  # (both trace the triangles: hits are triangles)
+    by_patch = WalkTables(scene, estimator, 1e-3, "random", speedups=triangles)
+    by_triangle = WalkTables(scene, estimator, 1e-3, "random", speedups=triangles)
+    assert by_patch.facing_by_patch and by_patch.grids is None
     by_triangle.facing_by_patch = False
     by_triangle.facing_rows = scene.geometry.triangle_normal_rows
     a = walk_chunk(by_patch, 20_000, np.random.default_rng(7))
@@ -52,7 +54,7 @@ def test_facing_by_patch_normal_is_facing_by_triangle_normal(estimator):
 
 @pytest.mark.parametrize("traced", ["triangles", "grids"])
 @pytest.mark.parametrize("classes", [False, True])
-def test_hit_points_keep_clear_of_edges(classes, traced, monkeypatch):
+def test_hit_points_keep_clear_of_edges(classes, traced):
     """A hit-point exit goes on from origin + t direction, except within the clearance of an
     edge of the triangle traced, where it maps the hit's barycentric coordinates onto the
     triangle's inset leaving frame (on the grids, its rectangle's). Rays aimed at points on
@@ -62,8 +64,8 @@ def test_hit_points_keep_clear_of_edges(classes, traced, monkeypatch):
     past the edge, behind the adjacent wall), and points away from the edges are the hit
     points. With classes (as in big scenes) the triangles' edge thresholds are read per patch
     class."""
-    from addon.core import PatchScene, estimators
-    from addon.core.scene import RELATIVE_EDGE_INSET
+    from addon.core import PatchScene, rays
+    from addon.core.frames import RELATIVE_EDGE_INSET
     from boxes import box_rectangles, rays_to_triangle_points, rectangles_to_mesh
 
     origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=2)
@@ -71,12 +73,9 @@ def test_hit_points_keep_clear_of_edges(classes, traced, monkeypatch):
     q, _ = np.linalg.qr(np.random.default_rng(5).normal(size=(3, 3)))
     scene = PatchScene((V - 0.5) @ q.T, T, TP, np.full(len(origin), 0.5), (face == 1).astype(float))
     g = scene.geometry
-    if classes:
-        monkeypatch.setattr(estimators, "CLASSES_MIN_PATCHES", 1)
     assert g.patch_grids is not None and g.patch_grids.rectangles == 6
-    if traced == "triangles":
-        g.__dict__["patch_grids"] = None  # (the cached grids: as if the patches tiled none)
-    tables = WalkTables(scene, "finite", 1e-3, "hit")
+    speedups = Speedups(patch_classes=classes, grids=traced == "grids")
+    tables = WalkTables(scene, "finite", 1e-3, "hit", speedups=speedups)
     assert (tables.patch_class is not None) == classes
     assert (tables.grids is None) == (traced == "triangles")
     assert (tables.class_edge_barycentric is not None) == (classes and traced == "triangles")
@@ -87,8 +86,8 @@ def test_hit_points_keep_clear_of_edges(classes, traced, monkeypatch):
     hit, bu, bv, t, ng = tables.tracer.first_hit_barycentric(o, d)
     front = (np.einsum("ij,ij->i", ng, d) < 0) & (hit >= 0)
     assert front.all()
-    points = tables.hit_points(
-        np.ascontiguousarray(o.T), np.ascontiguousarray(d.T), t, hit, tables.hit_patches(hit, bu, bv), bu, bv, front
+    points = rays.hit_points(
+        tables, np.ascontiguousarray(o.T), np.ascontiguousarray(d.T), t, hit, rays.hit_patches(tables, hit, bu, bv), bu, bv, front
     ).T.astype(np.float64)
 
     if traced == "triangles":
@@ -130,14 +129,14 @@ def test_walks_on_threads_take_turns_at_their_numpy_work(monkeypatch):
     another thread's whole walk has run) lets that other walk take its turns meanwhile."""
     import threading
 
-    from addon.core import estimators
+    from addon.core import tallies
     from boxes import box_scene
 
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
-    tables = WalkTables(scene, "biased_infinite", 1e-3, "random")  # a walk that scores with _Scores
+    tables = WalkTables(scene, "biased_infinite", 1e-3, "random")  # a walk that scores with Scores
     # (a random exit traces the box's grids, with their barycentric query)
     tracer, query = tables.grids.tracer, "first_hit_barycentric"
-    real_trace, real_add = getattr(tracer, query), estimators._Scores.add
+    real_trace, real_add = getattr(tracer, query), tallies.Scores.add
     held = {"tracing": [], "scoring": []}
     other_done = threading.Event()
     first_cast = threading.Event()
@@ -154,7 +153,7 @@ def test_walks_on_threads_take_turns_at_their_numpy_work(monkeypatch):
         return real_add(self, patch, weights)
 
     monkeypatch.setattr(tracer, query, tracing)
-    monkeypatch.setattr(estimators._Scores, "add", scoring)
+    monkeypatch.setattr(tallies.Scores, "add", scoring)
     results = {}
 
     def walk(name, seed):

@@ -1,0 +1,102 @@
+"""Leaving frames of triangles and parallelograms: where rays start on a patch, kept clear of its edges.
+
+Positions are in unit space, (world - centre) / diagonal of the scene's bounding box.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+# The ray tracer works in unit space: positions (world - centre) / diagonal, where centre and
+# diagonal are the bounding box's, so that float32 precision and Embree's internal tolerances
+# (its barycentrics fail below a scene size of ~1e-8) see the same scene at any scale or
+# distance from the origin. Rays leave a patch from a point pushed this far along its normal
+# (~170 float32 ulps at the scene's extent).
+RELATIVE_RAY_OFFSET = 1e-5
+
+# Points where rays leave a patch keep this distance (relative to the diagonal, ~17 float32
+# ulps at the scene's extent) from the patch's edges, so that float32 rounding never puts an
+# origin on the far side of an adjacent wall, where its ray would hit that wall's back.
+RELATIVE_EDGE_INSET = 1e-6
+
+# A ray leaving from where the previous one hit starts at that hit point (origin + t direction,
+# pushed off along the normal) if the point lies at least this far (relative to the diagonal)
+# from every edge of its triangle: four times the edge inset, which leaves room for float32's
+# error in the point (~2e-7 in unit space). Closer to an edge, the hit's barycentric
+# coordinates are mapped onto the triangle's inset leaving frame instead.
+RELATIVE_HIT_EDGE_CLEARANCE = 4 * RELATIVE_EDGE_INSET
+
+
+def edge_barycentric(corners):
+    """(T,) float32: for (T,3,3) unit-space triangles, the barycentric coordinate below which a
+    point may lie closer than RELATIVE_HIT_EDGE_CLEARANCE to one of the triangle's edges (the
+    clearance over its smallest altitude, 2 area / longest edge; 1 for triangles too small to
+    have such points)."""
+    corners = np.asarray(corners, dtype=np.float64)
+    edges = corners[:, [1, 2, 0]] - corners
+    longest = np.linalg.norm(edges, axis=2).max(axis=1)
+    twice_area = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        threshold = RELATIVE_HIT_EDGE_CLEARANCE * longest / twice_area
+    return np.where(np.isfinite(threshold), np.minimum(threshold, 1.0), 1.0).astype(np.float32)
+
+
+def inset_triangles(corners, inset):
+    """Each triangle shrunk about its incentre so that every edge moves in by ``inset``
+    (by at most half the inradius for tiny triangles). (T,3,3)."""
+    a = np.linalg.norm(corners[:, 2] - corners[:, 1], axis=1)  # side opposite corner 0
+    b = np.linalg.norm(corners[:, 0] - corners[:, 2], axis=1)
+    c = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+    perimeter = a + b + c
+    incentre = (a[:, None] * corners[:, 0] + b[:, None] * corners[:, 1] + c[:, None] * corners[:, 2]) / perimeter[:, None]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    inradius = 2 * area / perimeter
+    shrink = np.minimum(inset / inradius, 0.5)
+    return incentre[:, None, :] + (1 - shrink)[:, None, None] * (corners - incentre[:, None, :])
+
+
+def parallelogram_frames(sorted_corners, first, count, inset=0.0):
+    """Which patches are two triangles forming a parallelogram, and its (corner, a, b).
+
+    Such a patch (any quad with parallel sides: the grids meshing makes) is sampled as
+    corner + u a + v b, without choosing a triangle or folding.
+    """
+    P = first.shape[0]
+    frame = np.zeros((P, 9))
+    two, ok, (p, s1, s2, _) = parallelogram_corners(sorted_corners, first, count)
+    if two.size == 0:
+        return np.zeros(P, bool), frame
+    edge_a, edge_b = s1 - p, s2 - p
+    # Inset every side by ``inset`` (at most a quarter of the patch): corner + d_a a + d_b b.
+    d_a = np.minimum(inset / np.linalg.norm(edge_a, axis=1), 0.25)[:, None]
+    d_b = np.minimum(inset / np.linalg.norm(edge_b, axis=1), 0.25)[:, None]
+    frame[two] = np.hstack([p + d_a * edge_a + d_b * edge_b, (1 - 2 * d_a) * edge_a, (1 - 2 * d_b) * edge_b])
+    flags = np.zeros(P, bool)
+    flags[two[ok]] = True
+    return flags, frame
+
+
+def parallelogram_corners(sorted_corners, first, count):
+    """The corners of the patches made of two triangles: (patches with two triangles (n,),
+    whether each is a parallelogram (n,), and its corners (p, s1, s2, q), each (n,3) float64).
+    p is the first triangle's own corner, s1 and s2 the two corners the triangles share (the
+    edges are a = s1 - p and b = s2 - p), q the second triangle's own corner (p + a + b to
+    within rounding)."""
+    two = np.flatnonzero(count == 2)
+    t0 = np.asarray(sorted_corners[first[two]], dtype=np.float64)  # (n,3,3)
+    t1 = np.asarray(sorted_corners[first[two] + 1], dtype=np.float64)
+    tolerance = 1e-7  # unit space
+    between = t0[:, :, None, :] - t1[:, None, :, :]  # (n,3,3,3): every corner of t0 to every corner of t1
+    shared = np.einsum("...k,...k->...", between, between) < tolerance**2  # (n,3,3)
+    shared_in_t0 = shared.any(axis=2)        # (n,3)
+    shared_in_t1 = shared.any(axis=1)
+    ok = (shared_in_t0.sum(axis=1) == 2) & (shared_in_t1.sum(axis=1) == 2) & (shared.sum(axis=(1, 2)) == 2)
+    rows = np.arange(two.size)
+    p = t0[rows, np.argmin(shared_in_t0, axis=1)]      # t0's own corner
+    q = t1[rows, np.argmin(shared_in_t1, axis=1)]      # t1's own corner
+    order = np.argsort(~shared_in_t0, axis=1, kind="stable")[:, :2]
+    s1 = t0[rows, order[:, 0]]
+    s2 = t0[rows, order[:, 1]]
+    ok &= np.linalg.norm(p + q - s1 - s2, axis=1) < tolerance  # the diagonals bisect each other
+    return two, ok, (p, s1, s2, q)
+
+

@@ -1,0 +1,274 @@
+"""Geometry arrays derived once from a scene's mesh and shared by every material set on it.
+
+Triangles are sorted by patch; positions are in unit space, (world - centre) / diagonal, in
+float32; areas are in the scene's units.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from .frames import RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET, edge_barycentric, inset_triangles, parallelogram_frames
+from .patch_grids import patch_grids
+from .raytrace import RayTracer
+from .validation import (
+    MIN_PATCH_NORMAL_COSINE,
+    RELATIVE_DEGENERATE_AREA,
+    PatchError,
+    indices_of,
+    indices_text,
+    validate_mesh,
+    warn_coincident,
+)
+
+# At most this many distinct leaving-frame shapes (edges and normal) are kept as a table of
+# their own (Geometry.leave_shapes; 2^12 shapes take 144 kB): more, and the table is no
+# smaller than the patches' own rows.
+LEAVE_SHAPES_MAX = 1 << 12
+
+# Odd multipliers (of the golden ratio's 64-bit constant) that hash a leaving frame's 9 float32
+# bit patterns to one uint64 (Geometry.leave_shapes).
+_SHAPE_HASH = np.array([((2 * k + 1) * 0x9E3779B97F4A7C15) % 2**64 for k in range(9)], dtype=np.uint64)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Geometry arrays derived once and shared by every material set on the same patches.
+
+    Triangles are stored sorted by patch (the ray tracer's primitive ids index this order).
+    Positions are in unit space, (world - centre) / diagonal, in float32; areas are in the
+    scene's units.
+    """
+
+    centre: np.ndarray            # (3,) float64
+    diagonal: float               # bounding-box diagonal, scene units
+    ray_offset: float             # distance a ray origin is pushed along the normal (unit space)
+    triangle_index: np.ndarray    # (T,) original index of each sorted triangle
+    triangle_patch: np.ndarray    # (T,) int32 patch of each sorted triangle
+    triangle_area: np.ndarray     # (T,) float64
+    triangle_normal: np.ndarray   # (T,3) float32 unit normals
+    triangle_corners: np.ndarray  # (T,3,3) float32 unit-space corners, the ray tracer's input
+    patch_area: np.ndarray        # (P,) float64
+    patch_normal: np.ndarray      # (P,3) float32
+    patch_first_triangle: np.ndarray  # (P,) int64 first sorted triangle of each patch
+    patch_triangle_count: np.ndarray  # (P,) int64
+    triangle_key: np.ndarray      # (T,) float64: patch + cumulative area fraction in the patch
+    triangle_frame: np.ndarray    # (9,T) float32: origin (pushed off), edge1, edge2, one row per coordinate
+    patch_first_fraction: np.ndarray  # (P,) float32: area fraction of each patch's first triangle
+    patch_parallelogram: np.ndarray   # (P,) bool: the patch is two triangles forming a parallelogram
+    parallelogram_frame: np.ndarray   # (9,P) float32: corner (pushed off), edge a, edge b (zeros if not)
+
+    @property
+    def patch_count(self):
+        return self.patch_area.shape[0]
+
+    @property
+    def triangle_count(self):
+        return self.triangle_patch.shape[0]
+
+    @cached_property
+    def max_triangles_per_patch(self):
+        return int(self.patch_triangle_count.max())
+
+    def to_world(self, points):
+        """Unit-space points (n,3) back in the scene's coordinates, float64."""
+        return np.asarray(points, dtype=np.float64) * self.diagonal + self.centre
+
+    @cached_property
+    def patch_normal_rows(self):
+        """(3,P) float32: the patch normals one coordinate per row, for column gathers."""
+        return np.ascontiguousarray(self.patch_normal.T)
+
+    @cached_property
+    def leave_table(self):
+        """(12,P) float32: each parallelogram patch's corner (pushed off), edge a, edge b, then
+        its normal, one coordinate per row: one gather gives a random exit's origin frame and
+        the normal its direction is built on."""
+        return np.ascontiguousarray(np.vstack([self.parallelogram_frame, self.patch_normal_rows]))
+
+    @cached_property
+    def leave_shapes(self):
+        """The distinct shapes of the patches' leaving frames (:func:`leave_shapes`)."""
+        return leave_shapes(self.leave_table)
+
+    @cached_property
+    def exit_table(self):
+        """(12,T+P) float32: the leaving frames of triangles and patches. Columns 0..T-1 are the
+        triangles' leaving frames (corner, edge1, edge2) with their patch's normal (random
+        points of patches that are not parallelograms; a hit-point exit's hits near an edge),
+        columns T..T+P-1 the rows of :attr:`leave_table` (parallelogram patches)."""
+        triangle_columns = np.vstack([self.triangle_frame, self.patch_normal_rows[:, self.triangle_patch]])
+        return np.ascontiguousarray(np.hstack([triangle_columns, self.leave_table]))
+
+    @cached_property
+    def edge_barycentric(self):
+        """(T,) float32: the barycentric coordinate below which a point of each triangle may lie
+        closer than RELATIVE_HIT_EDGE_CLEARANCE to one of its edges (the clearance over the
+        triangle's smallest altitude, 2 area / longest edge; 1 for triangles too small to
+        have such points). Where patches have leaving-frame shapes (:attr:`leave_shapes`), every
+        triangle of a shape's patches takes the largest of their thresholds
+        (:attr:`shape_edge_barycentric`), which a walk reads per patch class: a larger
+        threshold only sends a few more hit points through the exact remap onto the frame."""
+        if self.shape_edge_barycentric is not None:
+            _, shape_of_patch = self.leave_shapes
+            return self.shape_edge_barycentric[shape_of_patch[self.triangle_patch]]
+        return self._own_edge_barycentric()
+
+    @cached_property
+    def shape_edge_barycentric(self):
+        """(K,) float32: the largest :attr:`edge_barycentric` of the triangles of each shape of
+        :attr:`leave_shapes`, or None where the patches are not all parallelograms or have no
+        shape table."""
+        if not self.all_parallelograms or self.leave_shapes is None:
+            return None
+        _, shape_of_patch = self.leave_shapes
+        largest = np.zeros(shape_of_patch.max() + 1, dtype=np.float32)
+        np.maximum.at(largest, shape_of_patch[self.triangle_patch], self._own_edge_barycentric())
+        return largest
+
+    def _own_edge_barycentric(self):
+        return edge_barycentric(self.triangle_corners)
+
+    @cached_property
+    def triangle_normal_rows(self):
+        """(3,T) float32: the triangle normals one coordinate per row, for column gathers."""
+        return np.ascontiguousarray(self.triangle_normal.T)
+
+    @cached_property
+    def all_parallelograms(self):
+        return bool(self.patch_parallelogram.all())
+
+    @cached_property
+    def any_parallelograms(self):
+        return bool(self.patch_parallelogram.any())
+
+    @cached_property
+    def patch_grids(self):
+        """The parallelogram patches merged into the grids they tile, with the other patches'
+        own triangles (:mod:`.patch_grids`), which walks trace instead of the triangles; None
+        where that would save too few triangles."""
+        return patch_grids(self)
+
+    @cached_property
+    def tracer(self):
+        """The Embree scene over these triangles, built on first use and then reused."""
+        return RayTracer(self.triangle_corners)
+
+
+
+def leave_shapes(leave_table, max_shapes=LEAVE_SHAPES_MAX, shape_hash=_SHAPE_HASH):
+    """The distinct shapes of parallelogram patches' leaving frames ((12,P) ``leave_table``):
+    ((9,K) float32 rows edge a, edge b, normal, one column per distinct shape; (P,) uint16 the
+    shape of each patch), bit for bit equal, or None where there are more than ``max_shapes``.
+    A patch's frame is its corner and its shape: patches meshed from one face share one (a wall
+    of a room, a box's side). Compared as bits: a shared shape is the same float32 numbers, and
+    -0.0 stays apart from 0.0."""
+    bits = np.ascontiguousarray(leave_table[3:12].T).view(np.uint32)  # (P,9)
+    # A hash of each row first (a sort of P numbers, not of P rows); rows of equal hashes are
+    # then checked to be equal, and where two shapes share a hash the rows themselves are sorted.
+    hashed = bits.astype(np.uint64) @ shape_hash
+    if np.unique(hashed).size > max_shapes:  # (shared hashes only lower the count)
+        return None
+    _, first, shape_of_patch = np.unique(hashed, return_index=True, return_inverse=True)
+    shapes = bits[first]
+    if not np.array_equal(shapes[shape_of_patch.reshape(-1)], bits):
+        shapes, shape_of_patch = np.unique(bits, axis=0, return_inverse=True)
+        if shapes.shape[0] > max_shapes:
+            return None
+    return np.ascontiguousarray(shapes.view(np.float32).T), shape_of_patch.reshape(-1).astype(np.uint16)
+
+def build_geometry(vertices, triangles, triangle_patch, patch_count):
+    """The :class:`Geometry` of a mesh whose triangles make ``patch_count`` patches (checked:
+    ValueError naming what is wrong)."""
+    V, T, tp, centre, diagonal = validate_mesh(vertices, triangles, triangle_patch, patch_count)
+    corners = (V[T] - centre) / diagonal          # (T,3,3) float64, unit space
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    cross = np.cross(e1, e2)
+    double_area = np.linalg.norm(cross, axis=1)
+    area = 0.5 * double_area                      # unit space
+    degenerate = area <= RELATIVE_DEGENERATE_AREA
+    if degenerate.any():
+        warnings.warn(
+            f"dropped {int(degenerate.sum())} degenerate (zero-area) triangles: {indices_text(degenerate)}",
+            stacklevel=3,
+        )
+    keep = np.flatnonzero(~degenerate)
+    warn_coincident(corners[keep], tp[keep])
+    patch_area = np.bincount(tp[keep], weights=area[keep], minlength=patch_count)
+    empty = patch_area <= 0
+    if empty.any():
+        raise PatchError(f"patches {indices_text(empty)} have no area (no triangles, or only degenerate ones)", indices_of(empty))
+
+    order = keep[np.argsort(tp[keep], kind="stable")]
+    tp_sorted = tp[order]
+    normal = cross[order] / double_area[order, None]
+    weighted = np.stack(  # area-weighted normal sum (x2)
+        [np.bincount(tp_sorted, weights=cross[order, k], minlength=patch_count) for k in range(3)], axis=1
+    )
+    norm = np.linalg.norm(weighted, axis=1)
+    folded = norm <= 1e-12 * patch_area * 2
+    if folded.any():
+        raise PatchError(
+            f"patches {indices_text(folded)} have triangles of opposite winding that cancel: "
+            "a patch must be coplanar triangles facing one way",
+            indices_of(folded),
+        )
+    patch_normal = weighted / norm[:, None]
+    cosine = np.einsum("ij,ij->i", normal, patch_normal[tp_sorted])
+    crooked = cosine < MIN_PATCH_NORMAL_COSINE
+    if crooked.any():
+        crooked_patches = np.unique(tp_sorted[crooked])
+        raise PatchError(
+            f"patches {indices_text(crooked_patches)} mix triangles of different "
+            "orientation: a patch must be coplanar triangles with the same winding",
+            crooked_patches,
+        )
+
+    count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
+    first = np.concatenate(([0], np.cumsum(count)[:-1]))
+    sorted_area = area[order]
+    cumulative = np.cumsum(sorted_area)
+    before_patch = np.concatenate(([0.0], cumulative))[first]
+    fraction = (cumulative - before_patch[tp_sorted]) / patch_area[tp_sorted]
+    last = first + count - 1
+    fraction[last] = 1.0  # exact upper end, whatever the rounding
+    ray_offset = RELATIVE_RAY_OFFSET
+    sorted_corners = corners[order]
+    inset = RELATIVE_EDGE_INSET
+    is_parallelogram, parallelogram = parallelogram_frames(sorted_corners, first, count, inset)
+    parallelogram[:, :3] += ray_offset * patch_normal
+    leave_corners = inset_triangles(sorted_corners, inset)
+
+    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
+    return Geometry(
+        centre=centre,
+        diagonal=diagonal,
+        ray_offset=ray_offset,
+        triangle_index=order,
+        triangle_patch=tp_sorted.astype(np.int32),
+        triangle_area=sorted_area * diagonal**2,
+        triangle_normal=f32(normal),
+        triangle_corners=f32(sorted_corners),
+        patch_area=patch_area * diagonal**2,
+        patch_normal=f32(patch_normal),
+        patch_first_triangle=first,
+        patch_triangle_count=count,
+        triangle_key=tp_sorted + fraction,
+        triangle_frame=f32(
+            np.hstack(
+                [
+                    leave_corners[:, 0] + ray_offset * normal,
+                    leave_corners[:, 1] - leave_corners[:, 0],
+                    leave_corners[:, 2] - leave_corners[:, 0],
+                ]
+            ).T
+        ),
+        patch_first_fraction=f32(fraction[first]),
+        patch_parallelogram=is_parallelogram,
+        parallelogram_frame=f32(np.where(is_parallelogram[:, None], parallelogram, 0.0).T),
+    )
+

@@ -1,0 +1,27 @@
+"""The names a solve is asked for by: estimators, exit points, samplings, stop rules and stop reasons."""
+
+# The paper's two estimators.
+FINITE = "finite"                    # Phi_T: constant power, die-or-survive with R_bar at each hit
+BIASED_INFINITE = "biased_infinite"  # power times R at each hit, cut below the threshold t
+ESTIMATORS = (FINITE, BIASED_INFINITE)
+
+# Where the next ray leaves a hit patch from.
+EXIT_RANDOM = "random"  # a new uniform point of the patch: the paper's discrete method
+EXIT_HIT = "hit"        # the point hit: particle tracing
+EXIT_POINTS = (EXIT_RANDOM, EXIT_HIT)
+
+# How sources and first rays are drawn.
+INDEPENDENT = "independent"  # the paper's: what the predicted path counts are derived for
+STRATIFIED = "stratified"    # paths allotted in proportion to power, low-discrepancy first rays
+SAMPLINGS = (INDEPENDENT, STRATIFIED)
+
+# When a solve with an error target stops.
+PREDICTED = "predicted"  # after the paths formula (2)/(3) predicts for the target
+MEASURED = "measured"    # once the batch-means estimate meets the target
+STOP_RULES = (PREDICTED, MEASURED)
+
+# Why a solve stopped (SolveResult.stopped).
+STOP_PATHS = "paths"
+STOP_TARGET = "target"
+STOP_CANCELLED = "cancelled"
+STOP_TIME_LIMIT = "time_limit"

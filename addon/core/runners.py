@@ -1,0 +1,51 @@
+"""Where a solve's chunks run: this machine's threads (a cluster runner offers the same calls).
+
+A runner takes tasks "chunks k, k+1, ... of sizes n_k" and returns futures of their tallies.
+Chunk k draws from its own stream, SeedSequence(seed, spawn_key=(k,)) (a group of chunks traced
+together from its first chunk's), so a task's result depends on nothing but its arguments:
+bitwise the same wherever and in whatever order it runs.
+"""
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from .walk import walk_chunks
+
+
+def chunk_generator(seed, first_chunk):
+    """The random numbers of chunk ``first_chunk`` (and of the chunks traced with it)."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(first_chunk,))))
+
+
+def run_chunks(tables, seed, first_chunk, sizes, abort=None):
+    """The tallies of chunks ``first_chunk``, ``first_chunk`` + 1, ... of ``sizes`` paths."""
+    return walk_chunks(tables, sizes, chunk_generator(seed, first_chunk), abort)
+
+
+class ThreadRunner:
+    """Chunks on threads of this process; walks take turns at numpy and trace in parallel."""
+
+    def __init__(self, threads):
+        self.threads = threads
+        self.slots = threads + 1  # every thread busy, and one task queued beyond them
+        self._abort = threading.Event()
+        self._executor = None
+
+    def start(self, tables, seed):
+        self._tables, self._seed = tables, seed
+        self._executor = ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="radiosity")
+
+    def submit(self, first_chunk, sizes):
+        """A future of the tallies of chunks ``first_chunk``... of ``sizes`` paths."""
+        return self._executor.submit(run_chunks, self._tables, self._seed, first_chunk, sizes, self._abort)
+
+    def stop(self, pending):
+        """Abandon the tasks still running (at their next step) or queued; wait for the threads."""
+        self._abort.set()
+        for future in pending:
+            future.cancel()
+        if self._executor is not None:
+            self._executor.shutdown(wait=True)

@@ -1,0 +1,164 @@
+"""Per-solve tables: a scene's materials, sources and geometry in the layouts the walk reads.
+
+Built once per solve and shared by all its chunks and threads. Gathers from them use
+``take(..., mode="wrap")``: every index is valid by construction (a ray tracer's miss, -1, is
+only ever gathered to be masked out), and numpy's wrapping gather is about twice as fast as its
+checking one.
+"""
+from __future__ import annotations
+
+import threading
+from functools import cached_property
+
+import numpy as np
+
+from .names import EXIT_RANDOM, FINITE, INDEPENDENT, STRATIFIED
+from .sampling import SourceTable, channel_sum
+from .speedups import Speedups
+
+# At most this many patch classes (2^12 classes take 200 kB); more, and the classes are the
+# shapes alone, R_bar read per patch.
+PATCH_CLASSES_MAX = 1 << 12
+
+
+class WalkTables:
+    """What every chunk of a solve reads: materials (C,P), the sources, the leaving frames,
+    the Embree scene the walk traces, and which speed-ups it uses (``speedups``)."""
+
+    def __init__(self, scene, estimator, threshold, exit_point, sampling=INDEPENDENT, speedups=None, max_classes=PATCH_CLASSES_MAX):
+        g = self.geometry = scene.geometry
+        self.estimator = estimator
+        self.finite = estimator == FINITE
+        self.threshold = float(threshold)
+        self.exit_random = exit_point == EXIT_RANDOM
+        self.stratified = sampling == STRATIFIED
+        self.patch_count = scene.patch_count
+        self.sources = SourceTable(scene.patch_area, scene.emission)
+        self.grey_reflectivity = scene.grey_reflectivity  # R_bar (P,)
+        # Grey scenes carry one channel; colour scenes three.
+        self.channels = 1 if scene.is_grey else 3
+        self.reflectivity = np.ascontiguousarray(scene.reflectivity[:, : self.channels].T)  # (C,P)
+        self.emission = scene.emission  # (P,3), for start_weight
+        # A grey finite walk's weights stay exactly 1: no weight arrays at all. A grey biased
+        # walk's weight is the accumulated reflectivity the threshold test keeps anyway.
+        self.unit_weights = self.finite and self.channels == 1
+        self.weight_is_accumulated = not self.finite and self.channels == 1
+        speedups = (speedups or Speedups()).resolve(scene, estimator, exit_point)
+        # float32 uniforms per ray leaving a new point of its patch: point (2), direction (2),
+        # and a triangle choice unless every patch is a parallelogram. (The finite survival test
+        # draws float64: float32 would quantise R_bar to multiples of 2^-24.)
+        self.uniforms_per_ray = 4 if g.all_parallelograms else 5
+        self.row_triangle = None if g.all_parallelograms else 4
+        # Sorted paths go by a 16-bit key, patch >> shift (numpy's radix sort).
+        self.patch_key_shift = max(0, int(scene.patch_count - 1).bit_length() - 16)
+        if g.all_parallelograms:
+            self.leave_table = g.leave_table
+        else:
+            self.exit_table = g.exit_table
+        self.patch_class = None
+        if speedups.patch_classes:
+            classes = patch_classes(g, self.grey_reflectivity, max_classes)
+            if classes is None:
+                speedups = speedups.without("patch_classes")
+            else:
+                self.patch_class, self.class_shape, self.class_grey_reflectivity, class_shape_index = classes
+                self.class_normals = np.ascontiguousarray(self.class_shape[6:9])
+                self.leave_corners = self.leave_table[0:3]  # contiguous: the table's first rows
+        self.speedups = speedups
+        # In a scene of parallelograms the triangles come in pairs, in patch order: triangle t
+        # is half of patch t >> 1.
+        self.paired_triangles = g.all_parallelograms
+        self.grids = g.patch_grids if speedups.grids else None
+        # The Embree scene the walk traces, built here (once per geometry), not on a thread.
+        self.tracer = g.tracer if self.grids is None else self.grids.tracer
+        # A hit-point exit's edge thresholds and the frames a hit near an edge is mapped onto
+        # (rays.hit_points), per triangle traced, or per class where classes have shapes.
+        self.class_edge_barycentric = None
+        if not self.exit_random:
+            if self.grids is None:
+                self.hit_frames, self.edge_barycentric = g.exit_table, g.edge_barycentric
+                if self.patch_class is not None:
+                    self.class_edge_barycentric = g.shape_edge_barycentric[class_shape_index]
+            else:
+                self.hit_frames, self.edge_barycentric = self.grids.hit_frames, self.grids.edge_barycentric
+        # A random exit's facing test off the grids: in a scene of parallelograms against the
+        # hit patch's normal (rows the next step gathers again), else the triangle's.
+        self.facing_by_patch = g.all_parallelograms
+        self.facing_rows = self.leave_table[9:12] if self.facing_by_patch else g.triangle_normal_rows
+        # Walks on several threads take turns at their numpy work: a walk holds this lock
+        # except while it traces (walk.walk_chunks).
+        self.numpy_turn = threading.Lock()
+
+    @cached_property
+    def survivor_weight(self):
+        """R_jc / R_bar_j (C,P): what survivors multiply each channel's weight by (colour walks)."""
+        R = self.reflectivity
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.grey_reflectivity > 0, R / self.grey_reflectivity, 0.0)
+
+    @cached_property
+    def start_weight(self):
+        """E_ic / E_bar_i (C,P): a path's starting weight from source i (colour walks)."""
+        E = self.emission
+        grey_emission = channel_sum(E) / 3  # bit for bit E.mean(axis=1), at a tenth of its cost
+        with np.errstate(invalid="ignore", divide="ignore"):
+            start = np.where(grey_emission > 0, E[:, : self.channels].T / grey_emission, 0.0)
+        return np.ascontiguousarray(start)  # (E.T's rows: the division keeps its column order)
+
+    def class_of(self, patch):
+        """The class of each of the given patches (with patch classes only)."""
+        return self.patch_class.take(patch, mode="wrap")
+
+    def grey_reflectivity_at(self, patch):
+        """R_bar of each of the given patches (float64)."""
+        if self.patch_class is not None and self.class_grey_reflectivity is not None:
+            return self.class_grey_reflectivity.take(self.class_of(patch), mode="wrap")
+        return self.grey_reflectivity.take(patch, mode="wrap")
+
+    def outside_turn(self, trace, origins, directions):
+        """``trace(origins, directions)`` with the numpy turn released: other walks work meanwhile."""
+        self.numpy_turn.release()
+        try:
+            return trace(origins, directions)
+        finally:
+            self.numpy_turn.acquire()
+
+
+def patch_classes(geometry, grey_reflectivity, max_classes=PATCH_CLASSES_MAX):
+    """The patches of a scene of parallelograms in classes of one leaving-frame shape (edge a,
+    edge b, normal: Geometry.leave_shapes) and one R_bar each, bit for bit: ((P,) uint16 class
+    of each patch, (9,K) float32 shape rows, (K,) R_bar or None, (K,) shape index of each
+    class). Where shape and R_bar together make more than ``max_classes`` classes (R_bar varies
+    from patch to patch), the classes are the shapes alone and R_bar None (read per patch);
+    None where the shapes alone are too many. A walk then reads a patch's leaving frame as its
+    corner and its class's shape, and a hit patch's normal and R_bar as its class's."""
+    shapes = geometry.leave_shapes
+    if shapes is None:
+        return None
+    shape_table, shape_of_patch = shapes
+    values, value_of_patch = np.unique(grey_reflectivity, return_inverse=True)
+    key = shape_of_patch.astype(np.int64) * values.size + value_of_patch.reshape(-1)
+    keys, patch_class = unique_keys(key, shape_table.shape[1] * values.size)
+    if keys.size > max_classes:
+        if shape_table.shape[1] > max_classes:
+            return None
+        return shape_of_patch, shape_table, None, np.arange(shape_table.shape[1])
+    shape = keys // values.size
+    return (
+        patch_class.reshape(-1).astype(np.uint16),
+        np.ascontiguousarray(shape_table[:, shape]),
+        values[keys % values.size],
+        shape,
+    )
+
+
+def unique_keys(key, key_count):
+    """np.unique(key, return_inverse=True) for (P,) int64 keys in [0, key_count): where the
+    key range is not much bigger than P, a table of the keys present replaces the sort."""
+    if key_count > 4 * key.size:
+        return np.unique(key, return_inverse=True)
+    present = np.zeros(key_count, dtype=bool)
+    present[key] = True
+    keys = np.flatnonzero(present)
+    rank = np.cumsum(present) - 1  # a present key's place among the keys present
+    return keys, rank.take(key, mode="wrap")

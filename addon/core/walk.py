@@ -1,0 +1,53 @@
+"""The shooting random walk as a wavefront of named stages.
+
+A batch of paths ("chunk") is traced as a wavefront: every live path advances one bounce per
+step, and the live paths' rays go to the ray tracer together. Each step runs the same stages:
+
+    refill          new paths from the sources take the places of ended ones
+    generate        each live path's next ray leaves its patch (cosine-distributed)
+    intersect       the ray tracer: what each ray meets first
+    handle_escaped  rays that hit nothing escape; rays that hit a back side are absorbed there
+    score           the power a path carries scores on the patch it hit
+    survive_or_cut  the estimator's rule (``estimators``): finite paths survive with R_bar,
+                    biased paths carry R and end below the threshold t
+
+until the chunk's paths have all ended. Small chunks go through in groups: one wavefront, each
+path tagged with its chunk, every chunk with its own tallies. The stages run on one of two
+states: :class:`.path_walk.PathWalk` (paths as arrays of what they carry) or, for the paper's
+plain walk whose paths are interchangeable, :class:`.interchangeable.InterchangeableWalk`.
+"""
+from __future__ import annotations
+
+from .interchangeable import InterchangeableWalk
+from .path_walk import PathWalk
+
+
+class Aborted(Exception):
+    """The walk was asked to stop; its partial chunk is discarded."""
+
+
+def walk_chunks(tables, sizes, rng, abort=None):
+    """Trace the paths of chunks of ``sizes`` paths as one wavefront; return each chunk's own
+    tallies (ChunkTally), in order. ``abort`` (a threading.Event) stops it at the next step.
+
+    Walks on several threads take turns at their numpy work (``tables.numpy_turn``, released
+    while they trace): taking turns hands the GIL over about once a step."""
+    sizes = [int(n) for n in sizes]
+    state = InterchangeableWalk if tables.speedups.interchangeable else PathWalk
+    with tables.numpy_turn:
+        walk = state(tables, sizes, rng)
+        while True:
+            if abort is not None and abort.is_set():
+                raise Aborted
+            if not walk.refill():
+                break
+            hits = walk.intersect(*walk.generate(rng))
+            walk.handle_escaped(hits)
+            walk.score(hits)
+            walk.survive_or_cut(hits, rng)
+        return walk.tallies()
+
+
+def walk_chunk(tables, paths, rng, abort=None):
+    """Trace ``paths`` random walks from the sources to their end; return their tallies."""
+    return walk_chunks(tables, [paths], rng, abort)[0]

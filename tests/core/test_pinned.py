@@ -1,0 +1,34 @@
+"""Every walk gives bit for bit the results it gave before the walk was split into named stages
+(pins made on commit 4187daa: see pinned_cases), with the speed-ups on and off as each case says."""
+import json
+from pathlib import Path
+
+import pytest
+from pinned_cases import CASES, SCENES, fingerprint, solve_arguments
+
+from addon.core import Speedups, solve
+
+PINS = json.loads((Path(__file__).parent / "pinned_results.json").read_text())
+_scenes = {}
+
+
+def _scene(name):
+    if name not in _scenes:
+        _scenes[name] = SCENES[name]()
+    return _scenes[name]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c["id"] for c in CASES])
+def test_results_are_the_pinned_ones(case):
+    scene = _scene(case["scene"])
+    result = solve(scene, speedups=Speedups(**case["speedups"]), **solve_arguments(scene, case))
+    assert fingerprint(result) == PINS[case["id"]]
+
+
+def test_a_planted_change_fails_the_pins():
+    """The fingerprint sees a change in the last bit of one patch's radiosity."""
+    case = CASES[0]
+    scene = _scene(case["scene"])
+    result = solve(scene, **solve_arguments(scene, case))
+    result.radiosity[7, 1] = float.fromhex(result.radiosity[7, 1].hex()) * (1 + 2**-52)
+    assert fingerprint(result) != PINS[case["id"]]
