@@ -1,7 +1,8 @@
-"""The stages of the paper's plain walk, whose paths are interchangeable: a grey finite walk
-leaving from random points. Every path carries the same power and leaves each patch from a new
-point, so a path is nothing but the patch it is on (and its chunk), and the live paths may be
-kept in any order without changing the estimate.
+"""The walk's stages for the paper's plain walk, whose paths are interchangeable.
+
+A grey finite walk leaving from random points: every path carries the same power and leaves each
+patch from a new point, so a path is nothing but the patch it is on (and its chunk), and the live
+paths may be kept in any order without changing the estimate.
 
 Every ray ends one of four ways: escaped (no hit), blocked (a back side), absorbed (a front hit,
 then the survival test fails) or surviving. Instead of selecting the survivors path by path, a

@@ -1,5 +1,6 @@
-"""The stages of a walk whose paths carry something of their own: weights, hit points, an
-accumulated reflectivity. The live paths are arrays (:class:`LivePaths`), selected path by path.
+"""The walk's stages for paths that carry something of their own (weights, hit points, R products).
+
+The live paths are arrays (:class:`LivePaths`), selected path by path.
 
 In a group of chunks each path also carries its chunk, and the live paths stay in chunk order:
 a chunk's paths all start before the next chunk's, selections keep the order, and the sort by

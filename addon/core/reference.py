@@ -1,5 +1,7 @@
-"""Exact and near-exact references for the random walks: form factors, the direct solve of the
-discrete radiosity system B = E + R F B, and the exact per-path variances of table 1.
+"""Exact and near-exact references for the random walks, to test them against.
+
+Form factors, the direct solve of the discrete radiosity system B = E + R F B, and the exact
+per-path variances of table 1.
 
 Form factors between axis-aligned rectangles come in closed form from the contour integral
 (Stokes' theorem applied to the form factor's double area integral)

@@ -1,6 +1,7 @@
-"""Sampling for shooting random walks: sources in proportion to power, uniform points on
-patches, cosine-distributed directions. All functions are vectorised over paths and take the
-uniform random numbers they consume as arguments, so that they are deterministic and testable.
+"""Sampling for shooting random walks: sources by power, points on patches, cosine directions.
+
+All functions are vectorised over paths and take the uniform random numbers they consume as
+arguments, so that they are deterministic and testable.
 """
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""solve(): runs the random walks in chunks (on threads, or a runner's workers), to a path count
-or an error target.
+"""solve(): the random walks in chunks, on threads, to a path count or an error target.
 
 Chunk tallies are added in chunk order, so a run's result depends only on the seed and the chunk
 plan, never on the number of threads or on timing: bitwise reproducible. The chunks are also the

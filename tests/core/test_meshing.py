@@ -375,7 +375,7 @@ def test_saddle_grid_of_twisted_quads(patch_size):
 def test_cells_of_a_twisted_quads_bilinear_grid_are_twisted_too():
     """Why a twisted quad is not gridded: the cells of its bilinear grid are twisted too."""
     v, fs, cv = twisted_quad(lift=0.8)
-    from addon.core.meshing import _grid_template
+    from addon.core.subdivision import _grid_template
 
     i, j, cells = _grid_template(2, 2)
     u, w = (i / 2)[:, None], (j / 2)[:, None]
