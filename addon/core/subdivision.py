@@ -189,37 +189,15 @@ def add_grids(b, plan, points):
                 + u * v * ps[:, None, 2]
                 + (1 - u) * v * ps[:, None, 3]
             )  # (G, K, 3)
-            G, K = len(sel), len(i)
-            keys = b.interior_keys(G * K).reshape(G, K, 5)
             # boundary points lie on source edges; corners are source vertices
-            on_v0 = j == 0  # edge 0 -> 1, fraction i/n
-            on_v1 = j == m  # edge 3 -> 2, fraction i/n
-            on_u0 = i == 0  # edge 0 -> 3, fraction j/m
-            on_u1 = i == n  # edge 1 -> 2, fraction j/m
-            for mask, a, c, num, den in (
-                (on_v0, 0, 1, i, n),
-                (on_v1, 3, 2, i, n),
-                (on_u0, 0, 3, j, m),
-                (on_u1, 1, 2, j, m),
-            ):
-                cnt = int(mask.sum())
-                ek = _edge_point_keys(
-                    np.repeat(qs[:, a], cnt),
-                    np.repeat(qs[:, c], cnt),
-                    np.tile(num[mask], G),
-                    np.full(G * cnt, den),
-                )
-                keys[:, mask] = ek.reshape(G, cnt, 5)
-            first = b.add_points(keys.reshape(-1, 5), pos.reshape(-1, 3))
-            corners = first + (np.arange(G)[:, None, None] * K + cells[None]).reshape(-1)
-            nc = len(cells)
-            b.add_faces(
-                np.full(G * nc, 4, dtype=np.int64),
-                corners,
-                np.repeat(quads[sel], nc),
-                np.tile(np.arange(nc), G),
+            edges = (
+                (j == 0, 0, 1, i, n),  # edge 0 -> 1, fraction i/n
+                (j == m, 3, 2, i, n),  # edge 3 -> 2, fraction i/n
+                (i == 0, 0, 3, j, m),  # edge 0 -> 3, fraction j/m
+                (i == n, 1, 2, j, m),  # edge 1 -> 2, fraction j/m
             )
-
+            nc = len(cells)
+            _add_subdivided(b, qs, pos, edges, cells, 4, np.repeat(quads[sel], nc), np.tile(np.arange(nc), len(sel)))
 
 def add_triangles(b, plan, points, face_triangles, triangle_face):
     """Triangles (of n-gons and non-planar faces too) cut into n^2 triangles each."""
@@ -242,28 +220,32 @@ def add_triangles(b, plan, points, face_triangles, triangle_face):
             w1 = (i / n)[None, :, None]
             w2 = (j / n)[None, :, None]
             pos = (1 - w1 - w2) * ps[:, None, 0] + w1 * ps[:, None, 1] + w2 * ps[:, None, 2]
-            G, K = len(sel), len(i)
-            keys = b.interior_keys(G * K).reshape(G, K, 5)
-            for mask, a, c, num in (
-                (j == 0, 0, 1, i),  # edge 0 -> 1 at i/n
-                (i == 0, 0, 2, j),  # edge 0 -> 2 at j/n
-                (i + j == n, 1, 2, j),  # edge 1 -> 2 at j/n
-            ):
-                cnt = int(mask.sum())
-                ek = _edge_point_keys(
-                    np.repeat(ts[:, a], cnt),
-                    np.repeat(ts[:, c], cnt),
-                    np.tile(num[mask], G),
-                    np.full(G * cnt, int(n)),
-                )
-                keys[:, mask] = ek.reshape(G, cnt, 5)
-            first = b.add_points(keys.reshape(-1, 5), pos.reshape(-1, 3))
-            corners = first + (np.arange(G)[:, None, None] * K + subs[None]).reshape(-1)
-            ns = len(subs)
-            b.add_faces(
-                np.full(G * ns, 3, dtype=np.int64),
-                corners,
-                np.repeat(tf[sel], ns),
-                np.repeat(order_in_face[sel] * (int(n_t.max()) ** 2 + 1), ns)
-                + np.tile(np.arange(ns), G),
+            edges = (
+                (j == 0, 0, 1, i, int(n)),  # edge 0 -> 1 at i/n
+                (i == 0, 0, 2, j, int(n)),  # edge 0 -> 2 at j/n
+                (i + j == n, 1, 2, j, int(n)),  # edge 1 -> 2 at j/n
             )
+            ns = len(subs)
+            order = np.repeat(order_in_face[sel] * (int(n_t.max()) ** 2 + 1), ns) + np.tile(np.arange(ns), len(sel))
+            _add_subdivided(b, ts, pos, edges, subs, 3, np.repeat(tf[sel], ns), order)
+
+
+def _add_subdivided(b, source_corners, pos, edges, cells, sides, face, order):
+    """G faces subdivided alike: their points ((G,K,3) ``pos``) keyed as interior points, or, for
+    each (mask, a, c, num, den) of ``edges``, as the point at num/den of the source edge from
+    corner a to corner c of ``source_corners`` (G,corners); then the ``cells`` (local point
+    indices, ``sides`` corners each) as faces with their source ``face`` and ``order``."""
+    G, K = pos.shape[:2]
+    keys = b.interior_keys(G * K).reshape(G, K, 5)
+    for mask, a, c, num, den in edges:
+        cnt = int(mask.sum())
+        ek = _edge_point_keys(
+            np.repeat(source_corners[:, a], cnt),
+            np.repeat(source_corners[:, c], cnt),
+            np.tile(num[mask], G),
+            np.full(G * cnt, den),
+        )
+        keys[:, mask] = ek.reshape(G, cnt, 5)
+    first = b.add_points(keys.reshape(-1, 5), pos.reshape(-1, 3))
+    corners = first + (np.arange(G)[:, None, None] * K + cells[None]).reshape(-1)
+    b.add_faces(np.full(G * len(cells), sides, dtype=np.int64), corners, face, order)
