@@ -129,11 +129,12 @@ class PathWalk:
             u = rng.random((t.uniforms_per_ray, n), dtype=np.float32)
             if first is not None and new > 0:
                 u[:4, n_live:] = first[:, start : start + new]  # stratified first rays
-            return rays.leave_random(t, p.patch, u)
+            return rays.leave_sources(t, p.patch, u)
         u = rng.random((2, n), dtype=np.float32)
         normals = rays.patch_normals(t, p.patch)
         origins = p.leave_from
         origins += normals[:, :n_live] * np.float32(t.geometry.ray_offset)
+        light = None
         if new > 0:
             # New paths leave from points of their sources (their directions take u's rows).
             u_new = np.empty((t.uniforms_per_ray, new), dtype=np.float32)
@@ -144,9 +145,17 @@ class PathWalk:
                 rng.random(dtype=np.float32, out=u_new[:2])
             if t.row_triangle is not None:
                 rng.random(dtype=np.float32, out=u_new[t.row_triangle])
-            frame = rays.leave_frames(t, p.patch[n_live:], u_new)  # (folds u_new's points first)
+            source = p.patch[n_live:]
+            light = rays.light_columns(t, source)
+            if light is not None:  # (their uniforms before leave_frames folds them)
+                u_light = np.vstack([u_new[:2, light], u[:, n_live + light]])
+                source = rays.on_patches(t, source)
+            frame = rays.leave_frames(t, source, u_new)
             origins = np.concatenate((origins, frame_points(frame, u_new[0], u_new[1])), axis=1)
-        return origins, add_sphere_points(normals, u[0], u[1])
+        directions = add_sphere_points(normals, u[0], u[1])
+        if light is not None:
+            rays.set_light_rays(t, p.patch[n_live + light], u_light, origins, directions, n_live + light)
+        return origins, directions
 
     def intersect(self, origins, directions):
         """What each ray meets first (and, leaving from hit points, where)."""

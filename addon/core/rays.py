@@ -29,6 +29,42 @@ class Hits:
     points: np.ndarray | None = None  # (3,n) where (exit_point="hit"), not yet pushed off
 
 
+def leave_sources(tables, source, u):
+    """:func:`leave_random` for paths on patches; paths just started at a light (a source id
+    from the patch count on) take that light's rays, from the same uniforms u[0:4]."""
+    light = light_columns(tables, source)
+    if light is None:
+        return leave_random(tables, source, u)
+    u_light = u[:4, light].copy()  # (before leave_random folds points onto triangles)
+    origins, directions = leave_random(tables, on_patches(tables, source), u)
+    set_light_rays(tables, source[light], u_light, origins, directions, light)
+    return origins, directions
+
+
+def light_columns(tables, source):
+    """The columns of ``source`` that are lights' emitters, or None (no lights, or none there)."""
+    if tables.lights is None:
+        return None
+    light = np.flatnonzero(source >= tables.patch_count)
+    return light if light.size else None
+
+
+def on_patches(tables, source):
+    """``source`` with every light's emitter replaced by patch 0 (to gather patch tables with)."""
+    return np.where(source < tables.patch_count, source, 0).astype(source.dtype)
+
+
+def set_light_rays(tables, source, u, origins, directions, columns):
+    """Rays from the lights' emitters ``source`` (ids from the patch count on) with uniforms
+    ``u`` (4, m), written into ``columns`` of (3,n) ``origins`` and ``directions`` (unit space;
+    origins pushed off along their direction like a patch's along its normal)."""
+    g = tables.geometry
+    o, d = tables.lights.emit(source - tables.patch_count, u)
+    o = (o - g.centre[:, None]) / g.diagonal + g.ray_offset * d
+    origins[:, columns] = o
+    directions[:, columns] = d
+
+
 def leave_random(tables, patch, u):
     """Rays leaving the given patches from uniform points (``u[0]``, ``u[1]``, and
     ``u[row_triangle]`` to choose a triangle), in cosine-distributed directions (``u[2]``,

@@ -25,23 +25,32 @@ def channel_sum(values):
     return total
 
 
+def source_weights(patch_area, emission, light_power=None):
+    """(S,) what a source is chosen in proportion to: its power summed over the channels, the
+    patches' (A_i E_i) first, then the lights' emitters'."""
+    power = patch_area * channel_sum(emission)
+    if light_power is None or not len(light_power):
+        return power
+    return np.concatenate([power, channel_sum(light_power)])
+
+
 class SourceTable:
-    """Chooses emitting patches with probability Phi_i / Phi_T (power summed over channels).
+    """Chooses sources with probability Phi_i / Phi_T, from (S,) ``power`` (source_weights):
+    ids below the patch count are emitting patches, the others the lights' emitters.
 
     A guide table (the cutpoint method) makes each choice O(1) on average: bucket m of M
     equal buckets of [0,1) stores the first source whose cumulative probability passes
     m / M, and a short vectorised walk finishes the search.
     """
 
-    def __init__(self, patch_area, emission):
-        power = patch_area * channel_sum(emission)
-        self.patches = np.flatnonzero(power > 0)
-        cumulative = np.cumsum(power[self.patches])
+    def __init__(self, power):
+        self.ids = np.flatnonzero(power > 0)
+        cumulative = np.cumsum(power[self.ids])
         self.cdf = cumulative / cumulative[-1]
         self.cdf[-1] = 1.0
-        self.probability = power[self.patches] / cumulative[-1]
+        self.probability = power[self.ids] / cumulative[-1]
         self._lock = threading.Lock()
-        buckets = self.patches.size
+        buckets = self.ids.size
         self.guide = np.searchsorted(self.cdf, np.arange(buckets) / buckets, side="right")
 
     def stratified(self, count, rng):
@@ -85,27 +94,27 @@ class SourceTable:
         draws its own uniform, O(count).
         """
         if self.draws_counts(count):
-            return np.repeat(self.patches, self.counts(count, rng))
+            return np.repeat(self.ids, self.counts(count, rng))
         return self.choose(rng.random(count))
 
     def draws_counts(self, count):
         """Whether :meth:`sample` draws ``count`` choices as counts per source."""
-        return self.patches.size * MULTINOMIAL_PATHS_PER_SOURCE <= count
+        return self.ids.size * MULTINOMIAL_PATHS_PER_SOURCE <= count
 
     def counts(self, count, rng):
-        """The number of paths from each source (in the order of ``patches``) among ``count``
+        """The number of paths from each source (in the order of ``ids``) among ``count``
         independent choices: one multinomial draw, the numbers :meth:`sample` draws when
         :meth:`draws_counts`."""
         return rng.multinomial(count, self.probability)
 
     def choose(self, u):
-        """Patch index for each uniform u in [0, 1): the first k with u < cdf[k]."""
+        """Source id for each uniform u in [0, 1): the first k with u < cdf[k]."""
         k = self.guide[(u * self.guide.size).astype(np.int64)]
         behind = np.flatnonzero(self.cdf[k] <= u)
         while behind.size:
             k[behind] += 1
             behind = behind[self.cdf[k[behind]] <= u[behind]]
-        return self.patches[k]
+        return self.ids[k]
 
 
 def halton(index, bases):
@@ -260,8 +269,8 @@ class SourceRuns:
         counts = np.concatenate([sources.counts(n, rng) for n in sizes])
         self.end = np.cumsum(counts)
         self.start = self.end - counts
-        self.chunk = np.repeat(np.arange(len(sizes)), sources.patches.size)
-        self.patch = np.tile(sources.patches, len(sizes))
+        self.chunk = np.repeat(np.arange(len(sizes)), sources.ids.size)
+        self.source = np.tile(sources.ids, len(sizes))
 
     def add_window(self, live, first, last):
         """Adds paths ``first`` to ``last`` (exclusive) to the (chunks, patches) counts ``live``:
@@ -269,4 +278,4 @@ class SourceRuns:
         i = np.searchsorted(self.end, first, side="right")
         j = np.searchsorted(self.start, last, side="left")
         overlap = np.minimum(self.end[i:j], last) - np.maximum(self.start[i:j], first)
-        live[self.chunk[i:j], self.patch[i:j]] += overlap  # one run per chunk and source
+        live[self.chunk[i:j], self.source[i:j]] += overlap  # one run per chunk and source

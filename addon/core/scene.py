@@ -12,7 +12,8 @@ from functools import cached_property
 import numpy as np
 
 from .geometry import build_geometry
-from .validation import PatchError, validate_materials
+from .lights import Lights
+from .validation import PatchError, validate_lights, validate_materials
 
 class PatchScene:
     """Patches (groups of coplanar triangles) with their reflectivity and emittance.
@@ -25,17 +26,21 @@ class PatchScene:
     triangle_patch : (T,) int in [0, P): the patch each triangle belongs to.
     reflectivity : (P,3) RGB or (P,) grey, each in [0, 1).
     emission : (P,3) or (P,), the emittance E (power per unit area), >= 0.
+    lights : light sources beside the emissive patches (``lights``: point, spot, area, sun, world).
+    aim : (centre, radius) of the sphere sun and world light is aimed at (the part of the scene
+        whose light matters); default the bounding sphere of every patch.
 
     Degenerate triangles are dropped with a warning; everything else that is wrong raises
     ``ValueError`` naming the problem and the offending indices.
     """
 
-    def __init__(self, vertices, triangles, triangle_patch, reflectivity, emission, *, _geometry=None):
+    def __init__(self, vertices, triangles, triangle_patch, reflectivity, emission, lights=(), aim=None, *, _geometry=None):
         reflectivity_arr = np.asarray(reflectivity)
         if reflectivity_arr.ndim not in (1, 2) or reflectivity_arr.shape[0] == 0:
             raise ValueError(f"reflectivity must have shape (P,) or (P, 3) with P > 0; got {reflectivity_arr.shape}")
         patch_count = reflectivity_arr.shape[0]
-        self.reflectivity, self.emission = validate_materials(reflectivity, emission, patch_count)
+        lights = tuple(lights.lights if isinstance(lights, Lights) else lights)
+        self.reflectivity, self.emission = validate_materials(reflectivity, emission, patch_count, require_emitter=not lights)
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.triangles = np.asarray(triangles)
         self.triangle_patch = np.asarray(triangle_patch)
@@ -50,12 +55,23 @@ class PatchScene:
                 f"(largest emission {self.emission.max():.3g}); use smaller units of power",
                 np.flatnonzero(~np.isfinite(power).all(axis=1) | (power.max(axis=1) > 1e300)),
             )
+        g = self.geometry
+        if aim is None:
+            aim = (g.centre, 0.5 * g.diagonal)
+        # Sun and world rays start beyond the whole scene, seen from the aim's centre.
+        reach = float(np.linalg.norm(np.asarray(aim[0], np.float64) - g.centre)) + g.diagonal
+        self.lights = Lights(lights, aim, reach)
+        validate_lights(self.lights)
+        if lights and not (self.source_power > 0).any():
+            raise ValueError("the scene has no source: every emission is zero and no light gives power")
 
     # --- materials -------------------------------------------------------------------------
-    def with_materials(self, reflectivity, emission):
-        """A scene on the same patches with other materials, sharing geometry and ray tracer."""
+    def with_materials(self, reflectivity, emission, lights=None):
+        """A scene on the same patches with other materials (and the same lights unless given),
+        sharing geometry and ray tracer."""
         return PatchScene(
-            self.vertices, self.triangles, self.triangle_patch, reflectivity, emission, _geometry=self.geometry
+            self.vertices, self.triangles, self.triangle_patch, reflectivity, emission,
+            self.lights if lights is None else lights, self.lights.aim, _geometry=self.geometry,
         )
 
     # --- sizes -----------------------------------------------------------------------------
@@ -94,7 +110,8 @@ class PatchScene:
 
     @cached_property
     def is_grey(self):
-        return bool((self.reflectivity == self.reflectivity[:, :1]).all() and (self.emission == self.emission[:, :1]).all())
+        same = lambda a: bool((a == a[:, :1]).all())  # noqa: E731
+        return same(self.reflectivity) and same(self.emission) and same(self.lights.power)
 
     @cached_property
     def patch_power(self):
@@ -102,9 +119,16 @@ class PatchScene:
         return self.patch_area * self.emission.mean(axis=1)
 
     @cached_property
+    def source_power(self):
+        """(S,3) the power of every source: the patches' A_i E_i, then the lights' emitters."""
+        return np.vstack([self.patch_area[:, None] * self.emission, self.lights.power])
+
+    @cached_property
     def total_power(self):
-        """Phi_T."""
-        return float(self.patch_power.sum())
+        """Phi_T: the patches' and the lights' (channel mean)."""
+        if not len(self.lights):
+            return float(self.patch_power.sum())
+        return float(self.patch_power.sum() + self.lights.power.mean(axis=1).sum())
 
     @cached_property
     def average_reflectivity(self):
@@ -119,5 +143,6 @@ class PatchScene:
     def __repr__(self):
         return (
             f"PatchScene({self.patch_count} patches, {self.triangle_count} triangles, "
-            f"A_T={self.total_area:.6g}, Phi_T={self.total_power:.6g}, R_ave={self.average_reflectivity:.4g})"
+            f"A_T={self.total_area:.6g}, Phi_T={self.total_power:.6g}, R_ave={self.average_reflectivity:.4g}"
+            + (f", {len(self.lights)} lights)" if len(self.lights) else ")")
         )

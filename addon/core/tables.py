@@ -13,7 +13,7 @@ from functools import cached_property
 import numpy as np
 
 from .names import EXIT_RANDOM, FINITE, INDEPENDENT, STRATIFIED
-from .sampling import SourceTable, channel_sum
+from .sampling import SourceTable, channel_sum, source_weights
 from .speedups import Speedups
 
 # At most this many patch classes (2^12 classes take 200 kB); more, and the classes are the
@@ -33,7 +33,9 @@ class WalkTables:
         self.exit_random = exit_point == EXIT_RANDOM
         self.stratified = sampling == STRATIFIED
         self.patch_count = scene.patch_count
-        self.sources = SourceTable(scene.patch_area, scene.emission)
+        self.sources = SourceTable(source_weights(scene.patch_area, scene.emission, scene.lights.power))
+        # Source ids from the patch count on are the lights' emitters (None: no lights).
+        self.lights = scene.lights if len(scene.lights) else None
         self.grey_reflectivity = scene.grey_reflectivity  # R_bar (P,)
         # Grey scenes carry one channel; colour scenes three.
         self.channels = 1 if scene.is_grey else 3
@@ -98,8 +100,9 @@ class WalkTables:
 
     @cached_property
     def start_weight(self):
-        """E_ic / E_bar_i (C,P): a path's starting weight from source i (colour walks)."""
-        E = self.emission
+        """E_ic / E_bar_i (C,S): a path's starting weight from source i, a patch or a light's
+        emitter (colour walks)."""
+        E = self.emission if self.lights is None else np.vstack([self.emission, self.lights.power])
         grey_emission = channel_sum(E) / 3  # bit for bit E.mean(axis=1), at a tenth of its cost
         with np.errstate(invalid="ignore", divide="ignore"):
             start = np.where(grey_emission > 0, E[:, : self.channels].T / grey_emission, 0.0)

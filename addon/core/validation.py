@@ -111,7 +111,7 @@ def _as_channels(values, patch_count, name):
     raise ValueError(f"{name} must have shape (P,) or (P, 3); got {array.shape}")
 
 
-def validate_materials(reflectivity, emission, patch_count):
+def validate_materials(reflectivity, emission, patch_count, require_emitter=True):
     """Check reflectivity and emission arrays; return them as (P,3) float64.
 
     Raises ValueError naming the problem and the offending patch indices.
@@ -140,9 +140,21 @@ def validate_materials(reflectivity, emission, patch_count):
             "in practice",
             indices_of(unresolved),
         )
-    if not (E > 0).any():
+    if require_emitter and not (E > 0).any():
         raise ValueError("the scene has no emitting patch: every emission is zero")
     return R, E
+
+
+def validate_lights(lights):
+    """Check that every light's power is finite and not negative (ValueError naming it)."""
+    for light in lights.lights:
+        power = np.asarray(light.emitter_powers(lights.aim), np.float64)
+        if not np.isfinite(power).all():
+            raise ValueError(f"light '{light.name}' has a power that is NaN or infinite")
+        if (power < 0).any():
+            raise ValueError(f"light '{light.name}' has a negative power (colour or strength)")
+    if lights.aim[1] <= 0 or not np.isfinite(lights.aim[1]) or not np.isfinite(lights.aim[0]).all():
+        raise ValueError(f"the lights' aim sphere must have a finite centre and a positive radius; got {lights.aim}")
 
 
 

@@ -1,19 +1,19 @@
 """The sampling primitives: sources by power, uniform points, cosine directions."""
 import numpy as np
 
-from addon.core.sampling import SourceTable, choose_triangles, cosine_directions, points_on_triangles
+from addon.core.sampling import SourceTable, choose_triangles, source_weights, cosine_directions, points_on_triangles
 from boxes import box_scene
 
 
 def test_sources_follow_power_exactly_at_bucket_edges():
     area = np.array([1.0, 2.0, 1.0, 4.0, 0.5])
     emission = np.array([[0, 0, 0], [1, 1, 1], [3, 0, 0], [1e-9, 0, 0], [2, 2, 2]], float)
-    table = SourceTable(area, emission)
-    assert list(table.patches) == [1, 2, 3, 4]
+    table = SourceTable(source_weights(area, emission))
+    assert list(table.ids) == [1, 2, 3, 4]
     # The choice is exactly "first k with u < cdf[k]": check against searchsorted on a fine grid.
     u = np.linspace(0, 1, 200_001, endpoint=False)
     u = np.concatenate([u, table.cdf[:-1], np.nextafter(table.cdf[:-1], 0), [np.nextafter(1.0, 0)]])
-    expected = table.patches[np.searchsorted(table.cdf, u, side="right")]
+    expected = table.ids[np.searchsorted(table.cdf, u, side="right")]
     assert np.array_equal(table.choose(u), expected)
 
 
@@ -21,12 +21,12 @@ def test_sources_frequencies():
     rng = np.random.default_rng(0)
     area = rng.uniform(0.1, 2, 500)
     emission = rng.uniform(0, 1, (500, 3)) * (rng.random((500, 1)) < 0.3)
-    table = SourceTable(area, emission)
+    table = SourceTable(source_weights(area, emission))
     n = 2_000_000
-    counts = np.bincount(table.choose(rng.random(n)), minlength=500)[table.patches]
+    counts = np.bincount(table.choose(rng.random(n)), minlength=500)[table.ids]
     expected = n * table.probability
     chi2 = ((counts - expected) ** 2 / expected).sum()
-    dof = table.patches.size - 1
+    dof = table.ids.size - 1
     assert chi2 < dof + 5 * np.sqrt(2 * dof)
 
 

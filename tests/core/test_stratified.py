@@ -5,7 +5,7 @@ import pytest
 
 from addon.core import solve
 from addon.core.reference import area_weighted_mse, solve_radiosity_system
-from addon.core.sampling import SourceTable
+from addon.core.sampling import SourceTable, source_weights
 from boxes import box_scene
 
 
@@ -19,10 +19,10 @@ def test_allotment_is_floor_or_ceil_of_the_expected_count():
     rng = np.random.default_rng(0)
     area = rng.uniform(0.1, 2, 50)
     emission = rng.uniform(0, 1, (50, 3))
-    table = SourceTable(area, emission)
+    table = SourceTable(source_weights(area, emission))
     for count in (7, 1000, 65536):
         patch, u = table.stratified(count, rng)
-        counts = np.bincount(patch, minlength=50)[table.patches]
+        counts = np.bincount(patch, minlength=50)[table.ids]
         expected = count * table.probability
         assert (counts >= np.floor(expected) - 1e-9).all() and (counts <= np.ceil(expected) + 1e-9).all()
         assert u.shape == (4, count) and u.min() >= 0 and u.max() < 1
@@ -36,7 +36,7 @@ def test_a_shift_just_below_one_stays_inside_the_table():
         def random(self, size=None):
             return np.nextafter(1.0, 0.0) if size is None else np.full(size, 0.5)
 
-    table = SourceTable(np.ones(3), np.ones((3, 3)))
+    table = SourceTable(source_weights(np.ones(3), np.ones((3, 3))))
     patch, u = table.stratified(3, AlmostOne())  # an IndexError before the clamp
     assert patch[-1] == 2 and ((patch >= 0) & (patch < 3)).all()
 
@@ -48,26 +48,26 @@ def test_sample_draws_the_law_of_independent_choices():
     area = rng.uniform(0.1, 2, 40)
     emission = np.zeros((40, 3))
     emission[::3] = rng.uniform(0.1, 1, (14, 3))
-    table = SourceTable(area, emission)
+    table = SourceTable(source_weights(area, emission))
     for count in (20, 100_000):  # per-path choices, then multinomial counts
-        total = np.zeros(table.patches.size)
+        total = np.zeros(table.ids.size)
         rounds = 200_000 // count
         for _ in range(rounds):
             patch = table.sample(count, rng)
             assert patch.size == count
             if count >= 100_000:
                 assert (np.diff(patch) >= 0).all()  # multinomial counts come grouped by source
-            total += np.bincount(patch, minlength=40)[table.patches]
+            total += np.bincount(patch, minlength=40)[table.ids]
         expected = rounds * count * table.probability
         chi2 = ((total - expected) ** 2 / expected).sum()
-        dof = table.patches.size - 1
+        dof = table.ids.size - 1
         assert chi2 < dof + 5 * np.sqrt(2 * dof), chi2
 
 
 def test_first_ray_uniforms_are_uniform():
     """Each path's four numbers are uniform (random shift modulo 1): their means over many
     chunks are 1/2 within the standard error of a uniform."""
-    table = SourceTable(np.ones(3), np.ones((3, 3)))
+    table = SourceTable(source_weights(np.ones(3), np.ones((3, 3))))
     rng = np.random.default_rng(1)
     first_path = np.array([table.stratified(10, rng)[1][:, 0] for _ in range(20_000)])
     assert np.abs(first_path.mean(axis=0) - 0.5).max() < 5 * np.sqrt(1 / 12 / 20_000)

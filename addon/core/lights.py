@@ -1,0 +1,295 @@
+"""Light sources beside emissive patches: point, spot, area, sun and world, in the scene's units.
+
+Every quantity is in the units of the radiosity the scene writes (those of an emissive patch's
+emittance E, "radiosity units" below, and of B = E + reflected): a light's power is what a patch
+of emittance E and area A emits, E A. What each light is given:
+
+- PointLight: radiant intensity I per steradian (power 4 pi I), at a point or spread over a
+  sphere of ``radius`` whose surface emits like a Lambertian emitter (same intensity from every
+  side); with a ``spot`` cone, intensity I times the cone's mask of the angle to its axis.
+- AreaLight: exitance M of its surface (the E of an emissive patch of the same shape), one side,
+  a rectangle or an ellipse; ``spread`` below pi narrows the emission to a cone.
+- SunLight: irradiance H on a surface facing it, from a disc of angular diameter ``angle``.
+- WorldLight: a uniform background, or an equirectangular image, as the irradiance W it gives an
+  unoccluded plane facing any side (a radiance of W / pi).
+
+Each light is a set of one or more emitters (an environment image: one per pixel), each with a
+power (3,) and a way to draw rays: ``emit(rows, u)`` gives, for emitter rows and float32 uniforms
+u (4, n), origins and directions (3, n) in world space. Sun and world rays start on a disc
+perpendicular to their direction that covers the ``aim`` sphere (the part of the scene whose
+light matters), placed beyond the whole scene; what misses it escapes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+TWO_PI = 2.0 * np.pi
+
+
+@dataclass(frozen=True)
+class Spot:
+    """A spot light's cone: emission along ``axis`` (unit), the mask of cos(angle to the axis)
+    x rising as smoothstep from 0 at cos_outer to 1 at cos_inner (no rise where they are equal)."""
+
+    axis: np.ndarray
+    cos_outer: float
+    cos_inner: float
+
+    def mask(self, x):
+        x = np.asarray(x, dtype=np.float64)
+        width = self.cos_inner - self.cos_outer
+        if width <= 0:
+            return (x > self.cos_outer).astype(np.float64)
+        t = np.clip((x - self.cos_outer) / width, 0.0, 1.0)
+        return t * t * (3.0 - 2.0 * t)
+
+    def solid_angle(self):
+        """The integral of the mask over directions: 2 pi times its integral over x in [-1, 1]."""
+        width = max(self.cos_inner - self.cos_outer, 0.0)
+        return TWO_PI * ((1.0 - self.cos_inner) + 0.5 * width)  # smoothstep integrates to half
+
+    def sample_cosine(self, u):
+        """x = cos(angle to the axis) with density proportional to the mask: uniform over the
+        full cone above cos_inner, the smoothstep's integral inverted on the ramp (Newton)."""
+        u = np.asarray(u, dtype=np.float64)
+        width = max(self.cos_inner - self.cos_outer, 0.0)
+        full, ramp = 1.0 - self.cos_inner, 0.5 * width
+        target = u * (full + ramp)
+        x = 1.0 - target  # on the full part: x from 1 down to cos_inner
+        on_ramp = target > full
+        if width > 0 and on_ramp.any():
+            # Mass from x down to cos_outer on the ramp: width (1 - G(t)), G(t) = t^3 - t^4 / 2
+            # normalised to 1 at t = 1 (G(1) = 1/2, times 2); solve G(t) = 1 - (target - full) / ramp.
+            want = 1.0 - (target[on_ramp] - full) / ramp
+            t = np.full(want.shape, 0.5)
+            for _ in range(40):
+                g = 2.0 * (t**3 - 0.5 * t**4) - want
+                dg = 2.0 * (3 * t**2 - 2 * t**3)
+                step = np.where(dg > 0, g / np.maximum(dg, 1e-300), 0.0)
+                t = np.clip(t - step, 0.0, 1.0)
+            x[on_ramp] = self.cos_outer + t * width
+        return x
+
+
+@dataclass(frozen=True)
+class PointLight:
+    position: np.ndarray           # (3,) world
+    intensity: np.ndarray          # (3,) radiosity units x area per steradian
+    radius: float = 0.0
+    spot: Spot | None = None
+    name: str = "point"
+
+    def emitter_powers(self, aim=None):
+        solid_angle = 4.0 * np.pi if self.spot is None else self.spot.solid_angle()
+        return (np.asarray(self.intensity, np.float64) * solid_angle)[None]
+
+    def emit(self, rows, u, aim, reach):
+        n = u.shape[1]
+        if self.spot is None:
+            direction = _sphere_directions(u[2], u[3])
+        else:
+            direction = _cone_directions(self.spot.axis, self.spot.sample_cosine(u[2]), u[3])
+        origin = np.repeat(np.asarray(self.position, np.float64)[:, None], n, axis=1)
+        if self.radius > 0:
+            # A point of the sphere seen from the direction: a uniform point of the disc facing
+            # it, moved onto the near hemisphere (a Lambertian sphere's rays in one direction).
+            a, b = _basis(direction)
+            r = self.radius * np.sqrt(u[0].astype(np.float64))
+            phi = TWO_PI * u[1].astype(np.float64)
+            x, y = r * np.cos(phi), r * np.sin(phi)
+            z = np.sqrt(np.maximum(self.radius**2 - x * x - y * y, 0.0))
+            origin = origin + a * x + b * y + direction * z
+        return origin, direction
+
+
+@dataclass(frozen=True)
+class AreaLight:
+    centre: np.ndarray             # (3,) world
+    half_u: np.ndarray             # (3,) half of the first side (or semi-axis)
+    half_v: np.ndarray             # (3,) half of the second side (or semi-axis)
+    normal: np.ndarray             # (3,) unit, the side it emits to
+    exitance: np.ndarray           # (3,) radiosity units
+    ellipse: bool = False
+    spread: float = np.pi          # full cone angle of the emission; pi: Lambertian
+    name: str = "area"
+
+    @property
+    def area(self):
+        full = 4.0 * np.linalg.norm(np.cross(self.half_u, self.half_v))
+        return full * np.pi / 4.0 if self.ellipse else full
+
+    def emitter_powers(self, aim=None):
+        return (np.asarray(self.exitance, np.float64) * self.area)[None]
+
+    def emit(self, rows, u, aim, reach):
+        a, b = u[0].astype(np.float64), u[1].astype(np.float64)
+        if self.ellipse:
+            r, phi = np.sqrt(a), TWO_PI * b
+            s, t = r * np.cos(phi), r * np.sin(phi)
+        else:
+            s, t = 2.0 * a - 1.0, 2.0 * b - 1.0
+        origin = self.centre[:, None] + self.half_u[:, None] * s + self.half_v[:, None] * t
+        return origin, _cosine_directions(self.normal, u[2], u[3])
+
+
+@dataclass(frozen=True)
+class SunLight:
+    direction: np.ndarray          # (3,) unit, the way the light travels
+    irradiance: np.ndarray         # (3,) on a surface facing the sun
+    angle: float = 0.0             # angular diameter of the sun's disc
+    name: str = "sun"
+
+    def _beam_factor(self):
+        """Flux through a disc perpendicular to each direction of the sun's cone, over the
+        irradiance it gives a surface facing it: solid angle / projected solid angle."""
+        half = 0.5 * self.angle
+        if half < 1e-6:
+            return 1.0
+        return 2.0 * (1.0 - np.cos(half)) / np.sin(half) ** 2
+
+    def emitter_powers(self, aim=None):
+        radius = 1.0 if aim is None else aim[1]
+        return (np.asarray(self.irradiance, np.float64) * np.pi * radius**2 * self._beam_factor())[None]
+
+    def emit(self, rows, u, aim, reach):
+        half = 0.5 * self.angle
+        cos_theta = 1.0 - u[2].astype(np.float64) * (1.0 - np.cos(half))
+        direction = _cone_directions(np.asarray(self.direction, np.float64), cos_theta, u[3])
+        return _disc_origins(direction, u[0], u[1], aim, reach), direction
+
+
+@dataclass(frozen=True)
+class WorldLight:
+    irradiance: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (3,) uniform background
+    image: np.ndarray | None = None  # (H, W, 3) equirectangular, in the same units, or None
+    rotation: np.ndarray | None = None  # (3,3) world direction -> image direction
+    name: str = "world"
+
+    def emitter_powers(self, aim=None):
+        radius = 1.0 if aim is None else aim[1]
+        if self.image is None:
+            return (np.asarray(self.irradiance, np.float64) * 4.0 * np.pi * radius**2)[None]
+        # An image pixel's flux through a disc perpendicular to its directions: (W / pi) pi R^2 Omega.
+        return self.image.reshape(-1, 3) * (_pixel_solid_angles(self.image.shape[:2]).reshape(-1, 1) * radius**2)
+
+    def emit(self, rows, u, aim, reach):
+        if self.image is None:
+            towards_sky = _sphere_directions(u[2], u[3])
+        else:
+            towards_sky = _pixel_directions(self.image.shape[:2], rows, u[2], u[3])
+            if self.rotation is not None:
+                towards_sky = np.asarray(self.rotation, np.float64).T @ towards_sky
+        direction = -towards_sky
+        return _disc_origins(direction, u[0], u[1], aim, reach), direction
+
+
+def equirectangular_direction(row, column, shape):
+    """The direction (3, n) towards the sky at the centre of pixel (row, column) of an
+    equirectangular image of ``shape`` (H, W): row 0 at the top (z = 1), column 0 at azimuth
+    pi (the -x direction), azimuth falling to the right, as Blender maps a world image."""
+    H, W = shape
+    theta = (np.asarray(row) + 0.5) / H * np.pi
+    phi = np.pi - (np.asarray(column) + 0.5) / W * TWO_PI
+    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
+
+
+def _pixel_solid_angles(shape):
+    """(H, W) solid angle of each pixel of an equirectangular image."""
+    H, W = shape
+    edges = np.cos(np.arange(H + 1) * np.pi / H)
+    band = (edges[:-1] - edges[1:]) * TWO_PI / W
+    return np.repeat(band[:, None], W, axis=1)
+
+
+def _pixel_directions(shape, pixel, u_z, u_phi):
+    """Uniform directions (in solid angle) within the given pixels of an equirectangular image."""
+    H, W = shape
+    row, column = np.divmod(np.asarray(pixel), W)
+    z_top, z_bottom = np.cos(row * np.pi / H), np.cos((row + 1) * np.pi / H)
+    z = z_top + (z_bottom - z_top) * u_z.astype(np.float64)
+    phi = np.pi - (column + u_phi.astype(np.float64)) / W * TWO_PI
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def _sphere_directions(u1, u2):
+    """Uniform unit directions (3, n)."""
+    z = 1.0 - 2.0 * u1.astype(np.float64)
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    phi = TWO_PI * u2.astype(np.float64)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def _basis(direction):
+    """Two unit vectors (3, n) perpendicular to each unit direction (3, n) and to each other."""
+    d = direction
+    helper = np.where(np.abs(d[0]) < 0.9, 1.0, 0.0)
+    other = np.stack([helper, 1.0 - helper, np.zeros_like(helper)])
+    a = np.cross(d.T, other.T).T
+    a /= np.linalg.norm(a, axis=0)
+    return a, np.cross(d.T, a.T).T
+
+
+def _cone_directions(axis, cos_theta, u_phi):
+    """Unit directions (3, n) at angles arccos(cos_theta) from ``axis`` (3,), azimuth 2 pi u."""
+    axis = np.asarray(axis, np.float64)[:, None]
+    a, b = _basis(axis)
+    sin_theta = np.sqrt(np.maximum(1.0 - cos_theta**2, 0.0))
+    phi = TWO_PI * u_phi.astype(np.float64)
+    return axis * cos_theta + a * (sin_theta * np.cos(phi)) + b * (sin_theta * np.sin(phi))
+
+
+def _cosine_directions(normal, u1, u2):
+    """Cosine-distributed unit directions (3, n) about ``normal`` (3,)."""
+    cos_theta = np.sqrt(1.0 - u1.astype(np.float64))
+    return _cone_directions(normal, cos_theta, u2)
+
+
+def _disc_origins(direction, u1, u2, aim, reach):
+    """Origins on a disc perpendicular to each direction that covers the ``aim`` sphere
+    (centre, radius), ``reach`` back from its centre (beyond the whole scene)."""
+    centre, radius = aim
+    a, b = _basis(direction)
+    r = radius * np.sqrt(u1.astype(np.float64))
+    phi = TWO_PI * u2.astype(np.float64)
+    return np.asarray(centre, np.float64)[:, None] - direction * reach + a * (r * np.cos(phi)) + b * (r * np.sin(phi))
+
+
+class Lights:
+    """A scene's lights as one table of emitters (rows), in the order given: (E,3) ``power``,
+    the light of each row, and rays from rows. ``aim`` (centre, radius) is the sphere sun and
+    world rays cover, ``reach`` how far back from its centre they start (world units)."""
+
+    def __init__(self, lights, aim, reach):
+        self.lights = tuple(lights)
+        self.aim = (np.asarray(aim[0], np.float64), float(aim[1]))
+        self.reach = float(reach)
+        powers = [np.asarray(light.emitter_powers(self.aim), np.float64).reshape(-1, 3) for light in self.lights]
+        counts = np.array([p.shape[0] for p in powers], dtype=np.int64)
+        self.power = np.vstack(powers) if powers else np.zeros((0, 3))
+        self.first = np.concatenate(([0], np.cumsum(counts)))
+        self.light_of = np.repeat(np.arange(len(self.lights)), counts)
+
+    def __len__(self):
+        return len(self.lights)
+
+    @property
+    def emitter_count(self):
+        return self.power.shape[0]
+
+    def light_power(self):
+        """(L,3) the power of each light (the sum of its emitters')."""
+        return np.add.reduceat(self.power, self.first[:-1], axis=0) if len(self) else np.zeros((0, 3))
+
+    def emit(self, rows, u):
+        """Rays from emitter ``rows`` (n,) with uniforms ``u`` (4, n): world origins and unit
+        directions, (3, n) float64 each."""
+        origins, directions = np.empty((3, rows.size)), np.empty((3, rows.size))
+        light = self.light_of[rows]
+        for k in np.unique(light):
+            at = np.flatnonzero(light == k)
+            o, d = self.lights[k].emit(rows[at] - self.first[k], u[:, at], self.aim, self.reach)
+            origins[:, at], directions[:, at] = o, d
+        return origins, directions
