@@ -3,8 +3,10 @@
 A batch of paths ("chunk") is traced as a wavefront: every live path advances one bounce per
 step, and the live paths' rays go to the ray tracer together. Each step runs the same stages:
 
-    refill          new paths from the sources take the places of ended ones
-    generate        each live path's next ray leaves its patch (cosine-distributed)
+    refill          new paths from the sources (emissive patches, lights) take the places of
+                    ended ones
+    generate        each live path's next ray: from its source's own distribution of points
+                    and directions at the start, then cosine-distributed from the patch it hit
     intersect       the ray tracer: what each ray meets first
     handle_escaped  rays that hit nothing escape; rays that hit a back side are absorbed there
     score           the power a path carries scores on the patch it hit
