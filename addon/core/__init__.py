@@ -10,7 +10,7 @@ the biased infinite one, with the paper's heuristic MSE formulas (2), (3) and th
 efficiency (4).
 """
 from .error_model import Prediction, mse_to_relative_rms, predict, relative_rms_to_mse
-from .names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE
+from .names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE, GATHERED, SHOT
 from .scene import PatchScene
 from .solver import SolveResult, solve
 from .speedups import Speedups

@@ -18,6 +18,12 @@ power (3,) and a way to draw rays: ``emit(rows, u)`` gives, for emitter rows and
 u (4, n), origins and directions (3, n) in world space. Sun and world rays start on a disc
 perpendicular to their direction that covers the ``aim`` sphere (the part of the scene whose
 light matters), placed beyond the whole scene; what misses it escapes.
+
+Each light also answers the gathering question (``first_shot``): ``gather(x, normal, u)`` for
+receiving points x (3, n) world with unit normals, and uniforms u (2, n), gives a direction
+towards the light, the distance to go (inf: the ray must escape) and the irradiance estimate
+(3, n) it makes if nothing is in the way: in expectation, the light's irradiance at x in the
+scene's units (B = E + R H).
 """
 from __future__ import annotations
 
@@ -103,6 +109,22 @@ class PointLight:
             origin = origin + a * x + b * y + direction * z
         return origin, direction
 
+    def gather(self, x, normal, u):
+        position = np.asarray(self.position, np.float64)[:, None]
+        if self.radius > 0:
+            # A uniform point of the sphere: a Lambertian sphere of intensity I has exitance
+            # I / r^2, so its estimate is (I / r^2) cos_x cos_y 4 pi r^2 / (pi d^2).
+            outward = _sphere_directions(u[0], u[1])
+            towards, distance = _towards(position + self.radius * outward, x)
+            value = 4.0 * np.maximum(-_dot(outward, towards), 0.0)
+        else:
+            towards, distance = _towards(position, x)
+            value = np.ones(x.shape[1])
+        if self.spot is not None:
+            value = value * self.spot.mask(-_dot(np.asarray(self.spot.axis, np.float64)[:, None], towards))
+        value = value * np.maximum(_dot(normal, towards), 0.0) / distance**2
+        return towards, distance, np.asarray(self.intensity, np.float64)[:, None] * value
+
 
 @dataclass(frozen=True)
 class AreaLight:
@@ -124,14 +146,23 @@ class AreaLight:
         return (np.asarray(self.exitance, np.float64) * self.area)[None]
 
     def emit(self, rows, u, aim, reach):
-        a, b = u[0].astype(np.float64), u[1].astype(np.float64)
+        return self._points(u[0], u[1]), _cosine_directions(self.normal, u[2], u[3])
+
+    def _points(self, a, b):
+        a, b = a.astype(np.float64), b.astype(np.float64)
         if self.ellipse:
             r, phi = np.sqrt(a), TWO_PI * b
             s, t = r * np.cos(phi), r * np.sin(phi)
         else:
             s, t = 2.0 * a - 1.0, 2.0 * b - 1.0
-        origin = self.centre[:, None] + self.half_u[:, None] * s + self.half_v[:, None] * t
-        return origin, _cosine_directions(self.normal, u[2], u[3])
+        return np.asarray(self.centre, np.float64)[:, None] + np.outer(self.half_u, s) + np.outer(self.half_v, t)
+
+    def gather(self, x, normal, u):
+        # A uniform point y of the light: M cos_x cos_y A / (pi d^2).
+        towards, distance = _towards(self._points(u[0], u[1]), x)
+        cos_y = np.maximum(-_dot(np.asarray(self.normal, np.float64)[:, None], towards), 0.0)
+        value = np.maximum(_dot(normal, towards), 0.0) * cos_y * (self.area / np.pi) / distance**2
+        return towards, distance, np.asarray(self.exitance, np.float64)[:, None] * value
 
 
 @dataclass(frozen=True)
@@ -159,6 +190,15 @@ class SunLight:
         direction = _cone_directions(np.asarray(self.direction, np.float64), cos_theta, u[3])
         return _disc_origins(direction, u[0], u[1], aim, reach), direction
 
+    def gather(self, x, normal, u):
+        # A uniform direction of the sun's cone: its radiance H / (pi sin^2) times cos_x times
+        # the cone's solid angle is H cos_x times the beam factor.
+        half = 0.5 * self.angle
+        cos_theta = 1.0 - u[0].astype(np.float64) * (1.0 - np.cos(half))
+        towards = -_cone_directions(np.asarray(self.direction, np.float64), cos_theta, u[1])
+        value = np.maximum(_dot(normal, towards), 0.0) * self._beam_factor()
+        return towards, np.full(x.shape[1], np.inf), np.asarray(self.irradiance, np.float64)[:, None] * value
+
 
 @dataclass(frozen=True)
 class WorldLight:
@@ -184,6 +224,20 @@ class WorldLight:
         direction = -towards_sky
         return _disc_origins(direction, u[0], u[1], aim, reach), direction
 
+    def gather(self, x, normal, u):
+        # A cosine-distributed direction about the normal: radiance W / pi over the density
+        # cos / pi leaves W (the pixel's W for an image).
+        towards = _cosine_directions_about(normal, u[0], u[1])
+        return towards, np.full(x.shape[1], np.inf), self.radiance_times_pi(towards)
+
+    def radiance_times_pi(self, towards):
+        """(3, n) pi times the sky's radiance in each direction (3, n) towards it: W, or its pixel's."""
+        if self.image is None:
+            return np.repeat(np.asarray(self.irradiance, np.float64)[:, None], towards.shape[1], axis=1)
+        sky = towards if self.rotation is None else np.asarray(self.rotation, np.float64) @ towards
+        row, column = equirectangular_pixel(sky, self.image.shape[:2])
+        return self.image[row, column].T.astype(np.float64)
+
 
 def equirectangular_direction(row, column, shape):
     """The direction (3, n) towards the sky at the centre of pixel (row, column) of an
@@ -193,6 +247,17 @@ def equirectangular_direction(row, column, shape):
     theta = (np.asarray(row) + 0.5) / H * np.pi
     phi = np.pi - (np.asarray(column) + 0.5) / W * TWO_PI
     return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
+
+
+def equirectangular_pixel(direction, shape):
+    """(row, column) of the pixel of an equirectangular image of ``shape`` (H, W) that holds
+    each unit direction (3, n): the inverse of :func:`_pixel_directions`."""
+    H, W = shape
+    z = np.clip(direction[2], -1.0, 1.0)
+    row = np.minimum((np.arccos(z) / np.pi * H).astype(np.int64), H - 1)
+    phi = np.arctan2(direction[1], direction[0])
+    column = np.floor((np.pi - phi) / TWO_PI * W).astype(np.int64) % W
+    return row, column
 
 
 def _pixel_solid_angles(shape):
@@ -212,6 +277,26 @@ def _pixel_directions(shape, pixel, u_z, u_phi):
     phi = np.pi - (column + u_phi.astype(np.float64)) / W * TWO_PI
     r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
     return np.stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def _towards(points, x):
+    """Unit directions (3, n) from each x to each point, and the distances."""
+    d = points - x
+    distance = np.sqrt(_dot(d, d))
+    return d / distance, distance
+
+
+def _dot(a, b):
+    return np.einsum("in,in->n", a, b) if a.shape[1] == b.shape[1] else (a * b).sum(axis=0)
+
+
+def _cosine_directions_about(normal, u1, u2):
+    """Cosine-distributed unit directions (3, n) about each normal (3, n) (Malley)."""
+    a, b = _basis(normal)
+    r = np.sqrt(u1.astype(np.float64))
+    phi = TWO_PI * u2.astype(np.float64)
+    z = np.sqrt(np.maximum(1.0 - r * r, 0.0))
+    return a * (r * np.cos(phi)) + b * (r * np.sin(phi)) + normal * z
 
 
 def _sphere_directions(u1, u2):

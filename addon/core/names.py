@@ -15,6 +15,11 @@ INDEPENDENT = "independent"  # the paper's: what the predicted path counts are d
 STRATIFIED = "stratified"    # paths allotted in proportion to power, low-discrepancy first rays
 SAMPLINGS = (INDEPENDENT, STRATIFIED)
 
+# Where the direct light comes from (the first bounce).
+SHOT = "shot"          # the paper's: every path's first hit scores it
+GATHERED = "gathered"  # each patch gathers it by shadow rays; the walks shoot only its reflection
+DIRECT_LIGHTS = (SHOT, GATHERED)
+
 # When a solve with an error target stops.
 PREDICTED = "predicted"  # after the paths formula (2)/(3) predicts for the target
 MEASURED = "measured"    # once the batch-means estimate meets the target

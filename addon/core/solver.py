@@ -16,14 +16,18 @@ import numpy as np
 
 from .batches import Batches
 from .error_model import check_estimator, check_positive, predict
+from .first_shot import Gathering, gather_samples
 from .names import (
     EXIT_POINTS,
+    DIRECT_LIGHTS,
     EXIT_RANDOM,
     FINITE,
+    GATHERED,
     INDEPENDENT,
     MEASURED,
     PREDICTED,
     SAMPLINGS,
+    SHOT,
     STOP_CANCELLED,
     STOP_PATHS,
     STOP_RULES,
@@ -52,6 +56,9 @@ GROUP_SCORES = 1 << 22
 # With stop_rule="measured": never stop on fewer chunks than this, nor run past this many
 # times the predicted paths (unless paths= is given as the cap).
 MIN_MEASURED_CHUNKS = 8
+# With the direct light gathered, chunks are planned for this fraction of the paper's predicted
+# paths (it needs several times fewer: docs/performance.md).
+GATHERED_PLAN_DIVISOR = 4
 MEASURED_CAP_FACTOR = 64
 POLL_SECONDS = 0.05
 
@@ -79,6 +86,8 @@ class SolveResult:
     path_ends: dict = field(default_factory=dict)
     prediction: object = None
     speedups: object = None  # the speed-ups the walk used (Speedups, resolved)
+    direct_light: str = SHOT
+    gather_rays: int = 0  # per chunk, with the direct light gathered
 
     @property
     def rays_per_second(self):
@@ -104,7 +113,7 @@ def chunks_per_group(tables, chunk_paths, expected_path_length):
     return 1 << (most.bit_length() - 1) if most > 1 else 1
 
 
-def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling):
+def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light):
     check_estimator(estimator, threshold)
     check_positive("paths", paths, integer=True)
     check_positive("target_mse", target_mse)
@@ -116,6 +125,8 @@ def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_
         raise ValueError(f"exit_point must be one of {', '.join(EXIT_POINTS)}; got {exit_point!r}")
     if sampling not in SAMPLINGS:
         raise ValueError(f"sampling must be one of {', '.join(SAMPLINGS)}; got {sampling!r}")
+    if direct_light not in DIRECT_LIGHTS:
+        raise ValueError(f"direct_light must be one of {', '.join(DIRECT_LIGHTS)}; got {direct_light!r}")
     if stop_rule not in STOP_RULES:
         raise ValueError(f"stop_rule must be one of {', '.join(STOP_RULES)}; got {stop_rule!r}")
     if stop_rule == "measured" and target_mse is None:
@@ -138,12 +149,16 @@ def solve(
     threads=None,
     sampling=INDEPENDENT,
     speedups=None,
+    direct_light=SHOT,
 ):
     """Radiosity of ``scene`` by shooting random walks.
 
     Runs ``paths`` paths, or, with ``target_mse``, the paths formula (2)/(3) predicts for it
     (``stop_rule="predicted"``) or until the batch estimate meets it (``"measured"``, capped
-    by ``paths`` if given, else 64 times the prediction). ``sampling="stratified"`` (beyond
+    by ``paths`` if given, else 64 times the prediction). ``direct_light="gathered"`` (beyond the
+    paper, ``first_shot``) gathers each patch's direct light by shadow rays and walks only its
+    reflection; the paper's formulas do not predict its error, so with ``target_mse`` it always
+    stops on the measured error. ``sampling="stratified"`` (beyond
     the paper) allots each chunk's paths to sources in proportion to power and draws the first
     ray from a randomly shifted low-discrepancy set: same expectation, usually less noise;
     the predicted path counts are derived for the paper's plain ``"independent"`` sampling.
@@ -151,7 +166,7 @@ def solve(
     between chunks; ``max_seconds`` bounds the wall time. A stopped run returns the complete
     chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
     """
-    _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling)
+    _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light)
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
         raise ValueError(f"seed must be a non-negative whole number; got {seed!r}")
     if speedups is not None and not isinstance(speedups, Speedups):
@@ -161,18 +176,23 @@ def solve(
     start = time.perf_counter()
 
     prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
-    measured_rule = stop_rule == MEASURED
+    gathered = direct_light == GATHERED
+    measured_rule = stop_rule == MEASURED or (gathered and target_mse is not None)
     if measured_rule:
         planned = prediction.paths_for(target_mse)
+        if gathered:  # (chunks planned for fewer paths than the paper's walk needs)
+            planned = max(1, planned // GATHERED_PLAN_DIVISOR)
         cap = paths if paths is not None else MEASURED_CAP_FACTOR * planned
     else:
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
     chunk = chunk_paths_for(prediction.expected_path_length, planned)
     tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups)
+    if gathered:
+        tables.gathering = Gathering(scene, gather_samples(chunk, prediction.expected_path_length, scene))
     total = Batches(scene, tables)
     chunk_count = math.ceil(cap / chunk)
-    group = chunks_per_group(tables, chunk, prediction.expected_path_length)
+    group = 1 if gathered else chunks_per_group(tables, chunk, prediction.expected_path_length)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
     done_rule = STOP_TARGET if (paths is None and not measured_rule) else STOP_PATHS
     stopped = None
@@ -221,7 +241,7 @@ def solve(
         rays=total.rays,
         seconds=time.perf_counter() - start,
         mean_path_length=total.rays / n if n else math.nan,
-        predicted_mse=prediction.mse_for(n),
+        predicted_mse=math.nan if gathered else prediction.mse_for(n),
         measured_mse=total.measured_mse(),
         stopped=stopped,
         estimator=estimator,
@@ -235,6 +255,8 @@ def solve(
         path_ends=dict(total.ended),
         prediction=prediction,
         speedups=tables.speedups,
+        direct_light=direct_light,
+        gather_rays=round(2 * tables.gathering.samples.sum()) if gathered else 0,
     )
 
 

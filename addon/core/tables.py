@@ -90,6 +90,8 @@ class WalkTables:
         # Walks on several threads take turns at their numpy work: a walk holds this lock
         # except while it traces (walk.walk_chunks).
         self.numpy_turn = threading.Lock()
+        # The first shot gathered (first_shot.Gathering), or None: the walk shoots it.
+        self.gathering = None
 
     @cached_property
     def survivor_weight(self):

@@ -17,9 +17,12 @@ until the chunk's paths have all ended. Small chunks go through in groups: one w
 path tagged with its chunk, every chunk with its own tallies. The stages run on one of two
 states: :class:`.path_walk.PathWalk` (paths as arrays of what they carry) or, for the paper's
 plain walk whose paths are interchangeable, :class:`.interchangeable.InterchangeableWalk`.
+With the direct light gathered (``first_shot``), each chunk first gathers every patch's direct
+light by shadow rays, then runs these stages from what the patches reflect of it.
 """
 from __future__ import annotations
 
+from .first_shot import gathered_chunk
 from .interchangeable import InterchangeableWalk
 from .path_walk import PathWalk
 
@@ -35,19 +38,35 @@ def walk_chunks(tables, sizes, rng, abort=None):
     Walks on several threads take turns at their numpy work (``tables.numpy_turn``, released
     while they trace): taking turns hands the GIL over about once a step."""
     sizes = [int(n) for n in sizes]
-    state = InterchangeableWalk if tables.speedups.interchangeable else PathWalk
     with tables.numpy_turn:
-        walk = state(tables, sizes, rng)
-        while True:
-            if abort is not None and abort.is_set():
-                raise Aborted
-            if not walk.refill():
-                break
-            hits = walk.intersect(*walk.generate(rng))
-            walk.handle_escaped(hits)
-            walk.score(hits)
-            walk.survive_or_cut(hits, rng)
-        return walk.tallies()
+        if tables.gathering is None:
+            return _stages(tables, sizes, rng, abort)
+        # The first shot gathered (first_shot): each chunk gathers, then walks from what it gathered.
+        walk = lambda t, n, r: _stages(t, [n], r, abort)[0]  # noqa: E731
+        tallies = []
+        for n in sizes:
+            _check(abort)
+            tallies.append(gathered_chunk(tables, n, rng, walk))
+        return tallies
+
+
+def _stages(tables, sizes, rng, abort):
+    state = InterchangeableWalk if tables.speedups.interchangeable else PathWalk
+    walk = state(tables, sizes, rng)
+    while True:
+        _check(abort)
+        if not walk.refill():
+            break
+        hits = walk.intersect(*walk.generate(rng))
+        walk.handle_escaped(hits)
+        walk.score(hits)
+        walk.survive_or_cut(hits, rng)
+    return walk.tallies()
+
+
+def _check(abort):
+    if abort is not None and abort.is_set():
+        raise Aborted
 
 
 def walk_chunk(tables, paths, rng, abort=None):

@@ -14,6 +14,7 @@ from addon.core.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
 from addon.core.reference import rectangle_form_factors, solve_radiosity_system
 
 Z = 5.0
+DIRECT_LIGHTS = ("shot", "gathered")  # every light, shot by the walk and gathered (first_shot)
 R_FACES = np.array([0.3, 0.5, 0.7, 0.5, 0.6, 0.4])
 SIZE = (1.0, 1.2, 0.9)
 
@@ -42,11 +43,18 @@ def _solid_angles(point, rectangles):
 
 
 def _z(result, exact, channel=0):
-    return (result.reflected[:, channel] - exact) / np.sqrt(result.reflected_variance[:, channel])
+    """z-scores of the reflected radiosity; 0 where an estimate without variance is exact (a
+    gathered sky over an open plane), inf where it is not."""
+    error = result.reflected[:, channel] - exact
+    sd = np.sqrt(result.reflected_variance[:, channel])
+    exact_enough = np.abs(error) <= 1e-12 * np.maximum(np.abs(exact), 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(sd > 0, error / sd, np.where(exact_enough, 0.0, np.inf))
 
 
 @pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
-def test_a_point_light_in_a_closed_box_is_the_direct_solve(estimator):
+@pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
+def test_a_point_light_in_a_closed_box_is_the_direct_solve(estimator, direct_light):
     """First bounce: a patch of solid angle Omega seen from a light of intensity I receives
     I Omega; then B' = D + R F B' with D = R I Omega / A (the discrete solution, random exit)."""
     position, intensity = np.array([0.3, 0.7, 0.5]), 2.0
@@ -55,7 +63,7 @@ def test_a_point_light_in_a_closed_box_is_the_direct_solve(estimator):
     assert omega.sum() == pytest.approx(4 * math.pi, rel=1e-12)
     direct = R_FACES.repeat(9) * intensity * omega / scene.patch_area
     exact = solve_radiosity_system(F, scene.reflectivity, direct)[:, 0]
-    r = solve(scene, estimator, paths=600_000, seed=3, threshold=1e-6)
+    r = solve(scene, estimator, paths=600_000, seed=3, threshold=1e-6, direct_light=direct_light)
     assert r.chunks >= 32
     assert np.abs(_z(r, exact)).max() < Z
     np.testing.assert_allclose(r.energy["emitted"], 4 * math.pi * intensity, rtol=1e-12)
@@ -75,7 +83,8 @@ def test_a_sphere_light_is_a_point_light_seen_from_far_and_keeps_its_power():
     assert np.abs((a.reflected[:, 0] - b.reflected[:, 0]) / sd).max() < Z
 
 
-def test_a_spot_light_masks_a_point_light():
+@pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
+def test_a_spot_light_masks_a_point_light(direct_light):
     """A spot aimed at the floor: its power is I times the mask's solid angle, and the floor
     patches under the full cone receive what the point light gives them, patches outside the
     cone nothing directly (the walls' light then comes from the floor)."""
@@ -95,7 +104,7 @@ def test_a_spot_light_masks_a_point_light():
     scene = _box(n=n, reflectivity=[0.0] * 6, lights=[PointLight(position, np.full(3, 1.0), spot=spot)])[0]
     # Only the floor reflects (0.5): its radiosity is half the direct light it receives.
     lit = scene.with_materials(np.where(np.arange(scene.patch_count) < n * n, 0.5, 0.0), scene.emission)
-    r = solve(lit, paths=500_000, seed=6)
+    r = solve(lit, paths=500_000, seed=6, direct_light=direct_light)
     np.testing.assert_allclose(r.energy["emitted"], spot.solid_angle(), rtol=1e-12)
     origin, u, v, _ = box_rectangles(SIZE, n=n)
     floor = slice(0, n * n)
@@ -111,7 +120,8 @@ def test_a_spot_light_masks_a_point_light():
     assert (r.reflected[floor, 0][outside] == 0).all()
 
 
-def test_an_area_light_is_a_rectangle_of_the_form_factor_reference():
+@pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
+def test_an_area_light_is_a_rectangle_of_the_form_factor_reference(direct_light):
     """A rectangle light facing down, in the plane between the walls' top and middle rows of
     patches: the power a patch in front of it receives directly is M A_light F(light -> patch)
     (exact form factors between axis-aligned rectangles), a patch behind it none."""
@@ -129,7 +139,7 @@ def test_an_area_light_is_a_rectangle_of_the_form_factor_reference():
     light_area = 0.4 * 0.3
     direct = R_FACES[face] * exitance * light_area * F_all[-1, :-1] / scene.patch_area
     exact = solve_radiosity_system(F, scene.reflectivity, direct)[:, 0]
-    r = solve(scene, paths=600_000, seed=7)
+    r = solve(scene, paths=600_000, seed=7, direct_light=direct_light)
     np.testing.assert_allclose(r.energy["emitted"], exitance * light_area, rtol=1e-12)
     assert np.abs(_z(r, exact)).max() < Z
 
@@ -157,7 +167,8 @@ def _plane(size=2.0, n=4, reflectivity=0.5):
 
 @pytest.mark.parametrize("angle", [0.0, math.radians(10)])
 @pytest.mark.parametrize("tilt", [0.0, 40.0])
-def test_a_sun_on_a_plane_gives_h_cos_theta(tilt, angle):
+@pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
+def test_a_sun_on_a_plane_gives_h_cos_theta(tilt, angle, direct_light):
     """An open plane under a sun at ``tilt`` from the zenith: every patch receives H cos(tilt)
     (b = R H cos), whatever the sun's angular size (the cone's mean cosine: exact for it)."""
     (V, T, TP), R = _plane()
@@ -166,7 +177,7 @@ def test_a_sun_on_a_plane_gives_h_cos_theta(tilt, angle):
     H = 2.0
     sun = SunLight(direction=direction, irradiance=np.full(3, H), angle=angle)
     scene = PatchScene(V, T, TP, R, np.zeros(R.size), lights=[sun])
-    r = solve(scene, paths=400_000, seed=8)
+    r = solve(scene, paths=400_000, seed=8, direct_light=direct_light)
     half = angle / 2
     # Mean cosine to the plane's normal over the sun's cone (uniform in solid angle about the axis).
     mean_cos = math.cos(t) * (1 + math.cos(half)) / 2
@@ -175,19 +186,22 @@ def test_a_sun_on_a_plane_gives_h_cos_theta(tilt, angle):
     assert r.energy["escaped"][0] > 0  # the disc is wider than the plane
 
 
-def test_a_uniform_world_over_an_open_plane_gives_its_irradiance():
+@pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
+def test_a_uniform_world_over_an_open_plane_gives_its_irradiance(direct_light):
     """An unoccluded plane under a uniform world W receives W (b = R W); half of the world's
     rays come from below and escape (or meet the plane's back: blocked)."""
     (V, T, TP), R = _plane()
     W = np.array([1.0, 0.5, 0.25])
     scene = PatchScene(V, T, TP, R, np.zeros(R.size), lights=[WorldLight(irradiance=W)])
-    r = solve(scene, paths=600_000, seed=9)
+    r = solve(scene, paths=600_000, seed=9, direct_light=direct_light)
     for c in range(3):
         assert np.abs(_z(r, 0.5 * W[c], c)).max() < Z
-    assert r.energy["blocked"].sum() > 0
+    if direct_light == "shot":  # (gathered, the sky's light from below is never traced)
+        assert r.energy["blocked"].sum() > 0
 
 
-def test_an_equirectangular_world_of_one_bright_band_lights_a_plane_as_its_integral():
+@pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
+def test_an_equirectangular_world_of_one_bright_band_lights_a_plane_as_its_integral(direct_light):
     """A world image black but for the rows above 30 degrees of elevation: an up-facing plane
     receives (W / pi) times the projected solid angle of that cap, pi sin^2(60 deg) = 3 pi / 4."""
     (V, T, TP), R = _plane()
@@ -195,13 +209,14 @@ def test_an_equirectangular_world_of_one_bright_band_lights_a_plane_as_its_integ
     image = np.zeros((H, Wd, 3))
     image[: H // 3] = 2.0  # rows 0..19: polar angle 0..60 degrees
     scene = PatchScene(V, T, TP, R, np.zeros(R.size), lights=[WorldLight(image=image)])
-    r = solve(scene, paths=500_000, seed=10)
+    r = solve(scene, paths=500_000, seed=10, direct_light=direct_light)
     exact = 0.5 * 2.0 / math.pi * (math.pi * math.sin(math.radians(60)) ** 2)
     assert np.abs(_z(r, exact)).max() < Z
 
 
 @pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
-def test_every_kind_balances_its_energy(estimator):
+@pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
+def test_every_kind_balances_its_energy(estimator, direct_light):
     """In an open box with a card, lit by one light of every kind and an emissive patch: what
     the run emits is the scene's Phi_T, and it is absorbed, escapes, is blocked or (biased)
     undistributed, exactly."""
@@ -217,19 +232,20 @@ def test_every_kind_balances_its_energy(estimator):
     ]
     scene = base.with_materials(base.reflectivity, base.emission, lights=lights)
     assert not scene.is_grey
-    r = solve(scene, estimator, paths=300_000, seed=11, threshold=1e-3)
+    r = solve(scene, estimator, paths=300_000, seed=11, threshold=1e-3, direct_light=direct_light)
     e = r.energy
     np.testing.assert_allclose(e["emitted"].mean(), scene.total_power, rtol=1e-9)
     np.testing.assert_allclose(e["absorbed"] + e["escaped"] + e["undistributed"], e["emitted"], rtol=1e-9)
     assert (e["escaped"] > 0).all() and (e["blocked"] > 0).all()
 
 
-def test_a_furnace_with_a_light_inside_reflects_r_over_one_minus_r_of_its_power():
+@pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
+def test_a_furnace_with_a_light_inside_reflects_r_over_one_minus_r_of_its_power(direct_light):
     """A closed box of uniform R lit by a light anywhere inside: everything it emits is absorbed
     by the walls at (1 - R) a bounce, so sum_j b_j A_j = R Phi / (1 - R) in expectation."""
     R = 0.6
     scene = _box(reflectivity=[R] * 6, lights=[PointLight(np.array([0.2, 0.3, 0.7]), np.full(3, 1.0))])[0]
-    r = solve(scene, paths=400_000, seed=12)
+    r = solve(scene, paths=400_000, seed=12, direct_light=direct_light)
     total = float((r.reflected[:, 0] * scene.patch_area).sum())
     sd = math.sqrt(float((r.reflected_variance[:, 0] * scene.patch_area**2).sum()))  # (patches' errors are correlated: an upper bound would be their sum)
     exact = R * 4 * math.pi / (1 - R)

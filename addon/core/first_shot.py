@@ -1,0 +1,221 @@
+"""The first shot by gathering: each patch's direct light from every source by shadow rays.
+
+Beyond the paper. A shooting walk's first bounce is about half its variance: where a path from
+a source lands is the noisiest choice it makes. Here each patch j gathers its direct
+irradiance H_j instead, from uniform points of it, each looking at one source chosen by power (a point on an emitting patch or on a light, or a
+direction of the sun or the sky) through a shadow ray. The walk then shoots only what the
+direct light reflects: patch j is a source of emittance E'_j = R_j H_j, and the walk adds the
+light of every later bounce (``direct_light="gathered"`` in :func:`.solver.solve`).
+
+Each chunk gathers with its own points and shoots its own walk from what it gathered, so the
+chunks stay independent replicas of the whole estimate: batch means measure its error, which
+the paper's formulas (2)-(3) do not predict. Unbiased: the walk's result is linear in its
+sources, and E'_j is an unbiased estimate of R_j H_j. (With exit_point="random" the walk takes
+each patch's reflected light as uniform over it, the discrete method's assumption.)
+"""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from .rays import hit_patches, meets_front
+from .lights import WorldLight, _cosine_directions_about
+from .sampling import SourceTable, channel_sum, patch_point_rows, source_weights
+from .tallies import ChunkTally
+
+# A chunk's gathering aims at about this share of the rays its walk traces.
+GATHER_SHARE = 0.3
+MAX_GATHER_SAMPLES = 256
+# The numbers each gathering sample draws: its point (2), a source (1), a point or direction
+# of it (2), a cosine direction (2), and a triangle of either patch where patches are not
+# parallelograms (2).
+GATHER_DIMENSIONS = 9
+# A light is seen if the shadow ray meets nothing before this share of the way to it.
+SEEN_BEFORE = 1.0 - 1e-5
+
+
+def gather_samples(chunk_paths, expected_path_length, scene):
+    """Expected gathering samples of each patch (P,) in a chunk of ``chunk_paths`` walks (two
+    rays each): about GATHER_SHARE of the walk's rays in all. A patch's share goes as
+    sqrt(A_j) R_bar_j, which minimises the area-weighted variance sum_j A_j R_j^2 Var(H_j) of
+    the reflected direct light when each sample's relative variance is alike. A share below
+    one is a chance of a sample (gather_direct divides by the share, not the count)."""
+    budget = GATHER_SHARE * chunk_paths * max(expected_path_length, 1.0) / 2
+    weight = np.sqrt(scene.patch_area) * np.maximum(scene.grey_reflectivity, 1e-3)
+    return np.clip(weight * (budget / weight.sum()), 1e-3, MAX_GATHER_SAMPLES)
+
+
+class Gathering:
+    """What every chunk's gathering reads: the sources a shadow ray looks at, by power (emitting
+    patches, then every light but the world, which the cosine rays find), and the scene's
+    quantities in world units."""
+
+    def __init__(self, scene, samples):
+        self.samples = np.asarray(samples, dtype=np.float64)  # (P,) expected, per patch
+        self.whole = np.floor(self.samples).astype(np.int64)
+        self.chance = self.samples - self.whole
+        self.lights = scene.lights.lights
+        self.worlds = [light for light in self.lights if isinstance(light, WorldLight)]
+        light_power = scene.lights.light_power()
+        looked_at = np.array([not isinstance(light, WorldLight) for light in self.lights], dtype=bool)
+        weights = source_weights(scene.patch_area, scene.emission, light_power * looked_at[:, None])
+        self.table = SourceTable(weights) if weights.any() else None
+        self.choice = weights / weights.sum() if weights.any() else weights  # P_s
+        self.emission = scene.emission.T  # (3,P)
+        self.reflectivity = scene.reflectivity.T  # (3,P)
+        self.patch_area = scene.patch_area
+        self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
+        self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
+
+    def draw(self, rng):
+        """This chunk's samples: the patch of each, count_j of patch j: the whole part of its
+        share and one more with the fraction's chance."""
+        count = self.whole + (rng.random(self.samples.size) < self.chance)
+        return np.repeat(np.arange(count.size, dtype=np.int32), count)
+
+
+def gather_direct(tables, gathering, rng):
+    """(3,P) an unbiased estimate of each patch's direct irradiance H (scene units), and the
+    rays it traced: per patch j, ``gathering.samples[j]`` points on average, each with a shadow ray to a
+    source chosen by power and a cosine-distributed ray, weighted against each other where
+    both can find the same emitting patch (multiple importance sampling, balance heuristic:
+    shadow rays are good at small and far sources, cosine rays at near and large ones)."""
+    g = tables.geometry
+    P = tables.patch_count
+    patch = gathering.draw(rng)
+    # Independent uniforms: a chunk's per-patch mean is then close to normal, as the batch-means
+    # error bar assumes (randomly shifted low-discrepancy points left it far from normal).
+    u = rng.random((GATHER_DIMENSIONS, patch.size))
+    u32 = u.astype(np.float32)
+    x = patch_point_rows(g, patch, u32[7], u32[0].copy(), u32[1].copy()).astype(np.float64)  # unit space
+    normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
+    value = np.zeros((3, patch.size))
+    rays = 0
+    if gathering.table is not None:
+        rays += _shadow_rays(tables, gathering, patch, x, normal, u, u32, value)
+    rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
+    H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)])
+    H /= gathering.samples
+    return H, rays
+
+
+def _emitter_estimate(gathering, source, cos_x, cos_y, distance_world):
+    """E_s (cos_x / pi) / (p_shadow + p_cosine) (3,n): either strategy's weighted estimate of
+    an emitting patch s met at distance d (the integrand E_s cos_x / pi over the sum of the
+    densities in solid angle: p_shadow = P_s d^2 / (A_s cos_y), p_cosine = cos_x / pi)."""
+    p_cosine = cos_x / np.pi
+    p_shadow = gathering.choice[source] / gathering.patch_area[source] * distance_world**2 / cos_y
+    return gathering.emission[:, source] * (p_cosine / (p_shadow + p_cosine))
+
+
+def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
+    """Adds each sample's shadow-ray estimate to ``value``; returns the rays traced."""
+    g, P = tables.geometry, tables.patch_count
+    source = gathering.table.choose(u[2])
+    towards = np.empty_like(x)
+    distance = np.full(patch.size, -1.0)  # unit space; -1: the ray must meet the source patch
+    shadow = np.zeros_like(value)
+    at_patch = np.flatnonzero(source < P)
+    if at_patch.size:
+        s = source[at_patch]
+        y = patch_point_rows(g, s, u32[8, at_patch], u32[3, at_patch].copy(), u32[4, at_patch].copy()).astype(np.float64)
+        d = y - x[:, at_patch]
+        dist = np.sqrt(np.einsum("in,in->n", d, d))
+        d /= dist
+        cos_x = np.einsum("in,in->n", normal[:, at_patch], d)
+        cos_y = -np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), d)
+        ok = (cos_x > 0) & (cos_y > 0) & (s != patch[at_patch])
+        towards[:, at_patch] = d
+        cols = at_patch[ok]
+        shadow[:, cols] = _emitter_estimate(gathering, s[ok], cos_x[ok], cos_y[ok], dist[ok] * g.diagonal)
+    at_light = np.flatnonzero(source >= P)
+    if at_light.size:
+        light = source[at_light] - P
+        x_world = g.to_world(x[:, at_light].T).T
+        for k in np.unique(light):
+            here = light == k
+            cols = at_light[here]
+            t, dist, v = gathering.lights[k].gather(x_world[:, here], normal[:, cols], u[3:5, cols])
+            towards[:, cols] = t
+            distance[cols] = dist / g.diagonal
+            shadow[:, cols] = v / gathering.choice[source[cols]]
+    live = np.flatnonzero(shadow.any(axis=0))
+    if live.size:
+        hit, hit_patch, front, t = _trace(tables, x[:, live], towards[:, live])
+        to_patch = distance[live] < 0
+        met_source = (hit >= 0) & (hit_patch == source[live]) & front
+        clear = (hit < 0) | (t >= distance[live] * SEEN_BEFORE)
+        value[:, live] += shadow[:, live] * np.where(to_patch, met_source, clear)
+    return live.size
+
+
+def _cosine_rays(tables, gathering, patch, x, normal, u, value):
+    """Adds each sample's cosine-ray estimate to ``value``: the emitting patch it meets (weighted
+    against the shadow rays), or the sky where it escapes. Returns the rays traced."""
+    g = tables.geometry
+    towards = _cosine_directions_about(normal, u[5], u[6])
+    hit, source, front, t = _trace(tables, x, towards)
+    met = np.flatnonzero(front & (hit >= 0) & (gathering.emission[:, source].any(axis=0)) & (source != patch))
+    if met.size:
+        s = source[met]
+        cos_x = np.einsum("in,in->n", normal[:, met], towards[:, met])
+        cos_y = -np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), towards[:, met])
+        value[:, met] += _emitter_estimate(gathering, s, cos_x, np.maximum(cos_y, 1e-12), t[met] * g.diagonal)
+    escaped = np.flatnonzero(hit < 0)
+    if escaped.size and gathering.worlds:
+        for world in gathering.worlds:
+            value[:, escaped] += world.radiance_times_pi(towards[:, escaped])
+    return patch.size
+
+
+def _trace(tables, origins, directions):
+    """Shadow or cosine rays (3,n rows, unit space): (triangle, patch, front, distance)."""
+    o = np.ascontiguousarray(origins.T, dtype=np.float32)
+    d = np.ascontiguousarray(directions.T, dtype=np.float32)
+    triangle, u, v, t, ng = tables.outside_turn(tables.tracer.first_hit_barycentric, o, d)
+    patch = hit_patches(tables, triangle, u, v)
+    return triangle, patch, meets_front(d.T, ng) & (triangle >= 0), t
+
+
+def reflected_sources(tables, emission):
+    """The walk's tables with the patches' reflected direct light ``emission`` (P,3) as its only
+    sources (everything else shared)."""
+    walk = copy.copy(tables)
+    walk.__dict__.pop("start_weight", None)
+    walk.sources = SourceTable(source_weights(tables.geometry.patch_area, emission))
+    walk.emission = emission
+    walk.lights = None
+    walk.gathering = None
+    return walk
+
+
+def gathered_chunk(tables, paths, rng, walk):
+    """One chunk of the gathered estimate: the direct light of every patch, then ``paths``
+    walks from its reflection (``walk(tables, paths, rng)`` gives their ChunkTally). Returns
+    a ChunkTally in the solve's relative weights (times Phi_T / N)."""
+    gathering = tables.gathering
+    H, gather_rays = gather_direct(tables, gathering, rng)
+    C = tables.channels
+    direct = H * gathering.patch_area  # (3,P) power incident on each patch's front
+    reflected = gathering.reflectivity * H  # (3,P) E'
+    walk_power = float((gathering.patch_area * channel_sum(reflected.T)).sum() / 3)
+    scale = paths / gathering.total_power  # relative weight per unit of power
+    incident = direct[:C] * scale
+    absorbed = ((1.0 - gathering.reflectivity) * direct).sum(axis=1)[:C] * scale
+    emitted = gathering.channel_power[:C] * scale
+    walked = np.zeros(C)  # what the walk started with
+    blocked, undistributed, walk_absorbed, walk_escaped = (np.zeros(C) for _ in range(4))
+    rays, ended = gather_rays, {}
+    if walk_power > 0:
+        tally = walk(reflected_sources(tables, np.ascontiguousarray(reflected.T)), paths, rng)
+        w = walk_power / gathering.total_power
+        incident = incident + tally.incident * w
+        walked, walk_absorbed, walk_escaped = tally.emitted * w, tally.absorbed * w, tally.escaped * w
+        blocked, undistributed = tally.blocked * w, tally.undistributed * w
+        rays += tally.rays
+        ended = tally.ended
+    # What the direct light brought no patch (in expectation, what escaped or met a back side
+    # on its first flight), so that the accounts balance exactly.
+    escaped = emitted - absorbed - walked + walk_escaped
+    return ChunkTally(paths, rays, incident, emitted, absorbed + walk_absorbed, escaped, blocked, undistributed, ended)
