@@ -22,9 +22,9 @@ _registered_modules = []
 
 
 def _glue_modules():
-    from . import properties, operators, panel, preview
+    from . import properties, operators, panel, estimate
 
-    return [properties, operators, panel, preview]
+    return [properties, operators, panel, estimate]
 
 
 def register():

@@ -305,10 +305,8 @@ def main(argv=None):
     _ensure_registered()
     own_scene = not (args.open or args.current)  # built here, not the user's
     if own_scene:
-        if scene_name == "cornell":
-            from .scenes import cornell_box
-
-            cornell_box()
+        if scene_name == "cornell":  # the one Cornell box: sample_scenes/cornell_box.py
+            build_sample_scene("cornell_box")
         elif scene_name in _sample_scene_names():
             build_sample_scene(scene_name)
         else:

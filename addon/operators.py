@@ -131,7 +131,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             worker.set_running_job(self._job)
             self._job.start()
         else:
-            self._job._run()
+            self._job.run()
         return None
 
     def _cleanup(self, context):

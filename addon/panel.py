@@ -6,7 +6,7 @@ import math
 
 import bpy
 
-from . import preview, worker
+from . import estimate, worker
 
 
 def _number(x):
@@ -136,7 +136,7 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
         if job is not None:
             draw_progress(layout, job)
         else:
-            value, fresh = preview.current(context)
+            value, fresh = estimate.current(context)
             draw_estimate(layout, context, value, fresh)
             layout.operator("radiosity.solve", icon="LIGHT_SUN")
         draw_last_run(layout, settings)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from .worker import SolveSettings
+from .pipeline import SolveSettings
 
 
 def _changed(self, context):
-    from . import preview
+    from . import estimate
 
-    preview.invalidate()
+    estimate.invalidate()
 
 
 def _count(text) -> int:

@@ -1,6 +1,6 @@
 """Reading the Blender scene into arrays and writing results back (bpy glue).
 
-No numerics here beyond reshaping: the arrays go to ``worker`` and come back.
+No numerics here beyond reshaping: the arrays go to ``pipeline`` and come back.
 
 Units: emission = emission colour x strength, reflectivity = base colour, so
 the radiosity written is what Cycles' COMBINED bake gives for the same
@@ -13,7 +13,11 @@ import bpy
 import numpy as np
 
 from .core import meshing
-from .worker import MAX_REFLECTIVITY, ObjectArrays
+from .patches import ObjectArrays
+
+#: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
+#: need R < 1; without the setting, a base colour of 1 or more is refused).
+MAX_REFLECTIVITY = 0.99
 
 COLLECTION_NAME = "Radiosity"
 ATTRIBUTE_NAME = "Radiosity"
@@ -535,7 +539,7 @@ def write_results(context, output_data, output_mode, scene=None):
 
     All new objects are built first and only then swapped in for the old ones, so a failure
     part-way leaves the previous results as they were (never a half-written set).
-    ``output_data`` is a worker.SolveOutput; ``scene`` the scene that was solved (by default
+    ``output_data`` is a pipeline.SolveOutput; ``scene`` the scene that was solved (by default
     the context's).  Returns the new objects.
     """
     scene = scene if scene is not None else context.scene

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
-from addon import preview, scene_io, worker
+from addon import estimate, patches, pipeline, scene_io, worker
 
 from .conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
 from .test_extension import _drive, _modal_operator, _snapshot, configure
@@ -108,7 +108,7 @@ def test_white_base_colour_is_refused_with_the_reason_or_clamped_on_request(blen
     blender.scene.radiosity.clamp_reflectivity = True
     objects, notes = scene_io.read_selection(blender)
     room = next(o for o in objects if o.name == "Room")
-    assert room.face_reflectivity.max() == worker.MAX_REFLECTIVITY
+    assert room.face_reflectivity.max() == scene_io.MAX_REFLECTIVITY
     state, reports = _run_sync(blender)
     assert state == {"FINISHED"}
     assert any(kind == "WARNING" and "'White' above 0.99 were clamped to 0.99" in text for kind, text in reports)
@@ -276,7 +276,7 @@ def test_quitting_while_solving_stops_the_worker(tmp_path, hook):
         "    print('worker alive after the hooks:', job.alive, flush=True)\n"
         "atexit.register(report)  # registered first: runs last\n"
         "import bpy, addon, threading\n"
-        "from addon import scene_io, worker\n"
+        "from addon import patches, pipeline, scene_io, worker\n"
         f"if not {hook}:\n"
         "    threading._threading_atexits[:] = [f for f in threading._threading_atexits\n"
         "                                       if getattr(f, 'func', f) is not worker._stop_at_exit]\n"
@@ -365,7 +365,7 @@ def test_furnace_through_blender_with_ngons_modifiers_mirror_and_linked_duplicat
     settings = blender.scene.radiosity.solve_settings()
     settings.paths = 200_000
     settings.threads = 2
-    output = worker.run_solve(objects, settings)
+    output = pipeline.run_solve(objects, settings)
     r = output.result
     assert r.path_ends["escaped"] == 0 and r.path_ends["blocked"] == 0
     # Area-weighted mean: hits per path are geometric (mean 1/(1-R), variance R/(1-R)^2).
@@ -618,7 +618,7 @@ def _with_huge_counts(monkeypatch, paths=3_000_000_017, rays=9_876_543_210_123):
     """Make the worker report path and ray counts beyond 2^31 (a long run, without running it)."""
     import dataclasses
 
-    real = worker.run_solve
+    real = pipeline.run_solve
 
     def run_solve(*args, **kwargs):
         out = real(*args, **kwargs)
@@ -695,35 +695,35 @@ def test_patch_count_is_the_meshings_count_without_meshing(blender):
                                  triangle_face=o.triangle_face).patch_count
             for o in objects
         )
-        assert worker.patch_count(objects, size) == meshed, size
+        assert patches.patch_count(objects, size) == meshed, size
 
 
 def test_a_patch_size_that_makes_too_many_patches_is_refused_before_meshing(blender, monkeypatch):
     objects = _mixed_objects(blender)
-    assert worker.MAX_PATCHES == 2_000_000
+    assert patches.MAX_PATCHES == 2_000_000
     # the smallest patch size the setting allows: ~10^9 patches; refused at once, never meshed
     blender.scene.radiosity.patch_size = 1e-4
     meshed = []
-    real_mesh = worker.meshing.mesh_patches
-    monkeypatch.setattr(worker.meshing, "mesh_patches", lambda *a, **k: meshed.append(1) or real_mesh(*a, **k))
+    real_mesh = patches.meshing.mesh_patches
+    monkeypatch.setattr(patches.meshing, "mesh_patches", lambda *a, **k: meshed.append(1) or real_mesh(*a, **k))
     t0 = time.perf_counter()
-    value = preview.compute(blender)  # what the panel's estimate shows
+    value = estimate.compute(blender)  # what the panel's estimate shows
     assert time.perf_counter() - t0 < 5
     assert not meshed
     message = value["error"]
     assert "more than the limit of 2,000,000" in message and "Use a larger patch size" in message
-    count = worker.patch_count(objects, blender.scene.radiosity.patch_size)  # 1e-4 as a float32
+    count = patches.patch_count(objects, blender.scene.radiosity.patch_size)  # 1e-4 as a float32
     assert f"{count:,.0f} patches" in message
     # the size suggested fits under the limit
     suggested = float(message.rsplit("(", 1)[1].split()[0])
-    assert worker.patch_count(objects, suggested) <= worker.MAX_PATCHES < count
+    assert patches.patch_count(objects, suggested) <= patches.MAX_PATCHES < count
     # a lower limit, to check the boundary exactly (and that a solve refuses the same way)
     blender.scene.radiosity.patch_size = 0.1
-    at = worker.patch_count(objects, blender.scene.radiosity.patch_size)
-    monkeypatch.setattr(worker, "MAX_PATCHES", int(at))
-    assert preview.compute(blender)["patches"] == at
-    monkeypatch.setattr(worker, "MAX_PATCHES", int(at) - 1)
-    assert "more than the limit" in preview.compute(blender)["error"]
+    at = patches.patch_count(objects, blender.scene.radiosity.patch_size)
+    monkeypatch.setattr(patches, "MAX_PATCHES", int(at))
+    assert estimate.compute(blender)["patches"] == at
+    monkeypatch.setattr(patches, "MAX_PATCHES", int(at) - 1)
+    assert "more than the limit" in estimate.compute(blender)["error"]
     before = _snapshot()
     with pytest.raises(RuntimeError, match="Use a larger patch size"):
         bpy.ops.radiosity.solve()

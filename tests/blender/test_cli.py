@@ -28,14 +28,16 @@ def test_cli_builds_solves_saves_and_renders(tmp_path):
 
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     results = [o for o in bpy.data.objects if "radiosity_source" in o.keys()]
-    assert sorted(o["radiosity_source"] for o in results) == ["Light", "Room", "Short Box", "Tall Box"]
+    # the one Cornell box (sample_scenes/cornell_box.py): one object per part
+    sources = sorted(o["radiosity_source"] for o in results)
+    assert len(sources) >= 7 and any("light" in name for name in sources) and any("red" in name for name in sources)
     for o in results:
         attr = o.data.color_attributes["Radiosity"]
         c = np.empty(len(attr.data) * 4, dtype=np.float32)
         attr.data.foreach_get("color", c)
         assert np.all(np.isfinite(c)) and c.reshape(-1, 4)[:, :3].max() > 0
     # the sources are visible again after the preview render
-    assert all(not bpy.data.objects[n].hide_render for n in ("Light", "Room", "Short Box", "Tall Box"))
+    assert all(not bpy.data.objects[n].hide_render for n in sources)
     # the preview shows something: not a black image
     image = bpy.data.images.load(str(png))
     pixels = np.empty(len(image.pixels), dtype=np.float32)

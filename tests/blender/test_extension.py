@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import addon
-from addon import panel, preview, scene_io, worker
+from addon import estimate, panel, patches, pipeline, scene_io, worker
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
 from addon.core.meshing import concatenate, mesh_patches, point_average, triangle_areas
 
@@ -50,7 +50,7 @@ def _trace():
         "scene_prop": hasattr(bpy.types.Scene, "radiosity"),
         "ops": ops,
         "depsgraph_handlers": len(bpy.app.handlers.depsgraph_update_post),
-        "timers": bpy.app.timers.is_registered(preview._start),
+        "timers": bpy.app.timers.is_registered(estimate._start),
     }
 
 
@@ -395,7 +395,7 @@ def test_saved_blend_reloads_with_the_attribute(blender, tmp_path):
 def test_estimate_matches_the_core_prediction(blender):
     spec = build_test_scene()
     configure(blender)
-    value = preview.compute(blender)
+    value = estimate.compute(blender)
     names, meshes, combined, _ = reference(spec)
     scene = PatchScene(combined.vertices, combined.triangles, combined.triangle_patch,
                        np.concatenate([spec[n][2][m.patch_face] for n, m in zip(names, meshes)]),
@@ -408,10 +408,10 @@ def test_estimate_matches_the_core_prediction(blender):
     t = blender.scene.radiosity.threshold
     assert value["relative_efficiency"] == pytest.approx((1 - R) * (1 + math.log(t) / math.log(R)) / (1 + R))
     blender.scene.radiosity.patch_size = PATCH_SIZE / 2
-    assert preview.compute(blender)["patches"] > value["patches"]
+    assert estimate.compute(blender)["patches"] > value["patches"]
     for o in bpy.data.objects:
         o.select_set(False)
-    assert "error" in preview.compute(blender)
+    assert "error" in estimate.compute(blender)
 
 
 class FakeLayout:
@@ -459,14 +459,14 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
     # normal: selection with a fresh estimate in the cache
     build_test_scene()
     configure(blender)
-    preview.STATE.value, preview.STATE.key = preview.compute(blender), preview._key(blender)
+    estimate.STATE.value, estimate.STATE.key = estimate.compute(blender), estimate._key(blender)
     log = draw_panel(blender)
     labels = " ".join(t for k, t in log if k == "label")
     assert "Patches:" in labels and "Rel. efficiency (4)" in labels and "Target MSE" in labels
     # error estimate shown for an empty selection
     for o in bpy.data.objects:
         o.select_set(False)
-    preview.STATE.value, preview.STATE.key = preview.compute(blender), preview._key(blender)
+    estimate.STATE.value, estimate.STATE.key = estimate.compute(blender), estimate._key(blender)
     labels = " ".join(t for k, t in draw_panel(blender) if k == "label")
     assert "Select" in labels
     # running: a job that has not finished
@@ -475,8 +475,8 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
         bpy.data.objects[name].select_set(True)
     objects, _ = scene_io.read_selection(blender)
     job = worker.SolveJob(objects, blender.scene.radiosity.solve_settings())
-    scene = worker.make_patches(objects, PATCH_SIZE).patch_scene()
-    prediction, _ = worker.prediction_for(scene, job.settings)
+    scene = patches.make_patches(objects, PATCH_SIZE).patch_scene()
+    prediction, _ = pipeline.prediction_for(scene, job.settings)
     job._on_prediction(prediction, scene.patch_count)
     mse = (0.07 * prediction.mean_reflected_radiosity) ** 2  # a 7% relative error
     job._on_progress(0.4, {"paths": 1000, "rays": 2000, "seconds": 0.1, "rays_per_second": 20000.0,
@@ -530,7 +530,7 @@ def test_worker_reports_core_errors_as_messages(blender):
     settings.estimator = "biased_infinite"
     settings.threshold = 2.0  # outside (0, 1): the core refuses
     job = worker.SolveJob(objects, settings)
-    job._run()
+    job.run()
     assert job.output is None and "threshold" in job.error and job.traceback is None
 
 
@@ -647,12 +647,12 @@ def test_the_estimate_thread_leaves_bpy_to_the_main_thread(blender, monkeypatch)
 
     monkeypatch.setattr(bpy.app.timers, "register", register)
     blender.evaluated_depsgraph_get()  # the new scene evaluated (its updates invalidate the cache)
-    assert preview._start() is None  # the timer's work, called as Blender would: main thread
-    preview.STATE.thread.join(timeout=60)
-    assert not preview.STATE.thread.is_alive()
+    assert estimate._start() is None  # the timer's work, called as Blender would: main thread
+    estimate.STATE.thread.join(timeout=60)
+    assert not estimate.STATE.thread.is_alive()
     assert calls and all(on_main for _name, on_main in calls), calls
-    assert preview.STATE.key == preview._key(blender) and preview.STATE.value["patches"] > 0
+    assert estimate.STATE.key == estimate._key(blender) and estimate.STATE.value["patches"] > 0
     # the main-thread poll: done, so it redraws and ends
-    poll = getattr(preview, "_poll", None)
+    poll = getattr(estimate, "_poll", None)
     assert poll is not None and bpy.app.timers.is_registered(poll)
     assert poll() is None

@@ -5,7 +5,7 @@ their results are written patch by patch onto the right source faces."""
 import bpy
 import numpy as np
 
-from addon import scene_io, worker
+from addon import patches, pipeline, scene_io, worker
 from addon.core import meshing
 
 from .conftest import make_object, mesh_arrays, read_colours, result_objects
@@ -42,7 +42,7 @@ def test_nurbs_sphere_and_displaced_grid_solve_and_write_results(blender):
         nonplanar, _ = meshing.nonplanar_faces(o.vertices, len(o.face_sizes), o.triangles, o.triangle_face)
         assert nonplanar.sum() >= 8, name
 
-    output = worker.run_solve(list(objects.values()), settings.solve_settings())  # the same run, for checking
+    output = pipeline.run_solve(list(objects.values()), settings.solve_settings())  # the same run, for checking
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     results = {o["radiosity_source"]: o for o in result_objects()}
     assert set(results) == {"Block", "Lamp", "Room", "Nurbs", "Bumpy"}
@@ -89,11 +89,11 @@ def test_nurbs_sphere_and_displaced_grid_solve_and_write_results(blender):
 
 def test_patch_count_follows_the_non_planar_rule(blender):
     objects = list(_nonplanar_scene(blender).values())
-    min_area = worker.degenerate_area(objects)
+    min_area = patches.degenerate_area(objects)
     for size in (10.0, 0.2, 0.05):
         meshed = sum(
             meshing.mesh_patches(o.vertices, o.face_sizes, o.corner_verts, size, face_triangles=o.triangles,
                                  triangle_face=o.triangle_face, min_area=min_area).patch_count
             for o in objects
         )
-        assert worker.patch_count(objects, size) == meshed, size
+        assert patches.patch_count(objects, size) == meshed, size

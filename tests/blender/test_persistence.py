@@ -8,7 +8,7 @@ import bpy
 import numpy as np
 import pytest
 
-from addon import scene_io, worker
+from addon import patches, pipeline, scene_io, worker
 from addon.operators import RADIOSITY_OT_solve
 
 from .conftest import build_test_scene, read_colours, result_objects
@@ -107,7 +107,7 @@ def test_a_failed_write_leaves_the_previous_results_whole(blender, monkeypatch):
 def test_a_non_finite_result_is_never_written(blender, monkeypatch):
     build_test_scene()
     configure(blender)
-    real = worker.run_solve
+    real = pipeline.run_solve
 
     def poisoned(*args, **kwargs):
         out = real(*args, **kwargs)

@@ -1,9 +1,9 @@
-"""The extension's worker reuses meshing, geometry tables and the Embree scene when only the
+"""The extension's patch making reuses meshing, geometry tables and the Embree scene when only the
 materials (or estimator, target, seed) change: the panel's estimate and a re-run neither
-re-mesh nor rebuild. (addon.worker imports no bpy.)"""
+re-mesh nor rebuild. (addon.patches imports no bpy.)"""
 import numpy as np
 
-from addon import worker
+from addon import patches
 
 
 def box_object(name="Box", size=1.0, reflectivity=0.5):
@@ -15,7 +15,7 @@ def box_object(name="Box", size=1.0, reflectivity=0.5):
     triangle_face = np.concatenate([np.arange(6), np.arange(6)])
     emission = np.zeros((6, 3))
     emission[1] = 1.0
-    return worker.ObjectArrays(
+    return patches.ObjectArrays(
         name=name,
         vertices=vertices,
         face_sizes=np.full(6, 4),
@@ -28,11 +28,11 @@ def box_object(name="Box", size=1.0, reflectivity=0.5):
 
 
 def test_materials_change_reuses_meshes_geometry_and_tracer():
-    worker._GEOMETRY_CACHE.clear()
-    first = worker.make_patches([box_object(reflectivity=0.5)], patch_size=0.25)
+    patches._GEOMETRY_CACHE.clear()
+    first = patches.make_patches([box_object(reflectivity=0.5)], patch_size=0.25)
     scene_a = first.patch_scene()
     tracer = scene_a.tracer
-    second = worker.make_patches([box_object(reflectivity=0.3)], patch_size=0.25)
+    second = patches.make_patches([box_object(reflectivity=0.3)], patch_size=0.25)
     scene_b = second.patch_scene()
     assert second.meshes is first.meshes and second.combined is first.combined
     assert scene_b.geometry is scene_a.geometry and scene_b.tracer is tracer
@@ -41,8 +41,8 @@ def test_materials_change_reuses_meshes_geometry_and_tracer():
 
 
 def test_geometry_or_patch_size_change_rebuilds_and_the_last_two_are_kept():
-    worker._GEOMETRY_CACHE.clear()
-    make = lambda size=1.0, patch=0.25: worker.make_patches([box_object(size=size)], patch_size=patch).patch_scene()  # noqa: E731
+    patches._GEOMETRY_CACHE.clear()
+    make = lambda size=1.0, patch=0.25: patches.make_patches([box_object(size=size)], patch_size=patch).patch_scene()  # noqa: E731
     base = make()
     finer = make(patch=0.2)
     assert finer.geometry is not base.geometry and finer.patch_count > base.patch_count

@@ -48,12 +48,12 @@ def test_to_blender_round_trip(empty_scene, sample):
 def test_extension_reads_back_the_same_scene(empty_scene):
     """Through the extension's own reader and patch meshing: same patches, areas and materials."""
     scene_io = pytest.importorskip("addon.scene_io")
-    worker = pytest.importorskip("addon.worker")
+    patch_making = pytest.importorskip("addon.patches")
     sample = cornell_box.build(divisions=10)
     for obj in to_blender(sample):
         obj.select_set(True)
     objects, notes = scene_io.read_selection(bpy.context)
-    patches = worker.make_patches(objects, patch_size=10.0)  # larger than any face: no subdivision
+    patches = patch_making.make_patches(objects, patch_size=10.0)  # larger than any face: no subdivision
     scene = patches.patch_scene()
     assert scene.patch_count == sample.patch_count
     assert scene.total_area == pytest.approx(sample.total_area, rel=1e-6)

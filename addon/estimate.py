@@ -14,7 +14,7 @@ import threading
 
 import bpy
 
-from . import scene_io, worker
+from . import pipeline, scene_io
 
 DELAY_SECONDS = 0.3
 POLL_SECONDS = 0.1
@@ -24,7 +24,7 @@ class _State:
     def __init__(self):
         self.key = None  # key of the estimate in ``value``
         self.pending_key = None  # key being computed or scheduled
-        self.value = None  # dict from worker.estimate, or {"error": message}
+        self.value = None  # dict from pipeline.estimate, or {"error": message}
         self.thread = None
         self.generation = 0  # bumped by scene changes and settings
         self.lock = threading.Lock()
@@ -50,7 +50,7 @@ def compute(context) -> dict:
     """The estimate for the current selection, synchronously (tests, scripts)."""
     try:
         objects, _notes = scene_io.read_selection(context)
-        return worker.estimate(objects, context.scene.radiosity.solve_settings())
+        return pipeline.estimate(objects, context.scene.radiosity.solve_settings())
     except ValueError as exc:
         return {"error": str(exc)}
 
@@ -93,7 +93,7 @@ def _start():
 
     def run():
         try:
-            value = worker.estimate(objects, settings)
+            value = pipeline.estimate(objects, settings)
         except ValueError as exc:
             value = {"error": str(exc)}
         except Exception as exc:  # noqa: BLE001

@@ -1,0 +1,284 @@
+"""Patches of the selected objects: faces cleaned, meshed (cached per geometry) and given materials.
+
+No bpy: scene reading (``scene_io``) gives :class:`ObjectArrays`; :func:`make_patches` makes the
+:class:`Patches` the pipeline solves, and :func:`scene_and_notes` their core scene.
+"""
+from __future__ import annotations
+
+import hashlib
+import threading
+import warnings
+from collections import OrderedDict
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
+
+#: A patch size that would make more patches than this is refused before meshing (memory and
+#: time grow with the patch count: a tiny patch size could otherwise exhaust the memory).
+MAX_PATCHES = 2_000_000
+
+
+@dataclass
+class ObjectArrays:
+    """One source object, read from Blender, world space, outward winding."""
+
+    name: str
+    vertices: np.ndarray  # (V,3) float64
+    face_sizes: np.ndarray  # (F,) int64
+    corner_verts: np.ndarray  # (C,) int64
+    triangles: np.ndarray  # (T,3) int64, Blender's loop triangles (vertex indices)
+    triangle_face: np.ndarray  # (T,) int64
+    face_reflectivity: np.ndarray  # (F,3) float64 in [0, 1)
+    face_emission: np.ndarray  # (F,3) float64 >= 0, emission colour x strength
+    uid: int | None = None  # the source object's session_uid (to find it again)
+    face_slot: np.ndarray | None = None  # (F,) material slot of each face
+    slot_names: tuple = ()  # material name of each slot
+
+
+@dataclass
+class Patches:
+    """The patch meshes of the source objects and their PatchScene arrays."""
+
+    objects: list  # ObjectArrays
+    meshes: list  # meshing.PatchMesh, one per object
+    combined: meshing.CombinedPatches
+    reflectivity: np.ndarray  # (P,3)
+    emission: np.ndarray  # (P,3)
+    geometry_key: str | None = None  # fingerprint of the meshed geometry (see _GeometryCache)
+    notes: list = field(default_factory=list)  # what reading the geometry left out, for the user
+
+    def patch_scene(self):
+        """The core scene; geometry, sampling tables and the Embree scene are built once per
+        geometry and reused when only materials (or estimator, target, seed) change."""
+        return _GEOMETRY_CACHE.scene(self)
+
+
+class _GeometryCache:
+    """The last few meshed geometries and their core scenes, keyed by a fingerprint of the
+    objects' arrays and the patch size: the panel's estimate and a re-run neither re-mesh
+    nor rebuild the ray tracer."""
+
+    size = 2
+
+    def __init__(self):
+        self._entries = OrderedDict()  # key -> {"meshes", "combined", "scene", "warnings"}
+        self._lock = threading.Lock()
+
+    @staticmethod
+    def key(objects, patch_size):
+        digest = hashlib.blake2b(digest_size=16)
+        digest.update(np.float64(patch_size).tobytes())
+        for o in objects:
+            for array in (o.vertices, o.face_sizes, o.corner_verts, o.triangles, o.triangle_face):
+                array = np.ascontiguousarray(array)
+                digest.update(f"{array.dtype}{array.shape}".encode())
+                digest.update(array.tobytes())
+        return digest.hexdigest()
+
+    def meshes(self, key):
+        with self._lock:
+            entry = self._entries.get(key)
+            if entry is not None:
+                self._entries.move_to_end(key)
+                return entry["meshes"], entry["combined"]
+        return None
+
+    def store(self, key, meshes, combined):
+        with self._lock:
+            self._entries[key] = {"meshes": meshes, "combined": combined, "scene": None, "warnings": []}
+            while len(self._entries) > self.size:
+                self._entries.popitem(last=False)
+
+    def scene(self, patches):
+        with self._lock:
+            entry = self._entries.get(patches.geometry_key)
+            base = entry["scene"] if entry is not None else None
+            if base is not None and base.patch_count == patches.combined.patch_count:
+                for message in entry["warnings"]:  # what building it said, said again
+                    warnings.warn(message, stacklevel=2)  # the Warning itself: keeps its .patches
+                return base.with_materials(patches.reflectivity, patches.emission)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                scene = PatchScene(
+                    patches.combined.vertices,
+                    patches.combined.triangles,
+                    patches.combined.triangle_patch,
+                    patches.reflectivity,
+                    patches.emission,
+                )
+            for w in caught:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            if entry is not None:
+                entry["scene"] = scene
+                entry["warnings"] = [w.message for w in caught if issubclass(w.category, UserWarning)]
+            return scene
+
+    def clear(self):
+        with self._lock:
+            self._entries.clear()
+
+
+_GEOMETRY_CACHE = _GeometryCache()
+
+
+def degenerate_area(objects) -> float:
+    """The core's degenerate-triangle area for the scene these objects make: triangles of this
+    area or less are dropped by the core (RELATIVE_DEGENERATE_AREA x the squared diagonal of the
+    vertices the triangles use). The meshing gets it too, so that the faces it cuts into
+    triangles (non-planar ones) never make a patch of dropped triangles only."""
+    used = [o.vertices[np.unique(o.triangles)] for o in objects if len(o.triangles)]
+    if not used:
+        return 0.0
+    used = np.vstack(used)
+    diagonal = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
+    return RELATIVE_DEGENERATE_AREA * diagonal**2
+
+
+def drop_zero_area_faces(objects):
+    """(objects, notes): faces with no area at the core's tolerance left out, objects left
+    without faces skipped. Such faces (collinear or coincident corners, common in imported
+    meshes) are invisible, and a patch made of them only would make the core refuse the scene."""
+    if not any(len(o.triangles) for o in objects):
+        return [], [f"'{o.name}': every face has zero area; the object was skipped" for o in objects]
+    threshold = degenerate_area(objects)
+    kept, notes = [], []
+    for o in objects:
+        F = len(o.face_sizes)
+        area = meshing.triangle_areas(o.vertices, o.triangles) if len(o.triangles) else np.zeros(0)
+        face_area = np.bincount(o.triangle_face, weights=np.where(area > threshold, area, 0.0), minlength=F)
+        flat = face_area <= 0
+        if not flat.any():
+            kept.append(o)
+            continue
+        if flat.all():
+            notes.append(f"'{o.name}': every face has zero area; the object was skipped")
+            continue
+        count = int(flat.sum())
+        notes.append(f"'{o.name}': {count} face{'s' if count > 1 else ''} of zero area "
+                     "(collinear or coincident corners) left out")
+        keep = ~flat
+        corner_face = np.repeat(np.arange(F), o.face_sizes)
+        new_index = np.cumsum(keep) - 1
+        keep_triangle = keep[o.triangle_face]
+        kept.append(replace(
+            o,
+            face_sizes=o.face_sizes[keep],
+            corner_verts=o.corner_verts[keep[corner_face]],
+            triangles=o.triangles[keep_triangle],
+            triangle_face=new_index[o.triangle_face[keep_triangle]],
+            face_reflectivity=o.face_reflectivity[keep],
+            face_emission=o.face_emission[keep],
+            face_slot=None if o.face_slot is None else o.face_slot[keep],
+        ))
+    return kept, notes
+
+
+def patch_count(objects, patch_size) -> float:
+    """How many patches ``meshing.mesh_patches`` makes of these objects at this patch size,
+    counted without meshing (``meshing.count_patches``; a float, so that absurd counts do not
+    overflow)."""
+    min_area = degenerate_area(objects)
+    return sum(
+        meshing.count_patches(
+            o.vertices, o.face_sizes, o.corner_verts, patch_size, o.triangles, o.triangle_face, min_area
+        )
+        for o in objects
+        if len(o.face_sizes)
+    )
+
+
+def check_patch_count(objects, patch_size, limit=None):
+    """ValueError, suggesting a larger patch size, when the patch size would make more than
+    ``limit`` (default MAX_PATCHES) patches; returns the count otherwise."""
+    limit = MAX_PATCHES if limit is None else limit
+    count = patch_count(objects, patch_size)
+    if count <= limit:
+        return count
+    suggested = float(patch_size) * max(1.0, (count / limit) ** 0.5)
+    for _ in range(64):  # the count falls as the size grows: a few steps up to a size that fits
+        suggested = float(f"{suggested:.2g}")
+        if patch_count(objects, suggested) <= limit:
+            break
+        suggested *= 1.25
+    raise ValueError(
+        f"A patch size of {float(patch_size):.3g} would make {count:,.0f} patches, more than the limit of "
+        f"{limit:,} (memory and time grow with the patch count). Use a larger patch size "
+        f"({suggested:.2g} or more)"
+    )
+
+
+def make_patches(objects, patch_size) -> Patches:
+    """Mesh every object into patches and gather per-patch materials (the meshing of an
+    unchanged geometry comes from the cache). Faces of zero area are left out first, and a
+    patch size that would make more than MAX_PATCHES patches is refused before any meshing."""
+    objects, notes = drop_zero_area_faces(objects)
+    if not objects:
+        raise ValueError("the selected objects have no faces of non-zero area")
+    check_patch_count(objects, patch_size)
+    patches = _make_patches(objects, patch_size)
+    patches.notes = notes
+    return patches
+
+
+def _make_patches(objects, patch_size) -> Patches:
+    key = _GeometryCache.key(objects, patch_size)
+    cached = _GEOMETRY_CACHE.meshes(key)
+    if cached is not None:
+        meshes, combined = cached
+        return _with_materials(objects, meshes, combined, key)
+    min_area = degenerate_area(objects)  # the scene's: what the core drops, across all objects
+    meshes = [
+        meshing.mesh_patches(
+            o.vertices,
+            o.face_sizes,
+            o.corner_verts,
+            patch_size,
+            face_triangles=o.triangles,
+            triangle_face=o.triangle_face,
+            min_area=min_area,
+        )
+        for o in objects
+    ]
+    combined = meshing.concatenate(meshes)
+    if combined.patch_count == 0:
+        raise ValueError("the selected objects have no faces")
+    _GEOMETRY_CACHE.store(key, meshes, combined)
+    return _with_materials(objects, meshes, combined, key)
+
+
+def _with_materials(objects, meshes, combined, key) -> Patches:
+    reflectivity = np.concatenate(
+        [o.face_reflectivity[m.patch_face] for o, m in zip(objects, meshes)]
+    ).reshape(-1, 3)
+    emission = np.concatenate(
+        [o.face_emission[m.patch_face] for o, m in zip(objects, meshes)]
+    ).reshape(-1, 3)
+    return Patches(list(objects), meshes, combined, reflectivity, emission, key)
+
+
+def objects_of_patches(patches: Patches, indices) -> str:
+    """' (objects 'A', 'B')' for the source objects of the given patch indices, or ''."""
+    if indices is None or len(indices) == 0:
+        return ""
+    owners = np.unique(patches.combined.patch_object[np.asarray(indices, dtype=np.int64)])
+    names = ", ".join(f"'{patches.objects[k].name}'" for k in owners)
+    return f" (in {names})"
+
+
+def scene_and_notes(patches: Patches):
+    """(PatchScene, notes): the core's errors and warnings name the objects of their patches."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            scene = patches.patch_scene()
+        except ValueError as exc:
+            where = objects_of_patches(patches, getattr(exc, "patches", None))
+            raise ValueError(f"{exc}{where}") from exc
+    notes = list(patches.notes) + [
+        f"{w.message}{objects_of_patches(patches, getattr(w.message, 'patches', None))}"
+        for w in caught
+        if issubclass(w.category, UserWarning)
+    ]
+    return scene, notes
