@@ -20,9 +20,17 @@ import time
 
 import numpy as np
 
+from . import options
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        """One line, not the whole usage: ``--help`` has the rest."""
+        self.exit(2, f"error: {message} (see --help)\n")
+
 
 def _parser():
-    p = argparse.ArgumentParser(prog="python -m addon", description=__doc__.split("\n")[0])
+    p = _Parser(prog="python -m addon", description=__doc__.split("\n")[0])
     src = p.add_mutually_exclusive_group()
     src.add_argument("--scene", default=None,
                      help="built-in 'cornell' (default) or a sample_scenes name, e.g. fig1_r0.5, cornell_box")
@@ -30,28 +38,35 @@ def _parser():
     src.add_argument("--current", action="store_true", help="use the scene already loaded (inside Blender)")
     p.add_argument("--list", action="store_true", help="list the scene names and exit")
     p.add_argument("--select-all", action="store_true", help="solve all mesh objects, not just the selection")
-    p.add_argument("--output", "-o", metavar="FILE.blend", help="where to save (default out/<scene>.blend)")
+    p.add_argument("--output", "-o", dest="blend_path", metavar="FILE.blend", help="where to save (default out/<scene>.blend)")
     p.add_argument("--preview", metavar="FILE.png", help="preview image (default: next to the .blend)")
     p.add_argument("--no-preview", action="store_true", help="skip the preview render")
-    p.add_argument("--estimator", choices=["finite", "biased_infinite"], default="finite")
-    p.add_argument("--threshold", type=float, default=1e-3, help="t of the biased infinite estimator")
-    p.add_argument("--error", type=float, default=3.0, help="relative RMS error target in percent (default 3)")
-    p.add_argument("--patch-size", type=float, default=None,
-                   help="largest patch edge in scene units (default: 1/20 of the scene's size; "
-                   "sample_scenes keep the paper's patches)")
-    p.add_argument("--exit-point", choices=["random", "hit"], default="random")
-    p.add_argument("--sampling", choices=["independent", "stratified"], default="independent",
-                   help="independent (the paper's) or stratified sources and low-discrepancy first rays")
-    p.add_argument("--stop-rule", choices=["predicted", "measured"], default="predicted",
-                   help="run the predicted paths, or until the measured error meets the target")
-    p.add_argument("--colours", choices=["FACE", "VERTEX", "BOTH"], default="BOTH",
-                   help="face colours (CORNER), vertex colours (POINT) or both")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--time-limit", type=float, default=0.0, help="seconds, 0 = none")
-    p.add_argument("--threads", type=int, default=0, help="0 = automatic")
-    p.add_argument("--resolution", type=int, default=480, help="preview width in pixels")
-    p.add_argument("--samples", type=int, default=16, help="Cycles samples for the preview")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    for option in options.SETTINGS:  # the panel's settings: same names, defaults and ranges
+        if isinstance(option, options.Choice):
+            ids = [i for i, _, _ in option.items]
+            p.add_argument(option.flag, dest=option.name, default=option.default, metavar="|".join(ids),
+                           help=f"{option.description} (default {option.default}; any case)")
+        else:
+            kind = int if option.integer else float
+            p.add_argument(option.flag, dest=option.name, type=kind, default=option.default,
+                           help=f"{option.description} ({option.range_text()}; default {option.default:g})")
+    p.add_argument("--resolution", type=int, default=RESOLUTION.default, help="preview width in pixels "
+                   f"({RESOLUTION.range_text()})")
+    p.add_argument("--samples", type=int, default=SAMPLES.default, help=f"Cycles samples for the preview ({SAMPLES.range_text()})")
     return p
+
+
+# The preview's own options (not settings of the solve).
+RESOLUTION = options.Number("resolution", "--resolution", 480, 16, 16384, "Resolution", "", unit="pixels", integer=True)
+SAMPLES = options.Number("samples", "--samples", 16, 1, 65536, "Samples", "", integer=True)
+
+
+def _checked(args):
+    """The arguments with every setting checked against its range (ValueError naming it)."""
+    for option in (*options.SETTINGS, RESOLUTION, SAMPLES):
+        setattr(args, option.name, option.check(getattr(args, option.name)))
+    return args
 
 
 def _sample_scene_names():
@@ -237,8 +252,9 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
 def render_preview(path, sources, width=480, samples=16, exposure=0.0, keep_settings=False):
     """Render the result objects (their baked colours as emission) with Cycles to ``path``.
 
-    The source objects are hidden from the render only while it runs; the preview's settings
-    (``preview_settings``) are undone afterwards unless ``keep_settings``.
+    The source objects are hidden from the render while it runs; they and the preview's
+    settings (``preview_settings``) are restored afterwards unless ``keep_settings`` (a scene
+    built here is saved so that F12 renders what the preview shows).
     """
     import bpy
 
@@ -251,9 +267,9 @@ def render_preview(path, sources, width=480, samples=16, exposure=0.0, keep_sett
         scene.render.filepath = os.path.abspath(path)
         bpy.ops.render.render(write_still=True)
     finally:
-        for o, h in hidden:
-            o.hide_render = h
         if not keep_settings:
+            for o, h in hidden:
+                o.hide_render = h
             changes.restore()
 
 
@@ -276,6 +292,10 @@ def _fail(message, status=1):
 
 def main(argv=None):
     args = _parser().parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        args = _checked(args)
+    except ValueError as exc:
+        return _fail(str(exc), 2)
     names = ["cornell"] + _sample_scene_names()
     if args.list:
         print("\n".join(names))
@@ -319,38 +339,28 @@ def main(argv=None):
         return _fail("no mesh object selected (use --select-all)", 2)
 
     settings = bpy.context.scene.radiosity
-    settings.estimator = args.estimator
-    settings.threshold = args.threshold
-    settings.target_error = args.error
-    if args.patch_size is None and scene_name in _sample_scene_names() and own_scene:
-        # sample scenes come meshed as in the paper: keep their patches
-        args.patch_size = 1e6
-    if args.patch_size is None:
-        lo, hi = world_bounds(sources)
-        if np.max(hi - lo) > 0:  # else the setting's own value
-            args.patch_size = float(np.max(hi - lo)) / 20.0
-    if args.patch_size is not None:
-        settings.patch_size = args.patch_size
-    settings.exit_point = args.exit_point
-    settings.sampling = args.sampling
-    settings.stop_rule = args.stop_rule
-    settings.output = args.colours
-    settings.seed = args.seed
-    settings.time_limit = args.time_limit
-    settings.threads = args.threads
+    if own_scene and scene_name in _sample_scene_names() and not args.patch_size:
+        args.patch_size = 1e6  # sample scenes come meshed as in the paper: keep their patches
+    for option in options.SETTINGS:
+        setattr(settings, option.name, getattr(args, option.name))
 
+    from . import operators, worker
+
+    operators.LAST_ERROR = ""
+    progress = ProgressLine(sys.stderr) if (not args.quiet and sys.stderr.isatty()) else None
+    worker.PROGRESS_LISTENER = progress
     try:
-        result = bpy.ops.radiosity.solve()
-    except RuntimeError as exc:  # the operator's error report (bad input, time limit, ...)
+        result = bpy.ops.radiosity.solve(quiet_errors=True)
+    except RuntimeError as exc:  # an error the operator did not keep quiet
         return _fail(_one_line(exc))
+    finally:
+        worker.PROGRESS_LISTENER = None
+        if progress is not None:
+            progress.end()
     if "FINISHED" not in result:
-        return _fail("the solve did not finish")
-    print(
-        f"{scene_name}: {settings.last_patches} patches, {settings.last_paths} paths, "
-        f"{settings.last_rays} rays, {settings.last_seconds:.2f} s, "
-        f"mean path length {settings.last_mean_path_length:.2f}, predicted MSE {settings.last_predicted_mse:.3g}"
-    )
-    out_blend = os.path.abspath(args.output or os.path.join("out", f"{scene_name}.blend"))
+        return _fail(operators.LAST_ERROR or "the solve did not finish")
+    print(summary(scene_name, settings))
+    out_blend = os.path.abspath(args.blend_path or os.path.join("out", f"{scene_name}.blend"))
     os.makedirs(os.path.dirname(out_blend), exist_ok=True)
     png = None if args.no_preview else os.path.abspath(args.preview or os.path.splitext(out_blend)[0] + ".png")
     try:
@@ -368,6 +378,63 @@ def main(argv=None):
         print(f"preview: {png}")
     print(f"saved: {out_blend}  ({time.perf_counter() - t0:.1f} s in all)")
     return 0
+
+
+def summary(scene_name, settings) -> str:
+    """The run in one line, with the error reached against the target (both relative RMS)."""
+    error = settings.last_relative_error
+    target = settings.last_target_error
+    reached = "error unknown" if error < 0 else f"error {error:.2f}%"
+    if target > 0 and error >= 0:
+        reached += f" of a {target:g}% target ({error / target * 100:.0f}% of it)"
+    return (f"{scene_name}: {settings.last_patches:,} patches, {settings.last_paths:,} paths, "
+            f"{settings.last_rays:,} rays, {settings.last_seconds:.2f} s, mean path length "
+            f"{settings.last_mean_path_length:.2f}, {reached}, stopped by {settings.last_stopped}")
+
+
+class ProgressLine:
+    """One line on a terminal, rewritten after batches (at most every PERIOD seconds): paths
+    done of planned, ray rate, the error estimate against the target, and the time left."""
+
+    PERIOD = 0.25
+
+    def __init__(self, stream):
+        self.stream, self.shown, self.width = stream, 0.0, 0
+
+    def __call__(self, job):
+        now = time.perf_counter()
+        if now - self.shown < self.PERIOD:
+            return
+        self.shown = now
+        self.write(progress_text(job))
+
+    def write(self, text):
+        self.stream.write("\r" + text.ljust(self.width))
+        self.stream.flush()
+        self.width = len(text)
+
+    def end(self):
+        if self.width:
+            self.stream.write("\r" + " " * self.width + "\r")
+            self.stream.flush()
+
+
+def progress_text(job) -> str:
+    """The progress line of a running job (worker.SolveJob)."""
+    p = job.snapshot()
+    fraction, paths, seconds = p.get("fraction", 0.0), p.get("paths", 0), p.get("seconds", 0.0)
+    planned = getattr(job.prediction, "paths", None)
+    parts = [f"{fraction * 100:5.1f}%", f"{paths:,} of {planned:,} planned paths" if planned else f"{paths:,} paths"]
+    if p.get("rays_per_second"):
+        parts.append(f"{p['rays_per_second'] / 1e6:.2f} Mray/s")
+    error = job.relative_error(p.get("measured_mse"))
+    if error is not None:
+        target = job.settings.relative_rms
+        parts.append(f"error {error * 100:.2f}%" + (f" (target {target * 100:g}%)" if not job.settings.paths else ""))
+    if 0 < fraction < 1 and seconds > 0:
+        left = seconds * (1 - fraction) / fraction
+        parts.append(f"{int(left // 60)}:{int(left % 60):02d} left")
+    return "  ".join(parts)
 
 
 def _auto_exposure(scene_io):

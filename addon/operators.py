@@ -9,6 +9,8 @@ from bpy.app.handlers import persistent
 from . import scene_io, worker
 
 TIMER_SECONDS = 0.1
+#: The last error of ``radiosity.solve`` (with quiet_errors, its only record).
+LAST_ERROR = ""
 #: Above this share of the emitted power absorbed on back sides, the user is warned.
 BLOCKED_WARNING = 0.05
 
@@ -37,9 +39,18 @@ def _run_stats(output):
         "last_predicted_mse": float(r.predicted_mse),
         "last_measured_mse": measured if measured == measured else -1.0,  # NaN -> -1
         "last_patches": int(output.patches.combined.patch_count),
+        "last_patch_size": float(output.patches.patch_size),
         "last_stopped": str(r.stopped),
         "last_estimator": str(r.estimator),
+        "last_relative_error": _percent(output.prediction, measured),
+        "last_target_error": float(output.settings_relative_rms * 100.0) if output.settings_relative_rms else 0.0,
     }
+
+
+def _percent(prediction, mse):
+    """An MSE as a relative RMS error in percent of the mean reflected radiosity (-1: unknown)."""
+    mean = getattr(prediction, "mean_reflected_radiosity", 0.0)
+    return 100.0 * mse**0.5 / mean if mse == mse and mse >= 0 and mean > 0 else -1.0
 
 
 def _store_stats(settings, stats):
@@ -61,10 +72,20 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
     bl_label = "Solve Radiosity"
     bl_options = {"REGISTER", "UNDO"}
 
+    quiet_errors: bpy.props.BoolProperty(
+        name="Quiet errors", options={"HIDDEN", "SKIP_SAVE"},
+        description="Keep an error in LAST_ERROR instead of reporting it (the command line prints it once)")
+
     _job = None
     _timer = None
     _notes = ()
     _scene_uid = None
+
+    def _error(self, text):
+        global LAST_ERROR
+        LAST_ERROR = text
+        if not self.quiet_errors:
+            self.report({"ERROR"}, text)
 
     @classmethod
     def poll(cls, context):
@@ -113,13 +134,13 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         try:
             objects, notes = scene_io.read_selection(context)
         except ValueError as exc:
-            self.report({"ERROR"}, str(exc))
+            self._error(str(exc))
             return {"CANCELLED"}
         except Exception as exc:  # noqa: BLE001 - an unforeseen scene: a report, never a traceback
             import traceback
 
             print(traceback.format_exc())
-            self.report({"ERROR"}, f"Reading the selection failed ({type(exc).__name__}: {exc}); "
+            self._error(f"Reading the selection failed ({type(exc).__name__}: {exc}); "
                         "the scene is unchanged")
             return {"CANCELLED"}
         settings = context.scene.radiosity.solve_settings()
@@ -149,7 +170,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         if job.error is not None:
             if job.traceback:
                 print(job.traceback)
-            self.report({"ERROR"}, f"Radiosity failed: {job.error}")
+            self._error(f"Radiosity failed: {job.error}")
             return {"CANCELLED"}
         if output is None or output.result.stopped == "cancelled":
             self.report({"INFO"}, "Radiosity cancelled: the scene is unchanged")
@@ -159,17 +180,17 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             return {"CANCELLED"}
         missing = _missing_sources(output)
         if missing:
-            self.report({"ERROR"}, f"Radiosity: {', '.join(repr(n) for n in missing)} was deleted while "
+            self._error(f"Radiosity: {', '.join(repr(n) for n in missing)} was deleted while "
                         "solving; the result was discarded and the scene is unchanged")
             return {"CANCELLED"}
         uid = getattr(self, "_scene_uid", None)
         scene = next((sc for sc in bpy.data.scenes if sc.session_uid == uid), None) if uid else context.scene
         if scene is None:
-            self.report({"ERROR"}, "Radiosity: the scene was deleted while solving; the result was discarded")
+            self._error("Radiosity: the scene was deleted while solving; the result was discarded")
             return {"CANCELLED"}
         r = output.result
         if r.paths == 0:
-            self.report({"ERROR"}, f"Radiosity: the time limit ({job.settings.max_seconds:g} s) ended the run "
+            self._error(f"Radiosity: the time limit ({job.settings.max_seconds:g} s) ended the run "
                         "before the first batch of paths; nothing was written. Raise the time limit")
             return {"CANCELLED"}
         try:
@@ -179,7 +200,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             import traceback
 
             print(traceback.format_exc())
-            self.report({"ERROR"}, f"Writing the result failed, the scene is unchanged: {exc}")
+            self._error(f"Writing the result failed, the scene is unchanged: {exc}")
             return {"CANCELLED"}
         # The results are written: from here on nothing may raise, or the operator would end
         # without its undo step (and with a traceback) over a scene that holds the new results.

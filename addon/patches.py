@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
+from .options import AUTOMATIC_PATCH_DIVISIONS
 
 #: A patch size that would make more patches than this is refused before meshing (memory and
 #: time grow with the patch count: a tiny patch size could otherwise exhaust the memory).
@@ -48,6 +49,7 @@ class Patches:
     emission: np.ndarray  # (P,3)
     geometry_key: str | None = None  # fingerprint of the meshed geometry (see _GeometryCache)
     notes: list = field(default_factory=list)  # what reading the geometry left out, for the user
+    patch_size: float = 0.0  # the size meshed with (an automatic size resolved)
 
     def patch_scene(self):
         """The core scene; geometry, sampling tables and the Embree scene are built once per
@@ -209,16 +211,31 @@ def check_patch_count(objects, patch_size, limit=None):
     )
 
 
+def automatic_patch_size(objects) -> float:
+    """Patch size 0's meaning: the largest extent of the objects' geometry over
+    AUTOMATIC_PATCH_DIVISIONS (1.0 where there is no extent)."""
+    used = [o.vertices[np.unique(o.triangles)] for o in objects if len(o.triangles)]
+    if not used:
+        return 1.0
+    used = np.vstack(used)
+    extent = float(np.max(used.max(axis=0) - used.min(axis=0)))
+    return extent / AUTOMATIC_PATCH_DIVISIONS if extent > 0 else 1.0
+
+
 def make_patches(objects, patch_size) -> Patches:
     """Mesh every object into patches and gather per-patch materials (the meshing of an
     unchanged geometry comes from the cache). Faces of zero area are left out first, and a
-    patch size that would make more than MAX_PATCHES patches is refused before any meshing."""
+    patch size that would make more than MAX_PATCHES patches is refused before any meshing.
+    A patch size of 0 is automatic (:func:`automatic_patch_size`)."""
     objects, notes = drop_zero_area_faces(objects)
     if not objects:
         raise ValueError("the selected objects have no faces of non-zero area")
+    if not patch_size:
+        patch_size = automatic_patch_size(objects)
     check_patch_count(objects, patch_size)
     patches = _make_patches(objects, patch_size)
     patches.notes = notes
+    patches.patch_size = float(patch_size)
     return patches
 
 

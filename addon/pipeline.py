@@ -10,22 +10,25 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .core import meshing, predict, relative_rms_to_mse, solve
+from . import options
 from .patches import Patches, make_patches, scene_and_notes
 
 @dataclass
 class SolveSettings:
-    estimator: str = "finite"  # "finite" | "biased_infinite"
-    threshold: float = 1e-3
-    relative_rms: float = 0.05  # error target as a fraction of the mean reflected radiosity
+    """A job's settings; the defaults are the panel's and the command line's (``options``)."""
+
+    estimator: str = options.ESTIMATOR.default
+    threshold: float = options.THRESHOLD.default
+    relative_rms: float = options.TARGET_ERROR.default / 100.0  # of the mean reflected radiosity
     paths: int | None = None  # fixed path count instead of the error target
-    patch_size: float = 0.5
-    exit_point: str = "random"  # "random" | "hit"
-    sampling: str = "independent"  # "independent" (the paper's) | "stratified"
-    stop_rule: str = "predicted"  # "predicted" (formula paths) | "measured" (batch error estimate)
-    seed: int = 0
+    patch_size: float = options.PATCH_SIZE.default  # 0: automatic (patches.automatic_patch_size)
+    exit_point: str = options.EXIT_POINT.default
+    sampling: str = options.SAMPLING.default
+    stop_rule: str = options.STOP_RULE.default
+    seed: int = options.SEED.default
     max_seconds: float | None = None
     threads: int | None = None
-    output: str = "FACE"  # "FACE" | "VERTEX" | "BOTH"
+    output: str = options.OUTPUT.default
 
 
 @dataclass
@@ -37,6 +40,7 @@ class SolveOutput:
     face_colours: list = field(default_factory=list)  # (P_k,3) per object
     point_colours: list = field(default_factory=list)  # (N_k,3) per object, or None
     notes: list = field(default_factory=list)  # the core's warnings, for the user
+    settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
 
     def blocked_fraction(self):
         """Share of the emitted power absorbed on the back side of faces."""
@@ -102,7 +106,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         max_seconds=settings.max_seconds or None,
         threads=settings.threads or None,
     )
-    out = SolveOutput(patches, result, prediction, target, notes=notes)
+    out = SolveOutput(patches, result, prediction, target, notes=notes,
+                      settings_relative_rms=None if settings.paths else settings.relative_rms)
     radiosity = np.asarray(result.radiosity, dtype=np.float64)
     for k, mesh in enumerate(patches.meshes):
         B = radiosity[patches.combined.patch_slice(k)]

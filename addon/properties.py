@@ -5,6 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
+from . import options
 from .pipeline import SolveSettings
 
 
@@ -28,76 +29,29 @@ def _decimal_count(name):
                     lambda self, value: setattr(self, name, str(int(value))))
 
 
+def _enum(option, update=None):
+    return EnumProperty(name=option.label, description=option.description, items=list(option.items),
+                        default=option.default, **({"update": update} if update else {}))
+
+
+def _number(option, update=None, **extra):
+    """A property of ``option``'s default and range (0 allowed where 0 means a default)."""
+    low = 0 if option.zero_means else option.low
+    bounds = {"min": low} | ({"max": option.high} if option.high is not None else {})
+    kind = IntProperty if option.integer else FloatProperty
+    return kind(name=option.label, description=option.description, default=option.default,
+                **bounds, **extra, **({"update": update} if update else {}))
+
+
 class RadiositySettings(bpy.types.PropertyGroup):
-    estimator: EnumProperty(
-        name="Estimator",
-        items=[
-            ("finite", "Finite (Phi_T)", "Shooting random walk with expected finite path length: "
-             "every visited patch gets the path's power, survival with probability R"),
-            ("biased_infinite", "Biased infinite", "Infinite path length estimator, cut when the "
-             "accumulated reflectivity falls below the threshold t"),
-        ],
-        default="finite",
-        update=_changed,
-    )
-    threshold: FloatProperty(
-        name="Threshold t",
-        description="Biased infinite estimator: a path ends when the product of reflectivities "
-        "along it is below t",
-        default=1e-3, min=1e-6, max=0.5, precision=4, step=0.01,
-        update=_changed,
-    )
-    target_error: FloatProperty(
-        name="Error target",
-        description="Relative RMS error wanted, as a percentage of the scene's average reflected "
-        "radiosity (converted to a mean square error with the paper's formulas)",
-        default=5.0, min=0.05, max=100.0, soft_min=0.5, soft_max=20.0, precision=2,
-        subtype="PERCENTAGE",
-        update=_changed,
-    )
-    patch_size: FloatProperty(
-        name="Patch size",
-        description="Largest patch edge: faces longer than this are subdivided",
-        default=0.5, min=1e-4, soft_max=10.0, precision=3, subtype="DISTANCE", unit="LENGTH",
-        update=_changed,
-    )
-    exit_point: EnumProperty(
-        name="Exit point",
-        items=[
-            ("random", "Random", "The next ray leaves from a random point of the hit patch"),
-            ("hit", "Hit point", "The next ray leaves from the point that was hit"),
-        ],
-        default="random",
-    )
-    sampling: EnumProperty(
-        name="Sampling",
-        items=[
-            ("independent", "Plain (paper)", "Sources and first rays drawn independently, as in the paper: "
-             "the predicted path counts are derived for this"),
-            ("stratified", "Stratified", "Paths allotted to sources in proportion to power and a randomly "
-             "shifted low-discrepancy first ray: same expected result, usually less noise for the same time"),
-        ],
-        default="independent",
-    )
-    stop_rule: EnumProperty(
-        name="Stop at",
-        items=[
-            ("predicted", "Predicted paths", "Run the number of paths the paper's formula predicts for the "
-             "error target"),
-            ("measured", "Measured error", "Run until the run's own estimate of its error (from independent "
-             "batches) meets the target, at most 64 times the predicted paths"),
-        ],
-        default="predicted",
-    )
-    output: EnumProperty(
-        name="Output",
-        items=[
-            ("FACE", "Face colours", "Flat colour per patch on the CORNER domain"),
-            ("VERTEX", "Vertex colours", "Area-weighted average of the adjacent patches on the POINT domain"),
-            ("BOTH", "Both", "Face colours as 'Radiosity', vertex colours as 'Radiosity Vertex'"),
-        ],
-        default="FACE",
-    )
+    estimator: _enum(options.ESTIMATOR, _changed)
+    threshold: _number(options.THRESHOLD, _changed, precision=4, step=0.01)
+    target_error: _number(options.TARGET_ERROR, _changed, soft_min=0.5, soft_max=20.0, precision=2, subtype="PERCENTAGE")
+    patch_size: _number(options.PATCH_SIZE, _changed, soft_max=10.0, precision=3, subtype="DISTANCE", unit="LENGTH")
+    exit_point: _enum(options.EXIT_POINT)
+    sampling: _enum(options.SAMPLING)
+    stop_rule: _enum(options.STOP_RULE, _changed)
+    output: _enum(options.OUTPUT)
     clamp_reflectivity: BoolProperty(
         name="Clamp bright colours",
         description="Use 0.99 for base colours above it (white is 1.0) instead of refusing colours of "
@@ -105,15 +59,9 @@ class RadiositySettings(bpy.types.PropertyGroup):
         default=False,
         update=_changed,
     )
-    seed: IntProperty(name="Seed", default=0, min=0, description="Random seed (same seed, same result)")
-    time_limit: FloatProperty(
-        name="Time limit", default=0.0, min=0.0, soft_max=3600.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE",
-        description="Stop after this many seconds (0: no limit); the paths done so far are kept",
-    )
-    threads: IntProperty(
-        name="Threads", default=0, min=0, max=64,
-        description="Worker threads for the ray tracing (0: automatic). Same seed and threads give the same result",
-    )
+    seed: _number(options.SEED)
+    time_limit: _number(options.TIME_LIMIT, soft_max=3600.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE")
+    threads: _number(options.THREADS)
 
     # statistics of the last finished run (written with the results). Path and ray counts pass
     # 2^31 in long runs: an IntProperty is 32-bit and a FloatProperty single precision, so they
@@ -125,8 +73,11 @@ class RadiositySettings(bpy.types.PropertyGroup):
     last_predicted_mse: FloatProperty(name="Predicted MSE", default=0.0)
     last_measured_mse: FloatProperty(name="Measured MSE", default=0.0)
     last_patches: IntProperty(name="Patches", default=0)
+    last_patch_size: FloatProperty(name="Patch size used", default=0.0, subtype="DISTANCE", unit="LENGTH")
     last_stopped: StringProperty(name="Stopped by", default="")
     last_estimator: StringProperty(name="Estimator", default="")
+    last_relative_error: FloatProperty(name="Error reached", default=-1.0, description="Measured relative RMS error of the last run, percent (-1: unknown)")
+    last_target_error: FloatProperty(name="Error target", default=0.0, description="The last run's error target, percent (0: a path count was given)")
 
     last_paths = _decimal_count("last_path_count")
     last_rays = _decimal_count("last_ray_count")

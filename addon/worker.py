@@ -67,6 +67,8 @@ class SolveJob:
     def _on_progress(self, fraction, stats):
         with self._lock:
             self.progress = {"fraction": float(fraction), **dict(stats)}
+        if PROGRESS_LISTENER is not None:
+            PROGRESS_LISTENER(self)
 
     def _on_prediction(self, prediction, patch_count):
         self.prediction = prediction
@@ -93,6 +95,9 @@ class SolveJob:
         finally:
             self.done.set()
 
+
+# Called with the job after each batch (the command line's progress line), or None.
+PROGRESS_LISTENER = None
 
 # The job of the running modal solve, if any (one at a time).
 _running: SolveJob | None = None

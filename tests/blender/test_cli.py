@@ -36,13 +36,22 @@ def test_cli_builds_solves_saves_and_renders(tmp_path):
         c = np.empty(len(attr.data) * 4, dtype=np.float32)
         attr.data.foreach_get("color", c)
         assert np.all(np.isfinite(c)) and c.reshape(-1, 4)[:, :3].max() > 0
-    # the sources are visible again after the preview render
-    assert all(not bpy.data.objects[n].hide_render for n in sources)
+    # a scene built here is saved to render the preview on F12: the sources hidden from render
+    assert all(bpy.data.objects[n].hide_render for n in sources)
     # the preview shows something: not a black image
     image = bpy.data.images.load(str(png))
     pixels = np.empty(len(image.pixels), dtype=np.float32)
     image.pixels.foreach_get(pixels)
     assert pixels.reshape(-1, 4)[:, :3].mean() > 0.02
+    # F12 in the saved file renders the preview (README): the same image, to Cycles' noise
+    f12 = tmp_path / "f12.png"
+    bpy.context.scene.render.filepath = str(f12)
+    bpy.ops.render.render(write_still=True)
+    again = bpy.data.images.load(str(f12))
+    other = np.empty(len(again.pixels), dtype=np.float32)
+    again.pixels.foreach_get(other)
+    assert other.shape == pixels.shape
+    assert np.abs(other - pixels).mean() < 0.01 * max(pixels.mean(), 1e-3) + 2 / 255
     bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
@@ -129,6 +138,112 @@ def test_cli_failures_are_one_line_and_a_non_zero_status(tmp_path):
     assert not any((tmp_path / n).exists() for n in ("a.blend", "b.blend", "c.blend"))
 
 
+@pytest.mark.parametrize("args, expected", [
+    (["--error", "-1"], "--error must be between 0.05 and 100 %; got -1"),
+    (["--error", "0"], "--error must be between 0.05 and 100 %; got 0"),
+    (["--error", "500"], "--error must be between 0.05 and 100 %; got 500"),
+    (["--threshold", "2"], "--threshold must be between 1e-06 and 0.5; got 2"),
+    (["--threshold", "0"], "--threshold must be between 1e-06 and 0.5; got 0"),
+    (["--patch-size", "-1"], "--patch-size must be 0 (automatic) or at least 0.0001; got -1"),
+    (["--seed", "-5"], "--seed must be between 0 and 2.14748e+09; got -5"),
+    (["--threads", "-1"], "--threads must be between 0 and 64; got -1"),
+    (["--resolution", "0"], "--resolution must be between 16 and 16384 pixels; got 0"),
+    (["--colours", "stripes"], "--colours must be one of FACE, VERTEX, BOTH; got 'stripes'"),
+    (["--no-such-option"], "unrecognized arguments: --no-such-option"),
+    (["--error", "lots"], "argument --error: invalid float value: 'lots'"),
+])
+def test_cli_refuses_values_out_of_range_in_one_line(tmp_path, args, expected):
+    """Values the panel's properties would clamp are refused, naming the option, its range and
+    the value: exit status 2, one line on stderr (no usage dump), nothing run or written."""
+    proc = subprocess.run([sys.executable, "-m", "addon", *args, "-o", str(tmp_path / "x.blend")], cwd=str(tmp_path),
+                          capture_output=True, text=True, timeout=120, env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and expected in lines[0], proc.stderr
+    assert "usage:" not in proc.stderr and not (tmp_path / "x.blend").exists()
+
+
+def test_cli_names_and_defaults_are_the_panels():
+    """One set of defaults and names (addon/options.py): the parser's defaults are the
+    properties' defaults, and choices are taken in any case."""
+    import bpy
+
+    import addon
+    from addon import options
+    from addon.__main__ import _checked, _parser
+
+    args = _checked(_parser().parse_args(["--colours", "vertex", "--sampling", "STRATIFIED"]))
+    assert args.output == "VERTEX" and args.sampling == "stratified"
+    defaults = _parser().parse_args([])
+    addon.register()
+    try:
+        from addon.properties import RadiositySettings
+
+        props = RadiositySettings.bl_rna.properties
+        for option in options.SETTINGS:
+            assert getattr(defaults, option.name) == pytest.approx(props[option.name].default), option.name
+            if isinstance(option, options.Choice):
+                assert [i.identifier for i in props[option.name].enum_items] == [i for i, _, _ in option.items]
+    finally:
+        addon.unregister()
+
+
+def test_an_operator_error_prints_once(tmp_path):
+    """The operator's error reaches the command line once, not as Blender's report and again."""
+    import bpy
+
+    from .conftest import build_test_scene
+
+    def no_emitter():
+        build_test_scene()
+        bpy.data.objects["Lamp"].select_set(False)
+
+    _save_scene(tmp_path / "dark.blend", no_emitter)
+    proc = subprocess.run([sys.executable, "-m", "addon", "--open", str(tmp_path / "dark.blend"), "--no-preview",
+                           "-o", str(tmp_path / "y.blend")], cwd=str(tmp_path), capture_output=True, text=True,
+                          timeout=300, env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 1
+    assert (proc.stdout + proc.stderr).count("No emitter among the selected objects") == 1, proc.stdout + proc.stderr
+
+
+def test_run_sh_takes_paths_from_the_callers_directory(tmp_path):
+    """tools/run.sh from another directory: -o and --open are the caller's paths."""
+    elsewhere = tmp_path / "work"
+    elsewhere.mkdir()
+    env = {**os.environ}
+    proc = subprocess.run(["bash", os.path.join(ROOT, "tools", "run.sh"), "--scene", "cornell", "--error", "30",
+                           "--no-preview", "-q", "-o", "mine.blend"], cwd=str(elsewhere), capture_output=True,
+                          text=True, timeout=600, env=env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert (elsewhere / "mine.blend").exists() and not os.path.exists(os.path.join(ROOT, "mine.blend"))
+
+
+def test_progress_line_and_summary_speak_of_the_target():
+    """The progress line (on a terminal) says paths of planned, the rate, the error against the
+    target and the time left; the summary the error reached as a share of the target."""
+    from types import SimpleNamespace
+
+    from addon.__main__ import progress_text, summary
+
+    class Job:
+        prediction = SimpleNamespace(paths=1_000_000, mean_reflected_radiosity=2.0)
+        settings = SimpleNamespace(relative_rms=0.05, paths=None)
+
+        def snapshot(self):
+            return {"fraction": 0.25, "paths": 250_000, "seconds": 3.0, "rays_per_second": 2.5e6,
+                    "measured_mse": (0.06 * 2.0) ** 2}
+
+        def relative_error(self, mse):
+            return mse**0.5 / 2.0
+
+    text = progress_text(Job())
+    assert "250,000 of 1,000,000 planned paths" in text and "2.50 Mray/s" in text
+    assert "error 6.00% (target 5%)" in text and "0:09 left" in text
+    settings = SimpleNamespace(last_relative_error=4.5, last_target_error=5.0, last_patches=10, last_paths=100,
+                               last_rays=300, last_seconds=1.0, last_mean_path_length=3.0, last_stopped="target")
+    assert "error 4.50% of a 5% target (90% of it)" in summary("box", settings)
+
+
 # ---------------------------------------------------------------------------------------------
 # Curves, text, surfaces, metaballs and modifiers on the command line
 # ---------------------------------------------------------------------------------------------
@@ -177,7 +292,9 @@ def test_cli_reads_curves_text_surfaces_metaballs_and_modifiers(blender, tmp_pat
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     out = tmp_path / "out.blend"
     assert main(["--current", "--no-preview", "--error", "30", "--threads", "1", "-o", str(out)]) == 0
-    assert blender.scene.radiosity.patch_size == pytest.approx(np.max(hi - lo) / 20, rel=1e-6)
+    # patch size 0, automatic: 1/20 of the selection's largest extent (its evaluated geometry)
+    assert blender.scene.radiosity.patch_size == 0
+    assert blender.scene.radiosity.last_patch_size == pytest.approx(np.max(hi - lo) / 20, rel=1e-6)
     sources = {o["radiosity_source"] for o in bpy.data.objects if "radiosity_source" in o.keys()}
     assert sources == {o.name for o in bpy.data.objects if "radiosity_source" not in o.keys()}
 

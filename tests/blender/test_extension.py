@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import addon
+from addon.options import STOP_RULE
 from addon import estimate, panel, patches, pipeline, scene_io, worker
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
 from addon.core.meshing import concatenate, mesh_patches, point_average, triangle_areas
@@ -86,6 +87,7 @@ def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1, **solve_options
     E = np.concatenate([spec[n][3][m.patch_face] for n, m in zip(names, meshes)])
     scene = PatchScene(c.vertices, c.triangles, c.triangle_patch, R, E)
     target = relative_rms_to_mse(predict(scene), relative_rms)
+    solve_options.setdefault("stop_rule", STOP_RULE.default)  # the extension's default
     result = solve(scene, "finite", target_mse=target, seed=seed, threads=threads, **solve_options)
     return names, meshes, c, result
 
@@ -555,6 +557,8 @@ def _modal_operator():
         _start_job = Op._start_job
         _cleanup = Op._cleanup
         _finish = Op._finish
+        _error = Op._error
+        quiet_errors = False
         modal = Op.modal
 
         def __init__(self):

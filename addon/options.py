@@ -1,0 +1,104 @@
+"""The solve's settings, defined once: names, defaults, ranges and words, for the panel and the command line.
+
+``properties.py`` makes Blender properties of them, ``__main__.py`` command-line options; both
+refuse what is out of range the same way. No bpy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Number:
+    name: str            # the property (scene.radiosity.<name>)
+    flag: str            # the command-line option
+    default: float
+    low: float
+    high: float | None   # None: no upper bound
+    label: str
+    description: str
+    unit: str = ""
+    integer: bool = False
+    zero_means: str = ""  # a default that 0 stands for, beside the range (e.g. "automatic")
+
+    def check(self, value):
+        """``value``, or ValueError naming the option, its range and the value."""
+        if self.zero_means and value == 0:
+            return value
+        inside = value == value and value >= self.low and (self.high is None or value <= self.high)
+        if not inside:
+            raise ValueError(f"{self.flag} must be {self.range_text()}; got {value:g}")
+        return value
+
+    def range_text(self):
+        unit = f" {self.unit}" if self.unit else ""
+        if self.high is None:
+            text = f"at least {self.low:g}{unit}"
+        else:
+            text = f"between {self.low:g} and {self.high:g}{unit}"
+        return f"0 ({self.zero_means}) or {text}" if self.zero_means else text
+
+
+@dataclass(frozen=True)
+class Choice:
+    name: str
+    flag: str
+    default: str
+    items: tuple  # (identifier, label, description)
+    label: str
+    description: str = ""
+
+    def check(self, value):
+        ids = [i for i, _, _ in self.items]
+        for i in ids:
+            if value.lower() == i.lower():
+                return i
+        raise ValueError(f"{self.flag} must be one of {', '.join(ids)}; got {value!r}")
+
+
+ESTIMATOR = Choice("estimator", "--estimator", "finite", (
+    ("finite", "Finite (Phi_T)", "The paper's finite estimator: constant power, a path survives a "
+     "hit with the patch's reflectivity"),
+    ("biased_infinite", "Biased infinite", "The paper's biased infinite estimator: power times the "
+     "reflectivity at every hit, cut when the accumulated reflectivity falls below the threshold t"),
+), "Estimator")
+THRESHOLD = Number("threshold", "--threshold", 1e-3, 1e-6, 0.5, "Threshold t",
+                   "Biased infinite estimator: a path ends when the product of reflectivities along it is below t")
+TARGET_ERROR = Number("target_error", "--error", 5.0, 0.05, 100.0, "Error target",
+                      "Relative RMS error wanted, as a percentage of the scene's mean reflected radiosity", unit="%")
+PATCH_SIZE = Number("patch_size", "--patch-size", 0.0, 1e-4, None, "Patch size",
+                    "Largest patch edge: faces longer than this are subdivided (0: automatic, 1/20 of the "
+                    "selection's largest extent)", zero_means="automatic")
+EXIT_POINT = Choice("exit_point", "--exit-point", "random", (
+    ("random", "Random", "The next ray leaves from a random point of the hit patch (the paper's discrete method)"),
+    ("hit", "Hit point", "The next ray leaves from the point that was hit"),
+), "Exit point")
+SAMPLING = Choice("sampling", "--sampling", "independent", (
+    ("independent", "Independent (paper)", "Sources and first rays drawn independently, as in the paper: "
+     "the predicted path counts are derived for this"),
+    ("stratified", "Stratified", "Paths allotted to sources in proportion to power and a randomly shifted "
+     "low-discrepancy first ray: same expected result, usually less noise for the same time"),
+), "Sampling")
+STOP_RULE = Choice("stop_rule", "--stop-rule", "measured", (
+    ("measured", "Measured error", "Run until the run's own estimate of its error (from independent batches) "
+     "meets the target: what you ask for is what you get. The paper's predicted path count is the plan"),
+    ("predicted", "Predicted paths", "Run the number of paths the paper's formula (2)/(3) predicts for the "
+     "target (a heuristic: the error reached can be above the target)"),
+), "Stop at")
+OUTPUT = Choice("output", "--colours", "BOTH", (
+    ("FACE", "Face colours", "Flat colour per patch on the CORNER domain"),
+    ("VERTEX", "Vertex colours", "Area-weighted average of the adjacent patches on the POINT domain"),
+    ("BOTH", "Both", "Face colours as 'Radiosity', vertex colours as 'Radiosity Vertex'"),
+), "Colours")
+SEED = Number("seed", "--seed", 0, 0, 2**31 - 1, "Seed", "Random seed (same seed, same result)", integer=True)
+TIME_LIMIT = Number("time_limit", "--time-limit", 0.0, 0.0, None, "Time limit",
+                    "Stop after this many seconds (0: no limit); the paths done so far are kept", unit="s")
+THREADS = Number("threads", "--threads", 0, 0, 64, "Threads",
+                 "Threads for the ray tracing (0: automatic). Same seed and threads give the same result",
+                 integer=True)
+
+SETTINGS = (ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, EXIT_POINT, SAMPLING, STOP_RULE, OUTPUT, SEED,
+            TIME_LIMIT, THREADS)
+
+# Patch size 0: the selection's largest extent over this.
+AUTOMATIC_PATCH_DIVISIONS = 20
