@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Build the Blender extension zip of Random Walk Radiosity.
 
-    python tools/build_extension.py                 # download wheels, write the manifest, build dist/*.zip
+    .venv/bin/python tools/build_extension.py       # download wheels, write the manifest, one zip per platform in dist/
     python tools/build_extension.py --offline       # use the wheels already in build/wheels
     python tools/build_extension.py --platform linux-x64 --python 3.11   # a smaller zip for one platform
 
@@ -14,9 +14,10 @@ Steps:
 2. Write the ``wheels`` and ``platforms`` lists into ``blender_manifest.toml``
    (the repository's top-level one, unless ``--no-write-manifest``).
 3. Stage manifest + ``addon/`` (as the package root) + ``wheels/`` in
-   ``build/extension`` and build the zip with Blender's own extension builder
-   (``blender_ext.py build``, from the bpy module or a Blender install; it
-   validates the manifest); without it, a plain zip of the staged tree.
+   ``build/extension`` and build one zip per platform with Blender's own
+   extension builder (``blender_ext.py build --split-platforms``, from the bpy
+   module or a Blender install), each validated; without the builder the script
+   stops and says how to run it (it never writes an unvalidated zip).
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ import re
 import shutil
 import subprocess
 import sys
-import zipfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MANIFEST = os.path.join(ROOT, "blender_manifest.toml")
@@ -151,33 +151,38 @@ def manifest_value(text, key):
     return m.group(1) if m else None
 
 
+NO_BUILDER = (
+    "Blender's extension builder (blender_ext.py) was not found: it comes with the bpy module or a "
+    "Blender install. Run this script with the project's Python (bash tools/env.sh prints it; "
+    ".venv/bin/python tools/build_extension.py), or set $BLENDER to a Blender binary")
+
+
 def build(staging, out_dir, manifest_text):
-    os.makedirs(out_dir, exist_ok=True)
-    name = f"{manifest_value(manifest_text, 'id')}-{manifest_value(manifest_text, 'version')}.zip"
-    output = os.path.join(out_dir, name)
-    if os.path.exists(output):
-        os.remove(output)
+    """One validated zip per platform (Blender's ``build --split-platforms``), each with only
+    its own wheels: their paths, sorted."""
     script = blender_ext_script()
-    if script:
-        cmd = [sys.executable, script, "build", "--source-dir", staging, "--output-filepath", output]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        sys.stdout.write(proc.stdout)
-        if proc.returncode != 0:
-            sys.stderr.write(proc.stderr)
-            raise SystemExit(f"Blender's extension build failed ({script})")
+    if not script:
+        raise SystemExit(NO_BUILDER)
+    os.makedirs(out_dir, exist_ok=True)
+    stem = f"{manifest_value(manifest_text, 'id')}-{manifest_value(manifest_text, 'version')}"
+    for old in glob.glob(os.path.join(out_dir, f"{stem}*.zip")):
+        os.remove(old)
+    cmd = [sys.executable, script, "build", "--source-dir", staging, "--output-dir", out_dir, "--split-platforms"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    sys.stdout.write(proc.stdout)
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stderr)
+        raise SystemExit(f"Blender's extension build failed ({script})")
+    outputs = sorted(glob.glob(os.path.join(out_dir, f"{stem}*.zip")))
+    if not outputs:
+        raise SystemExit(f"Blender's extension build wrote no zip into {out_dir}")
+    for output in outputs:
         proc = subprocess.run([sys.executable, script, "validate", output], capture_output=True, text=True)
         sys.stdout.write(proc.stdout)
         if proc.returncode != 0:
             sys.stderr.write(proc.stderr)
-            raise SystemExit("Blender's extension validate failed")
-    else:
-        print("Blender's blender_ext.py not found (no bpy module): writing a plain zip")
-        with zipfile.ZipFile(output, "w", zipfile.ZIP_DEFLATED) as z:
-            for folder, _dirs, files in os.walk(staging):
-                for f in sorted(files):
-                    path = os.path.join(folder, f)
-                    z.write(path, os.path.relpath(path, staging))
-    return output
+            raise SystemExit(f"Blender's extension validate failed for {output}")
+    return outputs
 
 
 def main(argv=None):
@@ -227,9 +232,10 @@ def main(argv=None):
             f.write(text)
         print(f"\nwrote wheels and platforms into {os.path.relpath(MANIFEST, ROOT)}")
     stage(args.staging_dir, text, args.wheels_dir, wheels)
-    output = build(args.staging_dir, args.out_dir, text)
-    print(f"\nbuilt {output} ({os.path.getsize(output) / 1e6:.1f} MB)")
-    return output
+    outputs = build(args.staging_dir, args.out_dir, text)
+    for output in outputs:
+        print(f"built {output} ({os.path.getsize(output) / 1e6:.1f} MB)")
+    return outputs
 
 
 if __name__ == "__main__":

@@ -10,6 +10,8 @@ import sys
 import textwrap
 import zipfile
 
+import pytest
+
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.join(ROOT, "tools"))
@@ -86,10 +88,13 @@ def test_zip_installs_and_enables_in_the_bpy_module(tmp_path):
 
         platform = "macos-arm64" if _p.machine() == "arm64" else "macos-x64"
     # a one-platform zip keeps the test small; the wheel cache is reused
-    zip_path = build_extension.main([
+    zips = build_extension.main([
         "--platform", platform, "--python", PY, "--no-write-manifest",
         "--staging-dir", str(tmp_path / "staging"), "--out-dir", str(tmp_path / "dist"),
     ])
+    # one zip per platform, named after it (Blender's --split-platforms)
+    assert len(zips) == 1 and zips[0].endswith(f"-{platform.replace('-', '_')}.zip"), zips
+    zip_path = zips[0]
     with zipfile.ZipFile(zip_path) as z:
         names = z.namelist()
     assert "blender_manifest.toml" in names and "__init__.py" in names
@@ -118,3 +123,14 @@ def test_zip_installs_and_enables_in_the_bpy_module(tmp_path):
     assert out["wheel_installed"]
     assert out["solve"] == ["FINISHED"] and out["attribute"]
     assert out["after_disable"] is False
+
+
+def test_without_blenders_builder_no_unvalidated_zip_is_written(tmp_path, monkeypatch, capsys):
+    """A Python without the bpy module (and no $BLENDER) stops with a message saying how to
+    build, instead of writing a zip nobody validated."""
+    monkeypatch.setattr(build_extension, "blender_ext_script", lambda: None)
+    staging = tmp_path / "staging"
+    staging.mkdir()
+    with pytest.raises(SystemExit) as stop:
+        build_extension.build(str(staging), str(tmp_path / "dist"), 'id = "x"\nversion = "1"\n')
+    assert "tools/env.sh" in str(stop.value) and not list((tmp_path / "dist").glob("*.zip"))
