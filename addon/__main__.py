@@ -344,8 +344,15 @@ def main(argv=None):
     for option in options.SETTINGS:
         setattr(settings, option.name, getattr(args, option.name))
 
-    from . import operators, worker
+    from . import operators, pipeline, worker
 
+    try:  # a costly setting is said before the run, as the panel says it
+        objects, _ = scene_io.read_selection(bpy.context)
+        warning = pipeline.estimate(objects, settings.solve_settings())["warning"]
+    except ValueError:
+        warning = None  # bad input: the solve says what is wrong
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
     operators.LAST_ERROR = ""
     progress = ProgressLine(sys.stderr) if (not args.quiet and sys.stderr.isatty()) else None
     worker.PROGRESS_LISTENER = progress

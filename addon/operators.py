@@ -286,7 +286,42 @@ class RADIOSITY_OT_cancel(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (RADIOSITY_OT_solve, RADIOSITY_OT_cancel)
+# The tooltips of the panel's estimate: the paper's terms for an artist.
+EXPLANATIONS = {
+    "time": "The predicted rays over this machine's ray rate on this scene (measured by a short solve, "
+            "then by each run). With 'Stop at: Measured error' the run stops when its own error estimate "
+            "meets the target, which can be sooner or later",
+    "paths": "Sbert & Brusi's formula (2) (finite) or (3) (biased infinite): the paths that reach the "
+             "error target, and the rays they trace (paths x the expected path length)",
+    "patches": "The selection meshed into patches no larger than the patch size: each patch gets one "
+               "colour. Smaller patches show more detail and need more paths for the same error",
+    "efficiency": "The paper's relative efficiency, formula (4): the time one estimator needs for an error "
+                  "over the other's, from the scene's average reflectivity and threshold t",
+    "reflectivity": "R_ave, the area-weighted mean reflectivity: paths last 1 / (1 - R_ave) bounces on "
+                    "average (the finite estimator) and the error grows with it",
+    "target": "The error target as the paper's mean square error: the relative RMS error times the "
+              "scene's mean reflected radiosity, squared",
+}
+
+
+class RADIOSITY_OT_explain(bpy.types.Operator):
+    """Explain this value"""
+
+    bl_idname = "radiosity.explain"
+    bl_label = "Explain"
+    bl_options = {"INTERNAL"}
+
+    term: bpy.props.StringProperty(options={"HIDDEN", "SKIP_SAVE"})
+
+    @classmethod
+    def description(cls, context, properties):
+        return EXPLANATIONS.get(properties.term, "")
+
+    def execute(self, context):
+        return {"FINISHED"}
+
+
+classes = (RADIOSITY_OT_solve, RADIOSITY_OT_cancel, RADIOSITY_OT_explain)
 
 
 def register():

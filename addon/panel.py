@@ -7,6 +7,7 @@ import math
 import bpy
 
 from . import estimate, worker
+from .pipeline import duration_text
 
 
 def _number(x):
@@ -54,14 +55,34 @@ def draw_estimate(layout, context, value, fresh):
             box.label(text=line)
         return
     col = box.column(align=True)
-    col.label(text=f"Objects: {value['objects']}   Patches: {_number(value['patches'])}")
+    for term, text in estimate_lines(value):
+        _explained(col, term, text)
+    if value.get("warning"):
+        for k, line in enumerate(_wrap(value["warning"], 40)):
+            col.label(text=line, icon="ERROR" if k == 0 else "NONE")
+
+
+def estimate_lines(value):
+    """(term, text) of each line of the estimate, what the artist decides on first; each term
+    has a tooltip with the paper's meaning (operators.EXPLANATIONS)."""
+    size = f"{value['patch_size']:.3g}" if value.get("patch_size") else "-"
+    lines = [
+        ("time", f"Predicted time: {duration_text(value['seconds'])}" if value.get("seconds") == value.get("seconds")
+         else "Predicted time: -"),
+        ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"),
+        ("patches", f"Objects: {value['objects']}   Patches: {_number(value['patches'])} (size {size})"),
+        ("efficiency", value["efficiency"]),
+        ("reflectivity", f"Average reflectivity {value['R_ave']:.2f}, path length {value['path_length']:.2f}"),
+    ]
     if value.get("target_mse") is not None:
-        col.label(text=f"Target MSE: {value['target_mse']:.3g}")
-    col.label(text=f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}")
-    col.label(text=f"Path length: {value['path_length']:.2f}   R_ave: {value['R_ave']:.2f}")
-    re = value["relative_efficiency"]
-    better = "finite" if re > 1 else "biased infinite"
-    col.label(text=f"Rel. efficiency (4): {re:.2f} ({better} better)")
+        lines.append(("target", f"Target MSE (the paper's measure): {value['target_mse']:.3g}"))
+    return lines
+
+
+def _explained(layout, term, text):
+    """A line whose tooltip explains the paper's term (an operator that does nothing)."""
+    op = layout.operator("radiosity.explain", text=text, emboss=False)
+    op.term = term
 
 
 def draw_progress(layout, job):

@@ -14,11 +14,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
+from .core.diagnostics import escaping_light
 from .options import AUTOMATIC_PATCH_DIVISIONS
 
 #: A patch size that would make more patches than this is refused before meshing (memory and
 #: time grow with the patch count: a tiny patch size could otherwise exhaust the memory).
 MAX_PATCHES = 2_000_000
+
+#: An object whose emitting faces send at least this share of their light out of the scene
+#: (none of it reaching the other objects) gets a warning.
+ESCAPING_WARNING = 0.9
 
 
 @dataclass
@@ -298,4 +303,22 @@ def scene_and_notes(patches: Patches):
         for w in caught
         if issubclass(w.category, UserWarning)
     ]
-    return scene, notes
+    return scene, notes + escaping_sources(patches, scene)
+
+
+def escaping_sources(patches: Patches, scene) -> list:
+    """A note for each object whose emitting faces send (almost) all their light out of the
+    scene: they face away from everything else."""
+    emitting, missed = escaping_light(scene)
+    if not emitting.size:
+        return []
+    owner = patches.combined.patch_object[emitting]
+    power = scene.patch_power[emitting]
+    notes = []
+    for k in np.unique(owner):
+        share = float(np.average(missed[owner == k], weights=power[owner == k]))
+        if share >= ESCAPING_WARNING:
+            notes.append(f"'{patches.objects[k].name}' sends {share:.0%} of its light out of the scene: its "
+                         "emitting faces point away from everything else (a new plane faces up: flip its normals "
+                         "or turn it; see Overlays > Face Orientation)")
+    return notes

@@ -60,23 +60,76 @@ def prediction_for(scene, settings: SolveSettings):
     return predict(scene, settings.estimator, threshold=settings.threshold, target_mse=target), target
 
 
+# Ray rates (rays per second of a whole solve) measured on this machine, by (geometry, estimator,
+# exit point): from a short calibration solve, replaced by each finished run's own rate.
+RAY_RATES = {}
+CALIBRATION_PATHS = 20_000
+#: Above this predicted time the estimate warns and says which settings drive it.
+SLOW_SECONDS = 60.0
+
+
+def ray_rate(scene, patches: Patches, settings: SolveSettings) -> float:
+    """This machine's ray rate for this scene and walk: the last run's, else a short solve's."""
+    key = (patches.geometry_key, settings.estimator, settings.exit_point)
+    if key not in RAY_RATES:
+        r = solve(scene, settings.estimator, paths=CALIBRATION_PATHS, threshold=settings.threshold,
+                  exit_point=settings.exit_point, threads=settings.threads or None)
+        RAY_RATES[key] = r.rays_per_second
+    return RAY_RATES[key]
+
+
+def efficiency_sentence(relative_efficiency) -> str:
+    """Formula (4) for an artist: which of the paper's estimators needs less time for this error."""
+    if relative_efficiency >= 1:
+        return f"Finite needs {relative_efficiency:.1f}x less time than biased infinite for this error"
+    return f"Biased infinite needs {1 / relative_efficiency:.1f}x less time than finite for this error"
+
+
+def slow_warning(seconds, patches, settings: SolveSettings) -> str | None:
+    """A warning when the predicted time passes SLOW_SECONDS, naming what drives it."""
+    if not seconds > SLOW_SECONDS:
+        return None
+    target = f"the {settings.relative_rms * 100:g}% error target" if not settings.paths else f"{settings.paths:,} paths"
+    return (f"Predicted {duration_text(seconds)}: {patches.combined.patch_count:,} patches (patch size "
+            f"{patches.patch_size:.3g}) and {target} drive it. Paths grow with the patch count: twice the "
+            "patch size needs about 4x fewer; twice the error target, 4x fewer")
+
+
+def duration_text(seconds) -> str:
+    if seconds < 60:
+        return f"{seconds:.0f} s" if seconds >= 1 else f"{seconds:.1f} s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)} min {int(seconds % 60)} s"
+    return f"{seconds / 3600:.1f} h"
+
+
 def estimate(objects, settings: SolveSettings) -> dict:
-    """What the panel shows before a run: sizes and the paper's predictions."""
+    """What the panel and the command line show before a run: the predicted time (from this
+    machine's ray rate), paths and rays, and the paper's predictions behind them."""
     patches = make_patches(objects, settings.patch_size)
-    scene, _ = scene_and_notes(patches)
+    scene, notes = scene_and_notes(patches)
     p, target = prediction_for(scene, settings)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
+    relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
+    rate = ray_rate(scene, patches, settings)
+    seconds = float(p.expected_rays) / rate if rate > 0 else float("nan")
     return {
         "objects": len(objects),
         "patches": int(scene.patch_count),
+        "patch_size": float(patches.patch_size),
         "paths": int(p.paths),
         "rays": float(p.expected_rays),
+        "rays_per_second": float(rate),
+        "seconds": seconds,
         "path_length": float(p.expected_path_length),
         "R_ave": float(p.R_ave),
-        "relative_efficiency": float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency),
+        "relative_efficiency": relative_efficiency,
+        "efficiency": efficiency_sentence(relative_efficiency),
         "target_mse": target,
         "predicted_mse": float(p.predicted_mse),
         "other_estimator": other,
+        "warning": slow_warning(seconds, patches, settings),
+        "notes": notes,
     }
 
 
@@ -106,6 +159,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         max_seconds=settings.max_seconds or None,
         threads=settings.threads or None,
     )
+    if result.seconds > 0 and result.rays:
+        RAY_RATES[(patches.geometry_key, settings.estimator, settings.exit_point)] = result.rays_per_second
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms)
     radiosity = np.asarray(result.radiosity, dtype=np.float64)

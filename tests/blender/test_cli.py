@@ -206,6 +206,18 @@ def test_an_operator_error_prints_once(tmp_path):
     assert (proc.stdout + proc.stderr).count("No emitter among the selected objects") == 1, proc.stdout + proc.stderr
 
 
+def test_cli_warns_before_a_slow_run(tmp_path):
+    """A setting that makes the predicted time pass a minute is said before the run, naming the
+    patch size and the target (a time limit keeps the test short)."""
+    proc = subprocess.run([sys.executable, "-m", "addon", "--scene", "cornell", "--patch-size", "0.01", "--error", "0.3",
+                           "--time-limit", "1", "--no-preview", "-q", "-o", str(tmp_path / "slow.blend")],
+                          cwd=str(tmp_path), capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    warning = next(line for line in proc.stderr.splitlines() if line.startswith("warning: Predicted"))
+    assert "patch size 0.01" in warning and "0.3% error target" in warning
+
+
 def test_run_sh_takes_paths_from_the_callers_directory(tmp_path):
     """tools/run.sh from another directory: -o and --open are the caller's paths."""
     elsewhere = tmp_path / "work"

@@ -65,7 +65,7 @@ def test_register_and_unregister_leave_no_trace():
         during = _trace()
         assert "VIEW3D_PT_radiosity" in during["types"]
         assert "RADIOSITY_OT_solve" in during["types"]
-        assert during["registered"] == ["RadiositySettings", "RADIOSITY_OT_solve", "RADIOSITY_OT_cancel",
+        assert during["registered"] == ["RadiositySettings", "RADIOSITY_OT_solve", "RADIOSITY_OT_cancel", "RADIOSITY_OT_explain",
                                         "VIEW3D_PT_radiosity"]
         assert during["scene_prop"] and during["ops"] == ["solve", "cancel"]
         assert during["depsgraph_handlers"] == before["depsgraph_handlers"] + 1
@@ -436,10 +436,17 @@ class FakeLayout:
     def label(self, text="", **kwargs):
         self.log.append(("label", text))
 
-    def operator(self, idname, **kwargs):
+    def operator(self, idname, text="", **kwargs):
         module, name = idname.split(".")
         getattr(getattr(bpy.ops, module), name).get_rna_type()
         self.log.append(("operator", idname))
+        if text:
+            self.log.append(("label", text))  # a line drawn as a button (its tooltip explains it)
+
+        class Properties:
+            pass
+
+        return Properties()
 
     def progress(self, factor=0.0, type="BAR", text=""):
         assert 0.0 <= factor <= 1.0
@@ -464,7 +471,10 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
     estimate.STATE.value, estimate.STATE.key = estimate.compute(blender), estimate._key(blender)
     log = draw_panel(blender)
     labels = " ".join(t for k, t in log if k == "label")
-    assert "Patches:" in labels and "Rel. efficiency (4)" in labels and "Target MSE" in labels
+    # the artist's decision first: the predicted time, then paths, and formula (4) as a sentence
+    assert labels.index("Predicted time:") < labels.index("Paths:") and "Patches:" in labels
+    assert "less time than" in labels and "for this error" in labels and "Target MSE" in labels
+    assert "Rel. efficiency (4)" not in labels and "R_ave" not in labels
     # error estimate shown for an empty selection
     for o in bpy.data.objects:
         o.select_set(False)
@@ -660,3 +670,25 @@ def test_the_estimate_thread_leaves_bpy_to_the_main_thread(blender, monkeypatch)
     poll = getattr(estimate, "_poll", None)
     assert poll is not None and bpy.app.timers.is_registered(poll)
     assert poll() is None
+
+
+def test_estimate_predicts_time_from_this_machines_ray_rate_and_warns_when_slow(blender):
+    """The estimate's time is the predicted rays over a ray rate measured on this scene (a short
+    solve, then each run's own); past a minute it warns, naming the patch size and the target;
+    every line of the panel's estimate has a tooltip."""
+    from addon import operators
+    from addon.panel import estimate_lines
+
+    build_test_scene()
+    configure(blender)
+    value = estimate.compute(blender)
+    assert value["rays_per_second"] > 0 and value["seconds"] == pytest.approx(value["rays"] / value["rays_per_second"])
+    assert value["warning"] is None  # a few seconds at most
+    for term, _text in estimate_lines(value):
+        assert operators.EXPLANATIONS[term]
+    blender.scene.radiosity.patch_size = 0.05
+    blender.scene.radiosity.target_error = 0.5
+    slow = estimate.compute(blender)
+    assert slow["seconds"] > 60 and "patch size 0.05" in slow["warning"] and "0.5% error target" in slow["warning"]
+    assert pipeline.efficiency_sentence(3.6) == "Finite needs 3.6x less time than biased infinite for this error"
+    assert pipeline.efficiency_sentence(0.5).startswith("Biased infinite needs 2.0x less time")

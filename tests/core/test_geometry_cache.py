@@ -50,3 +50,32 @@ def test_geometry_or_patch_size_change_rebuilds_and_the_last_two_are_kept():
     bigger = make(size=2.0)                          # evicts the least recent (finer)
     assert bigger.geometry is not base.geometry
     assert make(patch=0.2).geometry is not finer.geometry
+
+
+def _plane_over_box(normal_up):
+    """A closed box (its top face not emitting) and a small emitting plane above it, facing up
+    (away from everything) or down."""
+    box = box_object(name="Room", reflectivity=0.5)
+    box.face_emission = np.zeros((6, 3))
+    z = 1.5
+    corners = [[0.3, 0.3, z], [0.7, 0.3, z], [0.7, 0.7, z], [0.3, 0.7, z]]
+    order = [0, 1, 2, 3] if normal_up else [0, 3, 2, 1]
+    lamp = patches.ObjectArrays(
+        name="Lamp", vertices=np.array(corners, float), face_sizes=np.array([4]), corner_verts=np.array(order),
+        triangles=np.array([[order[0], order[1], order[2]], [order[0], order[2], order[3]]]),
+        triangle_face=np.array([0, 0]), face_reflectivity=np.full((1, 3), 0.5), face_emission=np.ones((1, 3)))
+    # the box's outside faces the lamp: wind the box outwards
+    box.corner_verts = box.corner_verts.reshape(6, 4)[:, ::-1].ravel()
+    box.triangles = box.triangles[:, ::-1]
+    return [box, lamp]
+
+
+def test_an_emitter_facing_away_from_everything_is_named():
+    """Issue 24, point 7: an emissive plane facing up above the other objects sends all its
+    light out of the scene: a note names it; facing down, no note."""
+    up = patches.make_patches(_plane_over_box(normal_up=True), patch_size=0.25)
+    _, notes = patches.scene_and_notes(up)
+    assert any(n.startswith("'Lamp' sends 100% of its light out of the scene") for n in notes), notes
+    down = patches.make_patches(_plane_over_box(normal_up=False), patch_size=0.25)
+    _, notes = patches.scene_and_notes(down)
+    assert not any("out of the scene" in n for n in notes), notes
