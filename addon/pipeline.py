@@ -64,6 +64,7 @@ def prediction_for(scene, settings: SolveSettings):
 # exit point): from a short calibration solve, replaced by each finished run's own rate.
 RAY_RATES = {}
 CALIBRATION_PATHS = 20_000
+CALIBRATION_SECONDS = 0.3  # at most (paths of endless bounces never finish a chunk)
 #: Above this predicted time the estimate warns and says which settings drive it.
 SLOW_SECONDS = 60.0
 
@@ -73,7 +74,9 @@ def ray_rate(scene, patches: Patches, settings: SolveSettings) -> float:
     key = (patches.geometry_key, settings.estimator, settings.exit_point)
     if key not in RAY_RATES:
         r = solve(scene, settings.estimator, paths=CALIBRATION_PATHS, threshold=settings.threshold,
-                  exit_point=settings.exit_point, threads=settings.threads or None)
+                  exit_point=settings.exit_point, threads=settings.threads or None, max_seconds=CALIBRATION_SECONDS)
+        if not r.rays:
+            return float("nan")  # not one chunk in the time: unknown, measured again next time
         RAY_RATES[key] = r.rays_per_second
     return RAY_RATES[key]
 
@@ -112,7 +115,7 @@ def estimate(objects, settings: SolveSettings) -> dict:
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
     rate = ray_rate(scene, patches, settings)
-    seconds = float(p.expected_rays) / rate if rate > 0 else float("nan")
+    seconds = float(p.expected_rays) / rate if rate > 0 else float("nan")  # (NaN > 0 is False)
     return {
         "objects": len(objects),
         "patches": int(scene.patch_count),
