@@ -6,7 +6,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import scene_io, worker
+from . import live_view, scene_io, worker
 
 TIMER_SECONDS = 0.1
 #: The last error of ``radiosity.solve`` (with quiet_errors, its only record).
@@ -150,12 +150,17 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         self._job = worker.SolveJob(objects, settings)
         if threaded:
             worker.set_running_job(self._job)
+            self._job.live_view = True
+            self._live = _live_view(self._job)
             self._job.start()
         else:
             self._job.run()
         return None
 
     def _cleanup(self, context):
+        if getattr(self, "_live", None) is not None:
+            self._live.remove()
+            self._live = None
         if self._timer is not None:
             context.window_manager.event_timer_remove(self._timer)
             self._timer = None
@@ -238,6 +243,14 @@ def _after_writing(op, settings, output, stats):
         f"Radiosity: {stats['last_patches']:,} patches, {stats['last_paths']:,} paths, "
         f"{stats['last_rays']:,} rays in {stats['last_seconds']:.1f} s",
     )
+
+
+def _live_view(job):
+    """The 3D view's live result of ``job`` (live_view.LiveView), or None where it cannot draw."""
+    try:
+        return live_view.LiveView(job)
+    except Exception:  # noqa: BLE001 - no drawing (e.g. no GPU): the solve goes on without it
+        return None
 
 
 def _placements(uids):

@@ -139,14 +139,14 @@ def estimate(objects, settings: SolveSettings) -> dict:
 def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None, on_prediction=None) -> SolveOutput:
     """Mesh, solve and compute the colours to write, for the given objects.
 
-    ``on_prediction(prediction, patch_count)`` is called once the patches
+    ``on_prediction(prediction, patch_count, patches)`` is called once the patches
     are known, before the first path.
     """
     patches = make_patches(objects, settings.patch_size)
     scene, notes = scene_and_notes(patches)
     prediction, target = prediction_for(scene, settings)
     if on_prediction is not None:
-        on_prediction(prediction, int(scene.patch_count))
+        on_prediction(prediction, int(scene.patch_count), patches)
     result = solve(
         scene,
         settings.estimator,

@@ -10,6 +10,8 @@ import threading
 import time
 import traceback
 
+import numpy as np
+
 from .pipeline import SolveOutput, SolveSettings, run_solve
 
 
@@ -37,6 +39,11 @@ class SolveJob:
         self.error: str | None = None
         self.traceback: str | None = None
         self.started = time.perf_counter()
+        # The live view (with ``live_view``): (version, (P,3) float32 B so far), every LIVE_SECONDS.
+        self.live_view = False
+        self.live = (0, None)
+        self.patches = None
+        self._live_at = -LIVE_SECONDS
         self.file_generation = _file_generation  # the open file when the job was made
         self._thread = threading.Thread(target=self.run, name="radiosity-solve", daemon=True)
 
@@ -65,14 +72,22 @@ class SolveJob:
             return dict(self.progress)
 
     def _on_progress(self, fraction, stats):
+        stats = dict(stats)
+        radiosity = stats.pop("radiosity", None)
+        now = time.perf_counter()
+        if self.live_view and radiosity is not None and now - self._live_at >= LIVE_SECONDS:
+            # the live view's data: the result so far, as the draw handler reads it
+            self.live = (self.live[0] + 1, np.asarray(radiosity(), dtype=np.float32))
+            self._live_at = now
         with self._lock:
-            self.progress = {"fraction": float(fraction), **dict(stats)}
+            self.progress = {"fraction": float(fraction), **stats}
         if PROGRESS_LISTENER is not None:
             PROGRESS_LISTENER(self)
 
-    def _on_prediction(self, prediction, patch_count):
+    def _on_prediction(self, prediction, patch_count, patches=None):
         self.prediction = prediction
         self.patch_count = patch_count
+        self.patches = patches
 
     def relative_error(self, mse):
         """An MSE as the relative RMS error the settings speak of (None if unknown)."""
@@ -95,6 +110,9 @@ class SolveJob:
         finally:
             self.done.set()
 
+
+# The live view's result is refreshed at most this often (a pass over the patches each time).
+LIVE_SECONDS = 0.5
 
 # Called with the job after each batch (the command line's progress line), or None.
 PROGRESS_LISTENER = None

@@ -163,7 +163,7 @@ def solve(
     ray from a randomly shifted low-discrepancy set: same expectation, usually less noise;
     the predicted path counts are derived for the paper's plain ``"independent"`` sampling.
     ``progress(fraction, stats)`` and ``should_stop()`` are called from the calling thread
-    between chunks; ``max_seconds`` bounds the wall time. A stopped run returns the complete
+    between chunks (``stats["radiosity"]()`` gives the result so far); ``max_seconds`` bounds the wall time. A stopped run returns the complete
     chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
     """
     _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light)
@@ -275,6 +275,8 @@ def _progress(total, prediction, cap, measured_target, start):
         "rays_per_second": total.rays / elapsed if elapsed > 0 else math.nan,
         "measured_mse": mse_now,
         "predicted_mse": prediction.mse_for(total.paths),
+        # The result so far, (P,3) B, computed only if called (a pass over the patches).
+        "radiosity": lambda: total.scene.emission + total.reflected(),
     }
 
 

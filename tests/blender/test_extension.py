@@ -692,3 +692,47 @@ def test_estimate_predicts_time_from_this_machines_ray_rate_and_warns_when_slow(
     assert slow["seconds"] > 60 and "patch size 0.05" in slow["warning"] and "0.5% error target" in slow["warning"]
     assert pipeline.efficiency_sentence(3.6) == "Finite needs 3.6x less time than biased infinite for this error"
     assert pipeline.efficiency_sentence(0.5).startswith("Biased infinite needs 2.0x less time")
+
+
+def test_live_view_data_refines_while_solving_and_writes_nothing(blender):
+    """Issue 24, point 11, headless: a job with the live view on keeps its result so far (the
+    data the 3D view draws), refreshed while it solves and ending near the final result; the
+    triangles and colours drawn cover every patch; nothing is written into the scene."""
+    from addon import live_view
+
+    build_test_scene()
+    configure(blender)
+    objects, _ = scene_io.read_selection(blender)
+    settings = blender.scene.radiosity.solve_settings()
+    settings.relative_rms = 0.02
+    job = worker.SolveJob(objects, settings)
+    job.live_view = True
+    seen = []
+    original = job._on_progress
+
+    def watch(fraction, stats):
+        original(fraction, stats)
+        seen.append(job.live[0])
+
+    job._on_progress = watch
+    before = len(bpy.data.objects), len(bpy.data.meshes)
+    worker_seconds = worker.LIVE_SECONDS
+    worker.LIVE_SECONDS = 0.0  # every batch, for the test
+    try:
+        job.run()
+    finally:
+        worker.LIVE_SECONDS = worker_seconds
+    assert job.error is None and (len(bpy.data.objects), len(bpy.data.meshes)) == before
+    version, radiosity = job.live
+    assert version == len(seen) >= 2 and sorted(seen) == seen
+    final = job.output.result.radiosity
+    assert radiosity.shape == final.shape and radiosity.dtype == np.float32
+    np.testing.assert_allclose(radiosity, final, rtol=1e-5, atol=1e-6)  # the last batch's result
+    positions, colours = live_view.triangles(job.patches, radiosity)
+    T = len(job.patches.combined.triangles)
+    assert positions.shape == (3 * T, 3) and colours.shape == (3 * T, 4)
+    assert (colours >= 0).all() and (colours <= 1).all() and colours[:, :3].max() > 0.1
+    # without the live view (the command line, scripts): no copies made
+    quiet = worker.SolveJob(objects, settings)
+    quiet.run()
+    assert quiet.live == (0, None)
