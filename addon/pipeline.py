@@ -63,8 +63,8 @@ def prediction_for(scene, settings: SolveSettings):
 # Ray rates (rays per second of a whole solve) measured on this machine, by (geometry, estimator,
 # exit point): from a short calibration solve, replaced by each finished run's own rate.
 RAY_RATES = {}
-CALIBRATION_PATHS = 20_000
-CALIBRATION_SECONDS = 0.3  # at most (paths of endless bounces never finish a chunk)
+CALIBRATION_PATHS = 4096
+CALIBRATION_SECONDS = 2.0  # at most (paths of endless bounces never finish a chunk)
 #: Above this predicted time the estimate warns and says which settings drive it.
 SLOW_SECONDS = 60.0
 

@@ -228,6 +228,7 @@ def test_run_sh_takes_paths_from_the_callers_directory(tmp_path):
                           text=True, timeout=600, env=env)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert (elsewhere / "mine.blend").exists() and not os.path.exists(os.path.join(ROOT, "mine.blend"))
+    assert "\r" not in proc.stderr  # no progress line when not on a terminal
 
 
 def test_progress_line_and_summary_speak_of_the_target():
