@@ -43,7 +43,10 @@ def _parser():
     p.add_argument("--no-preview", action="store_true", help="skip the preview render")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     for option in options.SETTINGS:  # the panel's settings: same names, defaults and ranges
-        if isinstance(option, options.Choice):
+        if isinstance(option, options.Flag):
+            p.add_argument(option.flag, dest=option.name, default=option.default, action=argparse.BooleanOptionalAction,
+                           help=option.description)
+        elif isinstance(option, options.Choice):
             ids = [i for i, _, _ in option.items]
             p.add_argument(option.flag, dest=option.name, default=option.default, metavar="|".join(ids),
                            help=f"{option.description} (default {option.default}; any case)")
@@ -367,6 +370,7 @@ def main(argv=None):
     if "FINISHED" not in result:
         return _fail(operators.LAST_ERROR or "the solve did not finish")
     print(summary(scene_name, settings))
+    print(f"sources: {settings.last_sources}")
     out_blend = os.path.abspath(args.blend_path or os.path.join("out", f"{scene_name}.blend"))
     os.makedirs(os.path.dirname(out_blend), exist_ok=True)
     png = None if args.no_preview else os.path.abspath(args.preview or os.path.splitext(out_blend)[0] + ".png")

@@ -39,6 +39,7 @@ def _run_stats(output):
         "last_predicted_mse": float(r.predicted_mse),
         "last_measured_mse": measured if measured == measured else -1.0,  # NaN -> -1
         "last_patches": int(output.patches.combined.patch_count),
+        "last_sources": output.sources,
         "last_patch_size": float(output.patches.patch_size),
         "last_stopped": str(r.stopped),
         "last_estimator": str(r.estimator),
@@ -306,12 +307,17 @@ EXPLANATIONS = {
             "meets the target, which can be sooner or later",
     "paths": "Sbert & Brusi's formula (2) (finite) or (3) (biased infinite): the paths that reach the "
              "error target, and the rays they trace (paths x the expected path length)",
-    "patches": "The selection meshed into patches no larger than the patch size: each patch gets one "
-               "colour. Smaller patches show more detail and need more paths for the same error",
+    "patches": "Selected objects get results; the other visible objects (Rest of the scene) block and "
+               "reflect light as in a render, meshed coarser, and get none. Smaller patches show more "
+               "detail and need more paths for the same error",
     "efficiency": "The paper's relative efficiency, formula (4): the time one estimator needs for an error "
                   "over the other's, from the scene's average reflectivity and threshold t",
     "reflectivity": "R_ave, the area-weighted mean reflectivity: paths last 1 / (1 - R_ave) bounces on "
                     "average (the finite estimator) and the error grows with it",
+    "size": "The selection meshed into patches no larger than the patch size (the rest of the scene 4x "
+            "coarser): each patch gets one colour",
+    "sources": "The light sources that take part and each one's share of the emitted power (Phi_T): "
+               "emissive faces of the selection, lights that render (selected or not) and the world",
     "target": "The error target as the paper's mean square error: the relative RMS error times the "
               "scene's mean reflected radiosity, squared",
 }

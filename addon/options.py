@@ -56,6 +56,18 @@ class Choice:
         raise ValueError(f"{self.flag} must be one of {', '.join(ids)}; got {value!r}")
 
 
+@dataclass(frozen=True)
+class Flag:
+    name: str
+    flag: str  # --flag / --no-flag
+    default: bool
+    label: str
+    description: str
+
+    def check(self, value):
+        return bool(value)
+
+
 ESTIMATOR = Choice("estimator", "--estimator", "finite", (
     ("finite", "Finite (Phi_T)", "The paper's finite estimator: constant power, a path survives a "
      "hit with the patch's reflectivity"),
@@ -97,8 +109,12 @@ THREADS = Number("threads", "--threads", 0, 0, 64, "Threads",
                  "Threads for the ray tracing (0: automatic). Same seed and threads give the same result",
                  integer=True)
 
+SCENE_OBJECTS = Flag("use_scene_objects", "--scene-objects", True, "Rest of the scene",
+                     "The other visible objects block and reflect light (meshed coarser, no results written), as "
+                     "they do in a render; off: only the selection takes part")
+
 SETTINGS = (ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, EXIT_POINT, SAMPLING, STOP_RULE, OUTPUT, SEED,
-            TIME_LIMIT, THREADS)
+            TIME_LIMIT, THREADS, SCENE_OBJECTS)
 
 # Patch size 0: the selection's largest extent over this.
 AUTOMATIC_PATCH_DIVISIONS = 20

@@ -37,6 +37,7 @@ def draw_settings(layout, settings):
     col.prop(settings, "stop_rule")
     layout.prop(settings, "output")
     layout.prop(settings, "clamp_reflectivity")
+    layout.prop(settings, "use_scene_objects")
     col = layout.column(align=True)
     col.prop(settings, "seed")
     col.prop(settings, "time_limit")
@@ -70,7 +71,9 @@ def estimate_lines(value):
         ("time", f"Predicted time: {duration_text(value['seconds'])}" if value.get("seconds") == value.get("seconds")
          else "Predicted time: -"),
         ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"),
-        ("patches", f"Objects: {value['objects']}   Patches: {_number(value['patches'])} (size {size})"),
+        ("patches", f"Objects: {value['objects']} get results, {value.get('others', 0)} more block and reflect"),
+        ("size", f"Patches: {_number(value['patches'])} (size {size})"),
+        ("sources", f"Sources: {value.get('sources') or '-'}"),
         ("efficiency", value["efficiency"]),
         ("reflectivity", f"Average reflectivity {value['R_ave']:.2f}, path length {value['path_length']:.2f}"),
     ]
@@ -124,6 +127,8 @@ def draw_last_run(layout, settings):
     if settings.last_measured_mse >= 0:
         col.label(text=f"MSE measured: {settings.last_measured_mse:.3g}")
     col.label(text=f"Stopped by: {settings.last_stopped}")
+    if settings.last_sources:
+        col.label(text=f"Sources: {settings.last_sources}")
 
 
 def _wrap(text, width):

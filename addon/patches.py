@@ -25,6 +25,15 @@ MAX_PATCHES = 2_000_000
 #: (none of it reaching the other objects) gets a warning.
 ESCAPING_WARNING = 0.9
 
+#: The rest of the scene (objects that block and reflect but get no results) is meshed this
+#: many times coarser than the selection.
+OTHERS_COARSER = 4.0
+
+
+def object_patch_size(o, patch_size) -> float:
+    """The patch size an object is meshed at: the selection's, or coarser for the rest of the scene."""
+    return patch_size if o.receives else patch_size * OTHERS_COARSER
+
 
 @dataclass
 class ObjectArrays:
@@ -41,6 +50,7 @@ class ObjectArrays:
     uid: int | None = None  # the source object's session_uid (to find it again)
     face_slot: np.ndarray | None = None  # (F,) material slot of each face
     slot_names: tuple = ()  # material name of each slot
+    receives: bool = True  # selected: gets results; else an object of the rest of the scene (blocks, reflects)
 
 
 @dataclass
@@ -55,6 +65,7 @@ class Patches:
     geometry_key: str | None = None  # fingerprint of the meshed geometry (see _GeometryCache)
     notes: list = field(default_factory=list)  # what reading the geometry left out, for the user
     patch_size: float = 0.0  # the size meshed with (an automatic size resolved)
+    lights: tuple = ()  # the core's light sources (scene_io.Selection.lights)
 
     def patch_scene(self):
         """The core scene; geometry, sampling tables and the Embree scene are built once per
@@ -78,6 +89,7 @@ class _GeometryCache:
         digest = hashlib.blake2b(digest_size=16)
         digest.update(np.float64(patch_size).tobytes())
         for o in objects:
+            digest.update(b"r" if o.receives else b"o")
             for array in (o.vertices, o.face_sizes, o.corner_verts, o.triangles, o.triangle_face):
                 array = np.ascontiguousarray(array)
                 digest.update(f"{array.dtype}{array.shape}".encode())
@@ -105,7 +117,7 @@ class _GeometryCache:
             if base is not None and base.patch_count == patches.combined.patch_count:
                 for message in entry["warnings"]:  # what building it said, said again
                     warnings.warn(message, stacklevel=2)  # the Warning itself: keeps its .patches
-                return base.with_materials(patches.reflectivity, patches.emission)
+                return base.with_materials(patches.reflectivity, patches.emission, lights=patches.lights)
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 scene = PatchScene(
@@ -114,6 +126,7 @@ class _GeometryCache:
                     patches.combined.triangle_patch,
                     patches.reflectivity,
                     patches.emission,
+                    lights=patches.lights,
                 )
             for w in caught:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -189,7 +202,8 @@ def patch_count(objects, patch_size) -> float:
     min_area = degenerate_area(objects)
     return sum(
         meshing.count_patches(
-            o.vertices, o.face_sizes, o.corner_verts, patch_size, o.triangles, o.triangle_face, min_area
+            o.vertices, o.face_sizes, o.corner_verts, object_patch_size(o, patch_size), o.triangles, o.triangle_face,
+            min_area,
         )
         for o in objects
         if len(o.face_sizes)
@@ -217,9 +231,9 @@ def check_patch_count(objects, patch_size, limit=None):
 
 
 def automatic_patch_size(objects) -> float:
-    """Patch size 0's meaning: the largest extent of the objects' geometry over
+    """Patch size 0's meaning: the largest extent of the selected objects' geometry over
     AUTOMATIC_PATCH_DIVISIONS (1.0 where there is no extent)."""
-    used = [o.vertices[np.unique(o.triangles)] for o in objects if len(o.triangles)]
+    used = [o.vertices[np.unique(o.triangles)] for o in objects if len(o.triangles) and o.receives]
     if not used:
         return 1.0
     used = np.vstack(used)
@@ -232,6 +246,7 @@ def make_patches(objects, patch_size) -> Patches:
     unchanged geometry comes from the cache). Faces of zero area are left out first, and a
     patch size that would make more than MAX_PATCHES patches is refused before any meshing.
     A patch size of 0 is automatic (:func:`automatic_patch_size`)."""
+    lights = tuple(getattr(objects, "lights", ()))  # (a scene_io.Selection carries them)
     objects, notes = drop_zero_area_faces(objects)
     if not objects:
         raise ValueError("the selected objects have no faces of non-zero area")
@@ -239,6 +254,7 @@ def make_patches(objects, patch_size) -> Patches:
         patch_size = automatic_patch_size(objects)
     check_patch_count(objects, patch_size)
     patches = _make_patches(objects, patch_size)
+    patches.lights = lights
     patches.notes = notes
     patches.patch_size = float(patch_size)
     return patches
@@ -256,7 +272,7 @@ def _make_patches(objects, patch_size) -> Patches:
             o.vertices,
             o.face_sizes,
             o.corner_verts,
-            patch_size,
+            object_patch_size(o, patch_size),
             face_triangles=o.triangles,
             triangle_face=o.triangle_face,
             min_area=min_area,

@@ -41,6 +41,7 @@ class SolveOutput:
     point_colours: list = field(default_factory=list)  # (N_k,3) per object, or None
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
+    sources: str = ""  # the sources that took part (sources_text)
 
     def blocked_fraction(self):
         """Share of the emitted power absorbed on the back side of faces."""
@@ -106,6 +107,26 @@ def duration_text(seconds) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
+def sources_text(scene) -> str:
+    """The sources that take part and each kind's share of the power, e.g. "1 point light 92%,
+    world 3%, emissive faces 5%"."""
+    total = scene.total_power
+    parts = []
+    kinds = {}
+    for light, power in zip(scene.lights.lights, scene.lights.light_power().mean(axis=1)):
+        kind = {"PointLight": "point light" if getattr(light, "spot", None) is None else "spot light",
+                "AreaLight": "area light", "SunLight": "sun", "WorldLight": "world"}[type(light).__name__]
+        count, share = kinds.get(kind, (0, 0.0))
+        kinds[kind] = (count + 1, share + power / total)
+    for kind, (count, share) in kinds.items():
+        name = kind if kind == "world" else f"{count} {kind}{'s' if count > 1 else ''}"
+        parts.append(f"{name} {share:.0%}")
+    emissive = float(scene.patch_power.sum()) / total
+    if emissive > 0:
+        parts.append(f"emissive faces {emissive:.0%}")
+    return ", ".join(parts)
+
+
 def estimate(objects, settings: SolveSettings) -> dict:
     """What the panel and the command line show before a run: the predicted time (from this
     machine's ray rate), paths and rays, and the paper's predictions behind them."""
@@ -117,7 +138,8 @@ def estimate(objects, settings: SolveSettings) -> dict:
     rate = ray_rate(scene, patches, settings)
     seconds = float(p.expected_rays) / rate if rate > 0 else float("nan")  # (NaN > 0 is False)
     return {
-        "objects": len(objects),
+        "objects": sum(o.receives for o in patches.objects),
+        "others": sum(not o.receives for o in patches.objects),
         "patches": int(scene.patch_count),
         "patch_size": float(patches.patch_size),
         "paths": int(p.paths),
@@ -132,6 +154,7 @@ def estimate(objects, settings: SolveSettings) -> dict:
         "predicted_mse": float(p.predicted_mse),
         "other_estimator": other,
         "warning": slow_warning(seconds, patches, settings),
+        "sources": sources_text(scene),
         "notes": notes,
     }
 
@@ -165,9 +188,14 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     if result.seconds > 0 and result.rays:
         RAY_RATES[(patches.geometry_key, settings.estimator, settings.exit_point)] = result.rays_per_second
     out = SolveOutput(patches, result, prediction, target, notes=notes,
-                      settings_relative_rms=None if settings.paths else settings.relative_rms)
+                      settings_relative_rms=None if settings.paths else settings.relative_rms,
+                      sources=sources_text(scene))
     radiosity = np.asarray(result.radiosity, dtype=np.float64)
     for k, mesh in enumerate(patches.meshes):
+        if not patches.objects[k].receives:  # the rest of the scene: no results
+            out.face_colours.append(None)
+            out.point_colours.append(None)
+            continue
         B = radiosity[patches.combined.patch_slice(k)]
         out.face_colours.append(B)
         out.point_colours.append(

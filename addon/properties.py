@@ -59,6 +59,8 @@ class RadiositySettings(bpy.types.PropertyGroup):
         default=False,
         update=_changed,
     )
+    use_scene_objects: BoolProperty(name=options.SCENE_OBJECTS.label, description=options.SCENE_OBJECTS.description,
+                                    default=options.SCENE_OBJECTS.default, update=_changed)
     seed: _number(options.SEED)
     time_limit: _number(options.TIME_LIMIT, soft_max=3600.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE")
     threads: _number(options.THREADS)
@@ -75,6 +77,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
     last_patches: IntProperty(name="Patches", default=0)
     last_patch_size: FloatProperty(name="Patch size used", default=0.0, subtype="DISTANCE", unit="LENGTH")
     last_stopped: StringProperty(name="Stopped by", default="")
+    last_sources: StringProperty(name="Sources", default="", description="The sources of the last run and their shares of the power")
     last_estimator: StringProperty(name="Estimator", default="")
     last_relative_error: FloatProperty(name="Error reached", default=-1.0, description="Measured relative RMS error of the last run, percent (-1: unknown)")
     last_target_error: FloatProperty(name="Error target", default=0.0, description="The last run's error target, percent (0: a path count was given)")

@@ -13,6 +13,7 @@ import bpy
 import numpy as np
 
 from .core import meshing
+from . import lights_io
 from .patches import ObjectArrays
 
 #: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
@@ -325,6 +326,21 @@ def _describe(obj):
     return f"'{obj.name}' is a {kind}"
 
 
+def read_rest_of_scene(context, depsgraph, notes):
+    """Arrays of the visible mesh objects that are not selected (not hidden from render, not
+    results): they block and reflect light and get no results (``receives`` False)."""
+    selected = {o.session_uid for o in source_objects(context)}
+    rest = []
+    for obj in sorted(context.view_layer.objects, key=lambda o: o.name):
+        if obj.type not in SOURCE_TYPES or obj.session_uid in selected or is_result_object(obj) or obj.hide_render:
+            continue
+        arrays = read_object(obj, depsgraph, [])
+        if arrays is not None:
+            arrays.receives = False
+            rest.append(arrays)
+    return rest
+
+
 def skipped_objects(context):
     """Selected objects that are not meshes (and not results): they take no part."""
     selected = getattr(context, "selected_objects", None)
@@ -365,9 +381,12 @@ def read_selection(context):
     # realised: each instance is read as an object of its own.
     instances = read_instances([*candidates, *others], depsgraph, notes)
     objects.extend(instances)
+    receivers = len(objects)
+    if getattr(settings, "use_scene_objects", False) and objects:
+        objects.extend(read_rest_of_scene(context, depsgraph, notes))
     instancers = {o.uid for o in instances}
     skipped = [o for o in others if o.session_uid not in instancers]
-    if not objects:
+    if not receivers:
         if skipped and not candidates:
             raise SceneError("No mesh among the selected objects: " + "; ".join(_describe(o) for o in skipped))
         raise SceneError("The selected mesh objects have no faces")
@@ -400,14 +419,30 @@ def read_selection(context):
             notes.append(f"'{o.name}': base colours of material {_materials_where(o, over)} above "
                          f"{MAX_REFLECTIVITY} were clamped to {MAX_REFLECTIVITY} ('Clamp bright colours' is on)")
             o.face_reflectivity = np.minimum(o.face_reflectivity, MAX_REFLECTIVITY)
-    if not any(np.any(o.face_emission > 0) for o in objects):
+    try:
+        lights = lights_io.read_lights(depsgraph, notes)
+        world = lights_io.read_world(context.scene, notes)
+    except lights_io.LightError as exc:
+        raise SceneError(str(exc)) from exc
+    if world is not None:
+        lights.append(world)
+    if not lights and not any(np.any(o.face_emission > 0) for o in objects):
         raise SceneError(
-            "No emitter among the selected objects: give a material an emission strength > 0 "
-            "(Principled BSDF 'Emission Strength' or an Emission shader); lamps (Light objects) "
-            "are not used"
+            "No emitter among the selected objects (nor the rest of the scene) and no light: give a material "
+            "an emission strength > 0 (Principled BSDF 'Emission Strength' or an Emission shader), add a "
+            "light, or give the world a colour"
         )
     # unique notes, in order
-    return objects, list(dict.fromkeys(notes))
+    return Selection(objects, lights), list(dict.fromkeys(notes))
+
+
+class Selection(list):
+    """The selected objects' arrays (a list of ObjectArrays), with the lights that light them
+    (``lights``: the core's light sources of the scene's lamps and world)."""
+
+    def __init__(self, objects=(), lights=()):
+        super().__init__(objects)
+        self.lights = tuple(lights)
 
 
 # ---------------------------------------------------------------------------
@@ -552,6 +587,8 @@ def write_results(context, output_data, output_mode, scene=None):
             output_data.face_colours,
             output_data.point_colours,
         ):
+            if faces is None:  # an object of the rest of the scene: it took part, gets no result
+                continue
             if not (np.isfinite(faces).all() and (points is None or np.isfinite(points).all())):
                 raise ValueError(f"the result for '{arrays.name}' is not finite")
             name = arrays.name + RESULT_SUFFIX

@@ -74,7 +74,12 @@ def test_no_emitter_and_zero_strength(blender):
     build_test_scene()
     configure(blender)
     _select("Room", "Block")
+    # the lamp, not selected, still lights the room (the rest of the scene, as in a render)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    assert sorted(o["radiosity_source"] for o in result_objects()) == ["Block", "Room"]
+    bpy.data.objects["Lamp"].hide_render = True  # hidden from render: it takes no part
     _unchanged_after_error(blender, "No emitter among the selected objects")
+    bpy.data.objects["Lamp"].hide_render = False
     _select("Room", "Block", "Lamp")
     bpy.data.materials["Emitter"].node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 0.0
     _unchanged_after_error(blender, "No emitter among the selected objects")
@@ -572,7 +577,8 @@ def test_text_and_curves_are_tessellated_like_meshes(blender):
     spline.points.add(1)
     wire_object = bpy.data.objects.new("Wire", wire)
     blender.scene.collection.objects.link(wire_object)
-    _select("Room", "Block", "Sign", "Wire")  # the lamp is off: the sign is the only emitter
+    _select("Room", "Block", "Sign", "Wire")
+    bpy.data.objects["Lamp"].hide_render = True  # the lamp is off: the sign is the only emitter
     configure(blender)
     state, reports = _run_sync(blender)
     assert state == {"FINISHED"}, reports

@@ -111,6 +111,7 @@ def test_cli_failures_are_one_line_and_a_non_zero_status(tmp_path):
     def no_emitter():
         build_test_scene()
         bpy.data.objects["Lamp"].select_set(False)
+        bpy.data.objects["Lamp"].hide_render = True  # not in the render: it takes no part
 
     def nothing_selected():
         build_test_scene()
@@ -197,6 +198,7 @@ def test_an_operator_error_prints_once(tmp_path):
     def no_emitter():
         build_test_scene()
         bpy.data.objects["Lamp"].select_set(False)
+        bpy.data.objects["Lamp"].hide_render = True  # not in the render: it takes no part
 
     _save_scene(tmp_path / "dark.blend", no_emitter)
     proc = subprocess.run([sys.executable, "-m", "addon", "--open", str(tmp_path / "dark.blend"), "--no-preview",

@@ -347,8 +347,10 @@ def test_bad_input_is_reported_and_changes_nothing(blender):
     unchanged()
 
     bpy.data.objects["Room"].select_set(True)
+    blender.scene.radiosity.use_scene_objects = False  # the unselected lamp takes no part
     _expect_error("No emitter")
     unchanged()
+    blender.scene.radiosity.use_scene_objects = True
 
     bpy.data.objects["Lamp"].select_set(True)
     lamp_node = bpy.data.materials["Emitter"].node_tree.nodes["Principled BSDF"]

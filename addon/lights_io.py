@@ -1,0 +1,171 @@
+"""Reading Blender's lights and world as the core's light sources, in Cycles' units.
+
+Cycles (intern/cycles/scene/light.cpp, kernel/light/*.h) takes a lamp's strength as colour x
+power and turns it into radiance; a diffuse surface of albedo R then shows R / pi times the
+irradiance. The radiosity written is what a Cycles bake shows (an emissive material of strength
+S has radiance S), so a light's quantities in the core's units are (docs/lights.md):
+
+- point and spot, power P: intensity P / (4 pi^2) (Cycles' eval_fac 1 / (4 pi) of a point, over
+  pi); a radius r is a sphere of that intensity; a spot's mask is Cycles' smoothstep of
+  (cos - cos(size / 2)) / ((1 - cos(size / 2)) blend);
+- area, power P over its area A (object scale included): exitance P / (pi A);
+- sun, strength S (W/m^2): irradiance S / pi;
+- world, colour C x strength S: the radiance C S of the sky, an unoccluded plane's W = C S.
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+
+from .core.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
+
+POINT_INTENSITY = 1.0 / (4.0 * math.pi**2)  # per watt
+AREA_EXITANCE = 1.0 / math.pi  # per watt per square metre
+SUN_IRRADIANCE = 1.0 / math.pi  # per W/m^2 of strength
+
+
+class LightError(ValueError):
+    """A light the solve cannot use; the message names it."""
+
+
+def read_lights(depsgraph, notes):
+    """The core lights of every light object that renders in the view layer (selected or not,
+    as Cycles lights them). Zero power: left out, with a note; negative or not finite: refused."""
+    lights = []
+    for instance in depsgraph.object_instances:
+        obj = instance.object
+        if obj.type != "LIGHT":
+            continue
+        original = obj.original
+        if getattr(original, "hide_render", False):
+            continue
+        if not getattr(original, "visible_diffuse", True):
+            notes.append(f"light '{original.name}' is not visible to diffuse rays (Ray Visibility): left out, "
+                         "as Cycles leaves it out of diffuse light")
+            continue
+        light = read_light(obj.data, np.array(instance.matrix_world), original.name, notes)
+        if light is not None:
+            lights.append(light)
+    return lights
+
+
+def read_light(data, matrix, name, notes):
+    """One Blender light (``bpy.types.Light``) at ``matrix`` (4,4) world as a core light, or None."""
+    colour = np.array(data.color[:3], dtype=np.float64)
+    power = float(data.energy)
+    what = "strength" if data.type == "SUN" else "power"
+    if not (np.isfinite(colour).all() and math.isfinite(power)):
+        raise LightError(f"light '{name}': its colour or {what} is not a finite number")
+    if power < 0 or (colour < 0).any():
+        raise LightError(f"light '{name}' has a negative {what} or colour: a light cannot take light away")
+    if power == 0 or not colour.any():
+        notes.append(f"light '{name}' has no {what}: left out")
+        return None
+    if getattr(data, "use_nodes", False):
+        notes.append(f"light '{name}': its node tree is not read; its colour and {what} were used")
+    if not getattr(data, "use_shadow", True):
+        notes.append(f"light '{name}' casts no shadow in Cycles; here objects still block it")
+    position = matrix[:3, 3]
+    axes = matrix[:3, :3]
+    down = -axes[:, 2] / np.linalg.norm(axes[:, 2])  # lights shine along their local -Z
+    if data.type in ("POINT", "SPOT"):
+        intensity = colour * power * POINT_INTENSITY
+        spot = None
+        if data.type == "SPOT":
+            cos_outer = math.cos(0.5 * float(data.spot_size))
+            cos_inner = cos_outer + (1.0 - cos_outer) * float(data.spot_blend)
+            spot = Spot(axis=down, cos_outer=cos_outer, cos_inner=min(cos_inner, 1.0))
+        radius = float(getattr(data, "shadow_soft_size", 0.0))
+        return PointLight(position, intensity, radius=radius, spot=spot, name=name)
+    if data.type == "AREA":
+        if float(getattr(data, "spread", math.pi)) < math.pi - 1e-6:
+            raise LightError(f"area light '{name}': a spread below 180 degrees is not supported; set Spread to 180")
+        shape = data.shape
+        size_u = float(data.size)
+        size_v = float(data.size_y) if shape in ("RECTANGLE", "ELLIPSE") else size_u
+        half_u = 0.5 * size_u * axes[:, 0]
+        half_v = 0.5 * size_v * axes[:, 1]
+        ellipse = shape in ("DISK", "ELLIPSE")
+        area = 4.0 * float(np.linalg.norm(np.cross(half_u, half_v))) * (math.pi / 4.0 if ellipse else 1.0)
+        if not area > 0:
+            notes.append(f"area light '{name}' has no area: left out")
+            return None
+        exitance = colour * power * AREA_EXITANCE / area
+        return AreaLight(position, half_u, half_v, down, exitance, ellipse=ellipse, name=name)
+    if data.type == "SUN":
+        return SunLight(down, colour * power * SUN_IRRADIANCE, angle=float(data.angle), name=name)
+    notes.append(f"light '{name}' of type {data.type} is not supported: left out")
+    return None
+
+
+def read_world(scene, notes, image_reader=None):
+    """The world as a core WorldLight: its Background node's colour x strength (or the world
+    colour without nodes), an environment image by its pixels; None where it gives no light."""
+    world = scene.world
+    if world is None:
+        return None
+    colour, strength, image = _background(world, notes)
+    if not (np.isfinite(colour).all() and math.isfinite(strength)):
+        raise LightError(f"world '{world.name}': its colour or strength is not a finite number")
+    if strength < 0 or (colour < 0).any():
+        raise LightError(f"world '{world.name}' has a negative colour or strength")
+    if image is not None:
+        pixels = (image_reader or image_pixels)(image, notes)
+        if pixels is not None:
+            return WorldLight(image=pixels * strength, name=world.name)
+    if strength == 0 or not colour.any():
+        return None
+    return WorldLight(irradiance=colour * strength, name=world.name)
+
+
+def _background(world, notes):
+    """(colour (3,), strength, image or None) of the world's surface."""
+    tree = world.node_tree
+    if bpy.app.version < (5, 0, 0) and not world.use_nodes:  # (Blender 5 always uses the nodes)
+        tree = None
+    if tree is None:
+        return np.array(world.color[:3], dtype=np.float64), 1.0, None
+    output = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
+    output = output or next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"), None)
+    link = output.inputs["Surface"].links[0] if output is not None and output.inputs["Surface"].is_linked else None
+    if link is None:
+        return np.zeros(3), 0.0, None
+    node = link.from_node
+    if node.bl_idname != "ShaderNodeBackground":
+        notes.append(f"world '{world.name}': its {node.name} node is not read; the world gives no light here")
+        return np.zeros(3), 0.0, None
+    strength_socket = node.inputs["Strength"]
+    if strength_socket.is_linked:
+        notes.append(f"world '{world.name}': its strength is linked to a node; its default value was used")
+    strength = float(strength_socket.default_value)
+    colour_socket = node.inputs["Color"]
+    if colour_socket.is_linked:
+        source = colour_socket.links[0].from_node
+        if source.bl_idname == "ShaderNodeTexEnvironment" and source.image is not None:
+            if source.inputs["Vector"].is_linked:
+                notes.append(f"world '{world.name}': the mapping of its environment image is not read; "
+                             "the image was used unrotated")
+            return np.ones(3), strength, source.image
+        notes.append(f"world '{world.name}': its colour comes from a {source.name} node, not read; "
+                     "the socket's own colour was used")
+    return np.array(colour_socket.default_value[:3], dtype=np.float64), strength, None
+
+
+def image_pixels(image, notes):
+    """(H, W, 3) linear pixels of an equirectangular image, top row first (Blender stores the
+    bottom row first), or None with a note where the image cannot be read."""
+    try:
+        width, height = image.size
+        if width == 0 or height == 0:
+            raise RuntimeError("no pixels")
+        flat = np.empty(width * height * image.channels, dtype=np.float32)
+        image.pixels.foreach_get(flat)
+    except Exception as exc:  # noqa: BLE001 - a missing file: a note, the world's average instead
+        notes.append(f"environment image '{image.name}' could not be read ({exc}); the world gives no light here")
+        return None
+    pixels = flat.reshape(height, width, image.channels)[::-1, :, :3].astype(np.float64)
+    if not image.is_float and image.colorspace_settings.name == "sRGB":
+        pixels = np.where(pixels <= 0.04045, pixels / 12.92, ((pixels + 0.055) / 1.055) ** 2.4)
+    return pixels

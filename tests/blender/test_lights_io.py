@@ -1,0 +1,201 @@
+"""Blender's lights and world read as the core's light sources, in Cycles' units (issue 23)."""
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+from addon import lights_io, scene_io
+from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
+
+from .conftest import box_arrays, build_test_scene, make_object, principled, result_objects
+
+
+def _lamp(kind, name="L", location=(0.5, 0.5, 0.8), rotation=(0, 0, 0), scale=(1, 1, 1), **settings):
+    data = bpy.data.lights.new(name, kind)
+    for key, value in settings.items():
+        setattr(data, key, value)
+    obj = bpy.data.objects.new(name, data)
+    obj.location, obj.rotation_euler, obj.scale = location, rotation, scale
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def _read(context):
+    notes = []
+    lights = lights_io.read_lights(context.evaluated_depsgraph_get(), notes)
+    return lights, notes
+
+
+def test_each_kind_in_cycles_units(blender):
+    """Point and spot: intensity P / (4 pi^2); area: exitance P / (pi A) with the object's scale in
+    A; sun: irradiance S / pi along the object's -Z; spot cone from size and blend as Cycles'
+    smoothstep."""
+    _lamp("POINT", "Point", energy=100.0, color=(1.0, 0.5, 0.25), shadow_soft_size=0.0)
+    _lamp("SPOT", "Spot", energy=50.0, spot_size=math.radians(60), spot_blend=0.2, shadow_soft_size=0.1)
+    _lamp("AREA", "Square", energy=80.0, shape="SQUARE", size=2.0, scale=(2, 1, 1))
+    _lamp("AREA", "Disk", energy=10.0, shape="DISK", size=0.5)
+    _lamp("SUN", "Sun", energy=3.0, angle=math.radians(5), rotation=(math.radians(30), 0, 0))
+    lights, notes = _read(bpy.context)
+    by = {light.name: light for light in lights}
+    assert set(by) == {"Point", "Spot", "Square", "Disk", "Sun"} and not notes
+    point = by["Point"]
+    assert isinstance(point, PointLight) and point.radius == 0 and point.spot is None
+    np.testing.assert_allclose(point.intensity, np.array([1.0, 0.5, 0.25]) * 100 / (4 * math.pi**2))
+    np.testing.assert_allclose(point.position, [0.5, 0.5, 0.8], atol=1e-6)
+    spot = by["Spot"]
+    np.testing.assert_allclose(spot.intensity, 50 / (4 * math.pi**2))
+    assert spot.radius == pytest.approx(0.1)
+    cos_outer = math.cos(math.radians(30))
+    assert spot.spot.cos_outer == pytest.approx(cos_outer)
+    assert spot.spot.cos_inner == pytest.approx(cos_outer + (1 - cos_outer) * 0.2)
+    np.testing.assert_allclose(spot.spot.axis, [0, 0, -1], atol=1e-6)
+    square = by["Square"]
+    assert isinstance(square, AreaLight) and not square.ellipse
+    assert square.area == pytest.approx(8.0)  # 2 x 2 m, scaled twice along x
+    np.testing.assert_allclose(square.exitance, 80 / (math.pi * 8.0))
+    disk = by["Disk"]
+    assert disk.ellipse and disk.area == pytest.approx(math.pi * 0.25**2)
+    sun = by["Sun"]
+    assert isinstance(sun, SunLight) and sun.angle == pytest.approx(math.radians(5))
+    np.testing.assert_allclose(sun.irradiance, 3 / math.pi)
+    np.testing.assert_allclose(sun.direction, [0, math.sin(math.radians(30)), -math.cos(math.radians(30))], atol=1e-6)
+
+
+def test_lights_left_out_or_refused_are_named(blender):
+    hidden = _lamp("POINT", "Hidden", energy=10.0)
+    hidden.hide_render = True
+    _lamp("POINT", "Dark", energy=0.0)
+    no_diffuse = _lamp("POINT", "Glossy only", energy=10.0)
+    no_diffuse.visible_diffuse = False
+    lights, notes = _read(bpy.context)
+    assert lights == []
+    assert any("'Dark' has no power" in n for n in notes)
+    assert any("'Glossy only' is not visible to diffuse rays" in n for n in notes)
+    assert not any("Hidden" in n for n in notes)  # hidden from render: not in the render, not here
+    _lamp("POINT", "Negative", energy=-5.0)
+    with pytest.raises(lights_io.LightError, match="'Negative' has a negative power"):
+        _read(bpy.context)
+
+
+def test_area_spread_below_180_is_refused(blender):
+    _lamp("AREA", "Narrow", energy=10.0, spread=math.radians(60))
+    with pytest.raises(lights_io.LightError, match="'Narrow': a spread below 180 degrees"):
+        _read(bpy.context)
+
+
+def test_the_world_colour_and_strength(blender):
+    world = bpy.data.worlds.new("Sky")
+    blender.scene.world = world
+    if not world.use_nodes:
+        world.use_nodes = True
+    background = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    background.inputs["Color"].default_value = (0.2, 0.3, 0.4, 1.0)
+    background.inputs["Strength"].default_value = 2.0
+    notes = []
+    sky = lights_io.read_world(blender.scene, notes)
+    assert isinstance(sky, WorldLight) and sky.image is None and not notes
+    np.testing.assert_allclose(sky.irradiance, [0.4, 0.6, 0.8], rtol=1e-6)
+    background.inputs["Strength"].default_value = 0.0
+    assert lights_io.read_world(blender.scene, []) is None
+
+
+def test_an_environment_image_is_read_top_row_first(blender):
+    """An equirectangular image lights by its pixels, top row first (Blender stores the bottom
+    row first), in linear colour."""
+    image = bpy.data.images.new("Env", 8, 4, float_buffer=True)
+    pixels = np.zeros((4, 8, 4), np.float32)
+    pixels[3] = (1.0, 0.5, 0.25, 1.0)  # Blender's last row: the top of the image, the zenith
+    image.pixels.foreach_set(pixels.ravel())
+    world = bpy.data.worlds.new("Env")
+    blender.scene.world = world
+    if not world.use_nodes:
+        world.use_nodes = True
+    tree = world.node_tree
+    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    env = tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = image
+    tree.links.new(env.outputs["Color"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = 2.0
+    sky = lights_io.read_world(blender.scene, [])
+    assert sky.image.shape == (4, 8, 3)
+    np.testing.assert_allclose(sky.image[0], np.tile([2.0, 1.0, 0.5], (8, 1)))
+    assert not sky.image[1:].any()
+
+
+def test_a_room_lit_by_a_lamp_alone_solves_and_a_bad_lamp_changes_nothing(blender):
+    """A closed room with no emissive material, lit by a point light inside: it solves and
+    lights the walls; a negative lamp is refused with its name and the scene is unchanged."""
+    room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
+    _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.5), energy=40.0)
+    objects, notes = scene_io.read_selection(blender)
+    assert [type(light).__name__ for light in objects.lights] == ["PointLight"]
+    s = blender.scene.radiosity
+    s.target_error, s.patch_size, s.threads = 10.0, 0.25, 1
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    (room,) = result_objects()
+    c = np.empty(len(room.data.color_attributes["Radiosity"].data) * 4, np.float32)
+    room.data.color_attributes["Radiosity"].data.foreach_get("color", c)
+    # the walls' radiosity: R times what they receive, about 0.6 x 40 / (4 pi^2) / 0.25 m^2 directly
+    assert c.reshape(-1, 4)[:, :3].mean() > 0.5
+    before = sorted(o.name for o in bpy.data.objects)
+    bpy.data.objects["Bulb"].data.energy = -1.0
+    with pytest.raises(RuntimeError, match="'Bulb' has a negative power"):
+        bpy.ops.radiosity.solve()
+    assert sorted(o.name for o in bpy.data.objects) == before
+
+
+def test_the_sources_and_their_shares_are_listed(blender):
+    """The estimate, the last run and the command line list the sources that took part with
+    each kind's share of the power."""
+    from addon import pipeline
+
+    build_test_scene()
+    _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.5), energy=4.0)
+    blender.scene.radiosity.patch_size, blender.scene.radiosity.threads = 0.25, 1
+    objects, _ = scene_io.read_selection(blender)
+    value = pipeline.estimate(objects, blender.scene.radiosity.solve_settings())
+    # the lamp quad: 0.09 m^2 x mean(4, 3.5, 3) = 0.315; the bulb 4 x 4 pi / (4 pi^2) = 1.27
+    bulb = 4.0 / math.pi
+    lamp = 0.09 * 3.5
+    assert value["sources"] == f"1 point light {bulb / (bulb + lamp):.0%}, emissive faces {lamp / (bulb + lamp):.0%}"
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    assert blender.scene.radiosity.last_sources == value["sources"]
+
+
+def test_the_rest_of_the_scene_blocks_and_reflects_without_results(blender):
+    """Selected objects get results; the other visible objects block and reflect light (meshed
+    coarser) and get none; the option leaves them out. The floor under an unselected block is in
+    its shadow only while the block takes part."""
+    from addon import pipeline
+
+    build_test_scene()
+    for name in ("Block",):
+        bpy.data.objects[name].select_set(False)
+    s = blender.scene.radiosity
+    s.patch_size, s.threads, s.target_error, s.output = 0.1, 1, 5.0, "FACE"
+
+    def floor_under_block():
+        assert bpy.ops.radiosity.solve() == {"FINISHED"}
+        assert sorted(o["radiosity_source"] for o in result_objects()) == ["Lamp", "Room"]
+        room = bpy.data.objects["Room Radiosity"].data
+        colours = np.empty(len(room.color_attributes["Radiosity"].data) * 4, np.float32)
+        room.color_attributes["Radiosity"].data.foreach_get("color", colours)
+        corners = np.empty(len(room.loops), np.int32)
+        room.loops.foreach_get("vertex_index", corners)
+        co = np.empty(len(room.vertices) * 3, np.float32)
+        room.vertices.foreach_get("co", co)
+        points = co.reshape(-1, 3)[corners]
+        under = (points[:, 2] < 1e-3) & (points[:, 0] > 0.25) & (points[:, 0] < 0.45) & (points[:, 1] > 0.25) & (points[:, 1] < 0.45)
+        return colours.reshape(-1, 4)[under, :3].mean()
+
+    objects, _ = scene_io.read_selection(blender)
+    value = pipeline.estimate(objects, s.solve_settings())
+    assert value["objects"] == 2 and value["others"] == 1
+    shadowed = floor_under_block()
+    s.use_scene_objects = False
+    objects, _ = scene_io.read_selection(blender)
+    assert pipeline.estimate(objects, s.solve_settings())["others"] == 0
+    lit = floor_under_block()
+    assert shadowed < 0.5 * lit
