@@ -113,8 +113,15 @@ SCENE_OBJECTS = Flag("use_scene_objects", "--scene-objects", True, "Rest of the 
                      "The other visible objects block and reflect light (meshed coarser, no results written), as "
                      "they do in a render; off: only the selection takes part")
 
+LIGHT_OUTPUT = Flag("light_output", "--light-output", False, "Light only",
+                    "Also write the light arriving at each patch, without the surface's colour ('Radiosity Light': "
+                    "Cycles' Diffuse bake without Color), to multiply with textures in a material")
+INDIRECT_OUTPUT = Flag("indirect_output", "--indirect-output", False, "Indirect light",
+                       "Also write the light arriving after at least one bounce, without the surface's colour "
+                       "('Radiosity Indirect')")
+
 SETTINGS = (ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, EXIT_POINT, SAMPLING, STOP_RULE, OUTPUT, SEED,
-            TIME_LIMIT, THREADS, SCENE_OBJECTS)
+            TIME_LIMIT, THREADS, SCENE_OBJECTS, LIGHT_OUTPUT, INDIRECT_OUTPUT)
 
 # Patch size 0: the selection's largest extent over this.
 AUTOMATIC_PATCH_DIVISIONS = 20

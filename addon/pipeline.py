@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .core import meshing, predict, relative_rms_to_mse, solve
+from .core.first_shot import direct_irradiance
 from . import options
 from .patches import Patches, make_patches, scene_and_notes
 
@@ -29,6 +30,8 @@ class SolveSettings:
     max_seconds: float | None = None
     threads: int | None = None
     output: str = options.OUTPUT.default
+    light_output: bool = options.LIGHT_OUTPUT.default
+    indirect_output: bool = options.INDIRECT_OUTPUT.default
 
 
 @dataclass
@@ -39,6 +42,7 @@ class SolveOutput:
     target_mse: float | None
     face_colours: list = field(default_factory=list)  # (P_k,3) per object
     point_colours: list = field(default_factory=list)  # (N_k,3) per object, or None
+    extra: dict = field(default_factory=dict)  # attribute name -> [(P_k,3) per object], light and indirect
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
     sources: str = ""  # the sources that took part (sources_text)
@@ -60,6 +64,10 @@ def prediction_for(scene, settings: SolveSettings):
     target = relative_rms_to_mse(base, settings.relative_rms)
     return predict(scene, settings.estimator, threshold=settings.threshold, target_mse=target), target
 
+
+LIGHT_ATTRIBUTE = "Radiosity Light"
+INDIRECT_ATTRIBUTE = "Radiosity Indirect"
+INDIRECT_SAMPLES = 64  # gathering samples a patch for the direct light the indirect output leaves out
 
 # Ray rates (rays per second of a whole solve) measured on this machine, by (geometry, estimator,
 # exit point): from a short calibration solve, replaced by each finished run's own rate.
@@ -191,6 +199,15 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
     radiosity = np.asarray(result.radiosity, dtype=np.float64)
+    extras = {}
+    if settings.light_output:
+        extras[LIGHT_ATTRIBUTE] = result.irradiance
+    if settings.indirect_output:
+        # the light arriving minus a gathered estimate of the direct light alone (noise of both)
+        extras[INDIRECT_ATTRIBUTE] = result.irradiance - direct_irradiance(scene, INDIRECT_SAMPLES, int(settings.seed))
+    for name, values in extras.items():
+        out.extra[name] = [None if not o.receives else np.asarray(values[patches.combined.patch_slice(k)])
+                           for k, o in enumerate(patches.objects)]
     for k, mesh in enumerate(patches.meshes):
         if not patches.objects[k].receives:  # the rest of the scene: no results
             out.face_colours.append(None)

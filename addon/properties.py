@@ -61,6 +61,10 @@ class RadiositySettings(bpy.types.PropertyGroup):
     )
     use_scene_objects: BoolProperty(name=options.SCENE_OBJECTS.label, description=options.SCENE_OBJECTS.description,
                                     default=options.SCENE_OBJECTS.default, update=_changed)
+    light_output: BoolProperty(name=options.LIGHT_OUTPUT.label, description=options.LIGHT_OUTPUT.description,
+                               default=options.LIGHT_OUTPUT.default)
+    indirect_output: BoolProperty(name=options.INDIRECT_OUTPUT.label, description=options.INDIRECT_OUTPUT.description,
+                                  default=options.INDIRECT_OUTPUT.default)
     seed: _number(options.SEED)
     time_limit: _number(options.TIME_LIMIT, soft_max=3600.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE")
     threads: _number(options.THREADS)
@@ -98,6 +102,8 @@ class RadiositySettings(bpy.types.PropertyGroup):
             max_seconds=float(self.time_limit) or None,
             threads=int(self.threads) or None,
             output=self.output,
+            light_output=bool(self.light_output),
+            indirect_output=bool(self.indirect_output),
         )
 
 

@@ -558,6 +558,20 @@ def write_colours(mesh, patch_mesh, face_colours, point_colours, output):
     return names
 
 
+def write_extra(mesh, patch_mesh, name, face_values, output):
+    """One more attribute (the light alone, the indirect light) on the main one's domain."""
+    if output == "VERTEX":
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "POINT")
+        attr.data.foreach_set("color", _rgba(meshing.point_average(patch_mesh, face_values)))
+    else:
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
+        attr.data.foreach_set("color", _rgba(meshing.corner_values(patch_mesh, face_values)))
+    main = mesh.color_attributes.get(ATTRIBUTE_NAME)
+    if main is not None:
+        mesh.color_attributes.active_color = main
+    return attr.name
+
+
 def show_attribute_in_solid_view():
     """Let the 3D views' solid shading colour objects by their colour attribute."""
     for screen in bpy.data.screens:
@@ -581,12 +595,12 @@ def write_results(context, output_data, output_mode, scene=None):
     created = []
     try:
         material = result_material()
-        for arrays, pm, faces, points in zip(
+        for index, (arrays, pm, faces, points) in enumerate(zip(
             output_data.patches.objects,
             output_data.patches.meshes,
             output_data.face_colours,
             output_data.point_colours,
-        ):
+        )):
             if faces is None:  # an object of the rest of the scene: it took part, gets no result
                 continue
             if not (np.isfinite(faces).all() and (points is None or np.isfinite(points).all())):
@@ -596,6 +610,8 @@ def write_results(context, output_data, output_mode, scene=None):
             obj = bpy.data.objects.new(name, mesh)  # vertices are in world space
             created.append(obj)
             write_colours(mesh, pm, faces, points, output_mode)
+            for extra_name, per_object in getattr(output_data, "extra", {}).items():
+                write_extra(mesh, pm, extra_name, per_object[index], output_mode)
             mesh.materials.append(material)
             obj[SOURCE_PROPERTY] = arrays.name
     except Exception:

@@ -19,9 +19,11 @@ import copy
 
 import numpy as np
 
-from .rays import hit_patches, meets_front
 from .lights import WorldLight, _cosine_directions_about
+from .names import EXIT_RANDOM, FINITE
+from .rays import hit_patches, meets_front
 from .sampling import SourceTable, channel_sum, patch_point_rows, source_weights
+from .tables import WalkTables
 from .tallies import ChunkTally
 
 # A chunk's gathering aims at about this share of the rays its walk traces.
@@ -176,6 +178,20 @@ def _trace(tables, origins, directions):
     triangle, u, v, t, ng = tables.outside_turn(tables.tracer.first_hit_barycentric, o, d)
     patch = hit_patches(tables, triangle, u, v)
     return triangle, patch, meets_front(d.T, ng) & (triangle >= 0), t
+
+
+def direct_irradiance(scene, samples=64, seed=0):
+    """(P,3) an estimate of each patch's direct irradiance H alone (the light arriving straight
+    from the sources), from ``samples`` gathering samples a patch, in rounds of 8 (memory)."""
+    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
+    rounds = max(1, int(np.ceil(samples / 8)))
+    gathering = Gathering(scene, np.full(scene.patch_count, 8.0))
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 30,))))
+    total = np.zeros((3, scene.patch_count))
+    with tables.numpy_turn:
+        for _ in range(rounds):
+            total += gather_direct(tables, gathering, rng)[0]
+    return (total / rounds).T
 
 
 def reflected_sources(tables, emission):

@@ -68,6 +68,7 @@ class SolveResult:
     radiosity: np.ndarray          # (P,3) B = E + b
     reflected: np.ndarray          # (P,3) b
     reflected_variance: np.ndarray  # (P,3) batch-means estimate of Var(b), NaN below 2 chunks
+    irradiance: np.ndarray         # (P,3) H, the light arriving (B = E + R H): Cycles' DIFFUSE bake without colour
     paths: int
     rays: int
     seconds: float
@@ -237,6 +238,7 @@ def solve(
         radiosity=scene.emission + total.reflected(),
         reflected=total.reflected(),
         reflected_variance=total.reflected_variance(),
+        irradiance=total.irradiance(),
         paths=n,
         rays=total.rays,
         seconds=time.perf_counter() - start,

@@ -199,3 +199,34 @@ def test_the_rest_of_the_scene_blocks_and_reflects_without_results(blender):
     assert pipeline.estimate(objects, s.solve_settings())["others"] == 0
     lit = floor_under_block()
     assert shadowed < 0.5 * lit
+
+
+def test_light_and_indirect_outputs_beside_the_radiosity(blender):
+    """With 'Light only' and 'Indirect light' on, each result object also carries the light
+    arriving ('Radiosity Light': times the base colour it is the reflected radiosity) and the
+    light after a bounce ('Radiosity Indirect': below the light arriving, above 0 in a closed
+    room on average)."""
+    build_test_scene()
+    s = blender.scene.radiosity
+    s.patch_size, s.threads, s.target_error, s.output = 0.25, 1, 5.0, "FACE"
+    s.light_output = s.indirect_output = True
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    room = bpy.data.objects["Room Radiosity"].data
+    names = set(room.color_attributes.keys())
+    assert {"Radiosity", "Radiosity Light", "Radiosity Indirect"} <= names
+
+    def colours(name):
+        a = room.color_attributes[name]
+        c = np.empty(len(a.data) * 4, np.float32)
+        a.data.foreach_get("color", c)
+        return c.reshape(-1, 4)[:, :3].astype(np.float64)
+
+    B, light, indirect = colours("Radiosity"), colours("Radiosity Light"), colours("Radiosity Indirect")
+    # the room emits nothing: B = R H per channel, R white (0.7) or red (0.6, 0.1, 0.1)
+    lit = (light > 0).all(axis=1)  # (the floor under the block gets no light)
+    assert lit.mean() > 0.8
+    ratio = B[lit] / light[lit]
+    white = np.abs(ratio - 0.7).max(axis=1) < 1e-4
+    red = np.abs(ratio - [0.6, 0.1, 0.1]).max(axis=1) < 1e-4
+    assert (white | red).all() and white.any() and red.any()
+    assert 0 < indirect.mean() < light.mean()

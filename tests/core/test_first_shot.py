@@ -55,3 +55,27 @@ def test_gathered_first_shot_stops_on_the_measured_error_and_refuses_unknown_nam
     assert r.stopped == "target" and r.measured_mse <= target
     with pytest.raises(ValueError, match="direct_light"):
         solve(scene, paths=1000, direct_light="gathering")
+
+
+def test_irradiance_is_what_the_reflected_light_comes_from_and_direct_light_alone_is_exact():
+    """SolveResult.irradiance H: R H is the reflected radiosity, to rounding (Cycles' DIFFUSE
+    bake without colour). direct_irradiance: a point light in a closed box gives each patch
+    I Omega / A directly (the solid angle it subtends), here within 5 standard errors of the
+    mean ratio over the patches (the standard error from two independent estimates)."""
+    import math
+
+    from test_lights import _box, _solid_angles
+
+    from addon.core.first_shot import direct_irradiance
+    from addon.core.lights import PointLight
+
+    scene, exact = _box_with_one_emitter()
+    r = solve(scene, paths=50_000, seed=5, direct_light=GATHERED)
+    np.testing.assert_allclose(scene.reflectivity * r.irradiance, r.reflected, rtol=1e-12, atol=1e-15)
+    position, intensity = np.array([0.3, 0.7, 0.5]), 2.0
+    box, rectangles, _ = _box(lights=[PointLight(position, np.full(3, intensity))])
+    truth = intensity * _solid_angles(position, rectangles) / box.patch_area
+    a = direct_irradiance(box, samples=64, seed=1)[:, 0] / truth
+    b = direct_irradiance(box, samples=64, seed=2)[:, 0] / truth
+    se = np.std(a - b, ddof=1) / math.sqrt(2) / math.sqrt(a.size)
+    assert abs(0.5 * (a + b).mean() - 1) < 5 * se / math.sqrt(2)
