@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
-from .core.diagnostics import escaping_light
+from .core.diagnostics import escaping_light, light_fates
 from .options import AUTOMATIC_PATCH_DIVISIONS
 
 #: A patch size that would make more patches than this is refused before meshing (memory and
@@ -319,7 +319,28 @@ def scene_and_notes(patches: Patches):
         for w in caught
         if issubclass(w.category, UserWarning)
     ]
-    return scene, notes + escaping_sources(patches, scene)
+    return scene, notes + escaping_sources(patches, scene) + light_notes(scene)
+
+
+def light_notes(scene) -> list:
+    """A note for each light none of whose light reaches the front of a face: inside a closed
+    object, or a sun or sky outside a closed room."""
+    notes = []
+    for light, (missed, back) in zip(scene.lights.lights, light_fates(scene)):
+        if missed + back < 0.999:  # some of it reaches the front of a face
+            continue
+        if type(light).__name__ in ("SunLight", "WorldLight"):
+            if back > 0:
+                notes.append(f"light '{light.name}': no light entered; it meets only the outside (the back) of "
+                             "the faces, as a sun or sky outside a closed room: the result is dark")
+            else:
+                notes.append(f"light '{light.name}': none of its light reaches the selection")
+        elif back >= ESCAPING_WARNING:
+            notes.append(f"light '{light.name}': {back:.0%} of its light meets the back of faces; it sits inside "
+                         "a closed object or behind faces")
+        else:
+            notes.append(f"light '{light.name}': none of its light reaches the front of a face")
+    return notes
 
 
 def escaping_sources(patches: Patches, scene) -> list:

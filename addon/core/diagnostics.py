@@ -1,8 +1,9 @@
-"""Checks that trace a few rays before a solve: emitting patches whose light leaves the scene."""
+"""Checks that trace a few rays before a solve: sources whose light leaves the scene or meets only back faces."""
 from __future__ import annotations
 
 import numpy as np
 
+from .rays import meets_front
 from .sampling import cosine_directions, points_on_patches
 
 # Rays per emitting patch, and at most this many in all (the emitters with most power first).
@@ -26,3 +27,31 @@ def escaping_light(scene, seed=0):
     directions = cosine_directions(g, patch, u[2], u[3])
     missed = scene.tracer.first_hit(origins, directions) < 0
     return emitting, missed.reshape(-1, RAYS_PER_EMITTER).mean(axis=1)
+
+
+RAYS_PER_LIGHT = 1024
+
+
+def light_fates(scene, seed=0):
+    """(L,2) for each light of the scene: the share of its rays that meet nothing, and the share
+    that meet the back of a face (a light inside a closed object, a sun or sky outside a closed
+    room: none of it reaches a front side)."""
+    lights = scene.lights
+    if not len(lights):
+        return np.zeros((0, 2))
+    g = scene.geometry
+    rng = np.random.default_rng(seed)
+    fates = []
+    for k in range(len(lights)):
+        first, last = lights.first[k], lights.first[k + 1]
+        power = lights.power[first:last].mean(axis=1)
+        rows = first + np.searchsorted(np.cumsum(power) / power.sum(), rng.random(RAYS_PER_LIGHT), side="right")
+        rows = np.minimum(rows, last - 1)
+        origins, directions = lights.emit(rows, rng.random((4, RAYS_PER_LIGHT), dtype=np.float32))
+        o = ((origins - g.centre[:, None]) / g.diagonal + g.ray_offset * directions).astype(np.float32)
+        d = directions.astype(np.float32)
+        hit, _, _, _, normal = g.tracer.first_hit_barycentric(np.ascontiguousarray(o.T), np.ascontiguousarray(d.T))
+        met = hit >= 0
+        back = met & ~meets_front(d, normal)
+        fates.append((float(np.mean(~met)), float(np.mean(back))))
+    return np.array(fates)

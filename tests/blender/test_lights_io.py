@@ -230,3 +230,21 @@ def test_light_and_indirect_outputs_beside_the_radiosity(blender):
     red = np.abs(ratio - [0.6, 0.1, 0.1]).max(axis=1) < 1e-4
     assert (white | red).all() and white.any() and red.any()
     assert 0 < indirect.mean() < light.mean()
+
+
+def test_lights_that_cannot_light_the_selection_are_named(blender):
+    """A lamp inside a closed box of its own, and a sun over a closed room: the estimate names
+    them (nothing of their light reaches the front of a face)."""
+    from addon import patches as patch_making
+
+    room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
+    shell_v, shell_f = box_arrays((0.4, 0.4, 0.4), (0.6, 0.6, 0.6), inward=False)
+    make_object("Shell", shell_v, shell_f, [principled("Grey", (0.5, 0.5, 0.5))]).select_set(True)
+    _lamp("POINT", "Trapped", location=(0.5, 0.5, 0.5), energy=10.0)
+    _lamp("SUN", "Sun", location=(0, 0, 3), energy=2.0)
+    objects, _ = scene_io.read_selection(blender)
+    made = patch_making.make_patches(objects, 0.25)
+    _, notes = patch_making.scene_and_notes(made)
+    assert any(n.startswith("light 'Trapped': 100% of its light meets the back of faces; it sits inside") for n in notes), notes
+    assert any(n.startswith("light 'Sun'") and "no light entered" in n for n in notes), notes
