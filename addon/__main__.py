@@ -43,7 +43,10 @@ def _parser():
     p.add_argument("--no-preview", action="store_true", help="skip the preview render")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     for option in options.SETTINGS:  # the panel's settings: same names, defaults and ranges
-        if isinstance(option, options.Flag):
+        if isinstance(option, options.Text):
+            p.add_argument(option.flag, dest=option.name, default=option.default, metavar="ADDRESS",
+                           help=option.description)
+        elif isinstance(option, options.Flag):
             p.add_argument(option.flag, dest=option.name, default=option.default, action=argparse.BooleanOptionalAction,
                            help=option.description)
         elif isinstance(option, options.Choice):

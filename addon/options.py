@@ -68,6 +68,18 @@ class Flag:
         return bool(value)
 
 
+@dataclass(frozen=True)
+class Text:
+    name: str
+    flag: str
+    default: str
+    label: str
+    description: str
+
+    def check(self, value):
+        return str(value).strip()
+
+
 ESTIMATOR = Choice("estimator", "--estimator", "finite", (
     ("finite", "Finite (Phi_T)", "The paper's finite estimator: constant power, a path survives a "
      "hit with the patch's reflectivity"),
@@ -120,8 +132,12 @@ INDIRECT_OUTPUT = Flag("indirect_output", "--indirect-output", False, "Indirect 
                        "Also write the light arriving after at least one bounce, without the surface's colour "
                        "('Radiosity Indirect')")
 
+CLUSTER = Text("cluster", "--cluster", "", "Cluster",
+               "A Dask scheduler's address (e.g. tcp://host:8786) to run the walks on its workers; empty: this "
+               "machine. Same seed, bitwise the same result")
+
 SETTINGS = (ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, EXIT_POINT, SAMPLING, STOP_RULE, OUTPUT, SEED,
-            TIME_LIMIT, THREADS, SCENE_OBJECTS, LIGHT_OUTPUT, INDIRECT_OUTPUT)
+            TIME_LIMIT, THREADS, SCENE_OBJECTS, LIGHT_OUTPUT, INDIRECT_OUTPUT, CLUSTER)
 
 # Patch size 0: the selection's largest extent over this.
 AUTOMATIC_PATCH_DIVISIONS = 20

@@ -45,6 +45,7 @@ def draw_settings(layout, settings):
     col.prop(settings, "seed")
     col.prop(settings, "time_limit")
     col.prop(settings, "threads")
+    layout.prop(settings, "cluster")
 
 
 def draw_estimate(layout, context, value, fresh):

@@ -32,6 +32,7 @@ class SolveSettings:
     output: str = options.OUTPUT.default
     light_output: bool = options.LIGHT_OUTPUT.default
     indirect_output: bool = options.INDIRECT_OUTPUT.default
+    cluster: str = options.CLUSTER.default  # a Dask scheduler address; empty: this machine's threads
 
 
 @dataclass
@@ -192,6 +193,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         should_stop=should_stop,
         max_seconds=settings.max_seconds or None,
         threads=settings.threads or None,
+        cluster=settings.cluster or None,
     )
     if result.seconds > 0 and result.rays:
         RAY_RATES[(patches.geometry_key, settings.estimator, settings.exit_point)] = result.rays_per_second

@@ -65,6 +65,8 @@ class RadiositySettings(bpy.types.PropertyGroup):
                                default=options.LIGHT_OUTPUT.default)
     indirect_output: BoolProperty(name=options.INDIRECT_OUTPUT.label, description=options.INDIRECT_OUTPUT.description,
                                   default=options.INDIRECT_OUTPUT.default)
+    cluster: StringProperty(name=options.CLUSTER.label, description=options.CLUSTER.description,
+                            default=options.CLUSTER.default)
     seed: _number(options.SEED)
     time_limit: _number(options.TIME_LIMIT, soft_max=3600.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE")
     threads: _number(options.THREADS)
@@ -104,6 +106,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
             output=self.output,
             light_output=bool(self.light_output),
             indirect_output=bool(self.indirect_output),
+            cluster=self.cluster.strip(),
         )
 
 

@@ -34,6 +34,7 @@ from .names import (
     STOP_TARGET,
     STOP_TIME_LIMIT,
 )
+from .cluster import ClusterRunner, WalkParameters
 from .runners import ThreadRunner
 from .speedups import Speedups
 from .tables import WalkTables
@@ -151,6 +152,7 @@ def solve(
     sampling=INDEPENDENT,
     speedups=None,
     direct_light=SHOT,
+    cluster=None,
 ):
     """Radiosity of ``scene`` by shooting random walks.
 
@@ -159,7 +161,8 @@ def solve(
     by ``paths`` if given, else 64 times the prediction). ``direct_light="gathered"`` (beyond the
     paper, ``first_shot``) gathers each patch's direct light by shadow rays and walks only its
     reflection; the paper's formulas do not predict its error, so with ``target_mse`` it always
-    stops on the measured error. ``sampling="stratified"`` (beyond
+    stops on the measured error. ``cluster`` (a ``dask.distributed.Client`` or a scheduler
+    address) runs the chunks on a Dask cluster instead of threads: bitwise the same result. ``sampling="stratified"`` (beyond
     the paper) allots each chunk's paths to sources in proportion to power and draws the first
     ray from a randomly shifted low-discrepancy set: same expectation, usually less noise;
     the predicted path counts are derived for the paper's plain ``"independent"`` sampling.
@@ -199,7 +202,13 @@ def solve(
     stopped = None
     pending = deque()
     next_chunk = 0
-    runner = ThreadRunner(threads)
+    if cluster is None:
+        runner = ThreadRunner(threads)
+    else:
+        gather = tuple(tables.gathering.samples.tolist()) if gathered else None
+        parameters = WalkParameters(estimator, float(threshold), exit_point, sampling, tables.speedups, gather)
+        runner = ClusterRunner(cluster, scene, parameters)
+        threads = runner.threads
     try:
         runner.start(tables, int(seed))
         while stopped is None:

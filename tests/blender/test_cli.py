@@ -182,7 +182,11 @@ def test_cli_names_and_defaults_are_the_panels():
 
         props = RadiositySettings.bl_rna.properties
         for option in options.SETTINGS:
-            assert getattr(defaults, option.name) == pytest.approx(props[option.name].default), option.name
+            default = props[option.name].default
+            if isinstance(option, options.Number):
+                assert getattr(defaults, option.name) == pytest.approx(default), option.name
+            else:
+                assert getattr(defaults, option.name) == default, option.name
             if isinstance(option, options.Choice):
                 assert [i.identifier for i in props[option.name].enum_items] == [i for i, _, _ in option.items]
     finally:

@@ -1,0 +1,108 @@
+"""solve(..., cluster=...) on a Dask LocalCluster of 2 worker processes: bitwise the local
+result, surviving a killed worker, with clear errors for an unreachable scheduler and a missing
+Dask, and cancel keeping the complete chunks (issue 25)."""
+import os
+import sys
+import time
+
+import numpy as np
+import pytest
+from boxes import box_scene
+
+from addon.core import GATHERED, solve
+from addon.core.names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE
+from addon.core.cluster import ClusterError
+from addon.core.solver import chunk_paths_for
+
+distributed = pytest.importorskip("distributed", reason="Dask's distributed is in requirements.txt: CI installs it")
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+R_FACES = [(0.7, 0.7, 0.7), (0.5, 0.5, 0.5), (0.8, 0.2, 0.2), (0.2, 0.8, 0.2), (0.6, 0.6, 0.6), (0.4, 0.4, 0.9)]
+E_FACES = [(0, 0, 0), (1, 1, 1), (0, 0, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0)]
+
+
+@pytest.fixture(scope="module")
+def client():
+    # The workers are new processes: they find addon.core through PYTHONPATH.
+    os.environ["PYTHONPATH"] = os.pathsep.join([ROOT, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=40)
+    c = distributed.Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return box_scene(R_FACES, E_FACES, n=4)[0]
+
+
+@pytest.mark.parametrize("estimator", [FINITE, BIASED_INFINITE])
+@pytest.mark.parametrize("exit_point", [EXIT_RANDOM, EXIT_HIT])
+def test_a_cluster_solve_is_bitwise_the_local_one(client, scene, estimator, exit_point):
+    local = solve(scene, estimator, paths=60_000, seed=7, exit_point=exit_point, threads=2)
+    remote = solve(scene, estimator, paths=60_000, seed=7, exit_point=exit_point, cluster=client)
+    assert np.array_equal(local.radiosity, remote.radiosity)
+    assert np.array_equal(local.reflected_variance, remote.reflected_variance, equal_nan=True)
+    assert (local.paths, local.rays, local.chunks) == (remote.paths, remote.rays, remote.chunks)
+    for key in local.energy:
+        assert np.array_equal(local.energy[key], remote.energy[key])
+
+
+def test_the_gathered_first_shot_and_the_measured_stop_rule_on_a_cluster(client, scene):
+    local = solve(scene, target_mse=1e-5, seed=3, direct_light=GATHERED, threads=1)
+    remote = solve(scene, target_mse=1e-5, seed=3, direct_light=GATHERED, cluster=client)
+    assert np.array_equal(local.radiosity, remote.radiosity) and local.stopped == remote.stopped == "target"
+
+
+def test_a_killed_worker_loses_no_paths(client, scene):
+    """A worker process killed mid-solve: its tasks run again on the other worker (Dask retries
+    the tasks of lost workers), and the result is still bitwise the local one."""
+    local = solve(scene, paths=400_000, seed=11, threads=1)
+    killed = []
+
+    def kill_one(fraction, stats):
+        if not killed and stats["paths"] > 0:
+            workers = client.run(os.getpid)
+            address, pid = sorted(workers.items())[0]
+            os.kill(pid, 9)
+            killed.append(address)
+
+    remote = solve(scene, paths=400_000, seed=11, cluster=client, progress=kill_one)
+    assert killed
+    assert np.array_equal(local.radiosity, remote.radiosity) and remote.paths == local.paths
+    client.wait_for_workers(2, timeout=60)  # the nanny restarts it for the next tests
+
+
+def test_cancel_keeps_the_complete_chunks_and_stops_the_tasks(client, scene):
+    calls = []
+
+    def stop_after_three():
+        calls.append(1)
+        return len(calls) > 3
+
+    r = solve(scene, paths=2_000_000, seed=5, cluster=client, should_stop=stop_after_three)
+    assert r.stopped == "cancelled" and 0 < r.paths < 2_000_000
+    chunk = chunk_paths_for(r.prediction.expected_path_length, 2_000_000)
+    assert r.paths == r.chunks * chunk  # whole chunks only, in order from the first
+    assert np.isfinite(r.radiosity).all()
+    deadline = time.time() + 30
+    while any(client.processing().values()) and time.time() < deadline:
+        time.sleep(0.1)
+    assert not any(client.processing().values())  # the remaining tasks were cancelled
+
+
+def test_an_unreachable_scheduler_is_one_clear_error_before_tracing(scene):
+    started = time.time()
+    with pytest.raises(ClusterError, match="cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'"):
+        solve(scene, paths=1000, cluster="tcp://127.0.0.1:9")
+    assert time.time() - started < 30
+
+
+def test_without_dask_the_cluster_option_says_how_to_install_it(scene, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
+    with pytest.raises(ClusterError, match="pip install"):
+        solve(scene, paths=1000, cluster="tcp://127.0.0.1:8786")
+    # and everything else works without it
+    assert solve(scene, paths=1000, threads=1).paths == 1000
