@@ -49,31 +49,41 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true")
     args = p.parse_args(argv)
     os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    import dask
+
+    # Dask's nannies start workers with MALLOC_TRIM_THRESHOLD_=65536, which slows the walks by a
+    # quarter (README, "On a cluster"): the workers here start without it, as the README advises.
+    dask.config.set({"distributed.nanny.pre-spawn-environ": {}})
     rows, fixed = [], []
-    clusters = {n: distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                            dashboard_address=None, silence_logs=40) for n in (1, 2)}
-    clients = {n: distributed.Client(c) for n, c in clusters.items()}
-    try:
-        for name, (scene, paths) in scenes(args.quick).items():
-            # the fixed cost: a one-chunk solve (the first on each cluster: the scene goes there)
-            _, local_small = timed(scene, 128, threads=2)
-            _, cluster_small = timed(scene, 128, cluster=clients[2])
-            fixed.append((name, local_small, cluster_small))
-            reference = None
-            for label, options in (("1 thread", {"threads": 1}), ("2 threads", {"threads": 2}),
-                                   ("1 worker", {"cluster": clients[1]}), ("2 workers", {"cluster": clients[2]})):
-                r, seconds = timed(scene, paths, **options)
-                if reference is None:
-                    reference = r.radiosity
-                same = bool(np.array_equal(reference, r.radiosity))
+    all_scenes = scenes(args.quick)
+    references = {}
+    for name, (scene, paths) in all_scenes.items():
+        for label, threads in (("1 thread", 1), ("2 threads", 2)):
+            r, seconds = timed(scene, paths, threads=threads)
+            references.setdefault(name, r.radiosity)
+            rows.append((name, paths, label, seconds, r.paths / seconds, r.rays / seconds,
+                         bool(np.array_equal(references[name], r.radiosity))))
+            print(f"{name:10s} {label:9s} {seconds:8.1f} s  {r.paths / seconds / 1e6:6.2f} Mpaths/s", flush=True)
+    for workers in (1, 2):  # one cluster at a time
+        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                           dashboard_address=None, silence_logs=40)
+        client = distributed.Client(cluster)
+        try:
+            for name, (scene, paths) in all_scenes.items():
+                if workers == 2:  # the fixed cost: a one-chunk solve, the scene's first on the cluster
+                    _, local_small = timed(scene, 128, threads=2)
+                    _, cluster_small = timed(scene, 128, cluster=client)
+                    fixed.append((name, local_small, cluster_small))
+                label = f"{workers} worker{'s' if workers > 1 else ''}"
+                r, seconds = timed(scene, paths, cluster=client)
+                same = bool(np.array_equal(references[name], r.radiosity))
                 rows.append((name, paths, label, seconds, r.paths / seconds, r.rays / seconds, same))
                 print(f"{name:10s} {label:9s} {seconds:8.1f} s  {r.paths / seconds / 1e6:6.2f} Mpaths/s  bitwise {same}",
                       flush=True)
-    finally:
-        for c in clients.values():
-            c.close()
-        for c in clusters.values():
-            c.close()
+        finally:
+            client.close()
+            cluster.close()
+    rows.sort(key=lambda r: (list(all_scenes).index(r[0]), ["1 thread", "2 threads", "1 worker", "2 workers"].index(r[2])))
     write(rows, fixed, args.quick)
 
 

@@ -14,6 +14,7 @@ from addon.core.names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE
 from addon.core.cluster import ClusterError
 from addon.core.solver import chunk_paths_for
 
+dask = pytest.importorskip("dask", reason="Dask is in requirements.txt: CI installs it")
 distributed = pytest.importorskip("distributed", reason="Dask's distributed is in requirements.txt: CI installs it")
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -25,6 +26,7 @@ E_FACES = [(0, 0, 0), (1, 1, 1), (0, 0, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0)]
 def client():
     # The workers are new processes: they find addon.core through PYTHONPATH.
     os.environ["PYTHONPATH"] = os.pathsep.join([ROOT, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    dask.config.set({"distributed.nanny.pre-spawn-environ": {}})  # (README: workers without Dask's malloc trim)
     cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                        silence_logs=40)
     c = distributed.Client(cluster)
@@ -106,3 +108,22 @@ def test_without_dask_the_cluster_option_says_how_to_install_it(scene, monkeypat
         solve(scene, paths=1000, cluster="tcp://127.0.0.1:8786")
     # and everything else works without it
     assert solve(scene, paths=1000, threads=1).paths == 1000
+
+
+def _worker_geometries():
+    from addon.core import cluster
+
+    return {key: id(geometry) for key, geometry in cluster._worker_geometries.items()}
+
+
+def test_workers_keep_the_geometry_and_its_embree_scene_across_solves(client, scene):
+    """A second solve of the same geometry with other materials reuses each worker's geometry
+    (with its Embree scene): the same objects, not rebuilt."""
+    solve(scene, paths=20_000, seed=1, cluster=client)
+    before = client.run(_worker_geometries)
+    other = scene.with_materials(scene.reflectivity * 0.5, scene.emission)
+    solve(other, paths=20_000, seed=1, cluster=client)
+    after = client.run(_worker_geometries)
+    for address, geometries in before.items():
+        for key, identity in geometries.items():
+            assert after[address][key] == identity
