@@ -224,6 +224,16 @@ def test_cli_warns_before_a_slow_run(tmp_path):
     assert "patch size 0.01" in warning and "0.3% error target" in warning
 
 
+def test_an_unreachable_cluster_is_one_line_and_nothing_is_written(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "addon", "--scene", "cornell", "--cluster", "tcp://127.0.0.1:9",
+                           "--no-preview", "-q", "-o", str(tmp_path / "c.blend")], cwd=str(tmp_path),
+                          capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 1
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in errors[0], proc.stderr
+    assert not (tmp_path / "c.blend").exists()
+
+
 def test_run_sh_takes_paths_from_the_callers_directory(tmp_path):
     """tools/run.sh from another directory: -o and --open are the caller's paths."""
     elsewhere = tmp_path / "work"
