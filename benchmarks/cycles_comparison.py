@@ -170,6 +170,52 @@ def rms_over_mean_reflected(B, ref):
 
 # --- Cycles ----------------------------------------------------------------------------------
 
+def configure_bake(scene, threads=None):
+    """Cycles on the CPU for an unbiased COMBINED bake into image blocks: 64 bounces, no
+    clamping, no adaptive sampling, no denoising, no margin. Returns scene.cycles."""
+    scene.render.engine = "CYCLES"
+    if threads:
+        scene.render.threads_mode = "FIXED"
+        scene.render.threads = threads
+    c = scene.cycles
+    c.device = "CPU"
+    c.max_bounces = c.diffuse_bounces = 64
+    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+    c.use_adaptive_sampling = False
+    c.use_denoising = False
+    bake = scene.render.bake
+    bake.target, bake.margin, bake.use_clear = "IMAGE_TEXTURES", 0, True
+    return c
+
+
+def block_mesh(name, corners, block, columns):
+    """A mesh of quads ``corners`` (P,4,3), each UV-mapped onto its own block x block pixels of a
+    new float image (``columns`` blocks a row): (mesh, image, rows)."""
+    import bpy
+
+    P = len(corners)
+    rows = math.ceil(P / columns)
+    width, height = columns * block, rows * block
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(np.asarray(corners).reshape(-1, 3).tolist(), [], np.arange(4 * P).reshape(P, 4).tolist())
+    bx, by = (np.arange(P) % columns) * block, (np.arange(P) // columns) * block
+    uv = np.stack([np.stack(c, axis=1) for c in ((bx, by), (bx + block, by), (bx + block, by + block), (bx, by + block))], axis=1)
+    mesh.uv_layers.new(name="Patches").data.foreach_set("uv", (uv / [width, height]).reshape(-1).astype(np.float32))
+    image = bpy.data.images.new("Bake", width, height, float_buffer=True, alpha=False)
+    return mesh, image, rows
+
+
+def selected_object(mesh):
+    """``mesh`` as the scene's only selected, active object."""
+    import bpy
+
+    obj = bpy.data.objects.new(mesh.name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    return obj
+
+
 class CyclesBaker:
     """The room as one Blender mesh of 600 quads, UV-mapped so each patch owns a pixel block."""
 
@@ -182,36 +228,14 @@ class CyclesBaker:
         P = origin.shape[0]
         self.block, self.rows = block, math.ceil(P / COLUMNS)
         self.width, self.height = COLUMNS * block, self.rows * block
-        mesh = bpy.data.meshes.new("Room")
-        mesh.from_pydata(quads(origin, u, v).reshape(-1, 3).tolist(), [], np.arange(4 * P).reshape(P, 4).tolist())
-        bx = (np.arange(P) % COLUMNS) * block
-        by = (np.arange(P) // COLUMNS) * block
-        uv = np.stack([np.stack(c, axis=1) for c in ((bx, by), (bx + block, by), (bx + block, by + block), (bx, by + block))], axis=1)
-        uv = uv.astype(np.float64) / [self.width, self.height]
-        mesh.uv_layers.new(name="Patches").data.foreach_set("uv", uv.reshape(-1).astype(np.float32))
-        self.image = bpy.data.images.new("Bake", self.width, self.height, float_buffer=True, alpha=False)
+        mesh, self.image, _ = block_mesh("Room", quads(origin, u, v), block, COLUMNS)
         mesh.materials.append(self._material("Wall", emit=False))
         mesh.materials.append(self._material("Light", emit=True))
         mesh.polygons.foreach_set("material_index", light.astype(np.int32))
         mesh.update()
-        obj = bpy.data.objects.new("Room", mesh)
+        selected_object(mesh)
         scene = bpy.context.scene
-        scene.collection.objects.link(obj)
-        obj.select_set(True)
-        bpy.context.view_layer.objects.active = obj
-        scene.render.engine = "CYCLES"
-        scene.render.threads_mode = "FIXED"
-        scene.render.threads = threads
-        c = scene.cycles
-        c.device = "CPU"
-        c.max_bounces = c.diffuse_bounces = 64
-        c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-        c.use_adaptive_sampling = False
-        c.use_denoising = False
-        bake = scene.render.bake
-        bake.target = "IMAGE_TEXTURES"
-        bake.margin = 0
-        bake.use_clear = True
+        c = configure_bake(scene, threads)
         self.scene = scene
         self.patches = P
         self.settings = {

@@ -27,6 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 RESULTS = ROOT / "benchmarks" / "results"
+
+from benchmarks.cycles_comparison import block_mesh, configure_bake, selected_object  # noqa: E402
 BLOCK = 12
 COLUMNS = 16
 
@@ -77,14 +79,7 @@ def build(kind):
     addon.register()
     corners, colours = quads()
     P = len(corners)
-    mesh = bpy.data.meshes.new("Scene")
-    mesh.from_pydata(corners.reshape(-1, 3).tolist(), [], np.arange(4 * P).reshape(P, 4).tolist())
-    rows = math.ceil(P / COLUMNS)
-    width, height = COLUMNS * BLOCK, rows * BLOCK
-    bx, by = (np.arange(P) % COLUMNS) * BLOCK, (np.arange(P) // COLUMNS) * BLOCK
-    uv = np.stack([np.stack(c, axis=1) for c in ((bx, by), (bx + BLOCK, by), (bx + BLOCK, by + BLOCK), (bx, by + BLOCK))], axis=1)
-    mesh.uv_layers.new(name="Patches").data.foreach_set("uv", (uv / [width, height]).reshape(-1).astype(np.float32))
-    image = bpy.data.images.new("Bake", width, height, float_buffer=True, alpha=False)
+    mesh, image, rows = block_mesh("Scene", corners, BLOCK, COLUMNS)
     palette = {}
     index = np.zeros(P, np.int32)
     for p, colour in enumerate(map(tuple, colours)):
@@ -94,11 +89,8 @@ def build(kind):
         index[p] = palette[colour]
     mesh.polygons.foreach_set("material_index", index)
     mesh.update()
-    obj = bpy.data.objects.new("Scene", mesh)
+    obj = selected_object(mesh)
     scene = bpy.context.scene
-    scene.collection.objects.link(obj)
-    obj.select_set(True)
-    bpy.context.view_layer.objects.active = obj
     kind_type, settings, location, rotation = KINDS[kind]
     if kind_type == "WORLD":
         world = bpy.data.worlds.new("Sky")
@@ -115,15 +107,7 @@ def build(kind):
         lamp = bpy.data.objects.new(kind, data)
         lamp.location, lamp.rotation_euler = location, rotation
         scene.collection.objects.link(lamp)
-    scene.render.engine = "CYCLES"
-    c = scene.cycles
-    c.device = "CPU"
-    c.max_bounces = c.diffuse_bounces = 64
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.use_adaptive_sampling = False
-    c.use_denoising = False
-    bake = scene.render.bake
-    bake.target, bake.margin, bake.use_clear = "IMAGE_TEXTURES", 0, True
+    configure_bake(scene)
     return obj, image, rows
 
 

@@ -127,3 +127,13 @@ def test_workers_keep_the_geometry_and_its_embree_scene_across_solves(client, sc
     for address, geometries in before.items():
         for key, identity in geometries.items():
             assert after[address][key] == identity
+
+
+def test_the_time_limit_stops_the_cluster_and_keeps_whole_chunks(client, scene):
+    r = solve(scene, paths=50_000_000, seed=9, cluster=client, max_seconds=1.5)
+    assert r.stopped == "time_limit" and 0 < r.paths < 50_000_000
+    assert r.paths == r.chunks * chunk_paths_for(r.prediction.expected_path_length, 50_000_000)
+    deadline = time.time() + 30
+    while any(client.processing().values()) and time.time() < deadline:
+        time.sleep(0.1)
+    assert not any(client.processing().values())
