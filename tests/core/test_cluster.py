@@ -137,3 +137,15 @@ def test_the_time_limit_stops_the_cluster_and_keeps_whole_chunks(client, scene):
     while any(client.processing().values()) and time.time() < deadline:
         time.sleep(0.1)
     assert not any(client.processing().values())
+
+
+def test_workers_without_the_core_are_one_clear_error_before_tracing(client, scene, monkeypatch):
+    """Each worker is asked first whether it can import embreex and addon.core; one that cannot
+    stops the solve before any task (simulated: the answer of a worker without embreex)."""
+    answers = {"tcp://10.0.0.5:4000": "ModuleNotFoundError: No module named 'embreex'", "tcp://10.0.0.6:4000": ""}
+    monkeypatch.setattr(client, "run", lambda function: answers)
+    submitted = []
+    monkeypatch.setattr(client, "submit", lambda *a, **k: submitted.append(a))
+    with pytest.raises(ClusterError, match="1 of the cluster's 2 workers cannot run the walks.*embreex"):
+        solve(scene, paths=1000, cluster=client)
+    assert not submitted
