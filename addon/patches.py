@@ -15,6 +15,7 @@ import numpy as np
 
 from .core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
 from .core.diagnostics import escaping_light, light_fates
+from .core.textures import patch_attribute_average, patch_texture_average
 from .options import AUTOMATIC_PATCH_DIVISIONS
 
 #: A patch size that would make more patches than this is refused before meshing (memory and
@@ -51,6 +52,9 @@ class ObjectArrays:
     face_slot: np.ndarray | None = None  # (F,) material slot of each face
     slot_names: tuple = ()  # material name of each slot
     receives: bool = True  # selected: gets results; else an object of the rest of the scene (blocks, reflects)
+    triangle_uv: np.ndarray | None = None  # (T,3,2) UVs of the loop triangles' corners (textured objects)
+    slot_textures: tuple = ()  # per slot: (pixels (H,W,3) linear, affine (2,3), UV map) or None
+    slot_colours: tuple = ()   # per slot: (T,3,3) colour attribute at the loop triangles' corners, or None
 
 
 @dataclass
@@ -190,6 +194,8 @@ def drop_zero_area_faces(objects):
             triangle_face=new_index[o.triangle_face[keep_triangle]],
             face_reflectivity=o.face_reflectivity[keep],
             face_emission=o.face_emission[keep],
+            triangle_uv=None if o.triangle_uv is None else o.triangle_uv[keep_triangle],
+            slot_colours=tuple(None if c is None else c[keep_triangle] for c in o.slot_colours),
             face_slot=None if o.face_slot is None else o.face_slot[keep],
         ))
     return kept, notes
@@ -288,12 +294,33 @@ def _make_patches(objects, patch_size) -> Patches:
 
 def _with_materials(objects, meshes, combined, key) -> Patches:
     reflectivity = np.concatenate(
-        [o.face_reflectivity[m.patch_face] for o, m in zip(objects, meshes)]
+        [textured_reflectivity(o, m) for o, m in zip(objects, meshes)]
     ).reshape(-1, 3)
     emission = np.concatenate(
         [o.face_emission[m.patch_face] for o, m in zip(objects, meshes)]
     ).reshape(-1, 3)
     return Patches(list(objects), meshes, combined, reflectivity, emission, key)
+
+
+def textured_reflectivity(o, mesh):
+    """(P,3) each patch's reflectivity: its face's, or the image texture averaged over the patch."""
+    reflectivity = o.face_reflectivity[mesh.patch_face]
+    if (o.triangle_uv is None and not o.slot_colours) or o.face_slot is None:
+        return reflectivity
+    corners = o.vertices[o.triangles]
+    for slot, colours in enumerate(o.slot_colours):
+        patches = np.flatnonzero(o.face_slot[mesh.patch_face] == slot) if colours is not None else ()
+        if len(patches):
+            reflectivity[patches] = patch_attribute_average(mesh, patches, corners, colours, o.triangle_face)
+    for slot, texture in enumerate(o.slot_textures if o.triangle_uv is not None else ()):
+        if texture is None:
+            continue
+        patches = np.flatnonzero(o.face_slot[mesh.patch_face] == slot)
+        if patches.size:
+            pixels, affine, _ = texture
+            reflectivity[patches] = patch_texture_average(mesh, patches, corners, o.triangle_uv, o.triangle_face,
+                                                          pixels, affine)
+    return reflectivity
 
 
 def objects_of_patches(patches: Patches, indices) -> str:

@@ -96,6 +96,77 @@ def _linked_colour(socket, node, name, notes, what):
     return default
 
 
+def image_pixels(image):
+    """(H, W, 3) float32 linear pixels of an image, row 0 at the bottom (Blender's order), or
+    None if it has none (a missing file)."""
+    try:
+        width, height = image.size[:]
+        channels = image.channels
+        if width * height == 0 or channels < 1:
+            return None
+        pixels = np.empty(width * height * channels, dtype=np.float32)
+        image.pixels.foreach_get(pixels)
+    except Exception:  # noqa: BLE001 - unreadable image: the caller falls back and says so
+        return None
+    pixels = pixels.reshape(height, width, channels)
+    rgb = pixels[..., :3] if channels >= 3 else np.repeat(pixels[..., :1], 3, axis=2)
+    if not image.is_float and image.colorspace_settings.name == "sRGB":
+        rgb = _srgb_to_linear(rgb).astype(np.float32)
+    return np.ascontiguousarray(rgb, dtype=np.float32)
+
+
+def texture_of(socket):
+    """(pixels, affine (2,3), UV map name or '') of an image texture driving ``socket`` through
+    a UV map and at most one affine Mapping node, or None where it is anything else."""
+    if not socket.is_linked:
+        return None
+    node = socket.links[0].from_node
+    while node.bl_idname == "NodeReroute" and node.inputs[0].is_linked:
+        node = node.inputs[0].links[0].from_node
+    if node.bl_idname != "ShaderNodeTexImage" or node.image is None or node.projection != "FLAT":
+        return None
+    affine, uv_name = np.eye(2, 3), ""
+    vector = node.inputs["Vector"]
+    if vector.is_linked:
+        link = vector.links[0]
+        if link.from_node.bl_idname == "ShaderNodeMapping":
+            affine = _mapping_affine(link.from_node)
+            if affine is None or not link.from_node.inputs["Vector"].is_linked:
+                return None
+            link = link.from_node.inputs["Vector"].links[0]
+        if link.from_node.bl_idname == "ShaderNodeUVMap":
+            uv_name = link.from_node.uv_map
+        elif not (link.from_node.bl_idname == "ShaderNodeTexCoord" and link.from_socket.name == "UV"):
+            return None
+    pixels = image_pixels(node.image)
+    if pixels is None:
+        return None
+    return pixels, affine, uv_name
+
+
+def _mapping_affine(node):
+    """The 2D affine map of a Mapping node (Point or Texture type, rotation about Z only, no
+    linked inputs), or None."""
+    if node.vector_type not in ("POINT", "TEXTURE"):
+        return None
+    inputs = {name: node.inputs[name] for name in ("Location", "Rotation", "Scale")}
+    if any(socket.is_linked for socket in inputs.values()):
+        return None
+    location = np.array(inputs["Location"].default_value[:2], dtype=np.float64)
+    rx, ry, rz = inputs["Rotation"].default_value[:3]
+    if abs(rx) > 1e-9 or abs(ry) > 1e-9:
+        return None
+    scale = np.array(inputs["Scale"].default_value[:2], dtype=np.float64)
+    rotation = np.array([[np.cos(rz), -np.sin(rz)], [np.sin(rz), np.cos(rz)]])
+    linear = rotation @ np.diag(scale)
+    if node.vector_type == "TEXTURE":  # the inverse of Point
+        if abs(np.linalg.det(linear)) < 1e-12:
+            return None
+        inverse = np.linalg.inv(linear)
+        return np.column_stack([inverse, -inverse @ location])
+    return np.column_stack([linear, location])
+
+
 def _socket_colour(node, name, notes, what):
     socket = node.inputs.get(name)
     if socket is None:
@@ -188,16 +259,56 @@ def material_colours(material):
     return reflectivity, emission, notes
 
 
+def material_attribute(material):
+    """The name of the colour attribute driving a material's base colour ('' for the active
+    one), or None."""
+    if material is None or material.node_tree is None:
+        return None
+    node = _surface_shader(material.node_tree)
+    names = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
+    if node is None or node.bl_idname not in names or not node.inputs[names[node.bl_idname]].is_linked:
+        return None
+    link = node.inputs[names[node.bl_idname]].links[0]
+    source = link.from_node
+    if source.bl_idname == "ShaderNodeVertexColor" and link.from_socket.name == "Color":
+        return source.layer_name
+    if source.bl_idname == "ShaderNodeAttribute" and source.attribute_type == "GEOMETRY" \
+            and link.from_socket.name == "Color":
+        return source.attribute_name
+    return None
+
+
+def material_texture(material):
+    """The image texture of a material's base colour, read per patch (``texture_of``), or None."""
+    if material is None or material.node_tree is None:
+        return None
+    if bpy.app.version < (5, 0, 0) and not material.use_nodes:
+        return None
+    node = _surface_shader(material.node_tree)
+    names = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
+    if node is None or node.bl_idname not in names:
+        return None
+    return texture_of(node.inputs[names[node.bl_idname]])
+
+
 def _slot_tables(obj, notes):
-    """Reflectivity, emission and material name of each material slot (at least one row)."""
+    """Reflectivity, emission, material name and base-colour texture (or None) of each material
+    slot (at least one row)."""
     materials = [slot.material for slot in obj.material_slots] or [None]
     R = np.empty((len(materials), 3))
     E = np.empty((len(materials), 3))
+    textures, attributes = [], []
     for k, material in enumerate(materials):
         R[k], E[k], more = material_colours(material)
+        texture = material_texture(material)
+        attribute = material_attribute(material)
+        if texture is not None or attribute is not None:  # read per patch: the average's note is moot
+            more = [n for n in more if not (("comes from image" in n or "is driven by" in n) and "'Emission" not in n)]
+        textures.append(texture)
+        attributes.append(attribute)
         notes.extend(more)
     names = tuple("(no material)" if m is None else m.name for m in materials)
-    return R, E, names
+    return R, E, names, tuple(textures), tuple(attributes)
 
 
 # ---------------------------------------------------------------------------
@@ -286,7 +397,11 @@ def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays |
         T = len(mesh.loop_triangles)
         triangles = _get(mesh.loop_triangles, "vertices", T, np.int32, 3).astype(np.int64)
         triangle_face = _get(mesh.loop_triangles, "polygon_index", T, np.int32).astype(np.int64)
-        R_slots, E_slots, slot_names = _slot_tables(evaluated, notes)
+        R_slots, E_slots, slot_names, textures, attributes = _slot_tables(evaluated, notes)
+        triangle_uv = None
+        if any(t is not None for t in textures):
+            triangle_uv, textures = _triangle_uv(mesh, T, textures, name, notes)
+        slot_colours = _attribute_colours(mesh, T, triangles, attributes, name, notes)
     finally:
         evaluated.to_mesh_clear()
     M = np.array(matrix_world, dtype=np.float64)
@@ -294,6 +409,9 @@ def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays |
     if np.linalg.det(M[:3, :3]) < 0:  # negative scale: keep normals outward
         corner_verts = meshing.reverse_faces(face_sizes, corner_verts)
         triangles = triangles[:, ::-1].copy()
+        if triangle_uv is not None:
+            triangle_uv = triangle_uv[:, ::-1].copy()
+        slot_colours = tuple(None if c is None else c[:, ::-1].copy() for c in slot_colours)
     slot = np.clip(material_index, 0, len(R_slots) - 1)
     return ObjectArrays(
         name=name,
@@ -307,7 +425,60 @@ def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays |
         triangle_face=triangle_face,
         face_reflectivity=R_slots[slot],
         face_emission=E_slots[slot],
+        triangle_uv=triangle_uv,
+        slot_textures=textures if triangle_uv is not None else (),
+        slot_colours=slot_colours if any(c is not None for c in slot_colours) else (),
     )
+
+
+def _attribute_colours(mesh, T, triangles, attributes, name, notes):
+    """Per slot, (T,3,3) linear colours of the colour attribute its base colour reads, at the
+    loop triangles' corners; None for slots without one (or whose attribute is missing, said so)."""
+    out = []
+    loops = None
+    for attribute in attributes:
+        if attribute is None:
+            out.append(None)
+            continue
+        layer = mesh.color_attributes.get(attribute) if attribute else mesh.color_attributes.active_color
+        if layer is None or layer.domain not in ("CORNER", "POINT"):
+            notes.append(f"'{name}': colour attribute '{attribute}' not found (or not on corners or points); "
+                         "the base colour's own value was used")
+            out.append(None)
+            continue
+        values = np.empty(len(layer.data) * 4, dtype=np.float32)
+        layer.data.foreach_get("color", values)  # (scene linear, for byte colours too)
+        rgb = values.reshape(-1, 4)[:, :3].astype(np.float64)
+        if layer.domain == "CORNER":
+            if loops is None:
+                loops = _get(mesh.loop_triangles, "loops", T, np.int32, 3).astype(np.int64)
+            out.append(rgb[loops])
+        else:
+            out.append(rgb[triangles])
+    return tuple(out)
+
+
+def _triangle_uv(mesh, T, textures, name, notes):
+    """((T,3,2) UVs of the loop triangles' corners, the textures kept): one UV map, the one the
+    textures name (or the render map); textures naming another are averaged instead, said so."""
+    wanted = {t[2] for t in textures if t is not None}
+    layer_name = next(iter(wanted)) if len(wanted) == 1 else ""
+    layer = mesh.uv_layers.get(layer_name) if layer_name else None
+    layer = layer or getattr(mesh.uv_layers, "active_render", None) or mesh.uv_layers.active
+    if layer is None:
+        notes.append(f"'{name}' has no UV map: its image textures were averaged over the whole image")
+        return None, ()
+    loops = len(mesh.loops)
+    uv = np.empty(loops * 2, dtype=np.float32)
+    layer.uv.foreach_get("vector", uv)
+    triangle_loops = _get(mesh.loop_triangles, "loops", T, np.int32, 3).astype(np.int64)
+    kept = []
+    for t in textures:
+        if t is not None and t[2] and t[2] != layer.name:
+            notes.append(f"'{name}': a texture reads UV map '{t[2]}' beside '{layer.name}'; it was averaged")
+            t = None
+        kept.append(t)
+    return uv.reshape(-1, 2).astype(np.float64)[triangle_loops], tuple(kept)
 
 
 def _has_instances(evaluated):
@@ -414,6 +585,7 @@ def read_selection(context):
                 "never lets a random walk end in a closed room (and above 1 it creates light). "
                 f"Lower the base colour below 1, or turn on 'Clamp bright colours' to use {MAX_REFLECTIVITY}"
             )
+        o.slot_textures = _checked_textures(o, clamp, notes)
         over = (o.face_reflectivity > MAX_REFLECTIVITY).any(axis=1)
         if over.any() and clamp:
             notes.append(f"'{o.name}': base colours of material {_materials_where(o, over)} above "
@@ -434,6 +606,38 @@ def read_selection(context):
         )
     # unique notes, in order
     return Selection(objects, lights), list(dict.fromkeys(notes))
+
+
+def _checked_textures(o, clamp, notes):
+    """The object's textures with the base colour's rules: finite and not negative, below 1
+    unless 'Clamp bright colours' lowers them to MAX_REFLECTIVITY (said so)."""
+    for slot, colours in enumerate(o.slot_colours):
+        if colours is not None:
+            where = f"'{o.name}': the colour attribute of material '{o.slot_names[slot]}'"
+            if not np.isfinite(colours).all() or (colours < 0).any():
+                raise SceneError(f"{where} has colours that are negative or not finite")
+            if colours.max() >= 1 and not clamp:
+                raise SceneError(f"{where} has colours of {float(colours.max()):.3g}: a reflectivity needs to stay "
+                                 f"below 1. Darken them, or turn on 'Clamp bright colours' to use {MAX_REFLECTIVITY}")
+    if clamp:
+        o.slot_colours = tuple(None if c is None else np.minimum(c, MAX_REFLECTIVITY) for c in o.slot_colours)
+    checked = []
+    for slot, texture in enumerate(o.slot_textures):
+        if texture is not None:
+            pixels, affine, uv = texture
+            where = f"'{o.name}': the image texture of material '{o.slot_names[slot]}'"
+            if not np.isfinite(pixels).all() or (pixels < 0).any():
+                raise SceneError(f"{where} has pixels that are negative or not finite")
+            if pixels.max() >= 1:
+                if not clamp:
+                    raise SceneError(f"{where} has pixels of {float(pixels.max()):.3g}: a reflectivity needs to "
+                                     "stay below 1. Darken the image, or turn on 'Clamp bright colours' to use "
+                                     f"{MAX_REFLECTIVITY}")
+                notes.append(f"{where}: pixels above {MAX_REFLECTIVITY} were clamped ('Clamp bright colours' is on)")
+                pixels = np.minimum(pixels, MAX_REFLECTIVITY)
+            texture = (pixels, affine, uv)
+        checked.append(texture)
+    return tuple(checked)
 
 
 class Selection(list):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import threading
+import time
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -25,6 +26,8 @@ INSTALL = "pip install 'dask[distributed]' (or pip install '.[distributed]' in t
 CONNECT_SECONDS = 10
 # Tasks queued per worker thread beyond the running ones (the solver reads results in order).
 QUEUE_PER_WORKER = 2
+# How often a wait for a task's result looks again (seconds).
+WAIT_STEP = 0.002
 # Walk tables a worker keeps (one per scene and solve parameters).
 WORKER_TABLES = 4
 
@@ -178,13 +181,17 @@ class _Result:
         self.future = future
 
     def result(self, timeout=None):
+        # Waits on done() rather than result(timeout): distributed's own timeout path can fail
+        # with an UnboundLocalError under load.
+        if timeout is not None:
+            deadline = time.monotonic() + timeout
+            while not self.future.done():
+                if time.monotonic() >= deadline:
+                    raise TimeoutError
+                time.sleep(WAIT_STEP)
         try:
-            return self.future.result(timeout=timeout)
-        except TimeoutError:
-            raise
+            return self.future.result()
         except Exception as exc:
-            if type(exc).__name__ == "TimeoutError":  # (distributed's own, on older versions)
-                raise TimeoutError(str(exc)) from exc
             if getattr(self.future.client, "status", "running") in ("closing", "closed"):
                 raise ClusterError("the Dask cluster went away during the solve") from exc
             raise

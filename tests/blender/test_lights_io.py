@@ -248,3 +248,102 @@ def test_lights_that_cannot_light_the_selection_are_named(blender):
     _, notes = patch_making.scene_and_notes(made)
     assert any(n.startswith("light 'Trapped': 100% of its light meets the back of faces; it sits inside") for n in notes), notes
     assert any(n.startswith("light 'Sun'") and "no light entered" in n for n in notes), notes
+
+
+def _textured_wall(blender, mapping_scale=None, clamp_white=False):
+    """A 1 x 1 m wall (x, z) lit by an emissive panel in front, its material's base colour an
+    image: left half red, right half blue (optionally through a Mapping node's scale)."""
+    image = bpy.data.images.new("Halves", 64, 4, float_buffer=True)
+    pixels = np.zeros((4, 64, 4), np.float32)
+    pixels[:, :32] = (0.8, 0.0, 0.0, 1.0)
+    pixels[:, 32:] = (0.0, 0.0, 0.8, 1.0)
+    if clamp_white:
+        pixels[:, 0] = (1.0, 1.0, 1.0, 1.0)
+    image.pixels.foreach_set(pixels.ravel())
+    material = principled("Painted", (0.5, 0.5, 0.5))
+    tree = material.node_tree
+    texture = tree.nodes.new("ShaderNodeTexImage")
+    texture.image = image
+    tree.links.new(texture.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    if mapping_scale is not None:
+        mapping = tree.nodes.new("ShaderNodeMapping")
+        mapping.inputs["Scale"].default_value = (mapping_scale, 1.0, 1.0)
+        coordinates = tree.nodes.new("ShaderNodeTexCoord")
+        tree.links.new(coordinates.outputs["UV"], mapping.inputs["Vector"])
+        tree.links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
+    wall = make_object("Wall", [(0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)], [(0, 1, 2, 3)], [material])
+    uv = wall.data.uv_layers.new(name="UVMap")
+    uv.data.foreach_set("uv", np.array([(0, 0), (1, 0), (1, 1), (0, 1)], np.float32).ravel())
+    panel = make_object("Panel", [(0, -1, 0), (0, -1, 1), (1, -1, 1), (1, -1, 0)], [(0, 1, 2, 3)],
+                        [principled("Glow", (0.5, 0.5, 0.5), (1, 1, 1), 2.0)])
+    for o in (wall, panel):
+        o.select_set(True)
+    return wall
+
+
+def test_an_image_texture_colours_each_patch_by_its_own_uv_footprint(blender):
+    """Base colour from an image through the UV map: each patch takes the image's mean over
+    its own part of UV space (left patches red, right ones blue), not one average for the whole
+    material; a Mapping node's scale of 2 repeats the image, so every patch is half and half."""
+    from addon import patches as patch_making
+
+    _textured_wall(blender)
+    objects, notes = scene_io.read_selection(blender)
+    wall = next(o for o in objects if o.name == "Wall")
+    made = patch_making.make_patches([wall], 0.25)
+    x = made.combined.vertices[made.combined.triangles].mean(axis=1)[:, 0]
+    centre_x = np.bincount(made.combined.triangle_patch, weights=x) / np.bincount(made.combined.triangle_patch)
+    R = made.reflectivity
+    left = centre_x < 0.5
+    assert R.shape[0] == 16 and left.sum() == 8
+    # exact but for the half texel (1/128) where bilinear filtering blends the halves and the
+    # repeat: at most (1/128) / 0.25 / 2 of a patch's colour, 0.0125 of 0.8
+    np.testing.assert_allclose(R[left], [[0.8, 0, 0]] * 8, atol=0.0125)
+    np.testing.assert_allclose(R[~left], [[0, 0, 0.8]] * 8, atol=0.0125)
+    assert not any("comes from image" in n for n in notes)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    import addon
+
+    addon.register()
+    _textured_wall(bpy.context, mapping_scale=2.0)
+    objects, _ = scene_io.read_selection(bpy.context)
+    wall = next(o for o in objects if o.name == "Wall")
+    R2 = patch_making.make_patches([wall], 0.5).reflectivity
+    np.testing.assert_allclose(R2, [[0.4, 0.0, 0.4]] * len(R2), atol=0.03)
+
+
+def test_a_texture_too_bright_is_refused_or_clamped(blender):
+    _textured_wall(blender, clamp_white=True)
+    with pytest.raises(scene_io.SceneError, match="image texture of material 'Painted' has pixels of 1"):
+        scene_io.read_selection(blender)
+    blender.scene.radiosity.clamp_reflectivity = True
+    objects, notes = scene_io.read_selection(blender)
+    assert any("pixels above 0.99 were clamped" in n for n in notes)
+
+
+def test_a_colour_attribute_feeding_the_base_colour_is_averaged_per_patch(blender):
+    """A point colour attribute, red at x = 0 and blue at x = 1, drives the base colour: each
+    patch takes the mean over its own footprint, the linear interpolation's value at its
+    centre (red fading into blue across the wall), not one colour for the material."""
+    from addon import patches as patch_making
+
+    material = principled("Painted", (0.5, 0.5, 0.5))
+    tree = material.node_tree
+    attribute = tree.nodes.new("ShaderNodeVertexColor")
+    attribute.layer_name = "Paint"
+    tree.links.new(attribute.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    wall = make_object("Wall", [(0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)], [(0, 1, 2, 3)], [material])
+    paint = wall.data.color_attributes.new("Paint", "FLOAT_COLOR", "POINT")
+    paint.data.foreach_set("color", np.array([(0.8, 0, 0, 1), (0, 0, 0.8, 1), (0, 0, 0.8, 1), (0.8, 0, 0, 1)],
+                                              np.float32).ravel())
+    panel = make_object("Panel", [(0, -1, 0), (0, -1, 1), (1, -1, 1), (1, -1, 0)], [(0, 1, 2, 3)],
+                        [principled("Glow", (0.5, 0.5, 0.5), (1, 1, 1), 2.0)])
+    for o in (wall, panel):
+        o.select_set(True)
+    objects, notes = scene_io.read_selection(blender)
+    made = patch_making.make_patches([next(o for o in objects if o.name == "Wall")], 0.25)
+    x = made.combined.vertices[made.combined.triangles].mean(axis=1)[:, 0]
+    centre_x = np.bincount(made.combined.triangle_patch, weights=x) / np.bincount(made.combined.triangle_patch)
+    expected = np.column_stack([0.8 * (1 - centre_x), np.zeros_like(centre_x), 0.8 * centre_x])
+    np.testing.assert_allclose(made.reflectivity, expected, atol=1e-9)
+    assert not any("Paint" in n for n in notes)

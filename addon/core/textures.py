@@ -1,0 +1,120 @@
+"""Image textures and colour attributes averaged over each patch's own footprint (supersampled, linear colour).
+
+A patch is a piece of one source face; its texture colour is the mean of the image over the
+part of UV space the patch covers: points spread evenly over each of the patch's triangles
+(area-weighted) take the UV of the source face's loop triangle they lie in (linear inside it,
+as Blender interpolates UVs), pass through the texture's affine mapping, and read the image
+bilinearly with repeat, as an Image Texture node with Linear interpolation does.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+# Barycentric points spread evenly over a triangle: the centres of the 16 sub-triangles of its
+# 4 x 4 subdivision (equal areas), so that the mean over them integrates linear functions exactly.
+_N = 4
+
+
+def _subtriangle_centres(n=_N):
+    points = []
+    for i in range(n):
+        for j in range(n - i):
+            points.append(((i + 1 / 3) / n, (j + 1 / 3) / n))  # upright sub-triangle
+            if i + j < n - 1:
+                points.append(((i + 2 / 3) / n, (j + 2 / 3) / n))  # inverted one
+    return np.array(points)
+
+
+SAMPLES = _subtriangle_centres()  # (16, 2) barycentric (b1, b2) of corners 1 and 2
+
+
+def patch_texture_average(patch_mesh, patches, source_corners, source_uv, triangle_face, image, affine):
+    """(len(patches), 3) mean colour of ``image`` over each of the given patches of
+    ``patch_mesh``: ``source_corners`` (T,3,3) and ``source_uv`` (T,3,2) are the source
+    object's loop triangles and their corners' UVs, ``triangle_face`` (T,) their faces (in face
+    order); ``image`` (H,W,3) linear, row 0 at the bottom; ``affine`` (2,3) maps UV to image
+    coordinates (u, v) before the lookup (the Mapping node)."""
+    def colour(points, face):
+        uv = _interpolated(points, face, source_corners, source_uv, triangle_face)
+        return sample_bilinear(image, uv @ affine[:, :2].T + affine[:, 2])
+
+    return _patch_means(patch_mesh, np.asarray(patches), colour)
+
+
+def patch_attribute_average(patch_mesh, patches, source_corners, corner_colours, triangle_face):
+    """(len(patches), 3) mean over each patch of a colour attribute given at the corners of
+    the source's loop triangles (T,3,3), interpolated linearly inside them as Blender does."""
+    return _patch_means(patch_mesh, np.asarray(patches),
+                        lambda points, face: _interpolated(points, face, source_corners, corner_colours, triangle_face))
+
+
+def _patch_means(patch_mesh, patches, colour):
+    """(len(patches), 3) the area-weighted mean of ``colour(points, face)`` over SAMPLES points
+    of every triangle of each patch."""
+    in_patch = np.isin(patch_mesh.triangle_patch, patches)
+    tri = patch_mesh.triangles[in_patch]
+    owner = patch_mesh.triangle_patch[in_patch]
+    corners = patch_mesh.points[tri]  # (k,3,3)
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    s = SAMPLES
+    points = a[:, None] + s[None, :, :1] * (b - a)[:, None] + s[None, :, 1:] * (c - a)[:, None]  # (k,S,3)
+    face = np.repeat(patch_mesh.patch_face[owner], len(s))
+    colour = colour(points.reshape(-1, 3), face).reshape(len(tri), len(s), 3).mean(axis=1)
+    index = np.searchsorted(patches, owner) if np.all(np.diff(patches) > 0) else _positions(patches, owner)
+    total = np.zeros((len(patches), 3))
+    np.add.at(total, index, colour * area[:, None])
+    weight = np.bincount(index, weights=area, minlength=len(patches))
+    return total / np.maximum(weight, 1e-300)[:, None]
+
+
+def _positions(patches, owner):
+    order = np.argsort(patches)
+    return order[np.searchsorted(patches[order], owner)]
+
+
+def _interpolated(points, face, source_corners, corner_values, triangle_face):
+    """Values (n,k) at each point (n,3) of face ``face`` (n,) of a quantity given at the loop
+    triangles' corners (T,3,k): from the face's loop triangle the point lies in most (the
+    largest smallest barycentric), linear inside it."""
+    source_uv = corner_values
+    first = np.searchsorted(triangle_face, face, side="left")
+    count = np.searchsorted(triangle_face, face, side="right") - first
+    best = np.full(len(points), -np.inf)
+    uv = np.zeros((len(points), source_uv.shape[2]))
+    for j in range(int(count.max()) if len(count) else 0):
+        t = first + np.minimum(j, count - 1)
+        w = _barycentric(points, source_corners[t])
+        inside = w.min(axis=1)
+        better = inside > best
+        best = np.where(better, inside, best)
+        uv[better] = np.einsum("ni,nij->nj", w[better], source_uv[t[better]])
+    return uv
+
+
+def _barycentric(p, triangle):
+    """(n,3) barycentric coordinates of points p (n,3) in triangles (n,3,3), projected onto
+    each triangle's plane."""
+    a, b, c = triangle[:, 0], triangle[:, 1], triangle[:, 2]
+    v0, v1, v2 = b - a, c - a, p - a
+    d00, d01, d11 = (v0 * v0).sum(1), (v0 * v1).sum(1), (v1 * v1).sum(1)
+    d20, d21 = (v2 * v0).sum(1), (v2 * v1).sum(1)
+    denominator = d00 * d11 - d01 * d01
+    denominator = np.where(np.abs(denominator) > 0, denominator, 1.0)
+    w1 = (d11 * d20 - d01 * d21) / denominator
+    w2 = (d00 * d21 - d01 * d20) / denominator
+    return np.column_stack([1.0 - w1 - w2, w1, w2])
+
+
+def sample_bilinear(image, uv):
+    """(n,3) the image (H,W,3, row 0 at the bottom) at UV points (n,2), bilinear with repeat
+    (Blender's Linear interpolation, Repeat extension: texel centres at (i + 1/2) / W)."""
+    H, W = image.shape[:2]
+    x = uv[:, 0] * W - 0.5
+    y = uv[:, 1] * H - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    i0, j0 = x0.astype(np.int64) % W, y0.astype(np.int64) % H
+    i1, j1 = (i0 + 1) % W, (j0 + 1) % H
+    return ((image[j0, i0] * (1 - fx) + image[j0, i1] * fx) * (1 - fy)
+            + (image[j1, i0] * (1 - fx) + image[j1, i1] * fx) * fy)
