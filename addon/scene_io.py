@@ -45,21 +45,8 @@ def _srgb_to_linear(c):
 
 def image_average(image):
     """Average linear RGB of an image's pixels, or None if it has none (missing file)."""
-    try:
-        width, height = image.size[:]
-        channels = image.channels
-        if width * height == 0 or channels < 1:
-            return None
-        pixels = np.empty(width * height * channels, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-    except Exception:  # noqa: BLE001 - unreadable image: the caller falls back and says so
-        return None
-    pixels = pixels.reshape(-1, channels).astype(np.float64)
-    rgb = pixels[:, :3] if channels >= 3 else np.repeat(pixels[:, :1], 3, axis=1)
-    # Byte images hold their colour space's values; float images are scene linear.
-    if not image.is_float and image.colorspace_settings.name == "sRGB":
-        rgb = _srgb_to_linear(rgb)
-    return rgb.mean(axis=0)
+    pixels = image_pixels(image, np.float64)
+    return None if pixels is None else pixels.reshape(-1, 3).mean(axis=0)
 
 
 def _text(colour):
@@ -96,9 +83,10 @@ def _linked_colour(socket, node, name, notes, what):
     return default
 
 
-def image_pixels(image):
-    """(H, W, 3) float32 linear pixels of an image, row 0 at the bottom (Blender's order), or
-    None if it has none (a missing file)."""
+def image_pixels(image, dtype=np.float32):
+    """(H, W, 3) linear pixels of an image, row 0 at the bottom (Blender's order), or None if
+    it has none (a missing file). Byte images hold their colour space's values; float images
+    are scene linear."""
     try:
         width, height = image.size[:]
         channels = image.channels
@@ -108,11 +96,11 @@ def image_pixels(image):
         image.pixels.foreach_get(pixels)
     except Exception:  # noqa: BLE001 - unreadable image: the caller falls back and says so
         return None
-    pixels = pixels.reshape(height, width, channels)
+    pixels = pixels.reshape(height, width, channels).astype(np.float64)
     rgb = pixels[..., :3] if channels >= 3 else np.repeat(pixels[..., :1], 3, axis=2)
     if not image.is_float and image.colorspace_settings.name == "sRGB":
-        rgb = _srgb_to_linear(rgb).astype(np.float32)
-    return np.ascontiguousarray(rgb, dtype=np.float32)
+        rgb = _srgb_to_linear(rgb)
+    return np.ascontiguousarray(rgb, dtype=dtype)
 
 
 def texture_of(socket):
