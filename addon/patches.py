@@ -55,6 +55,7 @@ class ObjectArrays:
     triangle_uv: np.ndarray | None = None  # (T,3,2) UVs of the loop triangles' corners (textured objects)
     slot_textures: tuple = ()  # per slot: (pixels (H,W,3) linear, affine (2,3), UV map) or None
     slot_colours: tuple = ()   # per slot: (T,3,3) colour attribute at the loop triangles' corners, or None
+    slot_emission_textures: tuple = ()  # per slot: (pixels, affine, UV map, strength) or None
 
 
 @dataclass
@@ -297,7 +298,7 @@ def _with_materials(objects, meshes, combined, key) -> Patches:
         [textured_reflectivity(o, m) for o, m in zip(objects, meshes)]
     ).reshape(-1, 3)
     emission = np.concatenate(
-        [o.face_emission[m.patch_face] for o, m in zip(objects, meshes)]
+        [textured_emission(o, m) for o, m in zip(objects, meshes)]
     ).reshape(-1, 3)
     return Patches(list(objects), meshes, combined, reflectivity, emission, key)
 
@@ -321,6 +322,22 @@ def textured_reflectivity(o, mesh):
             reflectivity[patches] = patch_texture_average(mesh, patches, corners, o.triangle_uv, o.triangle_face,
                                                           pixels, affine)
     return reflectivity
+
+
+def textured_emission(o, mesh):
+    """(P,3) each patch's emission: its face's, or its emission texture averaged over the patch
+    times the strength."""
+    emission = o.face_emission[mesh.patch_face]
+    if o.triangle_uv is None or o.face_slot is None:
+        return emission
+    corners = o.vertices[o.triangles]
+    for slot, texture in enumerate(o.slot_emission_textures):
+        patches = np.flatnonzero(o.face_slot[mesh.patch_face] == slot) if texture is not None else ()
+        if len(patches):
+            pixels, affine, _, strength = texture
+            emission[patches] = strength * patch_texture_average(mesh, patches, corners, o.triangle_uv,
+                                                                 o.triangle_face, pixels, affine)
+    return emission
 
 
 def objects_of_patches(patches: Patches, indices) -> str:

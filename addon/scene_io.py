@@ -279,24 +279,49 @@ def material_texture(material):
     return texture_of(node.inputs[names[node.bl_idname]])
 
 
+def material_emission_texture(material):
+    """(pixels, affine, UV map, strength) of an image texture driving a material's emission
+    colour (Principled 'Emission Color', or an Emission node's 'Color'), its strength a plain
+    value; or None."""
+    if material is None or material.node_tree is None:
+        return None
+    if bpy.app.version < (5, 0, 0) and not material.use_nodes:
+        return None
+    node = _surface_shader(material.node_tree)
+    sockets = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
+               "ShaderNodeEmission": ("Color", "Strength")}
+    if node is None or node.bl_idname not in sockets:
+        return None
+    colour, strength = (node.inputs.get(name) for name in sockets[node.bl_idname])
+    if colour is None or strength is None or strength.is_linked:
+        return None
+    texture = texture_of(colour)
+    return None if texture is None else (*texture, float(strength.default_value))
+
+
 def _slot_tables(obj, notes):
     """Reflectivity, emission, material name and base-colour texture (or None) of each material
     slot (at least one row)."""
     materials = [slot.material for slot in obj.material_slots] or [None]
     R = np.empty((len(materials), 3))
     E = np.empty((len(materials), 3))
-    textures, attributes = [], []
+    textures, attributes, emission_textures = [], [], []
     for k, material in enumerate(materials):
         R[k], E[k], more = material_colours(material)
         texture = material_texture(material)
         attribute = material_attribute(material)
-        if texture is not None or attribute is not None:  # read per patch: the average's note is moot
+        emission = material_emission_texture(material)
+        # read per patch: the notes of their averages are moot
+        if texture is not None or attribute is not None:
             more = [n for n in more if not (("comes from image" in n or "is driven by" in n) and "'Emission" not in n)]
+        if emission is not None:
+            more = [n for n in more if not ("comes from image" in n and ("'Emission" in n or "'Color' of 'Emission" in n))]
         textures.append(texture)
         attributes.append(attribute)
+        emission_textures.append(emission)
         notes.extend(more)
     names = tuple("(no material)" if m is None else m.name for m in materials)
-    return R, E, names, tuple(textures), tuple(attributes)
+    return R, E, names, tuple(textures), tuple(attributes), tuple(emission_textures)
 
 
 # ---------------------------------------------------------------------------
@@ -385,10 +410,11 @@ def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays |
         T = len(mesh.loop_triangles)
         triangles = _get(mesh.loop_triangles, "vertices", T, np.int32, 3).astype(np.int64)
         triangle_face = _get(mesh.loop_triangles, "polygon_index", T, np.int32).astype(np.int64)
-        R_slots, E_slots, slot_names, textures, attributes = _slot_tables(evaluated, notes)
+        R_slots, E_slots, slot_names, textures, attributes, emission_textures = _slot_tables(evaluated, notes)
         triangle_uv = None
-        if any(t is not None for t in textures):
-            triangle_uv, textures = _triangle_uv(mesh, T, textures, name, notes)
+        if any(t is not None for t in (*textures, *emission_textures)):
+            triangle_uv, kept = _triangle_uv(mesh, T, (*textures, *emission_textures), name, notes)
+            textures, emission_textures = kept[: len(textures)], kept[len(textures):]
         slot_colours = _attribute_colours(mesh, T, triangles, attributes, name, notes)
     finally:
         evaluated.to_mesh_clear()
@@ -415,6 +441,7 @@ def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays |
         face_emission=E_slots[slot],
         triangle_uv=triangle_uv,
         slot_textures=textures if triangle_uv is not None else (),
+        slot_emission_textures=emission_textures if triangle_uv is not None else (),
         slot_colours=slot_colours if any(c is not None for c in slot_colours) else (),
     )
 
@@ -455,7 +482,7 @@ def _triangle_uv(mesh, T, textures, name, notes):
     layer = layer or getattr(mesh.uv_layers, "active_render", None) or mesh.uv_layers.active
     if layer is None:
         notes.append(f"'{name}' has no UV map: its image textures were averaged over the whole image")
-        return None, ()
+        return None, (None,) * len(textures)
     loops = len(mesh.loops)
     uv = np.empty(loops * 2, dtype=np.float32)
     layer.uv.foreach_get("vector", uv)
@@ -609,6 +636,10 @@ def _checked_textures(o, clamp, notes):
                                  f"below 1. Darken them, or turn on 'Clamp bright colours' to use {MAX_REFLECTIVITY}")
     if clamp:
         o.slot_colours = tuple(None if c is None else np.minimum(c, MAX_REFLECTIVITY) for c in o.slot_colours)
+    for slot, texture in enumerate(o.slot_emission_textures):
+        if texture is not None and (not np.isfinite(texture[0]).all() or (texture[0] < 0).any() or texture[3] < 0):
+            raise SceneError(f"'{o.name}': the emission texture of material '{o.slot_names[slot]}' has pixels or a "
+                             "strength that are negative or not finite")
     checked = []
     for slot, texture in enumerate(o.slot_textures):
         if texture is not None:

@@ -347,3 +347,32 @@ def test_a_colour_attribute_feeding_the_base_colour_is_averaged_per_patch(blende
     expected = np.column_stack([0.8 * (1 - centre_x), np.zeros_like(centre_x), 0.8 * centre_x])
     np.testing.assert_allclose(made.reflectivity, expected, atol=1e-9)
     assert not any("Paint" in n for n in notes)
+
+
+def test_an_emission_texture_is_averaged_per_patch_times_its_strength(blender):
+    """Emission colour from an image (left half white, right half black) at strength 3: the
+    left patches emit 3, the right ones nothing (up to the half texel blended at the seam)."""
+    from addon import patches as patch_making
+
+    image = bpy.data.images.new("Sign", 64, 4, float_buffer=True)
+    pixels = np.zeros((4, 64, 4), np.float32)
+    pixels[:, :32] = 1.0
+    pixels[..., 3] = 1.0
+    image.pixels.foreach_set(pixels.ravel())
+    material = principled("Neon", (0.5, 0.5, 0.5), (1, 1, 1), 3.0)
+    tree = material.node_tree
+    texture = tree.nodes.new("ShaderNodeTexImage")
+    texture.image = image
+    tree.links.new(texture.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Emission Color"])
+    sign = make_object("Sign", [(0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)], [(0, 1, 2, 3)], [material])
+    sign.data.uv_layers.new(name="UVMap").data.foreach_set(
+        "uv", np.array([(0, 0), (1, 0), (1, 1), (0, 1)], np.float32).ravel())
+    sign.select_set(True)
+    objects, notes = scene_io.read_selection(blender)
+    made = patch_making.make_patches(objects, 0.25)
+    x = made.combined.vertices[made.combined.triangles].mean(axis=1)[:, 0]
+    centre_x = np.bincount(made.combined.triangle_patch, weights=x) / np.bincount(made.combined.triangle_patch)
+    left = centre_x < 0.5
+    np.testing.assert_allclose(made.emission[left], 3.0, atol=3 * 0.0125 / 0.8 + 1e-9)
+    np.testing.assert_allclose(made.emission[~left], 0.0, atol=3 * 0.0125 / 0.8 + 1e-9)
+    assert not any("comes from image" in n for n in notes)
