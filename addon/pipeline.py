@@ -33,6 +33,7 @@ class SolveSettings:
     light_output: bool = options.LIGHT_OUTPUT.default
     indirect_output: bool = options.INDIRECT_OUTPUT.default
     cluster: str = options.CLUSTER.default  # a Dask scheduler address; empty: this machine's threads
+    direct_light: str = "shot"  # "gathered": the first bounce by shadow rays (core first_shot; scripts only)
 
 
 @dataclass
@@ -194,6 +195,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         max_seconds=settings.max_seconds or None,
         threads=settings.threads or None,
         cluster=settings.cluster or None,
+        direct_light=settings.direct_light,
     )
     if result.seconds > 0 and result.rays:
         RAY_RATES[(patches.geometry_key, settings.estimator, settings.exit_point)] = result.rays_per_second

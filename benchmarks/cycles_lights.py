@@ -144,14 +144,15 @@ def cycles(image, rows, patches, samples, seed=0):
     return B, wall
 
 
-def ours(paths, seed=0):
+def ours(paths, seed=0, direct_light="shot"):
     import bpy
 
     from addon import patches as patch_making
     from addon import pipeline, scene_io
 
     objects, notes = scene_io.read_selection(bpy.context)
-    settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, exit_point="hit", seed=seed, threads=2)
+    settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, exit_point="hit" if direct_light == "shot" else "random",
+                                      seed=seed, threads=2, direct_light=direct_light)
     wall = time.perf_counter()
     out = pipeline.run_solve(objects, settings)
     wall = time.perf_counter() - wall
@@ -180,10 +181,99 @@ def compare(kind, samples, paths):
     }
 
 
+def time_to_error(kind, samples, paths, target=0.01):
+    """Seconds each side needs for a per-patch relative RMS error of ``target`` over the lit
+    patches, each from its own error estimate: Cycles' from two bakes with different seeds (the
+    spread of their difference), ours from batch means. The error goes as 1 / sqrt(work)
+    (samples, paths); time = fixed + work x rate, both fitted from a small and a large run."""
+    obj, image, rows = build(kind)
+    P = len(obj.data.polygons)
+    _, small_seconds = cycles(image, rows, P, 1, seed=3)
+    a, seconds_a = cycles(image, rows, P, samples, seed=1)
+    b, seconds_b = cycles(image, rows, P, samples, seed=2)
+    grey_a, grey_b = a.mean(axis=1), b.mean(axis=1)
+    mean = 0.5 * (grey_a + grey_b)
+    lit = mean > 0.02 * mean.max()
+    row = {"kind": kind, "cycles_error": float(np.sqrt(np.mean(((grey_a - grey_b)[lit] / mean[lit]) ** 2 / 2)))}
+    row["cycles_seconds"] = _extrapolate(small_seconds, 1, 0.5 * (seconds_a + seconds_b), samples, row["cycles_error"], target)
+    for light in ("shot", "gathered"):
+        _, _, small, _, _ = ours(paths // 64, direct_light=light)
+        _, variance, seconds, _, _ = ours(paths, direct_light=light)
+        error = float(np.sqrt(np.mean(variance.mean(axis=1)[lit] / mean[lit] ** 2)))
+        row[f"{light}_error"] = error
+        row[f"{light}_seconds"] = _extrapolate(small, paths // 64, seconds, paths, error, target)
+    return row
+
+
+def _extrapolate(small_seconds, small_work, seconds, work, error, target):
+    """Time for ``target`` from a line through (small_work, small_seconds) and (work, seconds),
+    the work needed scaling as (error / target)^2."""
+    rate = max(seconds - small_seconds, 1e-9) / (work - small_work)
+    fixed = max(small_seconds - rate * small_work, 0.0)
+    return fixed + rate * work * (error / target) ** 2
+
+
+def plot(rows, timed, path):
+    """The agreement (ours / Cycles, with standard errors) and the times to 1%, one bar group a
+    source kind."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    kinds = [r["kind"] for r in rows]
+    x = np.arange(len(kinds))
+    fig, axes = plt.subplots(1, 2 if timed else 1, figsize=(12 if timed else 6, 4), squeeze=False)
+    ax = axes[0, 0]
+    ax.errorbar(x, [r["mean_ratio"] for r in rows], yerr=[2 * r["ratio_se"] for r in rows], fmt="o", capsize=4)
+    ax.axhline(1.0, color="grey", lw=0.8)
+    ax.set_xticks(x, kinds, rotation=30)
+    ax.set_ylabel("ours / Cycles (mean over lit patches, 2 s.e.)")
+    ax.set_title("Radiosity against Cycles' COMBINED bake")
+    if timed:
+        ax = axes[0, 1]
+        width = 0.27
+        for k, (key, label) in enumerate((("cycles_seconds", "Cycles"), ("shot_seconds", "ours, shot (paper)"),
+                                           ("gathered_seconds", "ours, first shot gathered"))):
+            ax.bar(x + (k - 1) * width, [t[key] for t in timed], width, label=label)
+        ax.set_yscale("log")
+        ax.set_xticks(x, [t["kind"] for t in timed], rotation=30)
+        ax.set_ylabel("seconds to 1% per-patch relative RMS")
+        ax.set_title("Time to 1% (2 cores)")
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def timing(args):
+    samples, paths = (64, 200_000) if args.quick else (256, 2_000_000)
+    lines = ["", f"## Time to 1% (per-patch relative RMS over the lit patches), {samples} samples / {paths:,} paths measured",
+             "",
+             "Each side's error from its own estimate (Cycles: two bakes of different seeds; ours: batch means), "
+             "the work for 1% as (error / 0.01)^2 times the work measured, and the time from a line through a small "
+             "and a large run (a 1-sample bake; 1/64 of the paths): fixed cost plus work times rate. Ours shot: the "
+             "paper's walk (hit exit); gathered: the first bounce by shadow rays (direct_light='gathered').", "",
+             "| source | Cycles error | Cycles s to 1% | ours (shot) error | s to 1% | / Cycles | ours (gathered) error | s to 1% | / Cycles |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    args.timed = []
+    for kind in args.kinds:
+        r = time_to_error(kind, samples, paths)
+        args.timed.append(r)
+        c = r["cycles_seconds"]
+        print(f"{kind:12s} to 1%: Cycles {c:.2f} s, shot {r['shot_seconds']:.2f} s, gathered {r['gathered_seconds']:.2f} s",
+              flush=True)
+        lines.append(f"| {kind} | {r['cycles_error']:.4f} | {c:.2f} | {r['shot_error']:.4f} | {r['shot_seconds']:.2f} | "
+                     f"{r['shot_seconds'] / c:.2f} | {r['gathered_error']:.4f} | {r['gathered_seconds']:.2f} | "
+                     f"{r['gathered_seconds'] / c:.2f} |")
+    return lines
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true")
     p.add_argument("--kinds", nargs="+", default=list(KINDS))
+    p.add_argument("--timing", action="store_true", help="also the time each side needs to 1%% (appended)")
     args = p.parse_args(argv)
     samples, paths = (64, 200_000) if args.quick else (1024, 3_000_000)
     rows = []
@@ -211,6 +301,11 @@ def main(argv=None):
     notes = sorted({n for r in rows for n in r["notes"]})
     if notes:
         lines += ["", "Notes from reading the scenes:", ""] + [f"- {n}" for n in notes]
+    args.timed = []
+    if args.timing:
+        lines += timing(args)
+    plot(rows, args.timed, out.with_suffix(".png"))
+    lines += ["", f"![agreement and time to 1%]({out.with_suffix('.png').name})"]
     out.write_text("\n".join(lines) + "\n")
     print(f"wrote {out}")
 
