@@ -20,6 +20,7 @@ import bpy
 import numpy as np
 
 from .core.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
+from .images import linear_pixels
 
 POINT_INTENSITY = 1.0 / (4.0 * math.pi**2)  # per watt
 AREA_EXITANCE = 1.0 / math.pi  # per watt per square metre
@@ -100,7 +101,7 @@ def read_light(data, matrix, name, notes):
     return None
 
 
-def read_world(scene, notes, image_reader=None):
+def read_world(scene, notes):
     """The world as a core WorldLight: its Background node's colour x strength (or the world
     colour without nodes), an environment image by its pixels; None where it gives no light."""
     world = scene.world
@@ -112,7 +113,7 @@ def read_world(scene, notes, image_reader=None):
     if strength < 0 or (colour < 0).any():
         raise LightError(f"world '{world.name}' has a negative colour or strength")
     if image is not None:
-        pixels = (image_reader or image_pixels)(image, notes)
+        pixels = image_pixels(image, notes)
         if pixels is not None:
             return WorldLight(image=pixels * strength, name=world.name)
     if strength == 0 or not colour.any():
@@ -156,16 +157,9 @@ def _background(world, notes):
 def image_pixels(image, notes):
     """(H, W, 3) linear pixels of an equirectangular image, top row first (Blender stores the
     bottom row first), or None with a note where the image cannot be read."""
-    try:
-        width, height = image.size
-        if width == 0 or height == 0:
-            raise RuntimeError("no pixels")
-        flat = np.empty(width * height * image.channels, dtype=np.float32)
-        image.pixels.foreach_get(flat)
-    except Exception as exc:  # noqa: BLE001 - a missing file: a note, the world's average instead
-        notes.append(f"environment image '{image.name}' could not be read ({exc}); the world gives no light here")
+    pixels = linear_pixels(image, np.float64)
+    if pixels is None:
+        notes.append(f"environment image '{image.name}' could not be read (missing file?); "
+                     "the world gives no light here")
         return None
-    pixels = flat.reshape(height, width, image.channels)[::-1, :, :3].astype(np.float64)
-    if not image.is_float and image.colorspace_settings.name == "sRGB":
-        pixels = np.where(pixels <= 0.04045, pixels / 12.92, ((pixels + 0.055) / 1.055) ** 2.4)
-    return pixels
+    return pixels[::-1]

@@ -294,50 +294,36 @@ def _make_patches(objects, patch_size) -> Patches:
 
 
 def _with_materials(objects, meshes, combined, key) -> Patches:
-    reflectivity = np.concatenate(
-        [textured_reflectivity(o, m) for o, m in zip(objects, meshes)]
-    ).reshape(-1, 3)
-    emission = np.concatenate(
-        [textured_emission(o, m) for o, m in zip(objects, meshes)]
-    ).reshape(-1, 3)
+    materials = [patch_materials(o, m) for o, m in zip(objects, meshes)]
+    reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
+    emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
     return Patches(list(objects), meshes, combined, reflectivity, emission, key)
 
 
-def textured_reflectivity(o, mesh):
-    """(P,3) each patch's reflectivity: its face's, or the image texture averaged over the patch."""
+def patch_materials(o, mesh):
+    """(reflectivity (P,3), emission (P,3)) of each patch of object ``o``: its face's, or where
+    its material reads an image texture (through the UV map) or a colour attribute, their mean
+    over the patch's own footprint (core.textures)."""
     reflectivity = o.face_reflectivity[mesh.patch_face]
-    if (o.triangle_uv is None and not o.slot_colours) or o.face_slot is None:
-        return reflectivity
-    corners = o.vertices[o.triangles]
-    for slot, colours in enumerate(o.slot_colours):
-        patches = np.flatnonzero(o.face_slot[mesh.patch_face] == slot) if colours is not None else ()
-        if len(patches):
-            reflectivity[patches] = patch_attribute_average(mesh, patches, corners, colours, o.triangle_face)
-    for slot, texture in enumerate(o.slot_textures if o.triangle_uv is not None else ()):
-        if texture is None:
-            continue
-        patches = np.flatnonzero(o.face_slot[mesh.patch_face] == slot)
-        if patches.size:
-            pixels, affine, _ = texture
-            reflectivity[patches] = patch_texture_average(mesh, patches, corners, o.triangle_uv, o.triangle_face,
-                                                          pixels, affine)
-    return reflectivity
-
-
-def textured_emission(o, mesh):
-    """(P,3) each patch's emission: its face's, or its emission texture averaged over the patch
-    times the strength."""
     emission = o.face_emission[mesh.patch_face]
-    if o.triangle_uv is None or o.face_slot is None:
-        return emission
+    if o.face_slot is None:
+        return reflectivity, emission
+    slot_of_patch = o.face_slot[mesh.patch_face]
     corners = o.vertices[o.triangles]
-    for slot, texture in enumerate(o.slot_emission_textures):
-        patches = np.flatnonzero(o.face_slot[mesh.patch_face] == slot) if texture is not None else ()
-        if len(patches):
-            pixels, affine, _, strength = texture
-            emission[patches] = strength * patch_texture_average(mesh, patches, corners, o.triangle_uv,
-                                                                 o.triangle_face, pixels, affine)
-    return emission
+
+    def image(texture, patches):
+        return patch_texture_average(mesh, patches, corners, o.triangle_uv, o.triangle_face, *texture[:2])
+
+    per_slot = [(reflectivity, o.slot_colours, lambda c, p: patch_attribute_average(mesh, p, corners, c, o.triangle_face))]
+    if o.triangle_uv is not None:
+        per_slot += [(reflectivity, o.slot_textures, image),
+                     (emission, o.slot_emission_textures, lambda t, p: t[3] * image(t, p))]
+    for target, sources, average in per_slot:
+        for slot, source in enumerate(sources):
+            patches = np.flatnonzero(slot_of_patch == slot) if source is not None else ()
+            if len(patches):
+                target[patches] = average(source, patches)
+    return reflectivity, emission
 
 
 def objects_of_patches(patches: Patches, indices) -> str:

@@ -14,6 +14,7 @@ import numpy as np
 
 from .core import meshing
 from . import lights_io
+from .images import image_average, linear_pixels
 from .patches import ObjectArrays
 
 #: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
@@ -37,17 +38,6 @@ class SceneError(ValueError):
 # ---------------------------------------------------------------------------
 # Materials
 # ---------------------------------------------------------------------------
-
-def _srgb_to_linear(c):
-    c = np.asarray(c, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def image_average(image):
-    """Average linear RGB of an image's pixels, or None if it has none (missing file)."""
-    pixels = image_pixels(image, np.float64)
-    return None if pixels is None else pixels.reshape(-1, 3).mean(axis=0)
-
 
 def _text(colour):
     return "(" + ", ".join(f"{c:.3g}" for c in colour) + ")"
@@ -83,26 +73,6 @@ def _linked_colour(socket, node, name, notes, what):
     return default
 
 
-def image_pixels(image, dtype=np.float32):
-    """(H, W, 3) linear pixels of an image, row 0 at the bottom (Blender's order), or None if
-    it has none (a missing file). Byte images hold their colour space's values; float images
-    are scene linear."""
-    try:
-        width, height = image.size[:]
-        channels = image.channels
-        if width * height == 0 or channels < 1:
-            return None
-        pixels = np.empty(width * height * channels, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-    except Exception:  # noqa: BLE001 - unreadable image: the caller falls back and says so
-        return None
-    pixels = pixels.reshape(height, width, channels).astype(np.float64)
-    rgb = pixels[..., :3] if channels >= 3 else np.repeat(pixels[..., :1], 3, axis=2)
-    if not image.is_float and image.colorspace_settings.name == "sRGB":
-        rgb = _srgb_to_linear(rgb)
-    return np.ascontiguousarray(rgb, dtype=dtype)
-
-
 def texture_of(socket):
     """(pixels, affine (2,3), UV map name or '') of an image texture driving ``socket`` through
     a UV map and at most one affine Mapping node, or None where it is anything else."""
@@ -126,7 +96,7 @@ def texture_of(socket):
             uv_name = link.from_node.uv_map
         elif not (link.from_node.bl_idname == "ShaderNodeTexCoord" and link.from_socket.name == "UV"):
             return None
-    pixels = image_pixels(node.image)
+    pixels = linear_pixels(node.image)
     if pixels is None:
         return None
     return pixels, affine, uv_name
@@ -155,12 +125,12 @@ def _mapping_affine(node):
     return np.column_stack([linear, location])
 
 
-def _socket_colour(node, name, notes, what):
+def _socket_colour(node, name, notes, what, per_patch=()):
     socket = node.inputs.get(name)
     if socket is None:
         return np.zeros(3)
-    if socket.is_linked:
-        return _linked_colour(socket, node, name, notes, what)
+    if socket.is_linked:  # sockets read per patch need no note about their average
+        return _linked_colour(socket, node, name, [] if name in per_patch else notes, what)
     value = socket.default_value
     return np.array(value[:3], dtype=np.float64)
 
@@ -203,8 +173,9 @@ def _surface_shader(tree):
 _SUPPORTED = ("ShaderNodeBsdfPrincipled", "ShaderNodeBsdfDiffuse", "ShaderNodeEmission")
 
 
-def material_colours(material):
-    """(reflectivity (3,), emission (3,), notes) of a material.
+def material_colours(material, per_patch=()):
+    """(reflectivity (3,), emission (3,), notes) of a material; ``per_patch`` names the sockets
+    read per patch (``_per_patch_sockets``), whose averages get no note.
 
     Principled BSDF: base colour, emission colour x strength.  Diffuse BSDF:
     colour.  Emission: colour x strength, no reflection.  No node tree: the
@@ -231,32 +202,44 @@ def material_colours(material):
         notes.append(f"{what}: surface is {kind}; used node '{found.name}'")
         node = found
     if node.bl_idname == "ShaderNodeBsdfPrincipled":
-        reflectivity = _socket_colour(node, "Base Color", notes, what)
+        reflectivity = _socket_colour(node, "Base Color", notes, what, per_patch)
         name = "Emission Color" if "Emission Color" in node.inputs else "Emission"
-        emission = _socket_colour(node, name, notes, what) * _socket_float(
+        emission = _socket_colour(node, name, notes, what, per_patch) * _socket_float(
             node, "Emission Strength", notes, what, 1.0
         )
     elif node.bl_idname == "ShaderNodeBsdfDiffuse":
-        reflectivity = _socket_colour(node, "Color", notes, what)
+        reflectivity = _socket_colour(node, "Color", notes, what, per_patch)
         emission = np.zeros(3)
     else:  # Emission
         reflectivity = np.zeros(3)
-        emission = _socket_colour(node, "Color", notes, what) * _socket_float(
+        emission = _socket_colour(node, "Color", notes, what, per_patch) * _socket_float(
             node, "Strength", notes, what, 1.0
         )
     return reflectivity, emission, notes
 
 
+#: The socket of each shader that gives the base colour, and the emission colour and strength.
+_BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
+_EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
+             "ShaderNodeEmission": ("Color", "Strength")}
+
+
+def _shader_node(material):
+    """The surface shader node of a material that uses nodes, or None."""
+    if material is None or material.node_tree is None:
+        return None
+    if bpy.app.version < (5, 0, 0) and not material.use_nodes:
+        return None
+    return _surface_shader(material.node_tree)
+
+
 def material_attribute(material):
     """The name of the colour attribute driving a material's base colour ('' for the active
     one), or None."""
-    if material is None or material.node_tree is None:
+    node = _shader_node(material)
+    if node is None or node.bl_idname not in _BASE or not node.inputs[_BASE[node.bl_idname]].is_linked:
         return None
-    node = _surface_shader(material.node_tree)
-    names = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
-    if node is None or node.bl_idname not in names or not node.inputs[names[node.bl_idname]].is_linked:
-        return None
-    link = node.inputs[names[node.bl_idname]].links[0]
+    link = node.inputs[_BASE[node.bl_idname]].links[0]
     source = link.from_node
     if source.bl_idname == "ShaderNodeVertexColor" and link.from_socket.name == "Color":
         return source.layer_name
@@ -268,31 +251,20 @@ def material_attribute(material):
 
 def material_texture(material):
     """The image texture of a material's base colour, read per patch (``texture_of``), or None."""
-    if material is None or material.node_tree is None:
+    node = _shader_node(material)
+    if node is None or node.bl_idname not in _BASE:
         return None
-    if bpy.app.version < (5, 0, 0) and not material.use_nodes:
-        return None
-    node = _surface_shader(material.node_tree)
-    names = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
-    if node is None or node.bl_idname not in names:
-        return None
-    return texture_of(node.inputs[names[node.bl_idname]])
+    return texture_of(node.inputs[_BASE[node.bl_idname]])
 
 
 def material_emission_texture(material):
     """(pixels, affine, UV map, strength) of an image texture driving a material's emission
     colour (Principled 'Emission Color', or an Emission node's 'Color'), its strength a plain
     value; or None."""
-    if material is None or material.node_tree is None:
+    node = _shader_node(material)
+    if node is None or node.bl_idname not in _EMISSION:
         return None
-    if bpy.app.version < (5, 0, 0) and not material.use_nodes:
-        return None
-    node = _surface_shader(material.node_tree)
-    sockets = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
-               "ShaderNodeEmission": ("Color", "Strength")}
-    if node is None or node.bl_idname not in sockets:
-        return None
-    colour, strength = (node.inputs.get(name) for name in sockets[node.bl_idname])
+    colour, strength = (node.inputs.get(name) for name in _EMISSION[node.bl_idname])
     if colour is None or strength is None or strength.is_linked:
         return None
     texture = texture_of(colour)
@@ -300,22 +272,22 @@ def material_emission_texture(material):
 
 
 def _slot_tables(obj, notes):
-    """Reflectivity, emission, material name and base-colour texture (or None) of each material
-    slot (at least one row)."""
+    """Reflectivity, emission, material name, base-colour texture, colour attribute and
+    emission texture (each or None) of each material slot (at least one row)."""
     materials = [slot.material for slot in obj.material_slots] or [None]
     R = np.empty((len(materials), 3))
     E = np.empty((len(materials), 3))
     textures, attributes, emission_textures = [], [], []
     for k, material in enumerate(materials):
-        R[k], E[k], more = material_colours(material)
-        texture = material_texture(material)
-        attribute = material_attribute(material)
+        texture, attribute = material_texture(material), material_attribute(material)
         emission = material_emission_texture(material)
-        # read per patch: the notes of their averages are moot
+        node = _shader_node(material)
+        per_patch = set()
         if texture is not None or attribute is not None:
-            more = [n for n in more if not (("comes from image" in n or "is driven by" in n) and "'Emission" not in n)]
+            per_patch.add(_BASE[node.bl_idname])
         if emission is not None:
-            more = [n for n in more if not ("comes from image" in n and ("'Emission" in n or "'Color' of 'Emission" in n))]
+            per_patch.add(_EMISSION[node.bl_idname][0])
+        R[k], E[k], more = material_colours(material, per_patch)
         textures.append(texture)
         attributes.append(attribute)
         emission_textures.append(emission)

@@ -10,6 +10,7 @@ imported only here, only when a cluster is asked for.
 from __future__ import annotations
 
 import hashlib
+import pickle
 import threading
 import time
 from collections import OrderedDict
@@ -102,7 +103,7 @@ class ScenePayload:
     def of(cls, scene):
         arrays = (scene.vertices, scene.triangles, scene.triangle_patch, scene.reflectivity, scene.emission)
         geometry = _digest(arrays[:3])
-        whole = _digest(arrays[3:], geometry, repr(scene.lights.lights), repr(scene.lights.aim))
+        whole = _digest(arrays[3:], geometry, pickle.dumps((scene.lights.lights, scene.lights.aim)))
         return cls(arrays, scene.lights.lights, scene.lights.aim, geometry, whole)
 
 
@@ -113,7 +114,7 @@ def _digest(arrays, *extra):
         digest.update(f"{a.dtype}{a.shape}".encode())
         digest.update(a.tobytes())
     for e in extra:
-        digest.update(str(e).encode())
+        digest.update(e if isinstance(e, bytes) else str(e).encode())
     return digest.hexdigest()
 
 

@@ -2,8 +2,9 @@
 
 Beyond the paper. A shooting walk's first bounce is about half its variance: where a path from
 a source lands is the noisiest choice it makes. Here each patch j gathers its direct
-irradiance H_j instead, from uniform points of it, each looking at one source chosen by power (a point on an emitting patch or on a light, or a
-direction of the sun or the sky) through a shadow ray. The walk then shoots only what the
+irradiance H_j instead, from uniform points of it, each looking at one source chosen by power
+(a point on an emitting patch or on a light, or a direction of the sun) through a shadow ray,
+and along one cosine-distributed ray (an emitting patch it meets, or the sky). The walk then shoots only what the
 direct light reflects: patch j is a source of emittance E'_j = R_j H_j, and the walk adds the
 light of every later bounce (``direct_light="gathered"`` in :func:`.solver.solve`).
 
@@ -19,7 +20,7 @@ import copy
 
 import numpy as np
 
-from .lights import WorldLight, _cosine_directions_about
+from .lights import WorldLight, cosine_directions_about
 from .names import EXIT_RANDOM, FINITE
 from .rays import hit_patches, meets_front
 from .sampling import SourceTable, channel_sum, patch_point_rows, source_weights
@@ -156,7 +157,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value):
     """Adds each sample's cosine-ray estimate to ``value``: the emitting patch it meets (weighted
     against the shadow rays), or the sky where it escapes. Returns the rays traced."""
     g = tables.geometry
-    towards = _cosine_directions_about(normal, u[5], u[6])
+    towards = cosine_directions_about(normal, u[5], u[6])
     hit, source, front, t = _trace(tables, x, towards)
     met = np.flatnonzero(front & (hit >= 0) & (gathering.emission[:, source].any(axis=0)) & (source != patch))
     if met.size:

@@ -8,7 +8,7 @@ of emittance E and area A emits, E A. What each light is given:
   sphere of ``radius`` whose surface emits like a Lambertian emitter (same intensity from every
   side); with a ``spot`` cone, intensity I times the cone's mask of the angle to its axis.
 - AreaLight: exitance M of its surface (the E of an emissive patch of the same shape), one side,
-  a rectangle or an ellipse; ``spread`` below pi narrows the emission to a cone.
+  a rectangle or an ellipse, Lambertian (Blender's spread of 180 degrees).
 - SunLight: irradiance H on a surface facing it, from a disc of angular diameter ``angle``.
 - WorldLight: a uniform background, or an equirectangular image, as the irradiance W it gives an
   unoccluded plane facing any side (a radiance of W / pi).
@@ -112,17 +112,22 @@ class PointLight:
     def gather(self, x, normal, u):
         position = np.asarray(self.position, np.float64)[:, None]
         if self.radius > 0:
-            # A uniform point of the sphere: a Lambertian sphere of intensity I has exitance
-            # I / r^2, so its estimate is (I / r^2) cos_x cos_y 4 pi r^2 / (pi d^2).
-            outward = _sphere_directions(u[0], u[1])
-            towards, distance = _towards(position + self.radius * outward, x)
-            value = 4.0 * np.maximum(-_dot(outward, towards), 0.0)
+            # A uniform direction of the cone the sphere subtends (solid angle Omega): the sphere
+            # (exitance I / r^2, Lambertian) gives (I / r^2) cos_x Omega / pi along it.
+            axis, centre_distance = _towards(position, x)
+            sin2 = np.minimum((self.radius / centre_distance) ** 2, 1.0)  # (inside: the whole sphere)
+            cos_alpha = np.sqrt(1.0 - sin2)
+            cos_theta = 1.0 - u[0].astype(np.float64) * (1.0 - cos_alpha)
+            towards = _cone_directions(axis, cos_theta, u[1])
+            reach = np.sqrt(np.maximum(self.radius**2 - centre_distance**2 * (1.0 - cos_theta**2), 0.0))
+            distance = centre_distance * cos_theta - reach  # to the sphere's near side
+            value = TWO_PI * (1.0 - cos_alpha) / (np.pi * self.radius**2)
         else:
             towards, distance = _towards(position, x)
-            value = np.ones(x.shape[1])
+            value = 1.0 / distance**2
         if self.spot is not None:
             value = value * self.spot.mask(-_dot(np.asarray(self.spot.axis, np.float64)[:, None], towards))
-        value = value * np.maximum(_dot(normal, towards), 0.0) / distance**2
+        value = value * np.maximum(_dot(normal, towards), 0.0)
         return towards, distance, np.asarray(self.intensity, np.float64)[:, None] * value
 
 
@@ -134,7 +139,6 @@ class AreaLight:
     normal: np.ndarray             # (3,) unit, the side it emits to
     exitance: np.ndarray           # (3,) radiosity units
     ellipse: bool = False
-    spread: float = np.pi          # full cone angle of the emission; pi: Lambertian
     name: str = "area"
 
     @property
@@ -146,7 +150,7 @@ class AreaLight:
         return (np.asarray(self.exitance, np.float64) * self.area)[None]
 
     def emit(self, rows, u, aim, reach):
-        return self._points(u[0], u[1]), _cosine_directions(self.normal, u[2], u[3])
+        return self._points(u[0], u[1]), cosine_directions_about(self.normal, u[2], u[3])
 
     def _points(self, a, b):
         a, b = a.astype(np.float64), b.astype(np.float64)
@@ -227,7 +231,7 @@ class WorldLight:
     def gather(self, x, normal, u):
         # A cosine-distributed direction about the normal: radiance W / pi over the density
         # cos / pi leaves W (the pixel's W for an image).
-        towards = _cosine_directions_about(normal, u[0], u[1])
+        towards = cosine_directions_about(normal, u[0], u[1])
         return towards, np.full(x.shape[1], np.inf), self.radiance_times_pi(towards)
 
     def radiance_times_pi(self, towards):
@@ -290,15 +294,6 @@ def _dot(a, b):
     return np.einsum("in,in->n", a, b) if a.shape[1] == b.shape[1] else (a * b).sum(axis=0)
 
 
-def _cosine_directions_about(normal, u1, u2):
-    """Cosine-distributed unit directions (3, n) about each normal (3, n) (Malley)."""
-    a, b = _basis(normal)
-    r = np.sqrt(u1.astype(np.float64))
-    phi = TWO_PI * u2.astype(np.float64)
-    z = np.sqrt(np.maximum(1.0 - r * r, 0.0))
-    return a * (r * np.cos(phi)) + b * (r * np.sin(phi)) + normal * z
-
-
 def _sphere_directions(u1, u2):
     """Uniform unit directions (3, n)."""
     z = 1.0 - 2.0 * u1.astype(np.float64)
@@ -318,18 +313,20 @@ def _basis(direction):
 
 
 def _cone_directions(axis, cos_theta, u_phi):
-    """Unit directions (3, n) at angles arccos(cos_theta) from ``axis`` (3,), azimuth 2 pi u."""
-    axis = np.asarray(axis, np.float64)[:, None]
+    """Unit directions (3, n) at angles arccos(cos_theta) from ``axis`` ((3,), or one (3, n) a
+    direction), azimuth 2 pi u."""
+    axis = np.asarray(axis, np.float64)
+    axis = axis[:, None] if axis.ndim == 1 else axis
     a, b = _basis(axis)
     sin_theta = np.sqrt(np.maximum(1.0 - cos_theta**2, 0.0))
     phi = TWO_PI * u_phi.astype(np.float64)
     return axis * cos_theta + a * (sin_theta * np.cos(phi)) + b * (sin_theta * np.sin(phi))
 
 
-def _cosine_directions(normal, u1, u2):
-    """Cosine-distributed unit directions (3, n) about ``normal`` (3,)."""
-    cos_theta = np.sqrt(1.0 - u1.astype(np.float64))
-    return _cone_directions(normal, cos_theta, u2)
+def cosine_directions_about(normal, u1, u2):
+    """Cosine-distributed unit directions (3, n) about ``normal`` ((3,) or (3, n)): cos(theta)
+    = sqrt(1 - u1) has the density cos / pi (Malley)."""
+    return _cone_directions(normal, np.sqrt(1.0 - u1.astype(np.float64)), u2)
 
 
 def _disc_origins(direction, u1, u2, aim, reach):

@@ -29,7 +29,7 @@ SAMPLES = _subtriangle_centres()  # (16, 2) barycentric (b1, b2) of corners 1 an
 
 
 def patch_texture_average(patch_mesh, patches, source_corners, source_uv, triangle_face, image, affine):
-    """(len(patches), 3) mean colour of ``image`` over each of the given patches of
+    """(len(patches), 3) mean colour of ``image`` over each of the given (sorted) patches of
     ``patch_mesh``: ``source_corners`` (T,3,3) and ``source_uv`` (T,3,2) are the source
     object's loop triangles and their corners' UVs, ``triangle_face`` (T,) their faces (in face
     order); ``image`` (H,W,3) linear, row 0 at the bottom; ``affine`` (2,3) maps UV to image
@@ -61,35 +61,29 @@ def _patch_means(patch_mesh, patches, colour):
     points = a[:, None] + s[None, :, :1] * (b - a)[:, None] + s[None, :, 1:] * (c - a)[:, None]  # (k,S,3)
     face = np.repeat(patch_mesh.patch_face[owner], len(s))
     colour = colour(points.reshape(-1, 3), face).reshape(len(tri), len(s), 3).mean(axis=1)
-    index = np.searchsorted(patches, owner) if np.all(np.diff(patches) > 0) else _positions(patches, owner)
+    index = np.searchsorted(patches, owner)  # (patches come sorted: np.flatnonzero)
     total = np.zeros((len(patches), 3))
     np.add.at(total, index, colour * area[:, None])
     weight = np.bincount(index, weights=area, minlength=len(patches))
     return total / np.maximum(weight, 1e-300)[:, None]
 
 
-def _positions(patches, owner):
-    order = np.argsort(patches)
-    return order[np.searchsorted(patches[order], owner)]
-
-
 def _interpolated(points, face, source_corners, corner_values, triangle_face):
     """Values (n,k) at each point (n,3) of face ``face`` (n,) of a quantity given at the loop
     triangles' corners (T,3,k): from the face's loop triangle the point lies in most (the
     largest smallest barycentric), linear inside it."""
-    source_uv = corner_values
     first = np.searchsorted(triangle_face, face, side="left")
     count = np.searchsorted(triangle_face, face, side="right") - first
     best = np.full(len(points), -np.inf)
-    uv = np.zeros((len(points), source_uv.shape[2]))
+    values = np.zeros((len(points), corner_values.shape[2]))
     for j in range(int(count.max()) if len(count) else 0):
         t = first + np.minimum(j, count - 1)
         w = _barycentric(points, source_corners[t])
         inside = w.min(axis=1)
         better = inside > best
         best = np.where(better, inside, best)
-        uv[better] = np.einsum("ni,nij->nj", w[better], source_uv[t[better]])
-    return uv
+        values[better] = np.einsum("ni,nij->nj", w[better], corner_values[t[better]])
+    return values
 
 
 def _barycentric(p, triangle):

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
-from addon import estimate, patches, pipeline, scene_io, worker
+from addon import estimate, images, patches, pipeline, scene_io, worker
 
 from .conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
 from .test_extension import _drive, _modal_operator, _snapshot, configure
@@ -141,7 +141,7 @@ def test_image_texture_uses_the_average_linear_colour_and_says_so(blender):
     image.pixels.foreach_set(pixels.ravel())
     stored = np.empty(32, np.float32)
     image.pixels.foreach_get(stored)  # 8-bit quantised
-    expected = scene_io._srgb_to_linear(stored.reshape(8, 4)[:, :3].astype(float)).mean(axis=0)
+    expected = images.srgb_to_linear(stored.reshape(8, 4)[:, :3].astype(float)).mean(axis=0)
     tex = tree.nodes.new("ShaderNodeTexImage")
     tex.image = image
     tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])

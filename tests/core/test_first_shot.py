@@ -72,10 +72,11 @@ def test_irradiance_is_what_the_reflected_light_comes_from_and_direct_light_alon
     scene, exact = _box_with_one_emitter()
     r = solve(scene, paths=50_000, seed=5, direct_light=GATHERED)
     np.testing.assert_allclose(scene.reflectivity * r.irradiance, r.reflected, rtol=1e-12, atol=1e-15)
-    position, intensity = np.array([0.3, 0.7, 0.5]), 2.0
-    box, rectangles, _ = _box(lights=[PointLight(position, np.full(3, intensity))])
-    truth = intensity * _solid_angles(position, rectangles) / box.patch_area
-    a = direct_irradiance(box, samples=64, seed=1)[:, 0] / truth
-    b = direct_irradiance(box, samples=64, seed=2)[:, 0] / truth
-    se = np.std(a - b, ddof=1) / math.sqrt(2) / math.sqrt(a.size)
-    assert abs(0.5 * (a + b).mean() - 1) < 5 * se / math.sqrt(2)
+    position, intensity = np.array([0.4, 0.6, 0.45]), 2.0
+    for radius in (0.0, 0.1):  # a sphere wholly above every wall's horizon lights it as a point does
+        box, rectangles, _ = _box(lights=[PointLight(position, np.full(3, intensity), radius=radius)])
+        truth = intensity * _solid_angles(position, rectangles) / box.patch_area
+        a = direct_irradiance(box, samples=64, seed=1)[:, 0] / truth
+        b = direct_irradiance(box, samples=64, seed=2)[:, 0] / truth
+        se = np.std(a - b, ddof=1) / math.sqrt(2) / math.sqrt(a.size)
+        assert abs(0.5 * (a + b).mean() - 1) < 5 * se / math.sqrt(2), radius
