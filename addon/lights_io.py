@@ -55,7 +55,9 @@ def read_lights(depsgraph, notes):
 def read_light(data, matrix, name, notes):
     """One Blender light (``bpy.types.Light``) at ``matrix`` (4,4) world as a core light, or None."""
     colour = np.array(data.color[:3], dtype=np.float64)
-    power = float(data.energy)
+    if getattr(data, "use_temperature", False):  # Cycles multiplies the colour by the blackbody's
+        colour = colour * np.array(data.temperature_color[:3], dtype=np.float64)
+    power = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))
     what = "strength" if data.type == "SUN" else "power"
     if not (np.isfinite(colour).all() and math.isfinite(power)):
         raise LightError(f"light '{name}': its colour or {what} is not a finite number")
@@ -66,8 +68,10 @@ def read_light(data, matrix, name, notes):
         return None
     if getattr(data, "use_nodes", False):
         notes.append(f"light '{name}': its node tree is not read; its colour and {what} were used")
-    if not getattr(data, "use_shadow", True):
-        notes.append(f"light '{name}' casts no shadow in Cycles; here objects still block it")
+    # Without Normalize, Cycles does not divide the power by the light's area (its own area of a
+    # point light of radius 0 is 4, of a sun of angle 0 is 1).
+    unnormalized = not getattr(data, "normalize", True)
+    shadow = bool(getattr(data, "use_shadow", True))
     position = matrix[:3, 3]
     axes = matrix[:3, :3]
     down = -axes[:, 2] / np.linalg.norm(axes[:, 2])  # lights shine along their local -Z
@@ -77,9 +81,11 @@ def read_light(data, matrix, name, notes):
         if data.type == "SPOT":
             cos_outer = math.cos(0.5 * float(data.spot_size))
             cos_inner = cos_outer + (1.0 - cos_outer) * float(data.spot_blend)
-            spot = Spot(axis=down, cos_outer=cos_outer, cos_inner=min(cos_inner, 1.0))
+            spot = Spot(axis=down, cos_outer=cos_outer, cos_inner=min(cos_inner, 1.0), to_local=_spot_frame(axes, name))
         radius = float(getattr(data, "shadow_soft_size", 0.0))
-        return PointLight(position, intensity, radius=radius, spot=spot, name=name)
+        if unnormalized:
+            intensity = intensity * (4.0 * math.pi * radius**2 if radius > 0 else 4.0)
+        return PointLight(position, intensity, radius=radius, spot=spot, name=name, casts_shadow=shadow)
     if data.type == "AREA":
         if float(getattr(data, "spread", math.pi)) < math.pi - 1e-6:
             raise LightError(f"area light '{name}': a spread below 180 degrees is not supported; set Spread to 180")
@@ -93,12 +99,26 @@ def read_light(data, matrix, name, notes):
         if not area > 0:
             notes.append(f"area light '{name}' has no area: left out")
             return None
-        exitance = colour * power * AREA_EXITANCE / area
-        return AreaLight(position, half_u, half_v, down, exitance, ellipse=ellipse, name=name)
+        exitance = colour * power * AREA_EXITANCE / (1.0 if unnormalized else area)
+        return AreaLight(position, half_u, half_v, down, exitance, ellipse=ellipse, name=name, casts_shadow=shadow)
     if data.type == "SUN":
-        return SunLight(down, colour * power * SUN_IRRADIANCE, angle=float(data.angle), name=name)
+        angle = float(data.angle)
+        disc = math.pi * math.sin(0.5 * angle) ** 2 if angle > 0 else 1.0
+        return SunLight(down, colour * power * SUN_IRRADIANCE * (disc if unnormalized else 1.0), angle=angle, name=name,
+                        casts_shadow=shadow)
     notes.append(f"light '{name}' of type {data.type} is not supported: left out")
     return None
+
+
+def _spot_frame(axes, name):
+    """A spot's ``to_local`` where its object is scaled unevenly (Cycles then makes the cone
+    elliptical: the inverse matrix, z turned towards the axis), else None (a round cone)."""
+    scales = np.linalg.svd(axes, compute_uv=False)
+    if not scales.min() > 1e-9 * scales.max():
+        raise LightError(f"spot light '{name}' is scaled to nothing along an axis: its cone has no shape")
+    if scales.max() - scales.min() <= 1e-6 * scales.max():
+        return None
+    return np.linalg.inv(axes) * np.array([1.0, 1.0, -1.0])[:, None]
 
 
 def read_world(scene, notes):

@@ -11,6 +11,7 @@ import numpy as np
 
 from .core import meshing, predict, relative_rms_to_mse, solve
 from .core.first_shot import direct_irradiance
+from .core.names import GATHERED
 from . import options
 from .patches import Patches, make_patches, scene_and_notes
 
@@ -80,12 +81,20 @@ CALIBRATION_SECONDS = 2.0  # at most (paths of endless bounces never finish a ch
 SLOW_SECONDS = 60.0
 
 
+def direct_light_for(scene, settings: SolveSettings) -> str:
+    """How the direct light is computed: as the settings say, but gathered where a light casts no
+    shadow (a shooting walk cannot pass light through objects; ``light_notes`` says so)."""
+    return GATHERED if scene.lights.shadowless() else settings.direct_light
+
+
 def ray_rate(scene, patches: Patches, settings: SolveSettings) -> float:
     """This machine's ray rate for this scene and walk: the last run's, else a short solve's."""
-    key = (patches.geometry_key, settings.estimator, settings.exit_point)
+    direct_light = direct_light_for(scene, settings)
+    key = (patches.geometry_key, settings.estimator, settings.exit_point, direct_light)
     if key not in RAY_RATES:
         r = solve(scene, settings.estimator, paths=CALIBRATION_PATHS, threshold=settings.threshold,
-                  exit_point=settings.exit_point, threads=settings.threads or None, max_seconds=CALIBRATION_SECONDS)
+                  exit_point=settings.exit_point, threads=settings.threads or None, max_seconds=CALIBRATION_SECONDS,
+                  direct_light=direct_light)
         if not r.rays:
             return float("nan")  # not one chunk in the time: unknown, measured again next time
         RAY_RATES[key] = r.rays_per_second
@@ -195,10 +204,10 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         max_seconds=settings.max_seconds or None,
         threads=settings.threads or None,
         cluster=settings.cluster or None,
-        direct_light=settings.direct_light,
+        direct_light=direct_light_for(scene, settings),
     )
     if result.seconds > 0 and result.rays:
-        RAY_RATES[(patches.geometry_key, settings.estimator, settings.exit_point)] = result.rays_per_second
+        RAY_RATES[(patches.geometry_key, settings.estimator, settings.exit_point, result.direct_light)] = result.rays_per_second
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))

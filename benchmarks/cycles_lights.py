@@ -8,7 +8,10 @@ The scene: an open floor of 2 x 2 m in 8 x 8 patches (albedo 0.5), a red back wa
 in 8 x 4 patches (albedo 0.6, 0.2, 0.2) and a grey block of 0.4 m (albedo 0.5, 2 x 2 patches a
 face), every patch a quad of its own, all Lambertian (Diffuse BSDF). Lit by one source kind at a
 time: a point light, a sphere light (radius 0.15 m, soft falloff off), a spot, a square and a
-disk area light, a sun and a uniform world. Ours reads the lights through the extension
+disk area light, a sun and a uniform world; then a spot scaled (1.8, 1, 1), a point light that
+casts no shadow (above the block), the sphere light with soft falloff on (Blender's default; the
+core's sphere is the same without it: the difference measured), and a sphere light with colour temperature, exposure and
+Normalize off. Ours reads the lights through the extension
 (``scene_io.read_selection``: ``lights_io``) and solves the same patches (exit point "hit":
 patch averages of the continuous solution, what a bake's pixel blocks average); Cycles bakes
 COMBINED into pixel blocks, one per patch. Reported per scene: the mean of ours / Cycles over
@@ -41,6 +44,14 @@ KINDS = {
     "area_disk": ("AREA", {"energy": 150.0, "shape": "DISK", "size": 0.6}, (-0.2, 0.1, 1.3), (math.radians(20), 0, 0)),
     "sun": ("SUN", {"energy": 3.0, "angle": math.radians(8)}, (0, 0, 3), (math.radians(35), 0, math.radians(20))),
     "world": ("WORLD", {"color": (0.3, 0.35, 0.4), "strength": 1.0}, None, None),
+    # Cycles' readings beyond the plain kinds: a spot scaled unevenly (an elliptical cone), a lamp
+    # that casts no shadow over the block, and colour temperature, exposure and Normalize off.
+    "spot_oval": ("SPOT", {"energy": 300.0, "spot_size": math.radians(70), "spot_blend": 0.3, "shadow_soft_size": 0.0},
+                  (0.0, -0.3, 1.5), (math.radians(15), 0, 0), (1.8, 1.0, 1.0)),
+    "no_shadow": ("POINT", {"energy": 200.0, "shadow_soft_size": 0.0, "use_shadow": False}, (-0.3, 0.0, 1.2), (0, 0, 0)),
+    "sphere_soft": ("POINT", {"energy": 200.0, "shadow_soft_size": 0.15, "use_soft_falloff": True}, (0.3, 0.2, 1.2), (0, 0, 0)),
+    "point_raw": ("POINT", {"energy": 400.0, "shadow_soft_size": 0.1, "use_soft_falloff": False, "normalize": False,
+                            "use_temperature": True, "temperature": 4000.0, "exposure": 1.0}, (0.3, 0.2, 1.2), (0, 0, 0)),
 }
 
 
@@ -91,7 +102,7 @@ def build(kind):
     mesh.update()
     obj = selected_object(mesh)
     scene = bpy.context.scene
-    kind_type, settings, location, rotation = KINDS[kind]
+    kind_type, settings, location, rotation, *scale = KINDS[kind]
     if kind_type == "WORLD":
         world = bpy.data.worlds.new("Sky")
         scene.world = world
@@ -106,6 +117,7 @@ def build(kind):
                 setattr(data, key, value)
         lamp = bpy.data.objects.new(kind, data)
         lamp.location, lamp.rotation_euler = location, rotation
+        lamp.scale = scale[0] if scale else (1.0, 1.0, 1.0)
         scene.collection.objects.link(lamp)
     configure_bake(scene)
     return obj, image, rows

@@ -3,7 +3,8 @@
 Beyond the paper. A shooting walk's first bounce is about half its variance: where a path from
 a source lands is the noisiest choice it makes. Here each patch j gathers its direct
 irradiance H_j instead, from uniform points of it, each looking at one source chosen by power
-(a point on an emitting patch or on a light, or a direction of the sun) through a shadow ray,
+(a point on an emitting patch or on a light, or a direction of the sun) through a shadow ray
+(none for a light that casts no shadow: its light passes through objects, as Cycles draws it),
 and along one cosine-distributed ray (an emitting patch it meets, or the sky). The walk then shoots only what the
 direct light reflects: patch j is a source of emittance E'_j = R_j H_j, and the walk adds the
 light of every later bounce (``direct_light="gathered"`` in :func:`.solver.solve`).
@@ -118,6 +119,7 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
     source = gathering.table.choose(u[2])
     towards = np.empty_like(x)
     distance = np.full(patch.size, -1.0)  # unit space; -1: the ray must meet the source patch
+    unshadowed = np.zeros(patch.size, dtype=bool)  # from a light that casts no shadow: always seen
     shadow = np.zeros_like(value)
     at_patch = np.flatnonzero(source < P)
     if at_patch.size:
@@ -140,10 +142,12 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
             here = light == k
             cols = at_light[here]
             t, dist, v = gathering.lights[k].gather(x_world[:, here], normal[:, cols], u[3:5, cols])
+            unshadowed[cols] = not getattr(gathering.lights[k], "casts_shadow", True)
             towards[:, cols] = t
             distance[cols] = dist / g.diagonal
             shadow[:, cols] = v / gathering.choice[source[cols]]
-    live = np.flatnonzero(shadow.any(axis=0))
+    value[:, unshadowed] += shadow[:, unshadowed]
+    live = np.flatnonzero(shadow.any(axis=0) & ~unshadowed)
     if live.size:
         hit, hit_patch, front, t = _trace(tables, x[:, live], towards[:, live])
         to_patch = distance[live] < 0
@@ -233,6 +237,7 @@ def gathered_chunk(tables, paths, rng, walk):
         rays += tally.rays
         ended = tally.ended
     # What the direct light brought no patch (in expectation, what escaped or met a back side
-    # on its first flight), so that the accounts balance exactly.
+    # on its first flight), so that the accounts balance exactly; below zero where a light that
+    # casts no shadow reaches, through objects, more than it emits.
     escaped = emitted - absorbed - walked + walk_escaped
     return ChunkTally(paths, rays, incident, emitted, absorbed + walk_absorbed, escaped, blocked, undistributed, ended)

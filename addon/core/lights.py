@@ -32,16 +32,26 @@ from dataclasses import dataclass, field
 import numpy as np
 
 TWO_PI = 2.0 * np.pi
+# An elliptical spot's solid angle: Gauss-Legendre nodes in the angle to the axis (per part), and
+# trapezoid steps around it (periodic: both converge fast on the smooth integrand).
+ELLIPSE_QUADRATURE = (48, 256)
+# Added to the widest angle of an elliptical spot's sampled edge, for the edge between samples.
+BOUNDING_MARGIN = 1e-3
 
 
 @dataclass(frozen=True)
 class Spot:
     """A spot light's cone: emission along ``axis`` (unit), the mask of cos(angle to the axis)
-    x rising as smoothstep from 0 at cos_outer to 1 at cos_inner (no rise where they are equal)."""
+    x rising as smoothstep from 0 at cos_outer to 1 at cos_inner (no rise where they are equal).
+
+    A light object scaled unevenly makes the cone elliptical, as Cycles shapes it: ``to_local``
+    (3,3) takes a world direction into the light's own frame (the inverse of its matrix, z
+    towards the axis), and x is the z of that direction normalised. None: a round cone."""
 
     axis: np.ndarray
     cos_outer: float
     cos_inner: float
+    to_local: np.ndarray | None = None
 
     def mask(self, x):
         x = np.asarray(x, dtype=np.float64)
@@ -51,10 +61,66 @@ class Spot:
         t = np.clip((x - self.cos_outer) / width, 0.0, 1.0)
         return t * t * (3.0 - 2.0 * t)
 
+    def local_cosine(self, directions):
+        """x of unit world directions (3, n) leaving the light."""
+        if self.to_local is None:
+            return _dot(np.asarray(self.axis, np.float64)[:, None], directions)
+        local = np.asarray(self.to_local, np.float64) @ directions
+        return local[2] / np.sqrt(_dot(local, local))
+
     def solid_angle(self):
-        """The integral of the mask over directions: 2 pi times its integral over x in [-1, 1]."""
+        """The integral of the mask over directions. Round: 2 pi times its integral over x in
+        [-1, 1]. Elliptical: over the light's own directions l, the mask times the Jacobian
+        |det A| / |A l|^3 of l -> A l / |A l| (A the light's matrix), by Gauss-Legendre in the
+        angle to the axis (the cap, then the ramp) and the trapezoid rule around it."""
         width = max(self.cos_inner - self.cos_outer, 0.0)
-        return TWO_PI * ((1.0 - self.cos_inner) + 0.5 * width)  # smoothstep integrates to half
+        if self.to_local is None:
+            return TWO_PI * ((1.0 - self.cos_inner) + 0.5 * width)  # smoothstep integrates to half
+        A = np.linalg.inv(np.asarray(self.to_local, np.float64))
+        nodes, weights = np.polynomial.legendre.leggauss(ELLIPSE_QUADRATURE[0])
+        phi = TWO_PI * np.arange(ELLIPSE_QUADRATURE[1]) / ELLIPSE_QUADRATURE[1]
+        total, theta_inner, theta_outer = 0.0, np.arccos(min(self.cos_inner, 1.0)), np.arccos(self.cos_outer)
+        for start, end in ((0.0, theta_inner), (theta_inner, theta_outer)):
+            if end <= start:
+                continue
+            theta = start + (end - start) * 0.5 * (nodes + 1.0)
+            l = np.stack([np.outer(np.sin(theta), np.cos(phi)), np.outer(np.sin(theta), np.sin(phi)),
+                          np.repeat(np.cos(theta)[:, None], phi.size, axis=1)]).reshape(3, -1)
+            jacobian = abs(np.linalg.det(A)) / np.sqrt(_dot(A @ l, A @ l)) ** 3
+            f = (self.mask(l[2]) * jacobian).reshape(theta.size, phi.size) * np.sin(theta)[:, None]
+            total += 0.5 * (end - start) * (weights @ f.sum(axis=1)) * (TWO_PI / phi.size)
+        return total
+
+    def bounding_cos(self):
+        """The cosine of a round cone about the axis that holds every direction of the mask."""
+        if self.to_local is None:
+            return self.cos_outer
+        A = np.linalg.inv(np.asarray(self.to_local, np.float64))
+        phi = TWO_PI * np.arange(1024) / 1024
+        sin_outer = np.sqrt(max(1.0 - self.cos_outer**2, 0.0))
+        edge = A @ np.stack([sin_outer * np.cos(phi), sin_outer * np.sin(phi), np.full(phi.size, self.cos_outer)])
+        widest = np.arccos(np.clip(np.min(_dot(np.asarray(self.axis, np.float64)[:, None], edge)
+                                          / np.sqrt(_dot(edge, edge))), -1.0, 1.0))
+        return float(np.cos(min(widest + BOUNDING_MARGIN, np.pi)))
+
+    def sample(self, u_cos, u_phi):
+        """Directions (3, n) with density proportional to the mask. Round: exactly, by its cosine
+        (``sample_cosine``). Elliptical: uniform in the bounding cone, each kept with the chance
+        of its mask; the ones left draw again from a generator seeded with their own uniforms
+        (reproducible, and independent of other paths)."""
+        if self.to_local is None or u_cos.size == 0:
+            return _cone_directions(self.axis, self.sample_cosine(u_cos), u_phi)
+        axis, cos_bound = np.asarray(self.axis, np.float64), self.bounding_cos()
+        cos_theta = 1.0 - u_cos.astype(np.float64) * (1.0 - cos_bound)
+        directions = _cone_directions(axis, cos_theta, u_phi)
+        rng = np.random.default_rng(np.frombuffer(np.ascontiguousarray(np.stack([u_cos, u_phi]), np.float32).tobytes(), np.uint32))
+        redraw = np.flatnonzero(rng.random(directions.shape[1]) >= self.mask(self.local_cosine(directions)))
+        while redraw.size:
+            cos_theta = 1.0 - rng.random(redraw.size) * (1.0 - cos_bound)
+            directions[:, redraw] = _cone_directions(axis, cos_theta, rng.random(redraw.size))
+            kept = rng.random(redraw.size) < self.mask(self.local_cosine(directions[:, redraw]))
+            redraw = redraw[~kept]
+        return directions
 
     def sample_cosine(self, u):
         """x = cos(angle to the axis) with density proportional to the mask: uniform over the
@@ -86,6 +152,7 @@ class PointLight:
     radius: float = 0.0
     spot: Spot | None = None
     name: str = "point"
+    casts_shadow: bool = True  # False: its direct light passes through objects (gathered only)
 
     def emitter_powers(self, aim=None):
         solid_angle = 4.0 * np.pi if self.spot is None else self.spot.solid_angle()
@@ -96,7 +163,7 @@ class PointLight:
         if self.spot is None:
             direction = _sphere_directions(u[2], u[3])
         else:
-            direction = _cone_directions(self.spot.axis, self.spot.sample_cosine(u[2]), u[3])
+            direction = self.spot.sample(u[2], u[3])
         origin = np.repeat(np.asarray(self.position, np.float64)[:, None], n, axis=1)
         if self.radius > 0:
             # A point of the sphere seen from the direction: a uniform point of the disc facing
@@ -126,7 +193,7 @@ class PointLight:
             towards, distance = _towards(position, x)
             value = 1.0 / distance**2
         if self.spot is not None:
-            value = value * self.spot.mask(-_dot(np.asarray(self.spot.axis, np.float64)[:, None], towards))
+            value = value * self.spot.mask(self.spot.local_cosine(-towards))
         value = value * np.maximum(_dot(normal, towards), 0.0)
         return towards, distance, np.asarray(self.intensity, np.float64)[:, None] * value
 
@@ -140,6 +207,7 @@ class AreaLight:
     exitance: np.ndarray           # (3,) radiosity units
     ellipse: bool = False
     name: str = "area"
+    casts_shadow: bool = True
 
     @property
     def area(self):
@@ -175,6 +243,7 @@ class SunLight:
     irradiance: np.ndarray         # (3,) on a surface facing the sun
     angle: float = 0.0             # angular diameter of the sun's disc
     name: str = "sun"
+    casts_shadow: bool = True
 
     def _beam_factor(self):
         """Flux through a disc perpendicular to each direction of the sun's cone, over the
@@ -360,6 +429,10 @@ class Lights:
     @property
     def emitter_count(self):
         return self.power.shape[0]
+
+    def shadowless(self):
+        """Names of the lights that cast no shadow (their direct light can only be gathered)."""
+        return [light.name for light in self.lights if not getattr(light, "casts_shadow", True)]
 
     def light_power(self):
         """(L,3) the power of each light (the sum of its emitters')."""

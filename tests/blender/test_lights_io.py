@@ -62,6 +62,73 @@ def test_each_kind_in_cycles_units(blender):
     np.testing.assert_allclose(sun.direction, [0, math.sin(math.radians(30)), -math.cos(math.radians(30))], atol=1e-6)
 
 
+def test_exposure_temperature_normalize_and_an_uneven_spot_as_cycles_reads_them(blender):
+    """Cycles' strength is colour (x the blackbody colour with Temperature on) x power x
+    2^exposure; without Normalize the power is not divided by the light's own area (a point of
+    radius 0: 4; radius r: 4 pi r^2; an area light its area; a sun of angle a: pi sin^2(a/2)).
+    A spot scaled unevenly gets an elliptical cone (the inverse matrix, z turned); Cast Shadow
+    is carried to the core."""
+    _lamp("POINT", "Exposed", energy=10.0, exposure=2.0, shadow_soft_size=0.0)
+    _lamp("POINT", "Raw", energy=10.0, normalize=False, shadow_soft_size=0.0)
+    _lamp("POINT", "Raw ball", energy=10.0, normalize=False, shadow_soft_size=0.2)
+    warm = _lamp("POINT", "Warm", energy=10.0, use_temperature=True, temperature=3000.0, shadow_soft_size=0.0)
+    _lamp("AREA", "Raw panel", energy=10.0, normalize=False, shape="RECTANGLE", size=2.0, size_y=0.5)
+    _lamp("SUN", "Raw sun", energy=2.0, normalize=False, angle=math.radians(10))
+    _lamp("SPOT", "Oval", energy=10.0, spot_size=math.radians(50), scale=(2.0, 1.0, 1.0), use_shadow=False)
+    _lamp("SPOT", "Even", energy=10.0, spot_size=math.radians(50), scale=(3.0, 3.0, 3.0))
+    lights, notes = _read(bpy.context)
+    by = {light.name: light for light in lights}
+    unit = 10.0 / (4 * math.pi**2)
+    np.testing.assert_allclose(by["Exposed"].intensity, 4 * unit)
+    np.testing.assert_allclose(by["Raw"].intensity, 4 * unit)
+    np.testing.assert_allclose(by["Raw ball"].intensity, 4 * math.pi * 0.2**2 * unit)
+    blackbody = np.array(warm.data.temperature_color[:3])
+    assert blackbody[0] > blackbody[2]  # warm
+    np.testing.assert_allclose(by["Warm"].intensity, blackbody * unit)
+    np.testing.assert_allclose(by["Raw panel"].exitance, 10.0 / math.pi)
+    np.testing.assert_allclose(by["Raw sun"].irradiance, 2.0 / math.pi * math.pi * math.sin(math.radians(5)) ** 2)
+    oval, even = by["Oval"], by["Even"]
+    assert even.spot.to_local is None and oval.spot.to_local is not None
+    np.testing.assert_allclose(oval.spot.to_local, np.diag([0.5, 1.0, -1.0]), atol=1e-6)
+    assert oval.spot.bounding_cos() < oval.spot.cos_outer
+    assert not oval.casts_shadow and even.casts_shadow and by["Raw"].casts_shadow
+
+
+def test_a_lamp_that_casts_no_shadow_lights_through_and_says_how(blender):
+    """A closed room with a point light above a board: Cast Shadow off lights the floor under
+    the board as if the board were not there (the solve gathers the direct light and says so);
+    on, the floor there is darker."""
+    from addon import pipeline
+
+    room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    make_object("Room", room_v, room_f, [principled("White", (0.5, 0.5, 0.5))]).select_set(True)
+    board_v = np.array([[0.25, 0.25, 0.5], [0.75, 0.25, 0.5], [0.75, 0.75, 0.5], [0.25, 0.75, 0.5]])
+    make_object("Board", board_v, [(0, 1, 2, 3)], [principled("Black", (0.0, 0.0, 0.0))]).select_set(True)
+    lamp = _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.8), energy=40.0)
+    s = blender.scene.radiosity
+    s.target_error, s.patch_size, s.threads = 10.0, 0.25, 1
+
+    def floor_centre():
+        assert bpy.ops.radiosity.solve() == {"FINISHED"}
+        room = next(o for o in result_objects() if o.name.startswith("Room"))
+        colours = np.empty(len(room.data.color_attributes["Radiosity"].data) * 4, np.float32)
+        room.data.color_attributes["Radiosity"].data.foreach_get("color", colours)
+        faces = np.array([p.center for p in room.data.polygons])
+        centre = (np.abs(faces[:, 2]) < 1e-6) & (np.abs(faces[:, 0] - 0.5) < 0.25) & (np.abs(faces[:, 1] - 0.5) < 0.25)
+        face_colours = colours.reshape(-1, 4)[[p.loop_start for p in room.data.polygons], 0]
+        objects, _ = scene_io.read_selection(blender)
+        return face_colours[centre].mean(), pipeline.estimate(objects, s.solve_settings())["notes"]
+
+    shadowed, _ = floor_centre()
+    lamp.data.use_shadow = False
+    through, notes = floor_centre()
+    assert any("'Bulb' casts no shadow" in note for note in notes)
+    # Unshadowed, the centre floor adds its direct light, 0.5 x 40 / (4 pi^2) x cos / d^2 averaged
+    # over it: 0.72 (its indirect light grows too). Each mean is of 4 patches at a 10% target
+    # (about 5% of about 0.65 and 1.4): the difference's sd is about 0.08, half of 0.72 is 4.5 sd.
+    assert through - shadowed > 0.5 * 0.72
+
+
 def test_lights_left_out_or_refused_are_named(blender):
     hidden = _lamp("POINT", "Hidden", energy=10.0)
     hidden.hide_render = True

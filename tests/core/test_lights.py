@@ -121,6 +121,81 @@ def test_a_spot_light_masks_a_point_light(direct_light):
     assert (r.reflected[floor, 0][outside] == 0).all()
 
 
+def _spot_of_matrix(matrix, degrees_outer, degrees_inner):
+    """A spot shining along the light matrix's -Z, its cone shaped by the matrix as Cycles does:
+    the local direction is the inverse matrix's image with its z turned."""
+    to_local = np.linalg.inv(matrix) * np.array([1.0, 1.0, -1.0])[:, None]
+    axis = -matrix[:, 2] / np.linalg.norm(matrix[:, 2])
+    return Spot(axis, math.cos(math.radians(degrees_outer)), math.cos(math.radians(degrees_inner)), to_local=to_local)
+
+
+def test_an_unevenly_scaled_spot_is_an_elliptical_cone():
+    """Scaled evenly, the spot is its round cone (same mask, same solid angle). Scaled (2, 1, 1)
+    with a hard edge, along each azimuth phi its edge is at tan(theta) = tan(theta_o) / m(phi),
+    m = sqrt(cos^2 phi / 4 + sin^2 phi): the solid angle is the integral over phi of 1 - cos
+    theta, and the sampled directions' azimuths follow 1 - cos theta(phi) (chi-square); with a
+    blend, the solid angle is a uniform-sphere Monte Carlo estimate's, within 5 of its sd."""
+    rotation = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 degrees about z
+    round_ = Spot(np.array([0.0, 0.0, -1.0]), math.cos(math.radians(30)), math.cos(math.radians(25)))
+    even = _spot_of_matrix(rotation * 3.0, 30, 25)
+    assert even.solid_angle() == pytest.approx(round_.solid_angle(), rel=1e-9)
+    d = np.random.default_rng(2).normal(size=(3, 1000))
+    d /= np.linalg.norm(d, axis=0)
+    np.testing.assert_allclose(even.local_cosine(d), round_.local_cosine(d), atol=1e-12)
+
+    scale = np.diag([2.0, 1.0, 1.0])
+    hard = _spot_of_matrix(rotation @ scale, 30, 30)
+    phi = 2 * math.pi * (np.arange(180_000) + 0.5) / 180_000  # the light's own x-y azimuth
+    m = np.sqrt(np.cos(phi) ** 2 / 4 + np.sin(phi) ** 2)
+    one_minus_cos = 1 - np.cos(np.arctan(math.tan(math.radians(30)) / m))
+    assert hard.solid_angle() == pytest.approx(one_minus_cos.mean() * 2 * math.pi, rel=1e-6)
+    rng = np.random.default_rng(3)
+    u = rng.random((2, 300_000)).astype(np.float32)
+    directions = hard.sample(u[0], u[1])
+    assert (hard.mask(hard.local_cosine(directions)) > 0).all()
+    np.testing.assert_array_equal(directions, hard.sample(u[0], u[1]))  # reproducible
+    light_x, light_y = rotation[:, 0], rotation[:, 1]  # the light's own axes in the world
+    azimuth = np.arctan2(light_y @ directions, light_x @ directions) % (2 * math.pi)
+    observed = np.histogram(azimuth, np.linspace(0, 2 * math.pi, 37))[0]
+    expected = one_minus_cos.reshape(36, -1).sum(axis=1) / one_minus_cos.sum() * azimuth.size
+    chi2 = float(((observed - expected) ** 2 / expected).sum())
+    assert chi2 < 75, chi2  # 35 degrees of freedom: P(chi2 > 75) < 1e-4
+
+    blended = _spot_of_matrix(rotation @ scale, 40, 20)
+    d = rng.normal(size=(3, 4_000_000))
+    d /= np.linalg.norm(d, axis=0)
+    f = 4 * math.pi * blended.mask(blended.local_cosine(d))
+    assert abs(blended.solid_angle() - f.mean()) < 5 * f.std() / math.sqrt(f.size)
+    assert blended.bounding_cos() < blended.cos_outer  # the long side reaches wider
+
+
+@pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
+def test_an_elliptical_spot_lights_the_floor_of_its_ellipse(direct_light):
+    """A spot scaled (2, 1, 1) aimed at the floor: power I times its solid angle; floor patches
+    wholly inside its full (elliptical) cone get what the point light gives, patches wholly
+    outside its bounding cone nothing directly."""
+    position, n = np.array([0.5, 0.6, 0.5]), 10
+    spot = _spot_of_matrix(np.diag([2.0, 1.0, 1.0]), 28, 25)
+    scene = _box(n=n, reflectivity=[0.0] * 6, lights=[PointLight(position, np.full(3, 1.0), spot=spot)])[0]
+    lit = scene.with_materials(np.where(np.arange(scene.patch_count) < n * n, 0.5, 0.0), scene.emission)
+    r = solve(lit, paths=500_000, seed=7, direct_light=direct_light)
+    np.testing.assert_allclose(r.energy["emitted"], spot.solid_angle(), rtol=1e-12)
+    origin, u, v, _ = box_rectangles(SIZE, n=n)
+    floor = slice(0, n * n)
+    omega = _solid_angles(position, (origin[floor], u[floor], v[floor]))
+    corners = np.stack([origin[floor], origin[floor] + u[floor], origin[floor] + v[floor], origin[floor] + u[floor] + v[floor]]) - position
+    corners = corners / np.linalg.norm(corners, axis=-1, keepdims=True)
+    local = np.stack([spot.local_cosine(c.T) for c in corners])  # (4, patches)
+    inside = local.min(axis=0) > spot.cos_inner
+    outside = (-corners[..., 2]).max(axis=0) < spot.bounding_cos()
+    assert inside.sum() > 4 and outside.any()
+    assert (inside & ((-corners[..., 2]).min(axis=0) < math.cos(math.radians(28)))).any()  # beyond the round cone
+    exact = 0.5 * omega / lit.patch_area[floor]
+    b, variance = r.reflected[floor, 0][inside], r.reflected_variance[floor, 0][inside]
+    assert np.abs((b - exact[inside]) / np.sqrt(variance)).max() < Z
+    assert (r.reflected[floor, 0][outside] == 0).all()
+
+
 @pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
 def test_an_area_light_is_a_rectangle_of_the_form_factor_reference(direct_light):
     """A rectangle light facing down, in the plane between the walls' top and middle rows of
@@ -260,3 +335,38 @@ def test_lights_alone_light_a_scene_without_emissive_patches_and_bad_lights_are_
         _box(lights=[PointLight(np.zeros(3) + 0.5, np.array([1.0, -1.0, 1.0]), name="Lamp")])
     with pytest.raises(ValueError, match="'Lamp'.*NaN"):
         _box(lights=[PointLight(np.zeros(3) + 0.5, np.array([1.0, np.nan, 1.0]), name="Lamp")])
+
+
+@pytest.mark.parametrize("kind", ["point", "area"])
+def test_a_light_that_casts_no_shadow_lights_the_floor_through_an_occluder(kind):
+    """A light above a board that hides part of the floor: with Cast Shadow off (Cycles) the
+    floor under the board gets the light's unoccluded direct light, the exact solid-angle (point)
+    or form-factor (area) value; a shooting walk cannot do that and is refused by name."""
+    n = 6
+    origin, u, v, face = box_rectangles(SIZE, n=n)
+    board = (np.array([[0.3, 0.35, 0.4]]), np.array([[0.4, 0.0, 0.0]]), np.array([[0.0, 0.5, 0.0]]))  # faces up
+    V, T, TP = rectangles_to_mesh(*(np.concatenate([a, b]) for a, b in zip((origin, u, v), board)))
+    floor = np.arange(len(origin) + 1) < n * n
+    if kind == "point":
+        position = np.array([0.5, 0.6, 0.7])
+        light = PointLight(position, np.full(3, 1.0), name="Lamp", casts_shadow=False)
+        omega = _solid_angles(position, (origin[:n * n], u[:n * n], v[:n * n]))
+    else:
+        light = AreaLight(np.array([0.5, 0.6, 0.85]), np.array([0.1, 0, 0]), np.array([0, 0.1, 0]),
+                          np.array([0, 0, -1.0]), np.full(3, 1.0), name="Lamp", casts_shadow=False)
+        lamp = (np.array([[0.4, 0.5, 0.85]]), np.array([[0.0, 0.2, 0.0]]), np.array([[0.2, 0.0, 0.0]]))  # faces down
+        F = rectangle_form_factors(*(np.concatenate([a, b]) for a, b in zip(lamp, (origin[:n * n], u[:n * n], v[:n * n]))))
+        omega = F[0, 1:] * light.area  # H_j A_j = M A_lamp F_lamp->j, with M = 1
+    scene = PatchScene(V, T, TP, np.where(floor, 0.5, 0.0), np.zeros(len(origin) + 1), lights=[light])
+    with pytest.raises(ValueError, match="'Lamp' casts no shadow"):
+        solve(scene, paths=1000)
+    r = solve(scene, paths=300_000, seed=8, direct_light="gathered")
+    area = scene.patch_area[:n * n]
+    exact = 0.5 * omega / area
+    hidden = (origin[:n * n, 0] + u[:n * n, 0] <= 0.7) & (origin[:n * n, 0] >= 0.3) \
+        & (origin[:n * n, 1] >= 0.35) & (origin[:n * n, 1] + v[:n * n, 1] <= 0.85)
+    assert hidden.any()
+    b, variance = r.reflected[:n * n, 0], r.reflected_variance[:n * n, 0]
+    assert np.abs((b - exact) / np.sqrt(variance)).max() < Z
+    lit = r.reflected[:n * n, 0][hidden]
+    assert (lit > 0.5 * exact[hidden]).all()  # not in the board's shadow
