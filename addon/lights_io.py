@@ -85,7 +85,8 @@ def read_light(data, matrix, name, notes):
         radius = float(getattr(data, "shadow_soft_size", 0.0))
         if unnormalized:
             intensity = intensity * (4.0 * math.pi * radius**2 if radius > 0 else 4.0)
-        return PointLight(position, intensity, radius=radius, spot=spot, name=name, casts_shadow=shadow)
+        soft = bool(getattr(data, "use_soft_falloff", False))
+        return PointLight(position, intensity, radius=radius, spot=spot, name=name, casts_shadow=shadow, soft_falloff=soft)
     if data.type == "AREA":
         if float(getattr(data, "spread", math.pi)) < math.pi - 1e-6:
             raise LightError(f"area light '{name}': a spread below 180 degrees is not supported; set Spread to 180")

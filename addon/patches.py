@@ -355,11 +355,11 @@ def scene_and_notes(patches: Patches):
 def light_notes(scene) -> list:
     """A note for each light none of whose light reaches the front of a face (inside a closed
     object, or a sun or sky outside a closed room), and for each that casts no shadow."""
-    notes = []
+    gathered = dict(scene.lights.gathered_only())
+    notes = [f"light '{name}' {why} (as Cycles draws it): the direct light of every source is gathered by "
+             "shadow rays from each patch, not shot" for name, why in gathered.items()]
     for light, (missed, back) in zip(scene.lights.lights, light_fates(scene)):
-        if not getattr(light, "casts_shadow", True):
-            notes.append(f"light '{light.name}' casts no shadow: its light passes through objects to every face "
-                         "turned to it, as in Cycles; the direct light of all sources is gathered by shadow rays")
+        if gathered.get(light.name) == "casts no shadow":  # its light passes through objects
             continue
         if missed + back < 0.999:  # some of it reaches the front of a face
             continue

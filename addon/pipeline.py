@@ -82,9 +82,9 @@ SLOW_SECONDS = 60.0
 
 
 def direct_light_for(scene, settings: SolveSettings) -> str:
-    """How the direct light is computed: as the settings say, but gathered where a light casts no
-    shadow (a shooting walk cannot pass light through objects; ``light_notes`` says so)."""
-    return GATHERED if scene.lights.shadowless() else settings.direct_light
+    """How the direct light is computed: as the settings say, but gathered where a light's direct
+    light cannot be shot (no shadow, soft falloff: ``Lights.gathered_only``; ``light_notes`` says so)."""
+    return GATHERED if scene.lights.gathered_only() else settings.direct_light
 
 
 def ray_rate(scene, patches: Patches, settings: SolveSettings) -> float:

@@ -6,7 +6,8 @@ of emittance E and area A emits, E A. What each light is given:
 
 - PointLight: radiant intensity I per steradian (power 4 pi I), at a point or spread over a
   sphere of ``radius`` whose surface emits like a Lambertian emitter (same intensity from every
-  side); with a ``spot`` cone, intensity I times the cone's mask of the angle to its axis.
+  side), or with ``soft_falloff`` a disc of that radiance facing each receiver (gathered only);
+  with a ``spot`` cone, intensity I times the cone's mask of the angle to its axis.
 - AreaLight: exitance M of its surface (the E of an emissive patch of the same shape), one side,
   a rectangle or an ellipse, Lambertian (Blender's spread of 180 degrees).
 - SunLight: irradiance H on a surface facing it, from a disc of angular diameter ``angle``.
@@ -153,6 +154,7 @@ class PointLight:
     spot: Spot | None = None
     name: str = "point"
     casts_shadow: bool = True  # False: its direct light passes through objects (gathered only)
+    soft_falloff: bool = False  # with a radius: Cycles' disc facing each receiver (gathered only)
 
     def emitter_powers(self, aim=None):
         solid_angle = 4.0 * np.pi if self.spot is None else self.spot.solid_angle()
@@ -178,7 +180,15 @@ class PointLight:
 
     def gather(self, x, normal, u):
         position = np.asarray(self.position, np.float64)[:, None]
-        if self.radius > 0:
+        if self.radius > 0 and self.soft_falloff:
+            # Cycles' soft falloff: a disc of the sphere's radiance I / (pi r^2) facing x; a
+            # uniform point y of it gives I cos_y / |x - y|^2 along x -> y.
+            axis, _ = _towards(position, x)
+            a, b = _basis(axis)
+            r, phi = self.radius * np.sqrt(u[0].astype(np.float64)), TWO_PI * u[1].astype(np.float64)
+            towards, distance = _towards(position + a * (r * np.cos(phi)) + b * (r * np.sin(phi)), x)
+            value = np.maximum(_dot(axis, towards), 0.0) / distance**2
+        elif self.radius > 0:
             # A uniform direction of the cone the sphere subtends (solid angle Omega): the sphere
             # (exitance I / r^2, Lambertian) gives (I / r^2) cos_x Omega / pi along it.
             axis, centre_distance = _towards(position, x)
@@ -430,9 +440,17 @@ class Lights:
     def emitter_count(self):
         return self.power.shape[0]
 
-    def shadowless(self):
-        """Names of the lights that cast no shadow (their direct light can only be gathered)."""
-        return [light.name for light in self.lights if not getattr(light, "casts_shadow", True)]
+    def gathered_only(self):
+        """(name, why) of each light whose direct light a shooting walk cannot carry: one that
+        casts no shadow, or a sphere with Cycles' soft falloff (a disc facing each receiver,
+        which no set of rays leaving the light draws)."""
+        why = []
+        for light in self.lights:
+            if not getattr(light, "casts_shadow", True):
+                why.append((light.name, "casts no shadow"))
+            elif getattr(light, "soft_falloff", False) and light.radius > 0:
+                why.append((light.name, "has soft falloff"))
+        return why
 
     def light_power(self):
         """(L,3) the power of each light (the sum of its emitters')."""

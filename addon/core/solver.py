@@ -129,10 +129,10 @@ def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_
         raise ValueError(f"sampling must be one of {', '.join(SAMPLINGS)}; got {sampling!r}")
     if direct_light not in DIRECT_LIGHTS:
         raise ValueError(f"direct_light must be one of {', '.join(DIRECT_LIGHTS)}; got {direct_light!r}")
-    if direct_light == SHOT and scene.lights.shadowless():
-        names = ", ".join(f"'{name}'" for name in scene.lights.shadowless())
-        raise ValueError(f"light {names} casts no shadow: a shooting walk cannot pass its light through "
-                         f"objects; use direct_light='{GATHERED}' (shadow rays that ignore what is in the way)")
+    if direct_light == SHOT and scene.lights.gathered_only():
+        why = "; ".join(f"light '{name}' {reason}" for name, reason in scene.lights.gathered_only())
+        raise ValueError(f"{why}: a shooting walk cannot carry its direct light; use direct_light='{GATHERED}' "
+                         "(shadow rays from each patch)")
     if stop_rule not in STOP_RULES:
         raise ValueError(f"stop_rule must be one of {', '.join(STOP_RULES)}; got {stop_rule!r}")
     if stop_rule == "measured" and target_mse is None:

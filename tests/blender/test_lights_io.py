@@ -92,6 +92,7 @@ def test_exposure_temperature_normalize_and_an_uneven_spot_as_cycles_reads_them(
     np.testing.assert_allclose(oval.spot.to_local, np.diag([0.5, 1.0, -1.0]), atol=1e-6)
     assert oval.spot.bounding_cos() < oval.spot.cos_outer
     assert not oval.casts_shadow and even.casts_shadow and by["Raw"].casts_shadow
+    assert by["Raw ball"].soft_falloff  # Blender's default; Cycles' disc facing each receiver
 
 
 def test_a_lamp_that_casts_no_shadow_lights_through_and_says_how(blender):

@@ -370,3 +370,52 @@ def test_a_light_that_casts_no_shadow_lights_the_floor_through_an_occluder(kind)
     assert np.abs((b - exact) / np.sqrt(variance)).max() < Z
     lit = r.reflected[:n * n, 0][hidden]
     assert (lit > 0.5 * exact[hidden]).all()  # not in the board's shadow
+
+
+def _soft_falloff_irradiance(points, normal, centre, radius, intensity, nodes=(10, 48)):
+    """Irradiance at ``points`` (n,3) with ``normal`` from Cycles' soft-falloff point light: a
+    disc of radius r and radiance I / (pi r^2) facing each point (Gauss-Legendre in the radius,
+    trapezoid around)."""
+    g, w = np.polynomial.legendre.leggauss(nodes[0])
+    rho, w_rho = 0.5 * radius * (g + 1), 0.5 * radius * w * 0.5 * radius * (g + 1)  # rho d rho
+    phi = 2 * math.pi * np.arange(nodes[1]) / nodes[1]
+    out = np.empty(len(points))
+    for k, x in enumerate(points):
+        axis = (centre - x) / np.linalg.norm(centre - x)
+        a = np.cross(axis, [1.0, 0, 0] if abs(axis[0]) < 0.9 else [0, 1.0, 0])
+        a /= np.linalg.norm(a)
+        b = np.cross(axis, a)
+        y = centre + (rho[:, None, None] * (np.cos(phi)[None, :, None] * a + np.sin(phi)[None, :, None] * b))
+        d = y - x
+        t = np.linalg.norm(d, axis=-1)
+        cos_x = np.maximum(d @ normal / t, 0)
+        cos_y = np.maximum(d @ axis / t, 0)
+        out[k] = intensity / (math.pi * radius**2) * np.sum(w_rho[:, None] * (2 * math.pi / nodes[1]) * cos_x * cos_y / t**2)
+    return out
+
+
+def test_soft_falloff_is_cycles_disc_facing_each_receiver_and_cannot_be_shot():
+    """A point light of radius 0.2 with soft falloff, 0.45 m over a floor that alone reflects
+    (0.5): each floor patch's reflected light is 0.5 x the disc's irradiance averaged over it
+    (quadrature), up to 20% less than a sphere's; a shooting walk is refused by name."""
+    n, position, radius = 4, np.array([0.5, 0.6, 0.45]), 0.2
+    light = PointLight(position, np.full(3, 1.0), radius=radius, name="Soft", soft_falloff=True)
+    scene = _box(n=n, reflectivity=[0.0] * 6, lights=[light])[0]
+    lit = scene.with_materials(np.where(np.arange(scene.patch_count) < n * n, 0.5, 0.0), scene.emission)
+    with pytest.raises(ValueError, match="'Soft' has soft falloff"):
+        solve(lit, paths=1000)
+    r = solve(lit, paths=400_000, seed=9, direct_light="gathered")
+    origin, u, v, _ = box_rectangles(SIZE, n=n)
+    g, w = np.polynomial.legendre.leggauss(6)
+    s = 0.5 * (g + 1)
+    exact, sphere = np.empty(n * n), np.empty(n * n)
+    for p in range(n * n):
+        points = origin[p] + s[:, None, None] * u[p] + s[None, :, None] * v[p]
+        weights = (0.25 * w[:, None] * w[None, :]).ravel()
+        E = _soft_falloff_irradiance(points.reshape(-1, 3), np.array([0, 0, 1.0]), position, radius, 1.0)
+        exact[p] = 0.5 * weights @ E
+        d = position - points.reshape(-1, 3)
+        sphere[p] = 0.5 * weights @ (d[:, 2] / np.linalg.norm(d, axis=1) ** 3)  # I cos / d^2
+    assert (sphere / exact).max() > 1.1  # the two models differ far beyond the noise here
+    sd = np.sqrt(r.reflected_variance[:n * n, 0])
+    assert np.abs((r.reflected[:n * n, 0] - exact) / sd).max() < Z
