@@ -141,7 +141,8 @@ def _diffuse(name, colour, image):
     return m
 
 
-def cycles(image, rows, patches, samples, seed=0):
+def bake(image, rows, columns, block, patches, samples, seed):
+    """(B (P,3), wall seconds) of a COMBINED bake: each patch's block of pixels averaged."""
     import bpy
 
     scene = bpy.context.scene
@@ -151,9 +152,12 @@ def cycles(image, rows, patches, samples, seed=0):
     wall = time.perf_counter() - wall
     pixels = np.empty(len(image.pixels), np.float32)
     image.pixels.foreach_get(pixels)
-    rgb = pixels.reshape(rows * BLOCK, COLUMNS * BLOCK, 4)[..., :3].astype(np.float64)
-    B = rgb.reshape(rows, BLOCK, COLUMNS, BLOCK, 3).mean(axis=(1, 3)).reshape(-1, 3)[:patches]
-    return B, wall
+    rgb = pixels.reshape(rows * block, columns * block, 4)[..., :3].astype(np.float64)
+    return rgb.reshape(rows, block, columns, block, 3).mean(axis=(1, 3)).reshape(-1, 3)[:patches], wall
+
+
+def cycles(image, rows, patches, samples, seed=0):
+    return bake(image, rows, COLUMNS, BLOCK, patches, samples, seed)
 
 
 def ours(paths, seed=0, direct_light="shot"):

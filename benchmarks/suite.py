@@ -50,6 +50,7 @@ sys.path.insert(0, str(ROOT))
 RESULTS = ROOT / "benchmarks" / "results"
 
 from benchmarks.cycles_comparison import block_mesh, configure_bake, quads as rectangle_quads, room_rectangles, selected_object  # noqa: E402
+from benchmarks.cycles_lights import bake  # noqa: E402
 
 LEVELS = (0.01, 0.0025)
 MEASURES = ("per_patch", "rms_over_mean")
@@ -167,21 +168,6 @@ def build(spec):
         background.inputs["Strength"].default_value = spec.world[1]
     configure_bake(scene, threads=2)
     return obj, image, rows, columns
-
-
-def bake(image, rows, columns, block, P, samples, seed):
-    """(B (P,3), wall seconds) of a COMBINED bake: each patch's block of pixels averaged."""
-    import bpy
-
-    scene = bpy.context.scene
-    scene.cycles.samples, scene.cycles.seed = samples, seed
-    wall = time.perf_counter()
-    assert bpy.ops.object.bake(type="COMBINED") == {"FINISHED"}
-    wall = time.perf_counter() - wall
-    pixels = np.empty(len(image.pixels), np.float32)
-    image.pixels.foreach_get(pixels)
-    rgb = pixels.reshape(rows * block, columns * block, 4)[..., :3].astype(np.float64)
-    return rgb.reshape(rows, block, columns, block, 3).mean(axis=(1, 3)).reshape(-1, 3)[:P], wall
 
 
 def ours(paths, direct_light, seed=0):

@@ -84,6 +84,21 @@ def test_a_sphere_light_is_a_point_light_seen_from_far_and_keeps_its_power(direc
     assert np.abs((a.reflected[:, 0] - b.reflected[:, 0]) / sd).max() < Z
 
 
+def _floor_under_spot(position, spot, n, seed, direct_light):
+    """A box whose floor alone reflects (0.5) under a spot of intensity 1: the solve (checked to
+    emit I times the mask's solid angle), the scene, the floor's exact reflected light if it
+    received the whole point light (0.5 I Omega / A), and the floor patches' corners from the light."""
+    scene = _box(n=n, reflectivity=[0.0] * 6, lights=[PointLight(position, np.full(3, 1.0), spot=spot)])[0]
+    lit = scene.with_materials(np.where(np.arange(scene.patch_count) < n * n, 0.5, 0.0), scene.emission)
+    r = solve(lit, paths=500_000, seed=seed, direct_light=direct_light)
+    np.testing.assert_allclose(r.energy["emitted"], spot.solid_angle(), rtol=1e-12)
+    origin, u, v, _ = box_rectangles(SIZE, n=n)
+    floor = slice(0, n * n)
+    omega = _solid_angles(position, (origin[floor], u[floor], v[floor]))
+    corners = np.stack([origin[floor], origin[floor] + u[floor], origin[floor] + v[floor], origin[floor] + u[floor] + v[floor]]) - position
+    return r, lit, 0.5 * omega / lit.patch_area[floor], corners
+
+
 @pytest.mark.parametrize("direct_light", DIRECT_LIGHTS)
 def test_a_spot_light_masks_a_point_light(direct_light):
     """A spot aimed at the floor: its power is I times the mask's solid angle, and the floor
@@ -102,20 +117,12 @@ def test_a_spot_light_masks_a_point_light(direct_light):
     chi2 = float(((observed - expected) ** 2 / expected).sum())
     assert chi2 < 80, chi2  # 39 degrees of freedom: P(chi2 > 80) < 1e-4
     n = 8
-    scene = _box(n=n, reflectivity=[0.0] * 6, lights=[PointLight(position, np.full(3, 1.0), spot=spot)])[0]
-    # Only the floor reflects (0.5): its radiosity is half the direct light it receives.
-    lit = scene.with_materials(np.where(np.arange(scene.patch_count) < n * n, 0.5, 0.0), scene.emission)
-    r = solve(lit, paths=500_000, seed=6, direct_light=direct_light)
-    np.testing.assert_allclose(r.energy["emitted"], spot.solid_angle(), rtol=1e-12)
-    origin, u, v, _ = box_rectangles(SIZE, n=n)
+    r, lit, exact, corners = _floor_under_spot(position, spot, n, 6, direct_light)
     floor = slice(0, n * n)
-    omega = _solid_angles(position, (origin[floor], u[floor], v[floor]))
-    corners = np.stack([origin[floor], origin[floor] + u[floor], origin[floor] + v[floor], origin[floor] + u[floor] + v[floor]]) - position
     angle = np.degrees(np.arccos(-corners[..., 2] / np.linalg.norm(corners, axis=-1)))  # (4, 16)
     inside = angle.max(axis=0) < 25  # the whole patch inside the full cone
     outside = angle.min(axis=0) > 30  # the whole patch outside the cone
     assert inside.any() and outside.any()
-    exact = 0.5 * omega / lit.patch_area[floor]
     b, variance = r.reflected[floor, 0][inside], r.reflected_variance[floor, 0][inside]
     assert np.abs((b - exact[inside]) / np.sqrt(variance)).max() < Z
     assert (r.reflected[floor, 0][outside] == 0).all()
@@ -176,21 +183,14 @@ def test_an_elliptical_spot_lights_the_floor_of_its_ellipse(direct_light):
     outside its bounding cone nothing directly."""
     position, n = np.array([0.5, 0.6, 0.5]), 10
     spot = _spot_of_matrix(np.diag([2.0, 1.0, 1.0]), 28, 25)
-    scene = _box(n=n, reflectivity=[0.0] * 6, lights=[PointLight(position, np.full(3, 1.0), spot=spot)])[0]
-    lit = scene.with_materials(np.where(np.arange(scene.patch_count) < n * n, 0.5, 0.0), scene.emission)
-    r = solve(lit, paths=500_000, seed=7, direct_light=direct_light)
-    np.testing.assert_allclose(r.energy["emitted"], spot.solid_angle(), rtol=1e-12)
-    origin, u, v, _ = box_rectangles(SIZE, n=n)
+    r, lit, exact, corners = _floor_under_spot(position, spot, n, 7, direct_light)
     floor = slice(0, n * n)
-    omega = _solid_angles(position, (origin[floor], u[floor], v[floor]))
-    corners = np.stack([origin[floor], origin[floor] + u[floor], origin[floor] + v[floor], origin[floor] + u[floor] + v[floor]]) - position
     corners = corners / np.linalg.norm(corners, axis=-1, keepdims=True)
     local = np.stack([spot.local_cosine(c.T) for c in corners])  # (4, patches)
     inside = local.min(axis=0) > spot.cos_inner
     outside = (-corners[..., 2]).max(axis=0) < spot.bounding_cos()
     assert inside.sum() > 4 and outside.any()
     assert (inside & ((-corners[..., 2]).min(axis=0) < math.cos(math.radians(28)))).any()  # beyond the round cone
-    exact = 0.5 * omega / lit.patch_area[floor]
     b, variance = r.reflected[floor, 0][inside], r.reflected_variance[floor, 0][inside]
     assert np.abs((b - exact[inside]) / np.sqrt(variance)).max() < Z
     assert (r.reflected[floor, 0][outside] == 0).all()
