@@ -227,7 +227,7 @@ def measure(name, samples, paths):
         fixed, rate = line(max(paths // 16, 4096), small, paths, seconds)
         e = errors(variance.mean(axis=1), mean, measured)
         grey = B.mean(axis=1)
-        lit = measured & (mean > LIT * mean.max())
+        lit = measured & (mean > LIT * mean[measured].max())
         # agreement: ours against the two bakes' mean, in units of both sides' noise
         noise = np.sqrt(variance.mean(axis=1) + 0.25 * (a - b).mean(axis=1) ** 2)  # the two bakes' mean: half a bake's variance
         z = (grey - mean)[lit] / np.maximum(noise[lit], 1e-300)
@@ -243,6 +243,7 @@ def plot(rows, path):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig, axes = plt.subplots(1, len(rows), figsize=(4.2 * len(rows), 3.8), squeeze=False)
     for ax, row in zip(axes[0], rows):
@@ -254,6 +255,8 @@ def plot(rows, path):
             ax.plot(error * 100, seconds_to(error, error, r["work"], r["fixed"], r["rate"]), "o", color=ax.lines[-1].get_color())
         for level in LEVELS:
             ax.axvline(level * 100, color="grey", lw=0.6, ls=":")
+        ax.set_xticks([0.25, 1, 5], ["0.25", "1", "5"])
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_title(f"{row['scene']} ({row['patches']} patches)")
         ax.set_xlabel("per-patch relative RMS error, %")
         ax.set_ylabel("wall seconds (2 cores)")
@@ -294,7 +297,13 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true")
     p.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
+    p.add_argument("--replot", type=Path, help="only the report and plot, from a run's JSON")
     args = p.parse_args(argv)
+    if args.replot:
+        rows = json.loads(args.replot.read_text())
+        plot(rows, args.replot.with_suffix(".png"))
+        report(rows, "python -m benchmarks.suite", args.replot.with_suffix(".md"))
+        return
     samples, paths = (16, 100_000) if args.quick else (256, 2_000_000)
     rows = []
     for name in args.scenes:
