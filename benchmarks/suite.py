@@ -30,7 +30,8 @@ and the RMS over patches divided by the mean radiosity (the panel's). The error 
 large run of each; the time to a level is that line at the work the level needs. Ours: the
 operator's pipeline (``pipeline.run_solve``: reading the scene, meshing, solving, colours) with
 the paper's walk (finite estimator, exit point hit, "shot") and with the first bounce gathered
-by shadow rays ("gathered", exit point random), 2 threads; Cycles: the COMBINED bake's wall time
+by shadow rays ("gathered", exit point hit: the reflected light leaves from where the direct
+light landed), 2 threads; Cycles: the COMBINED bake's wall time
 (``cycles_comparison.configure_bake``), 2 threads.
 """
 from __future__ import annotations
@@ -178,7 +179,7 @@ def ours(paths, direct_light, seed=0):
 
     objects, _ = scene_io.read_selection(bpy.context)
     settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, seed=seed, threads=2, direct_light=direct_light,
-                                      exit_point="hit" if direct_light == "shot" else "random")
+                                      exit_point="hit")
     wall = time.perf_counter()
     out = pipeline.run_solve(objects, settings)
     wall = time.perf_counter() - wall

@@ -7,13 +7,19 @@ irradiance H_j instead, from uniform points of it, each looking at one source ch
 (none for a light that casts no shadow: its light passes through objects, as Cycles draws it),
 and along one cosine-distributed ray (an emitting patch it meets, or the sky). The walk then shoots only what the
 direct light reflects: patch j is a source of emittance E'_j = R_j H_j, and the walk adds the
-light of every later bounce (``direct_light="gathered"`` in :func:`.solver.solve`).
+light of every later bounce (``direct_light="gathered"`` in :func:`.solver.solve`). Leaving
+from hit points (the continuous walk), the reflected light leaves from where it arrived: each
+gathering sample is a point source of what it found, times R_j A_j / n_j (n_j the patch's
+expected samples), so that the first reflection is as uneven over a patch as the light that
+lands on it (:class:`ReflectedPoints`).
 
 Each chunk gathers with its own points and shoots its own walk from what it gathered, so the
 chunks stay independent replicas of the whole estimate: batch means measure its error, which
 the paper's formulas (2)-(3) do not predict. Unbiased: the walk's result is linear in its
-sources, and E'_j is an unbiased estimate of R_j H_j. (With exit_point="random" the walk takes
-each patch's reflected light as uniform over it, the discrete method's assumption.)
+sources, and E'_j is an unbiased estimate of R_j H_j (and the sample points an unbiased
+estimate of its distribution over the patch). With exit_point="random" the walk takes each
+patch's reflected light as uniform over it, the discrete method's assumption, as the shooting
+walk does.
 """
 from __future__ import annotations
 
@@ -80,8 +86,9 @@ class Gathering:
 
 
 def gather_direct(tables, gathering, rng):
-    """(3,P) an unbiased estimate of each patch's direct irradiance H (scene units), and the
-    rays it traced: per patch j, ``gathering.samples[j]`` points on average, each with a shadow ray to a
+    """(3,P) an unbiased estimate of each patch's direct irradiance H (scene units), the rays
+    it traced, and the samples it is made of (patch (n,), unit-space point (3,n), estimate of
+    the irradiance there (3,n)): per patch j, ``gathering.samples[j]`` points on average, each with a shadow ray to a
     source chosen by power and a cosine-distributed ray, weighted against each other where
     both can find the same emitting patch (multiple importance sampling, balance heuristic:
     shadow rays are good at small and far sources, cosine rays at near and large ones)."""
@@ -101,7 +108,7 @@ def gather_direct(tables, gathering, rng):
     rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
     H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)])
     H /= gathering.samples
-    return H, rays
+    return H, rays, (patch, x, value)
 
 
 def _emitter_estimate(gathering, source, cos_x, cos_y, distance_world):
@@ -199,15 +206,41 @@ def direct_irradiance(scene, samples=64, seed=0):
     return (total / rounds).T
 
 
-def reflected_sources(tables, emission):
-    """The walk's tables with the patches' reflected direct light ``emission`` (P,3) as its only
-    sources (everything else shared)."""
+class ReflectedPoints:
+    """The gathering samples as the walk's light sources (leaving from hit points): sample k,
+    at point x_k of patch j, reflects R_j A_j / n_j times the irradiance it found (``power``
+    (K,3), in the walk's source table after the patches), in cosine-distributed directions
+    about the patch's normal. Their sum over patch j's samples is A_j E'_j."""
+
+    def __init__(self, gathering, geometry, samples):
+        patch, x, value = samples
+        scale = gathering.patch_area / gathering.samples  # A_j / n_j
+        self.power = np.ascontiguousarray((value * gathering.reflectivity[:, patch] * scale[patch]).T)
+        self.origins = geometry.to_world(x.T).T
+        self.normals = geometry.patch_normal_rows.take(patch, axis=1).astype(np.float64)
+
+    def emit(self, rows, u):
+        """Rays from samples ``rows`` with uniforms ``u`` (4, n) (directions from u[2:4]): world
+        origins and unit directions (3, n), as :meth:`.lights.Lights.emit` gives them."""
+        return self.origins[:, rows], cosine_directions_about(self.normals[:, rows], u[2], u[3])
+
+
+def reflected_sources(tables, emission, samples=None):
+    """The walk's tables with the patches' reflected direct light as its only sources
+    (everything else shared): ``emission`` (P,3) E' from uniform points of each patch, or,
+    leaving from hit points, the gathering ``samples`` (gather_direct's) as ReflectedPoints."""
     walk = copy.copy(tables)
     walk.__dict__.pop("start_weight", None)
-    walk.sources = SourceTable(source_weights(tables.geometry.patch_area, emission))
-    walk.emission = emission
-    walk.lights = None
     walk.gathering = None
+    if samples is None or tables.exit_random:
+        walk.sources = SourceTable(source_weights(tables.geometry.patch_area, emission))
+        walk.emission = emission
+        walk.lights = None
+        return walk
+    points = ReflectedPoints(tables.gathering, tables.geometry, samples)
+    walk.emission = np.zeros_like(emission)
+    walk.sources = SourceTable(source_weights(tables.geometry.patch_area, walk.emission, points.power))
+    walk.lights = points
     return walk
 
 
@@ -216,7 +249,7 @@ def gathered_chunk(tables, paths, rng, walk):
     walks from its reflection (``walk(tables, paths, rng)`` gives their ChunkTally). Returns
     a ChunkTally in the solve's relative weights (times Phi_T / N)."""
     gathering = tables.gathering
-    H, gather_rays = gather_direct(tables, gathering, rng)
+    H, gather_rays, samples = gather_direct(tables, gathering, rng)
     C = tables.channels
     direct = H * gathering.patch_area  # (3,P) power incident on each patch's front
     reflected = gathering.reflectivity * H  # (3,P) E'
@@ -229,7 +262,7 @@ def gathered_chunk(tables, paths, rng, walk):
     blocked, undistributed, walk_absorbed, walk_escaped = (np.zeros(C) for _ in range(4))
     rays, ended = gather_rays, {}
     if walk_power > 0:
-        tally = walk(reflected_sources(tables, np.ascontiguousarray(reflected.T)), paths, rng)
+        tally = walk(reflected_sources(tables, np.ascontiguousarray(reflected.T), samples), paths, rng)
         w = walk_power / gathering.total_power
         incident = incident + tally.incident * w
         walked, walk_absorbed, walk_escaped = tally.emitted * w, tally.absorbed * w, tally.escaped * w
