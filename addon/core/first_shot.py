@@ -30,7 +30,7 @@ import numpy as np
 from .lights import WorldLight, cosine_directions_about
 from .names import EXIT_RANDOM, FINITE
 from .rays import hit_patches, meets_front
-from .sampling import SourceTable, channel_sum, patch_point_rows, source_weights
+from .sampling import SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights
 from .tables import WalkTables
 from .tallies import ChunkTally
 
@@ -210,19 +210,20 @@ class ReflectedPoints:
     """The gathering samples as the walk's light sources (leaving from hit points): sample k,
     at point x_k of patch j, reflects R_j A_j / n_j times the irradiance it found (``power``
     (K,3), in the walk's source table after the patches), in cosine-distributed directions
-    about the patch's normal. Their sum over patch j's samples is A_j E'_j."""
+    about the patch's normal. Their sum over patch j's samples is A_j E'_j. Points and normals
+    stay in the walk's unit space, float32 (the points already pushed off the surface)."""
 
     def __init__(self, gathering, geometry, samples):
         patch, x, value = samples
         scale = gathering.patch_area / gathering.samples  # A_j / n_j
         self.power = np.ascontiguousarray((value * gathering.reflectivity[:, patch] * scale[patch]).T)
-        self.origins = geometry.to_world(x.T).T
-        self.normals = geometry.patch_normal_rows.take(patch, axis=1).astype(np.float64)
+        self.points = x.astype(np.float32)
+        self.normals = geometry.patch_normal_rows.take(patch, axis=1)
 
-    def emit(self, rows, u):
-        """Rays from samples ``rows`` with uniforms ``u`` (4, n) (directions from u[2:4]): world
-        origins and unit directions (3, n), as :meth:`.lights.Lights.emit` gives them."""
-        return self.origins[:, rows], cosine_directions_about(self.normals[:, rows], u[2], u[3])
+    def unit_rays(self, rows, u):
+        """Rays from samples ``rows`` with uniforms ``u`` (4, n) float32 (directions from u[2:4],
+        as a patch's: normal plus a uniform sphere point): (3, n) unit-space origins, directions."""
+        return self.points.take(rows, axis=1), add_sphere_points(self.normals.take(rows, axis=1), u[2], u[3])
 
 
 def reflected_sources(tables, emission, samples=None):
