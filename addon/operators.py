@@ -42,7 +42,7 @@ def _run_stats(output):
         "last_sources": output.sources,
         "last_patch_size": float(output.patches.patch_size),
         "last_stopped": str(r.stopped),
-        "last_estimator": str(r.estimator),
+        "last_estimator": str(r.estimator) + (", direct light gathered" if r.direct_light == "gathered" else ""),
         "last_relative_error": _percent(output.prediction, measured),
         "last_target_error": float(output.settings_relative_rms * 100.0) if output.settings_relative_rms else 0.0,
     }
@@ -306,7 +306,9 @@ EXPLANATIONS = {
             "then by each run). With 'Stop at: Measured error' the run stops when its own error estimate "
             "meets the target, which can be sooner or later",
     "paths": "Sbert & Brusi's formula (2) (finite) or (3) (biased infinite): the paths that reach the "
-             "error target, and the rays they trace (paths x the expected path length)",
+             "error target, and the rays they trace (paths x the expected path length). With the direct "
+             "light gathered no formula holds: the paths planned (a quarter of the paper's) at the rays a path "
+             "measured, and the run stops on its own error estimate",
     "patches": "Selected objects get results; the other visible objects (Rest of the scene) block and "
                "reflect light as in a render, meshed coarser, and get none. Smaller patches show more "
                "detail and need more paths for the same error",

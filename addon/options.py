@@ -103,6 +103,13 @@ SAMPLING = Choice("sampling", "--sampling", "independent", (
     ("stratified", "Stratified", "Paths allotted to sources in proportion to power and a randomly shifted "
      "low-discrepancy first ray: same expected result, usually less noise for the same time"),
 ), "Sampling")
+DIRECT_LIGHT = Choice("direct_light", "--direct-light", "shot", (
+    ("shot", "Shot (paper)", "The paper's walk: paths from the sources carry the direct light too; its predicted "
+     "path counts and the estimators' relative efficiency hold for it"),
+    ("gathered", "Gathered", "Each patch gathers its direct light by shadow rays to the sources, and the walks carry "
+     "only reflected light: no formula predicts its error, which is measured as it runs. Lamps without shadow or "
+     "with soft falloff are always gathered"),
+), "Direct light")
 STOP_RULE = Choice("stop_rule", "--stop-rule", "measured", (
     ("measured", "Measured error", "Run until the run's own estimate of its error (from independent batches) "
      "meets the target: what you ask for is what you get. The paper's predicted path count is the plan"),
@@ -136,7 +143,7 @@ CLUSTER = Text("cluster", "--cluster", "", "Cluster",
                "A Dask scheduler's address (e.g. tcp://host:8786) to run the walks on its workers; empty: this "
                "machine. Same seed, bitwise the same result")
 
-SETTINGS = (ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, EXIT_POINT, SAMPLING, STOP_RULE, OUTPUT, SEED,
+SETTINGS = (ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, EXIT_POINT, SAMPLING, DIRECT_LIGHT, STOP_RULE, OUTPUT, SEED,
             TIME_LIMIT, THREADS, SCENE_OBJECTS, LIGHT_OUTPUT, INDIRECT_OUTPUT, CLUSTER)
 
 # Patch size 0: the selection's largest extent over this.

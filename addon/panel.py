@@ -34,6 +34,7 @@ def draw_settings(layout, settings):
     col = layout.column(align=True)
     col.prop(settings, "exit_point")
     col.prop(settings, "sampling")
+    col.prop(settings, "direct_light")
     col.prop(settings, "stop_rule")
     layout.prop(settings, "output")
     row = layout.row(align=True)
@@ -74,7 +75,8 @@ def estimate_lines(value):
     lines = [
         ("time", f"Predicted time: {duration_text(value['seconds'])}" if value.get("seconds") == value.get("seconds")
          else "Predicted time: -"),
-        ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"),
+        ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"
+         + (" (planned)" if value.get("direct_light") == "gathered" else "")),
         ("patches", f"Objects: {value['objects']} get results, {value.get('others', 0)} more block and reflect"),
         ("size", f"Patches: {_number(value['patches'])} (size {size})"),
         ("sources", f"Sources: {value.get('sources') or '-'}"),

@@ -12,6 +12,7 @@ import numpy as np
 from .core import meshing, predict, relative_rms_to_mse, solve
 from .core.first_shot import direct_irradiance
 from .core.names import GATHERED
+from .core.solver import GATHERED_PLAN_DIVISOR
 from . import options
 from .patches import Patches, make_patches, scene_and_notes
 
@@ -34,7 +35,7 @@ class SolveSettings:
     light_output: bool = options.LIGHT_OUTPUT.default
     indirect_output: bool = options.INDIRECT_OUTPUT.default
     cluster: str = options.CLUSTER.default  # a Dask scheduler address; empty: this machine's threads
-    direct_light: str = "shot"  # "gathered": the first bounce by shadow rays (core first_shot; scripts only)
+    direct_light: str = options.DIRECT_LIGHT.default  # "gathered": the first bounce by shadow rays (core first_shot)
 
 
 @dataclass
@@ -75,6 +76,9 @@ INDIRECT_SAMPLES = 64  # gathering samples a patch for the direct light the indi
 # Ray rates (rays per second of a whole solve) measured on this machine, by (geometry, estimator,
 # exit point): from a short calibration solve, replaced by each finished run's own rate.
 RAY_RATES = {}
+# Rays per path of the same walks, measured alike: the gathered first shot's plan needs it (its
+# paths also pay for the gathering's shadow and cosine rays).
+RAYS_PER_PATH = {}
 CALIBRATION_PATHS = 4096
 CALIBRATION_SECONDS = 2.0  # at most (paths of endless bounces never finish a chunk)
 #: Above this predicted time the estimate warns and says which settings drive it.
@@ -97,7 +101,7 @@ def ray_rate(scene, patches: Patches, settings: SolveSettings) -> float:
                   direct_light=direct_light)
         if not r.rays:
             return float("nan")  # not one chunk in the time: unknown, measured again next time
-        RAY_RATES[key] = r.rays_per_second
+        RAY_RATES[key], RAYS_PER_PATH[key] = r.rays_per_second, r.rays / r.paths
     return RAY_RATES[key]
 
 
@@ -155,14 +159,23 @@ def estimate(objects, settings: SolveSettings) -> dict:
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
     rate = ray_rate(scene, patches, settings)
-    seconds = float(p.expected_rays) / rate if rate > 0 else float("nan")  # (NaN > 0 is False)
+    paths, rays = int(p.paths), float(p.expected_rays)
+    direct_light = direct_light_for(scene, settings)
+    if direct_light == GATHERED and not settings.paths:
+        # No formula predicts the gathered walk's error: the solve's plan (a fraction of the
+        # paper's paths) at its measured rays per path; the run stops on its measured error.
+        paths = max(1, paths // GATHERED_PLAN_DIVISOR)
+        key = (patches.geometry_key, settings.estimator, settings.exit_point, direct_light)
+        rays = paths * RAYS_PER_PATH.get(key, float("nan"))
+    seconds = rays / rate if rate > 0 else float("nan")  # (NaN > 0 is False)
     return {
         "objects": sum(o.receives for o in patches.objects),
         "others": sum(not o.receives for o in patches.objects),
         "patches": int(scene.patch_count),
         "patch_size": float(patches.patch_size),
-        "paths": int(p.paths),
-        "rays": float(p.expected_rays),
+        "paths": paths,
+        "rays": rays,
+        "direct_light": direct_light,
         "rays_per_second": float(rate),
         "seconds": seconds,
         "path_length": float(p.expected_path_length),
@@ -207,7 +220,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         direct_light=direct_light_for(scene, settings),
     )
     if result.seconds > 0 and result.rays:
-        RAY_RATES[(patches.geometry_key, settings.estimator, settings.exit_point, result.direct_light)] = result.rays_per_second
+        key = (patches.geometry_key, settings.estimator, settings.exit_point, result.direct_light)
+        RAY_RATES[key], RAYS_PER_PATH[key] = result.rays_per_second, result.rays / result.paths
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))

@@ -50,6 +50,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
     patch_size: _number(options.PATCH_SIZE, _changed, soft_max=10.0, precision=3, subtype="DISTANCE", unit="LENGTH")
     exit_point: _enum(options.EXIT_POINT)
     sampling: _enum(options.SAMPLING)
+    direct_light: _enum(options.DIRECT_LIGHT, _changed)
     stop_rule: _enum(options.STOP_RULE, _changed)
     output: _enum(options.OUTPUT)
     clamp_reflectivity: BoolProperty(
@@ -99,6 +100,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
             patch_size=float(self.patch_size),
             exit_point=self.exit_point,
             sampling=self.sampling,
+            direct_light=self.direct_light,
             stop_rule=self.stop_rule,
             seed=int(self.seed),
             max_seconds=float(self.time_limit) or None,

@@ -143,6 +143,27 @@ def test_stratified_sampling_and_measured_stop_reach_the_core(blender):
         np.testing.assert_array_equal(colours[:, :3], np.repeat(expected, meshes[k].face_sizes, axis=0))
 
 
+def test_gathered_direct_light_reaches_the_core_and_the_estimate_plans_for_it(blender):
+    """The panel's Direct light 'Gathered' is the core's direct_light="gathered" (bitwise the
+    core's result on the same patches); the estimate then shows the solve's plan (a quarter of
+    the paper's paths, at the rays a gathered path measured), not the paper's prediction."""
+    spec = build_test_scene()
+    s = configure(blender)
+    paper = estimate.compute(blender)
+    s.direct_light = "gathered"
+    value = estimate.compute(blender)
+    assert value["direct_light"] == "gathered" and value["paths"] == paper["paths"] // 4
+    assert value["rays"] > value["paths"] and value["seconds"] == pytest.approx(value["rays"] / value["rays_per_second"])
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    names, meshes, combined, ref = reference(spec, direct_light="gathered")
+    assert ref.direct_light == "gathered" and s.last_paths == ref.paths and s.last_rays == ref.rays
+    assert s.last_estimator == "finite, direct light gathered"
+    for k, obj in enumerate(result_objects()):
+        _, colours = read_colours(obj.data, "Radiosity")
+        expected = ref.radiosity[combined.patch_slice(k)].astype(np.float32)
+        np.testing.assert_array_equal(colours[:, :3], np.repeat(expected, meshes[k].face_sizes, axis=0))
+
+
 def test_vertex_colours_are_area_weighted_averages(blender):
     build_test_scene()
     configure(blender, output="BOTH")
