@@ -12,7 +12,7 @@ import numpy as np
 from .core import meshing, predict, relative_rms_to_mse, solve
 from .core.first_shot import direct_irradiance
 from .core.names import GATHERED
-from .core.solver import GATHERED_PLAN_DIVISOR
+from .core.solver import planned_paths
 from . import options
 from .patches import Patches, make_patches, scene_and_notes
 
@@ -91,10 +91,15 @@ def direct_light_for(scene, settings: SolveSettings) -> str:
     return GATHERED if scene.lights.gathered_only() else settings.direct_light
 
 
+def _walk_key(patches: Patches, settings: SolveSettings, direct_light):
+    """What RAY_RATES and RAYS_PER_PATH are kept by: the geometry and the walk."""
+    return patches.geometry_key, settings.estimator, settings.exit_point, direct_light
+
+
 def ray_rate(scene, patches: Patches, settings: SolveSettings) -> float:
     """This machine's ray rate for this scene and walk: the last run's, else a short solve's."""
     direct_light = direct_light_for(scene, settings)
-    key = (patches.geometry_key, settings.estimator, settings.exit_point, direct_light)
+    key = _walk_key(patches, settings, direct_light)
     if key not in RAY_RATES:
         r = solve(scene, settings.estimator, paths=CALIBRATION_PATHS, threshold=settings.threshold,
                   exit_point=settings.exit_point, threads=settings.threads or None, max_seconds=CALIBRATION_SECONDS,
@@ -162,11 +167,10 @@ def estimate(objects, settings: SolveSettings) -> dict:
     paths, rays = int(p.paths), float(p.expected_rays)
     direct_light = direct_light_for(scene, settings)
     if direct_light == GATHERED and not settings.paths:
-        # No formula predicts the gathered walk's error: the solve's plan (a fraction of the
-        # paper's paths) at its measured rays per path; the run stops on its measured error.
-        paths = max(1, paths // GATHERED_PLAN_DIVISOR)
-        key = (patches.geometry_key, settings.estimator, settings.exit_point, direct_light)
-        rays = paths * RAYS_PER_PATH.get(key, float("nan"))
+        # No formula predicts the gathered walk's error: the solve's plan at its measured rays
+        # per path; the run stops on its measured error.
+        paths = planned_paths(paths, direct_light)
+        rays = paths * RAYS_PER_PATH.get(_walk_key(patches, settings, direct_light), float("nan"))
     seconds = rays / rate if rate > 0 else float("nan")  # (NaN > 0 is False)
     return {
         "objects": sum(o.receives for o in patches.objects),
@@ -220,7 +224,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         direct_light=direct_light_for(scene, settings),
     )
     if result.seconds > 0 and result.rays:
-        key = (patches.geometry_key, settings.estimator, settings.exit_point, result.direct_light)
+        key = _walk_key(patches, settings, result.direct_light)
         RAY_RATES[key], RAYS_PER_PATH[key] = result.rays_per_second, result.rays / result.paths
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,

@@ -90,7 +90,6 @@ def child(mode, patch_size, seconds):
     sampler.start()
     out = {"mode": mode, "patch_size": patch_size}
     import bpy
-    import numpy as np  # noqa: F401
 
     out["after_imports"] = peak_rss()
     sampler.enter("scene")
@@ -113,7 +112,9 @@ def child(mode, patch_size, seconds):
         objects, _ = scene_io.read_selection(bpy.context)
         out["after_read"] = peak_rss()
         sampler.enter("patches")
-        patches = patch_making.make_patches(objects, patch_size)
+        # (the patch size as the property holds it, float32: the solve below then finds these
+        # patches and their core scene in the geometry cache, as the operator's solve does)
+        patches = patch_making.make_patches(objects, settings.solve_settings().patch_size)
         out["after_patches"] = peak_rss()
         sampler.enter("core scene")
         scene, _ = patch_making.scene_and_notes(patches)

@@ -47,9 +47,8 @@ def light_fates(scene, seed=0):
         power = lights.power[first:last].mean(axis=1)
         rows = first + np.searchsorted(np.cumsum(power) / power.sum(), rng.random(RAYS_PER_LIGHT), side="right")
         rows = np.minimum(rows, last - 1)
-        origins, directions = lights.emit(rows, rng.random((4, RAYS_PER_LIGHT), dtype=np.float32))
-        o = ((origins - g.centre[:, None]) / g.diagonal + g.ray_offset * directions).astype(np.float32)
-        d = directions.astype(np.float32)
+        origins, directions = lights.unit_rays(rows, rng.random((4, RAYS_PER_LIGHT), dtype=np.float32), g)
+        o, d = origins.astype(np.float32), directions.astype(np.float32)
         hit, _, _, _, normal = g.tracer.first_hit_barycentric(np.ascontiguousarray(o.T), np.ascontiguousarray(d.T))
         met = hit >= 0
         back = met & ~meets_front(d, normal)

@@ -220,20 +220,23 @@ class ReflectedPoints:
         self.points = x.astype(np.float32)
         self.normals = geometry.patch_normal_rows.take(patch, axis=1)
 
-    def unit_rays(self, rows, u):
+    def unit_rays(self, rows, u, geometry):
         """Rays from samples ``rows`` with uniforms ``u`` (4, n) float32 (directions from u[2:4],
-        as a patch's: normal plus a uniform sphere point): (3, n) unit-space origins, directions."""
+        as a patch's: normal plus a uniform sphere point): (3, n) unit-space origins, directions,
+        as :meth:`.lights.Lights.unit_rays` gives them (the points are in unit space already:
+        ``geometry`` is not read)."""
         return self.points.take(rows, axis=1), add_sphere_points(self.normals.take(rows, axis=1), u[2], u[3])
 
 
-def reflected_sources(tables, emission, samples=None):
+def reflected_sources(tables, emission, samples):
     """The walk's tables with the patches' reflected direct light as its only sources
-    (everything else shared): ``emission`` (P,3) E' from uniform points of each patch, or,
-    leaving from hit points, the gathering ``samples`` (gather_direct's) as ReflectedPoints."""
+    (everything else shared): ``emission`` (P,3) E' from uniform points of each patch (random
+    exit), or, leaving from hit points, the gathering ``samples`` (gather_direct's) as
+    ReflectedPoints."""
     walk = copy.copy(tables)
     walk.__dict__.pop("start_weight", None)
     walk.gathering = None
-    if samples is None or tables.exit_random:
+    if tables.exit_random:
         walk.sources = SourceTable(source_weights(tables.geometry.patch_area, emission))
         walk.emission = emission
         walk.lights = None

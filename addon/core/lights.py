@@ -466,3 +466,10 @@ class Lights:
             o, d = self.lights[k].emit(rows[at] - self.first[k], u[:, at], self.aim, self.reach)
             origins[:, at], directions[:, at] = o, d
         return origins, directions
+
+    def unit_rays(self, rows, u, geometry):
+        """:meth:`emit`'s rays in ``geometry``'s unit space, as a walk traces them: origins
+        pushed off along their direction like a patch's along its normal ((3, n) each)."""
+        origins, directions = self.emit(rows, u)
+        origins = (origins - geometry.centre[:, None]) / geometry.diagonal + geometry.ray_offset * directions
+        return origins, directions

@@ -56,15 +56,9 @@ def on_patches(tables, source):
 
 def set_light_rays(tables, source, u, origins, directions, columns):
     """Rays from the lights' emitters ``source`` (ids from the patch count on) with uniforms
-    ``u`` (4, m), written into ``columns`` of (3,n) ``origins`` and ``directions`` (unit space;
-    origins pushed off along their direction like a patch's along its normal). Sources that
-    live in unit space (first_shot.ReflectedPoints) give their rays as they are."""
-    if hasattr(tables.lights, "unit_rays"):
-        origins[:, columns], directions[:, columns] = tables.lights.unit_rays(source - tables.patch_count, u)
-        return
-    g = tables.geometry
-    o, d = tables.lights.emit(source - tables.patch_count, u)
-    o = (o - g.centre[:, None]) / g.diagonal + g.ray_offset * d
+    ``u`` (4, m), written into ``columns`` of (3,n) ``origins`` and ``directions`` (unit space:
+    ``tables.lights`` is a Lights table, or the gathered first shot's ReflectedPoints)."""
+    o, d = tables.lights.unit_rays(source - tables.patch_count, u, tables.geometry)
     origins[:, columns] = o
     directions[:, columns] = d
 

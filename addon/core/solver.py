@@ -64,6 +64,14 @@ MEASURED_CAP_FACTOR = 64
 POLL_SECONDS = 0.05
 
 
+def planned_paths(predicted_paths, direct_light):
+    """The paths a solve stopping on its measured error plans its chunks for: the paper's
+    prediction, or with the direct light gathered a fraction of it."""
+    if direct_light == GATHERED:
+        return max(1, predicted_paths // GATHERED_PLAN_DIVISOR)
+    return predicted_paths
+
+
 @dataclass
 class SolveResult:
     radiosity: np.ndarray          # (P,3) B = E + b
@@ -187,9 +195,7 @@ def solve(
     gathered = direct_light == GATHERED
     measured_rule = stop_rule == MEASURED or (gathered and target_mse is not None)
     if measured_rule:
-        planned = prediction.paths_for(target_mse)
-        if gathered:  # (chunks planned for fewer paths than the paper's walk needs)
-            planned = max(1, planned // GATHERED_PLAN_DIVISOR)
+        planned = planned_paths(prediction.paths_for(target_mse), direct_light)
         cap = paths if paths is not None else MEASURED_CAP_FACTOR * planned
     else:
         planned = paths if paths is not None else prediction.paths_for(target_mse)
