@@ -180,16 +180,53 @@ def leave_shapes(leave_table, max_shapes=LEAVE_SHAPES_MAX, shape_hash=_SHAPE_HAS
             return None
     return np.ascontiguousarray(shapes.view(np.float32).T), shape_of_patch.reshape(-1).astype(np.uint16)
 
+# Per-triangle arrays are computed in blocks of about this many triangles (whole patches), so
+# that the float64 temporaries are a block's, not the scene's: every value is computed
+# triangle by triangle (and every per-patch sum within one block), so the bits are the same.
+BLOCK_TRIANGLES = 1 << 16
+
+
+class UnitCorners:
+    """The (T,3,3) float64 unit-space corners (world - centre) / diagonal of the triangles
+    ``triangles[rows]`` (all of them without ``rows``), computed on demand for the rows asked
+    for: the same numbers as indexing the whole array, without holding it."""
+
+    def __init__(self, vertices, triangles, centre, diagonal, rows=None):
+        self.vertices, self.triangles, self.rows = vertices, triangles, rows
+        self.centre, self.diagonal = centre, diagonal
+
+    def __len__(self):
+        return len(self.triangles if self.rows is None else self.rows)
+
+    def __getitem__(self, index):
+        triangles = self.triangles[index if self.rows is None else self.rows[index]]
+        return (self.vertices[triangles] - self.centre) / self.diagonal
+
+
+def triangle_blocks(count, size=None):
+    """(start, stop) ranges of about ``size`` (BLOCK_TRIANGLES) of the triangles sorted by patch,
+    cut only between patches (``count``: (P,) triangles of each patch)."""
+    size = size or BLOCK_TRIANGLES
+    end = np.cumsum(count)
+    total = int(end[-1]) if end.size else 0
+    cuts = end[np.maximum(np.searchsorted(end, np.arange(size, total, size), side="right") - 1, 0)]
+    cuts = np.unique(np.concatenate([[0], cuts, [total]]))
+    return list(zip(cuts[:-1].tolist(), cuts[1:].tolist()))
+
+
+def _cross(corners):
+    """(n,3) float64 (corner1 - corner0) x (corner2 - corner0) of (n,3,3) corners."""
+    return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+
+
 def build_geometry(vertices, triangles, triangle_patch, patch_count):
     """The :class:`Geometry` of a mesh whose triangles make ``patch_count`` patches (checked:
     ValueError naming what is wrong)."""
     V, T, tp, centre, diagonal = validate_mesh(vertices, triangles, triangle_patch, patch_count)
-    corners = (V[T] - centre) / diagonal          # (T,3,3) float64, unit space
-    e1 = corners[:, 1] - corners[:, 0]
-    e2 = corners[:, 2] - corners[:, 0]
-    cross = np.cross(e1, e2)
-    double_area = np.linalg.norm(cross, axis=1)
-    area = 0.5 * double_area                      # unit space
+    corners = UnitCorners(V, T, centre, diagonal)
+    area = np.empty(len(T))                       # unit space
+    for start in range(0, len(T), BLOCK_TRIANGLES):
+        area[start:start + BLOCK_TRIANGLES] = 0.5 * np.linalg.norm(_cross(corners[start:start + BLOCK_TRIANGLES]), axis=1)
     degenerate = area <= RELATIVE_DEGENERATE_AREA
     if degenerate.any():
         warnings.warn(
@@ -197,18 +234,27 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             stacklevel=3,
         )
     keep = np.flatnonzero(~degenerate)
-    warn_coincident(corners[keep], tp[keep])
-    patch_area = np.bincount(tp[keep], weights=area[keep], minlength=patch_count)
+    del degenerate
+    kept_patch = tp[keep]
+    warn_coincident(UnitCorners(V, T, centre, diagonal, keep), kept_patch)
+    patch_area = np.bincount(kept_patch, weights=area[keep], minlength=patch_count)
     empty = patch_area <= 0
     if empty.any():
         raise PatchError(f"patches {indices_text(empty)} have no area (no triangles, or only degenerate ones)", indices_of(empty))
 
-    order = keep[np.argsort(tp[keep], kind="stable")]
+    order = keep[np.argsort(kept_patch, kind="stable")]
+    del keep, kept_patch
     tp_sorted = tp[order]
-    normal = cross[order] / double_area[order, None]
-    weighted = np.stack(  # area-weighted normal sum (x2)
-        [np.bincount(tp_sorted, weights=cross[order, k], minlength=patch_count) for k in range(3)], axis=1
-    )
+    count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
+    sorted_corners = UnitCorners(V, T, centre, diagonal, order)
+    blocks = triangle_blocks(count)
+    weighted = np.zeros((patch_count, 3))  # area-weighted normal sum (x2), block by block of whole patches
+    for start, stop in blocks:
+        cross = _cross(sorted_corners[start:stop])
+        patches = tp_sorted[start:stop]
+        first_patch = patches[0]
+        for k in range(3):
+            weighted[first_patch:patches[-1] + 1, k] = np.bincount(patches - first_patch, weights=cross[:, k])
     norm = np.linalg.norm(weighted, axis=1)
     folded = norm <= 1e-12 * patch_area * 2
     if folded.any():
@@ -218,8 +264,32 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             indices_of(folded),
         )
     patch_normal = weighted / norm[:, None]
-    cosine = np.einsum("ij,ij->i", normal, patch_normal[tp_sorted])
-    crooked = cosine < MIN_PATCH_NORMAL_COSINE
+    del weighted, norm
+
+    # The triangles' float32 arrays, block by block of the sorted triangles.
+    ray_offset = RELATIVE_RAY_OFFSET
+    inset = RELATIVE_EDGE_INSET
+    n = len(order)
+    triangle_normal = np.empty((n, 3), np.float32)
+    triangle_corners = np.empty((n, 3, 3), np.float32)
+    triangle_frame = np.empty((9, n), np.float32)
+    crooked = np.zeros(n, bool)
+    for start, stop in blocks:
+        block = sorted_corners[start:stop]
+        cross = _cross(block)
+        normal = cross / np.linalg.norm(cross, axis=1)[:, None]
+        cosine = np.einsum("ij,ij->i", normal, patch_normal[tp_sorted[start:stop]])
+        crooked[start:stop] = cosine < MIN_PATCH_NORMAL_COSINE
+        triangle_normal[start:stop] = normal
+        triangle_corners[start:stop] = block
+        leave_corners = inset_triangles(block, inset)
+        triangle_frame[:, start:stop] = np.hstack(
+            [
+                leave_corners[:, 0] + ray_offset * normal,
+                leave_corners[:, 1] - leave_corners[:, 0],
+                leave_corners[:, 2] - leave_corners[:, 0],
+            ]
+        ).T
     if crooked.any():
         crooked_patches = np.unique(tp_sorted[crooked])
         raise PatchError(
@@ -227,21 +297,20 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             "orientation: a patch must be coplanar triangles with the same winding",
             crooked_patches,
         )
+    del crooked
 
-    count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
     first = np.concatenate(([0], np.cumsum(count)[:-1]))
     sorted_area = area[order]
+    del area
     cumulative = np.cumsum(sorted_area)
     before_patch = np.concatenate(([0.0], cumulative))[first]
     fraction = (cumulative - before_patch[tp_sorted]) / patch_area[tp_sorted]
+    del cumulative
     last = first + count - 1
     fraction[last] = 1.0  # exact upper end, whatever the rounding
-    ray_offset = RELATIVE_RAY_OFFSET
-    sorted_corners = corners[order]
-    inset = RELATIVE_EDGE_INSET
     is_parallelogram, parallelogram = parallelogram_frames(sorted_corners, first, count, inset)
     parallelogram[:, :3] += ray_offset * patch_normal
-    leave_corners = inset_triangles(sorted_corners, inset)
+    parallelogram[~is_parallelogram] = 0.0
 
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     return Geometry(
@@ -251,24 +320,15 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         triangle_index=order,
         triangle_patch=tp_sorted.astype(np.int32),
         triangle_area=sorted_area * diagonal**2,
-        triangle_normal=f32(normal),
-        triangle_corners=f32(sorted_corners),
+        triangle_normal=triangle_normal,
+        triangle_corners=triangle_corners,
         patch_area=patch_area * diagonal**2,
         patch_normal=f32(patch_normal),
         patch_first_triangle=first,
         patch_triangle_count=count,
         triangle_key=tp_sorted + fraction,
-        triangle_frame=f32(
-            np.hstack(
-                [
-                    leave_corners[:, 0] + ray_offset * normal,
-                    leave_corners[:, 1] - leave_corners[:, 0],
-                    leave_corners[:, 2] - leave_corners[:, 0],
-                ]
-            ).T
-        ),
+        triangle_frame=triangle_frame,
         patch_first_fraction=f32(fraction[first]),
         patch_parallelogram=is_parallelogram,
-        parallelogram_frame=f32(np.where(is_parallelogram[:, None], parallelogram, 0.0).T),
+        parallelogram_frame=f32(parallelogram.T),
     )
-
