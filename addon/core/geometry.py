@@ -157,6 +157,14 @@ class Geometry:
         """The Embree scene over these triangles, built on first use and then reused."""
         return RayTracer(self.triangle_corners)
 
+    @property
+    def surface_tracer(self):
+        """An Embree scene of the patches' surfaces for checks that ask only whether a ray meets
+        one and which side (its hit ids are not triangles of this geometry): the grids' where
+        there are grids (what the walks trace), else :attr:`tracer`. The grids' is a few
+        triangles where :attr:`tracer` holds every triangle's, which a walk may never build."""
+        return self.tracer if self.patch_grids is None else self.patch_grids.tracer
+
 
 
 def leave_shapes(leave_table, max_shapes=LEAVE_SHAPES_MAX, shape_hash=_SHAPE_HASH):
