@@ -40,7 +40,8 @@ class Geometry:
 
     Triangles are stored sorted by patch (the ray tracer's primitive ids index this order).
     Positions are in unit space, (world - centre) / diagonal, in float32; areas are in the
-    scene's units.
+    scene's units. The per-triangle float32 arrays (corners, normals, leaving frames) are made
+    on first use from ``corners``: walks over parallelograms traced as grids never need them.
     """
 
     centre: np.ndarray            # (3,) float64
@@ -48,15 +49,12 @@ class Geometry:
     ray_offset: float             # distance a ray origin is pushed along the normal (unit space)
     triangle_index: np.ndarray    # (T,) original index of each sorted triangle
     triangle_patch: np.ndarray    # (T,) int32 patch of each sorted triangle
-    triangle_area: np.ndarray     # (T,) float64
-    triangle_normal: np.ndarray   # (T,3) float32 unit normals
-    triangle_corners: np.ndarray  # (T,3,3) float32 unit-space corners, the ray tracer's input
+    corners: UnitCorners          # (T,3,3) float64 unit-space corners of the sorted triangles, on demand
     patch_area: np.ndarray        # (P,) float64
     patch_normal: np.ndarray      # (P,3) float32
     patch_first_triangle: np.ndarray  # (P,) int64 first sorted triangle of each patch
     patch_triangle_count: np.ndarray  # (P,) int64
     triangle_key: np.ndarray      # (T,) float64: patch + cumulative area fraction in the patch
-    triangle_frame: np.ndarray    # (9,T) float32: origin (pushed off), edge1, edge2, one row per coordinate
     patch_first_fraction: np.ndarray  # (P,) float32: area fraction of each patch's first triangle
     patch_parallelogram: np.ndarray   # (P,) bool: the patch is two triangles forming a parallelogram
     parallelogram_frame: np.ndarray   # (9,P) float32: corner (pushed off), edge a, edge b (zeros if not)
@@ -72,6 +70,49 @@ class Geometry:
     @cached_property
     def max_triangles_per_patch(self):
         return int(self.patch_triangle_count.max())
+
+    def _per_triangle(self, make, axis=0):
+        """``make(corners)`` of every sorted triangle, block by block, into one array whose
+        ``axis`` runs over the triangles."""
+        T = self.triangle_count
+        first = make(self.corners[0:BLOCK_TRIANGLES])
+        shape = list(first.shape)
+        shape[axis] = T
+        out = np.empty(shape, first.dtype)
+        for start in range(0, T, BLOCK_TRIANGLES):
+            block = first if start == 0 else make(self.corners[start:start + BLOCK_TRIANGLES])
+            out[(slice(None),) * axis + (slice(start, start + BLOCK_TRIANGLES),)] = block
+        return out
+
+    @cached_property
+    def triangle_corners(self):
+        """(T,3,3) float32 unit-space corners, the ray tracer's input."""
+        return self._per_triangle(lambda c: c.astype(np.float32))
+
+    @property
+    def float32_corners(self):
+        """``float32_corners[rows]``: rows of :attr:`triangle_corners`, without making it whole."""
+        return self.__dict__.get("triangle_corners", self.corners.float32())
+
+    @cached_property
+    def triangle_normal(self):
+        """(T,3) float32 unit normals."""
+        return self._per_triangle(lambda c: triangle_normals(c).astype(np.float32))
+
+    @cached_property
+    def triangle_area(self):
+        """(T,) float64 areas, scene units."""
+        return self._per_triangle(lambda c: 0.5 * np.linalg.norm(triangle_cross(c), axis=1)) * self.diagonal**2
+
+    @cached_property
+    def triangle_frame(self):
+        """(9,T) float32: origin (pushed off), edge1, edge2 of each triangle's leaving frame, one
+        row per coordinate (:meth:`frames_of`)."""
+        return self._per_triangle(lambda c: leaving_frames(c, self.ray_offset), axis=1)
+
+    def frames_of(self, rows):
+        """Columns ``rows`` of :attr:`triangle_frame`, without making it whole."""
+        return leaving_frames(self.corners[rows], self.ray_offset)
 
     def to_world(self, points):
         """Unit-space points (n,3) back in the scene's coordinates, float64."""
@@ -197,18 +238,24 @@ BLOCK_TRIANGLES = 1 << 16
 class UnitCorners:
     """The (T,3,3) float64 unit-space corners (world - centre) / diagonal of the triangles
     ``triangles[rows]`` (all of them without ``rows``), computed on demand for the rows asked
-    for: the same numbers as indexing the whole array, without holding it."""
+    for: the same numbers as indexing the whole array, without holding it (rounded to
+    ``dtype`` where given)."""
 
-    def __init__(self, vertices, triangles, centre, diagonal, rows=None):
+    def __init__(self, vertices, triangles, centre, diagonal, rows=None, dtype=None):
         self.vertices, self.triangles, self.rows = vertices, triangles, rows
-        self.centre, self.diagonal = centre, diagonal
+        self.centre, self.diagonal, self.dtype = centre, diagonal, dtype
+
+    def float32(self):
+        """These corners rounded to float32 (the rows of Geometry.triangle_corners)."""
+        return UnitCorners(self.vertices, self.triangles, self.centre, self.diagonal, self.rows, np.float32)
 
     def __len__(self):
         return len(self.triangles if self.rows is None else self.rows)
 
     def __getitem__(self, index):
         triangles = self.triangles[index if self.rows is None else self.rows[index]]
-        return (self.vertices[triangles] - self.centre) / self.diagonal
+        corners = (self.vertices[triangles] - self.centre) / self.diagonal
+        return corners if self.dtype is None else corners.astype(self.dtype)
 
 
 def triangle_blocks(count, size=None):
@@ -222,9 +269,31 @@ def triangle_blocks(count, size=None):
     return list(zip(cuts[:-1].tolist(), cuts[1:].tolist()))
 
 
-def _cross(corners):
+def triangle_cross(corners):
     """(n,3) float64 (corner1 - corner0) x (corner2 - corner0) of (n,3,3) corners."""
     return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+
+
+def triangle_normals(corners):
+    """(n,3) float64 unit normals of (n,3,3) corners."""
+    cross = triangle_cross(corners)
+    return cross / np.linalg.norm(cross, axis=1)[:, None]
+
+
+def leaving_frames(corners, ray_offset, inset=RELATIVE_EDGE_INSET):
+    """(9,n) float32 leaving frames of (n,3,3) corners: the inset triangle's first corner pushed
+    off along the normal, and its two edges from it."""
+    leave_corners = inset_triangles(corners, inset)
+    return np.ascontiguousarray(
+        np.hstack(
+            [
+                leave_corners[:, 0] + ray_offset * triangle_normals(corners),
+                leave_corners[:, 1] - leave_corners[:, 0],
+                leave_corners[:, 2] - leave_corners[:, 0],
+            ]
+        ).T,
+        dtype=np.float32,
+    )
 
 
 def build_geometry(vertices, triangles, triangle_patch, patch_count):
@@ -234,7 +303,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     corners = UnitCorners(V, T, centre, diagonal)
     area = np.empty(len(T))                       # unit space
     for start in range(0, len(T), BLOCK_TRIANGLES):
-        area[start:start + BLOCK_TRIANGLES] = 0.5 * np.linalg.norm(_cross(corners[start:start + BLOCK_TRIANGLES]), axis=1)
+        area[start:start + BLOCK_TRIANGLES] = 0.5 * np.linalg.norm(triangle_cross(corners[start:start + BLOCK_TRIANGLES]), axis=1)
     degenerate = area <= RELATIVE_DEGENERATE_AREA
     if degenerate.any():
         warnings.warn(
@@ -258,7 +327,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     blocks = triangle_blocks(count)
     weighted = np.zeros((patch_count, 3))  # area-weighted normal sum (x2), block by block of whole patches
     for start, stop in blocks:
-        cross = _cross(sorted_corners[start:stop])
+        cross = triangle_cross(sorted_corners[start:stop])
         patches = tp_sorted[start:stop]
         first_patch = patches[0]
         for k in range(3):
@@ -274,30 +343,11 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     patch_normal = weighted / norm[:, None]
     del weighted, norm
 
-    # The triangles' float32 arrays, block by block of the sorted triangles.
-    ray_offset = RELATIVE_RAY_OFFSET
-    inset = RELATIVE_EDGE_INSET
-    n = len(order)
-    triangle_normal = np.empty((n, 3), np.float32)
-    triangle_corners = np.empty((n, 3, 3), np.float32)
-    triangle_frame = np.empty((9, n), np.float32)
-    crooked = np.zeros(n, bool)
+    # Every triangle within MIN_PATCH_NORMAL_COSINE of its patch's normal, block by block.
+    crooked = np.zeros(len(order), bool)
     for start, stop in blocks:
-        block = sorted_corners[start:stop]
-        cross = _cross(block)
-        normal = cross / np.linalg.norm(cross, axis=1)[:, None]
-        cosine = np.einsum("ij,ij->i", normal, patch_normal[tp_sorted[start:stop]])
+        cosine = np.einsum("ij,ij->i", triangle_normals(sorted_corners[start:stop]), patch_normal[tp_sorted[start:stop]])
         crooked[start:stop] = cosine < MIN_PATCH_NORMAL_COSINE
-        triangle_normal[start:stop] = normal
-        triangle_corners[start:stop] = block
-        leave_corners = inset_triangles(block, inset)
-        triangle_frame[:, start:stop] = np.hstack(
-            [
-                leave_corners[:, 0] + ray_offset * normal,
-                leave_corners[:, 1] - leave_corners[:, 0],
-                leave_corners[:, 2] - leave_corners[:, 0],
-            ]
-        ).T
     if crooked.any():
         crooked_patches = np.unique(tp_sorted[crooked])
         raise PatchError(
@@ -316,7 +366,8 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     del cumulative
     last = first + count - 1
     fraction[last] = 1.0  # exact upper end, whatever the rounding
-    is_parallelogram, parallelogram = parallelogram_frames(sorted_corners, first, count, inset)
+    ray_offset = RELATIVE_RAY_OFFSET
+    is_parallelogram, parallelogram = parallelogram_frames(sorted_corners, first, count, RELATIVE_EDGE_INSET)
     parallelogram[:, :3] += ray_offset * patch_normal
     parallelogram[~is_parallelogram] = 0.0
 
@@ -327,15 +378,12 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         ray_offset=ray_offset,
         triangle_index=order,
         triangle_patch=tp_sorted.astype(np.int32),
-        triangle_area=sorted_area * diagonal**2,
-        triangle_normal=triangle_normal,
-        triangle_corners=triangle_corners,
+        corners=sorted_corners,
         patch_area=patch_area * diagonal**2,
         patch_normal=f32(patch_normal),
         patch_first_triangle=first,
         patch_triangle_count=count,
         triangle_key=tp_sorted + fraction,
-        triangle_frame=triangle_frame,
         patch_first_fraction=f32(fraction[first]),
         patch_parallelogram=is_parallelogram,
         parallelogram_frame=f32(parallelogram.T),
