@@ -162,7 +162,8 @@ def child(layout, n, target_error, use_tracemalloc):
     pipeline.scene_and_notes = after("scene arrays", pipeline.scene_and_notes)
     solver.WalkTables = after("tables and BVH", solver.WalkTables)
     pipeline.solve = after("solve (with live view)", pipeline.solve)
-    worker.run_solve = after("colours computed", worker.run_solve)
+    # (SolveJob.run, not run_solve: a wrapper's arguments would keep the objects' arrays alive)
+    worker.SolveJob.run = after("colours computed", worker.SolveJob.run)
     operators.scene_io.write_results = after("colours written", scene_io.write_results)
 
     live = {"version": None, "arrays": None, "bytes": 0}
