@@ -57,7 +57,10 @@ class Geometry:
     triangle_key: np.ndarray      # (T,) float64: patch + cumulative area fraction in the patch
     patch_first_fraction: np.ndarray  # (P,) float32: area fraction of each patch's first triangle
     patch_parallelogram: np.ndarray   # (P,) bool: the patch is two triangles forming a parallelogram
-    parallelogram_frame: np.ndarray   # (9,P) float32: corner (pushed off), edge a, edge b (zeros if not)
+    # (12,P) float32: each parallelogram patch's corner (pushed off), edge a, edge b (zeros if
+    # not), then its normal, one coordinate per row: one gather gives a random exit's origin
+    # frame and the normal its direction is built on
+    leave_table: np.ndarray
 
     @property
     def patch_count(self):
@@ -118,17 +121,17 @@ class Geometry:
         """Unit-space points (n,3) back in the scene's coordinates, float64."""
         return np.asarray(points, dtype=np.float64) * self.diagonal + self.centre
 
-    @cached_property
-    def patch_normal_rows(self):
-        """(3,P) float32: the patch normals one coordinate per row, for column gathers."""
-        return np.ascontiguousarray(self.patch_normal.T)
+    @property
+    def parallelogram_frame(self):
+        """(9,P) float32: the parallelogram patches' corner (pushed off), edge a, edge b (zeros if
+        not), one coordinate per row (rows of :attr:`leave_table`)."""
+        return self.leave_table[0:9]
 
-    @cached_property
-    def leave_table(self):
-        """(12,P) float32: each parallelogram patch's corner (pushed off), edge a, edge b, then
-        its normal, one coordinate per row: one gather gives a random exit's origin frame and
-        the normal its direction is built on."""
-        return np.ascontiguousarray(np.vstack([self.parallelogram_frame, self.patch_normal_rows]))
+    @property
+    def patch_normal_rows(self):
+        """(3,P) float32: the patch normals one coordinate per row, for column gathers (rows of
+        :attr:`leave_table`)."""
+        return self.leave_table[9:12]
 
     @cached_property
     def leave_shapes(self):
@@ -370,6 +373,10 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     is_parallelogram, parallelogram = parallelogram_frames(sorted_corners, first, count, RELATIVE_EDGE_INSET)
     parallelogram[:, :3] += ray_offset * patch_normal
     parallelogram[~is_parallelogram] = 0.0
+    leave_table = np.empty((12, patch_count), np.float32)
+    leave_table[0:9] = parallelogram.T
+    leave_table[9:12] = patch_normal.T
+    del parallelogram
 
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     return Geometry(
@@ -386,5 +393,5 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         triangle_key=tp_sorted + fraction,
         patch_first_fraction=f32(fraction[first]),
         patch_parallelogram=is_parallelogram,
-        parallelogram_frame=f32(parallelogram.T),
+        leave_table=leave_table,
     )
