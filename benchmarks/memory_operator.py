@@ -225,7 +225,7 @@ def table(rows):
     head = ["| stage |"]
     rule = ["|---|"]
     for plain, _ in rows:
-        label = f"{plain['layout']}, {plain['paths'] / 1e6:.0f}M paths"
+        label = f"{plain['layout']}, {plain['paths']:,} paths"
         head.append(f" peak RSS MiB ({label}) | current MiB | numpy peak during MiB | numpy held after MiB |")
         rule.append("---:|---:|---:|---:|")
     lines = ["".join(head), "".join(rule)]
@@ -251,6 +251,8 @@ def main(argv=None):
     ap.add_argument("--divisions", type=int, default=None, help=f"N, patches a wall side (default {WALL_DIVISIONS})")
     ap.add_argument("--errors", type=float, nargs="+", default=[12.0, 6.0],
                     help="error targets in %% (the panel's setting): two path counts")
+    ap.add_argument("--before", default=None, help="the JSON of an earlier run, shown beside this one")
+    ap.add_argument("--before-label", default=None, help="what the earlier run measured (a commit)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
@@ -263,9 +265,10 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for layout in args.layouts:
-        for error in args.errors:
+        for k, error in enumerate(args.errors):
             plain = measure(layout, n, error)
-            traced = measure(layout, n, error, use_tracemalloc=True)
+            # tracemalloc at the first error target only (the second checks the peak's independence of the paths)
+            traced = measure(layout, n, error, use_tracemalloc=True) if k == 0 else {"stages": []}
             rows.append((plain, traced))
             peak = max(s["peak"] for s in plain["stages"])
             print(f"{layout} {plain['patches']:,} patches, {plain['paths']:,} paths ({error:g}%): peak {peak / MIB:.0f} MiB, "
@@ -291,6 +294,16 @@ def main(argv=None):
             f"scene and the results at the end {floor / MIB:.0f} MiB; peak above that {(peak - floor) / MIB:.0f} MiB; "
             f"live view arrays {plain['live_bytes'] / MIB:.0f} MiB."
         )
+    if args.before:
+        before = json.loads(Path(args.before).read_text())
+        L += ["", f"Before (`{args.before_label}`):" if getattr(args, "before_label", None) else "Before:", ""]
+        for run in before:
+            plain = run["plain"]
+            peak = max(s["peak"] for s in plain["stages"])
+            floor = _by_stage(plain)["after release"]["current"]
+            L.append(f"- `{plain['layout']}`: {plain['patches']:,} patches, {plain['paths']:,} paths: peak {peak / MIB:.0f} MiB, "
+                     f"{(peak - floor) / MIB:.0f} MiB above Blender holding the scene and the results ({floor / MIB:.0f} MiB)")
+        L += ["", "Before, per stage:", ""] + table([(run["plain"], run["traced"]) for run in before])
     L += ["", "Per stage, at its end: the peak resident set so far and the current one; from the tracemalloc run "
           "(started once the scene is built), the peak of the numpy and Python allocations live during the stage "
           "and what is still allocated at its end.", ""]
