@@ -18,8 +18,10 @@ def triangles(patches, radiosity):
     patch's, exposed so that the median radiosity is MEDIAN_GREY, gamma 2.2, clipped)."""
     c = patches.combined
     positions = np.asarray(c.vertices, dtype=np.float32)[np.asarray(c.triangles).reshape(-1)]
-    rgb = display_colours(radiosity)[np.repeat(np.asarray(c.triangle_patch), 3)]
-    return positions, np.column_stack([rgb, np.ones(len(rgb), np.float32)])
+    rgba = np.ones((len(radiosity), 4), np.float32)
+    rgba[:, :3] = display_colours(radiosity)
+    # per patch, then per triangle, then per corner: no per-corner index or RGB arrays
+    return positions, np.repeat(rgba[c.triangle_patch], 3, axis=0)
 
 
 def display_colours(radiosity):

@@ -149,6 +149,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         self._scene_uid = context.scene.session_uid  # results go to the scene solved
         self._placements = _placements({o.uid for o in objects if o.uid is not None})
         self._job = worker.SolveJob(objects, settings)
+        del objects  # the job's now: it lets go of the arrays once they are meshed
         if threaded:
             worker.set_running_job(self._job)
             self._job.live_view = True

@@ -58,11 +58,24 @@ class ObjectArrays:
     slot_emission_textures: tuple = ()  # per slot: (pixels, affine, UV map, strength) or None
 
 
+@dataclass(frozen=True)
+class ObjectInfo:
+    """What the patches keep of a source object once meshed: its arrays are not needed again."""
+
+    name: str
+    uid: int | None
+    receives: bool
+
+    @classmethod
+    def of(cls, o: ObjectArrays):
+        return cls(o.name, o.uid, o.receives)
+
+
 @dataclass
 class Patches:
     """The patch meshes of the source objects and their PatchScene arrays."""
 
-    objects: list  # ObjectArrays
+    objects: list  # ObjectInfo of each source object (name, uid, receives), in patch order
     meshes: list  # meshing.PatchMesh, one per object
     combined: meshing.CombinedPatches
     reflectivity: np.ndarray  # (P,3)
@@ -84,6 +97,9 @@ class _GeometryCache:
     nor rebuild the ray tracer."""
 
     size = 2
+    # Older geometries stay only while all the entries, a new one included, have at most this
+    # many patches: a big scene's meshes, arrays and Embree scene are not kept beside another's.
+    max_patches = 1 << 19
 
     def __init__(self):
         self._entries = OrderedDict()  # key -> {"meshes", "combined", "scene", "warnings"}
@@ -109,10 +125,20 @@ class _GeometryCache:
                 return entry["meshes"], entry["combined"]
         return None
 
+    def make_room(self, patch_count):
+        """Forget the oldest geometries until ``patch_count`` more patches fit in max_patches
+        (before meshing a new geometry, so that the old ones are not held while it is made)."""
+        with self._lock:
+            while self._entries and self._patches() + patch_count > self.max_patches:
+                self._entries.popitem(last=False)
+
+    def _patches(self):
+        return sum(entry["combined"].patch_count for entry in self._entries.values())
+
     def store(self, key, meshes, combined):
         with self._lock:
             self._entries[key] = {"meshes": meshes, "combined": combined, "scene": None, "warnings": []}
-            while len(self._entries) > self.size:
+            while len(self._entries) > self.size or (len(self._entries) > 1 and self._patches() > self.max_patches):
                 self._entries.popitem(last=False)
 
     def scene(self, patches):
@@ -259,20 +285,21 @@ def make_patches(objects, patch_size) -> Patches:
         raise ValueError("the selected objects have no faces of non-zero area")
     if not patch_size:
         patch_size = automatic_patch_size(objects)
-    check_patch_count(objects, patch_size)
-    patches = _make_patches(objects, patch_size)
+    count = check_patch_count(objects, patch_size)
+    patches = _make_patches(objects, patch_size, count)
     patches.lights = lights
     patches.notes = notes
     patches.patch_size = float(patch_size)
     return patches
 
 
-def _make_patches(objects, patch_size) -> Patches:
+def _make_patches(objects, patch_size, count) -> Patches:
     key = _GeometryCache.key(objects, patch_size)
     cached = _GEOMETRY_CACHE.meshes(key)
     if cached is not None:
         meshes, combined = cached
         return _with_materials(objects, meshes, combined, key)
+    _GEOMETRY_CACHE.make_room(count)
     min_area = degenerate_area(objects)  # the scene's: what the core drops, across all objects
     meshes = [
         meshing.mesh_patches(
@@ -297,7 +324,7 @@ def _with_materials(objects, meshes, combined, key) -> Patches:
     materials = [patch_materials(o, m) for o, m in zip(objects, meshes)]
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
     emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
-    return Patches(list(objects), meshes, combined, reflectivity, emission, key)
+    return Patches([ObjectInfo.of(o) for o in objects], meshes, combined, reflectivity, emission, key)
 
 
 def patch_materials(o, mesh):

@@ -202,6 +202,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     are known, before the first path.
     """
     patches = make_patches(objects, settings.patch_size)
+    del objects  # the source arrays are meshed: the caller's references are the only ones left
     scene, notes = scene_and_notes(patches)
     prediction, target = prediction_for(scene, settings)
     if on_prediction is not None:

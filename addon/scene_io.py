@@ -718,6 +718,12 @@ def _rgba(values):
     return out.ravel()
 
 
+def _corner_rgba(patch_mesh, patch_values):
+    """``_rgba`` of per-patch values on every corner of its patch (flat colours), made per patch
+    and then repeated: no per-corner float64 copy."""
+    return np.repeat(_rgba(patch_values).reshape(-1, 4), patch_mesh.face_sizes, axis=0).ravel()
+
+
 def build_mesh(name, patch_mesh: meshing.PatchMesh):
     """A Blender mesh whose faces are the patches (foreach_set only)."""
     mesh = bpy.data.meshes.new(name)
@@ -737,7 +743,7 @@ def write_colours(mesh, patch_mesh, face_colours, point_colours, output):
     names = []
     if output in ("FACE", "BOTH"):
         attr = mesh.color_attributes.new(ATTRIBUTE_NAME, "FLOAT_COLOR", "CORNER")
-        attr.data.foreach_set("color", _rgba(meshing.corner_values(patch_mesh, face_colours)))
+        attr.data.foreach_set("color", _corner_rgba(patch_mesh, face_colours))
         names.append(attr.name)
     if output in ("VERTEX", "BOTH"):
         name = ATTRIBUTE_NAME if output == "VERTEX" else POINT_ATTRIBUTE_NAME
@@ -760,7 +766,7 @@ def write_extra(mesh, patch_mesh, name, face_values, output):
         attr.data.foreach_set("color", _rgba(meshing.point_average(patch_mesh, face_values)))
     else:
         attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
-        attr.data.foreach_set("color", _rgba(meshing.corner_values(patch_mesh, face_values)))
+        attr.data.foreach_set("color", _corner_rgba(patch_mesh, face_values))
     main = mesh.color_attributes.get(ATTRIBUTE_NAME)
     if main is not None:
         mesh.color_attributes.active_color = main

@@ -96,11 +96,16 @@ class SolveJob:
             return None
         return mse ** 0.5 / p.mean_reflected_radiosity
 
+    def _hand_over_objects(self):
+        """The objects' arrays, which the job then lets go of: run_solve drops them once meshed."""
+        objects, self.objects = self.objects, None
+        return objects
+
     def run(self):
         """The whole job in the calling thread (``start`` runs it on its own)."""
         try:
             self.output = run_solve(
-                self.objects, self.settings, self._on_progress, self._cancel.is_set, self._on_prediction
+                self._hand_over_objects(), self.settings, self._on_progress, self._cancel.is_set, self._on_prediction
             )
         except ValueError as exc:  # bad input: a message for the user
             self.error = str(exc)

@@ -2,6 +2,8 @@
 
     python -m benchmarks.memory                 # 1M, 4M, 16M, 64M and 256M paths, into benchmarks/results/memory.md
     python -m benchmarks.memory --quick         # 250k and 1M paths, into out/
+    python -m benchmarks.memory --operator      # 1M patches through the operator's code path (bpy),
+                                                # into benchmarks/results/memory_operator.md
 
 Every measurement runs in a fresh Python process, so its peak resident set (``ru_maxrss``) is its
 own. A child reports the peak resident set after the imports, after building the scene (meshing,
@@ -12,6 +14,9 @@ share is the last minus the one before. A second child per path count runs the s
 Embree's own, which are made once with the BVH, before it).
 
 Issue 5's target: the peak stays under 1 GiB and does not grow with the number of paths.
+
+``--operator`` (issue 26) measures the extension in Blender (the ``bpy`` module, headless) on a
+room of about a million patches: see :mod:`benchmarks.memory_operator`.
 """
 from __future__ import annotations
 
@@ -110,6 +115,13 @@ def main(argv=None):
     ap.add_argument("--paths", type=int, nargs="+", default=None)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--operator", action="store_true", help="the operator's code path in Blender (memory_operator)")
+    args, rest = ap.parse_known_args(argv)
+    if args.operator:
+        from benchmarks import memory_operator
+
+        memory_operator.main(rest + (["--quick"] if args.quick else []) + (["--out", args.out] if args.out else []))
+        return
     args = ap.parse_args(argv)
     if args.child is not None:
         child(args.child, args.threads, args.tracemalloc, args.scene)

@@ -1,37 +1,55 @@
-"""Peak memory of a solve of about a million patches through the operator (issue 26).
+"""Peak memory of the Solve operator on a room of about a million patches (issue 26).
 
-    .venv/bin/python -m benchmarks.memory_operator              # into benchmarks/results/memory_operator.md
-    .venv/bin/python -m benchmarks.memory_operator --quick      # ~250k patches, into out/
+    python -m benchmarks.memory --operator            # into benchmarks/results/memory_operator.md
+    python -m benchmarks.memory --operator --quick    # a 100k-patch room, into out/
 
-The scene: a closed room of 4 x 3 x 2.5 m (six faces, inward, albedo 0.7) with a ceiling panel of
-0.5 x 0.5 m emitting (5, 5, 5), meshed by the operator at a patch size that makes about a million
-patches. Each measurement runs in a fresh process (its peak resident set is its own):
+Each measurement runs in a fresh process that imports ``bpy`` (Blender as a Python module,
+headless), registers the extension, builds the room in Blender, selects it and runs
+``bpy.ops.radiosity.solve()``: the operator's synchronous mode (``execute``: ``SolveJob.run`` on
+the calling thread, then ``scene_io.write_results``), with the panel's settings (error target,
+measured stop rule, both colour outputs, threads automatic). The stages are timed by wrapping
+the functions the operator calls (``read_selection``, ``make_patches``, ``scene_and_notes``, the
+solve's ``WalkTables``, which builds the Embree scene, ``solve``, ``run_solve`` and
+``write_results``): after each, the peak resident set so far (``ru_maxrss``) and the current
+one. A second process per measurement runs the same under ``tracemalloc``, whose per-stage peak
+counts the numpy and Python allocations of that stage alone (not Blender's nor Embree's).
 
-- ``operator``: ``bpy.ops.radiosity.solve()`` as a script runs it (background mode, synchronous),
-  stopped by a time limit (the memory of a solve does not grow with its paths: benchmarks/memory.md);
-- ``stages``: the same work called stage by stage (reading the selection, meshing, the core's
-  scene, the solve, the colours, writing them), with the peak resident set after each, and a
-  sampler of the current resident set every 10 ms, whose maximum within a stage is its own peak.
+Headless Blender has no window, so the modal run's live view cannot draw. Its arrays are made
+as its draw handler makes them: the job keeps the result so far (``SolveJob.live``, as the
+threaded run does) and, after every batch, ``live_view.triangles`` is computed and kept until
+the next (standing for the vertex buffer the batch holds). Nor does headless Blender keep an
+undo stack: the undo step the operator pushes in the interface is not measured.
 
-Issue 26's target: the peak under 1 GiB.
+The room: six walls facing inwards (two of them coloured, so that the walk carries three
+channels) and an emitting quad under the ceiling. ``grids``: each wall is a grid of N x N
+faces, one patch each, so Blender holds a million source faces too; ``planes``: each wall is
+one quad, meshed into N x N patches by the patch size. The floor below which no fix can go is
+what Blender holds at the end, the scene and the result objects, measured once our arrays are
+released (``after release``: garbage collected and ``malloc_trim``).
 """
 from __future__ import annotations
 
 import argparse
+import ctypes
+import gc
 import json
 import os
+import platform
 import resource
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = Path(__file__).parent / "results"
 MIB = 1 << 20
 GIB = 1 << 30
-ROOM = (4.0, 3.0, 2.5)
+# Walls N x N: six walls of 408^2 patches are 998,784, and the light adds a few thousand.
+WALL_DIVISIONS = 408
+ROOM = 4.0
+STAGES = ("bpy imported", "scene built", "objects read", "patches meshed", "scene arrays", "tables and BVH",
+          "solve (with live view)", "colours computed", "colours written", "after release")
 
 
 def peak_rss():
@@ -43,161 +61,255 @@ def current_rss():
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
-class Sampler(threading.Thread):
-    """The current resident set every 10 ms, its maximum per stage label."""
+def _grid(origin, u, v, n):
+    """(vertices, quads) of an n x n grid on origin + [0,1]u + [0,1]v, faces along u x v."""
+    import numpy as np
 
-    def __init__(self):
-        super().__init__(daemon=True)
-        self.stage, self.peaks, self.stop = "start", {}, threading.Event()
-
-    def run(self):
-        while not self.stop.is_set():
-            rss = current_rss()
-            self.peaks[self.stage] = max(self.peaks.get(self.stage, 0), rss)
-            time.sleep(0.01)
-
-    def enter(self, stage):
-        rss = current_rss()
-        self.peaks[self.stage] = max(self.peaks.get(self.stage, 0), rss)
-        self.stage = stage
+    t = np.linspace(0.0, 1.0, n + 1)
+    a, b = np.meshgrid(t, t, indexing="ij")
+    vertices = origin + a.reshape(-1, 1) * u + b.reshape(-1, 1) * v
+    k = (np.arange(n)[:, None] * (n + 1) + np.arange(n)).reshape(-1)
+    quads = np.stack([k, k + n + 1, k + n + 2, k + 1], axis=1)
+    return vertices, quads
 
 
-def build_scene(patch_size):
+def _material(bpy, name, base, strength=0.0):
+    m = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        m.use_nodes = True
+    node = m.node_tree.nodes["Principled BSDF"]
+    node.inputs["Base Color"].default_value = (*base, 1.0)
+    node.inputs["Emission Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    node.inputs["Emission Strength"].default_value = strength
+    return m
+
+
+def build_room(bpy, layout, n):
+    """The room's objects, selected; returns the patch size that makes N x N patches a wall."""
+    import numpy as np
+
+    L = ROOM
+    walls = {  # name: (origin, u, v, base colour); u x v points into the room
+        "Floor": ((0, 0, 0), (L, 0, 0), (0, L, 0), (0.6, 0.6, 0.6)),
+        "Ceiling": ((0, 0, L), (0, L, 0), (L, 0, 0), (0.7, 0.7, 0.7)),
+        "Wall -X": ((0, 0, 0), (0, L, 0), (0, 0, L), (0.6, 0.15, 0.1)),
+        "Wall +X": ((L, 0, 0), (0, 0, L), (0, L, 0), (0.1, 0.5, 0.15)),
+        "Wall -Y": ((0, 0, 0), (0, 0, L), (L, 0, 0), (0.6, 0.6, 0.6)),
+        "Wall +Y": ((0, L, 0), (L, 0, 0), (0, 0, L), (0.6, 0.6, 0.6)),
+        "Light": ((0.375 * L, 0.375 * L, 0.98 * L), (0, 0.25 * L, 0), (0.25 * L, 0, 0), (0.0, 0.0, 0.0)),
+    }
+    for name, (origin, u, v, base) in walls.items():
+        divisions = n if layout == "grids" and name != "Light" else 1
+        vertices, quads = _grid(np.array(origin, float), np.array(u, float), np.array(v, float), divisions)
+        mesh = bpy.data.meshes.new(name)
+        mesh.vertices.add(len(vertices))
+        mesh.vertices.foreach_set("co", vertices.astype(np.float32).ravel())
+        mesh.loops.add(quads.size)
+        mesh.loops.foreach_set("vertex_index", quads.astype(np.int32).ravel())
+        mesh.polygons.add(len(quads))
+        mesh.polygons.foreach_set("loop_start", np.arange(0, quads.size, 4, dtype=np.int32))
+        mesh.update(calc_edges=True)
+        mesh.materials.append(_material(bpy, name, base, 10.0 if name == "Light" else 0.0))
+        obj = bpy.data.objects.new(name, mesh)
+        bpy.context.scene.collection.objects.link(obj)
+        obj.select_set(True)
+    # grids: faces a little smaller than a patch stay one patch each; planes: N x N a wall
+    return L / n * (1.5 if layout == "grids" else 1.0)
+
+
+def child(layout, n, target_error, use_tracemalloc):
+    """One measurement; prints a JSON line."""
+    sys.path.insert(0, str(ROOT))
+    out = {"layout": layout, "divisions": n, "target_error": target_error, "tracemalloc": use_tracemalloc}
+    stages = out["stages"] = []
+    if use_tracemalloc:
+        import tracemalloc
+
+    def mark(name):
+        entry = {"stage": name, "peak": peak_rss(), "current": current_rss(), "time": time.perf_counter()}
+        if use_tracemalloc and tracemalloc.is_tracing():
+            entry["traced_current"], entry["traced_peak"] = tracemalloc.get_traced_memory()
+            tracemalloc.reset_peak()
+        stages.append(entry)
+
     import bpy
 
-    from tests.blender.conftest import box_arrays, make_object, principled
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
     import addon
+    from addon import live_view, operators, pipeline, scene_io, worker
+    from addon.core import solver
 
+    mark("bpy imported")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
     addon.register()
-    v, f = box_arrays((0, 0, 0), ROOM, inward=True)
-    room = make_object("Room", v, f, [principled("wall", (0.7, 0.7, 0.7))])
-    x, y, z = ROOM[0] / 2, ROOM[1] / 2, ROOM[2] - 1e-3
-    panel = [(x - 0.25, y - 0.25, z), (x + 0.25, y - 0.25, z), (x + 0.25, y + 0.25, z), (x - 0.25, y + 0.25, z)]
-    lamp = make_object("Panel", panel, [(3, 2, 1, 0)], [principled("light", (0, 0, 0), (1, 1, 1), 5.0)])
-    for obj in (room, lamp):
-        obj.select_set(True)
-    bpy.context.view_layer.objects.active = room
+    patch_size = build_room(bpy, layout, n)
     settings = bpy.context.scene.radiosity
     settings.patch_size = patch_size
-    return settings
+    settings.target_error = target_error
+    bpy.context.view_layer.update()
+    if use_tracemalloc:
+        tracemalloc.start()
+    mark("scene built")
 
+    def after(stage, function):
+        def wrapped(*args, **kwargs):
+            result = function(*args, **kwargs)
+            mark(stage)
+            return result
+        return wrapped
 
-def child(mode, patch_size, seconds):
-    sys.path.insert(0, str(ROOT))
-    sampler = Sampler()
-    sampler.start()
-    out = {"mode": mode, "patch_size": patch_size}
-    import bpy
+    operators.scene_io.read_selection = after("objects read", scene_io.read_selection)
+    pipeline.make_patches = after("patches meshed", pipeline.make_patches)
+    pipeline.scene_and_notes = after("scene arrays", pipeline.scene_and_notes)
+    solver.WalkTables = after("tables and BVH", solver.WalkTables)
+    pipeline.solve = after("solve (with live view)", pipeline.solve)
+    # (SolveJob.run, not run_solve: a wrapper's arguments would keep the objects' arrays alive)
+    worker.SolveJob.run = after("colours computed", worker.SolveJob.run)
+    operators.scene_io.write_results = after("colours written", scene_io.write_results)
 
-    out["after_imports"] = peak_rss()
-    sampler.enter("scene")
-    settings = build_scene(patch_size)
-    settings.time_limit = seconds
-    settings.target_error = 0.05  # far below what the time allows: the time limit stops it
-    out["after_scene"] = peak_rss()
+    live = {"version": None, "arrays": None, "bytes": 0}
+
+    def draw_live(job):
+        """What the live view's draw handler makes, after every batch (a window-less stand-in)."""
+        job.live_view = True
+        version, radiosity = job.live
+        if radiosity is not None and version != live["version"]:
+            live["arrays"] = None  # the old batch goes when the new one is made
+            live["arrays"] = live_view.triangles(job.patches, radiosity)
+            live["version"] = version
+            live["bytes"] = sum(a.nbytes for a in live["arrays"]) + radiosity.nbytes
+
+    worker.PROGRESS_LISTENER = draw_live
     t = time.perf_counter()
-    if mode == "operator":
-        sampler.enter("operator")
-        from addon import operators
-
-        assert bpy.ops.radiosity.solve() == {"FINISHED"}, operators.LAST_ERROR
-        out["after_operator"] = peak_rss()
-    else:
-        from addon import patches as patch_making
-        from addon import pipeline, scene_io
-
-        sampler.enter("read selection")
-        objects, _ = scene_io.read_selection(bpy.context)
-        out["after_read"] = peak_rss()
-        sampler.enter("patches")
-        # (the patch size as the property holds it, float32: the solve below then finds these
-        # patches and their core scene in the geometry cache, as the operator's solve does)
-        patches = patch_making.make_patches(objects, settings.solve_settings().patch_size)
-        out["after_patches"] = peak_rss()
-        sampler.enter("core scene")
-        scene, _ = patch_making.scene_and_notes(patches)
-        from addon.core.tables import WalkTables
-
-        WalkTables(scene, "finite", 1e-3, "random").tracer  # the Embree scene (once per geometry)
-        out["after_core_scene"] = peak_rss()
-        out["patches_made"] = int(scene.patch_count)
-        del scene, patches
-        sampler.enter("solve")
-        run = pipeline.run_solve(objects, settings.solve_settings())
-        out["after_solve"] = peak_rss()
-        out["paths"], out["rays"] = run.result.paths, run.result.rays
-        sampler.enter("write")
-        scene_io.write_results(bpy.context, run, settings.output)
-        out["after_write"] = peak_rss()
+    done = bpy.ops.radiosity.solve()
     out["seconds"] = time.perf_counter() - t
-    sampler.enter("end")
-    sampler.stop.set()
-    sampler.join()
-    out["stage_peaks"] = sampler.peaks
+    assert done == {"FINISHED"}, (done, operators.LAST_ERROR)
+    out["live_bytes"] = live["bytes"]
+    radiosity = bpy.context.scene.radiosity
+    out["patches"] = int(radiosity.last_patches)
+    out["paths"] = int(radiosity.last_paths)
+    out["rays"] = int(radiosity.last_rays)
+    out["source_faces"] = sum(len(o.data.polygons) for o in bpy.data.objects if not scene_io.is_result_object(o))
+    out["result_corners"] = sum(len(o.data.loops) for o in bpy.data.objects if scene_io.is_result_object(o))
+    # Release every array of ours: the live view's, the geometry cache, the operator's job
+    # (Blender keeps the last operator, and so its job, for the redo panel).
+    live["arrays"] = None
+    from addon import patches
+
+    patches._GEOMETRY_CACHE.clear()
+    pipeline.RAY_RATES.clear()
+    for op in bpy.context.window_manager.operators:
+        getattr(op, "_job", None) and setattr(op, "_job", None)
+    worker.set_running_job(None)
+    gc.collect()
+    ctypes.CDLL("libc.so.6").malloc_trim(0)
+    mark("after release")
     print(json.dumps(out))
 
 
-def measure(mode, patch_size, seconds):
-    cmd = [sys.executable, "-m", "benchmarks.memory_operator", "--child", mode, "--patch-size", str(patch_size),
-           "--seconds", str(seconds)]
+def measure(layout, n, target_error, use_tracemalloc=False):
+    cmd = [sys.executable, "-m", "benchmarks.memory_operator", "--child", layout, str(n), str(target_error)]
+    if use_tracemalloc:
+        cmd.append("--tracemalloc")
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     if done.returncode:
-        raise SystemExit(done.stdout[-3000:] + done.stderr[-3000:])
+        raise RuntimeError(done.stderr[-4000:])
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def patch_size_for(patches):
-    """The patch edge that meshes the room into about ``patches`` square patches."""
-    a, b, c = ROOM
-    area = 2 * (a * b + a * c + b * c)
-    return (area / patches) ** 0.5
+def _by_stage(run):
+    return {s["stage"]: s for s in run["stages"]}
+
+
+def table(rows):
+    """Markdown rows: per stage, peak and current resident set, and the tracemalloc peak."""
+    head = ["| stage |"]
+    rule = ["|---|"]
+    for plain, _ in rows:
+        label = f"{plain['layout']}, {plain['paths']:,} paths"
+        head.append(f" peak RSS MiB ({label}) | current MiB | numpy peak during MiB | numpy held after MiB |")
+        rule.append("---:|---:|---:|---:|")
+    lines = ["".join(head), "".join(rule)]
+    for stage in STAGES:
+        cells = [f"| {stage} |"]
+        for plain, traced in rows:
+            p, t = _by_stage(plain).get(stage), _by_stage(traced).get(stage)
+            if p is None:
+                cells.append(" | | | |")
+                continue
+            numpy_peak = f"{t['traced_peak'] / MIB:.0f}" if t and "traced_peak" in t else ""
+            numpy_now = f"{t['traced_current'] / MIB:.0f}" if t and "traced_current" in t else ""
+            cells.append(f" {p['peak'] / MIB:.0f} | {p['current'] / MIB:.0f} | {numpy_peak} | {numpy_now} |")
+        lines.append("".join(cells))
+    return lines
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
-    ap.add_argument("--patch-size", type=float, default=None, help=argparse.SUPPRESS)
-    ap.add_argument("--seconds", type=float, default=60.0)
-    ap.add_argument("--patches", type=int, default=1_000_000)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--child", nargs=3, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--tracemalloc", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--layouts", nargs="+", default=["grids", "planes"])
+    ap.add_argument("--divisions", type=int, default=None, help=f"N, patches a wall side (default {WALL_DIVISIONS})")
+    ap.add_argument("--errors", type=float, nargs="+", default=[12.0, 6.0],
+                    help="error targets in %% (the panel's setting): two path counts")
+    ap.add_argument("--before", default=None, help="the JSON of an earlier run, shown beside this one")
+    ap.add_argument("--before-label", default=None, help="what the earlier run measured (a commit)")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
-    if args.child:
-        child(args.child, args.patch_size, args.seconds)
+    if args.child is not None:
+        layout, n, error = args.child
+        child(layout, int(n), float(error), args.tracemalloc)
         return
-    patches = 250_000 if args.quick else args.patches
-    seconds = 10.0 if args.quick else args.seconds
-    size = patch_size_for(patches)
-    op = measure("operator", size, seconds)
-    st = measure("stages", size, seconds)
-    print(json.dumps(op), json.dumps(st), sep="\n")
-    out = (ROOT / "out" if args.quick else RESULTS) / "memory_operator.md"
-    out.parent.mkdir(exist_ok=True)
+    n = args.divisions or (128 if args.quick else WALL_DIVISIONS)
+    out = Path(args.out) if args.out else (ROOT / "out" / "memory_operator_quick" if args.quick else RESULTS)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for layout in args.layouts:
+        for k, error in enumerate(args.errors):
+            plain = measure(layout, n, error)
+            # tracemalloc at the first error target only (the second checks the peak's independence of the paths)
+            traced = measure(layout, n, error, use_tracemalloc=True) if k == 0 else {"stages": []}
+            rows.append((plain, traced))
+            peak = max(s["peak"] for s in plain["stages"])
+            print(f"{layout} {plain['patches']:,} patches, {plain['paths']:,} paths ({error:g}%): peak {peak / MIB:.0f} MiB, "
+                  f"{plain['seconds']:.0f} s", flush=True)
     L = [
-        "# Peak memory of a solve through the operator (issue 26)",
+        "# Peak memory of the Solve operator on a room of a million patches (issue 26)",
         "",
-        f"`python -m benchmarks.memory_operator{' --quick' if args.quick else ''}`: the room of the module's "
-        f"docstring at patch size {size:.5f} m ({st['patches_made']:,} patches), stopped after "
-        f"{seconds:.0f} s; each run in a fresh process. Target: peak under 1 GiB ({GIB // MIB} MiB).",
+        f"`python -m benchmarks.memory --operator {' '.join(argv or [])}`".replace(" `", "`"),
+        f"Machine: {platform.machine()}, Python {platform.python_version()}; each measurement in a fresh process "
+        "(`bpy`, headless); `bpy.ops.radiosity.solve()` with the panel's settings (finite estimator, "
+        "measured stop rule at the error target, face and vertex colours, 2 threads). Method: "
+        "`benchmarks/memory_operator.py`.",
         "",
-        f"**Operator** (`bpy.ops.radiosity.solve()`): peak resident set {op['after_operator'] / MIB:.0f} MiB "
-        f"({'under' if op['after_operator'] < GIB else 'OVER'} 1 GiB; {op['after_scene'] / MIB:.0f} MiB before it: "
-        f"bpy and the scene).",
-        "",
-        "**Stage by stage** (the same work called in turn): peak resident set after each stage, and the "
-        "highest resident set sampled during it.",
-        "",
-        "| stage | peak after MiB | highest during MiB |",
-        "|---|---:|---:|",
     ]
-    for key, stage in (("after_imports", "start"), ("after_scene", "scene"), ("after_read", "read selection"),
-                       ("after_patches", "patches"), ("after_core_scene", "core scene"), ("after_solve", "solve"),
-                       ("after_write", "write")):
-        L.append(f"| {stage} | {st[key] / MIB:.0f} | {st['stage_peaks'].get(stage, 0) / MIB:.0f} |")
-    L += ["", f"The solve traced {st['rays']:,} rays ({st['paths']:,} paths)."]
-    out.write_text("\n".join(L) + "\n")
-    (out.with_suffix(".json")).write_text(json.dumps({"operator": op, "stages": st}, indent=1))
+    for plain, traced in rows:
+        last = _by_stage(plain)
+        peak = max(s["peak"] for s in plain["stages"])
+        floor = last["after release"]["current"]
+        L.append(
+            f"- `{plain['layout']}`: {plain['patches']:,} patches ({plain['source_faces']:,} source faces, "
+            f"{plain['result_corners']:,} result corners), {plain['target_error']:g}% target: {plain['paths']:,} paths, "
+            f"{plain['rays']:,} rays, {plain['seconds']:.0f} s. **Peak {peak / MIB:.0f} MiB**; Blender holding the "
+            f"scene and the results at the end {floor / MIB:.0f} MiB; peak above that {(peak - floor) / MIB:.0f} MiB; "
+            f"live view arrays {plain['live_bytes'] / MIB:.0f} MiB."
+        )
+    if args.before:
+        before = json.loads(Path(args.before).read_text())
+        L += ["", f"Before (`{args.before_label}`):" if getattr(args, "before_label", None) else "Before:", ""]
+        for run in before:
+            plain = run["plain"]
+            peak = max(s["peak"] for s in plain["stages"])
+            floor = _by_stage(plain)["after release"]["current"]
+            L.append(f"- `{plain['layout']}`: {plain['patches']:,} patches, {plain['paths']:,} paths: peak {peak / MIB:.0f} MiB, "
+                     f"{(peak - floor) / MIB:.0f} MiB above Blender holding the scene and the results ({floor / MIB:.0f} MiB)")
+        L += ["", "Before, per stage:", ""] + table([(run["plain"], run["traced"]) for run in before])
+    L += ["", "Per stage, at its end: the peak resident set so far and the current one; from the tracemalloc run "
+          "(started once the scene is built), the peak of the numpy and Python allocations live during the stage "
+          "and what is still allocated at its end.", ""]
+    L += table(rows)
+    (out / "memory_operator.md").write_text("\n".join(L) + "\n")
+    (out / "memory_operator.json").write_text(json.dumps([{"plain": p, "traced": t} for p, t in rows], indent=1))
     print("\n".join(L))
 
 

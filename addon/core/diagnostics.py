@@ -25,7 +25,7 @@ def escaping_light(scene, seed=0):
     u = rng.random((5, patch.size), dtype=np.float32)
     origins = points_on_patches(g, patch, u[4], u[0], u[1])
     directions = cosine_directions(g, patch, u[2], u[3])
-    missed = scene.tracer.first_hit(origins, directions) < 0
+    missed = g.surface_tracer.first_hit(origins, directions) < 0
     return emitting, missed.reshape(-1, RAYS_PER_EMITTER).mean(axis=1)
 
 
@@ -49,7 +49,7 @@ def light_fates(scene, seed=0):
         rows = np.minimum(rows, last - 1)
         origins, directions = lights.unit_rays(rows, rng.random((4, RAYS_PER_LIGHT), dtype=np.float32), g)
         o, d = origins.astype(np.float32), directions.astype(np.float32)
-        hit, _, _, _, normal = g.tracer.first_hit_barycentric(np.ascontiguousarray(o.T), np.ascontiguousarray(d.T))
+        hit, _, _, _, normal = g.surface_tracer.first_hit_barycentric(np.ascontiguousarray(o.T), np.ascontiguousarray(d.T))
         met = hit >= 0
         back = met & ~meets_front(d, normal)
         fates.append((float(np.mean(~met)), float(np.mean(back))))

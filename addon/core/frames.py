@@ -75,28 +75,35 @@ def parallelogram_frames(sorted_corners, first, count, inset=0.0):
     return flags, frame
 
 
-def parallelogram_corners(sorted_corners, first, count):
+def parallelogram_corners(sorted_corners, first, count, block=1 << 15):
     """The corners of the patches made of two triangles: (patches with two triangles (n,),
     whether each is a parallelogram (n,), and its corners (p, s1, s2, q), each (n,3) float64).
     p is the first triangle's own corner, s1 and s2 the two corners the triangles share (the
     edges are a = s1 - p and b = s2 - p), q the second triangle's own corner (p + a + b to
-    within rounding)."""
+    within rounding). ``sorted_corners[rows]`` gives triangles' corners (an array or
+    geometry.UnitCorners); the patches are taken ``block`` at a time (each on its own)."""
     two = np.flatnonzero(count == 2)
-    t0 = np.asarray(sorted_corners[first[two]], dtype=np.float64)  # (n,3,3)
-    t1 = np.asarray(sorted_corners[first[two] + 1], dtype=np.float64)
+    parts = [_parallelogram_corners(sorted_corners, first[two[k:k + block]]) for k in range(0, two.size, block)]
+    if not parts:
+        return two, np.zeros(0, bool), tuple(np.zeros((0, 3)) for _ in range(4))
+    return two, np.concatenate([ok for ok, _ in parts]), tuple(np.concatenate(c) for c in zip(*(c for _, c in parts)))
+
+
+def _parallelogram_corners(sorted_corners, first):
+    """parallelogram_corners of the patches whose two triangles start at ``first``."""
+    t0 = np.asarray(sorted_corners[first], dtype=np.float64)  # (n,3,3)
+    t1 = np.asarray(sorted_corners[first + 1], dtype=np.float64)
     tolerance = 1e-7  # unit space
     between = t0[:, :, None, :] - t1[:, None, :, :]  # (n,3,3,3): every corner of t0 to every corner of t1
     shared = np.einsum("...k,...k->...", between, between) < tolerance**2  # (n,3,3)
     shared_in_t0 = shared.any(axis=2)        # (n,3)
     shared_in_t1 = shared.any(axis=1)
     ok = (shared_in_t0.sum(axis=1) == 2) & (shared_in_t1.sum(axis=1) == 2) & (shared.sum(axis=(1, 2)) == 2)
-    rows = np.arange(two.size)
+    rows = np.arange(first.size)
     p = t0[rows, np.argmin(shared_in_t0, axis=1)]      # t0's own corner
     q = t1[rows, np.argmin(shared_in_t1, axis=1)]      # t1's own corner
     order = np.argsort(~shared_in_t0, axis=1, kind="stable")[:, :2]
     s1 = t0[rows, order[:, 0]]
     s2 = t0[rows, order[:, 1]]
     ok &= np.linalg.norm(p + q - s1 - s2, axis=1) < tolerance  # the diagonals bisect each other
-    return two, ok, (p, s1, s2, q)
-
-
+    return ok, (p, s1, s2, q)

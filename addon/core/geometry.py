@@ -40,7 +40,8 @@ class Geometry:
 
     Triangles are stored sorted by patch (the ray tracer's primitive ids index this order).
     Positions are in unit space, (world - centre) / diagonal, in float32; areas are in the
-    scene's units.
+    scene's units. The per-triangle float32 arrays (corners, normals, leaving frames) are made
+    on first use from ``corners``: walks over parallelograms traced as grids never need them.
     """
 
     centre: np.ndarray            # (3,) float64
@@ -48,18 +49,18 @@ class Geometry:
     ray_offset: float             # distance a ray origin is pushed along the normal (unit space)
     triangle_index: np.ndarray    # (T,) original index of each sorted triangle
     triangle_patch: np.ndarray    # (T,) int32 patch of each sorted triangle
-    triangle_area: np.ndarray     # (T,) float64
-    triangle_normal: np.ndarray   # (T,3) float32 unit normals
-    triangle_corners: np.ndarray  # (T,3,3) float32 unit-space corners, the ray tracer's input
+    corners: UnitCorners          # (T,3,3) float64 unit-space corners of the sorted triangles, on demand
     patch_area: np.ndarray        # (P,) float64
     patch_normal: np.ndarray      # (P,3) float32
     patch_first_triangle: np.ndarray  # (P,) int64 first sorted triangle of each patch
     patch_triangle_count: np.ndarray  # (P,) int64
     triangle_key: np.ndarray      # (T,) float64: patch + cumulative area fraction in the patch
-    triangle_frame: np.ndarray    # (9,T) float32: origin (pushed off), edge1, edge2, one row per coordinate
     patch_first_fraction: np.ndarray  # (P,) float32: area fraction of each patch's first triangle
     patch_parallelogram: np.ndarray   # (P,) bool: the patch is two triangles forming a parallelogram
-    parallelogram_frame: np.ndarray   # (9,P) float32: corner (pushed off), edge a, edge b (zeros if not)
+    # (12,P) float32: each parallelogram patch's corner (pushed off), edge a, edge b (zeros if
+    # not), then its normal, one coordinate per row: one gather gives a random exit's origin
+    # frame and the normal its direction is built on
+    leave_table: np.ndarray
 
     @property
     def patch_count(self):
@@ -73,21 +74,64 @@ class Geometry:
     def max_triangles_per_patch(self):
         return int(self.patch_triangle_count.max())
 
+    def _per_triangle(self, make, axis=0):
+        """``make(corners)`` of every sorted triangle, block by block, into one array whose
+        ``axis`` runs over the triangles."""
+        T = self.triangle_count
+        first = make(self.corners[0:BLOCK_TRIANGLES])
+        shape = list(first.shape)
+        shape[axis] = T
+        out = np.empty(shape, first.dtype)
+        for start in range(0, T, BLOCK_TRIANGLES):
+            block = first if start == 0 else make(self.corners[start:start + BLOCK_TRIANGLES])
+            out[(slice(None),) * axis + (slice(start, start + BLOCK_TRIANGLES),)] = block
+        return out
+
+    @cached_property
+    def triangle_corners(self):
+        """(T,3,3) float32 unit-space corners, the ray tracer's input."""
+        return self._per_triangle(lambda c: c.astype(np.float32))
+
+    @property
+    def float32_corners(self):
+        """``float32_corners[rows]``: rows of :attr:`triangle_corners`, without making it whole."""
+        return self.__dict__.get("triangle_corners", self.corners.float32())
+
+    @cached_property
+    def triangle_normal(self):
+        """(T,3) float32 unit normals."""
+        return self._per_triangle(lambda c: triangle_normals(c).astype(np.float32))
+
+    @cached_property
+    def triangle_area(self):
+        """(T,) float64 areas, scene units."""
+        return self._per_triangle(lambda c: 0.5 * np.linalg.norm(triangle_cross(c), axis=1)) * self.diagonal**2
+
+    @cached_property
+    def triangle_frame(self):
+        """(9,T) float32: origin (pushed off), edge1, edge2 of each triangle's leaving frame, one
+        row per coordinate (:meth:`frames_of`)."""
+        return self._per_triangle(lambda c: leaving_frames(c, self.ray_offset), axis=1)
+
+    def frames_of(self, rows):
+        """Columns ``rows`` of :attr:`triangle_frame`, without making it whole."""
+        return leaving_frames(self.corners[rows], self.ray_offset)
+
     def to_world(self, points):
         """Unit-space points (n,3) back in the scene's coordinates, float64."""
         return np.asarray(points, dtype=np.float64) * self.diagonal + self.centre
 
-    @cached_property
-    def patch_normal_rows(self):
-        """(3,P) float32: the patch normals one coordinate per row, for column gathers."""
-        return np.ascontiguousarray(self.patch_normal.T)
+    @property
+    def parallelogram_frame(self):
+        """(9,P) float32: the parallelogram patches' corner (pushed off), edge a, edge b (zeros if
+        not), one coordinate per row (rows of :attr:`leave_table`)."""
+        return self.leave_table[0:9]
 
-    @cached_property
-    def leave_table(self):
-        """(12,P) float32: each parallelogram patch's corner (pushed off), edge a, edge b, then
-        its normal, one coordinate per row: one gather gives a random exit's origin frame and
-        the normal its direction is built on."""
-        return np.ascontiguousarray(np.vstack([self.parallelogram_frame, self.patch_normal_rows]))
+    @property
+    def patch_normal_rows(self):
+        """(3,P) float32: the patch normals one coordinate per row, for column gathers (rows of
+        :attr:`leave_table`)."""
+        return self.leave_table[9:12]
 
     @cached_property
     def leave_shapes(self):
@@ -157,6 +201,14 @@ class Geometry:
         """The Embree scene over these triangles, built on first use and then reused."""
         return RayTracer(self.triangle_corners)
 
+    @property
+    def surface_tracer(self):
+        """An Embree scene of the patches' surfaces for checks that ask only whether a ray meets
+        one and which side (its hit ids are not triangles of this geometry): the grids' where
+        there are grids (what the walks trace), else :attr:`tracer`. The grids' is a few
+        triangles where :attr:`tracer` holds every triangle's, which a walk may never build."""
+        return self.tracer if self.patch_grids is None else self.patch_grids.tracer
+
 
 
 def leave_shapes(leave_table, max_shapes=LEAVE_SHAPES_MAX, shape_hash=_SHAPE_HASH):
@@ -180,16 +232,81 @@ def leave_shapes(leave_table, max_shapes=LEAVE_SHAPES_MAX, shape_hash=_SHAPE_HAS
             return None
     return np.ascontiguousarray(shapes.view(np.float32).T), shape_of_patch.reshape(-1).astype(np.uint16)
 
+# Per-triangle arrays are computed in blocks of about this many triangles (whole patches), so
+# that the float64 temporaries are a block's, not the scene's: every value is computed
+# triangle by triangle (and every per-patch sum within one block), so the bits are the same.
+BLOCK_TRIANGLES = 1 << 16
+
+
+class UnitCorners:
+    """The (T,3,3) float64 unit-space corners (world - centre) / diagonal of the triangles
+    ``triangles[rows]`` (all of them without ``rows``), computed on demand for the rows asked
+    for: the same numbers as indexing the whole array, without holding it (rounded to
+    ``dtype`` where given)."""
+
+    def __init__(self, vertices, triangles, centre, diagonal, rows=None, dtype=None):
+        self.vertices, self.triangles, self.rows = vertices, triangles, rows
+        self.centre, self.diagonal, self.dtype = centre, diagonal, dtype
+
+    def float32(self):
+        """These corners rounded to float32 (the rows of Geometry.triangle_corners)."""
+        return UnitCorners(self.vertices, self.triangles, self.centre, self.diagonal, self.rows, np.float32)
+
+    def __len__(self):
+        return len(self.triangles if self.rows is None else self.rows)
+
+    def __getitem__(self, index):
+        triangles = self.triangles[index if self.rows is None else self.rows[index]]
+        corners = (self.vertices[triangles] - self.centre) / self.diagonal
+        return corners if self.dtype is None else corners.astype(self.dtype)
+
+
+def triangle_blocks(count, size=None):
+    """(start, stop) ranges of about ``size`` (BLOCK_TRIANGLES) of the triangles sorted by patch,
+    cut only between patches (``count``: (P,) triangles of each patch)."""
+    size = size or BLOCK_TRIANGLES
+    end = np.cumsum(count)
+    total = int(end[-1]) if end.size else 0
+    cuts = end[np.maximum(np.searchsorted(end, np.arange(size, total, size), side="right") - 1, 0)]
+    cuts = np.unique(np.concatenate([[0], cuts, [total]]))
+    return list(zip(cuts[:-1].tolist(), cuts[1:].tolist()))
+
+
+def triangle_cross(corners):
+    """(n,3) float64 (corner1 - corner0) x (corner2 - corner0) of (n,3,3) corners."""
+    return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+
+
+def triangle_normals(corners):
+    """(n,3) float64 unit normals of (n,3,3) corners."""
+    cross = triangle_cross(corners)
+    return cross / np.linalg.norm(cross, axis=1)[:, None]
+
+
+def leaving_frames(corners, ray_offset, inset=RELATIVE_EDGE_INSET):
+    """(9,n) float32 leaving frames of (n,3,3) corners: the inset triangle's first corner pushed
+    off along the normal, and its two edges from it."""
+    leave_corners = inset_triangles(corners, inset)
+    return np.ascontiguousarray(
+        np.hstack(
+            [
+                leave_corners[:, 0] + ray_offset * triangle_normals(corners),
+                leave_corners[:, 1] - leave_corners[:, 0],
+                leave_corners[:, 2] - leave_corners[:, 0],
+            ]
+        ).T,
+        dtype=np.float32,
+    )
+
+
 def build_geometry(vertices, triangles, triangle_patch, patch_count):
     """The :class:`Geometry` of a mesh whose triangles make ``patch_count`` patches (checked:
     ValueError naming what is wrong)."""
     V, T, tp, centre, diagonal = validate_mesh(vertices, triangles, triangle_patch, patch_count)
-    corners = (V[T] - centre) / diagonal          # (T,3,3) float64, unit space
-    e1 = corners[:, 1] - corners[:, 0]
-    e2 = corners[:, 2] - corners[:, 0]
-    cross = np.cross(e1, e2)
-    double_area = np.linalg.norm(cross, axis=1)
-    area = 0.5 * double_area                      # unit space
+    corners = UnitCorners(V, T, centre, diagonal)
+    area = np.empty(len(T))                       # unit space
+    for start in range(0, len(T), BLOCK_TRIANGLES):
+        area[start:start + BLOCK_TRIANGLES] = 0.5 * np.linalg.norm(triangle_cross(corners[start:start + BLOCK_TRIANGLES]), axis=1)
     degenerate = area <= RELATIVE_DEGENERATE_AREA
     if degenerate.any():
         warnings.warn(
@@ -197,18 +314,27 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             stacklevel=3,
         )
     keep = np.flatnonzero(~degenerate)
-    warn_coincident(corners[keep], tp[keep])
-    patch_area = np.bincount(tp[keep], weights=area[keep], minlength=patch_count)
+    del degenerate
+    kept_patch = tp[keep]
+    warn_coincident(UnitCorners(V, T, centre, diagonal, keep), kept_patch)
+    patch_area = np.bincount(kept_patch, weights=area[keep], minlength=patch_count)
     empty = patch_area <= 0
     if empty.any():
         raise PatchError(f"patches {indices_text(empty)} have no area (no triangles, or only degenerate ones)", indices_of(empty))
 
-    order = keep[np.argsort(tp[keep], kind="stable")]
+    order = keep[np.argsort(kept_patch, kind="stable")]
+    del keep, kept_patch
     tp_sorted = tp[order]
-    normal = cross[order] / double_area[order, None]
-    weighted = np.stack(  # area-weighted normal sum (x2)
-        [np.bincount(tp_sorted, weights=cross[order, k], minlength=patch_count) for k in range(3)], axis=1
-    )
+    count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
+    sorted_corners = UnitCorners(V, T, centre, diagonal, order)
+    blocks = triangle_blocks(count)
+    weighted = np.zeros((patch_count, 3))  # area-weighted normal sum (x2), block by block of whole patches
+    for start, stop in blocks:
+        cross = triangle_cross(sorted_corners[start:stop])
+        patches = tp_sorted[start:stop]
+        first_patch = patches[0]
+        for k in range(3):
+            weighted[first_patch:patches[-1] + 1, k] = np.bincount(patches - first_patch, weights=cross[:, k])
     norm = np.linalg.norm(weighted, axis=1)
     folded = norm <= 1e-12 * patch_area * 2
     if folded.any():
@@ -218,8 +344,13 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             indices_of(folded),
         )
     patch_normal = weighted / norm[:, None]
-    cosine = np.einsum("ij,ij->i", normal, patch_normal[tp_sorted])
-    crooked = cosine < MIN_PATCH_NORMAL_COSINE
+    del weighted, norm
+
+    # Every triangle within MIN_PATCH_NORMAL_COSINE of its patch's normal, block by block.
+    crooked = np.zeros(len(order), bool)
+    for start, stop in blocks:
+        cosine = np.einsum("ij,ij->i", triangle_normals(sorted_corners[start:stop]), patch_normal[tp_sorted[start:stop]])
+        crooked[start:stop] = cosine < MIN_PATCH_NORMAL_COSINE
     if crooked.any():
         crooked_patches = np.unique(tp_sorted[crooked])
         raise PatchError(
@@ -227,21 +358,25 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
             "orientation: a patch must be coplanar triangles with the same winding",
             crooked_patches,
         )
+    del crooked
 
-    count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
     first = np.concatenate(([0], np.cumsum(count)[:-1]))
     sorted_area = area[order]
+    del area
     cumulative = np.cumsum(sorted_area)
     before_patch = np.concatenate(([0.0], cumulative))[first]
     fraction = (cumulative - before_patch[tp_sorted]) / patch_area[tp_sorted]
+    del cumulative
     last = first + count - 1
     fraction[last] = 1.0  # exact upper end, whatever the rounding
     ray_offset = RELATIVE_RAY_OFFSET
-    sorted_corners = corners[order]
-    inset = RELATIVE_EDGE_INSET
-    is_parallelogram, parallelogram = parallelogram_frames(sorted_corners, first, count, inset)
+    is_parallelogram, parallelogram = parallelogram_frames(sorted_corners, first, count, RELATIVE_EDGE_INSET)
     parallelogram[:, :3] += ray_offset * patch_normal
-    leave_corners = inset_triangles(sorted_corners, inset)
+    parallelogram[~is_parallelogram] = 0.0
+    leave_table = np.empty((12, patch_count), np.float32)
+    leave_table[0:9] = parallelogram.T
+    leave_table[9:12] = patch_normal.T
+    del parallelogram
 
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     return Geometry(
@@ -250,25 +385,13 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         ray_offset=ray_offset,
         triangle_index=order,
         triangle_patch=tp_sorted.astype(np.int32),
-        triangle_area=sorted_area * diagonal**2,
-        triangle_normal=f32(normal),
-        triangle_corners=f32(sorted_corners),
+        corners=sorted_corners,
         patch_area=patch_area * diagonal**2,
         patch_normal=f32(patch_normal),
         patch_first_triangle=first,
         patch_triangle_count=count,
         triangle_key=tp_sorted + fraction,
-        triangle_frame=f32(
-            np.hstack(
-                [
-                    leave_corners[:, 0] + ray_offset * normal,
-                    leave_corners[:, 1] - leave_corners[:, 0],
-                    leave_corners[:, 2] - leave_corners[:, 0],
-                ]
-            ).T
-        ),
         patch_first_fraction=f32(fraction[first]),
         patch_parallelogram=is_parallelogram,
-        parallelogram_frame=f32(np.where(is_parallelogram[:, None], parallelogram, 0.0).T),
+        leave_table=leave_table,
     )
-

@@ -258,13 +258,17 @@ def concatenate(meshes) -> CombinedPatches:
     patch_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     if meshes:
         vertices = np.concatenate([m.points for m in meshes]).reshape(-1, 3)
-        triangles = np.concatenate(
-            [m.triangles + off for m, off in zip(meshes, vertex_offsets)]
-        ).reshape(-1, 3)
-        triangle_patch = np.concatenate(
-            [m.triangle_patch + off for m, off in zip(meshes, patch_offsets[:-1])]
-        )
         patch_area = np.concatenate([m.patch_area for m in meshes])
+        triangle_offsets = starts_of(np.array([len(m.triangles) for m in meshes] + [0], dtype=np.int64))
+        triangles = np.empty((int(triangle_offsets[-1]), 3), dtype=np.int64)
+        triangle_patch = np.empty(int(triangle_offsets[-1]), dtype=np.int64)
+        for k, m in enumerate(meshes):
+            rows = slice(int(triangle_offsets[k]), int(triangle_offsets[k + 1]))
+            np.add(m.triangles, vertex_offsets[k], out=triangles[rows])
+            np.add(m.triangle_patch, patch_offsets[k], out=triangle_patch[rows])
+            # The mesh's points and areas become views of the combined arrays: one copy of each.
+            m.points = vertices[vertex_offsets[k] : vertex_offsets[k] + len(m.points)]
+            m.patch_area = patch_area[patch_offsets[k] : patch_offsets[k + 1]]
     else:
         vertices = np.zeros((0, 3))
         triangles = np.zeros((0, 3), dtype=np.int64)
@@ -273,8 +277,8 @@ def concatenate(meshes) -> CombinedPatches:
     patch_object = np.repeat(np.arange(len(meshes)), counts)
     return CombinedPatches(
         vertices=vertices,
-        triangles=triangles.astype(np.int64),
-        triangle_patch=triangle_patch.astype(np.int64),
+        triangles=triangles,
+        triangle_patch=triangle_patch,
         patch_object=patch_object,
         patch_offsets=patch_offsets,
         patch_area=patch_area,

@@ -117,7 +117,7 @@ def patch_grids(geometry):
     if P == 0 or P >= MAX_CELLS:
         return None
     two, ok, patch_corners = parallelogram_corners(
-        geometry.triangle_corners, geometry.patch_first_triangle, geometry.patch_triangle_count
+        geometry.float32_corners, geometry.patch_first_triangle, geometry.patch_triangle_count
     )
     merged = two[ok]  # the parallelogram patches, in patch order; grid cells 0..M-1
     M = merged.size
@@ -161,7 +161,7 @@ def patch_grids(geometry):
     corners = np.empty((2 * R + L, 3, 3))
     corners[0 : 2 * R : 2] = np.stack([c00, end_a, c11], axis=1)  # s = u + v, t = v
     corners[1 : 2 * R : 2] = np.stack([c00, c11, end_b], axis=1)  # s = u, t = u + v
-    corners[2 * R :] = geometry.triangle_corners[other_triangle]
+    corners[2 * R :] = geometry.float32_corners[other_triangle]
     # Rows per triangle (s and t of one-cell grids are u and v: cs = ct = 0), then a miss's.
     table = np.zeros((7, 2 * R + L + 1))
     table[0, 0 : 2 * R : 2] = 1.0
@@ -192,7 +192,7 @@ def patch_grids(geometry):
     frames[3:6, 1 : 2 * R : 2] = (inset_a + inset_b).T  # S = u, T = u + v
     frames[6:9, 1 : 2 * R : 2] = inset_b.T
     frames[9:12, : 2 * R] = np.repeat(normal.T, 2, axis=1)
-    frames[0:9, 2 * R :] = geometry.triangle_frame[:, other_triangle]
+    frames[0:9, 2 * R :] = geometry.frames_of(other_triangle)
     frames[9:12, 2 * R :] = geometry.patch_normal_rows[:, geometry.triangle_patch[other_triangle]]
     return PatchGrids(
         corners=np.ascontiguousarray(corners, dtype=np.float32),

@@ -97,14 +97,22 @@ class Scores:
         C, P = self.shape
         if not self.weights:
             sums = np.bincount(patches, minlength=P)[None]
+            if self.incident is None:
+                self.incident = sums
+            else:
+                for c in range(C):
+                    self.incident[c] += sums[c]
         else:
             w = np.concatenate(self.weights, axis=1)
-            sums = [np.bincount(patches, weights=w[c], minlength=P) for c in range(C)]
-        if self.incident is None:
-            self.incident = np.array(sums) if self.weights else sums
-        else:
-            for c in range(C):
-                self.incident[c] += sums[c]
+            first = self.incident is None
+            if first:
+                self.incident = np.empty((C, P))
+            for c in range(C):  # a channel at a time: one (P,) temporary, not (C,P)
+                sums = np.bincount(patches, weights=w[c], minlength=P)
+                if first:
+                    self.incident[c] = sums
+                else:
+                    self.incident[c] += sums
         self.patches, self.weights, self.count = [], [], 0
 
     def total(self):

@@ -50,17 +50,21 @@ class CoincidentFacesWarning(UserWarning):
         self.patches = patches
 
 
-def warn_coincident(corners, triangle_patch):
+def warn_coincident(corners, triangle_patch, block=1 << 16):
     """Warn about triangles with exactly the same corners as another (in any order or winding):
-    a ray hits one of them at random, so each shows only part of the light it gets."""
+    a ray hits one of them at random, so each shows only part of the light it gets.
+    ``corners[rows]`` gives the (n,3,3) corners of triangle rows (an array or geometry.UnitCorners)."""
     # A key that does not depend on the corners' order: each corner's projection, sorted, then
     # projected again. Equal triangles get equal keys; neighbours with equal keys are then
-    # compared exactly (corners in lexicographic order). O(T log T), no false positives.
-    projected = corners @ np.array([1.0, 1.37, 1.73])  # (T,3)
-    a, b, c = projected[:, 0], projected[:, 1], projected[:, 2]
-    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
-    middle = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))  # exact, order-free
-    key = low + 2.3 * middle + 3.1 * high
+    # compared exactly (corners in lexicographic order). O(T log T), no false positives. The
+    # keys are made a block of triangles at a time (elementwise: equal corners, equal keys).
+    key = np.empty(len(corners))
+    for start in range(0, len(key), block):
+        rows = corners[start:start + block]
+        a, b, c = (rows[:, k, 0] + 1.37 * rows[:, k, 1] + 1.73 * rows[:, k, 2] for k in range(3))
+        low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+        middle = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))  # exact, order-free
+        key[start:start + block] = low + 2.3 * middle + 3.1 * high
     by_key = np.argsort(key, kind="stable")
     candidates = np.flatnonzero(key[by_key[1:]] == key[by_key[:-1]])
     if candidates.size == 0:
@@ -176,7 +180,7 @@ def validate_mesh(vertices, triangles, triangle_patch, patch_count):
         raise ValueError("the scene has no triangles")
     if not np.issubdtype(T_raw.dtype, np.integer):
         raise ValueError(f"triangles must hold integer vertex indices; got dtype {T_raw.dtype}")
-    T = T_raw.astype(np.int64)
+    T = T_raw.astype(np.int64, copy=False)
     out_of_range = ((T < 0) | (T >= V.shape[0])).any(axis=1)
     if out_of_range.any():
         raise ValueError(
@@ -187,7 +191,7 @@ def validate_mesh(vertices, triangles, triangle_patch, patch_count):
         raise ValueError(f"triangle_patch must have shape ({T.shape[0]},) to match triangles; got {tp_raw.shape}")
     if not np.issubdtype(tp_raw.dtype, np.integer):
         raise ValueError(f"triangle_patch must hold integer patch indices; got dtype {tp_raw.dtype}")
-    tp = tp_raw.astype(np.int64)
+    tp = tp_raw.astype(np.int64, copy=False)
     bad_patch = (tp < 0) | (tp >= patch_count)
     if bad_patch.any():
         raise ValueError(

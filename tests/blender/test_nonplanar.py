@@ -63,10 +63,11 @@ def test_nurbs_sphere_and_displaced_grid_solve_and_write_results(blender):
         # every patch lies on its source face (patch_face maps results back to the right face):
         # its centroid is over one of the face's triangles, and near its plane (grid cells of
         # a face that is planar within 1 degree are bilinear: near, not on)
-        tri = obj.vertices[obj.triangles]
+        source = objects[obj.name]  # (the patches keep only the objects' names, not their arrays)
+        tri = source.vertices[source.triangles]
         centroid = np.add.reduceat(mesh.points[mesh.corner_verts], mesh.face_starts) / sizes[:, None]
         for p in range(mesh.patch_count):
-            t = tri[obj.triangle_face == mesh.patch_face[p]]
+            t = tri[source.triangle_face == mesh.patch_face[p]]
             a, b = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
             n = np.cross(a, b)
             keep = np.linalg.norm(n, axis=1) > 1e-12

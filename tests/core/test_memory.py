@@ -25,6 +25,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[2]
 MIB = 1 << 20
 # Resident set: pages of freed numpy buffers go back to the system or are reused, but glibc's
@@ -76,3 +78,77 @@ def test_solve_memory_does_not_grow_with_paths():
     # and the solve's own allocations are bounded by the chunk size, not the path count: under
     # half a float64 per path of the large run (32 MiB; the chunks in flight need about 17 MiB)
     assert large["traced"] < 8 * large["paths"] / 2, (small, large)
+
+
+# --- The scene's arrays (issue 26) ----------------------------------------------------------
+# A solve of a million patches through the operator peaked at 2.4 GiB (benchmarks/results/
+# memory_operator.md), most of it when the patches became a core scene: build_geometry's float64
+# temporaries of the whole scene (about 1.2 kB a patch), an Embree scene of every triangle that
+# only the diagnostics traced, and per-triangle float32 arrays a walk over grids never reads.
+# Measured on the room below (24,697 patches) with tracemalloc, per patch, above the meshed
+# patches: before, a peak of 1,451 B and 323 B held after, with both of those built; after,
+# 787 B and 143 B (the peak is then the grids' own search, patch_grids), neither built.
+SCENE_PEAK_BYTES = 1100  # per patch: 40% above the 787 measured, 25% below the 1,451 before
+SCENE_HELD_BYTES = 200   # per patch: 40% above the 143 measured, 38% below the 323 before
+
+
+def _room_objects(n, side=4.0):
+    """Six walls of n x n quads facing into a room, and an emitting quad under the ceiling, as
+    scene_io reads them (ObjectArrays; one face, one patch)."""
+    from addon.patches import ObjectArrays
+
+    L = side
+    walls = [((0, 0, 0), (L, 0, 0), (0, L, 0)), ((0, 0, L), (0, L, 0), (L, 0, 0)), ((0, 0, 0), (0, L, 0), (0, 0, L)),
+             ((L, 0, 0), (0, 0, L), (0, L, 0)), ((0, 0, 0), (0, 0, L), (L, 0, 0)), ((0, L, 0), (L, 0, 0), (0, 0, L)),
+             ((0.375 * L, 0.375 * L, 0.98 * L), (0, 0.25 * L, 0), (0.25 * L, 0, 0))]
+    objects = []
+    for k, (origin, u, v) in enumerate(walls):
+        d = 1 if k == 6 else n
+        t = np.linspace(0, 1, d + 1)
+        a, b = np.meshgrid(t, t, indexing="ij")
+        vertices = np.asarray(origin, float) + a.reshape(-1, 1) * np.asarray(u, float) + b.reshape(-1, 1) * np.asarray(v, float)
+        i = (np.arange(d)[:, None] * (d + 1) + np.arange(d)).reshape(-1)
+        quads = np.stack([i, i + d + 1, i + d + 2, i + 1], axis=1)
+        F = len(quads)
+        objects.append(ObjectArrays(
+            name=f"wall {k}", vertices=vertices, face_sizes=np.full(F, 4), corner_verts=quads.reshape(-1),
+            triangles=np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3),
+            triangle_face=np.repeat(np.arange(F), 2),
+            face_reflectivity=np.tile([0.6, 0.3 if k == 2 else 0.6, 0.6], (F, 1)),  # a coloured wall: 3 channels
+            face_emission=np.full((F, 3), 10.0 if k == 6 else 0.0),
+        ))
+    return objects, L / n * 1.5  # faces a little smaller than a patch: one patch each
+
+
+def test_scene_arrays_stay_within_a_per_patch_budget(monkeypatch):
+    import tracemalloc
+
+    import addon.core.geometry as geometry
+    from addon import patches
+    from addon.core import solve
+
+    # blocks of 4,096 triangles, as a million-patch scene has blocks of 2^16 among 2 million
+    monkeypatch.setattr(geometry, "BLOCK_TRIANGLES", 1 << 12)
+    objects, patch_size = _room_objects(64)
+    patches._GEOMETRY_CACHE.clear()
+    tracing = tracemalloc.is_tracing()
+    if not tracing:
+        tracemalloc.start()
+    try:
+        made = patches.make_patches(objects, patch_size)
+        meshed = tracemalloc.get_traced_memory()[0]
+        tracemalloc.reset_peak()
+        scene, _ = patches.scene_and_notes(made)  # the core scene and the diagnostics' rays
+        held, peak = tracemalloc.get_traced_memory()
+    finally:
+        if not tracing:
+            tracemalloc.stop()
+    P = scene.patch_count
+    assert P == 6 * 64 * 64 + 121
+    assert (peak - meshed) / P < SCENE_PEAK_BYTES, (peak - meshed) / P
+    assert (held - meshed) / P < SCENE_HELD_BYTES, (held - meshed) / P
+    # A walk over grids makes neither the Embree scene of every triangle nor per-triangle arrays.
+    solve(scene, paths=20_000, threads=2, seed=1)
+    made_lazily = ("tracer", "triangle_corners", "triangle_frame", "triangle_normal")
+    assert not [name for name in made_lazily if name in scene.geometry.__dict__]
+    patches._GEOMETRY_CACHE.clear()
