@@ -86,6 +86,7 @@ class WalkParameters:
     sampling: str
     speedups: object          # Speedups, as the solver resolved them
     gather_samples: tuple | None  # per patch, with the direct light gathered
+    jacobi: bool = False          # stochastic Jacobi iteration (jacobi.py)
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,6 +162,7 @@ def _tables(payload, parameters):
         _worker_geometries[payload.geometry_key] = scene.geometry
         p = parameters
         tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups)
+        tables.jacobi = p.jacobi
         if p.gather_samples is not None:
             tables.gathering = Gathering(scene, np.asarray(p.gather_samples))
         _worker_tables[key] = tables

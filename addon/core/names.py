@@ -20,6 +20,11 @@ SHOT = "shot"          # the paper's: every path's first hit scores it
 GATHERED = "gathered"  # each patch gathers it by shadow rays; the walks shoot only its reflection
 DIRECT_LIGHTS = (SHOT, GATHERED)
 
+# How the light is carried from patch to patch.
+WALK = "walk"      # the paper's: shooting random walks, path by path
+JACOBI = "jacobi"  # stochastic Jacobi iteration: shot generation by generation, stratified (jacobi.py)
+METHODS = (WALK, JACOBI)
+
 # When a solve with an error target stops.
 PREDICTED = "predicted"  # after the paths formula (2)/(3) predicts for the target
 MEASURED = "measured"    # once the batch-means estimate meets the target

@@ -24,7 +24,9 @@ from .names import (
     FINITE,
     GATHERED,
     INDEPENDENT,
+    JACOBI,
     MEASURED,
+    METHODS,
     PREDICTED,
     SAMPLINGS,
     SHOT,
@@ -33,6 +35,7 @@ from .names import (
     STOP_RULES,
     STOP_TARGET,
     STOP_TIME_LIMIT,
+    WALK,
 )
 from .cluster import ClusterRunner, WalkParameters
 from .runners import ThreadRunner
@@ -53,6 +56,8 @@ MIN_CHUNKS = 32
 GROUP_RAYS = 1 << 16
 GROUP_RAYS_COUNTED = 1 << 18
 GROUP_MAX_CHUNKS = 16
+# Stochastic Jacobi iteration groups chunks up to this many first rays in a group.
+GROUP_PATHS_JACOBI = 1 << 16
 GROUP_SCORES = 1 << 22
 # With stop_rule="measured": never stop on fewer chunks than this, nor run past this many
 # times the predicted paths (unless paths= is given as the cap).
@@ -64,10 +69,10 @@ MEASURED_CAP_FACTOR = 64
 POLL_SECONDS = 0.05
 
 
-def planned_paths(predicted_paths, direct_light):
+def planned_paths(predicted_paths, direct_light, method=WALK):
     """The paths a solve stopping on its measured error plans its chunks for: the paper's
-    prediction, or with the direct light gathered a fraction of it."""
-    if direct_light == GATHERED:
+    prediction, or with the direct light gathered or Jacobi iteration a fraction of it."""
+    if direct_light == GATHERED or method == JACOBI:
         return max(1, predicted_paths // GATHERED_PLAN_DIVISOR)
     return predicted_paths
 
@@ -97,6 +102,7 @@ class SolveResult:
     prediction: object = None
     speedups: object = None  # the speed-ups the walk used (Speedups, resolved)
     direct_light: str = SHOT
+    method: str = WALK
     gather_rays: int = 0  # per chunk, with the direct light gathered
 
     @property
@@ -118,12 +124,14 @@ def chunks_per_group(tables, chunk_paths, expected_path_length):
         return 1
     chunk_rays = max(1.0, chunk_paths * expected_path_length)
     group_rays = GROUP_RAYS_COUNTED if tables.speedups.interchangeable else GROUP_RAYS
+    if tables.jacobi:  # (a Jacobi group's wavefront is a generation: its first has a ray a path)
+        chunk_rays, group_rays = chunk_paths, GROUP_PATHS_JACOBI
     by_scores = GROUP_SCORES // (tables.channels * tables.patch_count)
     most = int(min(GROUP_MAX_CHUNKS, group_rays // chunk_rays, by_scores))
     return 1 << (most.bit_length() - 1) if most > 1 else 1
 
 
-def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light):
+def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light, method):
     check_estimator(estimator, threshold)
     check_positive("paths", paths, integer=True)
     check_positive("target_mse", target_mse)
@@ -141,6 +149,8 @@ def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_
         why = "; ".join(f"light '{name}' {reason}" for name, reason in scene.lights.gathered_only())
         raise ValueError(f"{why}: a shooting walk cannot carry its direct light; use direct_light='{GATHERED}' "
                          "(shadow rays from each patch)")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
     if stop_rule not in STOP_RULES:
         raise ValueError(f"stop_rule must be one of {', '.join(STOP_RULES)}; got {stop_rule!r}")
     if stop_rule == "measured" and target_mse is None:
@@ -165,6 +175,7 @@ def solve(
     speedups=None,
     direct_light=SHOT,
     cluster=None,
+    method=WALK,
 ):
     """Radiosity of ``scene`` by shooting random walks.
 
@@ -182,7 +193,7 @@ def solve(
     between chunks (``stats["radiosity"]()`` gives the result so far); ``max_seconds`` bounds the wall time. A stopped run returns the complete
     chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
     """
-    _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light)
+    _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light, method)
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
         raise ValueError(f"seed must be a non-negative whole number; got {seed!r}")
     if speedups is not None and not isinstance(speedups, Speedups):
@@ -193,15 +204,18 @@ def solve(
 
     prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
     gathered = direct_light == GATHERED
-    measured_rule = stop_rule == MEASURED or (gathered and target_mse is not None)
+    jacobi = method == JACOBI
+    beyond_formulas = gathered or jacobi  # the paper's formulas do not predict their error
+    measured_rule = stop_rule == MEASURED or (beyond_formulas and target_mse is not None)
     if measured_rule:
-        planned = planned_paths(prediction.paths_for(target_mse), direct_light)
+        planned = planned_paths(prediction.paths_for(target_mse), direct_light, method)
         cap = paths if paths is not None else MEASURED_CAP_FACTOR * planned
     else:
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
     chunk = chunk_paths_for(prediction.expected_path_length, planned)
     tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups)
+    tables.jacobi = jacobi
     if gathered:
         tables.gathering = Gathering(scene, gather_samples(chunk, prediction.expected_path_length, scene))
     total = Batches(scene, tables)
@@ -216,7 +230,7 @@ def solve(
         runner = ThreadRunner(threads)
     else:
         gather = tuple(tables.gathering.samples.tolist()) if gathered else None
-        parameters = WalkParameters(estimator, float(threshold), exit_point, sampling, tables.speedups, gather)
+        parameters = WalkParameters(estimator, float(threshold), exit_point, sampling, tables.speedups, gather, jacobi)
         runner = ClusterRunner(cluster, scene, parameters)
         threads = runner.threads
     try:
@@ -262,7 +276,7 @@ def solve(
         rays=total.rays,
         seconds=time.perf_counter() - start,
         mean_path_length=total.rays / n if n else math.nan,
-        predicted_mse=math.nan if gathered else prediction.mse_for(n),
+        predicted_mse=math.nan if beyond_formulas else prediction.mse_for(n),
         measured_mse=total.measured_mse(),
         stopped=stopped,
         estimator=estimator,
@@ -277,6 +291,7 @@ def solve(
         prediction=prediction,
         speedups=tables.speedups,
         direct_light=direct_light,
+        method=method,
         gather_rays=round(2 * tables.gathering.samples.sum()) if gathered else 0,
     )
 

@@ -92,6 +92,8 @@ class WalkTables:
         self.numpy_turn = threading.Lock()
         # The first shot gathered (first_shot.Gathering), or None: the walk shoots it.
         self.gathering = None
+        # Stochastic Jacobi iteration (jacobi.py) instead of path by path walks.
+        self.jacobi = False
 
     @cached_property
     def survivor_weight(self):

@@ -23,6 +23,7 @@ light by shadow rays, then runs these stages from what the patches reflect of it
 from __future__ import annotations
 
 from .first_shot import gathered_chunk
+from .jacobi import jacobi_chunk, jacobi_chunks
 from .interchangeable import InterchangeableWalk
 from .path_walk import PathWalk
 
@@ -39,10 +40,15 @@ def walk_chunks(tables, sizes, rng, abort=None):
     while they trace): taking turns hands the GIL over about once a step."""
     sizes = [int(n) for n in sizes]
     with tables.numpy_turn:
-        if tables.gathering is None:
+        if tables.jacobi:
+            if tables.gathering is None:
+                return jacobi_chunks(tables, sizes, rng, lambda: _check(abort))
+            walk = lambda t, n, r: jacobi_chunk(t, n, r, lambda: _check(abort))  # noqa: E731
+        elif tables.gathering is None:
             return _stages(tables, sizes, rng, abort)
+        else:
+            walk = lambda t, n, r: _stages(t, [n], r, abort)[0]  # noqa: E731
         # The first shot gathered (first_shot): each chunk gathers, then walks from what it gathered.
-        walk = lambda t, n, r: _stages(t, [n], r, abort)[0]  # noqa: E731
         tallies = []
         for n in sizes:
             _check(abort)

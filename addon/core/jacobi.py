@@ -1,0 +1,156 @@
+"""Stochastic Jacobi iteration with incremental shooting: the light shot generation by generation.
+
+Beyond the paper (issue 26). A chunk of n "paths" starts as the walk does: n first rays from the
+sources, drawn in proportion to power, each carrying the relative weight 1 (Phi_T / n of power).
+The power incident on each patch in one generation is scored, and the part the patches reflect,
+U_j = R_j I_j, is the next generation's unshot power. It is shot again from the patches as a
+whole: about sum(U) rays (the same quantum, weight 1, as a first ray), allotted to patches in
+proportion to U by systematic sampling and leaving each patch from Halton points (bases 2, 3 for
+the point, 5, 7 for the cosine direction), shifted by one random vector a generation
+(Cranley-Patterson). A patch then sheds what it reflects in floor or ceil of its share of rays,
+from evenly spread points and directions, where a walk's survivors leave it in a random number
+of rays from random ones: the same expectation, less noise.
+
+    shoot       the generation's rays: from the sources (generation 0) or from the patches,
+                in proportion to their unshot power
+    intersect   the ray tracer: what each ray meets first (rays.cast)
+    score       the power arriving at each front side hit: the generation's incident power
+    reflect     U_j = R_j I_j, the next generation's unshot power; below one ray's weight in
+                all, Russian roulette: one ray of weight 1 with probability sum(U), else the end
+
+Each generation's rays are, given the previous generation, an unbiased estimate of the light it
+transports (E[count_j] times the ray weight is U_j), so the chunk's total is unbiased; chunks
+are independent, and the solve's batch means measure the error. The power accounts balance
+exactly as the walk's do: what arrives at a patch is absorbed there but for what leaves it.
+"""
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from . import rays
+from .sampling import LAST_BELOW_ONE, draw_sources, halton
+from .tallies import ChunkTally, chunk_counts, chunk_sums
+
+_HALTON = {"table": np.zeros((4, 0), dtype=np.float32)}
+_HALTON_LOCK = threading.Lock()
+
+
+def halton_rows(count):
+    """Halton points 0..count-1 in bases 2, 3, 5, 7, (4, count) float64, computed once and kept."""
+    table = _HALTON["table"]
+    if table.shape[1] < count:
+        with _HALTON_LOCK:
+            table = _HALTON["table"]
+            if table.shape[1] < count:
+                table = _HALTON["table"] = halton(np.arange(max(count, 2 * table.shape[1])), (2, 3, 5, 7))
+    return table
+
+
+def systematic_counts(power, rays, shift):
+    """Rays per patch for ``rays`` rays allotted in proportion to ``power`` (P,) by the points
+    (k + shift) / rays, k < rays, of [0, 1): floor or ceil of rays p_j each, rays p_j on average."""
+    cdf = np.cumsum(power)
+    edges = np.ceil(cdf / cdf[-1] * rays - shift).astype(np.int64)
+    # From the last patch with power on, every point is below: rays - shift would round to
+    # rays - 1 for a shift within 2^-53 of 1.
+    edges[cdf == cdf[-1]] = rays
+    return np.diff(edges, prepend=0)
+
+
+def shoot_from_patches(tables, unshot, rng):
+    """A generation's rays from the patches, for a group of G chunks: ``unshot`` (C,G,P)
+    relative power. Each chunk with more than one ray's weight of it shoots about that many
+    rays of equal weight; one with less plays Russian roulette (one ray of weight 1 with
+    probability its unshot power, else its end). Returns (patch, chunk, weights (C,m),
+    leaving (G,C), origins, directions), the rays in chunk order, or None once every chunk
+    has ended."""
+    C, G, P = unshot.shape
+    power = unshot[0] if C == 1 else unshot.mean(axis=0)  # (G,P) what a ray's weight counts
+    total = power.sum(axis=1)
+    roulette, shift, corner = rng.random(G), rng.random(G), rng.random((G, 4))  # drawn alike, always
+    rays_of = np.where(total >= 1.0, np.rint(total), (total > 0) & (roulette < total)).astype(np.int64)
+    if not rays_of.any():
+        return None
+    scale = np.where(total >= 1.0, total / np.maximum(rays_of, 1), 1.0)  # each ray's weight
+    counts = np.zeros((G, P), dtype=np.int64)
+    for g in np.flatnonzero(rays_of):
+        counts[g] = systematic_counts(power[g], int(rays_of[g]), shift[g])
+    cell = np.repeat(np.arange(G * P, dtype=np.int64), counts.ravel())
+    chunk = (cell // P).astype(np.int32)
+    patch = (cell - chunk.astype(np.int64) * P).astype(np.int32)
+    # Ray k of a chunk: (k + shift) / m chose its patch, Halton point k its point and direction:
+    # a 5-D Hammersley set over the chunk's generation (each patch's rays a run of it).
+    index = np.arange(cell.size) - np.repeat(np.cumsum(rays_of) - rays_of, rays_of)
+    points = halton_rows(int(rays_of.max())).take(index, axis=1)
+    points += corner.T.take(chunk, axis=1)
+    points -= np.floor(points)
+    np.minimum(points, LAST_BELOW_ONE, out=points)
+    u = np.empty((tables.uniforms_per_ray, cell.size), dtype=np.float32)
+    u[:4] = points
+    if tables.row_triangle is not None:
+        rng.random(dtype=np.float32, out=u[tables.row_triangle])
+    origins, directions = rays.leave_random(tables, patch, u)
+    weights = scale.take(chunk)[None]
+    if C > 1:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.where(power > 0, unshot / power, 0.0)  # (C,G,P) U_jc / U_bar_j
+        weights = ratio.reshape(C, G * P).take(cell, axis=1) * weights
+    return patch, chunk, weights, chunk_sums(weights, chunk, G), origins, directions
+
+
+def jacobi_chunks(tables, sizes, rng, check=None):
+    """Chunks of stochastic Jacobi iteration from ``sizes`` first rays each, traced together
+    (each generation's rays of every chunk in one wavefront); returns each chunk's ChunkTally
+    in the walk's relative weights (times Phi_T / N). ``check()`` is called every generation
+    (it raises to stop)."""
+    C, P, G = tables.channels, tables.patch_count, len(sizes)
+    source, chunk, first = draw_sources(tables.sources, sizes, rng, tables.stratified)
+    u = rng.random((tables.uniforms_per_ray, source.size), dtype=np.float32)
+    if first is not None:
+        u[:4] = first
+    origins, directions = rays.leave_sources(tables, source, u)
+    chunk = np.zeros(source.size, dtype=np.int32) if chunk is None else chunk
+    weights = np.ones((1, source.size)) if C == 1 else tables.start_weight.take(source, axis=1)
+    emitted = chunk_sums(weights, chunk, G)
+    incident = np.zeros((C, G * P))
+    absorbed, escaped, blocked = (np.zeros((G, C)) for _ in range(3))
+    ray_count, generations = np.zeros(G, dtype=np.int64), np.zeros(G, dtype=np.int64)
+    R = tables.reflectivity[:, None, :]
+    while True:
+        if check is not None:
+            check()
+        hits = rays.cast(tables, origins, directions)
+        traced = chunk_counts(chunk, G)
+        ray_count += traced
+        generations += traced > 0
+        front = np.flatnonzero(hits.front)
+        cell = chunk.take(front) * np.int64(P) + hits.patch.take(front)
+        arrived = np.stack([np.bincount(cell, weights=weights[c].take(front), minlength=G * P) for c in range(C)])
+        incident += arrived
+        missed = hits.hit < 0
+        back = ~missed & ~hits.front
+        escaped += chunk_sums(weights.compress(missed, axis=1), chunk.compress(missed), G)
+        blocked += chunk_sums(weights.compress(back, axis=1), chunk.compress(back), G)
+        arrived = arrived.reshape(C, G, P)
+        unshot = arrived * R
+        reflected = unshot.sum(axis=2).T  # (G,C)
+        absorbed += arrived.sum(axis=2).T - reflected
+        shot = shoot_from_patches(tables, unshot, rng)
+        if shot is None:
+            absorbed += reflected  # (the roulette's end: nothing leaves)
+            break
+        patch, chunk, weights, leaving, origins, directions = shot
+        absorbed += reflected - leaving  # what leaves beyond what was reflected: the roulette's, either sign
+    incident = incident.reshape(C, G, P)
+    return [
+        ChunkTally(n, int(ray_count[g]), incident[:, g].copy(), emitted[g], absorbed[g], escaped[g], blocked[g],
+                   np.zeros(C), {"generations": int(generations[g])})
+        for g, n in enumerate(sizes)
+    ]
+
+
+def jacobi_chunk(tables, paths, rng, check=None):
+    """One chunk of :func:`jacobi_chunks`."""
+    return jacobi_chunks(tables, [paths], rng, check)[0]
