@@ -186,7 +186,7 @@ def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_po
     # A group's scores stay small in big colour scenes: 3 channels x 500,000 patches a chunk.
     from types import SimpleNamespace
 
-    big = SimpleNamespace(speedups=tables.speedups, channels=3, patch_count=500_000)
+    big = SimpleNamespace(speedups=tables.speedups, channels=3, patch_count=500_000, jacobi=False)
     assert solver.chunks_per_group(big, 100, 2.0) == 2
     fractions = []
     kw = dict(paths=20_000, seed=3, exit_point=exit_point)
