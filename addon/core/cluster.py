@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .first_shot import Gathering
+from .names import WALK
 from .runners import run_chunks
 from .scene import PatchScene
 from .tables import WalkTables
@@ -86,7 +87,7 @@ class WalkParameters:
     sampling: str
     speedups: object          # Speedups, as the solver resolved them
     gather_samples: tuple | None  # per patch, with the direct light gathered
-    jacobi: bool = False          # stochastic Jacobi iteration (jacobi.py)
+    method: str = WALK            # how the light is carried (names.METHODS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,7 +163,7 @@ def _tables(payload, parameters):
         _worker_geometries[payload.geometry_key] = scene.geometry
         p = parameters
         tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups)
-        tables.jacobi = p.jacobi
+        tables.method = p.method
         if p.gather_samples is not None:
             tables.gathering = Gathering(scene, np.asarray(p.gather_samples))
         _worker_tables[key] = tables

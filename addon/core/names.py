@@ -23,7 +23,8 @@ DIRECT_LIGHTS = (SHOT, GATHERED)
 # How the light is carried from patch to patch.
 WALK = "walk"      # the paper's: shooting random walks, path by path
 JACOBI = "jacobi"  # stochastic Jacobi iteration: shot generation by generation, stratified (jacobi.py)
-METHODS = (WALK, JACOBI)
+TWO_WAY = "two_way"  # stochastic Jacobi with every ray shooting and gathering, a control variate (two_way.py)
+METHODS = (WALK, JACOBI, TWO_WAY)
 
 # When a solve with an error target stops.
 PREDICTED = "predicted"  # after the paths formula (2)/(3) predicts for the target

@@ -17,6 +17,7 @@ import numpy as np
 from .batches import Batches
 from .error_model import check_estimator, check_positive, predict
 from .first_shot import Gathering, gather_samples
+from .two_way import direct_samples
 from .names import (
     EXIT_POINTS,
     DIRECT_LIGHTS,
@@ -35,6 +36,7 @@ from .names import (
     STOP_RULES,
     STOP_TARGET,
     STOP_TIME_LIMIT,
+    TWO_WAY,
     WALK,
 )
 from .cluster import ClusterRunner, WalkParameters
@@ -65,6 +67,7 @@ MIN_MEASURED_CHUNKS = 8
 # With the direct light gathered, chunks are planned for this fraction of the paper's predicted
 # paths (it needs several times fewer: docs/performance.md).
 GATHERED_PLAN_DIVISOR = 4
+TWO_WAY_PLAN_DIVISOR = 4
 MEASURED_CAP_FACTOR = 64
 POLL_SECONDS = 0.05
 
@@ -72,9 +75,22 @@ POLL_SECONDS = 0.05
 def planned_paths(predicted_paths, direct_light, method=WALK):
     """The paths a solve stopping on its measured error plans its chunks for: the paper's
     prediction, or with the direct light gathered or Jacobi iteration a fraction of it."""
+    if method == TWO_WAY:
+        return max(1, predicted_paths // TWO_WAY_PLAN_DIVISOR)
     if direct_light == GATHERED or method == JACOBI:
         return max(1, predicted_paths // GATHERED_PLAN_DIVISOR)
     return predicted_paths
+
+
+def method_direct_light(method, direct_light=None):
+    """The direct light a method uses when none is asked for: the two-way iteration always
+    gathers it; the walks shoot it, as the paper does."""
+    if direct_light is None:
+        return GATHERED if method == TWO_WAY else SHOT
+    if method == TWO_WAY and direct_light != GATHERED:
+        raise ValueError(f"method='{TWO_WAY}' gathers its direct light: direct_light must be '{GATHERED}' (or None); "
+                         f"got {direct_light!r}")
+    return direct_light
 
 
 @dataclass
@@ -143,14 +159,14 @@ def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_
         raise ValueError(f"exit_point must be one of {', '.join(EXIT_POINTS)}; got {exit_point!r}")
     if sampling not in SAMPLINGS:
         raise ValueError(f"sampling must be one of {', '.join(SAMPLINGS)}; got {sampling!r}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
     if direct_light not in DIRECT_LIGHTS:
         raise ValueError(f"direct_light must be one of {', '.join(DIRECT_LIGHTS)}; got {direct_light!r}")
     if direct_light == SHOT and scene.lights.gathered_only():
         why = "; ".join(f"light '{name}' {reason}" for name, reason in scene.lights.gathered_only())
         raise ValueError(f"{why}: a shooting walk cannot carry its direct light; use direct_light='{GATHERED}' "
                          "(shadow rays from each patch)")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
     if stop_rule not in STOP_RULES:
         raise ValueError(f"stop_rule must be one of {', '.join(STOP_RULES)}; got {stop_rule!r}")
     if stop_rule == "measured" and target_mse is None:
@@ -173,7 +189,7 @@ def solve(
     threads=None,
     sampling=INDEPENDENT,
     speedups=None,
-    direct_light=SHOT,
+    direct_light=None,
     cluster=None,
     method=WALK,
 ):
@@ -193,6 +209,8 @@ def solve(
     between chunks (``stats["radiosity"]()`` gives the result so far); ``max_seconds`` bounds the wall time. A stopped run returns the complete
     chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
     """
+    if method in METHODS:
+        direct_light = method_direct_light(method, direct_light)
     _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light, method)
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
         raise ValueError(f"seed must be a non-negative whole number; got {seed!r}")
@@ -204,8 +222,7 @@ def solve(
 
     prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
     gathered = direct_light == GATHERED
-    jacobi = method == JACOBI
-    beyond_formulas = gathered or jacobi  # the paper's formulas do not predict their error
+    beyond_formulas = gathered or method != WALK  # the paper's formulas do not predict their error
     measured_rule = stop_rule == MEASURED or (beyond_formulas and target_mse is not None)
     if measured_rule:
         planned = planned_paths(prediction.paths_for(target_mse), direct_light, method)
@@ -215,8 +232,10 @@ def solve(
         cap = planned
     chunk = chunk_paths_for(prediction.expected_path_length, planned)
     tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups)
-    tables.jacobi = jacobi
-    if gathered:
+    tables.method = method
+    if method == TWO_WAY:
+        tables.gathering = Gathering(scene, direct_samples(chunk, scene))
+    elif gathered:
         tables.gathering = Gathering(scene, gather_samples(chunk, prediction.expected_path_length, scene))
     total = Batches(scene, tables)
     chunk_count = math.ceil(cap / chunk)
@@ -230,7 +249,7 @@ def solve(
         runner = ThreadRunner(threads)
     else:
         gather = tuple(tables.gathering.samples.tolist()) if gathered else None
-        parameters = WalkParameters(estimator, float(threshold), exit_point, sampling, tables.speedups, gather, jacobi)
+        parameters = WalkParameters(estimator, float(threshold), exit_point, sampling, tables.speedups, gather, method)
         runner = ClusterRunner(cluster, scene, parameters)
         threads = runner.threads
     try:

@@ -12,7 +12,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .names import EXIT_RANDOM, FINITE, INDEPENDENT, STRATIFIED
+from .names import EXIT_RANDOM, FINITE, INDEPENDENT, JACOBI, STRATIFIED, WALK
 from .sampling import SourceTable, channel_sum, source_weights
 from .speedups import Speedups
 
@@ -92,8 +92,14 @@ class WalkTables:
         self.numpy_turn = threading.Lock()
         # The first shot gathered (first_shot.Gathering), or None: the walk shoots it.
         self.gathering = None
-        # Stochastic Jacobi iteration (jacobi.py) instead of path by path walks.
-        self.jacobi = False
+        # How the light is carried (names.METHODS): path by path walks, or generation by
+        # generation (jacobi.py, two_way.py).
+        self.method = WALK
+
+    @property
+    def jacobi(self):
+        """Shooting stochastic Jacobi iteration (jacobi.py)."""
+        return self.method == JACOBI
 
     @cached_property
     def survivor_weight(self):

@@ -26,6 +26,8 @@ from .first_shot import gathered_chunk
 from .jacobi import jacobi_chunk, jacobi_chunks
 from .interchangeable import InterchangeableWalk
 from .path_walk import PathWalk
+from .names import TWO_WAY
+from .two_way import two_way_chunk
 
 
 class Aborted(Exception):
@@ -40,6 +42,8 @@ def walk_chunks(tables, sizes, rng, abort=None):
     while they trace): taking turns hands the GIL over about once a step."""
     sizes = [int(n) for n in sizes]
     with tables.numpy_turn:
+        if tables.method == TWO_WAY:  # (it gathers its own direct light)
+            return [two_way_chunk(tables, n, rng, lambda: _check(abort)) for n in sizes]
         if tables.jacobi:
             if tables.gathering is None:
                 return jacobi_chunks(tables, sizes, rng, lambda: _check(abort))

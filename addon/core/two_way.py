@@ -1,0 +1,234 @@
+"""Two-way stochastic Jacobi iteration: every ray used twice, with a constant control variate.
+
+Beyond the paper (issue 26). A chunk estimates the light in generations, as stochastic Jacobi
+iteration does (``jacobi``), but each generation's rays leave every patch, not only those with
+power to shoot, so that each ray serves two estimates:
+
+- gathering: a ray from patch i that meets the front of patch j samples what i receives, the
+  form factor F_ij times j's reflected radiosity dB_j;
+- shooting: the same ray brings j what i reflects (by reciprocity, A_i F_ij = A_j F_ji).
+
+Both estimate the irradiance of the next generation, H_i = sum_j F_ij dB_j, from the same
+segment; the balance heuristic weights them: with n_i rays expected from patch i, segment
+i -> j adds dB_j / (n_i + n_j A_i / A_j) to H_i and dB_i / (n_j + n_i A_j / A_i) to H_j (the
+two techniques' densities of the pair, per unit of the integrand). A ray that escapes, or meets
+a back side, can only have been sampled from i: it adds 0 / n_i to H_i.
+
+A constant control variate beta (per channel: the area-weighted mean of dB) is taken out of
+every value and added back exactly: H_i = beta + sum over what i's rays see of (dB_j - beta),
+where a ray that escapes or meets a back side sees 0 - beta. In a closed room dB is close to
+beta everywhere after a bounce or two, so the values left are small: the shooting half, whose
+noise goes with the second moment of what it carries, needs the control variate to pay.
+
+Per chunk:
+
+    gather_direct   each patch's direct irradiance H^0 by shadow rays (``first_shot``)
+    reflect_first   the first reflection R H^0: a constant over each patch (exit_point="random",
+                    the discrete method), or as uneven over a patch as the light that landed on
+                    it (exit_point="hit": the constant, and what the gathering samples found
+                    beyond it, shot from them); from the second reflection on, each patch's
+                    reflected light is uniform over it
+    allot           a generation's rays to patches by systematic sampling, in proportion to
+                    sqrt(A_j) R_bar_j; the count in proportion to the generation's reflected power
+    cast            cosine-distributed rays from Hammersley points of each patch (rays.cast)
+    score_two_ways  each segment's two estimates, weighted, about the control variate
+    reflect         dB = R H, the next generation's; once its power is below ROULETTE of the
+                    first generation's, Russian roulette: go on with dB / q with probability q
+
+Each generation is, given the previous one, an unbiased estimate of the light it carries on,
+so a chunk's total is unbiased (the roulette keeps the expectation); chunks are independent
+replicas and the solve's batch means measure the error, which the paper's formulas do not
+predict. The accounts balance in expectation, not path by path: what a generation's rays that
+escape or meet a back side estimate of its reflected power is tallied as escaped or blocked.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import rays
+from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct
+from .jacobi import halton_rows, systematic_counts
+from .sampling import LAST_BELOW_ONE
+from .tallies import ChunkTally
+
+# Rays of a chunk of n paths: n FIRST_REFLECTION_RAYS from the gathering samples (hit exit),
+# then n GENERATION_RAYS in the first two-way generation, fewer as the light dies down.
+FIRST_REFLECTION_RAYS = 3.0
+GENERATION_RAYS = 2.0
+# ... and n DIRECT_SAMPLES gathering samples of the direct light (two rays each).
+DIRECT_SAMPLES = 1.0
+# A generation whose reflected power is below this share of the first one's plays roulette.
+ROULETTE = 1e-3
+# A generation casts at least this many rays a patch: fewer, and the two-way weights of the few
+# segments there are would make noise that does not die down with the light.
+LEAST_RAYS = 0.25
+
+
+@dataclass
+class Chunk:
+    """What a chunk carries from generation to generation, in the scene's units."""
+
+    reflected: np.ndarray   # (C,P) dB: the radiosity each patch reflects in this generation
+    irradiance: np.ndarray  # (C,P) H summed over generations so far (direct light included)
+    absorbed: np.ndarray    # (C,) power, per channel
+    escaped: np.ndarray
+    blocked: np.ndarray
+    rays: int
+    generations: int = 0
+    correction: np.ndarray | float = 0.0  # (C,P) irradiance the first generation adds (reflect_first)
+
+
+def allotment_weight(area, grey_reflectivity):
+    """(P,) what a generation's rays are allotted to patches in proportion to: sqrt(A_j) R_bar_j
+    (a patch's error in B is R_j times its error in H; sqrt(A) sits between the area-weighted
+    error, which wants rays as A, and the per-patch one, which wants them alike)."""
+    return np.sqrt(area) * np.maximum(grey_reflectivity, 1e-3)
+
+
+def direct_samples(chunk_paths, scene):
+    """(P,) expected gathering samples of each patch's direct light in a chunk of ``chunk_paths``:
+    DIRECT_SAMPLES a path in all, allotted as a generation's rays are (a share below one is a
+    chance of a sample)."""
+    weight = allotment_weight(scene.patch_area, scene.grey_reflectivity)
+    return np.clip(weight * (DIRECT_SAMPLES * chunk_paths / weight.sum()), 1e-3, MAX_GATHER_SAMPLES)
+
+
+def two_way_chunk(tables, paths, rng, check=None):
+    """One chunk of ``paths`` (the unit its rays are counted in): the direct light gathered,
+    then the reflected light generation by generation. Returns a ChunkTally in the walk's
+    relative weights (times Phi_T / N). ``check()`` is called every generation (it raises to
+    stop)."""
+    gathering = tables.gathering
+    C = tables.channels
+    H, gather_rays, samples = gather_direct(tables, gathering, rng)
+    H = H[:C]
+    direct = H * gathering.patch_area  # (C,P) power arriving straight from the sources
+    emitted = gathering.channel_power[:C]
+    state = Chunk(np.zeros_like(H), H.copy(), np.zeros(C), emitted - direct.sum(axis=1), np.zeros(C), gather_rays)
+    R = tables.reflectivity
+    if tables.exit_random:
+        state.reflected = R * H
+    else:
+        reflect_first(tables, state, samples, paths, rng)
+    first_power = reflected_power(tables, state.reflected)
+    budget = GENERATION_RAYS * paths / max(first_power, 1e-300)  # rays per unit of reflected power
+    weight = allotment_weight(gathering.patch_area, tables.grey_reflectivity)
+    while True:
+        if check is not None:
+            check()
+        power = reflected_power(tables, state.reflected)
+        if power <= 0:
+            break
+        if power < ROULETTE * first_power:
+            go_on = power / (ROULETTE * first_power)
+            if rng.random() >= go_on:
+                state.absorbed += leaving(tables, state.reflected)  # (the roulette's end: nothing leaves)
+                break
+            state.absorbed -= leaving(tables, state.reflected) * (1.0 / go_on - 1.0)  # what leaves beyond it
+            state.reflected = state.reflected / go_on
+            power /= go_on
+        generation(tables, state, weight, max(int(np.rint(budget * power)), int(np.ceil(LEAST_RAYS * weight.size))), rng)
+    incident = state.irradiance * gathering.patch_area
+    absorbed = state.absorbed + ((1.0 - R) * incident).sum(axis=1)
+    scale = paths / gathering.total_power  # relative weight per unit of power
+    return ChunkTally(paths, state.rays, incident * scale, emitted * scale, absorbed * scale, state.escaped * scale,
+                      state.blocked * scale, np.zeros(C), {"generations": state.generations})
+
+
+def reflected_power(tables, reflected):
+    """What a generation's rays are counted by: the channel-mean power it reflects, sum_j A_j
+    |dB_j| (an estimate about a control variate can be below zero in places)."""
+    return float((np.abs(reflected) @ tables.gathering.patch_area).mean())
+
+
+def leaving(tables, reflected):
+    """(C,) the power each channel reflects, sum_j A_j dB_j."""
+    return reflected @ tables.gathering.patch_area
+
+
+def reflect_first(tables, state, samples, paths, rng):
+    """The first reflection as uneven over each patch as the light that landed on it (hit exit).
+
+    Each gathering sample k of patch j is a point source of what it found (power p_k,
+    first_shot.ReflectedPoints); the samples are uniform points of j, so sources of equal
+    power p_bar_j at them are patch j reflecting R_j H_j uniformly, which the first two-way
+    generation carries (``state.reflected``). What is left, c_k = p_k - p_bar_j (zero in sum
+    over each patch), is shot from the samples: rays allotted in proportion to |c_k|, each
+    carrying an equal share of sum |c| with c_k's sign. It is small where the direct light is
+    even over a patch; its irradiance (``state.correction``) joins the first generation's."""
+    gathering, C, P = tables.gathering, tables.channels, tables.patch_count
+    patch = samples[0]
+    state.reflected = tables.reflectivity * state.irradiance
+    points = ReflectedPoints(gathering, tables.geometry, samples)
+    power = points.power[:, :C].T  # (C,K)
+    mean = np.stack([np.bincount(patch, weights=p, minlength=P) for p in power])
+    mean /= np.maximum(np.bincount(patch, minlength=P), 1)
+    left = power - mean.take(patch, axis=1)  # c_k
+    size = np.abs(left).mean(axis=0)  # what a sample's rays are allotted by
+    total = float(size.sum())
+    if total <= 0:
+        return
+    count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / max(float(power.mean(axis=0).sum()), 1e-300))))
+    sample = np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
+    origins, directions = points.unit_rays(sample, _hammersley(count, rng)[:4], tables.geometry)
+    hits = rays.cast(tables, origins, directions)
+    state.rays += count
+    carried = left.take(sample, axis=1) * (total / count / size.take(sample))  # (C,n) signed power a ray
+    state.correction = _bincount(hits.patch, hits.front, carried, P) / gathering.patch_area
+    state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
+    state.blocked += carried.compress((hits.hit >= 0) & ~hits.front, axis=1).sum(axis=1)
+
+
+def generation(tables, state, weight, count, rng):
+    """One two-way generation of ``count`` rays: their irradiance added to ``state``, its
+    reflection the next ``state.reflected``."""
+    area, P = tables.gathering.patch_area, tables.patch_count
+    expected = weight * (count / weight.sum())  # n_i
+    patch = np.repeat(np.arange(P, dtype=np.int32), systematic_counts(weight, count, rng.random()))
+    u = _hammersley(count, rng)
+    if tables.row_triangle is not None:
+        u = np.vstack([u[:4], rng.random((1, count), dtype=np.float32)])
+    origins, directions = rays.leave_random(tables, patch, u)
+    hits = rays.cast(tables, origins, directions)
+    state.rays += count
+    state.generations += 1
+    dB = state.reflected
+    beta = (dB @ area) / area.sum()  # (C,) the control variate
+    met = hits.front
+    i, j = patch.compress(met), hits.patch.compress(met)
+    gather_weight = 1.0 / (expected.take(i) + expected.take(j) * area.take(i) / area.take(j))
+    shoot_weight = 1.0 / (expected.take(j) + expected.take(i) * area.take(j) / area.take(i))
+    lost = patch.compress(~met)  # escaped or on a back side: seen as 0 - beta, from i only
+    value = dB - beta[:, None]
+    lost_share = np.bincount(lost, minlength=P) / expected
+    H = np.empty_like(dB)
+    for c in range(dB.shape[0]):
+        H[c] = np.bincount(i, weights=value[c].take(j) * gather_weight, minlength=P)
+        H[c] += np.bincount(j, weights=value[c].take(i) * shoot_weight, minlength=P)
+        H[c] += beta[c] * (1.0 - lost_share)
+    H += state.correction
+    state.correction = 0.0
+    # What the rays from i that found nothing, or a back side, estimate of i's reflected power.
+    for mask, account in ((hits.hit < 0, state.escaped), ((hits.hit >= 0) & ~met, state.blocked)):
+        share = np.bincount(patch.compress(mask), minlength=P) / expected
+        account += (dB * area) @ share
+    state.irradiance += H
+    state.reflected = tables.reflectivity * H
+
+
+def _hammersley(count, rng):
+    """(4, count) float32 Halton points 0..count-1 (bases 2, 3, 5, 7) shifted by one random
+    vector modulo 1: each point uniform, together evenly spread; the rays of each patch take a
+    run of them."""
+    points = halton_rows(count)[:, :count] + rng.random(4)[:, None]
+    points -= np.floor(points)
+    np.minimum(points, LAST_BELOW_ONE, out=points)
+    return points.astype(np.float32)
+
+
+def _bincount(patch, mask, weights, P):
+    """(C,P) sums of ``weights`` (C,n) over the masked columns, by patch."""
+    index = patch.compress(mask)
+    return np.stack([np.bincount(index, weights=w.compress(mask), minlength=P) for w in weights])
