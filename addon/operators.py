@@ -42,10 +42,17 @@ def _run_stats(output):
         "last_sources": output.sources,
         "last_patch_size": float(output.patches.patch_size),
         "last_stopped": str(r.stopped),
-        "last_estimator": str(r.estimator) + (", direct light gathered" if r.direct_light == "gathered" else ""),
+        "last_estimator": _method_text(r),
         "last_relative_error": _percent(output.prediction, measured),
         "last_target_error": float(output.settings_relative_rms * 100.0) if output.settings_relative_rms else 0.0,
     }
+
+
+def _method_text(result):
+    """How the last run carried the light, for the panel's statistics."""
+    if result.method == "two_way":
+        return "two-way iteration, direct light gathered"
+    return str(result.estimator) + (", direct light gathered" if result.direct_light == "gathered" else "")
 
 
 def _percent(prediction, mse):

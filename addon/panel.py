@@ -23,18 +23,25 @@ def _number(x):
 
 
 def draw_settings(layout, settings):
+    layout.prop(settings, "method")
+    walk = settings.method == "walk"  # (the estimator, sampling and direct light are the walks')
     col = layout.column(align=True)
+    col.active = walk
     col.prop(settings, "estimator", text="")
     row = col.row()
-    row.active = settings.estimator == "biased_infinite"
+    row.active = walk and settings.estimator == "biased_infinite"
     row.prop(settings, "threshold")
     col = layout.column(align=True)
     col.prop(settings, "target_error")
     col.prop(settings, "patch_size")
     col = layout.column(align=True)
     col.prop(settings, "exit_point")
-    col.prop(settings, "sampling")
-    col.prop(settings, "direct_light")
+    row = col.row()
+    row.active = walk
+    row.prop(settings, "sampling")
+    row = col.row()
+    row.active = walk
+    row.prop(settings, "direct_light")
     col.prop(settings, "stop_rule")
     layout.prop(settings, "output")
     row = layout.row(align=True)
@@ -76,7 +83,7 @@ def estimate_lines(value):
         ("time", f"Predicted time: {duration_text(value['seconds'])}" if value.get("seconds") == value.get("seconds")
          else "Predicted time: -"),
         ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"
-         + (" (planned)" if value.get("direct_light") == "gathered" else "")),
+         + (" (planned)" if value.get("planned") else "")),
         ("patches", f"Objects: {value['objects']} get results, {value.get('others', 0)} more block and reflect"),
         ("size", f"Patches: {_number(value['patches'])} (size {size})"),
         ("sources", f"Sources: {value.get('sources') or '-'}"),

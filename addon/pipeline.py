@@ -11,7 +11,7 @@ import numpy as np
 
 from .core import meshing, predict, relative_rms_to_mse, solve
 from .core.first_shot import direct_irradiance
-from .core.names import GATHERED
+from .core.names import GATHERED, TWO_WAY, WALK
 from .core.solver import planned_paths
 from . import options
 from .patches import Patches, make_patches, scene_and_notes
@@ -36,6 +36,7 @@ class SolveSettings:
     indirect_output: bool = options.INDIRECT_OUTPUT.default
     cluster: str = options.CLUSTER.default  # a Dask scheduler address; empty: this machine's threads
     direct_light: str = options.DIRECT_LIGHT.default  # "gathered": the first bounce by shadow rays (core first_shot)
+    method: str = options.METHOD.default  # "two_way": the core's two-way iteration (it gathers its direct light)
 
 
 @dataclass
@@ -86,14 +87,17 @@ SLOW_SECONDS = 60.0
 
 
 def direct_light_for(scene, settings: SolveSettings) -> str:
-    """How the direct light is computed: as the settings say, but gathered where a light's direct
-    light cannot be shot (no shadow, soft falloff: ``Lights.gathered_only``; ``light_notes`` says so)."""
-    return GATHERED if scene.lights.gathered_only() else settings.direct_light
+    """How the direct light is computed: as the settings say, but gathered by the two-way
+    iteration, and where a light's direct light cannot be shot (no shadow, soft falloff:
+    ``Lights.gathered_only``; ``light_notes`` says so)."""
+    if settings.method == TWO_WAY or scene.lights.gathered_only():
+        return GATHERED
+    return settings.direct_light
 
 
 def _walk_key(patches: Patches, settings: SolveSettings, direct_light):
     """What RAY_RATES and RAYS_PER_PATH are kept by: the geometry and the walk."""
-    return patches.geometry_key, settings.estimator, settings.exit_point, direct_light
+    return patches.geometry_key, settings.method, settings.estimator, settings.exit_point, direct_light
 
 
 def ray_rate(scene, patches: Patches, settings: SolveSettings) -> float:
@@ -103,7 +107,7 @@ def ray_rate(scene, patches: Patches, settings: SolveSettings) -> float:
     if key not in RAY_RATES:
         r = solve(scene, settings.estimator, paths=CALIBRATION_PATHS, threshold=settings.threshold,
                   exit_point=settings.exit_point, threads=settings.threads or None, max_seconds=CALIBRATION_SECONDS,
-                  direct_light=direct_light)
+                  direct_light=direct_light, method=settings.method)
         if not r.rays:
             return float("nan")  # not one chunk in the time: unknown, measured again next time
         RAY_RATES[key], RAYS_PER_PATH[key] = r.rays_per_second, r.rays / r.paths
@@ -166,10 +170,11 @@ def estimate(objects, settings: SolveSettings) -> dict:
     rate = ray_rate(scene, patches, settings)
     paths, rays = int(p.paths), float(p.expected_rays)
     direct_light = direct_light_for(scene, settings)
-    if direct_light == GATHERED and not settings.paths:
-        # No formula predicts the gathered walk's error: the solve's plan at its measured rays
-        # per path; the run stops on its measured error.
-        paths = planned_paths(paths, direct_light)
+    planned = (direct_light == GATHERED or settings.method != WALK) and not settings.paths
+    if planned:
+        # No formula predicts the error of a gathered first bounce or the two-way iteration: the
+        # solve's plan at its measured rays per path; the run stops on its measured error.
+        paths = planned_paths(paths, direct_light, settings.method)
         rays = paths * RAYS_PER_PATH.get(_walk_key(patches, settings, direct_light), float("nan"))
     seconds = rays / rate if rate > 0 else float("nan")  # (NaN > 0 is False)
     return {
@@ -180,6 +185,8 @@ def estimate(objects, settings: SolveSettings) -> dict:
         "paths": paths,
         "rays": rays,
         "direct_light": direct_light,
+        "method": settings.method,
+        "planned": planned,
         "rays_per_second": float(rate),
         "seconds": seconds,
         "path_length": float(p.expected_path_length),
@@ -223,6 +230,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         threads=settings.threads or None,
         cluster=settings.cluster or None,
         direct_light=direct_light_for(scene, settings),
+        method=settings.method,
     )
     if result.seconds > 0 and result.rays:
         key = _walk_key(patches, settings, result.direct_light)

@@ -44,6 +44,7 @@ def _number(option, update=None, **extra):
 
 
 class RadiositySettings(bpy.types.PropertyGroup):
+    method: _enum(options.METHOD, _changed)
     estimator: _enum(options.ESTIMATOR, _changed)
     threshold: _number(options.THRESHOLD, _changed, precision=4, step=0.01)
     target_error: _number(options.TARGET_ERROR, _changed, soft_min=0.5, soft_max=20.0, precision=2, subtype="PERCENTAGE")
@@ -101,6 +102,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
             exit_point=self.exit_point,
             sampling=self.sampling,
             direct_light=self.direct_light,
+            method=self.method,
             stop_rule=self.stop_rule,
             seed=int(self.seed),
             max_seconds=float(self.time_limit) or None,

@@ -15,11 +15,11 @@ ceiling, so their back side, which Cycles lets emit too, faces out of the scene)
 - ``lamp_room``: the same box closed, without its light panel, lit only by a point light
   (radius 5 cm) and a 0.3 m square area light;
 - ``open_sun_world``: ``cycles_lights``' open floor, red wall and block under a sun and a uniform
-  sky together.
-
-The figure 4 room (66,572 patches) is not in the suite yet: its Cycles bake at one pixel block a
-patch and its panels hanging 1 cm under the ceiling (emitting from both sides in Cycles, one in
-ours) need a variant of their own.
+  sky together;
+- ``fig4_room``: the paper's figure 4 room (``sample_scenes.room_fig4``, 66,572 patches, R_ave
+  0.5, four 1.5 m panels hanging 1 cm under the ceiling) with a black 2 m plate 2 mm above each
+  panel: Cycles lets a panel's back emit too, into the plate, which absorbs it, as our panels'
+  backs do; 2 x 2 bake pixels a patch (4.4 million at 8 x 8 would take Cycles an hour a bake).
 
 Each side's error comes from its own estimate, both unbiased (the agreement columns check it:
 ours against the mean of the two bakes): Cycles' from two bakes of different seeds (a patch's
@@ -29,10 +29,12 @@ and the RMS over patches divided by the mean radiosity (the panel's). The error 
 1 / sqrt(work) (samples a pixel, paths); time = fixed + work x rate, fitted from a small and a
 large run of each; the time to a level is that line at the work the level needs. Ours: the
 operator's pipeline (``pipeline.run_solve``: reading the scene, meshing, solving, colours) with
-the paper's walk (finite estimator, exit point hit, "shot") and with the first bounce gathered
+the paper's walk (finite estimator, exit point hit, "shot"), with the first bounce gathered
 by shadow rays ("gathered", exit point hit: the reflected light leaves from where the direct
-light landed), 2 threads; Cycles: the COMBINED bake's wall time
-(``cycles_comparison.configure_bake``), 2 threads.
+light landed) and with the two-way iteration ("two-way", below), 2 threads; Cycles: the COMBINED bake's wall time
+(``cycles_comparison.configure_bake``), 2 threads. And ours with the two-way iteration
+(``method="two_way"``, exit point hit: the direct light gathered, its first reflection leaving
+from where it landed, every later ray used both ways about a control variate).
 """
 from __future__ import annotations
 
@@ -114,7 +116,25 @@ def open_sun_world():
     return Spec(corners, R, np.zeros_like(R), lights=lights, world=((0.3, 0.35, 0.4), 1.0), block=12)
 
 
-SCENES = {"empty_room": empty_room, "cornell": cornell, "lamp_room": lamp_room, "open_sun_world": open_sun_world}
+def fig4_room():
+    import sample_scenes
+
+    corners, R, E, _ = _from_sample(sample_scenes.build("room_fig4"))
+    plates = []
+    for cx, cy in sample_scenes.room_fig4.LIGHT_CENTRES:
+        x0, x1, y0, y1 = cx - 1.0, cx + 1.0, cy - 1.0, cy + 1.0
+        z = sample_scenes.room_fig4.ROOM[2] - sample_scenes.room_fig4.LIGHT_DROP + 0.002
+        plates.append([(x0, y0, z), (x0, y1, z), (x1, y1, z), (x1, y0, z)])  # facing down, onto the panel's back
+    zeros = np.zeros((len(plates), 3))
+    return Spec(np.concatenate([corners, plates]), np.concatenate([R, zeros]), np.concatenate([E, zeros]), block=2)
+
+
+SCENES = {"empty_room": empty_room, "cornell": cornell, "lamp_room": lamp_room, "open_sun_world": open_sun_world,
+          "fig4_room": fig4_room}
+# Our ways of solving (SolveSettings beside paths, seed, threads, exit point hit), by name.
+SIDES = {"shot": {"direct_light": "shot"}, "gathered": {"direct_light": "gathered"}, "two_way": {"method": "two_way"}}
+LABELS = {"cycles": "Cycles", "shot": "ours, paper walk", "gathered": "ours, gathered first bounce",
+          "two_way": "ours, two-way iteration"}
 
 
 def _material(name, reflectivity, emission, image):
@@ -171,15 +191,14 @@ def build(spec):
     return obj, image, rows, columns
 
 
-def ours(paths, direct_light, seed=0):
+def ours(paths, side, seed=0):
     """(B (P,3) in face order, its variance, wall seconds, sources) from the operator's pipeline."""
     import bpy
 
     from addon import pipeline, scene_io
 
     objects, _ = scene_io.read_selection(bpy.context)
-    settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, seed=seed, threads=2, direct_light=direct_light,
-                                      exit_point="hit")
+    settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, seed=seed, threads=2, exit_point="hit", **SIDES[side])
     wall = time.perf_counter()
     out = pipeline.run_solve(objects, settings)
     wall = time.perf_counter() - wall
@@ -222,7 +241,7 @@ def measure(name, samples, paths):
     cycles_error = errors(0.5 * (a - b).mean(axis=1) ** 2, mean, measured)
     row["cycles"] = {"error": cycles_error, "fixed": fixed, "rate": rate, "work": samples,
                      "seconds": {m: {str(l): seconds_to(l, cycles_error[m], samples, fixed, rate) for l in LEVELS} for m in MEASURES}}
-    for light in ("shot", "gathered"):
+    for light in SIDES:
         _, _, small, _ = ours(max(paths // 16, 4096), light)
         B, variance, seconds, sources = ours(paths, light)
         fixed, rate = line(max(paths // 16, 4096), small, paths, seconds)
@@ -248,7 +267,9 @@ def plot(rows, path):
 
     fig, axes = plt.subplots(1, len(rows), figsize=(4.2 * len(rows), 3.8), squeeze=False)
     for ax, row in zip(axes[0], rows):
-        for side, label in (("cycles", "Cycles"), ("shot", "ours, paper walk"), ("gathered", "ours, gathered first bounce")):
+        for side, label in LABELS.items():
+            if side not in row:
+                continue
             r = row[side]
             error = r["error"]["per_patch"]
             levels = np.geomspace(0.002, 0.05, 40)
@@ -268,28 +289,40 @@ def plot(rows, path):
     plt.close(fig)
 
 
+def _ours(row):
+    return [side for side in SIDES if side in row]
+
+
 def report(rows, command, out):
+    sides = [side for side in SIDES if any(side in r for r in rows)]
     lines = ["# The issue 26 suite: time to 1% and 0.25% against Cycles", "", f"`{command}`", "",
              (__doc__.split("\n\n", 2)[2]).strip(), "",
              "## Agreement", "",
-             "| scene | patches | ours shot / Cycles | z RMS | ours gathered / Cycles | z RMS | sources |",
-             "|---|---:|---:|---:|---:|---:|---|"]
+             "| scene | patches | " + " | ".join(f"{LABELS[k][6:]} / Cycles | z RMS" for k in sides) + " | sources |",
+             "|---|---:|" + "---:|---:|" * len(sides) + "---|"]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['patches']} | {r['shot']['ratio']:.4f} | {r['shot']['z_rms']:.2f} | "
-                     f"{r['gathered']['ratio']:.4f} | {r['gathered']['z_rms']:.2f} | {r['shot']['sources']} |")
+        cells = [f"{r[k]['ratio']:.4f} | {r[k]['z_rms']:.2f}" if k in r else "- | -" for k in sides]
+        lines.append(f"| {r['scene']} | {r['patches']} | " + " | ".join(cells) + f" | {r[_ours(r)[0]]['sources']} |")
     lines += ["", "z RMS: the RMS over lit patches of (ours - Cycles) over both sides' noise; about 1 when both agree.", ""]
     for measure_name, title in (("per_patch", "per-patch relative RMS"), ("rms_over_mean", "RMS over patches / mean radiosity")):
         lines += [f"## Seconds to a {title}", "",
-                  "| scene | level | Cycles s | ours shot s | shot / Cycles | ours gathered s | gathered / Cycles |",
-                  "|---|---:|---:|---:|---:|---:|---:|"]
+                  "| scene | level | Cycles s | " + " | ".join(f"{LABELS[k][6:]} s | / Cycles" for k in sides) + " |",
+                  "|---|---:|---:|" + "---:|---:|" * len(sides)]
         for r in rows:
             for level in LEVELS:
-                c, s, g = (r[k]["seconds"][measure_name][str(level)] for k in ("cycles", "shot", "gathered"))
-                lines.append(f"| {r['scene']} | {level:.2%} | {c:.2f} | {s:.2f} | {s / c:.2f} | {g:.2f} | {g / c:.2f} |")
+                c = r["cycles"]["seconds"][measure_name][str(level)]
+                cells = []
+                for k in sides:
+                    t = r[k]["seconds"][measure_name][str(level)] if k in r else math.nan
+                    cells.append(f"{t:.2f} | **{t / c:.2f}**" if k == "two_way" else f"{t:.2f} | {t / c:.2f}")
+                lines.append(f"| {r['scene']} | {level:.2%} | {c:.2f} | " + " | ".join(cells) + " |")
         lines.append("")
-    lines += ["Measured errors (at the work run): " + "; ".join(
-        f"{r['scene']}: Cycles {r['cycles']['error']['per_patch']:.4f} at {r['samples']} samples, shot "
-        f"{r['shot']['error']['per_patch']:.4f} / gathered {r['gathered']['error']['per_patch']:.4f} at {r['paths']:,} paths"
+    lines += ["Measured per-patch errors (at the work run): " + "; ".join(
+        f"{r['scene']}: Cycles {r['cycles']['error']['per_patch']:.4f} at {r['samples']} samples, "
+        + ", ".join(f"{LABELS[k][6:]} {r[k]['error']['per_patch']:.4f}" for k in _ours(r)) + f" at {r['paths']:,} paths"
+        for r in rows), "", "Fixed seconds and seconds per unit of work (time = fixed + rate x work, from the small and the "
+        "large run): " + "; ".join(f"{r['scene']}: " + ", ".join(
+            f"{LABELS[k].replace('ours, ', '')} {r[k]['fixed']:.3f} + {r[k]['rate']:.3g}" for k in ("cycles", *_ours(r)))
         for r in rows), "", f"![time against error]({out.with_suffix('.png').name})"]
     out.write_text("\n".join(lines) + "\n")
 
@@ -306,16 +339,19 @@ def main(argv=None):
         report(rows, "python -m benchmarks.suite", args.replot.with_suffix(".md"))
         return
     samples, paths = (16, 100_000) if args.quick else (256, 2_000_000)
-    rows = []
+    out = (ROOT / "out" if args.quick else RESULTS) / "suite.md"
+    out.parent.mkdir(exist_ok=True)
+    # Scenes run alone are merged into the results of the others (in SCENES' order).
+    kept = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").exists() else []
+    rows = {r["scene"]: r for r in kept if r["scene"] in SCENES}
     for name in args.scenes:
         started = time.perf_counter()
         row = measure(name, samples, paths)
-        rows.append(row)
-        print(f"{name}: " + ", ".join(f"{k} {row[k]['seconds']['per_patch']['0.01']:.2f} s" for k in ("cycles", "shot", "gathered"))
+        rows[name] = row
+        print(f"{name}: " + ", ".join(f"{k} {row[k]['seconds']['per_patch']['0.01']:.2f} s" for k in ("cycles", *SIDES))
               + f" to 1% per patch ({time.perf_counter() - started:.0f} s)", flush=True)
-    out = (ROOT / "out" if args.quick else RESULTS) / "suite.md"
-    out.parent.mkdir(exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+        out.with_suffix(".json").write_text(json.dumps([rows[n] for n in SCENES if n in rows], indent=1))
+    rows = [rows[n] for n in SCENES if n in rows]
     plot(rows, out.with_suffix(".png"))
     report(rows, "python -m benchmarks.suite" + (" --quick" if args.quick else ""), out)
     print(f"wrote {out}")

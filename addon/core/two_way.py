@@ -198,22 +198,29 @@ def generation(tables, state, weight, count, rng):
     beta = (dB @ area) / area.sum()  # (C,) the control variate
     met = hits.front
     i, j = patch.compress(met), hits.patch.compress(met)
-    gather_weight = 1.0 / (expected.take(i) + expected.take(j) * area.take(i) / area.take(j))
-    shoot_weight = 1.0 / (expected.take(j) + expected.take(i) * area.take(j) / area.take(i))
-    lost = patch.compress(~met)  # escaped or on a back side: seen as 0 - beta, from i only
+    # Segment i -> j adds dB_j s / A_i to H_i and dB_i s / A_j to H_j, s = 1 / (n_i/A_i + n_j/A_j).
+    density = expected / area
+    s = density.take(i)
+    s += density.take(j)
+    np.reciprocal(s, out=s)
     value = dB - beta[:, None]
-    lost_share = np.bincount(lost, minlength=P) / expected
+    gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
+    gathered *= s
+    shot *= s
+    lost = patch.compress(~met)  # escaped or on a back side: seen as 0 - beta, from i only
+    kept = 1.0 - np.bincount(lost, minlength=P) / expected if lost.size else 1.0
     H = np.empty_like(dB)
     for c in range(dB.shape[0]):
-        H[c] = np.bincount(i, weights=value[c].take(j) * gather_weight, minlength=P)
-        H[c] += np.bincount(j, weights=value[c].take(i) * shoot_weight, minlength=P)
-        H[c] += beta[c] * (1.0 - lost_share)
+        H[c] = np.bincount(i, weights=gathered[c], minlength=P)
+        H[c] += np.bincount(j, weights=shot[c], minlength=P)
+        H[c] /= area
+        H[c] += beta[c] * kept
     H += state.correction
     state.correction = 0.0
-    # What the rays from i that found nothing, or a back side, estimate of i's reflected power.
-    for mask, account in ((hits.hit < 0, state.escaped), ((hits.hit >= 0) & ~met, state.blocked)):
-        share = np.bincount(patch.compress(mask), minlength=P) / expected
-        account += (dB * area) @ share
+    if lost.size:  # what the rays from i that found nothing, or a back side, estimate of i's reflected power
+        for mask, account in ((hits.hit < 0, state.escaped), ((hits.hit >= 0) & ~met, state.blocked)):
+            share = np.bincount(patch.compress(mask), minlength=P) / expected
+            account += (dB * area) @ share
     state.irradiance += H
     state.reflected = tables.reflectivity * H
 

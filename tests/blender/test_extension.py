@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import addon
-from addon.options import STOP_RULE
+from addon.options import METHOD, STOP_RULE
 from addon import estimate, panel, patches, pipeline, scene_io, worker
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
 from addon.core.meshing import concatenate, mesh_patches, point_average, triangle_areas
@@ -87,7 +87,8 @@ def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1, **solve_options
     E = np.concatenate([spec[n][3][m.patch_face] for n, m in zip(names, meshes)])
     scene = PatchScene(c.vertices, c.triangles, c.triangle_patch, R, E)
     target = relative_rms_to_mse(predict(scene), relative_rms)
-    solve_options.setdefault("stop_rule", STOP_RULE.default)  # the extension's default
+    solve_options.setdefault("stop_rule", STOP_RULE.default)  # the extension's defaults
+    solve_options.setdefault("method", METHOD.default)
     result = solve(scene, "finite", target_mse=target, seed=seed, threads=threads, **solve_options)
     return names, meshes, c, result
 
@@ -158,6 +159,30 @@ def test_gathered_direct_light_reaches_the_core_and_the_estimate_plans_for_it(bl
     names, meshes, combined, ref = reference(spec, direct_light="gathered")
     assert ref.direct_light == "gathered" and s.last_paths == ref.paths and s.last_rays == ref.rays
     assert s.last_estimator == "finite, direct light gathered"
+    for k, obj in enumerate(result_objects()):
+        _, colours = read_colours(obj.data, "Radiosity")
+        expected = ref.radiosity[combined.patch_slice(k)].astype(np.float32)
+        np.testing.assert_array_equal(colours[:, :3], np.repeat(expected, meshes[k].face_sizes, axis=0))
+
+
+def test_two_way_iteration_reaches_the_core_and_the_estimate_plans_for_it(blender):
+    """The panel's Method 'Two-way iteration' is the core's method="two_way" (bitwise the core's
+    result on the same patches, its direct light gathered whatever the walks' setting says);
+    the estimate shows the solve's plan (a quarter of the paper's paths at the rays a path of
+    it measured), and the last run names the method."""
+    spec = build_test_scene()
+    s = configure(blender)
+    s.method = "walk"
+    paper = estimate.compute(blender)
+    s.method = "two_way"
+    s.direct_light = "shot"  # (the walks' setting: not the two-way iteration's)
+    value = estimate.compute(blender)
+    assert value["planned"] and value["direct_light"] == "gathered" and value["paths"] == paper["paths"] // 4
+    assert value["rays"] > 2 * value["paths"] and value["efficiency"] == paper["efficiency"]
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    names, meshes, combined, ref = reference(spec, method="two_way")
+    assert ref.method == "two_way" and s.last_paths == ref.paths and s.last_rays == ref.rays
+    assert s.last_estimator == "two-way iteration, direct light gathered" and s.last_stopped == "target"
     for k, obj in enumerate(result_objects()):
         _, colours = read_colours(obj.data, "Radiosity")
         expected = ref.radiosity[combined.patch_slice(k)].astype(np.float32)
