@@ -5,8 +5,9 @@ a source lands is the noisiest choice it makes. Here each patch j gathers its di
 irradiance H_j instead, from uniform points of it, each looking at one source chosen by power
 (a point on an emitting patch or on a light, or a direction of the sun) through a shadow ray
 (none for a light that casts no shadow: its light passes through objects, as Cycles draws it),
-and along one cosine-distributed ray (an emitting patch it meets, or the sky). The walk then shoots only what the
-direct light reflects: patch j is a source of emittance E'_j = R_j H_j, and the walk adds the
+and along one cosine-distributed ray (an emitting patch it meets, or the sky; none where the
+only sources are lamps, which no ray meets). The walk then shoots only what the direct light
+reflects: patch j is a source of emittance E'_j = R_j H_j, and the walk adds the
 light of every later bounce (``direct_light="gathered"`` in :func:`.solver.solve`). Leaving
 from hit points (the continuous walk), the reflected light leaves from where it arrived: each
 gathering sample is a point source of what it found, times R_j A_j / n_j (n_j the patch's
@@ -75,6 +76,8 @@ class Gathering:
         self.emission = scene.emission.T  # (3,P)
         self.reflectivity = scene.reflectivity.T  # (3,P)
         self.patch_area = scene.patch_area
+        # A cosine ray finds light only on an emitting patch or in the sky (lamps are not surfaces).
+        self.cosine_rays_find_light = bool(self.emission.any()) or bool(self.worlds)
         self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
 
@@ -105,7 +108,8 @@ def gather_direct(tables, gathering, rng):
     rays = 0
     if gathering.table is not None:
         rays += _shadow_rays(tables, gathering, patch, x, normal, u, u32, value)
-    rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
+    if gathering.cosine_rays_find_light:
+        rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
     H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)])
     H /= gathering.samples
     return H, rays, (patch, x, value)
