@@ -19,7 +19,9 @@ ceiling, so their back side, which Cycles lets emit too, faces out of the scene)
 - ``fig4_room``: the paper's figure 4 room (``sample_scenes.room_fig4``, 66,572 patches, R_ave
   0.5, four 1.5 m panels hanging 1 cm under the ceiling) with a black 2 m plate 2 mm above each
   panel: Cycles lets a panel's back emit too, into the plate, which absorbs it, as our panels'
-  backs do; 2 x 2 bake pixels a patch (4.4 million at 8 x 8 would take Cycles an hour a bake).
+  backs do; 2 x 2 bake pixels a patch (4.4 million at 8 x 8 would take Cycles an hour a bake),
+  a quarter of the samples a pixel and 8 times the paths (66,576 patches need them for a
+  batch-means error of their own).
 
 Each side's error comes from its own estimate, both unbiased (the agreement columns check it:
 ours against the mean of the two bakes): Cycles' from two bakes of different seeds (a patch's
@@ -71,6 +73,8 @@ class Spec:
     lights: list = field(default_factory=list)
     world: tuple | None = None
     block: int = 8
+    samples_scale: float = 1.0  # of the suite's samples a pixel and paths
+    paths_scale: float = 1.0
 
 
 def _from_sample(sample):
@@ -119,14 +123,17 @@ def open_sun_world():
 def fig4_room():
     import sample_scenes
 
-    corners, R, E, _ = _from_sample(sample_scenes.build("room_fig4"))
+    import sample_scenes.room_fig4 as fig4
+
+    corners, R, E, _ = _from_sample(sample_scenes.build("fig4_room"))
     plates = []
-    for cx, cy in sample_scenes.room_fig4.LIGHT_CENTRES:
+    for cx, cy in fig4.LIGHT_CENTRES:
         x0, x1, y0, y1 = cx - 1.0, cx + 1.0, cy - 1.0, cy + 1.0
-        z = sample_scenes.room_fig4.ROOM[2] - sample_scenes.room_fig4.LIGHT_DROP + 0.002
+        z = fig4.ROOM[2] - fig4.LIGHT_DROP + 0.002
         plates.append([(x0, y0, z), (x0, y1, z), (x1, y1, z), (x1, y0, z)])  # facing down, onto the panel's back
     zeros = np.zeros((len(plates), 3))
-    return Spec(np.concatenate([corners, plates]), np.concatenate([R, zeros]), np.concatenate([E, zeros]), block=2)
+    return Spec(np.concatenate([corners, plates]), np.concatenate([R, zeros]), np.concatenate([E, zeros]), block=2,
+                samples_scale=0.25, paths_scale=8)
 
 
 SCENES = {"empty_room": empty_room, "cornell": cornell, "lamp_room": lamp_room, "open_sun_world": open_sun_world,
@@ -229,6 +236,7 @@ def seconds_to(level, error, work, fixed, rate):
 
 def measure(name, samples, paths):
     spec = SCENES[name]()
+    samples, paths = max(1, round(samples * spec.samples_scale)), round(paths * spec.paths_scale)
     obj, image, rows, columns = build(spec)
     P = len(spec.corners)
     measured = ~(spec.emission > 0).any(axis=1)

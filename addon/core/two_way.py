@@ -32,8 +32,9 @@ Per chunk:
                     sqrt(A_j) R_bar_j; the count in proportion to the generation's reflected power
     cast            cosine-distributed rays from Hammersley points of each patch (rays.cast)
     score_two_ways  each segment's two estimates, weighted, about the control variate
-    reflect         dB = R H, the next generation's; once its power is below ROULETTE of the
-                    first generation's, Russian roulette: go on with dB / q with probability q
+    reflect         dB = R H, the next generation's; once its power would pay for fewer than
+                    LEAST_RAYS rays a patch, Russian roulette: go on with dB / q and that many
+                    rays with probability q
 
 Each generation is, given the previous one, an unbiased estimate of the light it carries on,
 so a chunk's total is unbiased (the roulette keeps the expectation); chunks are independent
@@ -59,10 +60,9 @@ FIRST_REFLECTION_RAYS = 3.0
 GENERATION_RAYS = 2.0
 # ... and n DIRECT_SAMPLES gathering samples of the direct light (two rays each).
 DIRECT_SAMPLES = 1.0
-# A generation whose reflected power is below this share of the first one's plays roulette.
-ROULETTE = 1e-3
-# A generation casts at least this many rays a patch: fewer, and the two-way weights of the few
-# segments there are would make noise that does not die down with the light.
+# A generation casts at least this many rays a patch (fewer, and the two-way weights of the few
+# segments there are make noise that does not die down with the light): one whose power would
+# pay for fewer plays Russian roulette, going on with this many rays or not at all.
 LEAST_RAYS = 0.25
 
 
@@ -115,21 +115,22 @@ def two_way_chunk(tables, paths, rng, check=None):
     first_power = reflected_power(tables, state.reflected)
     budget = GENERATION_RAYS * paths / max(first_power, 1e-300)  # rays per unit of reflected power
     weight = allotment_weight(gathering.patch_area, tables.grey_reflectivity)
+    least = int(np.ceil(LEAST_RAYS * weight.size))
     while True:
         if check is not None:
             check()
-        power = reflected_power(tables, state.reflected)
-        if power <= 0:
+        count = budget * reflected_power(tables, state.reflected)
+        if count <= 0:
             break
-        if power < ROULETTE * first_power:
-            go_on = power / (ROULETTE * first_power)
+        if count < least:
+            go_on = count / least
             if rng.random() >= go_on:
                 state.absorbed += leaving(tables, state.reflected)  # (the roulette's end: nothing leaves)
                 break
             state.absorbed -= leaving(tables, state.reflected) * (1.0 / go_on - 1.0)  # what leaves beyond it
             state.reflected = state.reflected / go_on
-            power /= go_on
-        generation(tables, state, weight, max(int(np.rint(budget * power)), int(np.ceil(LEAST_RAYS * weight.size))), rng)
+            count = least
+        generation(tables, state, weight, int(np.rint(count)), rng)
     incident = state.irradiance * gathering.patch_area
     absorbed = state.absorbed + ((1.0 - R) * incident).sum(axis=1)
     scale = paths / gathering.total_power  # relative weight per unit of power
