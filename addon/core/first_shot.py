@@ -28,7 +28,7 @@ import copy
 
 import numpy as np
 
-from .lights import WorldLight, cosine_directions_about
+from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .rays import hit_patches, meets_front
 from .sampling import SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights
@@ -172,7 +172,9 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value):
     """Adds each sample's cosine-ray estimate to ``value``: the emitting patch it meets (weighted
     against the shadow rays), or the sky where it escapes. Returns the rays traced."""
     g = tables.geometry
-    towards = cosine_directions_about(normal, u[5], u[6])
+    towards = add_sphere_points(g.patch_normal_rows.take(patch, axis=1), u[5].astype(np.float32), u[6].astype(np.float32))
+    towards = towards.astype(np.float64)
+    towards /= np.sqrt(np.einsum("in,in->n", towards, towards))  # (normal + a sphere point: cosine distributed)
     hit, source, front, t = _trace(tables, x, towards)
     met = np.flatnonzero(front & (hit >= 0) & (gathering.emission[:, source].any(axis=0)) & (source != patch))
     if met.size:
