@@ -58,6 +58,14 @@ def test_the_gathered_first_shot_and_the_measured_stop_rule_on_a_cluster(client,
     assert np.array_equal(local.radiosity, remote.radiosity) and local.stopped == remote.stopped == "target"
 
 
+@pytest.mark.parametrize("exit_point", [EXIT_RANDOM, EXIT_HIT])
+def test_the_two_way_iteration_on_a_cluster_is_bitwise_the_local_one(client, scene, exit_point):
+    local = solve(scene, paths=30_000, seed=5, method="two_way", exit_point=exit_point, threads=2)
+    remote = solve(scene, paths=30_000, seed=5, method="two_way", exit_point=exit_point, cluster=client)
+    assert np.array_equal(local.radiosity, remote.radiosity) and local.rays == remote.rays
+    assert np.array_equal(local.reflected_variance, remote.reflected_variance, equal_nan=True)
+
+
 def test_a_killed_worker_loses_no_paths(client, scene):
     """A worker process killed mid-solve: its tasks run again on the other worker (Dask retries
     the tasks of lost workers), and the result is still bitwise the local one."""
