@@ -5,7 +5,9 @@ import pytest
 from boxes import box_scene
 
 from addon.core import GATHERED, solve
+from addon.core.first_shot import Gathering, gather_direct
 from addon.core.reference import solve_radiosity_system
+from addon.core.tables import WalkTables
 
 R_FACES = [(0.7, 0.7, 0.7), (0.5, 0.5, 0.5), (0.8, 0.2, 0.2), (0.2, 0.8, 0.2), (0.6, 0.6, 0.6), (0.4, 0.4, 0.9)]
 E_FACES = [(0, 0, 0), (1, 1, 1), (0, 0, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0)]
@@ -126,3 +128,29 @@ def test_reflected_light_leaves_from_where_the_direct_light_landed():
                        direct_light=GATHERED, exit_point=exit_point)
         H, sd = result.irradiance[1, 0], np.sqrt(result.reflected_variance[1, 0]) / R_wall
         assert abs(H - truth) < 5 * sd < abs(H - other), exit_point
+
+
+def test_cosine_rays_are_cast_in_proportion_to_the_emitters_share_of_the_area(monkeypatch):
+    """A sky needs every cosine ray and lamps none; emitting patches get about the chance that a
+    cosine ray meets one (10 A_E / A_T, at least 0.1): the one-emitter box casts about a tenth
+    as many, and its gathered estimate stays the direct solve (test above: the balance
+    heuristic counts the share)."""
+    from addon.core.first_shot import cosine_share
+
+    scene, _ = _box_with_one_emitter()
+    assert cosine_share(scene, world=True) == 1.0
+    assert cosine_share(scene, world=False) == pytest.approx(10 / 96)
+    whole_face = scene.with_materials(scene.reflectivity, np.where(np.arange(96)[:, None] < 16, 1.0, 0.0) * np.ones(3))
+    assert cosine_share(whole_face, world=False) == 1.0
+    from addon.core import first_shot
+
+    traced = []
+    trace = first_shot._trace
+    monkeypatch.setattr(first_shot, "_trace", lambda t, o, d: traced.append(o.shape[1]) or trace(t, o, d))
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    gathering = Gathering(scene, np.full(scene.patch_count, 4.0))
+    with tables.numpy_turn:
+        _, _, (patch, _, _) = gather_direct(tables, gathering, np.random.default_rng(0))
+    cosine = traced[-1]  # (the shadow rays' cast comes first)
+    share = 10 / 96
+    assert abs(cosine - patch.size * share) < 5 * np.sqrt(patch.size * share * (1 - share))
