@@ -59,7 +59,7 @@ from .tallies import ChunkTally
 FIRST_REFLECTION_RAYS = 3.0
 GENERATION_RAYS = 2.0
 # ... and n DIRECT_SAMPLES gathering samples of the direct light (two rays each).
-DIRECT_SAMPLES = 1.0
+DIRECT_SAMPLES = 1.5
 # A generation casts at least this many rays a patch (fewer, and the two-way weights of the few
 # segments there are make noise that does not die down with the light): one whose power would
 # pay for fewer plays Russian roulette, going on with this many rays or not at all.
