@@ -141,7 +141,7 @@ SCENES = {"empty_room": empty_room, "cornell": cornell, "lamp_room": lamp_room, 
 # Our ways of solving (SolveSettings beside paths, seed, threads, exit point hit), by name.
 SIDES = {"shot": {"direct_light": "shot"}, "gathered": {"direct_light": "gathered"}, "two_way": {"method": "two_way"}}
 LABELS = {"cycles": "Cycles", "shot": "ours, paper walk", "gathered": "ours, gathered first bounce",
-          "two_way": "ours, two-way iteration"}
+          "two_way": "ours, two-way iteration", "direct": "ours, direct light alone (a bound)"}
 
 
 def _material(name, reflectivity, emission, image):
@@ -215,6 +215,42 @@ def ours(paths, side, seed=0):
     return B, variance, wall, out.sources
 
 
+def direct_only(paths, chunks=32):
+    """The direct light alone as the two-way iteration gathers it (``first_shot.gather_direct``,
+    its samples for chunks of paths / 32 paths, on 2 threads): (R H per chunk (K,P) in face
+    order, wall seconds). What it takes to bring R H alone to an error bounds every method of
+    ours that gathers it this way, Cycles' way (next-event estimation)."""
+    import bpy
+    from concurrent.futures import ThreadPoolExecutor
+
+    from addon import patches as patch_making
+    from addon import scene_io
+    from addon.core.first_shot import Gathering, gather_direct
+    from addon.core.tables import WalkTables
+    from addon.core.two_way import direct_samples
+
+    objects, _ = scene_io.read_selection(bpy.context)
+    patches = patch_making.make_patches(objects, 1e6)
+    scene, _ = patch_making.scene_and_notes(patches)
+    tables = WalkTables(scene, "finite", 1e-3, "hit")
+    gathering = Gathering(scene, direct_samples(math.ceil(paths / chunks), scene))
+    R = scene.reflectivity.T
+
+    def run(k):
+        rng = np.random.default_rng(np.random.SeedSequence(9, spawn_key=(k,)))
+        with tables.numpy_turn:
+            return (R * gather_direct(tables, gathering, rng)[0]).T
+
+    wall = time.perf_counter()
+    with ThreadPoolExecutor(2) as pool:
+        parts = list(pool.map(run, range(chunks)))
+    wall = time.perf_counter() - wall
+    face = patches.meshes[0].patch_face
+    out = np.zeros((chunks, scene.patch_count))
+    out[:, face] = np.array(parts).mean(axis=2)
+    return out, wall
+
+
 def errors(variance, mean, measured):
     """Both measures of an estimate with per-patch variance (P,) around ``mean`` (P,), over the
     patches ``measured``."""
@@ -249,6 +285,10 @@ def measure(name, samples, paths):
     cycles_error = errors(0.5 * (a - b).mean(axis=1) ** 2, mean, measured)
     row["cycles"] = {"error": cycles_error, "fixed": fixed, "rate": rate, "work": samples,
                      "seconds": {m: {str(l): seconds_to(l, cycles_error[m], samples, fixed, rate) for l in LEVELS} for m in MEASURES}}
+    direct, seconds = direct_only(paths)
+    e = errors(direct.var(axis=0, ddof=1) / len(direct), mean, measured)
+    row["direct"] = {"error": e, "fixed": 0.0, "rate": seconds / paths, "work": paths,
+                     "seconds": {m: {str(l): seconds_to(l, e[m], paths, 0.0, seconds / paths) for l in LEVELS} for m in MEASURES}}
     for light in SIDES:
         _, _, small, _ = ours(max(paths // 16, 4096), light)
         B, variance, seconds, sources = ours(paths, light)
@@ -281,7 +321,8 @@ def plot(rows, path):
             r = row[side]
             error = r["error"]["per_patch"]
             levels = np.geomspace(0.002, 0.05, 40)
-            ax.loglog(levels * 100, [seconds_to(l, error, r["work"], r["fixed"], r["rate"]) for l in levels], label=label)
+            ax.loglog(levels * 100, [seconds_to(l, error, r["work"], r["fixed"], r["rate"]) for l in levels], label=label,
+                      ls=":" if side == "direct" else "-")
             ax.plot(error * 100, seconds_to(error, error, r["work"], r["fixed"], r["rate"]), "o", color=ax.lines[-1].get_color())
         for level in LEVELS:
             ax.axvline(level * 100, color="grey", lw=0.6, ls=":")
@@ -311,11 +352,16 @@ def report(rows, command, out):
     for r in rows:
         cells = [f"{r[k]['ratio']:.4f} | {r[k]['z_rms']:.2f}" if k in r else "- | -" for k in sides]
         lines.append(f"| {r['scene']} | {r['patches']} | " + " | ".join(cells) + f" | {r[_ours(r)[0]]['sources']} |")
-    lines += ["", "z RMS: the RMS over lit patches of (ours - Cycles) over both sides' noise; about 1 when both agree.", ""]
+    lines += ["", "z RMS: the RMS over lit patches of (ours - Cycles) over both sides' noise; about 1 when both agree.", "",
+              "*Direct light alone*: each patch's direct light times its reflectivity, gathered as the two-way "
+              "iteration gathers it (next-event estimation, as Cycles does), with nothing after it: the seconds it "
+              "alone needs to reach the level (on 2 threads, no fixed cost) bound every method of ours that "
+              "gathers the direct light this way.", ""]
     for measure_name, title in (("per_patch", "per-patch relative RMS"), ("rms_over_mean", "RMS over patches / mean radiosity")):
         lines += [f"## Seconds to a {title}", "",
-                  "| scene | level | Cycles s | " + " | ".join(f"{LABELS[k][6:]} s | / Cycles" for k in sides) + " |",
-                  "|---|---:|---:|" + "---:|---:|" * len(sides)]
+                  "| scene | level | Cycles s | " + " | ".join(f"{LABELS[k][6:]} s | / Cycles" for k in sides)
+                  + " | direct light alone s | / Cycles |",
+                  "|---|---:|---:|" + "---:|---:|" * (len(sides) + 1)]
         for r in rows:
             for level in LEVELS:
                 c = r["cycles"]["seconds"][measure_name][str(level)]
@@ -323,6 +369,8 @@ def report(rows, command, out):
                 for k in sides:
                     t = r[k]["seconds"][measure_name][str(level)] if k in r else math.nan
                     cells.append(f"{t:.2f} | **{t / c:.2f}**" if k == "two_way" else f"{t:.2f} | {t / c:.2f}")
+                t = r["direct"]["seconds"][measure_name][str(level)] if "direct" in r else math.nan
+                cells.append(f"{t:.2f} | {t / c:.2f}")
                 lines.append(f"| {r['scene']} | {level:.2%} | {c:.2f} | " + " | ".join(cells) + " |")
         lines.append("")
     lines += ["Measured per-patch errors (at the work run): " + "; ".join(
