@@ -238,13 +238,16 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
-    radiosity = np.asarray(result.radiosity, dtype=np.float64)
+    # Light is written as at least 0: an estimate below it is noise about a value near 0 (the two-way
+    # iteration's control variate where a patch gets almost no light; a difference of two estimates).
+    radiosity = np.maximum(result.radiosity, 0.0)
     extras = {}
     if settings.light_output:
-        extras[LIGHT_ATTRIBUTE] = result.irradiance
+        extras[LIGHT_ATTRIBUTE] = np.maximum(result.irradiance, 0.0)
     if settings.indirect_output:
         # the light arriving minus a gathered estimate of the direct light alone (noise of both)
-        extras[INDIRECT_ATTRIBUTE] = result.irradiance - direct_irradiance(scene, INDIRECT_SAMPLES, int(settings.seed))
+        extras[INDIRECT_ATTRIBUTE] = np.maximum(
+            result.irradiance - direct_irradiance(scene, INDIRECT_SAMPLES, int(settings.seed)), 0.0)
     for name, values in extras.items():
         out.extra[name] = [None if not o.receives else np.asarray(values[patches.combined.patch_slice(k)])
                            for k, o in enumerate(patches.objects)]

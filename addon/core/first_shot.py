@@ -30,7 +30,7 @@ import numpy as np
 
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
-from .rays import hit_patches, meets_front
+from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front
 from .sampling import SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights
 from .tables import WalkTables
 from .tallies import ChunkTally
@@ -46,6 +46,9 @@ GATHER_DIMENSIONS = 10
 # many times the emitters' share of the area, from COSINE_SHARE_LEAST to 1.
 COSINE_SHARE_PER_AREA = 10.0
 COSINE_SHARE_LEAST = 0.1
+# Rays from the sources a chunk casts to split the direct light found on no front side between
+# what escaped and what met a back side (split_lost).
+FATE_RAYS = 1024
 # A light is seen if the shadow ray meets nothing before this share of the way to it.
 SEEN_BEFORE = 1.0 - 1e-5
 
@@ -281,6 +284,23 @@ def reflected_sources(tables, emission, samples):
     return walk
 
 
+def split_lost(tables, rng, lost):
+    """(escaped, blocked) (C,) each: ``lost`` (C,), the direct light the gathering found on no
+    patch's front, split as FATE_RAYS rays from the sources (drawn and leaving as the walk's
+    first rays) divide between nothing and a back side: so that light landing on back sides
+    (flipped normals) is reported as such. Both 0 where no ray ends either way (then all of
+    ``lost``, noise about 0 in a closed scene, counts as escaped). Returns also the rays traced."""
+    source = tables.sources.sample(FATE_RAYS, rng)
+    u = rng.random((tables.uniforms_per_ray, FATE_RAYS), dtype=np.float32)
+    hits = ray_cast(tables, *leave_sources(tables, source, u))
+    escaped = np.count_nonzero(hits.hit < 0)
+    blocked = np.count_nonzero((hits.hit >= 0) & ~hits.front)
+    if escaped + blocked == 0:
+        return lost, np.zeros_like(lost), FATE_RAYS
+    share = blocked / (escaped + blocked)
+    return lost * (1.0 - share), lost * share, FATE_RAYS
+
+
 def gathered_chunk(tables, paths, rng, walk):
     """One chunk of the gathered estimate: the direct light of every patch, then ``paths``
     walks from its reflection (``walk(tables, paths, rng)`` gives their ChunkTally). Returns
@@ -309,5 +329,7 @@ def gathered_chunk(tables, paths, rng, walk):
     # What the direct light brought no patch (in expectation, what escaped or met a back side
     # on its first flight), so that the accounts balance exactly; below zero where a light that
     # casts no shadow reaches, through objects, more than it emits.
-    escaped = emitted - absorbed - walked + walk_escaped
-    return ChunkTally(paths, rays, incident, emitted, absorbed + walk_absorbed, escaped, blocked, undistributed, ended)
+    lost_escaped, lost_blocked, fate_rays = split_lost(tables, rng, emitted - absorbed - walked)
+    rays += fate_rays
+    return ChunkTally(paths, rays, incident, emitted, absorbed + walk_absorbed, lost_escaped + walk_escaped,
+                      blocked + lost_blocked, undistributed, ended)

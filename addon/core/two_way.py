@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import rays
-from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct
+from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct, split_lost
 from .jacobi import halton_rows, systematic_counts
 from .sampling import LAST_BELOW_ONE
 from .tallies import ChunkTally
@@ -106,7 +106,9 @@ def two_way_chunk(tables, paths, rng, check=None):
     H = H[:C]
     direct = H * gathering.patch_area  # (C,P) power arriving straight from the sources
     emitted = gathering.channel_power[:C]
-    state = Chunk(np.zeros_like(H), H.copy(), np.zeros(C), emitted - direct.sum(axis=1), np.zeros(C), gather_rays)
+    # What the direct light brought no patch's front escaped or met a back side (split_lost).
+    escaped, blocked, fate_rays = split_lost(tables, rng, emitted - direct.sum(axis=1))
+    state = Chunk(np.zeros_like(H), H.copy(), np.zeros(C), escaped, blocked, gather_rays + fate_rays)
     R = tables.reflectivity
     if tables.exit_random:
         state.reflected = R * H

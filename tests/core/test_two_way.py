@@ -178,3 +178,18 @@ def test_two_way_gathers_its_direct_light_and_stops_on_the_measured_error():
     target = 4e-6
     r = solve(scene, target_mse=target, seed=4, method="two_way")
     assert r.stopped == "target" and r.measured_mse <= target and r.direct_light == "gathered"
+
+
+@pytest.mark.parametrize("kind", [{"method": "two_way"}, {"direct_light": "gathered"}])
+def test_direct_light_landing_on_back_sides_is_reported_as_blocked(kind):
+    """A closed box turned inside out (every normal out) with a point light inside: the gathering
+    finds no light on any front side, and the rays from the light all meet back sides: what it
+    found on no front is reported blocked (the panel's flipped-normals warning), not escaped."""
+    origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=2)
+    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, v, u)  # (winding reversed: normals out)
+    scene = PatchScene(vertices, triangles, triangle_patch, np.full(len(origin), 0.5), np.zeros(len(origin)),
+                       lights=[PointLight(np.array([0.4, 0.5, 0.6]), np.ones(3))])
+    r = solve(scene, paths=20_000, seed=1, **kind)
+    e = r.energy
+    np.testing.assert_allclose(e["blocked"], e["emitted"], rtol=1e-9)
+    assert (e["escaped"] == 0).all() and np.allclose(r.radiosity, 0)
