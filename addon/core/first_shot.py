@@ -30,7 +30,7 @@ import numpy as np
 
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
-from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front
+from .rays import cast as ray_cast, cast_to_points, hit_patches, leave_random, leave_sources, meets_front
 from .sampling import SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights
 from .tables import WalkTables
 from .tallies import ChunkTally
@@ -46,6 +46,8 @@ GATHER_DIMENSIONS = 10
 # many times the emitters' share of the area, from COSINE_SHARE_LEAST to 1.
 COSINE_SHARE_PER_AREA = 10.0
 COSINE_SHARE_LEAST = 0.1
+# The strategies that find an emitting patch (_emitter_estimate).
+SHADOW, COSINE, SHOT = range(3)
 # Rays from the sources a chunk casts to split the direct light found on no front side between
 # what escaped and what met a back side (split_lost).
 FATE_RAYS = 1024
@@ -101,6 +103,12 @@ class Gathering:
         self.reflectivity = scene.reflectivity.T  # (3,P)
         self.patch_area = scene.patch_area
         self.cosine_share = cosine_share(scene, bool(self.worlds))
+        # Rays shot from the emitting patches, in proportion to their power: as many as cosine
+        # rays are cast (both sample the form factor, from either end).
+        patch_power = channel_sum(scene.patch_area[:, None] * scene.emission)
+        self.shots = float(self.cosine_share * self.samples.sum()) if patch_power.any() else 0.0
+        self.shot_table = SourceTable(patch_power) if self.shots > 0 else None
+        self.shots_expected = self.shots * patch_power / patch_power.sum() if self.shots > 0 else np.zeros(scene.patch_count)
         self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
 
@@ -133,18 +141,33 @@ def gather_direct(tables, gathering, rng):
         rays += _shadow_rays(tables, gathering, patch, x, normal, u, u32, value)
     if gathering.cosine_share > 0:
         rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
+    uniform = np.ones(patch.size, dtype=bool)
+    if gathering.shots > 0:
+        shot_patch, shot_x, shot_value, shot_rays = _shot_rays(tables, gathering, rng)
+        rays += shot_rays
+        patch, x, value = np.concatenate([patch, shot_patch]), np.hstack([x, shot_x]), np.hstack([value, shot_value])
+        uniform = np.concatenate([uniform, np.zeros(shot_patch.size, dtype=bool)])
     H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)])
     H /= gathering.samples
-    return H, rays, (patch, x, value)
+    return H, rays, (patch, x, value, uniform)
 
 
-def _emitter_estimate(gathering, source, cos_x, cos_y, distance_world):
-    """E_s (cos_x / pi) / (p_shadow + p_cosine) (3,n): either strategy's weighted estimate of
-    an emitting patch s met at distance d (the integrand E_s cos_x / pi over the sum of the
-    densities in solid angle: p_shadow = P_s d^2 / (A_s cos_y), p_cosine = cos_x / pi)."""
+def _emitter_estimate(gathering, technique, source, receiver, cos_x, cos_y, distance_world):
+    """The weighted estimate (3,n), as a sample of the receiving patch j, of an emitting patch
+    s met at distance d by a sample of ``technique`` (SHADOW, COSINE or SHOT). The three
+    strategies' densities at x, in solid angle, each per gathering sample of j:
+    p_shadow = P_s d^2 / (A_s cos_y) (one shadow ray a sample), p_cosine = q cos_x / pi (q =
+    the cosine share) and, for the rays shot from s, n_s of them, p_shot = (cos_x / pi) n_s A_j /
+    (A_s n_j); a sample of strategy t weighs in as f p_t / sum p^2, f = E_s cos_x / pi (the
+    power heuristic: the shot rays, shared by every patch, land on a given one a few at a time,
+    and the balance heuristic let their count's noise into patches far from small emitters).
+    A receiver's irradiance is the sum of its samples' estimates over n_j."""
+    area = gathering.patch_area
     p_cosine = cos_x / np.pi
-    p_shadow = gathering.choice[source] / gathering.patch_area[source] * distance_world**2 / cos_y
-    return gathering.emission[:, source] * (p_cosine / (p_shadow + gathering.cosine_share * p_cosine))
+    densities = (gathering.choice[source] / area[source] * distance_world**2 / cos_y, gathering.cosine_share * p_cosine,
+                 gathering.shots_expected[source] * area[receiver] / (area[source] * gathering.samples[receiver]) * p_cosine)
+    square = densities[0] ** 2 + densities[1] ** 2 + densities[2] ** 2
+    return gathering.emission[:, source] * (p_cosine * densities[technique] / square)
 
 
 def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
@@ -167,7 +190,7 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
         ok = (cos_x > 0) & (cos_y > 0) & (s != patch[at_patch])
         towards[:, at_patch] = d
         cols = at_patch[ok]
-        shadow[:, cols] = _emitter_estimate(gathering, s[ok], cos_x[ok], cos_y[ok], dist[ok] * g.diagonal)
+        shadow[:, cols] = _emitter_estimate(gathering, SHADOW, s[ok], patch[cols], cos_x[ok], cos_y[ok], dist[ok] * g.diagonal)
     at_light = np.flatnonzero(source >= P)
     if at_light.size:
         light = source[at_light] - P
@@ -211,12 +234,47 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
         s = source[met]
         cos_x = np.einsum("in,in->n", normal[:, met], towards[:, met])
         cos_y = -np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), towards[:, met])
-        value[:, met] += _emitter_estimate(gathering, s, cos_x, np.maximum(cos_y, 1e-12), t[met] * g.diagonal)
+        value[:, met] += _emitter_estimate(gathering, COSINE, s, patch[met], cos_x, np.maximum(cos_y, 1e-12), t[met] * g.diagonal)
     escaped = np.flatnonzero(hit < 0)
     if escaped.size and gathering.worlds:
         for world in gathering.worlds:
             value[:, escaped] += world.radiance_times_pi(towards[:, escaped])
     return patch.size
+
+
+def _shot_rays(tables, gathering, rng):
+    """Rays shot from the emitting patches (about ``gathering.shots``, chosen in proportion to
+    power, uniform points, cosine directions), each weighted as a sample of the patch it meets
+    (``_emitter_estimate``): (patch (m,), unit-space point there pushed off it (3,m), estimate
+    (3,m), rays traced)."""
+    g = tables.geometry
+    count = int(gathering.shots) + int(rng.random() < gathering.shots - int(gathering.shots))
+    source = gathering.shot_table.sample(count, rng).astype(np.int32)
+    u = rng.random((tables.uniforms_per_ray, count), dtype=np.float32)
+    origins, directions = leave_random(tables, source, u)
+    towards = directions.astype(np.float64)
+    towards /= np.sqrt(np.einsum("in,in->n", towards, towards))
+    if tables.exit_random:  # (the points are not needed: the reflected light leaves each patch uniformly)
+        _, patch, front, t = _trace(tables, origins, towards)
+        points = None
+    else:  # where the reflected light will leave from, as a walk leaves a hit point
+        t = None
+        hits = cast_to_points(tables, origins.copy(), towards.astype(np.float32))
+        patch, front, points = hits.patch, hits.front, hits.points
+    met = np.flatnonzero(front & (patch != source))
+    j, s, along = patch[met], source[met], towards[:, met]
+    normal_j = g.patch_normal_rows.take(j, axis=1)
+    if points is None:
+        distance = t[met]
+        points = origins[:, met] + along * distance  # (unused)
+    else:
+        points = points[:, met]
+        distance = np.sqrt(np.einsum("in,in->n", points - origins[:, met], points - origins[:, met]))
+        points = points + normal_j * np.float32(g.ray_offset)
+    cos_x = -np.einsum("in,in->n", normal_j.astype(np.float64), along)
+    cos_y = np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), along)
+    value = _emitter_estimate(gathering, SHOT, s, j, np.maximum(cos_x, 1e-12), np.maximum(cos_y, 1e-12), distance * g.diagonal)
+    return j, points.astype(np.float64), value, count
 
 
 def _trace(tables, origins, directions):
@@ -250,7 +308,7 @@ class ReflectedPoints:
     stay in the walk's unit space, float32 (the points already pushed off the surface)."""
 
     def __init__(self, gathering, geometry, samples):
-        patch, x, value = samples
+        patch, x, value = samples[:3]
         scale = gathering.patch_area / gathering.samples  # A_j / n_j
         self.power = np.ascontiguousarray((value * gathering.reflectivity[:, patch] * scale[patch]).T)
         self.points = x.astype(np.float32)

@@ -154,21 +154,26 @@ def leaving(tables, reflected):
 def reflect_first(tables, state, samples, paths, rng):
     """The first reflection as uneven over each patch as the light that landed on it (hit exit).
 
-    Each gathering sample k of patch j is a point source of what it found (power p_k,
-    first_shot.ReflectedPoints); the samples are uniform points of j, so sources of equal
-    power p_bar_j at them are patch j reflecting R_j H_j uniformly, which the first two-way
-    generation carries (``state.reflected``). What is left, c_k = p_k - p_bar_j (zero in sum
-    over each patch), is shot from the samples: rays allotted in proportion to |c_k|, each
-    carrying an equal share of sum |c| with c_k's sign. It is small where the direct light is
-    even over a patch; its irradiance (``state.correction``) joins the first generation's."""
+    Each sample k of patch j is a point source of what it found (power p_k,
+    first_shot.ReflectedPoints), sum_k p_k = R_j A_j H_j. The gathering's own samples are
+    uniform points of j, m_j of them, so sources of power sum_k p_k / m_j at them are patch j
+    reflecting R_j H_j uniformly, which the first two-way generation carries
+    (``state.reflected``). What is left (zero in sum over each patch), c_k = p_k - sum / m_j at
+    those and c_k = p_k at the samples shot from emitters (hit points, not uniform), is shot
+    from the samples: rays allotted in proportion to |c_k|, each carrying an equal share of
+    sum |c| with c_k's sign. A patch with no uniform sample leaves it all to its points. It is
+    small where the direct light is even over a patch; its irradiance (``state.correction``)
+    joins the first generation's."""
     gathering, C, P = tables.gathering, tables.channels, tables.patch_count
-    patch = samples[0]
+    patch, uniform = samples[0], samples[3]
     state.reflected = tables.reflectivity * state.irradiance
     points = ReflectedPoints(gathering, tables.geometry, samples)
     power = points.power[:, :C].T  # (C,K)
+    spread = np.bincount(patch.compress(uniform), minlength=P)  # m_j
     mean = np.stack([np.bincount(patch, weights=p, minlength=P) for p in power])
-    mean /= np.maximum(np.bincount(patch, minlength=P), 1)
-    left = power - mean.take(patch, axis=1)  # c_k
+    mean /= np.maximum(spread, 1)
+    state.reflected[:, spread == 0] = 0.0
+    left = power - mean.take(patch, axis=1) * uniform  # c_k
     size = np.abs(left).mean(axis=0)  # what a sample's rays are allotted by
     total = float(size.sum())
     if total <= 0:

@@ -150,7 +150,9 @@ def test_cosine_rays_are_cast_in_proportion_to_the_emitters_share_of_the_area(mo
     tables = WalkTables(scene, "finite", 1e-3, "random")
     gathering = Gathering(scene, np.full(scene.patch_count, 4.0))
     with tables.numpy_turn:
-        _, _, (patch, _, _) = gather_direct(tables, gathering, np.random.default_rng(0))
-    cosine = traced[-1]  # (the shadow rays' cast comes first)
+        _, _, (patch, _, _, uniform) = gather_direct(tables, gathering, np.random.default_rng(0))
+    samples = np.count_nonzero(uniform)  # (the others are the rays shot from the emitter)
+    cosine = traced[1]  # (the shadow rays' cast comes first, the emitter's shots last)
     share = 10 / 96
-    assert abs(cosine - patch.size * share) < 5 * np.sqrt(patch.size * share * (1 - share))
+    assert abs(cosine - samples * share) < 5 * np.sqrt(samples * share * (1 - share))
+    assert traced[2] == pytest.approx(gathering.shots, abs=1) and gathering.shots == pytest.approx(samples * share, rel=0.05)
