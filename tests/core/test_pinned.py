@@ -1,5 +1,11 @@
 """Every walk gives bit for bit the results it gave before the walk was split into named stages
-(pins made on commit 4187daa: see pinned_cases), with the speed-ups on and off as each case says."""
+(pins made on commit 4187daa: see pinned_cases), with the speed-ups on and off as each case says.
+
+A few solves come out differently, bit for bit, on another CPU with the same code
+(``pinned_variants.json`` says where they were recorded): a result must be one of its case's
+recorded fingerprints. A change to the walk changes it on every CPU, so it matches none.
+A CPU that gives a third result fails here: record its fingerprints the same way, after
+checking on a recorded CPU that the code still gives the pins."""
 import json
 from pathlib import Path
 
@@ -9,6 +15,7 @@ from pinned_cases import CASES, SCENES, fingerprint, solve_arguments
 from addon.core import Speedups, solve
 
 PINS = json.loads((Path(__file__).parent / "pinned_results.json").read_text())
+VARIANTS = json.loads((Path(__file__).parent / "pinned_variants.json").read_text())["cases"]
 _scenes = {}
 
 
@@ -22,7 +29,7 @@ def _scene(name):
 def test_results_are_the_pinned_ones(case):
     scene = _scene(case["scene"])
     result = solve(scene, speedups=Speedups(**case["speedups"]), **solve_arguments(scene, case))
-    assert fingerprint(result) == PINS[case["id"]]
+    assert fingerprint(result) in [PINS[case["id"]], *VARIANTS.get(case["id"], [])]
 
 
 def test_a_planted_change_fails_the_pins():
@@ -31,4 +38,4 @@ def test_a_planted_change_fails_the_pins():
     scene = _scene(case["scene"])
     result = solve(scene, **solve_arguments(scene, case))
     result.radiosity[7, 1] = float.fromhex(result.radiosity[7, 1].hex()) * (1 + 2**-52)
-    assert fingerprint(result) != PINS[case["id"]]
+    assert fingerprint(result) not in [PINS[case["id"]], *VARIANTS.get(case["id"], [])]
