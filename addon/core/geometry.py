@@ -370,13 +370,11 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     last = first + count - 1
     fraction[last] = 1.0  # exact upper end, whatever the rounding
     ray_offset = RELATIVE_RAY_OFFSET
-    is_parallelogram, parallelogram = parallelogram_frames(sorted_corners, first, count, RELATIVE_EDGE_INSET)
-    parallelogram[:, :3] += ray_offset * patch_normal
-    parallelogram[~is_parallelogram] = 0.0
     leave_table = np.empty((12, patch_count), np.float32)
-    leave_table[0:9] = parallelogram.T
+    is_parallelogram = parallelogram_frames(
+        sorted_corners, first, count, RELATIVE_EDGE_INSET, ray_offset, patch_normal, leave_table[0:9]
+    )
     leave_table[9:12] = patch_normal.T
-    del parallelogram
 
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     return Geometry(
