@@ -17,8 +17,9 @@ counts the numpy and Python allocations of that stage alone (not Blender's nor E
 Headless Blender has no window, so the modal run's live view cannot draw. Its arrays are made
 as its draw handler makes them: the job keeps the result so far (``SolveJob.live``, as the
 threaded run does) and, after every batch, ``live_view.triangles`` is computed and kept until
-the next (standing for the vertex buffer the batch holds). Nor does headless Blender keep an
-undo stack: the undo step the operator pushes in the interface is not measured.
+the next (standing for the vertex buffer the batch holds), and let go of before the results are
+written, as the modal run removes its live view then. Nor does headless Blender keep an undo
+stack: the undo step the operator pushes in the interface is not measured.
 
 The room: six walls facing inwards (two of them coloured, so that the walk carries three
 channels) and an emitting quad under the ceiling. ``grids``: each wall is a grid of N x N
@@ -164,9 +165,15 @@ def child(layout, n, target_error, use_tracemalloc):
     pipeline.solve = after("solve (with live view)", pipeline.solve)
     # (SolveJob.run, not run_solve: a wrapper's arguments would keep the objects' arrays alive)
     worker.SolveJob.run = after("colours computed", worker.SolveJob.run)
-    operators.scene_io.write_results = after("colours written", scene_io.write_results)
-
     live = {"version": None, "arrays": None, "bytes": 0}
+
+    write = scene_io.write_results
+
+    def write_results(*args, **kwargs):
+        live["arrays"] = None  # the modal run removes its live view before writing (operators._cleanup)
+        return write(*args, **kwargs)
+
+    operators.scene_io.write_results = after("colours written", write_results)
 
     def draw_live(job):
         """What the live view's draw handler makes, after every batch (a window-less stand-in)."""
