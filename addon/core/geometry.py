@@ -382,7 +382,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         diagonal=diagonal,
         ray_offset=ray_offset,
         triangle_index=order,
-        triangle_patch=tp_sorted.astype(np.int32),
+        triangle_patch=tp_sorted.astype(np.int32, copy=False),
         corners=sorted_corners,
         patch_area=patch_area * diagonal**2,
         patch_normal=f32(patch_normal),

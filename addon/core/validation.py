@@ -162,9 +162,15 @@ def validate_lights(lights):
 
 
 
+def _indices(array):
+    """Integer indices as int32 (kept: half of int64's memory) or int64."""
+    return array if array.dtype == np.int32 else array.astype(np.int64, copy=False)
+
+
 def validate_mesh(vertices, triangles, triangle_patch, patch_count):
-    """Check the mesh arrays; return (V (V,3) float64, T (T,3) int64, triangle_patch (T,) int64,
-    centre (3,), diagonal) of the bounding box of the vertices the triangles use."""
+    """Check the mesh arrays; return (V (V,3) float64, T (T,3) and triangle_patch (T,) as int32
+    or int64 (int32 as given, without a copy; other integers as int64), centre (3,), diagonal)
+    of the bounding box of the vertices the triangles use."""
     V = np.asarray(vertices, dtype=np.float64)
     if V.ndim != 2 or V.shape[1] != 3:
         raise ValueError(f"vertices must have shape (V, 3); got {V.shape}")
@@ -180,7 +186,7 @@ def validate_mesh(vertices, triangles, triangle_patch, patch_count):
         raise ValueError("the scene has no triangles")
     if not np.issubdtype(T_raw.dtype, np.integer):
         raise ValueError(f"triangles must hold integer vertex indices; got dtype {T_raw.dtype}")
-    T = T_raw.astype(np.int64, copy=False)
+    T = _indices(T_raw)
     out_of_range = ((T < 0) | (T >= V.shape[0])).any(axis=1)
     if out_of_range.any():
         raise ValueError(
@@ -191,7 +197,7 @@ def validate_mesh(vertices, triangles, triangle_patch, patch_count):
         raise ValueError(f"triangle_patch must have shape ({T.shape[0]},) to match triangles; got {tp_raw.shape}")
     if not np.issubdtype(tp_raw.dtype, np.integer):
         raise ValueError(f"triangle_patch must hold integer patch indices; got dtype {tp_raw.dtype}")
-    tp = tp_raw.astype(np.int64, copy=False)
+    tp = _indices(tp_raw)
     bad_patch = (tp < 0) | (tp >= patch_count)
     if bad_patch.any():
         raise ValueError(
