@@ -47,14 +47,16 @@ class Geometry:
     centre: np.ndarray            # (3,) float64
     diagonal: float               # bounding-box diagonal, scene units
     ray_offset: float             # distance a ray origin is pushed along the normal (unit space)
-    triangle_index: np.ndarray    # (T,) original index of each sorted triangle
+    triangle_index: np.ndarray    # (T,) int32 original index of each sorted triangle
     triangle_patch: np.ndarray    # (T,) int32 patch of each sorted triangle
     corners: UnitCorners          # (T,3,3) float64 unit-space corners of the sorted triangles, on demand
     patch_area: np.ndarray        # (P,) float64
-    patch_normal: np.ndarray      # (P,3) float32
-    patch_first_triangle: np.ndarray  # (P,) int64 first sorted triangle of each patch
-    patch_triangle_count: np.ndarray  # (P,) int64
-    triangle_key: np.ndarray      # (T,) float64: patch + cumulative area fraction in the patch
+    patch_normal: np.ndarray      # (P,3) float32, a view of leave_table's rows 9-11
+    patch_first_triangle: np.ndarray  # (P,) int32 first sorted triangle of each patch
+    patch_triangle_count: np.ndarray  # (P,) int32
+    # (T,) float64: patch + cumulative area fraction in the patch, where a patch has more than
+    # two triangles (sampling.choose_triangles searches it); None where none has
+    triangle_key: np.ndarray | None
     patch_first_fraction: np.ndarray  # (P,) float32: area fraction of each patch's first triangle
     patch_parallelogram: np.ndarray   # (P,) bool: the patch is two triangles forming a parallelogram
     # (12,P) float32: each parallelogram patch's corner (pushed off), edge a, edge b (zeros if
@@ -322,7 +324,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     if empty.any():
         raise PatchError(f"patches {indices_text(empty)} have no area (no triangles, or only degenerate ones)", indices_of(empty))
 
-    order = keep[np.argsort(kept_patch, kind="stable")]
+    order = keep[np.argsort(kept_patch, kind="stable")].astype(np.int32)  # (T < 2^31: checked)
     del keep, kept_patch
     tp_sorted = tp[order]
     count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
@@ -385,10 +387,10 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         triangle_patch=tp_sorted.astype(np.int32, copy=False),
         corners=sorted_corners,
         patch_area=patch_area * diagonal**2,
-        patch_normal=f32(patch_normal),
-        patch_first_triangle=first,
-        patch_triangle_count=count,
-        triangle_key=tp_sorted + fraction,
+        patch_normal=leave_table[9:12].T,  # (the same float32 numbers: one copy)
+        patch_first_triangle=first.astype(np.int32),
+        patch_triangle_count=count.astype(np.int32),
+        triangle_key=tp_sorted + fraction if count.max() > 2 else None,
         patch_first_fraction=f32(fraction[first]),
         patch_parallelogram=is_parallelogram,
         leave_table=leave_table,

@@ -184,6 +184,8 @@ def validate_mesh(vertices, triangles, triangle_patch, patch_count):
         raise ValueError(f"triangles must have shape (T, 3); got {T_raw.shape}")
     if T_raw.shape[0] == 0:
         raise ValueError("the scene has no triangles")
+    if T_raw.shape[0] >= 2**31 or V.shape[0] >= 2**31:
+        raise ValueError(f"the scene has {T_raw.shape[0]:,} triangles and {V.shape[0]:,} vertices: at most 2^31 - 1 of each")
     if not np.issubdtype(T_raw.dtype, np.integer):
         raise ValueError(f"triangles must hold integer vertex indices; got dtype {T_raw.dtype}")
     T = _indices(T_raw)
