@@ -55,15 +55,17 @@ class Batches:
     def reflected(self):
         if self.paths == 0:
             return np.zeros((self.scene.patch_count, 3))
-        b = (self.score * self.incident / self.paths).T
-        return np.repeat(b, 3, axis=1) if self.channels == 1 else b
+        b = self.score * self.incident
+        b /= self.paths  # (in place: one (C,P) array, the same numbers)
+        return np.repeat(b.T, 3, axis=1) if self.channels == 1 else b.T
 
     def irradiance(self):
         """(P,3) H, the light arriving at each patch over pi (B = E + R H): incident power over area."""
         if self.paths == 0:
             return np.zeros((self.scene.patch_count, 3))
-        h = (self.incident * (self.scene.total_power / self.scene.patch_area) / self.paths).T
-        return np.repeat(h, 3, axis=1) if self.channels == 1 else h
+        h = self.incident * (self.scene.total_power / self.scene.patch_area)
+        h /= self.paths
+        return np.repeat(h.T, 3, axis=1) if self.channels == 1 else h.T
 
     def variance_of_mean(self):
         """Batch-means estimate of Var(b_j) per channel and patch, (C,P); NaN below 2 chunks."""

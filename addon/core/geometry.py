@@ -220,19 +220,36 @@ def leave_shapes(leave_table, max_shapes=LEAVE_SHAPES_MAX, shape_hash=_SHAPE_HAS
     A patch's frame is its corner and its shape: patches meshed from one face share one (a wall
     of a room, a box's side). Compared as bits: a shared shape is the same float32 numbers, and
     -0.0 stays apart from 0.0."""
-    bits = np.ascontiguousarray(leave_table[3:12].T).view(np.uint32)  # (P,9)
-    # A hash of each row first (a sort of P numbers, not of P rows); rows of equal hashes are
-    # then checked to be equal, and where two shapes share a hash the rows themselves are sorted.
-    hashed = bits.astype(np.uint64) @ shape_hash
+    P = leave_table.shape[1]
+
+    def bits(rows):  # (n,9) uint32: the frames' bit patterns of patches ``rows`` (a slice)
+        return np.ascontiguousarray(leave_table[3:12, rows].T).view(np.uint32)
+
+    # A hash of each row first (a sort of P numbers, not of P rows), a block of patches at a
+    # time (uint64 arithmetic wraps: the same hashes); rows of equal hashes are then checked to
+    # be equal, and where two shapes share a hash the rows themselves are sorted.
+    hashed = np.empty(P, np.uint64)
+    for start in range(0, P, BLOCK_PATCHES):
+        rows = slice(start, start + BLOCK_PATCHES)
+        hashed[rows] = bits(rows).astype(np.uint64) @ shape_hash
     if np.unique(hashed).size > max_shapes:  # (shared hashes only lower the count)
         return None
     _, first, shape_of_patch = np.unique(hashed, return_index=True, return_inverse=True)
-    shapes = bits[first]
-    if not np.array_equal(shapes[shape_of_patch.reshape(-1)], bits):
-        shapes, shape_of_patch = np.unique(bits, axis=0, return_inverse=True)
+    del hashed
+    shape_of_patch = shape_of_patch.reshape(-1)
+    shapes = np.ascontiguousarray(leave_table[3:12, first].T).view(np.uint32)
+    same = all(
+        np.array_equal(shapes[shape_of_patch[start:start + BLOCK_PATCHES]], bits(slice(start, start + BLOCK_PATCHES)))
+        for start in range(0, P, BLOCK_PATCHES)
+    )
+    if not same:
+        shapes, shape_of_patch = np.unique(bits(slice(None)), axis=0, return_inverse=True)
         if shapes.shape[0] > max_shapes:
             return None
     return np.ascontiguousarray(shapes.view(np.float32).T), shape_of_patch.reshape(-1).astype(np.uint16)
+
+# Per-patch arrays are computed in blocks of this many patches (every value patch by patch).
+BLOCK_PATCHES = 1 << 16
 
 # Per-triangle arrays are computed in blocks of about this many triangles (whole patches), so
 # that the float64 temporaries are a block's, not the scene's: every value is computed
