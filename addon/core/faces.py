@@ -31,12 +31,21 @@ def starts_of(sizes: np.ndarray) -> np.ndarray:
     return starts
 
 
+# Per-triangle arithmetic runs this many triangles at a time (each triangle on its own: the same
+# numbers as all at once), so that its float64 temporaries are a block's.
+BLOCK_TRIANGLES = 1 << 16
+
+
 def triangle_areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Area of each triangle, (T,)."""
     points = np.asarray(points, dtype=np.float64)
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    a, b, c = (points[triangles[:, k]] for k in range(3))
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    triangles = np.asarray(triangles).reshape(-1, 3)
+    area = np.empty(len(triangles))
+    for start in range(0, len(triangles), BLOCK_TRIANGLES):
+        block = triangles[start:start + BLOCK_TRIANGLES]
+        a, b, c = (points[block[:, k]] for k in range(3))
+        area[start:start + BLOCK_TRIANGLES] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    return area
 
 
 def reverse_faces(face_sizes, corner_verts) -> np.ndarray:

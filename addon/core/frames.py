@@ -81,9 +81,14 @@ def parallelogram_frames(sorted_corners, first, count, inset, offset, normal, ou
     return flags
 
 
-def parallelogram_blocks(sorted_corners, first, count, block=1 << 15):
-    """:func:`parallelogram_corners` a block of ``block`` patches at a time: (patches (n,),
-    whether each is a parallelogram (n,), (p, s1, s2, q)) for each block."""
+# Two-triangle patches are compared this many at a time (each on its own).
+BLOCK_PATCHES = 1 << 15
+
+
+def parallelogram_blocks(sorted_corners, first, count, block=None):
+    """:func:`parallelogram_corners` a block of ``block`` (BLOCK_PATCHES) patches at a time:
+    (patches (n,), whether each is a parallelogram (n,), (p, s1, s2, q)) for each block."""
+    block = block or BLOCK_PATCHES
     two = np.flatnonzero(count == 2)
     for k in range(0, two.size, block):
         rows = two[k:k + block]
@@ -91,7 +96,7 @@ def parallelogram_blocks(sorted_corners, first, count, block=1 << 15):
         yield rows, ok, corners
 
 
-def parallelogram_corners(sorted_corners, first, count, block=1 << 15):
+def parallelogram_corners(sorted_corners, first, count, block=None):
     """The corners of the patches made of two triangles: (patches with two triangles (n,),
     whether each is a parallelogram (n,), and its corners (p, s1, s2, q), each (n,3) float64).
     p is the first triangle's own corner, s1 and s2 the two corners the triangles share (the

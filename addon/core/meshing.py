@@ -208,10 +208,12 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
             np.zeros((0, 3)), empty_i, empty_i, empty_i,
             np.zeros((0, 3), dtype=np.int32), empty_i, np.zeros(0),
         )
-    keys = np.concatenate(b.keys)
-    positions = np.concatenate(b.positions)
+    # (the builder's parts go once joined: one copy of the generated points and their keys)
+    keys, positions = _joined(b.keys), _joined(b.positions)
     uniq, first_index, inverse = weld(keys, len(points))
-    out_points = positions[first_index].copy()
+    del keys
+    out_points = positions[first_index]
+    del positions
     # canonical positions: source vertices exactly, edge points from the
     # lower-indexed vertex, so both neighbouring faces agree bit for bit
     kind0 = uniq[:, 0] == 0
@@ -225,8 +227,10 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
 
     sizes = np.concatenate([f[0] for f in b.faces])
     corners = inverse[np.concatenate([f[1] for f in b.faces])]
+    del inverse
     patch_face = np.concatenate([f[2] for f in b.faces])
     order = np.concatenate([f[3] for f in b.faces])
+    b.faces.clear()
     # patches in source-face order
     perm = np.lexsort((order, patch_face))
     fstarts = starts_of(sizes)
@@ -281,6 +285,13 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
         triangle_patch=tri_patch,
         patch_area=area,
     )
+
+
+def _joined(parts):
+    """The arrays of list ``parts`` as one (the list emptied: the parts go as soon as joined)."""
+    joined = parts[0] if len(parts) == 1 else np.concatenate(parts)
+    parts.clear()
+    return joined
 
 
 def concatenate(meshes) -> CombinedPatches:

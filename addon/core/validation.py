@@ -50,7 +50,11 @@ class CoincidentFacesWarning(UserWarning):
         self.patches = patches
 
 
-def warn_coincident(corners, triangle_patch, block=1 << 16):
+# Per-triangle keys of warn_coincident are made this many triangles at a time.
+BLOCK_TRIANGLES = 1 << 16
+
+
+def warn_coincident(corners, triangle_patch, block=None):
     """Warn about triangles with exactly the same corners as another (in any order or winding):
     a ray hits one of them at random, so each shows only part of the light it gets.
     ``corners[rows]`` gives the (n,3,3) corners of triangle rows (an array or geometry.UnitCorners)."""
@@ -59,6 +63,7 @@ def warn_coincident(corners, triangle_patch, block=1 << 16):
     # compared exactly (corners in lexicographic order). O(T log T), no false positives. The
     # keys are made a block of triangles at a time (elementwise: equal corners, equal keys).
     key = np.empty(len(corners))
+    block = block or BLOCK_TRIANGLES
     for start in range(0, len(key), block):
         rows = corners[start:start + block]
         a, b, c = (rows[:, k, 0] + 1.37 * rows[:, k, 1] + 1.73 * rows[:, k, 2] for k in range(3))
