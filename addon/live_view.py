@@ -12,14 +12,23 @@ import numpy as np
 MEDIAN_GREY = 0.35
 
 
+# Corner positions are gathered this many corners at a time (float64 to float32 per block).
+BLOCK_CORNERS = 1 << 18
+
+
 def triangles(patches, radiosity):
     """What the view draws for (P,3) ``radiosity`` on ``patches``: (3T,3) float32 corner
     positions (world space, every triangle of every patch) and (3T,4) uint8 colours (each
-    patch's :func:`colour_bytes`), the vertex buffer's two attributes."""
+    patch's :func:`colour_bytes`), the vertex buffer's two attributes. The colours are made
+    first, so that their temporaries are gone before the positions are made."""
     c = patches.combined
-    positions = np.asarray(c.vertices, dtype=np.float32)[np.asarray(c.triangles).reshape(-1)]
     # per patch, then per triangle, then per corner: no per-corner index or float arrays
-    return positions, np.repeat(colour_bytes(radiosity)[c.triangle_patch], 3, axis=0)
+    colours = np.repeat(colour_bytes(radiosity)[c.triangle_patch], 3, axis=0)
+    corners = np.asarray(c.triangles).reshape(-1)
+    positions = np.empty((len(corners), 3), np.float32)
+    for start in range(0, len(corners), BLOCK_CORNERS):
+        positions[start:start + BLOCK_CORNERS] = c.vertices[corners[start:start + BLOCK_CORNERS]]
+    return positions, colours
 
 
 def colour_bytes(radiosity):
@@ -36,9 +45,11 @@ def display_colours(radiosity):
     """(P,3) float32 display colours in [0, 1] of (P,3) radiosity: exposed so that the median
     radiosity is MEDIAN_GREY, clipped, gamma 2.2."""
     b = np.asarray(radiosity)
-    grey = b.mean(axis=1, dtype=np.float64)
+    grey = b.mean(axis=1, dtype=np.float32)
     lit = grey[grey > 0]
+    del grey
     scale = MEDIAN_GREY / float(np.median(lit)) if lit.size else 1.0
+    del lit
     out = np.multiply(b, scale, dtype=np.float32)
     np.clip(out, 0.0, 1.0, out=out)
     out **= np.float32(1 / 2.2)
