@@ -12,25 +12,62 @@ import numpy as np
 MEDIAN_GREY = 0.35
 
 
+# Corner positions are gathered this many corners at a time (float64 to float32 per block).
+BLOCK_CORNERS = 1 << 18
+
+
 def triangles(patches, radiosity):
     """What the view draws for (P,3) ``radiosity`` on ``patches``: (3T,3) float32 corner
-    positions (world space, every triangle of every patch) and (3T,4) float32 colours (each
-    patch's, exposed so that the median radiosity is MEDIAN_GREY, gamma 2.2, clipped)."""
+    positions (world space, every triangle of every patch) and (3T,4) uint8 colours (each
+    patch's :func:`colour_bytes`), the vertex buffer's two attributes. The colours are made
+    first, so that their temporaries are gone before the positions are made."""
     c = patches.combined
-    positions = np.asarray(c.vertices, dtype=np.float32)[np.asarray(c.triangles).reshape(-1)]
-    rgba = np.ones((len(radiosity), 4), np.float32)
-    rgba[:, :3] = display_colours(radiosity)
-    # per patch, then per triangle, then per corner: no per-corner index or RGB arrays
-    return positions, np.repeat(rgba[c.triangle_patch], 3, axis=0)
+    # per patch, then per triangle, then per corner: no per-corner index or float arrays
+    colours = np.repeat(colour_bytes(radiosity)[c.triangle_patch], 3, axis=0)
+    corners = np.asarray(c.triangles).reshape(-1)
+    positions = np.empty((len(corners), 3), np.float32)
+    for start in range(0, len(corners), BLOCK_CORNERS):
+        positions[start:start + BLOCK_CORNERS] = c.vertices[corners[start:start + BLOCK_CORNERS]]
+    return positions, colours
+
+
+def colour_bytes(radiosity):
+    """(P,4) uint8 RGBA of (P,3) radiosity: :func:`display_colours` in steps of 1/255 (the
+    vertex buffer holds 8-bit normalised colours, a quarter of float32's memory), opaque."""
+    rgba = np.full((len(radiosity), 4), 255, np.uint8)
+    rgb = display_colours(radiosity)
+    rgb *= np.float32(255)
+    rgba[:, :3] = np.rint(rgb, out=rgb)
+    return rgba
 
 
 def display_colours(radiosity):
-    """(P,3) float32 display colours of (P,3) radiosity."""
-    b = np.asarray(radiosity, dtype=np.float64)
-    grey = b.mean(axis=1)
+    """(P,3) float32 display colours in [0, 1] of (P,3) radiosity: exposed so that the median
+    radiosity is MEDIAN_GREY, clipped, gamma 2.2."""
+    b = np.asarray(radiosity)
+    grey = b.mean(axis=1, dtype=np.float32)
     lit = grey[grey > 0]
+    del grey
     scale = MEDIAN_GREY / float(np.median(lit)) if lit.size else 1.0
-    return np.clip(b * scale, 0.0, 1.0).astype(np.float32) ** np.float32(1 / 2.2)
+    del lit
+    out = np.multiply(b, scale, dtype=np.float32)
+    np.clip(out, 0.0, 1.0, out=out)
+    out **= np.float32(1 / 2.2)
+    return out
+
+
+def batch(positions, colours):
+    """The GPU batch of :func:`triangles`' arrays: float32 positions and 8-bit normalised
+    colours (which the FLAT_COLOR shader reads as floats in [0, 1])."""
+    import gpu
+
+    fmt = gpu.types.GPUVertFormat()
+    fmt.attr_add(id="pos", comp_type="F32", len=3, fetch_mode="FLOAT")
+    fmt.attr_add(id="color", comp_type="U8", len=4, fetch_mode="INT_TO_FLOAT_UNIT")
+    vbo = gpu.types.GPUVertBuf(format=fmt, len=len(positions))
+    vbo.attr_fill(id="pos", data=positions)
+    vbo.attr_fill(id="color", data=colours)
+    return gpu.types.GPUBatch(type="TRIS", buf=vbo)
 
 
 class LiveView:
@@ -49,12 +86,11 @@ class LiveView:
         if radiosity is None or patches is None:
             return
         import gpu
-        from gpu_extras.batch import batch_for_shader
 
         shader = gpu.shader.from_builtin("FLAT_COLOR")
         if self._drawn is None or self._drawn[0] != version:
-            positions, colours = triangles(patches, radiosity)
-            self._drawn = (version, batch_for_shader(shader, "TRIS", {"pos": positions, "color": colours}))
+            self._drawn = None  # the old batch goes before the new one is made
+            self._drawn = (version, batch(*triangles(patches, radiosity)))
         gpu.state.depth_test_set("LESS_EQUAL")
         self._drawn[1].draw(shader)
         gpu.state.depth_test_set("NONE")

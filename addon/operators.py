@@ -170,6 +170,8 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         if getattr(self, "_live", None) is not None:
             self._live.remove()
             self._live = None
+        if self._job is not None:  # nothing draws the result so far any more: let it go
+            self._job.live = (self._job.live[0], None)
         if self._timer is not None:
             context.window_manager.event_timer_remove(self._timer)
             self._timer = None

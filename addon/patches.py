@@ -42,11 +42,11 @@ class ObjectArrays:
 
     name: str
     vertices: np.ndarray  # (V,3) float64
-    face_sizes: np.ndarray  # (F,) int64
-    corner_verts: np.ndarray  # (C,) int64
-    triangles: np.ndarray  # (T,3) int64, Blender's loop triangles (vertex indices)
-    triangle_face: np.ndarray  # (T,) int64
-    face_reflectivity: np.ndarray  # (F,3) float64 in [0, 1)
+    face_sizes: np.ndarray  # (F,) int32 or int64 (scene_io: int32, as Blender's)
+    corner_verts: np.ndarray  # (C,) int32 or int64
+    triangles: np.ndarray  # (T,3) int32 or int64, Blender's loop triangles (vertex indices)
+    triangle_face: np.ndarray  # (T,) int32 or int64
+    face_reflectivity: np.ndarray  # (F,3) float64 in [0, 1) (scene_io: a broadcast row for one material)
     face_emission: np.ndarray  # (F,3) float64 >= 0, emission colour x strength
     uid: int | None = None  # the source object's session_uid (to find it again)
     face_slot: np.ndarray | None = None  # (F,) material slot of each face
@@ -335,16 +335,23 @@ def patch_materials(o, mesh):
     emission = o.face_emission[mesh.patch_face]
     if o.face_slot is None:
         return reflectivity, emission
+    per_slot = [(reflectivity, o.slot_colours, lambda c, p: patch_attribute_average(mesh, p, corners(), c, o.triangle_face))]
+    if o.triangle_uv is not None:
+        per_slot += [(reflectivity, o.slot_textures, lambda t, p: image(t, p)),
+                     (emission, o.slot_emission_textures, lambda t, p: t[3] * image(t, p))]
+    if not any(source is not None for _, sources, _ in per_slot for source in sources):
+        return reflectivity, emission  # one value a face: no (T,3,3) corners nor per-slot passes
     slot_of_patch = o.face_slot[mesh.patch_face]
-    corners = o.vertices[o.triangles]
+    made = []
+
+    def corners():
+        if not made:
+            made.append(o.vertices[o.triangles])
+        return made[0]
 
     def image(texture, patches):
-        return patch_texture_average(mesh, patches, corners, o.triangle_uv, o.triangle_face, *texture[:2])
+        return patch_texture_average(mesh, patches, corners(), o.triangle_uv, o.triangle_face, *texture[:2])
 
-    per_slot = [(reflectivity, o.slot_colours, lambda c, p: patch_attribute_average(mesh, p, corners, c, o.triangle_face))]
-    if o.triangle_uv is not None:
-        per_slot += [(reflectivity, o.slot_textures, image),
-                     (emission, o.slot_emission_textures, lambda t, p: t[3] * image(t, p))]
     for target, sources, average in per_slot:
         for slot, source in enumerate(sources):
             patches = np.flatnonzero(slot_of_patch == slot) if source is not None else ()

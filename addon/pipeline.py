@@ -13,7 +13,7 @@ from .core import meshing, predict, relative_rms_to_mse, solve
 from .core.first_shot import direct_irradiance
 from .core.names import GATHERED, TWO_WAY, WALK
 from .core.solver import planned_paths
-from . import options
+from . import options, trim
 from .patches import Patches, make_patches, scene_and_notes
 
 @dataclass
@@ -210,7 +210,9 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     """
     patches = make_patches(objects, settings.patch_size)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
+    trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
     scene, notes = scene_and_notes(patches)
+    trim.give_back()
     prediction, target = prediction_for(scene, settings)
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
@@ -232,6 +234,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         direct_light=direct_light_for(scene, settings),
         method=settings.method,
     )
+    trim.give_back()
     if result.seconds > 0 and result.rays:
         key = _walk_key(patches, settings, result.direct_light)
         RAY_RATES[key], RAYS_PER_PATH[key] = result.rays_per_second, result.rays / result.paths

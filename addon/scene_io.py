@@ -325,6 +325,14 @@ def _get(collection, attr, count, dtype, width=1):
     return out.reshape(-1, width) if width > 1 else out
 
 
+def _per_face(table, slot):
+    """(F,3) the rows of a per-slot table for each face: where every slot has the same values
+    (one material), one row broadcast to every face (a read-only view, no memory per face)."""
+    if (table == table[0]).all():
+        return np.broadcast_to(table[0], (len(slot), table.shape[1]))
+    return table[slot]
+
+
 def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
     """Arrays of one object: evaluated (modifiers), world space, outward winding."""
     return _read_evaluated(obj.evaluated_get(depsgraph), obj.matrix_world, obj.name, obj.session_uid, notes)
@@ -368,20 +376,21 @@ def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays |
             if not _has_instances(evaluated):
                 notes.append(f"'{name}' has no faces and was skipped")
             return None
+        # (indices stay int32, as Blender keeps them: half of int64's memory)
         co = _get(mesh.vertices, "co", V, np.float32, 3).astype(np.float64)
-        face_sizes = _get(mesh.polygons, "loop_total", F, np.int32).astype(np.int64)
-        loop_start = _get(mesh.polygons, "loop_start", F, np.int32).astype(np.int64)
-        material_index = _get(mesh.polygons, "material_index", F, np.int32).astype(np.int64)
-        loop_vertex = _get(mesh.loops, "vertex_index", len(mesh.loops), np.int32).astype(np.int64)
+        face_sizes = _get(mesh.polygons, "loop_total", F, np.int32)
+        loop_start = _get(mesh.polygons, "loop_start", F, np.int32)
+        material_index = _get(mesh.polygons, "material_index", F, np.int32)
+        loop_vertex = _get(mesh.loops, "vertex_index", len(mesh.loops), np.int32)
         # corners face by face (loop_start is normally already in order)
-        order = np.argsort(loop_start, kind="stable")
-        if np.any(order != np.arange(F)) or (F and loop_start[0] != 0):
+        if (F and loop_start[0] != 0) or np.any(loop_start[1:] < loop_start[:-1]):
             raise SceneError(f"'{name}': unexpected corner order")
+        del loop_start
         corner_verts = loop_vertex
         mesh.calc_loop_triangles()
         T = len(mesh.loop_triangles)
-        triangles = _get(mesh.loop_triangles, "vertices", T, np.int32, 3).astype(np.int64)
-        triangle_face = _get(mesh.loop_triangles, "polygon_index", T, np.int32).astype(np.int64)
+        triangles = _get(mesh.loop_triangles, "vertices", T, np.int32, 3)
+        triangle_face = _get(mesh.loop_triangles, "polygon_index", T, np.int32)
         R_slots, E_slots, slot_names, textures, attributes, emission_textures = _slot_tables(evaluated, notes)
         triangle_uv = None
         if any(t is not None for t in (*textures, *emission_textures)):
@@ -409,8 +418,8 @@ def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays |
         corner_verts=corner_verts,
         triangles=triangles,
         triangle_face=triangle_face,
-        face_reflectivity=R_slots[slot],
-        face_emission=E_slots[slot],
+        face_reflectivity=_per_face(R_slots, slot),
+        face_emission=_per_face(E_slots, slot),
         triangle_uv=triangle_uv,
         slot_textures=textures if triangle_uv is not None else (),
         slot_emission_textures=emission_textures if triangle_uv is not None else (),

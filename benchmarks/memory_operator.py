@@ -2,6 +2,7 @@
 
     python -m benchmarks.memory --operator            # into benchmarks/results/memory_operator.md
     python -m benchmarks.memory --operator --quick    # a 100k-patch room, into out/
+    python -m benchmarks.memory --operator --repeat 2 # each plain run twice, the highest peak reported
 
 Each measurement runs in a fresh process that imports ``bpy`` (Blender as a Python module,
 headless), registers the extension, builds the room in Blender, selects it and runs
@@ -17,8 +18,9 @@ counts the numpy and Python allocations of that stage alone (not Blender's nor E
 Headless Blender has no window, so the modal run's live view cannot draw. Its arrays are made
 as its draw handler makes them: the job keeps the result so far (``SolveJob.live``, as the
 threaded run does) and, after every batch, ``live_view.triangles`` is computed and kept until
-the next (standing for the vertex buffer the batch holds). Nor does headless Blender keep an
-undo stack: the undo step the operator pushes in the interface is not measured.
+the next (standing for the vertex buffer the batch holds), and let go of before the results are
+written, as the modal run removes its live view then. Nor does headless Blender keep an undo
+stack: the undo step the operator pushes in the interface is not measured.
 
 The room: six walls facing inwards (two of them coloured, so that the walk carries three
 channels) and an emitting quad under the ceiling. ``grids``: each wall is a grid of N x N
@@ -164,9 +166,15 @@ def child(layout, n, target_error, use_tracemalloc):
     pipeline.solve = after("solve (with live view)", pipeline.solve)
     # (SolveJob.run, not run_solve: a wrapper's arguments would keep the objects' arrays alive)
     worker.SolveJob.run = after("colours computed", worker.SolveJob.run)
-    operators.scene_io.write_results = after("colours written", scene_io.write_results)
-
     live = {"version": None, "arrays": None, "bytes": 0}
+
+    write = scene_io.write_results
+
+    def write_results(*args, **kwargs):
+        live["arrays"] = None  # the modal run removes its live view before writing (operators._cleanup)
+        return write(*args, **kwargs)
+
+    operators.scene_io.write_results = after("colours written", write_results)
 
     def draw_live(job):
         """What the live view's draw handler makes, after every batch (a window-less stand-in)."""
@@ -216,6 +224,10 @@ def measure(layout, n, target_error, use_tracemalloc=False):
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def _peak(run):
+    return max(s["peak"] for s in run["stages"])
+
+
 def _by_stage(run):
     return {s["stage"]: s for s in run["stages"]}
 
@@ -253,6 +265,9 @@ def main(argv=None):
                     help="error targets in %% (the panel's setting): two path counts")
     ap.add_argument("--before", default=None, help="the JSON of an earlier run, shown beside this one")
     ap.add_argument("--before-label", default=None, help="what the earlier run measured (a commit)")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="plain runs of each measurement (the peak reported is the highest; thread timing and "
+                         "the allocator move it by a few tens of MiB)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
@@ -266,13 +281,14 @@ def main(argv=None):
     rows = []
     for layout in args.layouts:
         for k, error in enumerate(args.errors):
-            plain = measure(layout, n, error)
+            runs = [measure(layout, n, error) for _ in range(max(1, args.repeat))]
+            plain = max(runs, key=_peak)  # the highest of the runs, stage by stage
+            plain["run_peaks"] = [_peak(run) for run in runs]
             # tracemalloc at the first error target only (the second checks the peak's independence of the paths)
             traced = measure(layout, n, error, use_tracemalloc=True) if k == 0 else {"stages": []}
             rows.append((plain, traced))
-            peak = max(s["peak"] for s in plain["stages"])
-            print(f"{layout} {plain['patches']:,} patches, {plain['paths']:,} paths ({error:g}%): peak {peak / MIB:.0f} MiB, "
-                  f"{plain['seconds']:.0f} s", flush=True)
+            print(f"{layout} {plain['patches']:,} patches, {plain['paths']:,} paths ({error:g}%): peaks "
+                  f"{', '.join(f'{p / MIB:.0f}' for p in plain['run_peaks'])} MiB, {plain['seconds']:.0f} s", flush=True)
     L = [
         "# Peak memory of the Solve operator on a room of a million patches (issue 26)",
         "",
@@ -285,12 +301,14 @@ def main(argv=None):
     ]
     for plain, traced in rows:
         last = _by_stage(plain)
-        peak = max(s["peak"] for s in plain["stages"])
+        peak = _peak(plain)
         floor = last["after release"]["current"]
+        runs = plain.get("run_peaks", [peak])
+        of_runs = f" (the highest of {len(runs)} runs: {', '.join(f'{p / MIB:.0f}' for p in runs)})" if len(runs) > 1 else ""
         L.append(
             f"- `{plain['layout']}`: {plain['patches']:,} patches ({plain['source_faces']:,} source faces, "
             f"{plain['result_corners']:,} result corners), {plain['target_error']:g}% target: {plain['paths']:,} paths, "
-            f"{plain['rays']:,} rays, {plain['seconds']:.0f} s. **Peak {peak / MIB:.0f} MiB**; Blender holding the "
+            f"{plain['rays']:,} rays, {plain['seconds']:.0f} s. **Peak {peak / MIB:.0f} MiB**{of_runs}; Blender holding the "
             f"scene and the results at the end {floor / MIB:.0f} MiB; peak above that {(peak - floor) / MIB:.0f} MiB; "
             f"live view arrays {plain['live_bytes'] / MIB:.0f} MiB."
         )
@@ -304,7 +322,8 @@ def main(argv=None):
             L.append(f"- `{plain['layout']}`: {plain['patches']:,} patches, {plain['paths']:,} paths: peak {peak / MIB:.0f} MiB, "
                      f"{(peak - floor) / MIB:.0f} MiB above Blender holding the scene and the results ({floor / MIB:.0f} MiB)")
         L += ["", "Before, per stage:", ""] + table([(run["plain"], run["traced"]) for run in before])
-    L += ["", "Per stage, at its end: the peak resident set so far and the current one; from the tracemalloc run "
+    L += ["", "Per stage, at its end: the peak resident set so far and the current one (of the run with the "
+          "highest peak); from the tracemalloc run "
           "(started once the scene is built), the peak of the numpy and Python allocations live during the stage "
           "and what is still allocated at its end.", ""]
     L += table(rows)

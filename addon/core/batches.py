@@ -30,8 +30,9 @@ class Batches:
         self.paths = 0
         self.rays = 0
         self.chunks = 0
-        # b_j = (R_j Phi_T / A_j) I_j / N
-        self.score = tables.reflectivity * (scene.total_power / scene.patch_area)  # (C,P)
+        # b_j = (R_j Phi_T / A_j) I_j / N: the score R_j Phi_T / A_j made where it is used (_score),
+        # not kept beside the tallies (a (C,P) array less through the solve)
+        self._reflectivity = tables.reflectivity  # (C,P)
         self.weight = scene.patch_area / scene.total_area
         self._mse_weight = None  # (C*P,) score^2 A_j / (C A_T), made on first use
         self._mse_at = (0, math.nan)  # (chunks, measured_mse at that many chunks)
@@ -52,25 +53,35 @@ class Batches:
         self.rays += tally.rays
         self.chunks += 1
 
+    def _score(self):
+        """(C,P) R_j Phi_T / A_j, a new array."""
+        return self._reflectivity * (self.scene.total_power / self.scene.patch_area)
+
     def reflected(self):
         if self.paths == 0:
             return np.zeros((self.scene.patch_count, 3))
-        b = (self.score * self.incident / self.paths).T
-        return np.repeat(b, 3, axis=1) if self.channels == 1 else b
+        b = self._score()
+        b *= self.incident
+        b /= self.paths  # (in place: one (C,P) array, the same numbers)
+        return np.repeat(b.T, 3, axis=1) if self.channels == 1 else b.T
 
     def irradiance(self):
         """(P,3) H, the light arriving at each patch over pi (B = E + R H): incident power over area."""
         if self.paths == 0:
             return np.zeros((self.scene.patch_count, 3))
-        h = (self.incident * (self.scene.total_power / self.scene.patch_area) / self.paths).T
-        return np.repeat(h, 3, axis=1) if self.channels == 1 else h
+        h = self.incident * (self.scene.total_power / self.scene.patch_area)
+        h /= self.paths
+        return np.repeat(h.T, 3, axis=1) if self.channels == 1 else h.T
 
     def variance_of_mean(self):
         """Batch-means estimate of Var(b_j) per channel and patch, (C,P); NaN below 2 chunks."""
         if self.chunks < 2:
             return np.full_like(self.incident, math.nan)
         variance = self._spread()
-        variance *= self.score**2
+        score = self._score()
+        score *= score  # (score**2)
+        variance *= score
+        del score
         variance /= (self.chunks - 1) * self.paths
         return variance
 
@@ -96,7 +107,10 @@ class Batches:
         if self._mse_at[0] == self.chunks:
             return self._mse_at[1]
         if self._mse_weight is None:
-            self._mse_weight = (self.score**2 * (self.weight / self.channels)).ravel()
+            score = self._score()
+            score *= score  # (score**2)
+            score *= self.weight / self.channels
+            self._mse_weight = score.ravel()
         # (einsum, not a BLAS dot: OpenBLAS's threads would spin beside the walks' threads)
         spread_sum = float(np.einsum("i,i->", self._spread().ravel(), self._mse_weight))
         mse = spread_sum / ((self.chunks - 1) * self.paths)

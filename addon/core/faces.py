@@ -31,12 +31,21 @@ def starts_of(sizes: np.ndarray) -> np.ndarray:
     return starts
 
 
+# Per-triangle arithmetic runs this many triangles at a time (each triangle on its own: the same
+# numbers as all at once), so that its float64 temporaries are a block's.
+BLOCK_TRIANGLES = 1 << 16
+
+
 def triangle_areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Area of each triangle, (T,)."""
     points = np.asarray(points, dtype=np.float64)
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    a, b, c = (points[triangles[:, k]] for k in range(3))
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    triangles = np.asarray(triangles).reshape(-1, 3)
+    area = np.empty(len(triangles))
+    for start in range(0, len(triangles), BLOCK_TRIANGLES):
+        block = triangles[start:start + BLOCK_TRIANGLES]
+        a, b, c = (points[block[:, k]] for k in range(3))
+        area[start:start + BLOCK_TRIANGLES] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    return area
 
 
 def reverse_faces(face_sizes, corner_verts) -> np.ndarray:
@@ -103,8 +112,10 @@ def nonplanar_faces(points, face_count, face_triangles, triangle_face, min_area=
     tf = np.asarray(triangle_face, dtype=np.int64).ravel()
     if min_area is None:
         min_area = default_min_area(points, t)
-    p = points[t]
-    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # 2 x area x normal
+    cross = np.empty((len(t), 3))  # 2 x area x normal, a block of triangles at a time
+    for start in range(0, len(t), BLOCK_TRIANGLES):
+        p = points[t[start:start + BLOCK_TRIANGLES]]
+        cross[start:start + BLOCK_TRIANGLES] = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     double_area = np.linalg.norm(cross, axis=1)
     has_area = 0.5 * double_area > float(min_area)
     w = np.where(has_area[:, None], cross, 0.0)
@@ -128,7 +139,11 @@ def _longest_edges(points, face_sizes, corner_verts, starts):
     face_of_corner = np.repeat(np.arange(len(face_sizes)), face_sizes)
     local = np.arange(len(corner_verts)) - starts[face_of_corner]
     nxt = starts[face_of_corner] + (local + 1) % face_sizes[face_of_corner]
-    length = np.linalg.norm(points[corner_verts[nxt]] - points[corner_verts], axis=1)
+    del local
+    length = np.empty(len(corner_verts))
+    for start in range(0, len(corner_verts), BLOCK_TRIANGLES):  # (corner by corner)
+        rows = slice(start, start + BLOCK_TRIANGLES)
+        length[rows] = np.linalg.norm(points[corner_verts[nxt[rows]]] - points[corner_verts[rows]], axis=1)
     longest = np.zeros(len(face_sizes))
     if len(length):
         np.maximum.at(longest, face_of_corner, length)
@@ -208,8 +223,11 @@ def plan_faces(points, face_sizes, corner_verts, patch_size, face_triangles, tri
 
 
 def _triangle_longest_edges(points, triangles):
-    p = points[triangles]
-    return np.linalg.norm(p[:, [1, 2, 0]] - p, axis=2).max(axis=1)
+    longest = np.empty(len(triangles))
+    for start in range(0, len(triangles), BLOCK_TRIANGLES):  # (triangle by triangle)
+        p = points[triangles[start:start + BLOCK_TRIANGLES]]
+        longest[start:start + BLOCK_TRIANGLES] = np.linalg.norm(p[:, [1, 2, 0]] - p, axis=2).max(axis=1)
+    return longest
 
 
 def triangle_subdivisions(points, triangles, limit):

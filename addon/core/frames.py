@@ -54,28 +54,49 @@ def inset_triangles(corners, inset):
     return incentre[:, None, :] + (1 - shrink)[:, None, None] * (corners - incentre[:, None, :])
 
 
-def parallelogram_frames(sorted_corners, first, count, inset=0.0):
-    """Which patches are two triangles forming a parallelogram, and its (corner, a, b).
+def parallelogram_frames(sorted_corners, first, count, inset, offset, normal, out):
+    """Which patches are two triangles forming a parallelogram ((P,) bool), with their leaving
+    frames written into ``out`` ((9,P) float32, one coordinate per row): the corner, inset and
+    pushed ``offset`` along the patch's ``normal`` ((P,3)), then the edges a and b; zeros for
+    the other patches.
 
     Such a patch (any quad with parallel sides: the grids meshing makes) is sampled as
-    corner + u a + v b, without choosing a triangle or folding.
+    corner + u a + v b, without choosing a triangle or folding. Computed a block of patches at a
+    time in float64 (row by row: the same numbers as the whole at once), so that no float64
+    array of every patch is made.
     """
-    P = first.shape[0]
-    frame = np.zeros((P, 9))
-    two, ok, (p, s1, s2, _) = parallelogram_corners(sorted_corners, first, count)
-    if two.size == 0:
-        return np.zeros(P, bool), frame
-    edge_a, edge_b = s1 - p, s2 - p
-    # Inset every side by ``inset`` (at most a quarter of the patch): corner + d_a a + d_b b.
-    d_a = np.minimum(inset / np.linalg.norm(edge_a, axis=1), 0.25)[:, None]
-    d_b = np.minimum(inset / np.linalg.norm(edge_b, axis=1), 0.25)[:, None]
-    frame[two] = np.hstack([p + d_a * edge_a + d_b * edge_b, (1 - 2 * d_a) * edge_a, (1 - 2 * d_b) * edge_b])
-    flags = np.zeros(P, bool)
-    flags[two[ok]] = True
-    return flags, frame
+    out[...] = 0.0
+    flags = np.zeros(first.shape[0], bool)
+    for two, ok, (p, s1, s2, _) in parallelogram_blocks(sorted_corners, first, count):
+        edge_a, edge_b = s1 - p, s2 - p
+        # Inset every side by ``inset`` (at most a quarter of the patch): corner + d_a a + d_b b.
+        d_a = np.minimum(inset / np.linalg.norm(edge_a, axis=1), 0.25)[:, None]
+        d_b = np.minimum(inset / np.linalg.norm(edge_b, axis=1), 0.25)[:, None]
+        corner = p + d_a * edge_a + d_b * edge_b
+        corner += offset * normal[two]
+        rows = two[ok]
+        for start, values in ((0, corner), (3, (1 - 2 * d_a) * edge_a), (6, (1 - 2 * d_b) * edge_b)):
+            out[start:start + 3, rows] = values[ok].T
+        flags[rows] = True
+    return flags
 
 
-def parallelogram_corners(sorted_corners, first, count, block=1 << 15):
+# Two-triangle patches are compared this many at a time (each on its own).
+BLOCK_PATCHES = 1 << 15
+
+
+def parallelogram_blocks(sorted_corners, first, count, block=None):
+    """:func:`parallelogram_corners` a block of ``block`` (BLOCK_PATCHES) patches at a time:
+    (patches (n,), whether each is a parallelogram (n,), (p, s1, s2, q)) for each block."""
+    block = block or BLOCK_PATCHES
+    two = np.flatnonzero(count == 2)
+    for k in range(0, two.size, block):
+        rows = two[k:k + block]
+        ok, corners = _parallelogram_corners(sorted_corners, first[rows])
+        yield rows, ok, corners
+
+
+def parallelogram_corners(sorted_corners, first, count, block=None):
     """The corners of the patches made of two triangles: (patches with two triangles (n,),
     whether each is a parallelogram (n,), and its corners (p, s1, s2, q), each (n,3) float64).
     p is the first triangle's own corner, s1 and s2 the two corners the triangles share (the
@@ -83,7 +104,7 @@ def parallelogram_corners(sorted_corners, first, count, block=1 << 15):
     within rounding). ``sorted_corners[rows]`` gives triangles' corners (an array or
     geometry.UnitCorners); the patches are taken ``block`` at a time (each on its own)."""
     two = np.flatnonzero(count == 2)
-    parts = [_parallelogram_corners(sorted_corners, first[two[k:k + block]]) for k in range(0, two.size, block)]
+    parts = [(ok, c) for _, ok, c in parallelogram_blocks(sorted_corners, first, count, block)]
     if not parts:
         return two, np.zeros(0, bool), tuple(np.zeros((0, 3)) for _ in range(4))
     return two, np.concatenate([ok for ok, _ in parts]), tuple(np.concatenate(c) for c in zip(*(c for _, c in parts)))

@@ -47,14 +47,16 @@ class Geometry:
     centre: np.ndarray            # (3,) float64
     diagonal: float               # bounding-box diagonal, scene units
     ray_offset: float             # distance a ray origin is pushed along the normal (unit space)
-    triangle_index: np.ndarray    # (T,) original index of each sorted triangle
+    triangle_index: np.ndarray    # (T,) int32 original index of each sorted triangle
     triangle_patch: np.ndarray    # (T,) int32 patch of each sorted triangle
     corners: UnitCorners          # (T,3,3) float64 unit-space corners of the sorted triangles, on demand
     patch_area: np.ndarray        # (P,) float64
-    patch_normal: np.ndarray      # (P,3) float32
-    patch_first_triangle: np.ndarray  # (P,) int64 first sorted triangle of each patch
-    patch_triangle_count: np.ndarray  # (P,) int64
-    triangle_key: np.ndarray      # (T,) float64: patch + cumulative area fraction in the patch
+    patch_normal: np.ndarray      # (P,3) float32, a view of leave_table's rows 9-11
+    patch_first_triangle: np.ndarray  # (P,) int32 first sorted triangle of each patch
+    patch_triangle_count: np.ndarray  # (P,) int32
+    # (T,) float64: patch + cumulative area fraction in the patch, where a patch has more than
+    # two triangles (sampling.choose_triangles searches it); None where none has
+    triangle_key: np.ndarray | None
     patch_first_fraction: np.ndarray  # (P,) float32: area fraction of each patch's first triangle
     patch_parallelogram: np.ndarray   # (P,) bool: the patch is two triangles forming a parallelogram
     # (12,P) float32: each parallelogram patch's corner (pushed off), edge a, edge b (zeros if
@@ -218,19 +220,36 @@ def leave_shapes(leave_table, max_shapes=LEAVE_SHAPES_MAX, shape_hash=_SHAPE_HAS
     A patch's frame is its corner and its shape: patches meshed from one face share one (a wall
     of a room, a box's side). Compared as bits: a shared shape is the same float32 numbers, and
     -0.0 stays apart from 0.0."""
-    bits = np.ascontiguousarray(leave_table[3:12].T).view(np.uint32)  # (P,9)
-    # A hash of each row first (a sort of P numbers, not of P rows); rows of equal hashes are
-    # then checked to be equal, and where two shapes share a hash the rows themselves are sorted.
-    hashed = bits.astype(np.uint64) @ shape_hash
+    P = leave_table.shape[1]
+
+    def bits(rows):  # (n,9) uint32: the frames' bit patterns of patches ``rows`` (a slice)
+        return np.ascontiguousarray(leave_table[3:12, rows].T).view(np.uint32)
+
+    # A hash of each row first (a sort of P numbers, not of P rows), a block of patches at a
+    # time (uint64 arithmetic wraps: the same hashes); rows of equal hashes are then checked to
+    # be equal, and where two shapes share a hash the rows themselves are sorted.
+    hashed = np.empty(P, np.uint64)
+    for start in range(0, P, BLOCK_PATCHES):
+        rows = slice(start, start + BLOCK_PATCHES)
+        hashed[rows] = bits(rows).astype(np.uint64) @ shape_hash
     if np.unique(hashed).size > max_shapes:  # (shared hashes only lower the count)
         return None
     _, first, shape_of_patch = np.unique(hashed, return_index=True, return_inverse=True)
-    shapes = bits[first]
-    if not np.array_equal(shapes[shape_of_patch.reshape(-1)], bits):
-        shapes, shape_of_patch = np.unique(bits, axis=0, return_inverse=True)
+    del hashed
+    shape_of_patch = shape_of_patch.reshape(-1)
+    shapes = np.ascontiguousarray(leave_table[3:12, first].T).view(np.uint32)
+    same = all(
+        np.array_equal(shapes[shape_of_patch[start:start + BLOCK_PATCHES]], bits(slice(start, start + BLOCK_PATCHES)))
+        for start in range(0, P, BLOCK_PATCHES)
+    )
+    if not same:
+        shapes, shape_of_patch = np.unique(bits(slice(None)), axis=0, return_inverse=True)
         if shapes.shape[0] > max_shapes:
             return None
     return np.ascontiguousarray(shapes.view(np.float32).T), shape_of_patch.reshape(-1).astype(np.uint16)
+
+# Per-patch arrays are computed in blocks of this many patches (every value patch by patch).
+BLOCK_PATCHES = 1 << 16
 
 # Per-triangle arrays are computed in blocks of about this many triangles (whole patches), so
 # that the float64 temporaries are a block's, not the scene's: every value is computed
@@ -322,7 +341,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     if empty.any():
         raise PatchError(f"patches {indices_text(empty)} have no area (no triangles, or only degenerate ones)", indices_of(empty))
 
-    order = keep[np.argsort(kept_patch, kind="stable")]
+    order = keep[np.argsort(kept_patch, kind="stable")].astype(np.int32)  # (T < 2^31: checked)
     del keep, kept_patch
     tp_sorted = tp[order]
     count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
@@ -370,13 +389,11 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     last = first + count - 1
     fraction[last] = 1.0  # exact upper end, whatever the rounding
     ray_offset = RELATIVE_RAY_OFFSET
-    is_parallelogram, parallelogram = parallelogram_frames(sorted_corners, first, count, RELATIVE_EDGE_INSET)
-    parallelogram[:, :3] += ray_offset * patch_normal
-    parallelogram[~is_parallelogram] = 0.0
     leave_table = np.empty((12, patch_count), np.float32)
-    leave_table[0:9] = parallelogram.T
+    is_parallelogram = parallelogram_frames(
+        sorted_corners, first, count, RELATIVE_EDGE_INSET, ray_offset, patch_normal, leave_table[0:9]
+    )
     leave_table[9:12] = patch_normal.T
-    del parallelogram
 
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     return Geometry(
@@ -384,13 +401,13 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         diagonal=diagonal,
         ray_offset=ray_offset,
         triangle_index=order,
-        triangle_patch=tp_sorted.astype(np.int32),
+        triangle_patch=tp_sorted.astype(np.int32, copy=False),
         corners=sorted_corners,
         patch_area=patch_area * diagonal**2,
-        patch_normal=f32(patch_normal),
-        patch_first_triangle=first,
-        patch_triangle_count=count,
-        triangle_key=tp_sorted + fraction,
+        patch_normal=leave_table[9:12].T,  # (the same float32 numbers: one copy)
+        patch_first_triangle=first.astype(np.int32),
+        patch_triangle_count=count.astype(np.int32),
+        triangle_key=tp_sorted + fraction if count.max() > 2 else None,
         patch_first_fraction=f32(fraction[first]),
         patch_parallelogram=is_parallelogram,
         leave_table=leave_table,

@@ -68,27 +68,60 @@ __all__ = [
 ]
 
 
-@dataclass
 class PatchMesh:
     """A patch mesh: every face is one patch.
 
     points        (N, 3) float64  positions of the patch mesh's vertices
-    face_sizes    (P,)   int64    corners of each patch face (3, 4, or the
+    face_sizes    (P,)   int32    corners of each patch face (3, 4, or the
                                   source face's size for kept faces)
-    corner_verts  (C,)   int64    point index of each corner, faces in order
-    patch_face    (P,)   int64    source face each patch comes from
-    triangles     (T, 3) int64    triangulation of the patches (into points)
-    triangle_patch(T,)   int64    patch of each triangle
+    corner_verts  (C,)   int32    point index of each corner, faces in order
+    patch_face    (P,)   int32    source face each patch comes from
+    triangles     (T, 3) int32    triangulation of the patches (into points)
+    triangle_patch(T,)   int32    patch of each triangle
     patch_area    (P,)   float64  area of each patch (sum of its triangles)
+
+    Once the mesh is one of several :func:`concatenate` combines, its points and areas are views
+    of the combined arrays and its triangulation is the combined one's rows, made on each use
+    (less the mesh's offsets): one copy of each.
     """
 
-    points: np.ndarray
-    face_sizes: np.ndarray
-    corner_verts: np.ndarray
-    patch_face: np.ndarray
-    triangles: np.ndarray
-    triangle_patch: np.ndarray
-    patch_area: np.ndarray
+    def __init__(self, points, face_sizes, corner_verts, patch_face, triangles, triangle_patch, patch_area):
+        self.points = points
+        self.face_sizes = face_sizes
+        self.corner_verts = corner_verts
+        self.patch_face = patch_face
+        self._triangles = triangles
+        self._triangle_patch = triangle_patch
+        self.patch_area = patch_area
+        self._combined = None  # (CombinedPatches, its triangle rows, vertex offset, patch offset)
+
+    def __repr__(self):
+        return f"PatchMesh({self.patch_count} patches, {len(self.points)} points, {self.triangle_count} triangles)"
+
+    @property
+    def triangles(self) -> np.ndarray:
+        if self._combined is None:
+            return self._triangles
+        combined, rows, vertex_offset, _ = self._combined
+        return combined.triangles[rows] - combined.triangles.dtype.type(vertex_offset)
+
+    @property
+    def triangle_patch(self) -> np.ndarray:
+        if self._combined is None:
+            return self._triangle_patch
+        combined, rows, _, patch_offset = self._combined
+        return combined.triangle_patch[rows] - combined.triangle_patch.dtype.type(patch_offset)
+
+    @property
+    def triangle_count(self) -> int:
+        return self._combined[1].stop - self._combined[1].start if self._combined else len(self._triangles)
+
+    def _share(self, combined, rows, vertex_offset, patch_offset):
+        """Points, areas and triangulation from now on from ``combined`` (see :func:`concatenate`)."""
+        self.points = combined.vertices[vertex_offset : vertex_offset + len(self.points)]
+        self.patch_area = combined.patch_area[patch_offset : patch_offset + self.patch_count]
+        self._triangles = self._triangle_patch = None
+        self._combined = (combined, rows, vertex_offset, patch_offset)
 
     @property
     def patch_count(self) -> int:
@@ -102,7 +135,7 @@ class PatchMesh:
     @property
     def corner_patch(self) -> np.ndarray:
         """Patch of each corner (for writing flat colours on corners)."""
-        return np.repeat(np.arange(self.patch_count), self.face_sizes)
+        return np.repeat(np.arange(self.patch_count, dtype=np.int32), self.face_sizes)
 
 
 @dataclass
@@ -170,15 +203,17 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
     the patches' triangulation."""
     F = len(kept_face)
     if b.count == 0:
-        empty_i = np.zeros(0, dtype=np.int64)
+        empty_i = np.zeros(0, dtype=np.int32)
         return PatchMesh(
             np.zeros((0, 3)), empty_i, empty_i, empty_i,
-            np.zeros((0, 3), dtype=np.int64), empty_i, np.zeros(0),
+            np.zeros((0, 3), dtype=np.int32), empty_i, np.zeros(0),
         )
-    keys = np.concatenate(b.keys)
-    positions = np.concatenate(b.positions)
+    # (the builder's parts go once joined: one copy of the generated points and their keys)
+    keys, positions = _joined(b.keys), _joined(b.positions)
     uniq, first_index, inverse = weld(keys, len(points))
-    out_points = positions[first_index].copy()
+    del keys
+    out_points = positions[first_index]
+    del positions
     # canonical positions: source vertices exactly, edge points from the
     # lower-indexed vertex, so both neighbouring faces agree bit for bit
     kind0 = uniq[:, 0] == 0
@@ -192,8 +227,10 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
 
     sizes = np.concatenate([f[0] for f in b.faces])
     corners = inverse[np.concatenate([f[1] for f in b.faces])]
+    del inverse
     patch_face = np.concatenate([f[2] for f in b.faces])
     order = np.concatenate([f[3] for f in b.faces])
+    b.faces.clear()
     # patches in source-face order
     perm = np.lexsort((order, patch_face))
     fstarts = starts_of(sizes)
@@ -236,46 +273,53 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
         tris = np.concatenate([tris, vkey_point[face_triangles[tsel]]])
         tri_patch = np.concatenate([tri_patch, patch_of_face[triangle_face[tsel]]])
     order_t = np.argsort(tri_patch, kind="stable")
-    tris = tris[order_t].astype(np.int64)
-    tri_patch = tri_patch[order_t].astype(np.int64)
+    tris = tris[order_t].astype(np.int32)
+    tri_patch = tri_patch[order_t].astype(np.int32)
     area = np.bincount(tri_patch, weights=triangle_areas(out_points, tris), minlength=P)
     return PatchMesh(
         points=out_points,
-        face_sizes=sizes.astype(np.int64),
-        corner_verts=corners.astype(np.int64),
-        patch_face=patch_face.astype(np.int64),
+        face_sizes=sizes.astype(np.int32),
+        corner_verts=corners.astype(np.int32),
+        patch_face=patch_face.astype(np.int32),
         triangles=tris,
         triangle_patch=tri_patch,
         patch_area=area,
     )
 
 
+def _joined(parts):
+    """The arrays of list ``parts`` as one (the list emptied: the parts go as soon as joined)."""
+    joined = parts[0] if len(parts) == 1 else np.concatenate(parts)
+    parts.clear()
+    return joined
+
+
 def concatenate(meshes) -> CombinedPatches:
-    """Concatenate patch meshes (one per object) into PatchScene arrays."""
+    """Concatenate patch meshes (one per object) into PatchScene arrays: int32 indices (the
+    meshing refuses more than 2^31 of anything long before), float64 positions and areas.
+    The meshes then read their points, areas and triangulation from the combined arrays
+    (PatchMesh._share): one copy of each."""
     meshes = list(meshes)
     vertex_offsets = starts_of(np.array([len(m.points) for m in meshes], dtype=np.int64))
     counts = np.array([m.patch_count for m in meshes], dtype=np.int64)
     patch_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    triangle_offsets = starts_of(np.array([m.triangle_count for m in meshes] + [0], dtype=np.int64))
     if meshes:
         vertices = np.concatenate([m.points for m in meshes]).reshape(-1, 3)
         patch_area = np.concatenate([m.patch_area for m in meshes])
-        triangle_offsets = starts_of(np.array([len(m.triangles) for m in meshes] + [0], dtype=np.int64))
-        triangles = np.empty((int(triangle_offsets[-1]), 3), dtype=np.int64)
-        triangle_patch = np.empty(int(triangle_offsets[-1]), dtype=np.int64)
+        triangles = np.empty((int(triangle_offsets[-1]), 3), dtype=np.int32)
+        triangle_patch = np.empty(int(triangle_offsets[-1]), dtype=np.int32)
         for k, m in enumerate(meshes):
             rows = slice(int(triangle_offsets[k]), int(triangle_offsets[k + 1]))
-            np.add(m.triangles, vertex_offsets[k], out=triangles[rows])
-            np.add(m.triangle_patch, patch_offsets[k], out=triangle_patch[rows])
-            # The mesh's points and areas become views of the combined arrays: one copy of each.
-            m.points = vertices[vertex_offsets[k] : vertex_offsets[k] + len(m.points)]
-            m.patch_area = patch_area[patch_offsets[k] : patch_offsets[k + 1]]
+            np.add(m.triangles, vertex_offsets[k], out=triangles[rows], casting="unsafe")
+            np.add(m.triangle_patch, patch_offsets[k], out=triangle_patch[rows], casting="unsafe")
     else:
         vertices = np.zeros((0, 3))
-        triangles = np.zeros((0, 3), dtype=np.int64)
-        triangle_patch = np.zeros(0, dtype=np.int64)
+        triangles = np.zeros((0, 3), dtype=np.int32)
+        triangle_patch = np.zeros(0, dtype=np.int32)
         patch_area = np.zeros(0)
-    patch_object = np.repeat(np.arange(len(meshes)), counts)
-    return CombinedPatches(
+    patch_object = np.repeat(np.arange(len(meshes), dtype=np.int32), counts)
+    combined = CombinedPatches(
         vertices=vertices,
         triangles=triangles,
         triangle_patch=triangle_patch,
@@ -284,6 +328,10 @@ def concatenate(meshes) -> CombinedPatches:
         patch_area=patch_area,
         meshes=meshes,
     )
+    for k, m in enumerate(meshes):
+        rows = slice(int(triangle_offsets[k]), int(triangle_offsets[k + 1]))
+        m._share(combined, rows, int(vertex_offsets[k]), int(patch_offsets[k]))
+    return combined
 
 
 def corner_values(mesh: PatchMesh, patch_values) -> np.ndarray:

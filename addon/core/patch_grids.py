@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .frames import RELATIVE_EDGE_INSET, edge_barycentric, parallelogram_corners
+from .frames import RELATIVE_EDGE_INSET, edge_barycentric, parallelogram_blocks
 from .raytrace import RayTracer
 
 # Unit space (the scene's diagonal is 1): patch edges and plane offsets that agree to within
@@ -47,6 +47,9 @@ CORNER_TOLERANCE = 2.5e-7
 MAX_TRIANGLE_FRACTION = 0.5
 # The cell arithmetic runs in float32, exact below 2^24 cells.
 MAX_CELLS = 1 << 24
+# Per-patch arithmetic runs this many patches at a time (every value patch by patch: the same
+# numbers as all at once), so that its float64 temporaries are a block's.
+BLOCK_PATCHES = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -116,18 +119,18 @@ def patch_grids(geometry):
     P, T = geometry.patch_count, geometry.triangle_count
     if P == 0 or P >= MAX_CELLS:
         return None
-    two, ok, patch_corners = parallelogram_corners(
-        geometry.float32_corners, geometry.patch_first_triangle, geometry.patch_triangle_count
-    )
-    merged = two[ok]  # the parallelogram patches, in patch order; grid cells 0..M-1
-    M = merged.size
+    merged, patch_corners = _parallelogram_patches(geometry)
+    M = merged.size  # the parallelogram patches, in patch order; grid cells 0..M-1
     if M == 0:
         return None
-    patch_corners = tuple(c[ok] for c in patch_corners)
-    p, s1, s2, _ = patch_corners
     normal = geometry.patch_normal[merged]
-    group = _groups(p, s1 - p, s2 - p, normal)
-    I, J, on_lattice = _lattice(p, s1 - p, s2 - p, group)
+    p, s1, s2, _ = patch_corners
+    p = p.astype(np.float64)
+    a = s1 - p  # (float32 s1 promoted: the differences of the float64 corners)
+    b = s2 - p
+    group = _groups(p, a, b, normal)
+    I, J, on_lattice = _lattice(p, a, b, group)
+    del p, a, b
     group = _alone(group, ~on_lattice)
     rect = _rectangles(group, I, J)
     bad = _misplaced(rect, patch_corners)
@@ -204,6 +207,21 @@ def patch_grids(geometry):
     )
 
 
+def _parallelogram_patches(geometry):
+    """(the parallelogram patches (M,), their corners (p, s1, s2, q), each (M,3) float32) of
+    :func:`.frames.parallelogram_corners` on the float32 corners: the corners are float32
+    numbers, kept as float32 (exactly) and promoted to float64 where computed with."""
+    blocks = parallelogram_blocks(geometry.float32_corners, geometry.patch_first_triangle, geometry.patch_triangle_count)
+    merged, corners = [], ([], [], [], [])
+    for two, ok, block_corners in blocks:
+        merged.append(two[ok])
+        for out, c in zip(corners, block_corners):
+            out.append(c[ok].astype(np.float32))
+    if not merged:
+        return np.zeros(0, np.int64), tuple(np.zeros((0, 3), np.float32) for _ in range(4))
+    return np.concatenate(merged), tuple(np.concatenate(c) for c in corners)
+
+
 def _alone(group, mask):
     """``group`` with each patch of ``mask`` in a group of its own (a rectangle of one cell)."""
     return np.where(mask, group.max() + 1 + np.arange(group.size), group)
@@ -219,11 +237,17 @@ def _groups(p, a, b, normal):
     m /= np.linalg.norm(m, axis=1)[:, None]
     offset = np.einsum("ij,ij->i", m, p)
     front = np.einsum("ij,ij->i", m, normal) > 0
-    key = np.column_stack([_clusters(x, GRID_QUANTUM) for x in (*a.T, *b.T, offset)] + [front])
-    order = np.lexsort(key.T[::-1])
-    new = np.ones(key.shape[0], dtype=bool)
-    new[1:] = (key[order[1:]] != key[order[:-1]]).any(axis=1)
-    group = np.empty(key.shape[0], dtype=np.int64)
+    del m
+    # one column of cluster ids per coordinate (int32: below MAX_CELLS), sorted by the first
+    # column, then the next, ...; a new group wherever one of them changes
+    key = [_clusters(x, GRID_QUANTUM).astype(np.int32) for x in (*a.T, *b.T, offset)] + [front]
+    order = np.lexsort(key[::-1])
+    new = np.ones(order.size, dtype=bool)
+    new[1:] = False
+    for column in key:
+        column = column[order]
+        new[1:] |= column[1:] != column[:-1]
+    group = np.empty(order.size, dtype=np.int64)
     group[order] = np.cumsum(new) - 1
     return group
 
@@ -247,19 +271,26 @@ def _lattice(p, a, b, group):
     b_g = np.stack([np.bincount(group, weights=b[:, k], minlength=G) for k in range(3)], axis=1) / count
     first = np.full(G, p.shape[0])
     np.minimum.at(first, group, np.arange(p.shape[0]))
-    d = p - p[first][group]
-    a_p, b_p = a_g[group], b_g[group]
-    aa = np.einsum("ij,ij->i", a_p, a_p)
-    bb = np.einsum("ij,ij->i", b_p, b_p)
-    ab = np.einsum("ij,ij->i", a_p, b_p)
-    da = np.einsum("ij,ij->i", d, a_p)
-    db = np.einsum("ij,ij->i", d, b_p)
-    det = aa * bb - ab * ab
-    i = (bb * da - ab * db) / det
-    j = (aa * db - ab * da) / det
-    I, J = np.rint(i), np.rint(j)
-    on_lattice = (np.abs(i - I) < LATTICE_TOLERANCE) & (np.abs(j - J) < LATTICE_TOLERANCE)
-    return I.astype(np.int64), J.astype(np.int64), on_lattice
+    origin = p[first]
+    I, J = np.empty(p.shape[0], np.int64), np.empty(p.shape[0], np.int64)
+    on_lattice = np.empty(p.shape[0], bool)
+    for start in range(0, p.shape[0], BLOCK_PATCHES):  # patch by patch: blocks of them
+        rows = slice(start, start + BLOCK_PATCHES)
+        g = group[rows]
+        d = p[rows] - origin[g]
+        a_p, b_p = a_g[g], b_g[g]
+        aa = np.einsum("ij,ij->i", a_p, a_p)
+        bb = np.einsum("ij,ij->i", b_p, b_p)
+        ab = np.einsum("ij,ij->i", a_p, b_p)
+        da = np.einsum("ij,ij->i", d, a_p)
+        db = np.einsum("ij,ij->i", d, b_p)
+        det = aa * bb - ab * ab
+        i = (bb * da - ab * db) / det
+        j = (aa * db - ab * da) / det
+        I_rows, J_rows = np.rint(i), np.rint(j)
+        on_lattice[rows] = (np.abs(i - I_rows) < LATTICE_TOLERANCE) & (np.abs(j - J_rows) < LATTICE_TOLERANCE)
+        I[rows], J[rows] = I_rows, J_rows
+    return I, J, on_lattice
 
 
 @dataclass
@@ -274,10 +305,10 @@ class _Rectangles:
     corner_patch: np.ndarray  # (R,4) patches at cells (0,0), (n_a-1,0), (0,n_b-1), (n_a-1,n_b-1)
 
     def corners(self, patch_corners):
-        """Each rectangle's corners c00, c10, c01, c11 from its corner patches' own corners."""
+        """Each rectangle's corners c00, c10, c01, c11 (float64) from its corner patches' own corners."""
         p, s1, s2, q = patch_corners
         cp = self.corner_patch
-        return p[cp[:, 0]], s1[cp[:, 1]], s2[cp[:, 2]], q[cp[:, 3]]
+        return tuple(c[cp[:, k]].astype(np.float64) for k, c in enumerate((p, s1, s2, q)))
 
 
 def _rectangles(group, I, J):
@@ -338,14 +369,16 @@ def _misplaced(rect, patch_corners):
     from where the rectangle's even subdivision puts it."""
     c00, c10, c01, _ = rect.corners(patch_corners)
     R = rect.first.size
-    r = rect.of_cell
     step_a = (c10 - c00) / rect.n_a[:, None]
     step_b = (c01 - c00) / rect.n_b[:, None]
-    base = c00[r] + rect.i[:, None] * step_a[r] + rect.j[:, None] * step_b[r]
-    error = np.zeros(rect.of_cell.size)
-    for corner, (di, dj) in zip(patch_corners, ((0, 0), (1, 0), (0, 1), (1, 1))):
-        expected = base + di * step_a[r] + dj * step_b[r]
-        np.maximum(error, np.linalg.norm(corner - expected, axis=1), out=error)
     worst = np.zeros(R)
-    np.maximum.at(worst, r, error)
+    for start in range(0, rect.of_cell.size, BLOCK_PATCHES):  # patch by patch: blocks of them
+        rows = slice(start, start + BLOCK_PATCHES)
+        r = rect.of_cell[rows]
+        base = c00[r] + rect.i[rows, None] * step_a[r] + rect.j[rows, None] * step_b[r]
+        error = np.zeros(r.size)
+        for corner, (di, dj) in zip(patch_corners, ((0, 0), (1, 0), (0, 1), (1, 1))):
+            expected = base + di * step_a[r] + dj * step_b[r]
+            np.maximum(error, np.linalg.norm(corner[rows] - expected, axis=1), out=error)
+        np.maximum.at(worst, r, error)
     return worst > CORNER_TOLERANCE

@@ -133,7 +133,7 @@ def weld(keys, n_vertices):
     kind = keys[:, 0]
     shared = np.flatnonzero(kind != 2)
     interior = np.flatnonzero(kind == 2)
-    k = keys[shared]
+    k = keys if shared.size == len(keys) else keys[shared]  # (no copy where no point is interior)
     code = k[:, 1].copy()  # kind 0: the source vertex
     on_edge = k[:, 0] == 1
     if np.any(on_edge):

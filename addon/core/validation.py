@@ -50,7 +50,11 @@ class CoincidentFacesWarning(UserWarning):
         self.patches = patches
 
 
-def warn_coincident(corners, triangle_patch, block=1 << 16):
+# Per-triangle keys of warn_coincident are made this many triangles at a time.
+BLOCK_TRIANGLES = 1 << 16
+
+
+def warn_coincident(corners, triangle_patch, block=None):
     """Warn about triangles with exactly the same corners as another (in any order or winding):
     a ray hits one of them at random, so each shows only part of the light it gets.
     ``corners[rows]`` gives the (n,3,3) corners of triangle rows (an array or geometry.UnitCorners)."""
@@ -59,6 +63,7 @@ def warn_coincident(corners, triangle_patch, block=1 << 16):
     # compared exactly (corners in lexicographic order). O(T log T), no false positives. The
     # keys are made a block of triangles at a time (elementwise: equal corners, equal keys).
     key = np.empty(len(corners))
+    block = block or BLOCK_TRIANGLES
     for start in range(0, len(key), block):
         rows = corners[start:start + block]
         a, b, c = (rows[:, k, 0] + 1.37 * rows[:, k, 1] + 1.73 * rows[:, k, 2] for k in range(3))
@@ -162,9 +167,15 @@ def validate_lights(lights):
 
 
 
+def _indices(array):
+    """Integer indices as int32 (kept: half of int64's memory) or int64."""
+    return array if array.dtype == np.int32 else array.astype(np.int64, copy=False)
+
+
 def validate_mesh(vertices, triangles, triangle_patch, patch_count):
-    """Check the mesh arrays; return (V (V,3) float64, T (T,3) int64, triangle_patch (T,) int64,
-    centre (3,), diagonal) of the bounding box of the vertices the triangles use."""
+    """Check the mesh arrays; return (V (V,3) float64, T (T,3) and triangle_patch (T,) as int32
+    or int64 (int32 as given, without a copy; other integers as int64), centre (3,), diagonal)
+    of the bounding box of the vertices the triangles use."""
     V = np.asarray(vertices, dtype=np.float64)
     if V.ndim != 2 or V.shape[1] != 3:
         raise ValueError(f"vertices must have shape (V, 3); got {V.shape}")
@@ -178,9 +189,11 @@ def validate_mesh(vertices, triangles, triangle_patch, patch_count):
         raise ValueError(f"triangles must have shape (T, 3); got {T_raw.shape}")
     if T_raw.shape[0] == 0:
         raise ValueError("the scene has no triangles")
+    if T_raw.shape[0] >= 2**31 or V.shape[0] >= 2**31:
+        raise ValueError(f"the scene has {T_raw.shape[0]:,} triangles and {V.shape[0]:,} vertices: at most 2^31 - 1 of each")
     if not np.issubdtype(T_raw.dtype, np.integer):
         raise ValueError(f"triangles must hold integer vertex indices; got dtype {T_raw.dtype}")
-    T = T_raw.astype(np.int64, copy=False)
+    T = _indices(T_raw)
     out_of_range = ((T < 0) | (T >= V.shape[0])).any(axis=1)
     if out_of_range.any():
         raise ValueError(
@@ -191,7 +204,7 @@ def validate_mesh(vertices, triangles, triangle_patch, patch_count):
         raise ValueError(f"triangle_patch must have shape ({T.shape[0]},) to match triangles; got {tp_raw.shape}")
     if not np.issubdtype(tp_raw.dtype, np.integer):
         raise ValueError(f"triangle_patch must hold integer patch indices; got dtype {tp_raw.dtype}")
-    tp = tp_raw.astype(np.int64, copy=False)
+    tp = _indices(tp_raw)
     bad_patch = (tp < 0) | (tp >= patch_count)
     if bad_patch.any():
         raise ValueError(

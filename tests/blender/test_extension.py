@@ -779,7 +779,12 @@ def test_live_view_data_refines_while_solving_and_writes_nothing(blender):
     positions, colours = live_view.triangles(job.patches, radiosity)
     T = len(job.patches.combined.triangles)
     assert positions.shape == (3 * T, 3) and colours.shape == (3 * T, 4)
-    assert (colours >= 0).all() and (colours <= 1).all() and colours[:, :3].max() > 0.1
+    assert positions.dtype == np.float32 and colours.dtype == np.uint8  # the vertex buffer's formats
+    assert (colours[:, 3] == 255).all() and colours[:, :3].max() > 25
+    # each corner has its patch's display colour, in steps of 1/255
+    patch_of_corner = np.repeat(job.patches.combined.triangle_patch, 3)
+    expected = live_view.display_colours(radiosity)[patch_of_corner]
+    assert np.abs(colours[:, :3] / 255 - expected).max() <= 0.5 / 255 + 1e-6
     # without the live view (the command line, scripts): no copies made
     quiet = worker.SolveJob(objects, settings)
     quiet.run()
