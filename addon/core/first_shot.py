@@ -6,13 +6,16 @@ irradiance H_j instead, from uniform points of it, each looking at one source ch
 (a point on an emitting patch or on a light, or a direction of the sun) through a shadow ray
 (none for a light that casts no shadow: its light passes through objects, as Cycles draws it),
 and along one cosine-distributed ray (an emitting patch it meets, or the sky; none where the
-only sources are lamps, which no ray meets). The walk then shoots only what the direct light
-reflects: patch j is a source of emittance E'_j = R_j H_j, and the walk adds the
-light of every later bounce (``direct_light="gathered"`` in :func:`.solver.solve`). Leaving
-from hit points (the continuous walk), the reflected light leaves from where it arrived: each
-gathering sample is a point source of what it found, times R_j A_j / n_j (n_j the patch's
-expected samples), so that the first reflection is as uneven over a patch as the light that
-lands on it (:class:`ReflectedPoints`).
+only sources are lamps, which no ray meets, and with a chance where emitters are small,
+``cosine_share``); and rays shot from the emitting patches themselves add their hits, as
+samples of the patches they meet: the three strategies weighted by the power heuristic
+(``_emitter_estimate``). The walk then shoots only what the direct light reflects: patch j is
+a source of emittance E'_j = R_j H_j, and the walk adds the light of every later bounce
+(``direct_light="gathered"`` in :func:`.solver.solve`). Leaving from hit points (the
+continuous walk), the reflected light leaves from where it arrived: each sample is a point
+source of what it found, times R_j A_j / n_j (n_j the patch's expected gathering samples), so
+that the first reflection is as uneven over a patch as the light that lands on it
+(:class:`ReflectedPoints`).
 
 Each chunk gathers with its own points and shoots its own walk from what it gathered, so the
 chunks stay independent replicas of the whole estimate: batch means measure its error, which

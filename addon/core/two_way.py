@@ -22,7 +22,8 @@ noise goes with the second moment of what it carries, needs the control variate 
 
 Per chunk:
 
-    gather_direct   each patch's direct irradiance H^0 by shadow rays (``first_shot``)
+    gather_direct   each patch's direct irradiance H^0 (``first_shot``: shadow rays, cosine rays
+                    and rays shot from the emitting patches, weighted by the power heuristic)
     reflect_first   the first reflection R H^0: a constant over each patch (exit_point="random",
                     the discrete method), or as uneven over a patch as the light that landed on
                     it (exit_point="hit": the constant, and what the gathering samples found
