@@ -178,7 +178,8 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
     g, P = tables.geometry, tables.patch_count
     source = gathering.table.choose(u[2])
     towards = np.empty_like(x)
-    distance = np.full(patch.size, -1.0)  # unit space; -1: the ray must meet the source patch
+    distance = np.zeros(patch.size)  # unit space, to the point looked at
+    to_patch = np.zeros(patch.size, dtype=bool)  # an emitting patch's point: meeting the patch sees it too
     unshadowed = np.zeros(patch.size, dtype=bool)  # from a light that casts no shadow: always seen
     shadow = np.zeros_like(value)
     at_patch = np.flatnonzero(source < P)
@@ -192,6 +193,7 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
         cos_y = -np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), d)
         ok = (cos_x > 0) & (cos_y > 0) & (s != patch[at_patch])
         towards[:, at_patch] = d
+        distance[at_patch], to_patch[at_patch] = dist, True
         cols = at_patch[ok]
         shadow[:, cols] = _emitter_estimate(gathering, SHADOW, s[ok], patch[cols], cos_x[ok], cos_y[ok], dist[ok] * g.diagonal)
     at_light = np.flatnonzero(source >= P)
@@ -210,10 +212,13 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
     live = np.flatnonzero(shadow.any(axis=0) & ~unshadowed)
     if live.size:
         hit, hit_patch, front, t = _trace(tables, x[:, live], towards[:, live])
-        to_patch = distance[live] < 0
-        met_source = (hit >= 0) & (hit_patch == source[live]) & front
+        # Seen if nothing is met before the point looked at; on an emitting patch, also if the
+        # patch is met first. (A patch's points lie a ray offset off it: at grazing angles a ray
+        # to a point near its far edge passes the point and misses the patch. Asking for the
+        # patch alone lost 0.23% of the figure 4 room's direct light, 2% on its walls' tops.)
+        met_source = (hit >= 0) & (hit_patch == source[live]) & front & to_patch[live]
         clear = (hit < 0) | (t >= distance[live] * SEEN_BEFORE)
-        value[:, live] += shadow[:, live] * np.where(to_patch, met_source, clear)
+        value[:, live] += shadow[:, live] * (met_source | clear)
     return live.size
 
 
