@@ -25,7 +25,6 @@ from .names import (
     FINITE,
     GATHERED,
     INDEPENDENT,
-    JACOBI,
     MEASURED,
     METHODS,
     PREDICTED,
@@ -67,17 +66,14 @@ MIN_MEASURED_CHUNKS = 8
 # With the direct light gathered, chunks are planned for this fraction of the paper's predicted
 # paths (it needs several times fewer: docs/performance.md).
 GATHERED_PLAN_DIVISOR = 4
-TWO_WAY_PLAN_DIVISOR = 4
 MEASURED_CAP_FACTOR = 64
 POLL_SECONDS = 0.05
 
 
 def planned_paths(predicted_paths, direct_light, method=WALK):
     """The paths a solve stopping on its measured error plans its chunks for: the paper's
-    prediction, or with the direct light gathered or Jacobi iteration a fraction of it."""
-    if method == TWO_WAY:
-        return max(1, predicted_paths // TWO_WAY_PLAN_DIVISOR)
-    if direct_light == GATHERED or method == JACOBI:
+    prediction, or with the direct light gathered or an iteration (Jacobi, two-way) a fraction of it."""
+    if direct_light == GATHERED or method != WALK:
         return max(1, predicted_paths // GATHERED_PLAN_DIVISOR)
     return predicted_paths
 
@@ -205,6 +201,10 @@ def solve(
     the paper) allots each chunk's paths to sources in proportion to power and draws the first
     ray from a randomly shifted low-discrepancy set: same expectation, usually less noise;
     the predicted path counts are derived for the paper's plain ``"independent"`` sampling.
+    ``method="two_way"`` (beyond the paper, ``two_way``) carries the light generation by
+    generation, every ray used as a shooting and a gathering estimate about a control variate,
+    its direct light always gathered (``direct_light`` None: the method's own, gathered for it,
+    shot for the walks); its error, too, is measured, never predicted.
     ``progress(fraction, stats)`` and ``should_stop()`` are called from the calling thread
     between chunks (``stats["radiosity"]()`` gives the result so far); ``max_seconds`` bounds the wall time. A stopped run returns the complete
     chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
