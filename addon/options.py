@@ -80,7 +80,7 @@ class Text:
         return str(value).strip()
 
 
-METHOD = Choice("method", "--method", "walk", (
+METHOD = Choice("method", "--method", "two_way", (
     ("walk", "Random walks (paper)", "The paper's shooting random walks, with its estimators: their predicted path "
      "counts and relative efficiency hold for them"),
     ("two_way", "Two-way iteration", "Beyond the paper: the direct light gathered by shadow rays, then the light "

@@ -17,7 +17,7 @@ import numpy as np
 from .batches import Batches
 from .error_model import check_estimator, check_positive, predict
 from .first_shot import Gathering, gather_samples
-from .two_way import direct_samples
+from .two_way import direct_samples, rays_per_path
 from .names import (
     EXIT_POINTS,
     DIRECT_LIGHTS,
@@ -230,7 +230,9 @@ def solve(
     else:
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
-    chunk = chunk_paths_for(prediction.expected_path_length, planned)
+    # (a chunk aims at the same rays whatever the method)
+    chunk = chunk_paths_for(rays_per_path(prediction.expected_path_length) if method == TWO_WAY
+                            else prediction.expected_path_length, planned)
     tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups)
     tables.method = method
     if method == TWO_WAY:

@@ -88,6 +88,12 @@ def allotment_weight(area, grey_reflectivity):
     return np.sqrt(area) * np.maximum(grey_reflectivity, 1e-3)
 
 
+def rays_per_path(expected_path_length):
+    """About the rays a path of a chunk costs: two a direct-light sample, GENERATION_RAYS for
+    each of the paper's expected bounces (what a solve sizes its chunks by)."""
+    return 2 * DIRECT_SAMPLES + GENERATION_RAYS * max(expected_path_length, 1.0)
+
+
 def direct_samples(chunk_paths, scene):
     """(P,) expected gathering samples of each patch's direct light in a chunk of ``chunk_paths``:
     DIRECT_SAMPLES a path in all, allotted as a generation's rays are (a share below one is a

@@ -370,6 +370,7 @@ def test_furnace_through_blender_with_ngons_modifiers_mirror_and_linked_duplicat
     settings = blender.scene.radiosity.solve_settings()
     settings.paths = 200_000
     settings.threads = 2
+    settings.method = "walk"  # (the band below is the walk's: its hits per path)
     output = pipeline.run_solve(objects, settings)
     r = output.result
     assert r.path_ends["escaped"] == 0 and r.path_ends["blocked"] == 0

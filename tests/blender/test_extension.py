@@ -109,7 +109,7 @@ def test_solve_matches_core_on_the_same_patches(blender):
         np.testing.assert_allclose(co, m.points, atol=1e-6)
         domain, colours = read_colours(obj.data, "Radiosity")
         assert domain == "CORNER"
-        expected = ref.radiosity[combined.patch_slice(k)].astype(np.float32)
+        expected = np.maximum(ref.radiosity[combined.patch_slice(k)], 0).astype(np.float32)  # (written at least 0)
         # flat per patch: every corner of a patch has the patch's colour
         np.testing.assert_array_equal(colours[:, :3], np.repeat(expected, m.face_sizes, axis=0))
         np.testing.assert_array_equal(colours[:, 3], 1.0)
@@ -131,10 +131,11 @@ def test_stratified_sampling_and_measured_stop_reach_the_core(blender):
     """The panel's Sampling and Stop settings are the core's sampling and stop_rule."""
     spec = build_test_scene()
     s = configure(blender)
+    s.method = "walk"  # (sampling is the walks' setting)
     s.sampling = "stratified"
     s.stop_rule = "measured"
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
-    names, meshes, combined, ref = reference(spec, sampling="stratified", stop_rule="measured")
+    names, meshes, combined, ref = reference(spec, method="walk", sampling="stratified", stop_rule="measured")
     assert ref.sampling == "stratified" and ref.stopped == "target"
     assert s.last_paths == ref.paths and s.last_rays == ref.rays and s.last_stopped == "target"
     assert 0 < s.last_measured_mse <= ref.prediction.target_mse
@@ -150,13 +151,14 @@ def test_gathered_direct_light_reaches_the_core_and_the_estimate_plans_for_it(bl
     the paper's paths, at the rays a gathered path measured), not the paper's prediction."""
     spec = build_test_scene()
     s = configure(blender)
+    s.method = "walk"  # (the direct light setting is the walks')
     paper = estimate.compute(blender)
     s.direct_light = "gathered"
     value = estimate.compute(blender)
     assert value["direct_light"] == "gathered" and value["paths"] == paper["paths"] // 4
     assert value["rays"] > value["paths"] and value["seconds"] == pytest.approx(value["rays"] / value["rays_per_second"])
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
-    names, meshes, combined, ref = reference(spec, direct_light="gathered")
+    names, meshes, combined, ref = reference(spec, method="walk", direct_light="gathered")
     assert ref.direct_light == "gathered" and s.last_paths == ref.paths and s.last_rays == ref.rays
     assert s.last_estimator == "finite, direct light gathered"
     for k, obj in enumerate(result_objects()):
@@ -445,7 +447,7 @@ def test_saved_blend_reloads_with_the_attribute(blender, tmp_path):
 
 def test_estimate_matches_the_core_prediction(blender):
     spec = build_test_scene()
-    configure(blender)
+    configure(blender).method = "walk"  # (the paper's prediction is the walks')
     value = estimate.compute(blender)
     names, meshes, combined, _ = reference(spec)
     scene = PatchScene(combined.vertices, combined.triangles, combined.triangle_patch,
