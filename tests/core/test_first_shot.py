@@ -90,16 +90,11 @@ def _gauss_legendre(n):
     return (x + 1) / 2, w / 2
 
 
-def test_reflected_light_leaves_from_where_the_direct_light_landed():
-    """Leaving from hit points, the gathered first reflection leaves each patch from where its
-    direct light arrived. A one-patch floor (R 0.5) lit unevenly by a point light low beside
-    it, and a one-patch wall above the light's height, which the light does not reach (it is
-    behind the wall's plane) and which reflects 0.01 (the biased walk's t = 0.05 ends every
-    path at its first hit: the wall receives exactly the floor's first reflection). The wall's
-    irradiance against a Gauss-Legendre quadrature of 0.5 H(x) cos cos / (pi r^2) over floor
-    and wall (converged to 1e-10): within 5 batch-means standard errors, as the shooting walk
-    is; the same light reflected uniformly from the floor (the discrete method's assumption,
-    15% less) is more than 5 away, and is what a random exit gives."""
+def floor_lit_unevenly_and_a_wall(R_floor=0.5, R_wall=0.01):
+    """A one-patch floor lit unevenly by a point light low beside it, and a one-patch wall above
+    the light's height, behind whose plane the light is: (scene, the wall's irradiance from the
+    floor's first reflection by a 32^4-point Gauss-Legendre quadrature of R_f H(x) cos cos /
+    (pi r^2), the same with the floor's light reflected uniformly, the rectangles (origin, u, v))."""
     from boxes import rectangles_to_mesh
 
     from addon.core import PatchScene
@@ -107,8 +102,8 @@ def test_reflected_light_leaves_from_where_the_direct_light_landed():
 
     origin = np.array([[0.0, 0.0, 0.0], [-0.1, 0.0, 0.3]])
     u, v = np.array([[1.0, 0, 0], [0, 1, 0]]), np.array([[0.0, 1, 0], [0, 0, 1]])
-    light, R_wall = np.array([-0.15, 0.5, 0.2]), 0.01
-    scene = PatchScene(*rectangles_to_mesh(origin, u, v), np.array([0.5, R_wall]), np.zeros(2),
+    light = np.array([-0.15, 0.5, 0.2])
+    scene = PatchScene(*rectangles_to_mesh(origin, u, v), np.array([R_floor, R_wall]), np.zeros(2),
                        lights=[PointLight(light, np.ones(3))])
     a, w = _gauss_legendre(32)
     s, t = (g.ravel() for g in np.meshgrid(a, a, indexing="ij"))
@@ -120,9 +115,24 @@ def test_reflected_light_leaves_from_where_the_direct_light_landed():
     r = wall[None] - floor[:, None]
     r2 = np.einsum("fwi,fwi->fw", r, r)
     kernel = np.maximum(r[..., 2], 0) * np.maximum(-r[..., 0], 0) / (np.pi * r2 * r2)
-    exact = 0.5 * (weight * H) @ (kernel @ weight)
-    uniform = 0.5 * (weight @ H) * (weight @ kernel @ weight)
+    exact = R_floor * (weight * H) @ (kernel @ weight)
+    uniform = R_floor * (weight @ H) * (weight @ kernel @ weight)
     assert uniform < 0.9 * exact
+    return scene, exact, uniform, (origin, u, v)
+
+
+def test_reflected_light_leaves_from_where_the_direct_light_landed():
+    """Leaving from hit points, the gathered first reflection leaves each patch from where its
+    direct light arrived. A one-patch floor (R 0.5) lit unevenly by a point light low beside
+    it, and a one-patch wall above the light's height, which the light does not reach (it is
+    behind the wall's plane) and which reflects 0.01 (the biased walk's t = 0.05 ends every
+    path at its first hit: the wall receives exactly the floor's first reflection). The wall's
+    irradiance against a Gauss-Legendre quadrature of 0.5 H(x) cos cos / (pi r^2) over floor
+    and wall (converged to 1e-10): within 5 batch-means standard errors, as the shooting walk
+    is; the same light reflected uniformly from the floor (the discrete method's assumption,
+    15% less) is more than 5 away, and is what a random exit gives."""
+    scene, exact, uniform, _ = floor_lit_unevenly_and_a_wall()
+    R_wall = scene.reflectivity[1, 0]
     for exit_point, truth, other in (("hit", exact, uniform), ("random", uniform, exact)):
         result = solve(scene, "biased_infinite", threshold=0.05, paths=400_000, seed=1,
                        direct_light=GATHERED, exit_point=exit_point)

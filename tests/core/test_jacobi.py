@@ -35,26 +35,30 @@ def test_jacobi_is_the_direct_solve(direct_light):
     assert abs(mean_square - 31 / 29) < 5 * math.sqrt(2 / n) * 1.2
 
 
-def test_a_closed_box_of_uniform_emission_and_reflectivity_is_e_over_one_minus_r():
+@pytest.mark.parametrize("method", ["jacobi", "two_way"])
+def test_a_closed_box_of_uniform_emission_and_reflectivity_is_e_over_one_minus_r(method):
     """Every patch emits E and reflects R: B = E / (1 - R) everywhere, exactly; the Russian
-    roulette that ends each chunk keeps the expectation (R = 0.8: about 50 generations)."""
+    roulette that ends each chunk keeps the expectation (R = 0.8: about 50 generations). The
+    two-way iteration (test_two_way) too."""
     R, E = 0.8, 1.0
     scene, _, _ = box_scene([(R, R, R)] * 6, [(E, E, E)] * 6, n=3)
-    r = solve(scene, paths=200_000, seed=2, method="jacobi")
+    r = solve(scene, paths=200_000, seed=2, method=method)
     z = (r.radiosity[:, 0] - E / (1 - R)) / np.sqrt(r.reflected_variance[:, 0])
     assert np.abs(z).max() < Z
 
 
-def test_a_point_light_in_a_closed_box_is_the_direct_solve():
-    """The lights' rays start generation 0 as they start the walk's paths: against the discrete
-    solution with the point light's exact first bounce, I Omega / A (test_lights)."""
+@pytest.mark.parametrize("method", ["jacobi", "two_way"])
+def test_a_point_light_in_a_closed_box_is_the_direct_solve(method):
+    """The lights' rays start generation 0 as they start the walk's paths (Jacobi), or the
+    light's direct light is gathered (two-way): against the discrete solution with the point
+    light's exact first bounce, I Omega / A (test_lights)."""
     from test_lights import R_FACES
 
     position, intensity = np.array([0.3, 0.7, 0.5]), 2.0
     scene, rectangles, F = _box(lights=[PointLight(position, np.full(3, intensity))])
     direct = R_FACES.repeat(9) * intensity * _solid_angles(position, rectangles) / scene.patch_area
     exact = solve_radiosity_system(F, scene.reflectivity, direct)[:, 0]
-    r = solve(scene, paths=600_000, seed=3, method="jacobi")
+    r = solve(scene, paths=600_000 if method == "jacobi" else 200_000, seed=3, method=method)
     z = (r.reflected[:, 0] - exact) / np.sqrt(r.reflected_variance[:, 0])
     assert np.abs(z).max() < Z
 

@@ -5,9 +5,8 @@ import math
 
 import numpy as np
 import pytest
-from boxes import CEILING, box_rectangles, box_scene, rectangles_to_mesh
-from test_first_shot import R_FACES, _box_with_one_emitter, _gauss_legendre
-from test_lights import _box, _solid_angles
+from boxes import CEILING, box_rectangles, rectangles_to_mesh
+from test_first_shot import R_FACES, _box_with_one_emitter, floor_lit_unevenly_and_a_wall
 
 from addon.core import PatchScene, solve
 from addon.core.first_shot import Gathering
@@ -57,29 +56,6 @@ def test_two_way_is_the_direct_solve(box):
     assert _z_ok(_z(r, exact))
 
 
-def test_a_closed_box_of_uniform_emission_and_reflectivity_is_e_over_one_minus_r():
-    """B = E / (1 - R) everywhere, R = 0.8 (a long chain of generations ended by roulette)."""
-    R, E = 0.8, 1.0
-    scene, _, _ = box_scene([(R, R, R)] * 6, [(E, E, E)] * 6, n=3)
-    r = solve(scene, paths=100_000, seed=2, method="two_way")
-    z = (r.radiosity[:, 0] - E / (1 - R)) / np.sqrt(r.reflected_variance[:, 0])
-    assert np.abs(z).max() < Z
-
-
-def test_a_point_light_in_a_closed_box_is_the_direct_solve():
-    """A light's direct light is gathered, the rest carried two ways: against the discrete
-    solution with the point light's exact first bounce, I Omega / A (test_lights)."""
-    from test_lights import R_FACES as R_BOX
-
-    position, intensity = np.array([0.3, 0.7, 0.5]), 2.0
-    scene, rectangles, F = _box(lights=[PointLight(position, np.full(3, intensity))])
-    direct = R_BOX.repeat(9) * intensity * _solid_angles(position, rectangles) / scene.patch_area
-    exact = solve_radiosity_system(F, scene.reflectivity, direct)[:, 0]
-    r = solve(scene, paths=200_000, seed=3, method="two_way")
-    z = (r.reflected[:, 0] - exact) / np.sqrt(r.reflected_variance[:, 0])
-    assert _z_ok(z)
-
-
 def test_leaving_from_hit_points_the_first_reflection_leaves_from_where_the_light_landed():
     """A one-patch floor (R 0.5) lit unevenly by a point light low beside it, and a one-patch
     wall (R 0.01) the light does not reach (test_first_shot). With exit_point="hit" the wall's
@@ -88,25 +64,9 @@ def test_leaving_from_hit_points_the_first_reflection_leaves_from_where_the_ligh
     generations), a geometric series of ratio q = R_w F_wf R_f F_fw with the exact rectangle
     form factors. With exit_point="random" the first reflection is uniform too (15% less).
     Each within 5 batch-means standard errors of its own truth and beyond 5 of the other's."""
-    origin = np.array([[0.0, 0.0, 0.0], [-0.1, 0.0, 0.3]])
-    u, v = np.array([[1.0, 0, 0], [0, 1, 0]]), np.array([[0.0, 1, 0], [0, 0, 1]])
-    light, R_floor, R_wall = np.array([-0.15, 0.5, 0.2]), 0.5, 0.01
-    scene = PatchScene(*rectangles_to_mesh(origin, u, v), np.array([R_floor, R_wall]), np.zeros(2),
-                       lights=[PointLight(light, np.ones(3))])
-    a, w = _gauss_legendre(32)
-    s, t = (g.ravel() for g in np.meshgrid(a, a, indexing="ij"))
-    weight = np.outer(w, w).ravel()
-    floor = np.stack([s, t, np.zeros_like(s)], axis=1)
-    wall = np.stack([np.full_like(s, -0.1), t, 0.3 + s], axis=1)
-    d = light - floor
-    H = d[:, 2] / np.linalg.norm(d, axis=1) ** 3  # I cos / d^2
-    r = wall[None] - floor[:, None]
-    r2 = np.einsum("fwi,fwi->fw", r, r)
-    kernel = np.maximum(r[..., 2], 0) * np.maximum(-r[..., 0], 0) / (np.pi * r2 * r2)
-    exact = R_floor * (weight * H) @ (kernel @ weight)
-    uniform = R_floor * (weight @ H) * (weight @ kernel @ weight)
-    assert uniform < 0.9 * exact
-    F = rectangle_form_factors(origin, u, v)
+    R_floor, R_wall = 0.5, 0.01
+    scene, exact, uniform, rectangles = floor_lit_unevenly_and_a_wall(R_floor, R_wall)
+    F = rectangle_form_factors(*rectangles)
     series = 1.0 / (1.0 - R_wall * F[1, 0] * R_floor * F[0, 1])
     for exit_point, truth, other in (("hit", exact, uniform), ("random", uniform, exact)):
         result = solve(scene, paths=200_000, seed=1, method="two_way", exit_point=exit_point)
