@@ -167,7 +167,7 @@ def ours(paths, seed=0, direct_light="shot"):
     from addon import pipeline, scene_io
 
     objects, notes = scene_io.read_selection(bpy.context)
-    settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, exit_point="hit",
+    settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, exit_point="hit", method="walk",
                                       seed=seed, threads=2, direct_light=direct_light)
     wall = time.perf_counter()
     out = pipeline.run_solve(objects, settings)

@@ -139,7 +139,8 @@ def fig4_room():
 SCENES = {"empty_room": empty_room, "cornell": cornell, "lamp_room": lamp_room, "open_sun_world": open_sun_world,
           "fig4_room": fig4_room}
 # Our ways of solving (SolveSettings beside paths, seed, threads, exit point hit), by name.
-SIDES = {"shot": {"direct_light": "shot"}, "gathered": {"direct_light": "gathered"}, "two_way": {"method": "two_way"}}
+SIDES = {"shot": {"method": "walk", "direct_light": "shot"}, "gathered": {"method": "walk", "direct_light": "gathered"},
+         "two_way": {"method": "two_way"}}
 LABELS = {"cycles": "Cycles", "shot": "ours, paper walk", "gathered": "ours, gathered first bounce",
           "two_way": "ours, two-way iteration", "direct": "ours, direct light alone (a bound)"}
 
