@@ -402,7 +402,7 @@ def summary(scene_name, settings) -> str:
     if target > 0 and error >= 0:
         reached += f" of a {target:g}% target ({error / target * 100:.0f}% of it)"
     return (f"{scene_name}: {settings.last_patches:,} patches, {settings.last_paths:,} paths, "
-            f"{settings.last_rays:,} rays, {settings.last_seconds:.2f} s, mean path length "
+            f"{settings.last_rays:,} rays, {settings.last_seconds:.2f} s ({settings.last_estimator}), mean path length "
             f"{settings.last_mean_path_length:.2f}, {reached}, stopped by {settings.last_stopped}")
 
 

@@ -319,6 +319,8 @@ EXPLANATIONS = {
              "error target, and the rays they trace (paths x the expected path length). With the direct "
              "light gathered no formula holds: the paths planned (a quarter of the paper's) at the rays a path "
              "measured, and the run stops on its own error estimate",
+    "method": "How the light is carried: the paper's random walks, or the two-way iteration (beyond the paper). "
+              "Automatic takes the two-way iteration where each patch gets enough of its rays to pay, else the walks",
     "patches": "Selected objects get results; the other visible objects (Rest of the scene) block and "
                "reflect light as in a render, meshed coarser, and get none. Smaller patches show more "
                "detail and need more paths for the same error",

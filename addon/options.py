@@ -80,7 +80,10 @@ class Text:
         return str(value).strip()
 
 
-METHOD = Choice("method", "--method", "two_way", (
+METHOD = Choice("method", "--method", "auto", (
+    ("auto", "Automatic", "The two-way iteration where each patch gets enough rays for it to pay (scenes of up "
+     "to about 65,000 patches, at error targets that need some rays a patch), else the paper's random walks, "
+     "which need fewer rays at a few a patch. The estimate says which"),
     ("walk", "Random walks (paper)", "The paper's shooting random walks, with its estimators: their predicted path "
      "counts and relative efficiency hold for them"),
     ("two_way", "Two-way iteration", "Beyond the paper: the direct light gathered by shadow rays, then the light "

@@ -9,6 +9,8 @@ import bpy
 from . import estimate, worker
 from .pipeline import duration_text
 
+METHOD_NAMES = {"walk": "random walks (paper)", "two_way": "two-way iteration", "jacobi": "stochastic Jacobi"}
+
 
 def _number(x):
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
@@ -24,7 +26,7 @@ def _number(x):
 
 def draw_settings(layout, settings):
     layout.prop(settings, "method")
-    walk = settings.method == "walk"  # (the estimator, sampling and direct light are the walks')
+    walk = settings.method in ("walk", "auto")  # (the estimator, sampling and direct light are the walks')
     col = layout.column(align=True)
     col.active = walk
     col.prop(settings, "estimator", text="")
@@ -84,6 +86,8 @@ def estimate_lines(value):
          else "Predicted time: -"),
         ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"
          + (" (planned)" if value.get("planned") else "")),
+        ("method", f"Method: {METHOD_NAMES.get(value.get('method'), value.get('method'))}"
+         + (" (automatic)" if value.get("automatic") else "")),
         ("patches", f"Objects: {value['objects']} get results, {value.get('others', 0)} more block and reflect"),
         ("size", f"Patches: {_number(value['patches'])} (size {size})"),
         ("sources", f"Sources: {value.get('sources') or '-'}"),

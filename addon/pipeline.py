@@ -5,14 +5,14 @@ operator's synchronous mode); ``worker`` runs the same on a thread. No bpy.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .core import meshing, predict, relative_rms_to_mse, solve
 from .core.first_shot import direct_irradiance
-from .core.names import GATHERED, TWO_WAY, WALK
-from .core.solver import planned_paths
+from .core.names import AUTO, GATHERED, TWO_WAY, WALK
+from .core.solver import choose_method, planned_paths
 from . import options, trim
 from .patches import Patches, make_patches, scene_and_notes
 
@@ -68,6 +68,17 @@ def prediction_for(scene, settings: SolveSettings):
         return predict(scene, settings.estimator, threshold=settings.threshold, paths=int(settings.paths)), None
     target = relative_rms_to_mse(base, settings.relative_rms)
     return predict(scene, settings.estimator, threshold=settings.threshold, target_mse=target), target
+
+
+def method_for(scene, settings: SolveSettings) -> SolveSettings:
+    """The settings with the method "auto" replaced by what it runs on this scene (the core's
+    choose_method: the two-way iteration where its chunks give every patch enough rays)."""
+    if settings.method != AUTO:
+        return settings
+    _, target = prediction_for(scene, settings)
+    chosen = choose_method(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
+                           target_mse=target, threshold=settings.threshold)
+    return replace(settings, method=chosen)
 
 
 LIGHT_ATTRIBUTE = "Radiosity Light"
@@ -164,6 +175,8 @@ def estimate(objects, settings: SolveSettings) -> dict:
     machine's ray rate), paths and rays, and the paper's predictions behind them."""
     patches = make_patches(objects, settings.patch_size)
     scene, notes = scene_and_notes(patches)
+    automatic = settings.method == AUTO
+    settings = method_for(scene, settings)
     p, target = prediction_for(scene, settings)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
@@ -186,6 +199,7 @@ def estimate(objects, settings: SolveSettings) -> dict:
         "rays": rays,
         "direct_light": direct_light,
         "method": settings.method,
+        "automatic": automatic,  # the method chosen by "auto"
         "planned": planned,
         "rays_per_second": float(rate),
         "seconds": seconds,
@@ -213,6 +227,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
     scene, notes = scene_and_notes(patches)
     trim.give_back()
+    settings = method_for(scene, settings)
     prediction, target = prediction_for(scene, settings)
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)

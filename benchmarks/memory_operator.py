@@ -43,6 +43,9 @@ import sys
 import time
 from pathlib import Path
 
+from addon import options
+from addon.core import names
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = Path(__file__).parent / "results"
 MIB = 1 << 20
@@ -119,10 +122,10 @@ def build_room(bpy, layout, n):
     return L / n * (1.5 if layout == "grids" else 1.0)
 
 
-def child(layout, n, target_error, use_tracemalloc):
+def child(layout, n, target_error, method, use_tracemalloc):
     """One measurement; prints a JSON line."""
     sys.path.insert(0, str(ROOT))
-    out = {"layout": layout, "divisions": n, "target_error": target_error, "tracemalloc": use_tracemalloc}
+    out = {"layout": layout, "divisions": n, "target_error": target_error, "tracemalloc": use_tracemalloc, "method": method}
     stages = out["stages"] = []
     if use_tracemalloc:
         import tracemalloc
@@ -147,6 +150,7 @@ def child(layout, n, target_error, use_tracemalloc):
     settings = bpy.context.scene.radiosity
     settings.patch_size = patch_size
     settings.target_error = target_error
+    settings.method = method
     bpy.context.view_layer.update()
     if use_tracemalloc:
         tracemalloc.start()
@@ -214,8 +218,8 @@ def child(layout, n, target_error, use_tracemalloc):
     print(json.dumps(out))
 
 
-def measure(layout, n, target_error, use_tracemalloc=False):
-    cmd = [sys.executable, "-m", "benchmarks.memory_operator", "--child", layout, str(n), str(target_error)]
+def measure(layout, n, target_error, method, use_tracemalloc=False):
+    cmd = [sys.executable, "-m", "benchmarks.memory_operator", "--child", layout, str(n), str(target_error), method]
     if use_tracemalloc:
         cmd.append("--tracemalloc")
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
@@ -257,9 +261,11 @@ def table(rows):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--child", nargs=3, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--child", nargs=4, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--tracemalloc", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--layouts", nargs="+", default=["grids", "planes"])
+    ap.add_argument("--method", choices=names.METHODS, default=options.METHOD.default,
+                    help=f"the panel's Method (default: its default, {options.METHOD.default})")
     ap.add_argument("--divisions", type=int, default=None, help=f"N, patches a wall side (default {WALL_DIVISIONS})")
     ap.add_argument("--errors", type=float, nargs="+", default=[12.0, 6.0],
                     help="error targets in %% (the panel's setting): two path counts")
@@ -272,8 +278,8 @@ def main(argv=None):
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     if args.child is not None:
-        layout, n, error = args.child
-        child(layout, int(n), float(error), args.tracemalloc)
+        layout, n, error, method = args.child
+        child(layout, int(n), float(error), method, args.tracemalloc)
         return
     n = args.divisions or (128 if args.quick else WALL_DIVISIONS)
     out = Path(args.out) if args.out else (ROOT / "out" / "memory_operator_quick" if args.quick else RESULTS)
@@ -281,11 +287,11 @@ def main(argv=None):
     rows = []
     for layout in args.layouts:
         for k, error in enumerate(args.errors):
-            runs = [measure(layout, n, error) for _ in range(max(1, args.repeat))]
+            runs = [measure(layout, n, error, args.method) for _ in range(max(1, args.repeat))]
             plain = max(runs, key=_peak)  # the highest of the runs, stage by stage
             plain["run_peaks"] = [_peak(run) for run in runs]
             # tracemalloc at the first error target only (the second checks the peak's independence of the paths)
-            traced = measure(layout, n, error, use_tracemalloc=True) if k == 0 else {"stages": []}
+            traced = measure(layout, n, error, args.method, use_tracemalloc=True) if k == 0 else {"stages": []}
             rows.append((plain, traced))
             print(f"{layout} {plain['patches']:,} patches, {plain['paths']:,} paths ({error:g}%): peaks "
                   f"{', '.join(f'{p / MIB:.0f}' for p in plain['run_peaks'])} MiB, {plain['seconds']:.0f} s", flush=True)
@@ -294,7 +300,7 @@ def main(argv=None):
         "",
         f"`python -m benchmarks.memory --operator {' '.join(argv or [])}`".replace(" `", "`"),
         f"Machine: {platform.machine()}, Python {platform.python_version()}; each measurement in a fresh process "
-        "(`bpy`, headless); `bpy.ops.radiosity.solve()` with the panel's settings (finite estimator, "
+        f"(`bpy`, headless); `bpy.ops.radiosity.solve()` with the panel's settings (method `{args.method}`, "
         "measured stop rule at the error target, face and vertex colours, 2 threads). Method: "
         "`benchmarks/memory_operator.py`.",
         "",

@@ -25,6 +25,7 @@ WALK = "walk"      # the paper's: shooting random walks, path by path
 JACOBI = "jacobi"  # stochastic Jacobi iteration: shot generation by generation, stratified (jacobi.py)
 TWO_WAY = "two_way"  # stochastic Jacobi with every ray shooting and gathering, a control variate (two_way.py)
 METHODS = (WALK, JACOBI, TWO_WAY)
+AUTO = "auto"      # the two-way iteration where its chunks give every patch enough rays, else the walk (solver.choose_method)
 
 # When a solve with an error target stops.
 PREDICTED = "predicted"  # after the paths formula (2)/(3) predicts for the target

@@ -17,8 +17,9 @@ import numpy as np
 from .batches import Batches
 from .error_model import check_estimator, check_positive, predict
 from .first_shot import Gathering, gather_samples
-from .two_way import direct_samples, rays_per_path
+from .two_way import GENERATION_RAYS, direct_samples, rays_per_path
 from .names import (
+    AUTO,
     EXIT_POINTS,
     DIRECT_LIGHTS,
     EXIT_RANDOM,
@@ -67,6 +68,13 @@ MIN_MEASURED_CHUNKS = 8
 # paths (it needs several times fewer: docs/performance.md).
 GATHERED_PLAN_DIVISOR = 4
 MEASURED_CAP_FACTOR = 64
+# The two-way iteration's chunks aim at this many first-generation rays a patch: with fewer, what
+# a generation passes on is mostly its own noise, which the next generation's gathering reads,
+# and its gain over the walk goes (docs/performance.md). As far as TWO_WAY_MAX_CHUNK_PATHS (the
+# direct light's samples are held at once) and MIN_MEASURED_CHUNKS chunks in the plan allow;
+# method="auto" takes the walk where they do not allow it.
+TWO_WAY_RAYS_PER_PATCH = 8
+TWO_WAY_MAX_CHUNK_PATHS = 1 << 18
 POLL_SECONDS = 0.05
 
 
@@ -128,6 +136,31 @@ def chunk_paths_for(expected_path_length, planned_paths):
     return int(min(MAX_CHUNK_PATHS, max(MIN_CHUNK_PATHS, min(by_rays, by_batches))))
 
 
+def two_way_chunk_paths(patch_count, expected_path_length, planned_paths):
+    """A two-way chunk: the usual rays, or more, up to TWO_WAY_RAYS_PER_PATCH first-generation
+    rays a patch (GENERATION_RAYS a path), within the plan's MIN_MEASURED_CHUNKS chunks."""
+    usual = chunk_paths_for(rays_per_path(expected_path_length), planned_paths)
+    wanted = math.ceil(TWO_WAY_RAYS_PER_PATCH * patch_count / GENERATION_RAYS)
+    most = min(TWO_WAY_MAX_CHUNK_PATHS, math.ceil(planned_paths / MIN_MEASURED_CHUNKS))
+    return int(max(usual, min(wanted, most)))
+
+
+def first_generation_rays(patch_count, chunk_paths):
+    """The rays a patch gets, on average, in a two-way chunk's first generation."""
+    return GENERATION_RAYS * chunk_paths / patch_count
+
+
+def choose_method(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3):
+    """What method="auto" runs: the two-way iteration where its chunks can give each patch
+    TWO_WAY_RAYS_PER_PATCH first-generation rays (scenes of up to about 65,000 patches, at
+    error targets that plan at least MIN_MEASURED_CHUNKS such chunks), else the paper's walk,
+    which then needs fewer rays to the same error."""
+    prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
+    planned = paths if paths is not None else planned_paths(prediction.paths_for(target_mse), GATHERED, TWO_WAY)
+    chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned)
+    return TWO_WAY if first_generation_rays(scene.patch_count, chunk) >= TWO_WAY_RAYS_PER_PATCH else WALK
+
+
 def chunks_per_group(tables, chunk_paths, expected_path_length):
     """How many chunks a task traces together (walk.walk_chunks): 1 unless the chunks are small
     and grouped chunks are on, else a power of two. It depends on the walk and the chunk plan
@@ -156,7 +189,7 @@ def _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_
     if sampling not in SAMPLINGS:
         raise ValueError(f"sampling must be one of {', '.join(SAMPLINGS)}; got {sampling!r}")
     if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+        raise ValueError(f"method must be one of {', '.join(METHODS + (AUTO,))}; got {method!r}")
     if direct_light not in DIRECT_LIGHTS:
         raise ValueError(f"direct_light must be one of {', '.join(DIRECT_LIGHTS)}; got {direct_light!r}")
     if direct_light == SHOT and scene.lights.gathered_only():
@@ -204,11 +237,18 @@ def solve(
     ``method="two_way"`` (beyond the paper, ``two_way``) carries the light generation by
     generation, every ray used as a shooting and a gathering estimate about a control variate,
     its direct light always gathered (``direct_light`` None: the method's own, gathered for it,
-    shot for the walks); its error, too, is measured, never predicted.
+    shot for the walks); its error, too, is measured, never predicted. ``method="auto"`` runs
+    it where its chunks give every patch enough rays, else the walk (:func:`choose_method`;
+    ``SolveResult.method`` says which ran).
     ``progress(fraction, stats)`` and ``should_stop()`` are called from the calling thread
     between chunks (``stats["radiosity"]()`` gives the result so far); ``max_seconds`` bounds the wall time. A stopped run returns the complete
     chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
     """
+    if method == AUTO and (paths is not None or target_mse is not None):
+        check_estimator(estimator, threshold)
+        check_positive("paths", paths, integer=True)
+        check_positive("target_mse", target_mse)
+        method = choose_method(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold)
     if method in METHODS:
         direct_light = method_direct_light(method, direct_light)
     _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light, method)
@@ -230,9 +270,10 @@ def solve(
     else:
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
-    # (a chunk aims at the same rays whatever the method)
-    chunk = chunk_paths_for(rays_per_path(prediction.expected_path_length) if method == TWO_WAY
-                            else prediction.expected_path_length, planned)
+    if method == TWO_WAY:
+        chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned)
+    else:
+        chunk = chunk_paths_for(prediction.expected_path_length, planned)
     tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups)
     tables.method = method
     if method == TWO_WAY:

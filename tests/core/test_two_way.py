@@ -8,7 +8,7 @@ import pytest
 from boxes import CEILING, box_rectangles, rectangles_to_mesh
 from test_first_shot import R_FACES, _box_with_one_emitter, floor_lit_unevenly_and_a_wall
 
-from addon.core import PatchScene, solve
+from addon.core import PatchScene, solve, solver
 from addon.core.first_shot import Gathering
 from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
 from addon.core.reference import rectangle_form_factors, solve_radiosity_system
@@ -153,3 +153,31 @@ def test_direct_light_landing_on_back_sides_is_reported_as_blocked(kind):
     e = r.energy
     np.testing.assert_allclose(e["blocked"], e["emitted"], rtol=1e-9)
     assert (e["escaped"] == 0).all() and np.allclose(r.radiosity, 0)
+
+
+def test_automatic_method_takes_the_two_way_iteration_only_where_each_patch_gets_enough_rays():
+    """method="auto": the two-way iteration where a chunk's first generation can give every patch
+    TWO_WAY_RAYS_PER_PATCH rays within the plan, else the walk; the result is bitwise the chosen
+    method's own and names it."""
+    scene, _ = _box_with_one_emitter()
+    P = scene.patch_count
+    few = 8 * solver.MIN_CHUNK_PATHS  # a plan of 8 minimal chunks: far under 8 rays a patch
+    assert solver.first_generation_rays(P, solver.two_way_chunk_paths(P, 2.0, few)) < solver.TWO_WAY_RAYS_PER_PATCH
+    assert solver.choose_method(scene, paths=few) == "walk"
+    assert solver.choose_method(scene, paths=200_000) == "two_way"
+    for paths, method in ((few, "walk"), (20_000, "two_way")):
+        auto = solve(scene, paths=paths, seed=2, method="auto", threads=2)
+        own = solve(scene, paths=paths, seed=2, method=method, threads=2)
+        assert auto.method == method and np.array_equal(auto.radiosity, own.radiosity) and auto.rays == own.rays
+
+
+def test_two_way_chunks_grow_to_enough_rays_a_patch_within_the_plan():
+    """A big scene's two-way chunks give each patch TWO_WAY_RAYS_PER_PATCH first-generation rays
+    when the plan has room for MIN_MEASURED_CHUNKS of them, never more than the memory cap; a
+    scene too big for that (or a plan too small) gets fewer, and "auto" takes the walk there."""
+    rays = lambda P, planned: solver.first_generation_rays(P, solver.two_way_chunk_paths(P, 2.5, planned))  # noqa: E731
+    assert rays(50_000, 10**9) >= solver.TWO_WAY_RAYS_PER_PATCH
+    assert rays(50_000, 10**9) < solver.TWO_WAY_RAYS_PER_PATCH + 0.01  # (no bigger than it needs)
+    assert solver.two_way_chunk_paths(1_000_000, 2.5, 10**9) == solver.TWO_WAY_MAX_CHUNK_PATHS
+    assert rays(1_000_000, 10**9) < solver.TWO_WAY_RAYS_PER_PATCH
+    assert math.ceil(10**6 / solver.two_way_chunk_paths(50_000, 2.5, 10**6)) >= solver.MIN_MEASURED_CHUNKS
