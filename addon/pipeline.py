@@ -222,6 +222,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     ``on_prediction(prediction, patch_count, patches)`` is called once the patches
     are known, before the first path.
     """
+    trim.fix_mmap_threshold()
     patches = make_patches(objects, settings.patch_size)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)

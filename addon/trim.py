@@ -20,6 +20,30 @@ def _malloc_trim():
 _MALLOC_TRIM = _malloc_trim()
 
 
+def _mallopt():
+    try:
+        return ctypes.CDLL(None).mallopt
+    except Exception:  # noqa: BLE001 - not glibc
+        return None
+
+
+_MALLOPT = _mallopt()
+M_MMAP_THRESHOLD = -3
+# Blocks of at least this size are mapped on their own and unmapped when freed: a solve's (C,P)
+# arrays of a big scene (23 MiB at a million patches) come and go straight to the system, while
+# a walk's per-step arrays (up to a few MiB) stay in the heaps (mapping those too cost 2x in time).
+MMAP_THRESHOLD = 16 << 20
+
+
+def fix_mmap_threshold() -> bool:
+    """Fix glibc's mmap threshold at MMAP_THRESHOLD for the process (it otherwise grows with every
+    large array freed, up to 32 MiB, and arrays below it stay resident after they are freed);
+    True if it could. Once is enough; again is harmless."""
+    if _MALLOPT is None:
+        return False
+    return bool(_MALLOPT(M_MMAP_THRESHOLD, MMAP_THRESHOLD))
+
+
 def give_back() -> bool:
     """Return the freed memory of the process's heaps to the system (glibc: ``malloc_trim(0)``,
     a few ms); True if it could."""

@@ -336,7 +336,6 @@ def reflected_sources(tables, emission, samples):
     exit), or, leaving from hit points, the gathering ``samples`` (gather_direct's) as
     ReflectedPoints."""
     walk = copy.copy(tables)
-    walk.__dict__.pop("start_weight", None)
     walk.gathering = None
     if tables.exit_random:
         walk.sources = SourceTable(source_weights(tables.geometry.patch_area, emission))

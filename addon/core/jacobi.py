@@ -112,7 +112,7 @@ def jacobi_chunks(tables, sizes, rng, check=None):
         u[:4] = first
     origins, directions = rays.leave_sources(tables, source, u)
     chunk = np.zeros(source.size, dtype=np.int32) if chunk is None else chunk
-    weights = np.ones((1, source.size)) if C == 1 else tables.start_weight.take(source, axis=1)
+    weights = np.ones((1, source.size)) if C == 1 else tables.start_weight(source)
     emitted = chunk_sums(weights, chunk, G)
     incident = np.zeros((C, G * P))
     absorbed, escaped, blocked = (np.zeros((G, C)) for _ in range(3))

@@ -112,7 +112,7 @@ class PathWalk:
         if t.weight_is_accumulated:
             p.weights = p.accumulated[None]
         elif p.weights is not None:
-            p.weights = np.concatenate((p.weights, t.start_weight.take(new_patch, axis=1, mode="wrap")), axis=1)
+            p.weights = np.concatenate((p.weights, t.start_weight(new_patch)), axis=1)
         w = None if p.weights is None else p.weights[:, n_live:]
         self.accounts.emitted += total_weight(w, new)[None] if new_chunk is None else chunk_sums(w, new_chunk, self.G)
         return True
@@ -224,7 +224,7 @@ class PathWalk:
         if t.finite:
             a.ended["absorbed"] += hit_count - self.per_chunk_count()
             if p.weights is not None:
-                p.weights *= t.survivor_weight.take(p.patch, axis=1, mode="wrap")
+                p.weights *= t.survivor_weight(p.patch)
             a.absorbed += self.arriving - self.per_chunk(p.weights)
 
     def tallies(self):

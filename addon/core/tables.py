@@ -8,7 +8,6 @@ checking one.
 from __future__ import annotations
 
 import threading
-from functools import cached_property
 
 import numpy as np
 
@@ -101,22 +100,27 @@ class WalkTables:
         """Shooting stochastic Jacobi iteration (jacobi.py)."""
         return self.method == JACOBI
 
-    @cached_property
-    def survivor_weight(self):
-        """R_jc / R_bar_j (C,P): what survivors multiply each channel's weight by (colour walks)."""
-        R = self.reflectivity
+    def survivor_weight(self, patch):
+        """R_jc / R_bar_j (C,n) at the given patches: what survivors multiply each channel's
+        weight by (colour walks). Made for the patches asked (a (C,P) table would be as big as
+        the reflectivities)."""
+        R = self.reflectivity.take(patch, axis=1, mode="wrap")
+        grey = self.grey_reflectivity.take(patch, mode="wrap")
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(self.grey_reflectivity > 0, R / self.grey_reflectivity, 0.0)
+            return np.where(grey > 0, R / grey, 0.0)
 
-    @cached_property
-    def start_weight(self):
-        """E_ic / E_bar_i (C,S): a path's starting weight from source i, a patch or a light's
-        emitter (colour walks)."""
-        E = self.emission if self.lights is None else np.vstack([self.emission, self.lights.power])
+    def start_weight(self, source):
+        """E_ic / E_bar_i (C,n): the starting weights of paths from the given sources, patches
+        (index < P) or a light's emitters (P + its index) (colour walks). Made for the sources
+        asked: a (C,S) table would cost as much as the scene's emission, for the few sources."""
+        P = self.patch_count
+        E = self.emission.take(source if self.lights is None else np.minimum(source, P - 1), axis=0, mode="wrap")
+        if self.lights is not None:
+            light = np.flatnonzero(source >= P)
+            E[light] = self.lights.power.take(source[light] - P, axis=0)
         grey_emission = channel_sum(E) / 3  # bit for bit E.mean(axis=1), at a tenth of its cost
         with np.errstate(invalid="ignore", divide="ignore"):
-            start = np.where(grey_emission > 0, E[:, : self.channels].T / grey_emission, 0.0)
-        return np.ascontiguousarray(start)  # (E.T's rows: the division keeps its column order)
+            return np.where(grey_emission > 0, E[:, : self.channels].T / grey_emission, 0.0)
 
     def class_of(self, patch):
         """The class of each of the given patches (with patch classes only)."""

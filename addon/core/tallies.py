@@ -57,7 +57,8 @@ class Accounts:
             ChunkTally(
                 paths=n,
                 rays=int(self.rays[k]),
-                incident=incident[:, k].astype(np.float64),  # (a copy, contiguous)
+                # (float64, contiguous, its own: a lone chunk's sums are its tally, a group's are copied)
+                incident=incident[:, k].astype(np.float64, copy=incident.shape[1] > 1),
                 emitted=self.emitted[k],
                 absorbed=self.absorbed[k],
                 escaped=self.escaped[k],

@@ -269,8 +269,10 @@ def test_progress_line_and_summary_speak_of_the_target():
     assert "250,000 of 1,000,000 planned paths" in text and "2.50 Mray/s" in text
     assert "error 6.00% (target 5%)" in text and "0:09 left" in text
     settings = SimpleNamespace(last_relative_error=4.5, last_target_error=5.0, last_patches=10, last_paths=100,
-                               last_rays=300, last_seconds=1.0, last_mean_path_length=3.0, last_stopped="target")
-    assert "error 4.50% of a 5% target (90% of it)" in summary("box", settings)
+                               last_rays=300, last_seconds=1.0, last_mean_path_length=3.0, last_stopped="target",
+                               last_estimator="two-way iteration, direct light gathered")
+    line = summary("box", settings)
+    assert "error 4.50% of a 5% target (90% of it)" in line and "(two-way iteration, direct light gathered)" in line
 
 
 # ---------------------------------------------------------------------------------------------

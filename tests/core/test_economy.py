@@ -35,9 +35,7 @@ def test_grey_walks_never_touch_per_channel_weights(estimator, exit_point):
     tables = WalkTables(scene, estimator, 1e-3, exit_point)
     assert tables.channels == 1
     reference = walk_chunk(tables, 5_000, np.random.default_rng(1))
-    # It never even makes the per-channel tables (made when a colour walk first reads them).
-    assert "survivor_weight" not in vars(tables) and "start_weight" not in vars(tables)
-    # Without the per-channel tables at all the walk runs, and gives the same numbers.
+    # Without the per-channel weights and reflectivities at all the walk runs, and gives the same numbers.
     tables.survivor_weight = tables.start_weight = tables.reflectivity = None
     bare = walk_chunk(tables, 5_000, np.random.default_rng(1))
     assert bare.rays == reference.rays
@@ -45,23 +43,36 @@ def test_grey_walks_never_touch_per_channel_weights(estimator, exit_point):
     assert bare.incident.shape == (1, scene.patch_count)
 
 
-def test_colour_walks_make_their_weight_tables_when_first_read():
+def test_colour_walks_make_their_weights_for_the_patches_and_sources_asked():
+    """R_jc / R_bar_j (0 where R_bar is 0) and E_ic / E_bar_i (0 where nothing is emitted), made
+    for the columns a step asks for (no (C,P) tables beside the scene's materials), equal to
+    the whole tables' columns bit for bit; a light's emitters (P + its index) start with its
+    power's weights."""
+    from addon.core.lights import PointLight
+
     R = [[0.3, 0.5, 0.7], [0.6, 0.2, 0.4], [0.7, 0.7, 0.1], [0.5, 0.5, 0.5], [0.4, 0.6, 0.2], [0.0, 0.0, 0.0]]
     E = [[0, 0, 0], [1.0, 0.5, 2.0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0.5, 0.5, 0.5]]
     scene, _, _ = box_scene(R, E, n=2)
     tables = WalkTables(scene, "finite", 1e-3, "random")
-    assert tables.channels == 3 and "start_weight" not in vars(tables)
-    walk_chunk(tables, 2_000, np.random.default_rng(1))
-    # R_jc / R_bar_j (0 where R_bar is 0) and E_ic / E_bar_i (0 where nothing is emitted),
-    # rows of patches, contiguous: the walk gathers their columns at every step.
+    assert tables.channels == 3 and not any(v.dtype == np.float64 and v.shape == (3, scene.patch_count)
+                                            for k, v in vars(tables).items() if isinstance(v, np.ndarray) and k != "reflectivity")
     R_bar = scene.reflectivity.mean(axis=1)
     E_bar = scene.emission.mean(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         expected_survivor = np.where(R_bar > 0, scene.reflectivity.T / R_bar, 0.0)
         expected_start = np.where(E_bar > 0, scene.emission.T / E_bar, 0.0)
-    for table, expected in ((tables.survivor_weight, expected_survivor), (tables.start_weight, expected_start)):
-        assert table.shape == (3, scene.patch_count) and table.flags.c_contiguous
-        np.testing.assert_array_equal(table, expected)
+    ids = np.random.default_rng(3).integers(0, scene.patch_count, 500)
+    np.testing.assert_array_equal(tables.survivor_weight(ids), expected_survivor[:, ids])
+    np.testing.assert_array_equal(tables.start_weight(ids), expected_start[:, ids])
+    from addon.core import PatchScene
+
+    lit = PatchScene(scene.vertices, scene.triangles, scene.triangle_patch, scene.reflectivity, scene.emission,
+                     lights=[PointLight(np.array([0.5, 0.5, 0.5]), np.array([2.0, 1.0, 0.5]))])
+    tables = WalkTables(lit, "finite", 1e-3, "random")
+    P = lit.patch_count
+    power = lit.lights.power[0]
+    np.testing.assert_array_equal(tables.start_weight(np.array([P, 7, P])),
+                                  np.stack([power / power.mean(), expected_start[:, 7], power / power.mean()], axis=1))
 
 
 @pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
