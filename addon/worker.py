@@ -78,7 +78,7 @@ class SolveJob:
         now = time.perf_counter()
         if self.live_view and radiosity is not None and now - self._live_at >= LIVE_SECONDS:
             # the live view's data: the result so far, as the draw handler reads it
-            self.live = (self.live[0] + 1, np.asarray(radiosity(), dtype=np.float32))
+            self.live = (self.live[0] + 1, radiosity(np.float32))
             self._live_at = now
             if (self.patch_count or 0) >= TRIM_PATCHES:
                 # what the last drawing and this result's temporaries freed goes back to the

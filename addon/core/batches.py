@@ -65,6 +65,25 @@ class Batches:
         b /= self.paths  # (in place: one (C,P) array, the same numbers)
         return np.repeat(b.T, 3, axis=1) if self.channels == 1 else b.T
 
+    def radiosity(self, dtype=np.float64):
+        """(P,3) B = E + b of ``dtype``, made a channel at a time (two (P,) temporaries rather
+        than (C,P) ones: the live view asks for it while the walks hold their own sums); in
+        float64 bit for bit E + reflected()."""
+        emission = self.scene.emission
+        out = np.empty((self.scene.patch_count, 3), dtype)
+        if self.paths == 0:
+            out[:] = emission
+            return out
+        per_area = self.scene.total_power / self.scene.patch_area
+        for c in range(3):
+            k = c if self.channels == 3 else 0
+            b = self._reflectivity[k] * per_area
+            b *= self.incident[k]
+            b /= self.paths
+            b += emission[:, c]
+            out[:, c] = b
+        return out
+
     def irradiance(self):
         """(P,3) H, the light arriving at each patch over pi (B = E + R H): incident power over area."""
         if self.paths == 0:

@@ -241,7 +241,7 @@ def solve(
     it where its chunks give every patch enough rays, else the walk (:func:`choose_method`;
     ``SolveResult.method`` says which ran).
     ``progress(fraction, stats)`` and ``should_stop()`` are called from the calling thread
-    between chunks (``stats["radiosity"]()`` gives the result so far); ``max_seconds`` bounds the wall time. A stopped run returns the complete
+    between chunks (``stats["radiosity"](dtype)`` gives the result so far); ``max_seconds`` bounds the wall time. A stopped run returns the complete
     chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
     """
     if method == AUTO and (paths is not None or target_mse is not None):
@@ -374,7 +374,7 @@ def _progress(total, prediction, cap, measured_target, start):
         "measured_mse": mse_now,
         "predicted_mse": prediction.mse_for(total.paths),
         # The result so far, (P,3) B, computed only if called (a pass over the patches).
-        "radiosity": lambda: total.scene.emission + total.reflected(),
+        "radiosity": total.radiosity,  # (dtype=np.float64)
     }
 
 

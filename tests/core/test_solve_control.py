@@ -70,6 +70,18 @@ def test_progress_reports_and_reaches_one(scene):
     assert all(k in seen[-1][1] for k in ("rays", "seconds", "rays_per_second", "measured_mse"))
 
 
+@pytest.mark.parametrize("grey", [True, False])
+def test_the_result_so_far_is_the_result_bit_for_bit(scene, grey):
+    """stats["radiosity"]() after the last chunk is the returned B, bit for bit (made a channel at
+    a time for the live view); in float32, the same rounded."""
+    if grey:
+        scene = scene.with_materials(np.repeat(scene.reflectivity.mean(axis=1, keepdims=True), 3, axis=1), scene.emission)
+    last = {}
+    r = solve(scene, "finite", paths=20_000, seed=3, progress=lambda f, stats: last.update(stats))
+    assert np.array_equal(last["radiosity"](), r.radiosity)
+    assert np.array_equal(last["radiosity"](np.float32), r.radiosity.astype(np.float32))
+
+
 def test_cancel_returns_complete_chunks(scene):
     calls = {"n": 0}
 

@@ -1,0 +1,122 @@
+"""When the two-way iteration beats the walk: its gain against the rays each patch gets in a chunk (issue 26).
+
+    python -m benchmarks.auto_method            # into benchmarks/results/auto_method.md and .png
+    python -m benchmarks.auto_method --quick    # two sizes, into out/
+
+The two-way iteration's chunks are independent replicas of the whole solve (the batch means
+measure its error). Each generation of a chunk estimates the light every patch reflects from
+the rays it got; with about one ray a patch that estimate is mostly noise, which the next
+generation's gathering reads, and the iteration's gain over the walk goes. This measures it:
+the closed Cornell box (two blocks, colour walls, a small ceiling light) meshed at several patch
+counts, and for each, solves of 4, 16, 64 and 256 paths a patch (the plan: two-way chunks grow
+to ``TWO_WAY_RAYS_PER_PATCH`` first-generation rays a patch within ``MIN_MEASURED_CHUNKS`` chunks
+of the plan, so the plan sets the rays a patch a chunk gets). Each solve's error is the RMS over
+patches / mean of the reflected radiosity from its batch means; the gain is the walk's error^2 x
+rays (and x seconds, 2 threads) over the two-way iteration's at the same plan: above 1 the
+two-way iteration reaches an error with fewer rays (less time). Exit point hit (the panel's
+default). ``method="auto"``'s choice (``solver.choose_method``) is shown beside each.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+RESULTS = ROOT / "benchmarks" / "results"
+
+from addon.core import solve, solver  # noqa: E402
+from addon.core.error_model import predict  # noqa: E402
+
+DIVISIONS = (20, 40, 60, 90, 120)
+PATHS_A_PATCH = (4, 16, 64, 256)
+
+
+def error(result):
+    """RMS over patches of the reflected radiosity's standard error, over its mean."""
+    return float(np.sqrt(result.reflected_variance.mean()) / result.reflected.mean())
+
+
+def measure(divisions, paths_a_patch):
+    import sample_scenes
+
+    scene = sample_scenes.build("cornell_box", divisions=divisions, closed=True).scene
+    P = scene.patch_count
+    rows = []
+    for k in paths_a_patch:
+        paths = k * P
+        chunk = solver.two_way_chunk_paths(P, predict(scene).expected_path_length, paths)
+        row = {"patches": P, "paths_a_patch": k, "paths": paths,
+               "first_generation_rays": solver.first_generation_rays(P, chunk),
+               "auto": solver.choose_method(scene, paths=paths)}
+        for method in ("walk", "two_way"):
+            r = solve(scene, paths=paths, seed=1, threads=2, exit_point="hit", method=method)
+            row[method] = {"error": error(r), "rays": r.rays, "seconds": r.seconds, "chunks": r.chunks}
+        w, t = row["walk"], row["two_way"]
+        row["gain_rays"] = w["error"] ** 2 * w["rays"] / (t["error"] ** 2 * t["rays"])
+        row["gain_seconds"] = w["error"] ** 2 * w["seconds"] / (t["error"] ** 2 * t["seconds"])
+        rows.append(row)
+        print(f"{P:,} patches, {k} paths a patch: {row['first_generation_rays']:.1f} rays a patch a generation, "
+              f"gain {row['gain_rays']:.2f} (rays) {row['gain_seconds']:.2f} (s), auto {row['auto']}", flush=True)
+    return rows
+
+
+def plot(rows, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for P in sorted({r["patches"] for r in rows}):
+        mine = [r for r in rows if r["patches"] == P]
+        ax.plot([r["first_generation_rays"] for r in mine], [r["gain_seconds"] for r in mine], "o-", label=f"{P:,} patches")
+    ax.axhline(1.0, color="grey", lw=0.8)
+    ax.axvline(solver.TWO_WAY_RAYS_PER_PATCH, color="grey", ls="--", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("first-generation rays a patch, a two-way chunk")
+    ax.set_ylabel("two-way gain over the walk (error$^2$ x seconds)")
+    ax.set_title("Closed Cornell box: where the two-way iteration pays")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def report(rows, command, out):
+    lines = ["# When the two-way iteration beats the walk (issue 26)", "", f"`{command}`", "",
+             __doc__.split("\n\n", 1)[1].strip(), "",
+             "| patches | paths a patch | two-way chunks | first-generation rays a patch | walk error | two-way error | "
+             "gain in rays | gain in seconds | auto takes |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        lines.append(f"| {r['patches']:,} | {r['paths_a_patch']} | {r['two_way']['chunks']} | {r['first_generation_rays']:.1f} | "
+                     f"{r['walk']['error']:.4f} | {r['two_way']['error']:.4f} | {r['gain_rays']:.2f} | "
+                     f"{r['gain_seconds']:.2f} | {r['auto']} |")
+    lines += ["", f"![gain against rays a patch]({out.stem}.png)", ""]
+    out.write_text("\n".join(lines) + "\n")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--quick", action="store_true")
+    args = p.parse_args(argv)
+    started = time.perf_counter()
+    divisions = (20, 60) if args.quick else DIVISIONS
+    rows = [row for d in divisions for row in measure(d, PATHS_A_PATCH[:2] if args.quick else PATHS_A_PATCH)]
+    folder = ROOT / "out" if args.quick else RESULTS
+    folder.mkdir(exist_ok=True)
+    out = folder / "auto_method.md"
+    (folder / "auto_method.json").write_text(json.dumps(rows, indent=1))
+    plot(rows, folder / "auto_method.png")
+    report(rows, "python -m benchmarks.auto_method" + (" --quick" if args.quick else ""), out)
+    print(f"wrote {out} ({time.perf_counter() - started:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()
