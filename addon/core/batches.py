@@ -12,6 +12,10 @@ import math
 import numpy as np
 
 
+# measured_mse sums this many patches at a time.
+MSE_BLOCK = 1 << 16
+
+
 class Batches:
     """Sums chunk tallies in chunk order, with what the batch error estimate needs."""
 
@@ -34,7 +38,6 @@ class Batches:
         # not kept beside the tallies (a (C,P) array less through the solve)
         self._reflectivity = tables.reflectivity  # (C,P)
         self.weight = scene.patch_area / scene.total_area
-        self._mse_weight = None  # (C*P,) score^2 A_j / (C A_T), made on first use
         self._mse_at = (0, math.nan)  # (chunks, measured_mse at that many chunks)
 
     def add(self, tally):
@@ -53,87 +56,109 @@ class Batches:
         self.rays += tally.rays
         self.chunks += 1
 
-    def _score(self):
-        """(C,P) R_j Phi_T / A_j, a new array."""
-        return self._reflectivity * (self.scene.total_power / self.scene.patch_area)
+    def _score(self, k):
+        """(P,) R_jk Phi_T / A_j of channel k, a new array."""
+        return self._reflectivity[k] * (self.scene.total_power / self.scene.patch_area)
+
+    def _columns(self, column, dtype=np.float64, plus=None):
+        """(P,3) of ``column(k)`` (P,) float64 for each channel (a grey scene's one in all three),
+        plus ``plus`` (P,3) if given: made a channel at a time, so that a million patches' results
+        take two (P,) temporaries rather than (C,P) ones."""
+        out = np.empty((self.scene.patch_count, 3), dtype)
+        for c in range(3):
+            if c == 0 or self.channels == 3:
+                values = column(c if self.channels == 3 else 0)
+            if plus is None:
+                out[:, c] = values
+            else:
+                out[:, c] = values + plus[:, c]
+        return out
+
+    def _reflected(self, k):
+        b = self._score(k)
+        b *= self.incident[k]
+        b /= self.paths
+        return b
 
     def reflected(self):
+        """(P,3) b = R_j Phi_T I_j / (A_j N), the reflected radiosity."""
         if self.paths == 0:
             return np.zeros((self.scene.patch_count, 3))
-        b = self._score()
-        b *= self.incident
-        b /= self.paths  # (in place: one (C,P) array, the same numbers)
-        return np.repeat(b.T, 3, axis=1) if self.channels == 1 else b.T
+        return self._columns(self._reflected)
 
     def radiosity(self, dtype=np.float64):
-        """(P,3) B = E + b of ``dtype``, made a channel at a time (two (P,) temporaries rather
-        than (C,P) ones: the live view asks for it while the walks hold their own sums); in
-        float64 bit for bit E + reflected()."""
-        emission = self.scene.emission
-        out = np.empty((self.scene.patch_count, 3), dtype)
+        """(P,3) B = E + b of ``dtype`` (the live view asks for float32 while the walks hold
+        their sums); in float64 bit for bit E + reflected()."""
         if self.paths == 0:
-            out[:] = emission
-            return out
-        per_area = self.scene.total_power / self.scene.patch_area
-        for c in range(3):
-            k = c if self.channels == 3 else 0
-            b = self._reflectivity[k] * per_area
-            b *= self.incident[k]
-            b /= self.paths
-            b += emission[:, c]
-            out[:, c] = b
-        return out
+            return self.scene.emission.astype(dtype)
+        return self._columns(self._reflected, dtype, plus=self.scene.emission)
 
     def irradiance(self):
         """(P,3) H, the light arriving at each patch over pi (B = E + R H): incident power over area."""
         if self.paths == 0:
             return np.zeros((self.scene.patch_count, 3))
-        h = self.incident * (self.scene.total_power / self.scene.patch_area)
-        h /= self.paths
-        return np.repeat(h.T, 3, axis=1) if self.channels == 1 else h.T
 
-    def variance_of_mean(self):
-        """Batch-means estimate of Var(b_j) per channel and patch, (C,P); NaN below 2 chunks."""
-        if self.chunks < 2:
-            return np.full_like(self.incident, math.nan)
-        variance = self._spread()
-        score = self._score()
+        def column(k):
+            h = self.incident[k] * (self.scene.total_power / self.scene.patch_area)
+            h /= self.paths
+            return h
+
+        return self._columns(column)
+
+    def _variance(self, k):
+        variance = self._spread(k)
+        score = self._score(k)
         score *= score  # (score**2)
         variance *= score
-        del score
         variance /= (self.chunks - 1) * self.paths
         return variance
 
-    def _spread(self):
-        """sum_k I_k^2 / n_k - I^2 / N per channel and patch (C,P), at least 0: N (chunks - 1)
-        times the batch variance of I / N. (A new array, computed in place.)"""
-        spread = np.square(self.incident)
+    def reflected_variance(self):
+        """(P,3) batch-means estimate of Var(b_j) per patch and channel; NaN below 2 chunks."""
+        if self.chunks < 2:
+            return np.full((self.scene.patch_count, 3), math.nan)
+        return self._columns(self._variance)
+
+    def _spread(self, k):
+        """sum_k I_k^2 / n_k - I^2 / N of channel k (P,), at least 0: N (chunks - 1) times the
+        batch variance of I / N. (A new array, computed in place.)"""
+        spread = np.square(self.incident[k])
         spread /= self.paths
-        np.subtract(self.incident_sq, spread, out=spread)
+        np.subtract(self.incident_sq[k], spread, out=spread)
         np.maximum(spread, 0.0, out=spread)
         return spread
 
-    def reflected_variance(self):
-        v = self.variance_of_mean().T
-        return np.repeat(v, 3, axis=1) if self.channels == 1 else v
-
     def measured_mse(self):
         """Batch-means estimate of the MSE of the current result (its variance part): the
-        area-weighted mean over patches (and channels) of variance_of_mean, computed as one sum
-        of its spread times score^2 A_j / (C A_T). Kept for the chunk count it was made at."""
+        area-weighted mean over patches (and channels) of reflected_variance, summed as spread
+        times score^2 A_j / (C A_T) a block of patches at a time (no (C,P) array: it is asked
+        after every chunk, while the walks hold their sums). Kept for the chunk count it was made at."""
         if self.chunks < 2:
             return math.nan
         if self._mse_at[0] == self.chunks:
             return self._mse_at[1]
-        if self._mse_weight is None:
-            score = self._score()
-            score *= score  # (score**2)
-            score *= self.weight / self.channels
-            self._mse_weight = score.ravel()
-        # (einsum, not a BLAS dot: OpenBLAS's threads would spin beside the walks' threads)
-        spread_sum = float(np.einsum("i,i->", self._spread().ravel(), self._mse_weight))
+        per_area = self.scene.total_power / self.scene.patch_area
+        spread_sum = 0.0
+        for start in range(0, self.scene.patch_count, MSE_BLOCK):
+            block = slice(start, start + MSE_BLOCK)
+            spread = np.square(self.incident[:, block])
+            spread /= self.paths
+            np.subtract(self.incident_sq[:, block], spread, out=spread)
+            np.maximum(spread, 0.0, out=spread)
+            weight = self._reflectivity[:, block] * per_area[block]
+            weight *= weight  # (score**2)
+            weight *= self.weight[block] / self.channels
+            # (einsum, not a BLAS dot: OpenBLAS's threads would spin beside the walks' threads)
+            spread_sum += float(np.einsum("ij,ij->", spread, weight))
         mse = spread_sum / ((self.chunks - 1) * self.paths)
         self._mse_at = (self.chunks, mse)
+        return mse
+
+    def let_go_of_squares(self):
+        """The measured MSE, then the sums of squares let go of (a (C,P) array less while the
+        results are made; reflected_variance must be made before)."""
+        mse = self.measured_mse()
+        self.incident_sq = None
         return mse
 
     def energy(self):

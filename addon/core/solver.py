@@ -329,17 +329,21 @@ def solve(
         runner.stop(pending)  # tasks still running are abandoned; their partial tallies dropped
 
     n = total.paths
+    # (one (P,3) result at a time, the sums of squares let go of once the error is estimated)
+    reflected_variance = total.reflected_variance()
+    measured_mse = total.let_go_of_squares()
+    reflected = total.reflected()
     return SolveResult(
-        radiosity=scene.emission + total.reflected(),
-        reflected=total.reflected(),
-        reflected_variance=total.reflected_variance(),
+        radiosity=scene.emission + reflected,
+        reflected=reflected,
+        reflected_variance=reflected_variance,
         irradiance=total.irradiance(),
         paths=n,
         rays=total.rays,
         seconds=time.perf_counter() - start,
         mean_path_length=total.rays / n if n else math.nan,
         predicted_mse=math.nan if beyond_formulas else prediction.mse_for(n),
-        measured_mse=total.measured_mse(),
+        measured_mse=measured_mse,
         stopped=stopped,
         estimator=estimator,
         threshold=threshold if estimator != FINITE else None,

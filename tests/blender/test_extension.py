@@ -190,6 +190,15 @@ def test_two_way_iteration_reaches_the_core_and_the_estimate_plans_for_it(blende
         _, colours = read_colours(obj.data, "Radiosity")
         expected = np.maximum(ref.radiosity[combined.patch_slice(k)], 0).astype(np.float32)  # written at least 0
         np.testing.assert_array_equal(colours[:, :3], np.repeat(expected, meshes[k].face_sizes, axis=0))
+    # "Automatic" is the core's method="auto": the estimate names what it takes here, and says so.
+    from addon.panel import estimate_lines
+
+    s.method = "auto"
+    value = estimate.compute(blender)
+    chosen = reference(spec)[3].method  # (the core resolving "auto" on the same patches)
+    assert value["automatic"] and value["method"] == chosen and chosen in ("walk", "two_way")
+    method_line = dict(estimate_lines(value))["method"]
+    assert method_line.endswith("(automatic)") and ("two-way" in method_line) == (chosen == "two_way")
 
 
 def test_vertex_colours_are_area_weighted_averages(blender):

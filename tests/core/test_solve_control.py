@@ -184,3 +184,16 @@ def test_batch_estimate_of_a_colour_scene_is_the_mean_over_channels():
     variance = r.reflected_variance.mean(axis=1)
     expected = float((variance * colour.patch_area).sum() / colour.total_area)
     assert r.measured_mse == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("block", [7, 1 << 16])
+def test_measured_mse_is_the_area_weighted_mean_of_the_variance(scene, monkeypatch, block):
+    """The batch estimate's MSE, summed a block of patches at a time, is the area- and
+    channel-mean of each patch's batch-means variance of the mean (to rounding)."""
+    from addon.core import batches
+
+    monkeypatch.setattr(batches, "MSE_BLOCK", block)
+    r = solve(scene, "finite", paths=40_000, seed=5)
+    weight = scene.patch_area / scene.patch_area.sum()
+    expected = float((r.reflected_variance * weight[:, None]).sum() / 3)
+    assert r.measured_mse == pytest.approx(expected, rel=1e-12)
