@@ -148,9 +148,12 @@ def two_way_chunk(tables, paths, rng, check=None):
 
 
 def reflected_power(tables, reflected):
-    """What a generation's rays are counted by: the channel-mean power it reflects, sum_j A_j
-    |dB_j| (an estimate about a control variate can be below zero in places)."""
-    return float((np.abs(reflected) @ tables.gathering.patch_area).mean())
+    """What a generation's rays are counted by: the power it reflects, sum_j A_j |dB_j| (an
+    estimate about a control variate can be below zero in places), in its strongest channel.
+    (Counted by the channels' mean, a saturated channel outlives the others between red walls
+    and the roulette's 1/chance lifted it generation after generation: in the closed Cornell
+    box one run in four had a chunk that put half the variance on five patches.)"""
+    return float((np.abs(reflected) @ tables.gathering.patch_area).max())
 
 
 def leaving(tables, reflected):
