@@ -72,18 +72,22 @@ def plot(rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for P in sorted({r["patches"] for r in rows}):
-        mine = [r for r in rows if r["patches"] == P]
-        ax.plot([r["first_generation_rays"] for r in mine], [r["gain_seconds"] for r in mine], "o-", label=f"{P:,} patches")
-    ax.axhline(1.0, color="grey", lw=0.8)
-    ax.axvline(solver.TWO_WAY_RAYS_PER_PATCH, color="grey", ls="--", lw=0.8)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("first-generation rays a patch, a two-way chunk")
-    ax.set_ylabel("two-way gain over the walk (error$^2$ x seconds)")
-    ax.set_title("Closed Cornell box: where the two-way iteration pays")
-    ax.legend(fontsize=8)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True)
+    for ax, key, what in ((axes[0], "gain_rays", "error$^2$ x rays"), (axes[1], "gain_seconds", "error$^2$ x seconds")):
+        for P in sorted({r["patches"] for r in rows}):
+            mine = [r for r in rows if r["patches"] == P]
+            ax.plot([r["paths_a_patch"] for r in mine], [r[key] for r in mine], "o-", label=f"{P:,} patches")
+            for r in mine:
+                ax.annotate(f"{r['first_generation_rays']:.0f}", (r["paths_a_patch"], r[key]), fontsize=7,
+                            textcoords="offset points", xytext=(4, 3))
+        ax.axhline(1.0, color="grey", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("paths a patch planned (labels: first-generation rays a patch, a chunk)")
+        ax.set_title(f"two-way gain over the walk, {what}", fontsize=10)
+    axes[0].set_ylabel("gain (above 1: the two-way iteration)")
+    axes[0].legend(fontsize=8)
+    fig.suptitle("Closed Cornell box: where the two-way iteration pays (method=auto takes it from 8 rays a patch)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
@@ -105,7 +109,11 @@ def report(rows, command, out):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true")
+    p.add_argument("--plot-only", action="store_true", help="redraw the plot from the last results' JSON")
     args = p.parse_args(argv)
+    if args.plot_only:
+        plot(json.loads((RESULTS / "auto_method.json").read_text()), RESULTS / "auto_method.png")
+        return
     started = time.perf_counter()
     divisions = (20, 60) if args.quick else DIVISIONS
     rows = [row for d in divisions for row in measure(d, PATHS_A_PATCH[:2] if args.quick else PATHS_A_PATCH)]
