@@ -81,11 +81,13 @@ class Chunk:
     correction: np.ndarray | float = 0.0  # (C,P) irradiance the first generation adds (reflect_first)
 
 
-def allotment_weight(area, grey_reflectivity):
-    """(P,) what a generation's rays are allotted to patches in proportion to: sqrt(A_j) R_bar_j
-    (a patch's error in B is R_j times its error in H; sqrt(A) sits between the area-weighted
-    error, which wants rays as A, and the per-patch one, which wants them alike)."""
-    return np.sqrt(area) * np.maximum(grey_reflectivity, 1e-3)
+def allotment_weight(area, reflectivity):
+    """(P,) what rays are allotted to patches in proportion to: sqrt(A_j) R_j, R_j one number a
+    patch (a patch's error in B is R_j times its error in H; sqrt(A) sits between the
+    area-weighted error, which wants rays as A, and the per-patch one, which wants them alike).
+    The direct light's samples take R_bar_j; the generations R_j of the strongest channel, as
+    they are counted (a red wall, R_bar 0.25 but R_red 0.63, carries most of the late red light)."""
+    return np.sqrt(area) * np.maximum(reflectivity, 1e-3)
 
 
 def rays_per_path(expected_path_length):
@@ -123,7 +125,7 @@ def two_way_chunk(tables, paths, rng, check=None):
         reflect_first(tables, state, samples, paths, rng)
     first_power = reflected_power(tables, state.reflected)
     budget = GENERATION_RAYS * paths / max(first_power, 1e-300)  # rays per unit of reflected power
-    weight = allotment_weight(gathering.patch_area, tables.grey_reflectivity)
+    weight = allotment_weight(gathering.patch_area, tables.reflectivity.max(axis=0))
     least = int(np.ceil(LEAST_RAYS * weight.size))
     while True:
         if check is not None:
