@@ -61,10 +61,13 @@ FIRST_REFLECTION_RAYS = 3.0
 GENERATION_RAYS = 2.0
 # ... and n DIRECT_SAMPLES gathering samples of the direct light (two rays each).
 DIRECT_SAMPLES = 1.5
-# A generation casts at least this many rays a patch (fewer, and the two-way weights of the few
-# segments there are make noise that does not die down with the light): one whose power would
-# pay for fewer plays Russian roulette, going on with this many rays or not at all.
-LEAST_RAYS = 0.25
+# A generation casts at least this many rays a patch: one whose power would pay for fewer plays
+# Russian roulette, going on with this many rays or not at all. Fewer rays a patch, and a
+# generation's estimate is spikier than the last's (a chain of sparse generations lets a few
+# patches' values grow without bound: 0.1 left chunks 4x off); more, and the roulette's
+# all-or-nothing for a whole chunk's last light costs more than it saves. Measured in the closed
+# Cornell box (2,940 and 59,535 patches): 0.5 the least MSE, and no heavy-tailed chunk.
+LEAST_RAYS = 0.5
 
 
 @dataclass
