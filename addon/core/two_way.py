@@ -64,7 +64,7 @@ DIRECT_SAMPLES = 1.5
 # A generation casts at least this many rays a patch: one whose power would pay for fewer plays
 # Russian roulette, going on with this many rays or not at all. Fewer rays a patch, and a
 # generation's estimate is spikier than the last's (a chain of sparse generations lets a few
-# patches' values grow without bound: 0.1 left chunks 4x off); more, and the roulette's
+# patches' values grow without bound: at 0.1 runs were up to 5x off); more, and the roulette's
 # all-or-nothing for a whole chunk's last light costs more than it saves. Measured in the closed
 # Cornell box (2,940 and 59,535 patches): 0.5 the least MSE, and no heavy-tailed chunk.
 LEAST_RAYS = 0.5
