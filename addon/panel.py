@@ -9,7 +9,9 @@ import bpy
 from . import estimate, worker
 from .pipeline import duration_text
 
-METHOD_NAMES = {"walk": "random walks (paper)", "two_way": "two-way iteration", "jacobi": "stochastic Jacobi"}
+from .options import METHOD
+
+METHOD_LABELS = {identifier: label for identifier, label, _ in METHOD.items}
 
 
 def _number(x):
@@ -86,7 +88,7 @@ def estimate_lines(value):
          else "Predicted time: -"),
         ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"
          + (" (planned)" if value.get("planned") else "")),
-        ("method", f"Method: {METHOD_NAMES.get(value.get('method'), value.get('method'))}"
+        ("method", f"Method: {METHOD_LABELS.get(value.get('method'), value.get('method'))}"
          + (" (automatic)" if value.get("automatic") else "")),
         ("patches", f"Objects: {value['objects']} get results, {value.get('others', 0)} more block and reflect"),
         ("size", f"Patches: {_number(value['patches'])} (size {size})"),

@@ -70,12 +70,12 @@ def prediction_for(scene, settings: SolveSettings):
     return predict(scene, settings.estimator, threshold=settings.threshold, target_mse=target), target
 
 
-def method_for(scene, settings: SolveSettings) -> SolveSettings:
+def method_for(scene, settings: SolveSettings, target) -> SolveSettings:
     """The settings with the method "auto" replaced by what it runs on this scene (the core's
-    choose_method: the two-way iteration where its chunks give every patch enough rays)."""
+    choose_method: the two-way iteration where its chunks give every patch enough rays);
+    ``target``: prediction_for's, which the method does not change."""
     if settings.method != AUTO:
         return settings
-    _, target = prediction_for(scene, settings)
     chosen = choose_method(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
                            target_mse=target, threshold=settings.threshold)
     return replace(settings, method=chosen)
@@ -176,8 +176,8 @@ def estimate(objects, settings: SolveSettings) -> dict:
     patches = make_patches(objects, settings.patch_size)
     scene, notes = scene_and_notes(patches)
     automatic = settings.method == AUTO
-    settings = method_for(scene, settings)
     p, target = prediction_for(scene, settings)
+    settings = method_for(scene, settings, target)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
     rate = ray_rate(scene, patches, settings)
@@ -228,8 +228,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
     scene, notes = scene_and_notes(patches)
     trim.give_back()
-    settings = method_for(scene, settings)
     prediction, target = prediction_for(scene, settings)
+    settings = method_for(scene, settings, target)
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
     result = solve(

@@ -56,9 +56,9 @@ class Batches:
         self.rays += tally.rays
         self.chunks += 1
 
-    def _score(self, k):
-        """(P,) R_jk Phi_T / A_j of channel k, a new array."""
-        return self._reflectivity[k] * (self.scene.total_power / self.scene.patch_area)
+    def _score(self, k, rows=slice(None)):
+        """R_jk Phi_T / A_j of channel k at patches ``rows`` (all of them: (P,)), a new array."""
+        return self._reflectivity[k, rows] * (self.scene.total_power / self.scene.patch_area[rows])
 
     def _columns(self, column, dtype=np.float64, plus=None):
         """(P,3) of ``column(k)`` (P,) float64 for each channel (a grey scene's one in all three),
@@ -119,12 +119,12 @@ class Batches:
             return np.full((self.scene.patch_count, 3), math.nan)
         return self._columns(self._variance)
 
-    def _spread(self, k):
-        """sum_k I_k^2 / n_k - I^2 / N of channel k (P,), at least 0: N (chunks - 1) times the
-        batch variance of I / N. (A new array, computed in place.)"""
-        spread = np.square(self.incident[k])
+    def _spread(self, k, rows=slice(None)):
+        """sum_k I_k^2 / n_k - I^2 / N of channel k at patches ``rows`` (all of them: (P,)), at
+        least 0: N (chunks - 1) times the batch variance of I / N. (A new array, computed in place.)"""
+        spread = np.square(self.incident[k, rows])
         spread /= self.paths
-        np.subtract(self.incident_sq[k], spread, out=spread)
+        np.subtract(self.incident_sq[k, rows], spread, out=spread)
         np.maximum(spread, 0.0, out=spread)
         return spread
 
@@ -137,19 +137,16 @@ class Batches:
             return math.nan
         if self._mse_at[0] == self.chunks:
             return self._mse_at[1]
-        per_area = self.scene.total_power / self.scene.patch_area
         spread_sum = 0.0
         for start in range(0, self.scene.patch_count, MSE_BLOCK):
-            block = slice(start, start + MSE_BLOCK)
-            spread = np.square(self.incident[:, block])
-            spread /= self.paths
-            np.subtract(self.incident_sq[:, block], spread, out=spread)
-            np.maximum(spread, 0.0, out=spread)
-            weight = self._reflectivity[:, block] * per_area[block]
-            weight *= weight  # (score**2)
-            weight *= self.weight[block] / self.channels
-            # (einsum, not a BLAS dot: OpenBLAS's threads would spin beside the walks' threads)
-            spread_sum += float(np.einsum("ij,ij->", spread, weight))
+            rows = slice(start, start + MSE_BLOCK)
+            area_share = self.weight[rows] / self.channels
+            for k in range(self.channels):
+                weight = self._score(k, rows)
+                weight *= weight  # (score**2)
+                weight *= area_share
+                # (einsum, not a BLAS dot: OpenBLAS's threads would spin beside the walks' threads)
+                spread_sum += float(np.einsum("i,i->", self._spread(k, rows), weight))
         mse = spread_sum / ((self.chunks - 1) * self.paths)
         self._mse_at = (self.chunks, mse)
         return mse
