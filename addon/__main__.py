@@ -45,22 +45,27 @@ def _parser():
     for option in options.SETTINGS:  # the panel's settings: same names, defaults and ranges
         if isinstance(option, options.Text):
             p.add_argument(option.flag, dest=option.name, default=option.default, metavar="ADDRESS",
-                           help=option.description)
+                           help=_literal(option.description))
         elif isinstance(option, options.Flag):
             p.add_argument(option.flag, dest=option.name, default=option.default, action=argparse.BooleanOptionalAction,
-                           help=option.description)
+                           help=_literal(option.description))
         elif isinstance(option, options.Choice):
             ids = [i for i, _, _ in option.items]
             p.add_argument(option.flag, dest=option.name, default=option.default, metavar="|".join(ids),
-                           help=f"{option.description} (default {option.default}; any case)")
+                           help=_literal(f"{option.description} (default {option.default}; any case)"))
         else:
             kind = int if option.integer else float
             p.add_argument(option.flag, dest=option.name, type=kind, default=option.default,
-                           help=f"{option.description} ({option.range_text()}; default {option.default:g})")
-    p.add_argument("--resolution", type=int, default=RESOLUTION.default, help="preview width in pixels "
-                   f"({RESOLUTION.range_text()})")
-    p.add_argument("--samples", type=int, default=SAMPLES.default, help=f"Cycles samples for the preview ({SAMPLES.range_text()})")
+                           help=_literal(f"{option.description} ({option.range_text()}; default {option.default:g})"))
+    p.add_argument("--resolution", type=int, default=RESOLUTION.default, help=_literal("preview width in pixels "
+                   f"({RESOLUTION.range_text()})"))
+    p.add_argument("--samples", type=int, default=SAMPLES.default, help=_literal(f"Cycles samples for the preview ({SAMPLES.range_text()})"))
     return p
+
+
+def _literal(text):
+    """A help text as argparse prints it: its own % signs doubled (argparse %-formats help)."""
+    return text.replace("%", "%%")
 
 
 # The preview's own options (not settings of the solve).

@@ -164,6 +164,15 @@ def test_cli_refuses_values_out_of_range_in_one_line(tmp_path, args, expected):
     assert "usage:" not in proc.stderr and not (tmp_path / "x.blend").exists()
 
 
+def test_help_lists_every_option(tmp_path):
+    out = run(["--help"], cwd=str(tmp_path))
+    from addon import options
+
+    for option in options.SETTINGS:
+        assert option.flag in out
+    assert "between 0.05 and 100 %" in " ".join(out.split())  # a description's own % sign, printed as it is
+
+
 def test_cli_names_and_defaults_are_the_panels():
     """One set of defaults and names (addon/options.py): the parser's defaults are the
     properties' defaults, and choices are taken in any case."""
