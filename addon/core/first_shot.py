@@ -2,7 +2,8 @@
 
 Beyond the paper. A shooting walk's first bounce is about half its variance: where a path from
 a source lands is the noisiest choice it makes. Here each patch j gathers its direct
-irradiance H_j instead, from uniform points of it, each looking at one source chosen by power
+irradiance H_j instead, from uniform points of it (stratified: a patch's samples are
+Sobol' points with a random digital shift of its own), each looking at one source chosen by power
 (a point on an emitting patch or on a light, or a direction of the sun) through a shadow ray
 (none for a light that casts no shadow: its light passes through objects, as Cycles draws it),
 and along one cosine-distributed ray (an emitting patch it meets, or the sky; none where the
@@ -34,7 +35,7 @@ import numpy as np
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .rays import cast as ray_cast, cast_to_points, hit_patches, leave_random, leave_sources, meets_front
-from .sampling import SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights
+from .sampling import LAST_BELOW_ONE, SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights, stratified_by_patch
 from .tables import WalkTables
 from .tallies import ChunkTally
 
@@ -45,6 +46,10 @@ MAX_GATHER_SAMPLES = 256
 # of it (2), a cosine direction (2), and a triangle of either patch where patches are not
 # parallelograms (2).
 GATHER_DIMENSIONS = 10
+# The Sobol' dimension each of them takes, stratified per patch (sampling.stratified_by_patch):
+# the point on the patch the first two (a (0,2)-sequence), the point on the source or the
+# direction to it the next two, then the cosine direction.
+GATHER_SOBOL_DIMENSIONS = (0, 1, 6, 2, 3, 4, 5, 7, 8, 9)
 # The share of samples that cast a cosine ray, where only emitting patches can be met: this
 # many times the emitters' share of the area, from COSINE_SHARE_LEAST to 1.
 COSINE_SHARE_PER_AREA = 10.0
@@ -91,8 +96,9 @@ class Gathering:
     patches, then every light but the world, which the cosine rays find), and the scene's
     quantities in world units."""
 
-    def __init__(self, scene, samples):
+    def __init__(self, scene, samples, stratified=True):
         self.samples = np.asarray(samples, dtype=np.float64)  # (P,) expected, per patch
+        self.stratified = stratified  # a patch's samples a low-discrepancy set (else independent)
         self.whole = np.floor(self.samples).astype(np.int64)
         self.chance = self.samples - self.whole
         self.lights = scene.lights.lights
@@ -128,14 +134,18 @@ def gather_direct(tables, gathering, rng):
     the irradiance there (3,n)): per patch j, ``gathering.samples[j]`` points on average, each with a shadow ray to a
     source chosen by power and a cosine-distributed ray, weighted against each other where
     both can find the same emitting patch (multiple importance sampling, balance heuristic:
-    shadow rays are good at small and far sources, cosine rays at near and large ones)."""
+    shadow rays are good at small and far sources, cosine rays at near and large ones). A
+    patch's samples are stratified: Sobol' points with a random digital shift of the patch's
+    own (points, sources, their points and directions evenly spread; each sample uniform, so
+    the estimate stays unbiased, and chunks and patches independent, so batch means hold)."""
     g = tables.geometry
     P = tables.patch_count
     patch = gathering.draw(rng)
-    # Independent uniforms: a chunk's per-patch mean is then close to normal, as the batch-means
-    # error bar assumes (randomly shifted low-discrepancy points left it far from normal).
-    u = rng.random((GATHER_DIMENSIONS, patch.size))
-    u32 = u.astype(np.float32)
+    if gathering.stratified:
+        u = stratified_by_patch(patch, P, GATHER_SOBOL_DIMENSIONS, rng)
+    else:
+        u = rng.random((GATHER_DIMENSIONS, patch.size))
+    u32 = np.minimum(u.astype(np.float32), np.float32(LAST_BELOW_ONE))  # (the cast can round up to 1)
     x = patch_point_rows(g, patch, u32[7], u32[0].copy(), u32[1].copy()).astype(np.float64)  # unit space
     normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
     value = np.zeros((3, patch.size))
@@ -182,6 +192,9 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
     to_patch = np.zeros(patch.size, dtype=bool)  # an emitting patch's point: meeting the patch sees it too
     unshadowed = np.zeros(patch.size, dtype=bool)  # from a light that casts no shadow: always seen
     shadow = np.zeros_like(value)
+    # The estimate's geometry is the surfaces' own: the points lie a ray offset off them (for the
+    # rays), which seen at a grazing angle changes cos and distance by far more than the offset.
+    surface = x - normal * g.ray_offset
     at_patch = np.flatnonzero(source < P)
     if at_patch.size:
         s = source[at_patch]
@@ -189,17 +202,21 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
         d = y - x[:, at_patch]
         dist = np.sqrt(np.einsum("in,in->n", d, d))
         d /= dist
-        cos_x = np.einsum("in,in->n", normal[:, at_patch], d)
-        cos_y = -np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), d)
+        normal_s = g.patch_normal_rows.take(s, axis=1).astype(np.float64)
+        e = y - normal_s * g.ray_offset - surface[:, at_patch]
+        length = np.sqrt(np.einsum("in,in->n", e, e))
+        e /= length
+        cos_x = np.einsum("in,in->n", normal[:, at_patch], e)
+        cos_y = -np.einsum("in,in->n", normal_s, e)
         ok = (cos_x > 0) & (cos_y > 0) & (s != patch[at_patch])
         towards[:, at_patch] = d
         distance[at_patch], to_patch[at_patch] = dist, True
         cols = at_patch[ok]
-        shadow[:, cols] = _emitter_estimate(gathering, SHADOW, s[ok], patch[cols], cos_x[ok], cos_y[ok], dist[ok] * g.diagonal)
+        shadow[:, cols] = _emitter_estimate(gathering, SHADOW, s[ok], patch[cols], cos_x[ok], cos_y[ok], length[ok] * g.diagonal)
     at_light = np.flatnonzero(source >= P)
     if at_light.size:
         light = source[at_light] - P
-        x_world = g.to_world(x[:, at_light].T).T
+        x_world = g.to_world(surface[:, at_light].T).T
         for k in np.unique(light):
             here = light == k
             cols = at_light[here]

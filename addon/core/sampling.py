@@ -131,6 +131,64 @@ def halton(index, bases):
     return out
 
 
+# Sobol' sequence direction numbers of Joe & Kuo (2008, new-joe-kuo-6.21201), dimensions 2 to
+# 10: (s, a, m_1..m_s); dimension 1 is the van der Corput sequence.
+JOE_KUO = ((1, 0, (1,)), (2, 1, (1, 3)), (3, 1, (1, 3, 1)), (3, 2, (1, 1, 1)), (4, 1, (1, 1, 3, 3)),
+           (4, 4, (1, 3, 5, 13)), (5, 2, (1, 1, 5, 5, 17)), (5, 4, (1, 1, 5, 5, 5)), (5, 7, (1, 1, 7, 11, 19)))
+SOBOL_DIMENSIONS = 1 + len(JOE_KUO)
+_SOBOL = {"table": np.zeros((SOBOL_DIMENSIONS, 0), dtype=np.uint32)}
+_SOBOL_LOCK = threading.Lock()
+
+
+def sobol_directions(bits=32):
+    """(SOBOL_DIMENSIONS, bits) uint32: v_k of each dimension, the k-th bit of an index's
+    contribution (x_i = XOR of v_k over the set bits k of i)."""
+    v = np.zeros((SOBOL_DIMENSIONS, bits), dtype=np.uint64)
+    v[0] = [1 << (bits - 1 - k) for k in range(bits)]
+    for d, (s, a, m) in enumerate(JOE_KUO, start=1):
+        m = list(m)
+        for k in range(s, bits):  # m_k = 2a_1 m_{k-1} ^ 4a_2 m_{k-2} ^ ... ^ 2^s m_{k-s} ^ m_{k-s}
+            x = m[k - s] ^ (m[k - s] << s)
+            for i in range(1, s):
+                x ^= ((a >> (s - 1 - i)) & 1) * (m[k - i] << i)
+            m.append(x)
+        v[d] = [m[k] << (bits - 1 - k) for k in range(bits)]
+    return v.astype(np.uint32)
+
+
+def sobol_rows(count):
+    """Sobol' points 0..count-1 (at least), (SOBOL_DIMENSIONS, n) uint32 fractions of 2^32,
+    computed once and kept (doubling as more are asked for)."""
+    table = _SOBOL["table"]
+    if table.shape[1] < count:
+        with _SOBOL_LOCK:
+            table = _SOBOL["table"]
+            if table.shape[1] < count:
+                n = max(count, 2 * table.shape[1], 64)
+                v, index = sobol_directions(), np.arange(n, dtype=np.int64)
+                table = np.zeros((SOBOL_DIMENSIONS, n), dtype=np.uint32)
+                for k in range(int(n - 1).bit_length()):
+                    table[:, (index >> k) & 1 == 1] ^= v[:, k:k + 1]
+                _SOBOL["table"] = table
+    return table
+
+
+def stratified_by_patch(patch, patch_count, rows, rng):
+    """(len(rows), n) float64 in [0, 1): for samples of patches ``patch`` (n,), grouped by patch
+    (each patch's samples one run), sample k of its patch's run takes Sobol' point k in the
+    dimensions ``rows``, XORed with a random 32-bit shift of its own for each patch and
+    dimension (a random digital shift: each point is uniform, a patch's points stay a
+    low-discrepancy set, and patches stay independent of each other)."""
+    counts = np.bincount(patch, minlength=patch_count)
+    start = np.cumsum(counts) - counts
+    rank = np.arange(patch.size) - start.take(patch)
+    table = sobol_rows(int(counts.max(initial=1)))
+    shift = rng.integers(0, 1 << 32, size=(len(rows), patch_count), dtype=np.uint32)
+    points = table[list(rows)].take(rank, axis=1)
+    points ^= shift.take(patch, axis=1)
+    return points * 2.0**-32
+
+
 def choose_triangles(geometry, patch, u):
     """A triangle of each patch, chosen with probability proportional to its area.
 

@@ -191,3 +191,25 @@ def test_an_emitter_seen_at_a_grazing_angle_from_far_away_is_seen_whole():
     with tables.numpy_turn:
         H = np.array([gather_direct(tables, gathering, rng)[0][0, 1] for _ in range(16)])
     assert abs(H.mean() - exact) < 5 * H.std(ddof=1) / 4
+
+
+def test_stratified_gathering_has_less_variance_than_independent_samples_and_the_same_mean():
+    """The colour box with one emitting ceiling patch, 64 chunks' direct irradiance each way:
+    per patch, stratified samples' variance is under half of independent ones' in the mean over
+    the lit patches (measured about a fifth; a ratio of two 63-degree variances, averaged over
+    80 lit patches, is within a few percent), and the two means agree within 5 standard errors."""
+    from addon.core.first_shot import gather_samples
+
+    scene, _ = _box_with_one_emitter()
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    H = {}
+    for stratified in (True, False):
+        gathering = Gathering(scene, gather_samples(12_500, 2.5, scene), stratified=stratified)
+        rng = np.random.default_rng(5)
+        with tables.numpy_turn:
+            H[stratified] = np.array([gather_direct(tables, gathering, rng)[0][0] for _ in range(64)])
+    lit = H[False].mean(axis=0) > 0
+    a, b = H[True][:, lit], H[False][:, lit]
+    assert np.mean(a.var(axis=0) / b.var(axis=0)) < 0.5
+    z = (a.mean(axis=0) - b.mean(axis=0)) / np.sqrt((a.var(axis=0, ddof=1) + b.var(axis=0, ddof=1)) / 64)
+    assert np.abs(z).max() < 5

@@ -127,3 +127,49 @@ def test_channel_sum_is_numpys_sum_bit_for_bit():
         np.testing.assert_array_equal(channel_sum(values) / 3, values.mean(axis=1))
         # ... and not the other grouping, which differs somewhere on such data.
         assert not np.array_equal(values[:, 0] + (values[:, 1] + values[:, 2]), values.sum(axis=1))
+
+
+# The first 8 Sobol' points in 10 dimensions, times 64: scipy.stats.qmc.Sobol(10, scramble=False)
+# (the same Joe & Kuo direction numbers) gives these points, in Gray-code order.
+SOBOL_FIRST_8 = [[0, 0, 0, 0, 0, 0, 0, 0, 0, 0], [32] * 10, [16, 48, 48, 48, 16, 16, 48, 16, 16, 16],
+                 [48, 16, 16, 16, 48, 48, 16, 48, 48, 48], [8, 40, 24, 8, 8, 24, 40, 40, 40, 56],
+                 [40, 8, 56, 40, 40, 56, 8, 8, 8, 24], [24, 24, 40, 56, 24, 8, 24, 56, 56, 40],
+                 [56, 56, 8, 24, 56, 40, 56, 24, 24, 8]]
+
+
+def test_sobol_points_are_joe_and_kuos_and_nets():
+    """The table's first points are scipy's; the first 2^m points of every dimension fall one in
+    each interval of 2^-m, and dimensions 0 and 1 together one in each of the 2^m boxes of
+    every shape 2^-a x 2^-(m-a) (a (0,m,2)-net)."""
+    from addon.core.sampling import sobol_rows
+
+    u = sobol_rows(1024)[:, :1024] * 2.0**-32
+    assert (u[:, :8].T * 64).tolist() == SOBOL_FIRST_8
+    for m in range(1, 11):
+        n = 2**m
+        for row in u[:, :n]:
+            assert np.unique((row * n).astype(int)).size == n
+        for a in range(m + 1):
+            boxes = (u[0, :n] * 2**a).astype(int) * 2 ** (m - a) + (u[1, :n] * 2 ** (m - a)).astype(int)
+            assert np.unique(boxes).size == n
+
+
+def test_stratified_points_are_uniform_evenly_spread_and_independent_between_patches():
+    """stratified_by_patch: 8 samples of patch 0 keep the net (one in each eighth of every
+    dimension); over 4,000 draws, one sample's coordinate is uniform (chi-square over 16 bins
+    within 5 standard deviations of its mean) and uncorrelated with another patch's (within 5
+    standard errors of zero)."""
+    from addon.core.sampling import stratified_by_patch
+
+    patch = np.repeat(np.arange(3, dtype=np.int32), [8, 0, 5])
+    rng = np.random.default_rng(7)
+    u = stratified_by_patch(patch, 3, range(10), rng)
+    assert u.shape == (10, 13) and u.min() >= 0 and u.max() < 1
+    for row in u[:, :8]:
+        assert np.unique((row * 8).astype(int)).size == 8
+    draws = np.array([stratified_by_patch(patch, 3, (2, 5), rng)[:, [3, 10]] for _ in range(4000)])  # (4000, 2, 2)
+    counts = np.bincount((draws[:, 0, 0] * 16).astype(int), minlength=16)
+    chi2 = ((counts - 250.0) ** 2 / 250.0).sum()
+    assert abs(chi2 - 15) < 5 * np.sqrt(30)
+    r = np.corrcoef(draws[:, 1, 0], draws[:, 1, 1])[0, 1]
+    assert abs(r) < 5 / np.sqrt(4000)
