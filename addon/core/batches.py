@@ -42,9 +42,10 @@ class Batches:
 
     def add(self, tally):
         self.incident += tally.incident
-        square = np.square(tally.incident)  # (in place from here: no more (C,P) temporaries)
-        square /= tally.paths
-        self.incident_sq += square
+        for c, row in enumerate(tally.incident):  # a channel at a time: a (P,) temporary, not (C,P)
+            square = np.square(row)
+            square /= tally.paths
+            self.incident_sq[c] += square
         self.emitted += tally.emitted
         self.absorbed += tally.absorbed
         self.escaped += tally.escaped

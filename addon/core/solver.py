@@ -327,6 +327,8 @@ def solve(
                 stopped = _interrupted(should_stop, max_seconds, start)
     finally:
         runner.stop(pending)  # tasks still running are abandoned; their partial tallies dropped
+        pending.clear()  # (their futures hold a tally, or a traceback and the walk's arrays in it)
+        tallies = tally = None  # (the last ones added, summed already)
 
     n = total.paths
     # (one (P,3) result at a time, the sums of squares let go of once the error is estimated)
