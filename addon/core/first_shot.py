@@ -122,10 +122,16 @@ class Gathering:
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
 
     def draw(self, rng):
-        """This chunk's samples: the patch of each, count_j of patch j: the whole part of its
-        share and one more with the fraction's chance."""
+        """This chunk's samples: the patch of each, count_j of patch j (the whole part of its
+        share and one more with the fraction's chance); and what each sample's estimate is
+        scaled by so that a patch's sum over ``samples`` is its samples' mean: n_j / count_j
+        where every chunk draws one or more (the mean of stratified points is nearly exact, and
+        a sum over n_j would be noisy by the count alone: a patch of 10.05 samples would be 0.5%
+        low in most chunks and 9.5% high in one of twenty), 1 where a patch may draw none."""
         count = self.whole + (rng.random(self.samples.size) < self.chance)
-        return np.repeat(np.arange(count.size, dtype=np.int32), count)
+        scale = np.where(self.whole >= 1, self.samples / np.maximum(count, 1), 1.0)
+        patch = np.repeat(np.arange(count.size, dtype=np.int32), count)
+        return patch, scale.take(patch)
 
 
 def gather_direct(tables, gathering, rng):
@@ -140,7 +146,7 @@ def gather_direct(tables, gathering, rng):
     the estimate stays unbiased, and chunks and patches independent, so batch means hold)."""
     g = tables.geometry
     P = tables.patch_count
-    patch = gathering.draw(rng)
+    patch, scale = gathering.draw(rng)
     if gathering.stratified:
         u = stratified_by_patch(patch, P, GATHER_SOBOL_DIMENSIONS, rng)
     else:
@@ -154,6 +160,7 @@ def gather_direct(tables, gathering, rng):
         rays += _shadow_rays(tables, gathering, patch, x, normal, u, u32, value)
     if gathering.cosine_share > 0:
         rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
+    value *= scale
     uniform = np.ones(patch.size, dtype=bool)
     if gathering.shots > 0:
         shot_patch, shot_x, shot_value, shot_rays = _shot_rays(tables, gathering, rng)

@@ -180,12 +180,13 @@ def stratified_by_patch(patch, patch_count, rows, rng):
     dimension (a random digital shift: each point is uniform, a patch's points stay a
     low-discrepancy set, and patches stay independent of each other)."""
     counts = np.bincount(patch, minlength=patch_count)
-    start = np.cumsum(counts) - counts
-    rank = np.arange(patch.size) - start.take(patch)
-    table = sobol_rows(int(counts.max(initial=1)))
-    shift = rng.integers(0, 1 << 32, size=(len(rows), patch_count), dtype=np.uint32)
+    runs = counts.compress(counts > 0)  # the samples of each patch that has any, in order
+    start = np.cumsum(runs) - runs
+    rank = np.arange(patch.size) - np.repeat(start, runs)
+    table = sobol_rows(int(runs.max(initial=1)))
+    shift = rng.integers(0, 1 << 32, size=(len(rows), runs.size), dtype=np.uint32)  # (a patch with no sample draws none)
     points = table[list(rows)].take(rank, axis=1)
-    points ^= shift.take(patch, axis=1)
+    points ^= np.repeat(shift, runs, axis=1)
     return points * 2.0**-32
 
 
