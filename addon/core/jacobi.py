@@ -25,27 +25,14 @@ exactly as the walk's do: what arrives at a patch is absorbed there but for what
 """
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 
 from . import rays
-from .sampling import LAST_BELOW_ONE, draw_sources, halton
+from .sampling import LAST_BELOW_ONE, GrowingTable, draw_sources, halton
 from .tallies import ChunkTally, chunk_counts, chunk_sums
 
-_HALTON = {"table": np.zeros((4, 0), dtype=np.float32)}
-_HALTON_LOCK = threading.Lock()
-
-
-def halton_rows(count):
-    """Halton points 0..count-1 in bases 2, 3, 5, 7, (4, count) float64, computed once and kept."""
-    table = _HALTON["table"]
-    if table.shape[1] < count:
-        with _HALTON_LOCK:
-            table = _HALTON["table"]
-            if table.shape[1] < count:
-                table = _HALTON["table"] = halton(np.arange(max(count, 2 * table.shape[1])), (2, 3, 5, 7))
-    return table
+# Halton points 0..n-1 in bases 2, 3, 5, 7, (4, n) float64.
+HALTON = GrowingTable(lambda n: halton(np.arange(n), (2, 3, 5, 7)))
 
 
 def systematic_counts(power, rays, shift):
@@ -83,7 +70,7 @@ def shoot_from_patches(tables, unshot, rng):
     # Ray k of a chunk: (k + shift) / m chose its patch, Halton point k its point and direction:
     # a 5-D Hammersley set over the chunk's generation (each patch's rays a run of it).
     index = np.arange(cell.size) - np.repeat(np.cumsum(rays_of) - rays_of, rays_of)
-    points = halton_rows(int(rays_of.max())).take(index, axis=1)
+    points = HALTON.rows(int(rays_of.max())).take(index, axis=1)
     points += corner.T.take(chunk, axis=1)
     points -= np.floor(points)
     np.minimum(points, LAST_BELOW_ONE, out=points)

@@ -136,8 +136,23 @@ def halton(index, bases):
 JOE_KUO = ((1, 0, (1,)), (2, 1, (1, 3)), (3, 1, (1, 3, 1)), (3, 2, (1, 1, 1)), (4, 1, (1, 1, 3, 3)),
            (4, 4, (1, 3, 5, 13)), (5, 2, (1, 1, 5, 5, 17)), (5, 4, (1, 1, 5, 5, 5)), (5, 7, (1, 1, 7, 11, 19)))
 SOBOL_DIMENSIONS = 1 + len(JOE_KUO)
-_SOBOL = {"table": np.zeros((SOBOL_DIMENSIONS, 0), dtype=np.uint32)}
-_SOBOL_LOCK = threading.Lock()
+
+
+class GrowingTable:
+    """Points 0..count-1 of a sequence, ``make(n)`` giving the first n (rows, n), computed once
+    and kept, grown (at least doubled) under a lock when more are asked for."""
+
+    def __init__(self, make):
+        self._make, self._table, self._lock = make, None, threading.Lock()
+
+    def rows(self, count):
+        table = self._table
+        if table is None or table.shape[1] < count:
+            with self._lock:
+                table = self._table
+                if table is None or table.shape[1] < count:
+                    table = self._table = self._make(max(count, 2 * (0 if table is None else table.shape[1]), 64))
+        return table
 
 
 def sobol_directions(bits=32):
@@ -156,21 +171,16 @@ def sobol_directions(bits=32):
     return v.astype(np.uint32)
 
 
-def sobol_rows(count):
-    """Sobol' points 0..count-1 (at least), (SOBOL_DIMENSIONS, n) uint32 fractions of 2^32,
-    computed once and kept (doubling as more are asked for)."""
-    table = _SOBOL["table"]
-    if table.shape[1] < count:
-        with _SOBOL_LOCK:
-            table = _SOBOL["table"]
-            if table.shape[1] < count:
-                n = max(count, 2 * table.shape[1], 64)
-                v, index = sobol_directions(), np.arange(n, dtype=np.int64)
-                table = np.zeros((SOBOL_DIMENSIONS, n), dtype=np.uint32)
-                for k in range(int(n - 1).bit_length()):
-                    table[:, (index >> k) & 1 == 1] ^= v[:, k:k + 1]
-                _SOBOL["table"] = table
+def _sobol(n):
+    v, index = sobol_directions(), np.arange(n, dtype=np.int64)
+    table = np.zeros((SOBOL_DIMENSIONS, n), dtype=np.uint32)
+    for k in range(int(n - 1).bit_length()):
+        table[:, (index >> k) & 1 == 1] ^= v[:, k:k + 1]
     return table
+
+
+# Sobol' points 0..n-1, (SOBOL_DIMENSIONS, n) uint32 fractions of 2^32.
+SOBOL = GrowingTable(_sobol)
 
 
 def stratified_by_patch(patch, patch_count, rows, rng):
@@ -183,7 +193,7 @@ def stratified_by_patch(patch, patch_count, rows, rng):
     runs = counts.compress(counts > 0)  # the samples of each patch that has any, in order
     start = np.cumsum(runs) - runs
     rank = np.arange(patch.size) - np.repeat(start, runs)
-    table = sobol_rows(int(runs.max(initial=1)))
+    table = SOBOL.rows(int(runs.max(initial=1)))
     shift = rng.integers(0, 1 << 32, size=(len(rows), runs.size), dtype=np.uint32)  # (a patch with no sample draws none)
     points = table[list(rows)].take(rank, axis=1)
     points ^= np.repeat(shift, runs, axis=1)

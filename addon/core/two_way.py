@@ -51,7 +51,7 @@ import numpy as np
 
 from . import rays
 from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct, split_lost
-from .jacobi import halton_rows, systematic_counts
+from .jacobi import HALTON, systematic_counts
 from .sampling import LAST_BELOW_ONE
 from .tallies import ChunkTally
 
@@ -252,7 +252,7 @@ def _hammersley(count, rng):
     """(4, count) float32 Halton points 0..count-1 (bases 2, 3, 5, 7) shifted by one random
     vector modulo 1: each point uniform, together evenly spread; the rays of each patch take a
     run of them."""
-    points = halton_rows(count)[:, :count] + rng.random(4)[:, None]
+    points = HALTON.rows(count)[:, :count] + rng.random(4)[:, None]
     points -= np.floor(points)
     np.minimum(points, LAST_BELOW_ONE, out=points)
     return points.astype(np.float32)

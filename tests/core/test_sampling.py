@@ -141,9 +141,9 @@ def test_sobol_points_are_joe_and_kuos_and_nets():
     """The table's first points are scipy's; the first 2^m points of every dimension fall one in
     each interval of 2^-m, and dimensions 0 and 1 together one in each of the 2^m boxes of
     every shape 2^-a x 2^-(m-a) (a (0,m,2)-net)."""
-    from addon.core.sampling import sobol_rows
+    from addon.core.sampling import SOBOL
 
-    u = sobol_rows(1024)[:, :1024] * 2.0**-32
+    u = SOBOL.rows(1024)[:, :1024] * 2.0**-32
     assert (u[:, :8].T * 64).tolist() == SOBOL_FIRST_8
     for m in range(1, 11):
         n = 2**m
