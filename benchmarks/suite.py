@@ -229,11 +229,13 @@ def direct_only(paths, chunks=32):
     from addon.core.first_shot import Gathering, gather_direct
     from addon.core.tables import WalkTables
     from addon.core.two_way import direct_samples
+    from addon.core.walk import FreeTurn
 
     objects, _ = scene_io.read_selection(bpy.context)
     patches = patch_making.make_patches(objects, 1e6)
     scene, _ = patch_making.scene_and_notes(patches)
     tables = WalkTables(scene, "finite", 1e-3, "hit")
+    tables.numpy_turn = FreeTurn()  # (as the two-way iteration gathers: walk.takes_turns)
     gathering = Gathering(scene, direct_samples(math.ceil(paths / chunks), scene))
     R = scene.reflectivity.T
 

@@ -22,11 +22,13 @@ light by shadow rays, then runs these stages from what the patches reflect of it
 """
 from __future__ import annotations
 
+import copy
+
 from .first_shot import gathered_chunk
 from .jacobi import jacobi_chunk, jacobi_chunks
 from .interchangeable import InterchangeableWalk
 from .path_walk import PathWalk
-from .names import TWO_WAY
+from .names import TWO_WAY, WALK
 from .two_way import two_way_chunk
 
 
@@ -38,9 +40,13 @@ def walk_chunks(tables, sizes, rng, abort=None):
     """Trace the paths of chunks of ``sizes`` paths as one wavefront; return each chunk's own
     tallies (ChunkTally), in order. ``abort`` (a threading.Event) stops it at the next step.
 
-    Walks on several threads take turns at their numpy work (``tables.numpy_turn``, released
-    while they trace): taking turns hands the GIL over about once a step."""
+    Path-by-path walks on several threads take turns at their numpy work
+    (``tables.numpy_turn``, released while they trace): taking turns hands the GIL over about
+    once a step. Chunk-wide work (:func:`takes_turns`) does not wait for a turn."""
     sizes = [int(n) for n in sizes]
+    if not takes_turns(tables):
+        tables = copy.copy(tables)
+        tables.numpy_turn = FreeTurn()
     with tables.numpy_turn:
         if tables.method == TWO_WAY:  # (it gathers its own direct light)
             return [two_way_chunk(tables, n, rng, lambda: _check(abort)) for n in sizes]
@@ -58,6 +64,35 @@ def walk_chunks(tables, sizes, rng, abort=None):
             _check(abort)
             tallies.append(gathered_chunk(tables, n, rng, walk))
         return tallies
+
+
+def takes_turns(tables):
+    """Whether walks on several threads take turns at their numpy work: the paper's walks do
+    (their steps' arrays are a wavefront's, small, and a turn a step keeps the GIL from
+    changing hands inside them); the gathered walk and the generations of the Jacobi and
+    two-way iterations do not (their arrays span a whole chunk, numpy lets go of the GIL
+    inside most of their operations, and two threads' numpy work then runs side by side;
+    ``benchmarks/turns.py``)."""
+    return tables.method == WALK and tables.gathering is None
+
+
+class FreeTurn:
+    """A numpy turn that never waits (:func:`takes_turns`): the lock's calls, doing nothing."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def acquire(self):
+        return True
+
+    def release(self):
+        pass
+
+    def locked(self):
+        return False
 
 
 def _stages(tables, sizes, rng, abort):
