@@ -35,7 +35,7 @@ import numpy as np
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .rays import cast as ray_cast, cast_to_points, hit_patches, leave_random, leave_sources, meets_front
-from .sampling import LAST_BELOW_ONE, SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights, stratified_by_patch
+from .sampling import SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights, stratified_by_patch
 from .tables import WalkTables
 from .tallies import ChunkTally
 
@@ -118,6 +118,10 @@ class Gathering:
         self.shots = float(self.cosine_share * self.samples.sum()) if patch_power.any() else 0.0
         self.shot_table = SourceTable(patch_power) if self.shots > 0 else None
         self.shots_expected = self.shots * patch_power / patch_power.sum() if self.shots > 0 else np.zeros(scene.patch_count)
+        # _emitter_weight's factors of each source and receiver: P_s / A_s, n_s / A_s, A_j / n_j.
+        self.shadow_density = self.choice[:scene.patch_count] / scene.patch_area
+        self.shot_density = self.shots_expected / scene.patch_area
+        self.area_per_sample = scene.patch_area / self.samples
         self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
 
@@ -148,16 +152,15 @@ def gather_direct(tables, gathering, rng):
     P = tables.patch_count
     patch, scale = gathering.draw(rng)
     if gathering.stratified:
-        u = stratified_by_patch(patch, P, GATHER_SOBOL_DIMENSIONS, rng)
+        u = stratified_by_patch(patch, P, GATHER_SOBOL_DIMENSIONS, rng, dtype=np.float32)
     else:
-        u = rng.random((GATHER_DIMENSIONS, patch.size))
-    u32 = np.minimum(u.astype(np.float32), np.float32(LAST_BELOW_ONE))  # (the cast can round up to 1)
-    x = patch_point_rows(g, patch, u32[7], u32[0].copy(), u32[1].copy()).astype(np.float64)  # unit space
+        u = rng.random((GATHER_DIMENSIONS, patch.size), dtype=np.float32)
+    x = patch_point_rows(g, patch, u[7], u[0].copy(), u[1].copy()).astype(np.float64)  # unit space
     normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
     value = np.zeros((3, patch.size))
     rays = 0
     if gathering.table is not None:
-        rays += _shadow_rays(tables, gathering, patch, x, normal, u, u32, value)
+        rays += _shadow_rays(tables, gathering, patch, x, normal, u, value)
     if gathering.cosine_share > 0:
         rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
     value *= scale
@@ -174,54 +177,64 @@ def gather_direct(tables, gathering, rng):
 
 def _emitter_estimate(gathering, technique, source, receiver, cos_x, cos_y, distance_world):
     """The weighted estimate (3,n), as a sample of the receiving patch j, of an emitting patch
-    s met at distance d by a sample of ``technique`` (SHADOW, COSINE or SHOT). The three
-    strategies' densities at x, in solid angle, each per gathering sample of j:
-    p_shadow = P_s d^2 / (A_s cos_y) (one shadow ray a sample), p_cosine = q cos_x / pi (q =
-    the cosine share) and, for the rays shot from s, n_s of them, p_shot = (cos_x / pi) n_s A_j /
-    (A_s n_j); a sample of strategy t weighs in as f p_t / sum p^2, f = E_s cos_x / pi (the
-    power heuristic: the shot rays, shared by every patch, land on a given one a few at a time,
-    and the balance heuristic let their count's noise into patches far from small emitters).
-    A receiver's irradiance is the sum of its samples' estimates over n_j."""
-    area = gathering.patch_area
-    p_cosine = cos_x / np.pi
-    densities = (gathering.choice[source] / area[source] * distance_world**2 / cos_y, gathering.cosine_share * p_cosine,
-                 gathering.shots_expected[source] * area[receiver] / (area[source] * gathering.samples[receiver]) * p_cosine)
-    square = densities[0] ** 2 + densities[1] ** 2 + densities[2] ** 2
-    return gathering.emission[:, source] * (p_cosine * densities[technique] / square)
+    s met at distance d by a sample of ``technique`` (SHADOW, COSINE or SHOT): E_s times
+    :func:`_emitter_weight`."""
+    return gathering.emission[:, source] * _emitter_weight(gathering, technique, source, receiver, cos_x, cos_y, distance_world)
 
 
-def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
+def _emitter_weight(gathering, technique, source, receiver, cos_x, cos_y, distance_world):
+    """(n,) the weighted estimate over E_s. The three strategies' densities at x, in solid
+    angle, each per gathering sample of j: p_shadow = P_s d^2 / (A_s cos_y) (one shadow ray a
+    sample), p_cosine = q cos_x / pi (q = the cosine share) and, for the rays shot from s, n_s
+    of them, p_shot = (cos_x / pi) n_s A_j / (A_s n_j); a sample of strategy t weighs in as
+    f p_t / sum p^2, f = E_s cos_x / pi (the power heuristic: the shot rays, shared by every
+    patch, land on a given one a few at a time, and the balance heuristic let their count's
+    noise into patches far from small emitters). A receiver's irradiance is the sum of its
+    samples' estimates over n_j."""
+    p_cosine = cos_x * (1.0 / np.pi)
+    densities = (gathering.shadow_density.take(source) * distance_world**2 / cos_y, gathering.cosine_share * p_cosine,
+                 gathering.shot_density.take(source) * gathering.area_per_sample.take(receiver) * p_cosine)
+    square = densities[0] ** 2
+    square += densities[1] ** 2
+    square += densities[2] ** 2
+    weight = p_cosine * densities[technique]
+    weight /= square
+    return weight
+
+
+def _shadow_rays(tables, gathering, patch, x, normal, u, value):
     """Adds each sample's shadow-ray estimate to ``value``; returns the rays traced."""
     g, P = tables.geometry, tables.patch_count
+    n = patch.size
     source = gathering.table.choose(u[2])
     towards = np.empty_like(x)
-    distance = np.zeros(patch.size)  # unit space, to the point looked at
-    to_patch = np.zeros(patch.size, dtype=bool)  # an emitting patch's point: meeting the patch sees it too
-    unshadowed = np.zeros(patch.size, dtype=bool)  # from a light that casts no shadow: always seen
-    shadow = np.zeros_like(value)
+    distance = np.empty(n)  # unit space, to the point looked at
+    weight = np.zeros(n)  # an emitting patch's estimate over its emittance
+    lit = None  # (3,n) the lights' estimates
+    unshadowed = np.zeros(n, dtype=bool)  # from a light that casts no shadow: always seen
     # The estimate's geometry is the surfaces' own: the points lie a ray offset off them (for the
     # rays), which seen at a grazing angle changes cos and distance by far more than the offset.
     surface = x - normal * g.ray_offset
-    at_patch = np.flatnonzero(source < P)
-    if at_patch.size:
+    on_patch = source < P
+    at_patch = slice(None) if on_patch.all() else np.flatnonzero(on_patch)
+    if on_patch.any():
         s = source[at_patch]
-        y = patch_point_rows(g, s, u32[8, at_patch], u32[3, at_patch].copy(), u32[4, at_patch].copy()).astype(np.float64)
-        d = y - x[:, at_patch]
-        dist = np.sqrt(np.einsum("in,in->n", d, d))
-        d /= dist
-        normal_s = g.patch_normal_rows.take(s, axis=1).astype(np.float64)
-        e = y - normal_s * g.ray_offset - surface[:, at_patch]
+        e = patch_point_rows(g, s, u[8, at_patch], u[3, at_patch].copy(), u[4, at_patch].copy()).astype(np.float64)
+        normal_s = g.patch_normal_rows.take(s, axis=1)
+        e -= normal_s * g.ray_offset
+        e -= surface[:, at_patch]  # surface to surface (the shadow ray follows it from x)
         length = np.sqrt(np.einsum("in,in->n", e, e))
         e /= length
         cos_x = np.einsum("in,in->n", normal[:, at_patch], e)
         cos_y = -np.einsum("in,in->n", normal_s, e)
         ok = (cos_x > 0) & (cos_y > 0) & (s != patch[at_patch])
-        towards[:, at_patch] = d
-        distance[at_patch], to_patch[at_patch] = dist, True
-        cols = at_patch[ok]
-        shadow[:, cols] = _emitter_estimate(gathering, SHADOW, s[ok], patch[cols], cos_x[ok], cos_y[ok], length[ok] * g.diagonal)
-    at_light = np.flatnonzero(source >= P)
+        towards[:, at_patch] = e
+        distance[at_patch] = length
+        w = _emitter_weight(gathering, SHADOW, s, patch[at_patch], cos_x, np.maximum(cos_y, 1e-12), length * g.diagonal)
+        weight[at_patch] = np.where(ok, w, 0.0)
+    at_light = np.flatnonzero(~on_patch)
     if at_light.size:
+        lit = np.zeros_like(value)
         light = source[at_light] - P
         x_world = g.to_world(surface[:, at_light].T).T
         for k in np.unique(light):
@@ -231,18 +244,27 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, u32, value):
             unshadowed[cols] = not getattr(gathering.lights[k], "casts_shadow", True)
             towards[:, cols] = t
             distance[cols] = dist / g.diagonal
-            shadow[:, cols] = v / gathering.choice[source[cols]]
-    value[:, unshadowed] += shadow[:, unshadowed]
-    live = np.flatnonzero(shadow.any(axis=0) & ~unshadowed)
+            lit[:, cols] = v / gathering.choice[source[cols]]
+    live = weight > 0
+    if lit is not None:
+        live |= lit.any(axis=0) & ~unshadowed
+    live = np.flatnonzero(live)
     if live.size:
         hit, hit_patch, front, t = _trace(tables, x[:, live], towards[:, live])
         # Seen if nothing is met before the point looked at; on an emitting patch, also if the
         # patch is met first. (A patch's points lie a ray offset off it: at grazing angles a ray
         # to a point near its far edge passes the point and misses the patch. Asking for the
         # patch alone lost 0.23% of the figure 4 room's direct light, 2% on its walls' tops.)
-        met_source = (hit >= 0) & (hit_patch == source[live]) & front & to_patch[live]
+        met_source = (hit >= 0) & (hit_patch == source[live]) & front & on_patch[live]
         clear = (hit < 0) | (t >= distance[live] * SEEN_BEFORE)
-        value[:, live] += shadow[:, live] * (met_source | clear)
+        blocked = live[~(met_source | clear)]
+        weight[blocked] = 0.0
+        if lit is not None:
+            lit[:, blocked] = 0.0
+    if on_patch.any():
+        value += gathering.emission.take(source if on_patch.all() else np.where(on_patch, source, 0), axis=1) * weight
+    if lit is not None:
+        value += lit
     return live.size
 
 
@@ -257,7 +279,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
         rays = _cosine_rays(tables, gathering, patch[cast], x[:, cast], normal[:, cast], u[:, cast], part, cast_all=True)
         value[:, cast] += part
         return rays
-    towards = add_sphere_points(g.patch_normal_rows.take(patch, axis=1), u[5].astype(np.float32), u[6].astype(np.float32))
+    towards = add_sphere_points(g.patch_normal_rows.take(patch, axis=1), u[5], u[6])
     towards = towards.astype(np.float64)
     towards /= np.sqrt(np.einsum("in,in->n", towards, towards))  # (normal + a sphere point: cosine distributed)
     hit, source, front, t = _trace(tables, x, towards)
@@ -341,8 +363,8 @@ class ReflectedPoints:
 
     def __init__(self, gathering, geometry, samples):
         patch, x, value = samples[:3]
-        scale = gathering.patch_area / gathering.samples  # A_j / n_j
-        self.power = np.ascontiguousarray((value * gathering.reflectivity[:, patch] * scale[patch]).T)
+        factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
+        self.power = np.ascontiguousarray((value * factor.take(patch, axis=1)).T)
         self.points = x.astype(np.float32)
         self.normals = geometry.patch_normal_rows.take(patch, axis=1)
 

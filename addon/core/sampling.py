@@ -183,8 +183,8 @@ def _sobol(n):
 SOBOL = GrowingTable(_sobol)
 
 
-def stratified_by_patch(patch, patch_count, rows, rng):
-    """(len(rows), n) float64 in [0, 1): for samples of patches ``patch`` (n,), grouped by patch
+def stratified_by_patch(patch, patch_count, rows, rng, dtype=np.float64):
+    """(len(rows), n) ``dtype`` in [0, 1) (float32: the points' first 24 bits, so never 1): for samples of patches ``patch`` (n,), grouped by patch
     (each patch's samples one run), sample k of its patch's run takes Sobol' point k in the
     dimensions ``rows``, XORed with a random 32-bit shift of its own for each patch and
     dimension (a random digital shift: each point is uniform, a patch's points stay a
@@ -197,6 +197,9 @@ def stratified_by_patch(patch, patch_count, rows, rng):
     shift = rng.integers(0, 1 << 32, size=(len(rows), runs.size), dtype=np.uint32)  # (a patch with no sample draws none)
     points = table[list(rows)].take(rank, axis=1)
     points ^= np.repeat(shift, runs, axis=1)
+    if dtype == np.float32:
+        points >>= 8
+        return points.astype(np.float32) * np.float32(2.0**-24)
     return points * 2.0**-32
 
 

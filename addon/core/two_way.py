@@ -193,7 +193,7 @@ def reflect_first(tables, state, samples, paths, rng):
     total = float(size.sum())
     if total <= 0:
         return
-    count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / max(float(power.mean(axis=0).sum()), 1e-300))))
+    count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / max(float(power.sum()) / C, 1e-300))))
     sample = np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
     origins, directions = points.unit_rays(sample, _hammersley(count, rng)[:4], tables.geometry)
     hits = rays.cast(tables, origins, directions)
