@@ -8,9 +8,12 @@ Sobol' points with a random digital shift of its own), each looking at one sourc
 (none for a light that casts no shadow: its light passes through objects, as Cycles draws it),
 and along one cosine-distributed ray (an emitting patch it meets, or the sky; none where the
 only sources are lamps, which no ray meets, and with a chance where emitters are small,
-``cosine_share``); and rays shot from the emitting patches themselves add their hits, as
-samples of the patches they meet: the three strategies weighted by the power heuristic
-(``_emitter_estimate``). The walk then shoots only what the direct light reflects: patch j is
+``cosine_share``): the two strategies weighted by the power heuristic (``_emitter_weight``).
+(Rays shot from the emitting patches, a third strategy whose hits were samples of the patches
+they met, once paid in the figure 1 cube; since a patch's samples are stratified the noise of
+their landing counts made the direct light's variance per ray 1.8-5x higher per patch, 3-14x
+in RMS over the mean, in every scene measured (benchmarks/direct_strategies.py), and they are
+gone.) The walk then shoots only what the direct light reflects: patch j is
 a source of emittance E'_j = R_j H_j, and the walk adds the light of every later bounce
 (``direct_light="gathered"`` in :func:`.solver.solve`). Leaving from hit points (the
 continuous walk), the reflected light leaves from where it arrived: each sample is a point
@@ -34,7 +37,7 @@ import numpy as np
 
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
-from .rays import cast as ray_cast, cast_to_points, hit_patches, leave_random, leave_sources, meets_front
+from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front
 from .sampling import SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights, stratified_by_patch
 from .tables import WalkTables
 from .tallies import ChunkTally
@@ -54,8 +57,8 @@ GATHER_SOBOL_DIMENSIONS = (0, 1, 6, 2, 3, 4, 5, 7, 8, 9)
 # many times the emitters' share of the area, from COSINE_SHARE_LEAST to 1.
 COSINE_SHARE_PER_AREA = 10.0
 COSINE_SHARE_LEAST = 0.1
-# The strategies that find an emitting patch (_emitter_estimate).
-SHADOW, COSINE, SHOT = range(3)
+# The strategies that find an emitting patch (_emitter_weight).
+SHADOW, COSINE = range(2)
 # Rays from the sources a chunk casts to split the direct light found on no front side between
 # what escaped and what met a back side (split_lost).
 FATE_RAYS = 1024
@@ -112,15 +115,8 @@ class Gathering:
         self.reflectivity = scene.reflectivity.T  # (3,P)
         self.patch_area = scene.patch_area
         self.cosine_share = cosine_share(scene, bool(self.worlds))
-        # Rays shot from the emitting patches, in proportion to their power: as many as cosine
-        # rays are cast (both sample the form factor, from either end).
-        patch_power = channel_sum(scene.patch_area[:, None] * scene.emission)
-        self.shots = float(self.cosine_share * self.samples.sum()) if patch_power.any() else 0.0
-        self.shot_table = SourceTable(patch_power) if self.shots > 0 else None
-        self.shots_expected = self.shots * patch_power / patch_power.sum() if self.shots > 0 else np.zeros(scene.patch_count)
-        # _emitter_weight's factors of each source and receiver: P_s / A_s, n_s / A_s, A_j / n_j.
+        # P_s / A_s of each emitting patch (_emitter_weight), A_j / n_j of each patch (ReflectedPoints).
         self.shadow_density = self.choice[:scene.patch_count] / scene.patch_area
-        self.shot_density = self.shots_expected / scene.patch_area
         self.area_per_sample = scene.patch_area / self.samples
         self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
@@ -143,7 +139,7 @@ def gather_direct(tables, gathering, rng):
     it traced, and the samples it is made of (patch (n,), unit-space point (3,n), estimate of
     the irradiance there (3,n)): per patch j, ``gathering.samples[j]`` points on average, each with a shadow ray to a
     source chosen by power and a cosine-distributed ray, weighted against each other where
-    both can find the same emitting patch (multiple importance sampling, balance heuristic:
+    both can find the same emitting patch (multiple importance sampling, power heuristic:
     shadow rays are good at small and far sources, cosine rays at near and large ones). A
     patch's samples are stratified: Sobol' points with a random digital shift of the patch's
     own (points, sources, their points and directions evenly spread; each sample uniform, so
@@ -164,39 +160,22 @@ def gather_direct(tables, gathering, rng):
     if gathering.cosine_share > 0:
         rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
     value *= scale
-    uniform = np.ones(patch.size, dtype=bool)
-    if gathering.shots > 0:
-        shot_patch, shot_x, shot_value, shot_rays = _shot_rays(tables, gathering, rng)
-        rays += shot_rays
-        patch, x, value = np.concatenate([patch, shot_patch]), np.hstack([x, shot_x]), np.hstack([value, shot_value])
-        uniform = np.concatenate([uniform, np.zeros(shot_patch.size, dtype=bool)])
     H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)])
     H /= gathering.samples
-    return H, rays, (patch, x, value, uniform)
+    return H, rays, (patch, x, value)
 
 
-def _emitter_estimate(gathering, technique, source, receiver, cos_x, cos_y, distance_world):
-    """The weighted estimate (3,n), as a sample of the receiving patch j, of an emitting patch
-    s met at distance d by a sample of ``technique`` (SHADOW, COSINE or SHOT): E_s times
-    :func:`_emitter_weight`."""
-    return gathering.emission[:, source] * _emitter_weight(gathering, technique, source, receiver, cos_x, cos_y, distance_world)
-
-
-def _emitter_weight(gathering, technique, source, receiver, cos_x, cos_y, distance_world):
-    """(n,) the weighted estimate over E_s. The three strategies' densities at x, in solid
-    angle, each per gathering sample of j: p_shadow = P_s d^2 / (A_s cos_y) (one shadow ray a
-    sample), p_cosine = q cos_x / pi (q = the cosine share) and, for the rays shot from s, n_s
-    of them, p_shot = (cos_x / pi) n_s A_j / (A_s n_j); a sample of strategy t weighs in as
-    f p_t / sum p^2, f = E_s cos_x / pi (the power heuristic: the shot rays, shared by every
-    patch, land on a given one a few at a time, and the balance heuristic let their count's
-    noise into patches far from small emitters). A receiver's irradiance is the sum of its
-    samples' estimates over n_j."""
+def _emitter_weight(gathering, technique, source, cos_x, cos_y, distance_world):
+    """(n,) the weighted estimate over E_s, as a sample of the receiving patch, of an emitting
+    patch s met at distance d by a sample of ``technique`` (SHADOW or COSINE). The strategies'
+    densities at x, in solid angle, each per gathering sample: p_shadow = P_s d^2 / (A_s cos_y)
+    (one shadow ray a sample) and p_cosine = q cos_x / pi (q = the cosine share); a sample of
+    strategy t weighs in as f p_t / sum p^2, f = E_s cos_x / pi (the power heuristic). A
+    receiver's irradiance is the sum of its samples' estimates over n_j."""
     p_cosine = cos_x * (1.0 / np.pi)
-    densities = (gathering.shadow_density.take(source) * distance_world**2 / cos_y, gathering.cosine_share * p_cosine,
-                 gathering.shot_density.take(source) * gathering.area_per_sample.take(receiver) * p_cosine)
+    densities = (gathering.shadow_density.take(source) * distance_world**2 / cos_y, gathering.cosine_share * p_cosine)
     square = densities[0] ** 2
     square += densities[1] ** 2
-    square += densities[2] ** 2
     weight = p_cosine * densities[technique]
     weight /= square
     return weight
@@ -230,7 +209,7 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, value):
         ok = (cos_x > 0) & (cos_y > 0) & (s != patch[at_patch])
         towards[:, at_patch] = e
         distance[at_patch] = length
-        w = _emitter_weight(gathering, SHADOW, s, patch[at_patch], cos_x, np.maximum(cos_y, 1e-12), length * g.diagonal)
+        w = _emitter_weight(gathering, SHADOW, s, cos_x, np.maximum(cos_y, 1e-12), length * g.diagonal)
         weight[at_patch] = np.where(ok, w, 0.0)
     at_light = np.flatnonzero(~on_patch)
     if at_light.size:
@@ -288,47 +267,12 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
         s = source[met]
         cos_x = np.einsum("in,in->n", normal[:, met], towards[:, met])
         cos_y = -np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), towards[:, met])
-        value[:, met] += _emitter_estimate(gathering, COSINE, s, patch[met], cos_x, np.maximum(cos_y, 1e-12), t[met] * g.diagonal)
+        value[:, met] += gathering.emission[:, s] * _emitter_weight(gathering, COSINE, s, cos_x, np.maximum(cos_y, 1e-12), t[met] * g.diagonal)
     escaped = np.flatnonzero(hit < 0)
     if escaped.size and gathering.worlds:
         for world in gathering.worlds:
             value[:, escaped] += world.radiance_times_pi(towards[:, escaped])
     return patch.size
-
-
-def _shot_rays(tables, gathering, rng):
-    """Rays shot from the emitting patches (about ``gathering.shots``, chosen in proportion to
-    power, uniform points, cosine directions), each weighted as a sample of the patch it meets
-    (``_emitter_estimate``): (patch (m,), unit-space point there pushed off it (3,m), estimate
-    (3,m), rays traced)."""
-    g = tables.geometry
-    count = int(gathering.shots) + int(rng.random() < gathering.shots - int(gathering.shots))
-    source = gathering.shot_table.sample(count, rng).astype(np.int32)
-    u = rng.random((tables.uniforms_per_ray, count), dtype=np.float32)
-    origins, directions = leave_random(tables, source, u)
-    towards = directions.astype(np.float64)
-    towards /= np.sqrt(np.einsum("in,in->n", towards, towards))
-    if tables.exit_random:  # (the points are not needed: the reflected light leaves each patch uniformly)
-        _, patch, front, t = _trace(tables, origins, towards)
-        points = None
-    else:  # where the reflected light will leave from, as a walk leaves a hit point
-        t = None
-        hits = cast_to_points(tables, origins.copy(), towards.astype(np.float32))
-        patch, front, points = hits.patch, hits.front, hits.points
-    met = np.flatnonzero(front & (patch != source))
-    j, s, along = patch[met], source[met], towards[:, met]
-    normal_j = g.patch_normal_rows.take(j, axis=1)
-    if points is None:
-        distance = t[met]
-        points = origins[:, met] + along * distance  # (unused)
-    else:
-        points = points[:, met]
-        distance = np.sqrt(np.einsum("in,in->n", points - origins[:, met], points - origins[:, met]))
-        points = points + normal_j * np.float32(g.ray_offset)
-    cos_x = -np.einsum("in,in->n", normal_j.astype(np.float64), along)
-    cos_y = np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), along)
-    value = _emitter_estimate(gathering, SHOT, s, j, np.maximum(cos_x, 1e-12), np.maximum(cos_y, 1e-12), distance * g.diagonal)
-    return j, points.astype(np.float64), value, count
 
 
 def _trace(tables, origins, directions):

@@ -22,8 +22,8 @@ noise goes with the second moment of what it carries, needs the control variate 
 
 Per chunk:
 
-    gather_direct   each patch's direct irradiance H^0 (``first_shot``: shadow rays, cosine rays
-                    and rays shot from the emitting patches, weighted by the power heuristic)
+    gather_direct   each patch's direct irradiance H^0 (``first_shot``: shadow rays and cosine
+                    rays, weighted by the power heuristic)
     reflect_first   the first reflection R H^0: a constant over each patch (exit_point="random",
                     the discrete method), or as uneven over a patch as the light that landed on
                     it (exit_point="hit": the constant, and what the gathering samples found
@@ -170,25 +170,22 @@ def reflect_first(tables, state, samples, paths, rng):
     """The first reflection as uneven over each patch as the light that landed on it (hit exit).
 
     Each sample k of patch j is a point source of what it found (power p_k,
-    first_shot.ReflectedPoints), sum_k p_k = R_j A_j H_j. The gathering's own samples are
-    uniform points of j, m_j of them, so sources of power sum_k p_k / m_j at them are patch j
-    reflecting R_j H_j uniformly, which the first two-way generation carries
-    (``state.reflected``). What is left (zero in sum over each patch), c_k = p_k - sum / m_j at
-    those and c_k = p_k at the samples shot from emitters (hit points, not uniform), is shot
-    from the samples: rays allotted in proportion to |c_k|, each carrying an equal share of
-    sum |c| with c_k's sign. A patch with no uniform sample leaves it all to its points. It is
-    small where the direct light is even over a patch; its irradiance (``state.correction``)
-    joins the first generation's."""
+    first_shot.ReflectedPoints), sum_k p_k = R_j A_j H_j. The samples are uniform points of j,
+    m_j of them, so sources of power sum_k p_k / m_j at them are patch j reflecting R_j H_j
+    uniformly, which the first two-way generation carries (``state.reflected``). What is left
+    (zero in sum over each patch), c_k = p_k - sum / m_j, is shot from the samples: rays
+    allotted in proportion to |c_k|, each carrying an equal share of sum |c| with c_k's sign.
+    It is small where the direct light is even over a patch; its irradiance
+    (``state.correction``) joins the first generation's."""
     gathering, C, P = tables.gathering, tables.channels, tables.patch_count
-    patch, uniform = samples[0], samples[3]
+    patch = samples[0]
     state.reflected = tables.reflectivity * state.irradiance
     points = ReflectedPoints(gathering, tables.geometry, samples)
     power = points.power[:, :C].T  # (C,K)
-    spread = np.bincount(patch.compress(uniform), minlength=P)  # m_j
+    spread = np.bincount(patch, minlength=P)  # m_j
     mean = np.stack([np.bincount(patch, weights=p, minlength=P) for p in power])
     mean /= np.maximum(spread, 1)
-    state.reflected[:, spread == 0] = 0.0
-    left = power - mean.take(patch, axis=1) * uniform  # c_k
+    left = power - mean.take(patch, axis=1)  # c_k
     size = np.abs(left).mean(axis=0)  # what a sample's rays are allotted by
     total = float(size.sum())
     if total <= 0:
