@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from boxes import CEILING, box_rectangles, rectangles_to_mesh
+from boxes import CEILING, box_rectangles, box_scene, rectangles_to_mesh
 from test_first_shot import R_FACES, _box_with_one_emitter, floor_lit_unevenly_and_a_wall
 
 from addon.core import PatchScene, solve, solver
@@ -51,9 +51,9 @@ def test_two_way_is_the_direct_solve(box):
     (rays that escape see 0 about the control variate, from their own patch only)."""
     scene, exact = _box_with_one_emitter() if box == "closed" else _open_box()
     r = solve(scene, paths=200_000, seed=1, method="two_way")
-    assert r.chunks == 32 and r.method == "two_way" and r.direct_light == "gathered"
-    assert r.path_ends["generations"] > 32 * 5
-    assert _z_ok(_z(r, exact))
+    assert r.chunks == solver.TWO_WAY_MIN_CHUNKS and r.method == "two_way" and r.direct_light == "gathered"
+    assert r.path_ends["generations"] > r.chunks * 5
+    assert _z_ok(_z(r, exact), r.chunks)
 
 
 def test_leaving_from_hit_points_the_first_reflection_leaves_from_where_the_light_landed():
@@ -181,3 +181,15 @@ def test_two_way_chunks_grow_to_enough_rays_a_patch_within_the_plan():
     assert solver.two_way_chunk_paths(1_000_000, 2.5, 10**9) == solver.TWO_WAY_MAX_CHUNK_PATHS
     assert rays(1_000_000, 10**9) < solver.TWO_WAY_RAYS_PER_PATCH
     assert math.ceil(10**6 / solver.two_way_chunk_paths(50_000, 2.5, 10**6)) >= solver.MIN_MEASURED_CHUNKS
+
+
+def test_a_small_plan_runs_in_fewer_larger_chunks_than_the_walk_s():
+    """A small plan's two-way chunks are TWO_WAY_MIN_CHUNKS (16), twice the walk's size: a
+    chunk's variance per path falls as it grows. A solve of a million paths in the 600-patch
+    box runs 16 of them, and its batch estimate is there."""
+    assert solver.TWO_WAY_MIN_CHUNKS == 16 < solver.MIN_CHUNKS
+    assert solver.two_way_chunk_paths(600, 2.0, 1_000_000) == 1_000_000 // 16
+    assert solver.chunk_paths_for(2.0, 1_000_000) == 1_000_000 // 32
+    scene = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=10)[0]
+    r = solve(scene, paths=1_000_000, seed=1, method="two_way", threads=2)
+    assert r.chunks == 16 and np.isfinite(r.reflected_variance).all()
