@@ -45,6 +45,8 @@ from .tallies import ChunkTally
 # A chunk's gathering aims at about this share of the rays its walk traces.
 GATHER_SHARE = 0.3
 MAX_GATHER_SAMPLES = 256
+# A chunk's gathering samples are drawn and traced this many at a time.
+SAMPLE_BLOCK = 1 << 18
 # The numbers each gathering sample draws: its point (2), a source (1), a point or direction
 # of it (2), a cosine direction (2), and a triangle of either patch where patches are not
 # parallelograms (2).
@@ -144,25 +146,46 @@ def gather_direct(tables, gathering, rng):
     patch's samples are stratified: Sobol' points with a random digital shift of the patch's
     own (points, sources, their points and directions evenly spread; each sample uniform, so
     the estimate stays unbiased, and chunks and patches independent, so batch means hold)."""
-    g = tables.geometry
     P = tables.patch_count
     patch, scale = gathering.draw(rng)
+    x = np.empty((3, patch.size), dtype=np.float32)  # unit space (ReflectedPoints keeps them)
+    value = np.zeros((3, patch.size))
+    rays = 0
+    for rows in _blocks(patch, SAMPLE_BLOCK):  # (a large chunk's memory stays that of a block)
+        rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng)
+    value *= scale
+    H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)])
+    H /= gathering.samples
+    return H, rays, (patch, x, value)
+
+
+def _gather_block(tables, gathering, patch, x32, value, rng):
+    """The samples of a run of whole patches: their points into ``x32`` (3,n), their estimates
+    added to ``value`` (3,n); returns the rays traced."""
+    g = tables.geometry
     if gathering.stratified:
-        u = stratified_by_patch(patch, P, GATHER_SOBOL_DIMENSIONS, rng, dtype=np.float32)
+        u = stratified_by_patch(patch, tables.patch_count, GATHER_SOBOL_DIMENSIONS, rng, dtype=np.float32)
     else:
         u = rng.random((GATHER_DIMENSIONS, patch.size), dtype=np.float32)
-    x = patch_point_rows(g, patch, u[7], u[0].copy(), u[1].copy()).astype(np.float64)  # unit space
+    x32[:] = patch_point_rows(g, patch, u[7], u[0].copy(), u[1].copy())
+    x = x32.astype(np.float64)
     normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
-    value = np.zeros((3, patch.size))
     rays = 0
     if gathering.table is not None:
         rays += _shadow_rays(tables, gathering, patch, x, normal, u, value)
     if gathering.cosine_share > 0:
         rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
-    value *= scale
-    H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)])
-    H /= gathering.samples
-    return H, rays, (patch, x, value)
+    return rays
+
+
+def _blocks(patch, size):
+    """Slices of ``patch`` (sorted, each patch's samples a run) of whole runs, about ``size``
+    samples each (a run is at most MAX_GATHER_SAMPLES, far below it)."""
+    cuts = [0]
+    while patch.size - cuts[-1] > size:
+        cuts.append(int(np.searchsorted(patch, patch[cuts[-1] + size], side="left")))
+    cuts.append(patch.size)
+    return [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
 
 
 def _emitter_weight(gathering, technique, source, cos_x, cos_y, distance_world):
@@ -309,7 +332,7 @@ class ReflectedPoints:
         patch, x, value = samples[:3]
         factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
         self.power = np.ascontiguousarray((value * factor.take(patch, axis=1)).T)
-        self.points = x.astype(np.float32)
+        self.points = np.asarray(x, dtype=np.float32)
         self.normals = geometry.patch_normal_rows.take(patch, axis=1)
 
     def unit_rays(self, rows, u, geometry):

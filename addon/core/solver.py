@@ -68,19 +68,25 @@ MIN_MEASURED_CHUNKS = 8
 # paths (it needs several times fewer: docs/performance.md).
 GATHERED_PLAN_DIVISOR = 4
 MEASURED_CAP_FACTOR = 64
-# The two-way iteration's chunks aim at this many first-generation rays a patch: with fewer, what
-# a generation passes on is mostly its own noise, which the next generation's gathering reads,
-# and its gain over the walk goes (docs/performance.md). As far as TWO_WAY_MAX_CHUNK_PATHS (the
-# direct light's samples are held at once) and MIN_MEASURED_CHUNKS chunks in the plan allow;
-# method="auto" takes the walk where they do not allow it.
+# The two-way iteration needs this many first-generation rays a patch in a chunk: with fewer,
+# what a generation passes on is mostly its own noise, which the next generation's gathering
+# reads, and its gain over the walk goes (docs/performance.md). Its chunks get them as far as
+# TWO_WAY_MAX_CHUNK_PATHS and MIN_MEASURED_CHUNKS chunks in the plan allow; method="auto" takes
+# the walk where they do not.
 TWO_WAY_RAYS_PER_PATCH = 8
+# ... and grow on to this many, within TWO_WAY_MIN_CHUNKS chunks of the plan: the noise a
+# generation passes on keeps falling (the figure 4 room, 16M paths: 8, 16 and 32 rays a patch,
+# 1.0, 0.83 and 0.67 of the variance per path, the time alike; docs/performance.md).
+TWO_WAY_CHUNK_RAYS_PER_PATCH = 32
 # A small plan's two-way chunks: half as many as the walk's, twice as large. A chunk's variance
 # per path falls as it grows (its last, sparse generations and the roulette that ends them carry
 # a smaller share of its light): at 2M paths 13% less in the Cornell box and 10% in the empty
 # room than in 32 chunks, 2-3% more in 8 (docs/performance.md); 16 leave the batch estimate 15
 # degrees of freedom.
 TWO_WAY_MIN_CHUNKS = 16
-TWO_WAY_MAX_CHUNK_PATHS = 1 << 18
+# A chunk's gathering samples and rays go a block at a time (first_shot.SAMPLE_BLOCK,
+# two_way.RAY_BLOCK); what it holds at once beyond a block is its samples' points and values.
+TWO_WAY_MAX_CHUNK_PATHS = 1 << 20
 POLL_SECONDS = 0.05
 
 
@@ -143,13 +149,15 @@ def chunk_paths_for(expected_path_length, planned_paths, min_chunks=MIN_CHUNKS):
 
 
 def two_way_chunk_paths(patch_count, expected_path_length, planned_paths):
-    """A two-way chunk: the usual rays, or more, up to TWO_WAY_RAYS_PER_PATCH first-generation
-    rays a patch (GENERATION_RAYS a path), within the plan's MIN_MEASURED_CHUNKS chunks; a small
-    plan in TWO_WAY_MIN_CHUNKS chunks."""
+    """A two-way chunk: the usual rays (a small plan in TWO_WAY_MIN_CHUNKS chunks), or more: up
+    to TWO_WAY_CHUNK_RAYS_PER_PATCH first-generation rays a patch (GENERATION_RAYS a path)
+    within TWO_WAY_MIN_CHUNKS chunks of the plan, and at least TWO_WAY_RAYS_PER_PATCH within
+    MIN_MEASURED_CHUNKS; never more than TWO_WAY_MAX_CHUNK_PATHS."""
     usual = chunk_paths_for(rays_per_path(expected_path_length), planned_paths, TWO_WAY_MIN_CHUNKS)
-    wanted = math.ceil(TWO_WAY_RAYS_PER_PATCH * patch_count / GENERATION_RAYS)
-    most = min(TWO_WAY_MAX_CHUNK_PATHS, math.ceil(planned_paths / MIN_MEASURED_CHUNKS))
-    return int(max(usual, min(wanted, most)))
+    paths_for = lambda rays: math.ceil(rays * patch_count / GENERATION_RAYS)  # noqa: E731
+    grown = min(paths_for(TWO_WAY_CHUNK_RAYS_PER_PATCH), math.ceil(planned_paths / TWO_WAY_MIN_CHUNKS))
+    enough = min(paths_for(TWO_WAY_RAYS_PER_PATCH), math.ceil(planned_paths / MIN_MEASURED_CHUNKS))
+    return int(min(TWO_WAY_MAX_CHUNK_PATHS, max(usual, grown, enough)))
 
 
 def first_generation_rays(patch_count, chunk_paths):

@@ -68,6 +68,8 @@ DIRECT_SAMPLES = 1.5
 # all-or-nothing for a whole chunk's last light costs more than it saves. Measured in the closed
 # Cornell box (2,940 and 59,535 patches): 0.5 the least MSE, and no heavy-tailed chunk.
 LEAST_RAYS = 0.5
+# A generation's rays (and the first reflection's) are cast this many at a time.
+RAY_BLOCK = 1 << 18
 
 
 @dataclass
@@ -192,64 +194,86 @@ def reflect_first(tables, state, samples, paths, rng):
         return
     count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / max(float(power.sum()) / C, 1e-300))))
     sample = np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
-    origins, directions = points.unit_rays(sample, _hammersley(count, rng)[:4], tables.geometry)
-    hits = rays.cast(tables, origins, directions)
+    shift = rng.random(4)
     state.rays += count
-    carried = left.take(sample, axis=1) * (total / count / size.take(sample))  # (C,n) signed power a ray
-    state.correction = _bincount(hits.patch, hits.front, carried, P) / gathering.patch_area
-    state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
-    state.blocked += carried.compress((hits.hit >= 0) & ~hits.front, axis=1).sum(axis=1)
+    correction = np.zeros((C, P))
+    for start in range(0, count, RAY_BLOCK):  # (as a generation's rays: a block at a time)
+        rows = slice(start, min(start + RAY_BLOCK, count))
+        k = sample[rows]
+        origins, directions = points.unit_rays(k, _hammersley(rows, shift if start == 0 else rng.random(4)), tables.geometry)
+        hits = rays.cast(tables, origins, directions)
+        carried = left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
+        correction += _bincount(hits.patch, hits.front, carried, P)
+        state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
+        state.blocked += carried.compress((hits.hit >= 0) & ~hits.front, axis=1).sum(axis=1)
+    state.correction = correction / gathering.patch_area
 
 
 def generation(tables, state, weight, count, rng):
     """One two-way generation of ``count`` rays: their irradiance added to ``state``, its
-    reflection the next ``state.reflected``."""
+    reflection the next ``state.reflected``. The rays go out RAY_BLOCK at a time (a run of
+    patches' rays each), so that a large chunk's memory stays that of a block."""
     area, P = tables.gathering.patch_area, tables.patch_count
     expected = weight * (count / weight.sum())  # n_i
     patch = np.repeat(np.arange(P, dtype=np.int32), systematic_counts(weight, count, rng.random()))
-    u = _hammersley(count, rng)
-    if tables.row_triangle is not None:
-        u = np.vstack([u[:4], rng.random((1, count), dtype=np.float32)])
-    origins, directions = rays.leave_random(tables, patch, u)
-    hits = rays.cast(tables, origins, directions)
+    shift = rng.random(4)
+    triangle_u = rng.random((1, count), dtype=np.float32) if tables.row_triangle is not None else None
     state.rays += count
     state.generations += 1
     dB = state.reflected
     beta = (dB @ area) / area.sum()  # (C,) the control variate
-    met = hits.front
-    i, j = patch.compress(met), hits.patch.compress(met)
-    # Segment i -> j adds dB_j s / A_i to H_i and dB_i s / A_j to H_j, s = 1 / (n_i/A_i + n_j/A_j).
-    density = expected / area
-    s = density.take(i)
-    s += density.take(j)
-    np.reciprocal(s, out=s)
     value = dB - beta[:, None]
-    gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
-    gathered *= s
-    shot *= s
-    lost = patch.compress(~met)  # escaped or on a back side: seen as 0 - beta, from i only
-    kept = 1.0 - np.bincount(lost, minlength=P) / expected if lost.size else 1.0
-    H = np.empty_like(dB)
-    for c in range(dB.shape[0]):
-        H[c] = np.bincount(i, weights=gathered[c], minlength=P)
-        H[c] += np.bincount(j, weights=shot[c], minlength=P)
-        H[c] /= area
-        H[c] += beta[c] * kept
+    density = expected / area
+    H = np.zeros_like(dB)
+    lost = np.zeros((2, P))  # rays from each patch that escaped, that met a back side
+    for start in range(0, count, RAY_BLOCK):
+        rows = slice(start, min(start + RAY_BLOCK, count))
+        u = _hammersley(rows, shift if start == 0 else rng.random(4))
+        if triangle_u is not None:
+            u = np.vstack([u, triangle_u[:, rows]])
+        _score_two_ways(tables, patch[rows], u, value, density, H, lost)
+    H /= area
+    # A ray from i that escaped or met a back side saw 0 - beta: what i's rays kept of beta.
+    H += beta[:, None] * (1.0 - lost.sum(axis=0) / expected)
     H += state.correction
     state.correction = 0.0
-    if lost.size:  # what the rays from i that found nothing, or a back side, estimate of i's reflected power
-        for mask, account in ((hits.hit < 0, state.escaped), ((hits.hit >= 0) & ~met, state.blocked)):
-            share = np.bincount(patch.compress(mask), minlength=P) / expected
-            account += (dB * area) @ share
+    # What the rays from i that found nothing, or a back side, estimate of i's reflected power.
+    state.escaped += (dB * area) @ (lost[0] / expected)
+    state.blocked += (dB * area) @ (lost[1] / expected)
     state.irradiance += H
     state.reflected = tables.reflectivity * H
 
 
-def _hammersley(count, rng):
-    """(4, count) float32 Halton points 0..count-1 (bases 2, 3, 5, 7) shifted by one random
-    vector modulo 1: each point uniform, together evenly spread; the rays of each patch take a
-    run of them."""
-    points = HALTON.rows(count)[:, :count] + rng.random(4)[:, None]
+def _score_two_ways(tables, patch, u, value, density, H, lost):
+    """Casts one block of a generation's rays (from ``patch``, uniforms ``u``) and adds each
+    segment's two estimates to H (C,P, times the area), its lost rays to ``lost`` (2,P)."""
+    P = tables.patch_count
+    origins, directions = rays.leave_random(tables, patch, u)
+    hits = rays.cast(tables, origins, directions)
+    met = hits.front
+    i, j = patch.compress(met), hits.patch.compress(met)
+    # Segment i -> j adds dB_j s / A_i to H_i and dB_i s / A_j to H_j, s = 1 / (n_i/A_i + n_j/A_j).
+    s = density.take(i)
+    s += density.take(j)
+    np.reciprocal(s, out=s)
+    gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
+    gathered *= s
+    shot *= s
+    for c in range(value.shape[0]):
+        H[c] += np.bincount(i, weights=gathered[c], minlength=P)
+        H[c] += np.bincount(j, weights=shot[c], minlength=P)
+    if not met.all():
+        lost[0] += np.bincount(patch.compress(hits.hit < 0), minlength=P)
+        lost[1] += np.bincount(patch.compress((hits.hit >= 0) & ~met), minlength=P)
+
+
+def _hammersley(rows, shift):
+    """(4, n) float32 for a block of n rays (``rows``, a slice): Halton points 0..n-1 (bases 2,
+    3, 5, 7) shifted by one random vector ``shift`` (4,) modulo 1: each point uniform, together
+    evenly spread; the rays of each patch take a run of them. (Each block its own set and shift:
+    the table stays a block's size.)"""
+    n = rows.stop - rows.start
+    points = HALTON.rows(n)[:, :n] + shift[:, None]
     points -= np.floor(points)
     np.minimum(points, LAST_BELOW_ONE, out=points)
     return points.astype(np.float32)

@@ -172,12 +172,16 @@ def test_automatic_method_takes_the_two_way_iteration_only_where_each_patch_gets
 
 
 def test_two_way_chunks_grow_to_enough_rays_a_patch_within_the_plan():
-    """A big scene's two-way chunks give each patch TWO_WAY_RAYS_PER_PATCH first-generation rays
-    when the plan has room for MIN_MEASURED_CHUNKS of them, never more than the memory cap; a
-    scene too big for that (or a plan too small) gets fewer, and "auto" takes the walk there."""
+    """A big scene's two-way chunks give each patch TWO_WAY_CHUNK_RAYS_PER_PATCH (32)
+    first-generation rays when the plan has room for TWO_WAY_MIN_CHUNKS of them, and at least
+    TWO_WAY_RAYS_PER_PATCH (8) when it has room for MIN_MEASURED_CHUNKS of those, never more
+    than the cap; a scene too big for that (or a plan too small) gets fewer, and "auto" takes
+    the walk there."""
     rays = lambda P, planned: solver.first_generation_rays(P, solver.two_way_chunk_paths(P, 2.5, planned))  # noqa: E731
-    assert rays(50_000, 10**9) >= solver.TWO_WAY_RAYS_PER_PATCH
-    assert rays(50_000, 10**9) < solver.TWO_WAY_RAYS_PER_PATCH + 0.01  # (no bigger than it needs)
+    assert rays(50_000, 10**9) >= solver.TWO_WAY_CHUNK_RAYS_PER_PATCH > solver.TWO_WAY_RAYS_PER_PATCH
+    assert rays(50_000, 10**9) < solver.TWO_WAY_CHUNK_RAYS_PER_PATCH + 0.01  # (no bigger than it needs)
+    assert 8 * solver.two_way_chunk_paths(50_000, 2.5, 8 * 200_000) >= 8 * 200_000  # (8 chunks of 8 rays)
+    assert rays(50_000, 8 * 200_000) >= solver.TWO_WAY_RAYS_PER_PATCH
     assert solver.two_way_chunk_paths(1_000_000, 2.5, 10**9) == solver.TWO_WAY_MAX_CHUNK_PATHS
     assert rays(1_000_000, 10**9) < solver.TWO_WAY_RAYS_PER_PATCH
     assert math.ceil(10**6 / solver.two_way_chunk_paths(50_000, 2.5, 10**6)) >= solver.MIN_MEASURED_CHUNKS
@@ -193,3 +197,26 @@ def test_a_small_plan_runs_in_fewer_larger_chunks_than_the_walk_s():
     scene = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=10)[0]
     r = solve(scene, paths=1_000_000, seed=1, method="two_way", threads=2)
     assert r.chunks == 16 and np.isfinite(r.reflected_variance).all()
+
+
+def test_chunks_traced_in_blocks_are_still_exact(monkeypatch):
+    """A large chunk gathers and casts a block at a time (first_shot.SAMPLE_BLOCK,
+    two_way.RAY_BLOCK: its memory is a block's). With blocks of a few hundred samples and rays
+    every chunk here is tens of blocks, and the results still hold: the closed colour box is its
+    discrete exact solution (z-scores as above), and with exit_point="hit" the unevenly lit
+    floor's first reflection still leaves from where the light landed (the first reflection's
+    rays in blocks too)."""
+    from addon.core import first_shot, two_way
+
+    monkeypatch.setattr(first_shot, "SAMPLE_BLOCK", 500)
+    monkeypatch.setattr(two_way, "RAY_BLOCK", 700)
+    scene, exact = _box_with_one_emitter()
+    r = solve(scene, paths=200_000, seed=1, method="two_way")
+    assert _z_ok(_z(r, exact), r.chunks)
+    R_floor, R_wall = 0.5, 0.01
+    scene, lit, uniform, rectangles = floor_lit_unevenly_and_a_wall(R_floor, R_wall)
+    F = rectangle_form_factors(*rectangles)
+    series = 1.0 / (1.0 - R_wall * F[1, 0] * R_floor * F[0, 1])
+    result = solve(scene, paths=200_000, seed=1, method="two_way", exit_point="hit")
+    H_wall, sd = result.irradiance[1, 0], np.sqrt(result.reflected_variance[1, 0]) / R_wall
+    assert abs(H_wall - lit * series) < 5 * sd < abs(H_wall - uniform * series)
