@@ -70,10 +70,14 @@ GATHERED_PLAN_DIVISOR = 4
 MEASURED_CAP_FACTOR = 64
 # The two-way iteration needs this many first-generation rays a patch in a chunk: with fewer,
 # what a generation passes on is mostly its own noise, which the next generation's gathering
-# reads, and its gain over the walk goes (docs/performance.md). Its chunks get them as far as
-# TWO_WAY_MAX_CHUNK_PATHS and MIN_MEASURED_CHUNKS chunks in the plan allow; method="auto" takes
-# the walk where they do not.
-TWO_WAY_RAYS_PER_PATCH = 8
+# reads, and its gain over the walk per ray goes (the closed Cornell box, 2,940-105,840
+# patches: from 4 rays a patch 2.3-3.2x the walk's, at one ray 0.82-1.21;
+# benchmarks/results/auto_method.md). Its chunks get them as far as TWO_WAY_MAX_CHUNK_PATHS and
+# MIN_MEASURED_CHUNKS chunks in the plan allow; method="auto" takes the walk where they do not,
+# and in scenes of more than AUTO_MAX_PATCHES (measured up to 105,840; a two-way chunk holds
+# several (C,P) arrays, and at a million patches the walk keeps a solve under 1 GiB).
+TWO_WAY_RAYS_PER_PATCH = 4
+AUTO_MAX_PATCHES = 1 << 17
 # ... and grow on to this many, within TWO_WAY_MIN_CHUNKS chunks of the plan: the noise a
 # generation passes on keeps falling (the figure 4 room, 16M paths: 8, 16 and 32 rays a patch,
 # 1.0, 0.83 and 0.67 of the variance per path, the time alike; docs/performance.md).
@@ -167,9 +171,11 @@ def first_generation_rays(patch_count, chunk_paths):
 
 def choose_method(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3):
     """What method="auto" runs: the two-way iteration where its chunks can give each patch
-    TWO_WAY_RAYS_PER_PATCH first-generation rays (scenes of up to about 65,000 patches, at
-    error targets that plan at least MIN_MEASURED_CHUNKS such chunks), else the paper's walk,
-    which then needs fewer rays to the same error."""
+    TWO_WAY_RAYS_PER_PATCH first-generation rays (at error targets that plan at least
+    MIN_MEASURED_CHUNKS such chunks) in a scene of at most AUTO_MAX_PATCHES patches, else the
+    paper's walk, which then needs fewer rays to the same error."""
+    if scene.patch_count > AUTO_MAX_PATCHES:
+        return WALK
     prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
     planned = paths if paths is not None else planned_paths(prediction.paths_for(target_mse), GATHERED, TWO_WAY)
     chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned)

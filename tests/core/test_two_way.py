@@ -161,7 +161,7 @@ def test_automatic_method_takes_the_two_way_iteration_only_where_each_patch_gets
     method's own and names it."""
     scene, _ = _box_with_one_emitter()
     P = scene.patch_count
-    few = 8 * solver.MIN_CHUNK_PATHS  # a plan of 8 minimal chunks: far under 8 rays a patch
+    few = 8 * solver.MIN_CHUNK_PATHS  # a plan of 8 minimal chunks: far under 4 rays a patch
     assert solver.first_generation_rays(P, solver.two_way_chunk_paths(P, 2.0, few)) < solver.TWO_WAY_RAYS_PER_PATCH
     assert solver.choose_method(scene, paths=few) == "walk"
     assert solver.choose_method(scene, paths=200_000) == "two_way"
@@ -174,14 +174,15 @@ def test_automatic_method_takes_the_two_way_iteration_only_where_each_patch_gets
 def test_two_way_chunks_grow_to_enough_rays_a_patch_within_the_plan():
     """A big scene's two-way chunks give each patch TWO_WAY_CHUNK_RAYS_PER_PATCH (32)
     first-generation rays when the plan has room for TWO_WAY_MIN_CHUNKS of them, and at least
-    TWO_WAY_RAYS_PER_PATCH (8) when it has room for MIN_MEASURED_CHUNKS of those, never more
+    TWO_WAY_RAYS_PER_PATCH (4) when it has room for MIN_MEASURED_CHUNKS of those, never more
     than the cap; a scene too big for that (or a plan too small) gets fewer, and "auto" takes
     the walk there."""
     rays = lambda P, planned: solver.first_generation_rays(P, solver.two_way_chunk_paths(P, 2.5, planned))  # noqa: E731
     assert rays(50_000, 10**9) >= solver.TWO_WAY_CHUNK_RAYS_PER_PATCH > solver.TWO_WAY_RAYS_PER_PATCH
     assert rays(50_000, 10**9) < solver.TWO_WAY_CHUNK_RAYS_PER_PATCH + 0.01  # (no bigger than it needs)
-    assert 8 * solver.two_way_chunk_paths(50_000, 2.5, 8 * 200_000) >= 8 * 200_000  # (8 chunks of 8 rays)
-    assert rays(50_000, 8 * 200_000) >= solver.TWO_WAY_RAYS_PER_PATCH
+    enough = 50_000 * solver.TWO_WAY_RAYS_PER_PATCH // 2  # paths of a chunk of that many rays a patch
+    assert solver.two_way_chunk_paths(50_000, 2.5, 8 * enough) == enough  # (8 chunks of them)
+    assert rays(50_000, 8 * enough) >= solver.TWO_WAY_RAYS_PER_PATCH
     assert solver.two_way_chunk_paths(1_000_000, 2.5, 10**9) == solver.TWO_WAY_MAX_CHUNK_PATHS
     assert rays(1_000_000, 10**9) < solver.TWO_WAY_RAYS_PER_PATCH
     assert math.ceil(10**6 / solver.two_way_chunk_paths(50_000, 2.5, 10**6)) >= solver.MIN_MEASURED_CHUNKS
@@ -220,3 +221,12 @@ def test_chunks_traced_in_blocks_are_still_exact(monkeypatch):
     result = solve(scene, paths=200_000, seed=1, method="two_way", exit_point="hit")
     H_wall, sd = result.irradiance[1, 0], np.sqrt(result.reflected_variance[1, 0]) / R_wall
     assert abs(H_wall - lit * series) < 5 * sd < abs(H_wall - uniform * series)
+
+
+def test_automatic_method_takes_the_walk_past_its_measured_scene_size(monkeypatch):
+    """Past AUTO_MAX_PATCHES (the largest scene the rule was measured on, and memory: a million
+    patches stay under 1 GiB with the walk) "auto" takes the walk, whatever the rays a patch."""
+    scene, _ = _box_with_one_emitter()
+    assert solver.choose_method(scene, paths=200_000) == "two_way"
+    monkeypatch.setattr(solver, "AUTO_MAX_PATCHES", scene.patch_count - 1)
+    assert solver.choose_method(scene, paths=200_000) == "walk"
