@@ -28,6 +28,8 @@ CASES = (
     ("gathered walk", {"direct_light": "gathered"}, {"small_room": 1_000_000, "cornell": 2_000_000, "room_fig4": 1_000_000}),
     ("Jacobi iteration", {"method": "jacobi"}, {"small_room": 1_000_000, "cornell": 2_000_000, "room_fig4": 2_000_000}),
     ("two-way iteration", {"method": "two_way"}, {"small_room": 1_000_000, "cornell": 2_000_000, "room_fig4": 1_000_000}),
+    # a small plan: 16 chunks of 1,250 paths (of 8,000 in the figure 4 room, whose chunks grow to 8 chunks)
+    ("two-way iteration, small plan", {"method": "two_way"}, {"small_room": 20_000, "cornell": 20_000, "room_fig4": 64_000}),
 )
 
 
@@ -35,7 +37,7 @@ def timed(scene, turns, paths, arguments, seed):
     from addon.core import solve, walk
 
     rule = walk.takes_turns
-    walk.takes_turns = lambda tables: turns
+    walk.takes_turns = lambda tables, paths: turns
     try:
         start = time.perf_counter()
         result = solve(scene, "finite", paths=paths, threads=2, seed=seed, exit_point="hit", **arguments)
@@ -61,9 +63,10 @@ def main(argv=None):
                 for turns in ((True, False) if k % 2 == 0 else (False, True)):
                     t, result = timed(scene, turns, paths[name], arguments, k)
                     seconds[turns].append(t)
+            result = timed(scene, True, paths[name], arguments, 0)[1]
             ratio = np.array(seconds[False]) / np.array(seconds[True])
             rows.append((name, label, np.median(seconds[True]), np.median(seconds[False]), np.median(ratio), ratio.min(), ratio.max(),
-                         "turns" if walk.takes_turns(_tables_like(scene, arguments)) else "no turns"))
+                         "turns" if walk.takes_turns(_tables_like(scene, arguments), result.paths // result.chunks) else "no turns"))
             print(rows[-1], flush=True)
     lines = ["# Taking turns at numpy, or not, on 2 threads", "", f"`python -m benchmarks.turns {' '.join(argv or [])}`".replace(" `", "`"), "",
              __doc__.split("\n\n", 2)[2].strip(), "",

@@ -44,7 +44,7 @@ def walk_chunks(tables, sizes, rng, abort=None):
     (``tables.numpy_turn``, released while they trace): taking turns hands the GIL over about
     once a step. Chunk-wide work (:func:`takes_turns`) does not wait for a turn."""
     sizes = [int(n) for n in sizes]
-    if not takes_turns(tables):
+    if not takes_turns(tables, sum(sizes)):
         tables = copy.copy(tables)
         tables.numpy_turn = FreeTurn()
     with tables.numpy_turn:
@@ -66,14 +66,25 @@ def walk_chunks(tables, sizes, rng, abort=None):
         return tallies
 
 
-def takes_turns(tables):
-    """Whether walks on several threads take turns at their numpy work: the paper's walks do
-    (their steps' arrays are a wavefront's, small, and a turn a step keeps the GIL from
-    changing hands inside them); the gathered walk and the generations of the Jacobi and
-    two-way iterations do not (their arrays span a whole chunk, numpy lets go of the GIL
-    inside most of their operations, and two threads' numpy work then runs side by side;
-    ``benchmarks/turns.py``)."""
-    return tables.method == WALK and tables.gathering is None
+def takes_turns(tables, paths):
+    """Whether walks on several threads take turns at their numpy work, for a task of
+    ``paths`` paths: the paper's walks do (their steps' arrays are a wavefront's, small, and a
+    turn a step keeps the GIL from changing hands inside them); the gathered walk and the
+    generations of the Jacobi and two-way iterations do not (their arrays span a whole chunk,
+    numpy lets go of the GIL inside most of their operations, and two threads' numpy work then
+    runs side by side; ``benchmarks/turns.py``), unless both the task's paths and the scene's
+    patches, the lengths of its arrays, are below TURN_FREE_SIZE."""
+    if tables.method == WALK and tables.gathering is None:
+        return True
+    return max(paths, tables.patch_count) < TURN_FREE_SIZE
+
+
+# Chunk-wide work takes no turns where a task's paths or the scene's patches reach this many
+# (benchmarks/turns.py: the two-way iteration with 1,250 paths a chunk took 1.17-1.22x the time
+# without turns that it took with them in the 600- and 2,504-patch rooms, 0.91x in the
+# 66,576-patch figure 4 room with 8,000 a chunk; in the empty room, with turns 0.82x the time
+# without at 1,250 paths a chunk, 0.90x at 7,800, 1.24x at 31,000).
+TURN_FREE_SIZE = 1 << 14
 
 
 class FreeTurn:

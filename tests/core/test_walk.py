@@ -175,18 +175,20 @@ def test_walks_on_threads_take_turns_at_their_numpy_work(monkeypatch):
 
 def test_chunk_wide_work_does_not_wait_for_a_turn(monkeypatch):
     """The two-way iteration's generations (whole-chunk arrays, numpy lets go of the GIL inside
-    them) run without the numpy turn, so that two threads' numpy work overlaps; the paper's
-    walk takes turns (the test above). benchmarks/turns.py measured the rule."""
+    them) run without the numpy turn, so that two threads' numpy work overlaps, unless the
+    chunk is small; the paper's walk takes turns (the test above). benchmarks/turns.py and the
+    rule's comment give the measurements."""
     from addon.core import two_way, walk
     from addon.core.first_shot import Gathering
     from addon.core.names import JACOBI, TWO_WAY
 
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
     tables = WalkTables(scene, "finite", 1e-3, "hit")
-    assert walk.takes_turns(tables)
+    big = walk.TURN_FREE_SIZE
+    assert walk.takes_turns(tables, big)
     tables.method = TWO_WAY
-    tables.gathering = Gathering(scene, two_way.direct_samples(2_000, scene))
-    assert not walk.takes_turns(tables)
+    tables.gathering = Gathering(scene, two_way.direct_samples(big, scene))
+    assert not walk.takes_turns(tables, big) and walk.takes_turns(tables, big - 1)  # (small chunks' arrays are short)
     held = []
     real = two_way.generation
 
@@ -195,9 +197,12 @@ def test_chunk_wide_work_does_not_wait_for_a_turn(monkeypatch):
         return real(t, *args)
 
     monkeypatch.setattr(two_way, "generation", generation)
-    tally = walk.walk_chunks(tables, [2_000], np.random.default_rng(1))[0]
-    assert held and not any(held) and tally.paths == 2_000
+    tally = walk.walk_chunks(tables, [big], np.random.default_rng(1))[0]
+    assert held and not any(held) and tally.paths == big
+    held.clear()
+    walk.walk_chunks(tables, [2_000], np.random.default_rng(1))
+    assert held and all(held)
     tables.method = JACOBI
-    assert not walk.takes_turns(tables)
+    assert not walk.takes_turns(tables, big)
     tables.method, tables.gathering = "walk", object()  # the gathered walk
-    assert not walk.takes_turns(tables)
+    assert not walk.takes_turns(tables, big)
