@@ -82,7 +82,7 @@ def _tables_like(scene, arguments):
     """Stand-in tables with the method and gathering a solve with ``arguments`` sets."""
     from types import SimpleNamespace
 
-    return SimpleNamespace(method=arguments.get("method", "walk"),
+    return SimpleNamespace(method=arguments.get("method", "walk"), patch_count=scene.patch_count,
                            gathering=object() if arguments.get("direct_light") == "gathered" else None)
 
 
