@@ -77,7 +77,7 @@ def method_for(scene, settings: SolveSettings, target) -> SolveSettings:
     if settings.method != AUTO:
         return settings
     chosen = choose_method(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
-                           target_mse=target, threshold=settings.threshold)
+                           target_mse=target, threshold=settings.threshold, max_seconds=settings.max_seconds or None)
     return replace(settings, method=chosen)
 
 

@@ -152,12 +152,16 @@ def chunk_paths_for(expected_path_length, planned_paths, min_chunks=MIN_CHUNKS):
     return int(min(MAX_CHUNK_PATHS, max(MIN_CHUNK_PATHS, min(by_rays, by_batches))))
 
 
-def two_way_chunk_paths(patch_count, expected_path_length, planned_paths):
+def two_way_chunk_paths(patch_count, expected_path_length, planned_paths, time_limited=False):
     """A two-way chunk: the usual rays (a small plan in TWO_WAY_MIN_CHUNKS chunks), or more: up
     to TWO_WAY_CHUNK_RAYS_PER_PATCH first-generation rays a patch (GENERATION_RAYS a path)
     within TWO_WAY_MIN_CHUNKS chunks of the plan, and at least TWO_WAY_RAYS_PER_PATCH within
-    MIN_MEASURED_CHUNKS; never more than TWO_WAY_MAX_CHUNK_PATHS."""
+    MIN_MEASURED_CHUNKS; never more than TWO_WAY_MAX_CHUNK_PATHS. Under a time limit, the usual
+    rays (about RAYS_PER_CHUNK): a chunk of a million paths can take longer than the limit, and
+    a run stopped before its first chunk has nothing to give."""
     usual = chunk_paths_for(rays_per_path(expected_path_length), planned_paths, TWO_WAY_MIN_CHUNKS)
+    if time_limited:
+        return usual
     paths_for = lambda rays: math.ceil(rays * patch_count / GENERATION_RAYS)  # noqa: E731
     grown = min(paths_for(TWO_WAY_CHUNK_RAYS_PER_PATCH), math.ceil(planned_paths / TWO_WAY_MIN_CHUNKS))
     enough = min(paths_for(TWO_WAY_RAYS_PER_PATCH), math.ceil(planned_paths / MIN_MEASURED_CHUNKS))
@@ -169,16 +173,17 @@ def first_generation_rays(patch_count, chunk_paths):
     return GENERATION_RAYS * chunk_paths / patch_count
 
 
-def choose_method(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3):
+def choose_method(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None):
     """What method="auto" runs: the two-way iteration where its chunks can give each patch
     TWO_WAY_RAYS_PER_PATCH first-generation rays (at error targets that plan at least
-    MIN_MEASURED_CHUNKS such chunks) in a scene of at most AUTO_MAX_PATCHES patches, else the
-    paper's walk, which then needs fewer rays to the same error."""
+    MIN_MEASURED_CHUNKS such chunks; under a time limit, in chunks of the usual size) in a scene
+    of at most AUTO_MAX_PATCHES patches, else the paper's walk, which then needs fewer rays to
+    the same error."""
     if scene.patch_count > AUTO_MAX_PATCHES:
         return WALK
     prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
     planned = paths if paths is not None else planned_paths(prediction.paths_for(target_mse), GATHERED, TWO_WAY)
-    chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned)
+    chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
     return TWO_WAY if first_generation_rays(scene.patch_count, chunk) >= TWO_WAY_RAYS_PER_PATCH else WALK
 
 
@@ -269,7 +274,7 @@ def solve(
         check_estimator(estimator, threshold)
         check_positive("paths", paths, integer=True)
         check_positive("target_mse", target_mse)
-        method = choose_method(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold)
+        method = choose_method(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold, max_seconds=max_seconds)
     if method in METHODS:
         direct_light = method_direct_light(method, direct_light)
     _check_solve_arguments(scene, estimator, paths, target_mse, threshold, exit_point, stop_rule, max_seconds, threads, sampling, direct_light, method)
@@ -292,7 +297,7 @@ def solve(
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
     if method == TWO_WAY:
-        chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned)
+        chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
     else:
         chunk = chunk_paths_for(prediction.expected_path_length, planned)
     tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups)

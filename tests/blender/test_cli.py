@@ -223,10 +223,10 @@ def test_an_operator_error_prints_once(tmp_path):
 
 def test_cli_warns_before_a_slow_run(tmp_path):
     """A setting that makes the predicted time pass a minute is said before the run, naming the
-    patch size and the target (a time limit keeps the test short; the walk's first chunks end
-    within it, where Automatic's two-way chunks of a million paths would not)."""
+    patch size and the target (a time limit keeps the test short: under it, Automatic's chunks
+    keep the usual size, and the first ones end within it)."""
     proc = subprocess.run([sys.executable, "-m", "addon", "--scene", "cornell", "--patch-size", "0.01", "--error", "0.3",
-                           "--method", "walk", "--time-limit", "1", "--no-preview", "-q", "-o", str(tmp_path / "slow.blend")],
+                           "--time-limit", "1", "--no-preview", "-q", "-o", str(tmp_path / "slow.blend")],
                           cwd=str(tmp_path), capture_output=True, text=True, timeout=600,
                           env={**os.environ, "PYTHONPATH": ROOT})
     assert proc.returncode == 0, proc.stderr[-2000:]

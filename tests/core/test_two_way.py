@@ -230,3 +230,21 @@ def test_automatic_method_takes_the_walk_past_its_measured_scene_size(monkeypatc
     assert solver.choose_method(scene, paths=200_000) == "two_way"
     monkeypatch.setattr(solver, "AUTO_MAX_PATCHES", scene.patch_count - 1)
     assert solver.choose_method(scene, paths=200_000) == "walk"
+
+
+def test_under_a_time_limit_two_way_chunks_stay_the_usual_size(monkeypatch):
+    """A chunk of a million paths can outlast a time limit, and a run stopped before its first
+    chunk has nothing to give: under a time limit two-way chunks keep the usual size (about
+    RAYS_PER_CHUNK rays), and "auto" decides on those chunks."""
+    usual = solver.chunk_paths_for(solver.rays_per_path(2.5), 10**9, solver.TWO_WAY_MIN_CHUNKS)
+    assert solver.two_way_chunk_paths(50_000, 2.5, 10**9, time_limited=True) == usual
+    assert usual < solver.two_way_chunk_paths(50_000, 2.5, 10**9)
+    scene, _ = _box_with_one_emitter()
+    monkeypatch.setattr(solver, "RAYS_PER_CHUNK", 1_000)  # usual chunks of under 4 rays a patch here
+    assert solver.choose_method(scene, paths=200_000) == "two_way"
+    assert solver.choose_method(scene, paths=200_000, max_seconds=60) == "walk"
+    r = solve(scene, paths=200_000, seed=1, method="auto", max_seconds=60, threads=2)
+    assert r.method == "walk"
+    limited = solve(scene, paths=20_000, seed=1, method="two_way", max_seconds=60, threads=2)
+    free = solve(scene, paths=20_000, seed=1, method="two_way", threads=2)
+    assert limited.paths == free.paths == 20_000 and free.chunks == solver.TWO_WAY_MIN_CHUNKS and limited.chunks > 8 * free.chunks
