@@ -14,6 +14,7 @@ this table.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -63,12 +64,11 @@ def main(argv=None):
                 for turns in ((True, False) if k % 2 == 0 else (False, True)):
                     t, result = timed(scene, turns, paths[name], arguments, k)
                     seconds[turns].append(t)
-            result = timed(scene, True, paths[name], arguments, 0)[1]
             ratio = np.array(seconds[False]) / np.array(seconds[True])
             rows.append((name, label, np.median(seconds[True]), np.median(seconds[False]), np.median(ratio), ratio.min(), ratio.max(),
                          "turns" if walk.takes_turns(_tables_like(scene, arguments), result.paths // result.chunks) else "no turns"))
             print(rows[-1], flush=True)
-    lines = ["# Taking turns at numpy, or not, on 2 threads", "", f"`python -m benchmarks.turns {' '.join(argv or [])}`".replace(" `", "`"), "",
+    lines = ["# Taking turns at numpy, or not, on 2 threads", "", "`" + " ".join(["python -m benchmarks.turns", *(sys.argv[1:] if argv is None else argv)]) + "`", "",
              __doc__.split("\n\n", 2)[2].strip(), "",
              "| scene | way of solving | turns s | no turns s | no turns / turns | range | the rule takes |",
              "|---|---|---:|---:|---:|---|---|"]

@@ -329,7 +329,7 @@ class ReflectedPoints:
     stay in the walk's unit space, float32 (the points already pushed off the surface)."""
 
     def __init__(self, gathering, geometry, samples):
-        patch, x, value = samples[:3]
+        patch, x, value = samples
         factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
         self.power = np.ascontiguousarray((value * factor.take(patch, axis=1)).T)
         self.points = np.asarray(x, dtype=np.float32)

@@ -194,13 +194,11 @@ def reflect_first(tables, state, samples, paths, rng):
         return
     count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / max(float(power.sum()) / C, 1e-300))))
     sample = np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
-    shift = rng.random(4)
     state.rays += count
     correction = np.zeros((C, P))
-    for start in range(0, count, RAY_BLOCK):  # (as a generation's rays: a block at a time)
-        rows = slice(start, min(start + RAY_BLOCK, count))
+    for rows, u in _ray_blocks(count, rng):
         k = sample[rows]
-        origins, directions = points.unit_rays(k, _hammersley(rows, shift if start == 0 else rng.random(4)), tables.geometry)
+        origins, directions = points.unit_rays(k, u, tables.geometry)
         hits = rays.cast(tables, origins, directions)
         carried = left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
         correction += _bincount(hits.patch, hits.front, carried, P)
@@ -216,7 +214,7 @@ def generation(tables, state, weight, count, rng):
     area, P = tables.gathering.patch_area, tables.patch_count
     expected = weight * (count / weight.sum())  # n_i
     patch = np.repeat(np.arange(P, dtype=np.int32), systematic_counts(weight, count, rng.random()))
-    shift = rng.random(4)
+    blocks = _ray_blocks(count, rng)  # (its first shift drawn here, as before blocks)
     triangle_u = rng.random((1, count), dtype=np.float32) if tables.row_triangle is not None else None
     state.rays += count
     state.generations += 1
@@ -226,9 +224,7 @@ def generation(tables, state, weight, count, rng):
     density = expected / area
     H = np.zeros_like(dB)
     lost = np.zeros((2, P))  # rays from each patch that escaped, that met a back side
-    for start in range(0, count, RAY_BLOCK):
-        rows = slice(start, min(start + RAY_BLOCK, count))
-        u = _hammersley(rows, shift if start == 0 else rng.random(4))
+    for rows, u in blocks:
         if triangle_u is not None:
             u = np.vstack([u, triangle_u[:, rows]])
         _score_two_ways(tables, patch[rows], u, value, density, H, lost)
@@ -267,16 +263,23 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
         lost[1] += np.bincount(patch.compress((hits.hit >= 0) & ~met), minlength=P)
 
 
-def _hammersley(rows, shift):
-    """(4, n) float32 for a block of n rays (``rows``, a slice): Halton points 0..n-1 (bases 2,
-    3, 5, 7) shifted by one random vector ``shift`` (4,) modulo 1: each point uniform, together
-    evenly spread; the rays of each patch take a run of them. (Each block its own set and shift:
-    the table stays a block's size.)"""
-    n = rows.stop - rows.start
-    points = HALTON.rows(n)[:, :n] + shift[:, None]
-    points -= np.floor(points)
-    np.minimum(points, LAST_BELOW_ONE, out=points)
-    return points.astype(np.float32)
+def _ray_blocks(count, rng):
+    """The blocks of ``count`` rays, RAY_BLOCK at a time, one by one: (rows, a slice; u (4, n)
+    float32), u the Halton points 0..n-1 (bases 2, 3, 5, 7) shifted by one random vector modulo
+    1: each point uniform, together evenly spread; the rays of each patch take a run of them.
+    Each block has its own set and shift, so that the table stays a block's size; the first
+    shift is drawn now, the others as their blocks are reached."""
+    shift = rng.random(4)
+
+    def blocks():
+        for start in range(0, count, RAY_BLOCK):
+            n = min(RAY_BLOCK, count - start)
+            points = HALTON.rows(n)[:, :n] + (shift if start == 0 else rng.random(4))[:, None]
+            points -= np.floor(points)
+            np.minimum(points, LAST_BELOW_ONE, out=points)
+            yield slice(start, start + n), points.astype(np.float32)
+
+    return blocks()
 
 
 def _bincount(patch, mask, weights, P):

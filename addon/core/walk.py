@@ -66,6 +66,14 @@ def walk_chunks(tables, sizes, rng, abort=None):
         return tallies
 
 
+# Chunk-wide work takes no turns where a task's paths or the scene's patches reach this many
+# (benchmarks/turns.py: the two-way iteration with 1,250 paths a chunk took 1.14-1.22x the time
+# without turns that it took with them in the 600- and 2,504-patch rooms, 0.95x in the
+# 66,576-patch figure 4 room with 8,000 a chunk; in the empty room, with turns 0.82x the time
+# without at 1,250 paths a chunk, 0.90x at 7,800, 1.24x at 31,000).
+TURN_FREE_SIZE = 1 << 14
+
+
 def takes_turns(tables, paths):
     """Whether walks on several threads take turns at their numpy work, for a task of
     ``paths`` paths: the paper's walks do (their steps' arrays are a wavefront's, small, and a
@@ -77,14 +85,6 @@ def takes_turns(tables, paths):
     if tables.method == WALK and tables.gathering is None:
         return True
     return max(paths, tables.patch_count) < TURN_FREE_SIZE
-
-
-# Chunk-wide work takes no turns where a task's paths or the scene's patches reach this many
-# (benchmarks/turns.py: the two-way iteration with 1,250 paths a chunk took 1.14-1.22x the time
-# without turns that it took with them in the 600- and 2,504-patch rooms, 0.95x in the
-# 66,576-patch figure 4 room with 8,000 a chunk; in the empty room, with turns 0.82x the time
-# without at 1,250 paths a chunk, 0.90x at 7,800, 1.24x at 31,000).
-TURN_FREE_SIZE = 1 << 14
 
 
 class FreeTurn:
