@@ -82,13 +82,13 @@ class Text:
 
 METHOD = Choice("method", "--method", "auto", (
     ("auto", "Automatic", "The two-way iteration where each patch gets enough rays for it to pay (scenes of up "
-     "to about 130,000 patches, at error targets that need some rays a patch), else the paper's random walks, "
+     "to about 390,000 patches, at error targets that need some rays a patch), else the paper's random walks, "
      "which need fewer rays at a few a patch. The estimate says which"),
     ("walk", "Random walks (paper)", "The paper's shooting random walks, with its estimators: their predicted path "
      "counts and relative efficiency hold for them"),
     ("two_way", "Two-way iteration", "Beyond the paper: the direct light gathered by shadow rays, then the light "
      "passed on generation by generation, every ray used both ways (shooting and gathering) about a control "
-     "variate. Faster to the same error in the rooms measured, of 600 to 100,000 patches; slower where a "
+     "variate. Faster to the same error in the rooms measured, of 600 to 500,000 patches; slower where a "
      "large emitter lights most of the scene directly. No formula predicts its error, which is measured as it "
      "runs. The estimator, sampling and direct light settings are the walks'"),
 ), "Method")

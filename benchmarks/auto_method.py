@@ -2,15 +2,16 @@
 
     python -m benchmarks.auto_method            # into benchmarks/results/auto_method.md and .png
     python -m benchmarks.auto_method --quick    # two sizes, into out/
+    python -m benchmarks.auto_method --divisions 190 270   # these sizes' rows replaced in the results
 
 The two-way iteration's chunks are independent replicas of the whole solve (the batch means
 measure its error). Each generation of a chunk estimates the light every patch reflects from
 the rays it got; with about one ray a patch that estimate is mostly noise, which the next
 generation's gathering reads, and the iteration's gain over the walk goes. This measures it:
 the closed Cornell box (two blocks, colour walls, a small ceiling light) meshed at several patch
-counts, and for each, solves of 4, 16, 64 and 256 paths a patch (the plan: two-way chunks grow
-to ``TWO_WAY_RAYS_PER_PATCH`` first-generation rays a patch within ``MIN_MEASURED_CHUNKS`` chunks
-of the plan, so the plan sets the rays a patch a chunk gets). Each solve's error is the RMS over
+counts, and for each, solves of 4, 16, 64 and 256 paths a patch (the plan sets the rays a patch
+a chunk gets: ``solver.two_way_chunk_paths``, up to ``TWO_WAY_MAX_CHUNK_PATHS`` paths a chunk,
+so that past about 2^19 patches no plan gives a patch 4 first-generation rays). Each solve's error is the RMS over
 patches / mean of the reflected radiosity from its batch means; the gain is the walk's error^2 x
 rays (and x seconds, 2 threads) over the two-way iteration's at the same plan: above 1 the
 two-way iteration reaches an error with fewer rays (less time). Exit point hit (the panel's
@@ -33,7 +34,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 from addon.core import solve, solver  # noqa: E402
 from addon.core.error_model import predict  # noqa: E402
 
-DIVISIONS = (20, 40, 60, 90, 120)
+DIVISIONS = (20, 40, 60, 90, 120, 190, 270)
 PATHS_A_PATCH = (4, 16, 64, 256)
 
 
@@ -87,7 +88,7 @@ def plot(rows, path):
         ax.set_title(f"two-way gain over the walk, {what}", fontsize=10)
     axes[0].set_ylabel("gain (above 1: the two-way iteration)")
     axes[0].legend(fontsize=8)
-    fig.suptitle("Closed Cornell box: where the two-way iteration pays (method=auto takes it from 8 rays a patch)")
+    fig.suptitle("Closed Cornell box: where the two-way iteration pays (auto: from 4 rays a patch, up to 393,216 patches)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
@@ -110,19 +111,28 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true")
     p.add_argument("--plot-only", action="store_true", help="redraw the plot from the last results' JSON")
+    p.add_argument("--divisions", type=int, nargs="+", default=None,
+                   help="only these box sizes (cells a side), their rows replacing theirs in the last results")
     args = p.parse_args(argv)
     if args.plot_only:
         plot(json.loads((RESULTS / "auto_method.json").read_text()), RESULTS / "auto_method.png")
         return
     started = time.perf_counter()
-    divisions = (20, 60) if args.quick else DIVISIONS
+    divisions = (20, 60) if args.quick else args.divisions or DIVISIONS
     rows = [row for d in divisions for row in measure(d, PATHS_A_PATCH[:2] if args.quick else PATHS_A_PATCH)]
+    if args.divisions and not args.quick:
+        sizes = {r["patches"] for r in rows}
+        kept = [r for r in json.loads((RESULTS / "auto_method.json").read_text()) if r["patches"] not in sizes]
+        rows = sorted(kept + rows, key=lambda r: (r["patches"], r["paths_a_patch"]))
     folder = ROOT / "out" if args.quick else RESULTS
     folder.mkdir(exist_ok=True)
     out = folder / "auto_method.md"
     (folder / "auto_method.json").write_text(json.dumps(rows, indent=1))
     plot(rows, folder / "auto_method.png")
-    report(rows, "python -m benchmarks.auto_method" + (" --quick" if args.quick else ""), out)
+    command = "python -m benchmarks.auto_method" + (" --quick" if args.quick else "")
+    if args.divisions and not args.quick:
+        command += " --divisions " + " ".join(map(str, args.divisions)) + " (the other sizes' rows from the run before)"
+    report(rows, command, out)
     print(f"wrote {out} ({time.perf_counter() - started:.0f} s)")
 
 

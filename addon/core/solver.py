@@ -70,14 +70,15 @@ GATHERED_PLAN_DIVISOR = 4
 MEASURED_CAP_FACTOR = 64
 # The two-way iteration needs this many first-generation rays a patch in a chunk: with fewer,
 # what a generation passes on is mostly its own noise, which the next generation's gathering
-# reads, and its gain over the walk per ray goes (the closed Cornell box, 2,940-105,840
+# reads, and its gain over the walk per ray goes (the closed Cornell box, 2,940-535,815
 # patches: from 4 rays a patch 2.3-3.2x the walk's, at one ray 0.82-1.21;
 # benchmarks/results/auto_method.md). Its chunks get them as far as TWO_WAY_MAX_CHUNK_PATHS and
 # MIN_MEASURED_CHUNKS chunks in the plan allow; method="auto" takes the walk where they do not,
-# and in scenes of more than AUTO_MAX_PATCHES (measured up to 105,840; a two-way chunk holds
-# several (C,P) arrays, and at a million patches the walk keeps a solve under 1 GiB).
+# and in scenes of more than AUTO_MAX_PATCHES: a two-way chunk holds several (C,P) arrays, and
+# through the operator two-way solves peaked at 784, 908 and 1,039 MiB at 250,852, 391,999 and
+# 499,968 patches, where the walk keeps a million under 1 GiB (docs/performance.md).
 TWO_WAY_RAYS_PER_PATCH = 4
-AUTO_MAX_PATCHES = 1 << 17
+AUTO_MAX_PATCHES = 3 << 17
 # ... and grow on to this many, within TWO_WAY_MIN_CHUNKS chunks of the plan: the noise a
 # generation passes on keeps falling (the figure 4 room, 16M paths: 8, 16 and 32 rays a patch,
 # 1.0, 0.83 and 0.67 of the variance per path, the time alike; docs/performance.md).
