@@ -34,6 +34,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 from benchmarks.cycles_comparison import block_mesh, configure_bake, selected_object  # noqa: E402
 BLOCK = 12
 COLUMNS = 16
+METHODS = ("walk", "two_way")
 
 KINDS = {
     "point": ("POINT", {"energy": 200.0, "shadow_soft_size": 0.0}, (0.3, 0.2, 1.2), (0, 0, 0)),
@@ -160,14 +161,13 @@ def cycles(image, rows, patches, samples, seed=0):
     return bake(image, rows, COLUMNS, BLOCK, patches, samples, seed)
 
 
-def ours(paths, seed=0, direct_light="shot"):
+def ours(paths, seed=0, direct_light="shot", method="walk"):
     import bpy
 
-    from addon import patches as patch_making
     from addon import pipeline, scene_io
 
     objects, notes = scene_io.read_selection(bpy.context)
-    settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, exit_point="hit", method="walk",
+    settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, exit_point="hit", method=method,
                                       seed=seed, threads=2, direct_light=direct_light)
     wall = time.perf_counter()
     out = pipeline.run_solve(objects, settings)
@@ -181,20 +181,25 @@ def ours(paths, seed=0, direct_light="shot"):
 
 
 def compare(kind, samples, paths):
+    """Ours against one bake, for the paper's walk and for the two-way iteration (which the
+    panel's Automatic takes in these scenes)."""
     obj, image, rows = build(kind)
     P = len(obj.data.polygons)
     reference, cycles_seconds = cycles(image, rows, P, samples)
-    mine, variance, our_seconds, sources, notes = ours(paths)
-    grey_ref, grey = reference.mean(axis=1), mine.mean(axis=1)
+    grey_ref = reference.mean(axis=1)
     lit = grey_ref > 0.02 * grey_ref.max()
-    ratio = grey[lit] / grey_ref[lit]
-    return {
-        "kind": kind, "patches": P, "lit": int(lit.sum()), "sources": sources, "notes": notes,
-        "mean_ratio": float(ratio.mean()), "ratio_se": float(ratio.std(ddof=1) / math.sqrt(ratio.size)),
-        "relative_rms": float(np.sqrt(np.mean((grey[lit] / grey_ref[lit] - 1) ** 2))),
-        "our_noise": float(np.sqrt(np.mean(variance.mean(axis=1)[lit] / grey_ref[lit] ** 2))),
-        "cycles_seconds": cycles_seconds, "our_seconds": our_seconds,
-    }
+    row = {"kind": kind, "patches": P, "lit": int(lit.sum()), "cycles_seconds": cycles_seconds}
+    for method in METHODS:
+        mine, variance, seconds, sources, notes = ours(paths, method=method)
+        ratio = mine.mean(axis=1)[lit] / grey_ref[lit]
+        row[method] = {
+            "mean_ratio": float(ratio.mean()), "ratio_se": float(ratio.std(ddof=1) / math.sqrt(ratio.size)),
+            "relative_rms": float(np.sqrt(np.mean((ratio - 1) ** 2))),
+            "our_noise": float(np.sqrt(np.mean(variance.mean(axis=1)[lit] / grey_ref[lit] ** 2))),
+            "seconds": seconds,
+        }
+        row["sources"], row["notes"] = sources, notes
+    return row
 
 
 def time_to_error(kind, samples, paths, target=0.01):
@@ -241,7 +246,10 @@ def plot(rows, timed, path):
     x = np.arange(len(kinds))
     fig, axes = plt.subplots(1, 2 if timed else 1, figsize=(12 if timed else 6, 4), squeeze=False)
     ax = axes[0, 0]
-    ax.errorbar(x, [r["mean_ratio"] for r in rows], yerr=[2 * r["ratio_se"] for r in rows], fmt="o", capsize=4)
+    for k, method in enumerate(METHODS):
+        ax.errorbar(x + (k - 0.5) * 0.2, [r[method]["mean_ratio"] for r in rows],
+                    yerr=[2 * r[method]["ratio_se"] for r in rows], fmt="o", capsize=4, label=method.replace("_", "-"))
+    ax.legend()
     ax.axhline(1.0, color="grey", lw=0.8)
     ax.set_xticks(x, kinds, rotation=30)
     ax.set_ylabel("ours / Cycles (mean over lit patches, 2 s.e.)")
@@ -296,24 +304,30 @@ def main(argv=None):
     for kind in args.kinds:
         row = compare(kind, samples, paths)
         rows.append(row)
-        print(f"{kind:12s} ours/Cycles {row['mean_ratio']:.4f} +- {row['ratio_se']:.4f}  rel. RMS {row['relative_rms']:.3f} "
-              f"(our noise {row['our_noise']:.3f})  {row['sources']}", flush=True)
+        print(f"{kind:12s} " + "  ".join(
+            f"{m}: ours/Cycles {row[m]['mean_ratio']:.4f} +- {row[m]['ratio_se']:.4f} rel. RMS {row[m]['relative_rms']:.3f} "
+            f"(noise {row[m]['our_noise']:.3f})" for m in METHODS) + f"  {row['sources']}", flush=True)
     out = (ROOT / "out" if args.quick else RESULTS) / "cycles_lights.md"
     out.parent.mkdir(exist_ok=True)
     lines = [
         "# Lights and the world against Cycles' COMBINED bake",
         "",
         f"`python -m benchmarks.cycles_lights{' --quick' if args.quick else ''}`: Cycles {samples} samples a pixel, "
-        f"{BLOCK}x{BLOCK} pixels a patch; ours {paths:,} paths, exit point hit. Scenes in the module's docstring. "
-        "Ratio: mean over the lit patches of ours / Cycles (grey), with its standard error over the patches; "
-        "relative RMS of the per-patch difference, beside our own noise (batch means) of the same measure.",
+        f"{BLOCK}x{BLOCK} pixels a patch; ours {paths:,} paths, exit point hit, the paper's walk and the two-way "
+        "iteration (which Automatic takes here). Scenes in the module's docstring. Ratio: mean over the lit patches "
+        "of ours / Cycles (grey), with its standard error over the patches; relative RMS of the per-patch "
+        "difference, beside our own noise (batch means) of the same measure.",
         "",
-        "| source | patches lit | ours / Cycles | rel. RMS | our noise | ours s | Cycles s | sources |",
-        "|---|---:|---:|---:|---:|---:|---:|---|",
+        "| source | patches lit | walk / Cycles | rel. RMS | our noise | two-way / Cycles | rel. RMS | our noise | "
+        "walk s | two-way s | Cycles s | sources |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in rows:
-        lines.append(f"| {r['kind']} | {r['lit']} | {r['mean_ratio']:.4f} ± {r['ratio_se']:.4f} | {r['relative_rms']:.3f} | "
-                     f"{r['our_noise']:.3f} | {r['our_seconds']:.2f} | {r['cycles_seconds']:.2f} | {r['sources']} |")
+        w, t = r["walk"], r["two_way"]
+        lines.append(f"| {r['kind']} | {r['lit']} | {w['mean_ratio']:.4f} ± {w['ratio_se']:.4f} | {w['relative_rms']:.3f} | "
+                     f"{w['our_noise']:.3f} | {t['mean_ratio']:.4f} ± {t['ratio_se']:.4f} | {t['relative_rms']:.3f} | "
+                     f"{t['our_noise']:.3f} | {w['seconds']:.2f} | {t['seconds']:.2f} | {r['cycles_seconds']:.2f} | "
+                     f"{r['sources']} |")
     notes = sorted({n for r in rows for n in r["notes"]})
     if notes:
         lines += ["", "Notes from reading the scenes:", ""] + [f"- {n}" for n in notes]
