@@ -88,6 +88,7 @@ class WalkParameters:
     speedups: object          # Speedups, as the solver resolved them
     gather_samples: tuple | None  # per patch, with the direct light gathered
     method: str = WALK            # how the light is carried (names.METHODS)
+    fate_shares: tuple | None = None  # the gathering's (escaped, blocked) split (first_shot.fate_shares)
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,6 +167,7 @@ def _tables(payload, parameters):
         tables.method = p.method
         if p.gather_samples is not None:
             tables.gathering = Gathering(scene, np.asarray(p.gather_samples))
+            tables.gathering.fate_shares = p.fate_shares
         _worker_tables[key] = tables
         for cache in (_worker_tables, _worker_geometries):
             while len(cache) > WORKER_TABLES:

@@ -61,9 +61,11 @@ COSINE_SHARE_PER_AREA = 10.0
 COSINE_SHARE_LEAST = 0.1
 # The strategies that find an emitting patch (_emitter_weight).
 SHADOW, COSINE = range(2)
-# Rays from the sources a chunk casts to split the direct light found on no front side between
-# what escaped and what met a back side (split_lost).
-FATE_RAYS = 1024
+# Rays from the sources a solve casts, once, to split the direct light found on no front side
+# between what escaped and what met a back side (fate_shares, split_lost), from its own stream
+# of the solve's seed.
+FATE_RAYS = 1 << 13
+FATE_STREAM = 1 << 62
 # A light is seen if the shadow ray meets nothing before this share of the way to it.
 SEEN_BEFORE = 1.0 - 1e-5
 
@@ -121,6 +123,7 @@ class Gathering:
         self.shadow_density = self.choice[:scene.patch_count] / scene.patch_area
         self.area_per_sample = scene.patch_area / self.samples
         self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
+        self.fate_shares = (1.0, 0.0)  # (escaped, blocked) of the light found on no front: fate_shares
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
 
     def draw(self, rng):
@@ -362,21 +365,30 @@ def reflected_sources(tables, emission, samples):
     return walk
 
 
-def split_lost(tables, rng, lost):
-    """(escaped, blocked) (C,) each: ``lost`` (C,), the direct light the gathering found on no
-    patch's front, split as FATE_RAYS rays from the sources (drawn and leaving as the walk's
-    first rays) divide between nothing and a back side: so that light landing on back sides
-    (flipped normals) is reported as such. Both 0 where no ray ends either way (then all of
-    ``lost``, noise about 0 in a closed scene, counts as escaped). Returns also the rays traced."""
+def fate_shares(tables, seed):
+    """(escaped, blocked): how FATE_RAYS rays from the sources (drawn and leaving as the walk's
+    first rays) that find no patch's front divide between nothing and a back side, so that
+    light landing on back sides (flipped normals) is reported as such; (1, 0) where none ends
+    either way (a closed scene, whose lost direct light is the gathering's noise about 0).
+    Measured once a solve, from the seed's own stream: the chunks split their lost light alike
+    (only the accounts read it), and no chunk pays for a cast of its own."""
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(FATE_STREAM,))))
     source = tables.sources.sample(FATE_RAYS, rng)
     u = rng.random((tables.uniforms_per_ray, FATE_RAYS), dtype=np.float32)
     hits = ray_cast(tables, *leave_sources(tables, source, u))
     escaped = np.count_nonzero(hits.hit < 0)
     blocked = np.count_nonzero((hits.hit >= 0) & ~hits.front)
     if escaped + blocked == 0:
-        return lost, np.zeros_like(lost), FATE_RAYS
+        return 1.0, 0.0
     share = blocked / (escaped + blocked)
-    return lost * (1.0 - share), lost * share, FATE_RAYS
+    return 1.0 - share, share
+
+
+def split_lost(gathering, lost):
+    """(escaped, blocked) (C,) each: ``lost`` (C,), the direct light the gathering found on no
+    patch's front, split by the solve's ``gathering.fate_shares``."""
+    escaped, blocked = gathering.fate_shares
+    return lost * escaped, lost * blocked
 
 
 def gathered_chunk(tables, paths, rng, walk):
@@ -407,7 +419,6 @@ def gathered_chunk(tables, paths, rng, walk):
     # What the direct light brought no patch (in expectation, what escaped or met a back side
     # on its first flight), so that the accounts balance exactly; below zero where a light that
     # casts no shadow reaches, through objects, more than it emits.
-    lost_escaped, lost_blocked, fate_rays = split_lost(tables, rng, emitted - absorbed - walked)
-    rays += fate_rays
+    lost_escaped, lost_blocked = split_lost(gathering, emitted - absorbed - walked)
     return ChunkTally(paths, rays, incident, emitted, absorbed + walk_absorbed, lost_escaped + walk_escaped,
                       blocked + lost_blocked, undistributed, ended)

@@ -16,7 +16,7 @@ import numpy as np
 
 from .batches import Batches
 from .error_model import check_estimator, check_positive, predict
-from .first_shot import Gathering, gather_samples
+from .first_shot import Gathering, fate_shares, gather_samples
 from .two_way import GENERATION_RAYS, direct_samples, rays_per_path
 from .names import (
     AUTO,
@@ -307,6 +307,9 @@ def solve(
         tables.gathering = Gathering(scene, direct_samples(chunk, scene))
     elif gathered:
         tables.gathering = Gathering(scene, gather_samples(chunk, prediction.expected_path_length, scene))
+    if gathered:
+        with tables.numpy_turn:  # (it casts, and a cast lets go of the turn while it traces)
+            tables.gathering.fate_shares = fate_shares(tables, int(seed))
     total = Batches(scene, tables)
     chunk_count = math.ceil(cap / chunk)
     group = 1 if gathered else chunks_per_group(tables, chunk, prediction.expected_path_length)
@@ -319,7 +322,8 @@ def solve(
         runner = ThreadRunner(threads)
     else:
         gather = tuple(tables.gathering.samples.tolist()) if gathered else None
-        parameters = WalkParameters(estimator, float(threshold), exit_point, sampling, tables.speedups, gather, method)
+        fates = tuple(tables.gathering.fate_shares) if gathered else None
+        parameters = WalkParameters(estimator, float(threshold), exit_point, sampling, tables.speedups, gather, method, fates)
         runner = ClusterRunner(cluster, scene, parameters)
         threads = runner.threads
     try:

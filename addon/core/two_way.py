@@ -121,8 +121,8 @@ def two_way_chunk(tables, paths, rng, check=None):
     direct = H * gathering.patch_area  # (C,P) power arriving straight from the sources
     emitted = gathering.channel_power[:C]
     # What the direct light brought no patch's front escaped or met a back side (split_lost).
-    escaped, blocked, fate_rays = split_lost(tables, rng, emitted - direct.sum(axis=1))
-    state = Chunk(np.zeros_like(H), H.copy(), np.zeros(C), escaped, blocked, gather_rays + fate_rays)
+    escaped, blocked = split_lost(gathering, emitted - direct.sum(axis=1))
+    state = Chunk(np.zeros_like(H), H.copy(), np.zeros(C), escaped, blocked, gather_rays)
     R = tables.reflectivity
     if tables.exit_random:
         state.reflected = R * H
