@@ -52,7 +52,7 @@ import numpy as np
 from . import rays
 from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct, split_lost
 from .jacobi import HALTON, systematic_counts
-from .sampling import LAST_BELOW_ONE
+from .sampling import LAST_BELOW_ONE, SOBOL
 from .tallies import ChunkTally
 
 # Rays of a chunk of n paths: n FIRST_REFLECTION_RAYS from the gathering samples (hit exit),
@@ -196,8 +196,14 @@ def reflect_first(tables, state, samples, paths, rng):
     sample = np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
     state.rays += count
     correction = np.zeros((C, P))
-    for rows, u in _ray_blocks(count, rng):
+    ray_patch = patch.take(sample)
+    rank, shift = _paired_ranks(ray_patch, (left.sum(axis=0) < 0).take(sample), P, rng)
+    table = SOBOL.rows(int(rank.max(initial=0)) + 1)[:2]
+    for start in range(0, count, RAY_BLOCK):
+        rows = slice(start, min(start + RAY_BLOCK, count))
         k = sample[rows]
+        u = np.empty((4, k.size), dtype=np.float32)  # (a sample's point is its origin: u[2:4] the direction)
+        u[2:4] = _shifted_points(table, rank[rows], shift.take(ray_patch[rows], axis=1))
         origins, directions = points.unit_rays(k, u, tables.geometry)
         hits = rays.cast(tables, origins, directions)
         carried = left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
@@ -261,6 +267,30 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
     if not met.all():
         lost[0] += np.bincount(patch.compress(hits.hit < 0), minlength=P)
         lost[1] += np.bincount(patch.compress((hits.hit >= 0) & ~met), minlength=P)
+
+
+def _paired_ranks(ray_patch, negative, P, rng):
+    """The first reflection's correction rays in pairs of one direction: each ray's rank among
+    its patch's rays of its sign ((n,) int64), and a random digital shift of each patch's
+    ((2,P) uint32). Ray r of a patch's rays that carry more than the patch's mean and ray r of
+    those that carry less take Sobol' point r of the patch's shift (each direction uniform,
+    each sign's set evenly spread): the two leave the patch in the same direction from nearby
+    points, and where they land on the same patch their shares, of opposite signs, cancel."""
+    key = ray_patch.astype(np.int64) * 2 + negative
+    counts = np.bincount(key, minlength=2 * P)
+    order = np.argsort(key, kind="stable")
+    rank = np.empty(key.size, dtype=np.int64)
+    rank[order] = np.arange(key.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    return rank, rng.integers(0, 1 << 32, size=(2, P), dtype=np.uint32)
+
+
+def _shifted_points(table, rank, shift):
+    """(2, n) float32 in [0, 1): Sobol' points ``rank`` of ``table`` (2, m) uint32, each XORed
+    with its own ``shift`` (2, n) (the first 24 bits)."""
+    points = table.take(rank, axis=1)
+    points ^= shift
+    points >>= 8
+    return points.astype(np.float32) * np.float32(2.0**-24)
 
 
 def _ray_blocks(count, rng):
