@@ -27,7 +27,8 @@ Per chunk:
     reflect_first   the first reflection R H^0: a constant over each patch (exit_point="random",
                     the discrete method), or as uneven over a patch as the light that landed on
                     it (exit_point="hit": the constant, and what the gathering samples found
-                    beyond it, shot from them); from the second reflection on, each patch's
+                    beyond it, shot from them, a patch's rays of either sign in pairs of one
+                    direction); from the second reflection on, each patch's
                     reflected light is uniform over it
     allot           a generation's rays to patches by systematic sampling, in proportion to
                     sqrt(A_j) R_bar_j; the count in proportion to the generation's reflected power
@@ -176,9 +177,10 @@ def reflect_first(tables, state, samples, paths, rng):
     m_j of them, so sources of power sum_k p_k / m_j at them are patch j reflecting R_j H_j
     uniformly, which the first two-way generation carries (``state.reflected``). What is left
     (zero in sum over each patch), c_k = p_k - sum / m_j, is shot from the samples: rays
-    allotted in proportion to |c_k|, each carrying an equal share of sum |c| with c_k's sign.
-    It is small where the direct light is even over a patch; its irradiance
-    (``state.correction``) joins the first generation's."""
+    allotted in proportion to |c_k|, each carrying an equal share of sum |c| with c_k's sign,
+    a patch's positive and negative rays in pairs of one direction (_paired_ranks). It is small
+    where the direct light is even over a patch; its irradiance (``state.correction``) joins
+    the first generation's."""
     gathering, C, P = tables.gathering, tables.channels, tables.patch_count
     patch = samples[0]
     state.reflected = tables.reflectivity * state.irradiance
