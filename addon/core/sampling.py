@@ -197,6 +197,12 @@ def stratified_by_patch(patch, patch_count, rows, rng, dtype=np.float64):
     shift = rng.integers(0, 1 << 32, size=(len(rows), runs.size), dtype=np.uint32)  # (a patch with no sample draws none)
     points = table[list(rows)].take(rank, axis=1)
     points ^= np.repeat(shift, runs, axis=1)
+    return unit_floats(points, dtype)
+
+
+def unit_floats(points, dtype=np.float64):
+    """uint32 ``points`` (shifted Sobol' points, changed in place) as ``dtype`` in [0, 1):
+    float32 takes their first 24 bits, so never rounds up to 1."""
     if dtype == np.float32:
         points >>= 8
         return points.astype(np.float32) * np.float32(2.0**-24)

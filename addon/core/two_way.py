@@ -53,7 +53,7 @@ import numpy as np
 from . import rays
 from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct, split_lost
 from .jacobi import HALTON, systematic_counts
-from .sampling import LAST_BELOW_ONE, SOBOL
+from .sampling import LAST_BELOW_ONE, SOBOL, unit_floats
 from .tallies import ChunkTally
 
 # Rays of a chunk of n paths: n FIRST_REFLECTION_RAYS from the gathering samples (hit exit),
@@ -288,11 +288,10 @@ def _paired_ranks(ray_patch, negative, P, rng):
 
 def _shifted_points(table, rank, shift):
     """(2, n) float32 in [0, 1): Sobol' points ``rank`` of ``table`` (2, m) uint32, each XORed
-    with its own ``shift`` (2, n) (the first 24 bits)."""
+    with its own ``shift`` (2, n)."""
     points = table.take(rank, axis=1)
     points ^= shift
-    points >>= 8
-    return points.astype(np.float32) * np.float32(2.0**-24)
+    return unit_floats(points, np.float32)
 
 
 def _ray_blocks(count, rng):
