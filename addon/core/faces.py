@@ -31,6 +31,11 @@ def starts_of(sizes: np.ndarray) -> np.ndarray:
     return starts
 
 
+def ranks_in_runs(sizes: np.ndarray) -> np.ndarray:
+    """(sum(sizes),) int64: 0, 1, ... within each of consecutive runs of ``sizes``."""
+    return np.arange(int(np.sum(sizes))) - np.repeat(starts_of(sizes), sizes)
+
+
 # Per-triangle arithmetic runs this many triangles at a time (each triangle on its own: the same
 # numbers as all at once), so that its float64 temporaries are a block's.
 BLOCK_TRIANGLES = 1 << 16
@@ -75,7 +80,7 @@ def fan_triangulation(face_sizes, corner_verts):
     starts = starts_of(face_sizes)
     counts = np.maximum(face_sizes - 2, 0)
     triangle_face = np.repeat(np.arange(len(face_sizes)), counts)
-    k = np.arange(int(counts.sum())) - np.repeat(starts_of(counts), counts)
+    k = ranks_in_runs(counts)
     first = starts[triangle_face]
     triangles = np.stack(
         [corner_verts[first], corner_verts[first + k + 1], corner_verts[first + k + 2]],

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import rays
+from .faces import ranks_in_runs
 from .sampling import LAST_BELOW_ONE, GrowingTable, draw_sources, halton
 from .tallies import ChunkTally, chunk_counts, chunk_sums
 
@@ -69,7 +70,7 @@ def shoot_from_patches(tables, unshot, rng):
     patch = (cell - chunk.astype(np.int64) * P).astype(np.int32)
     # Ray k of a chunk: (k + shift) / m chose its patch, Halton point k its point and direction:
     # a 5-D Hammersley set over the chunk's generation (each patch's rays a run of it).
-    index = np.arange(cell.size) - np.repeat(np.cumsum(rays_of) - rays_of, rays_of)
+    index = ranks_in_runs(rays_of)
     points = HALTON.rows(int(rays_of.max())).take(index, axis=1)
     points += corner.T.take(chunk, axis=1)
     points -= np.floor(points)

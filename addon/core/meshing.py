@@ -47,6 +47,7 @@ from .faces import (  # noqa: F401 - the meshing's public names
     plan_faces,
     prepare,
     reverse_faces,
+    ranks_in_runs,
     starts_of,
     triangle_areas,
 )
@@ -235,9 +236,7 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
     perm = np.lexsort((order, patch_face))
     fstarts = starts_of(sizes)
     sizes_sorted = sizes[perm]
-    corner_index = np.repeat(fstarts[perm], sizes_sorted) + (
-        np.arange(int(sizes_sorted.sum())) - np.repeat(starts_of(sizes_sorted), sizes_sorted)
-    )
+    corner_index = np.repeat(fstarts[perm], sizes_sorted) + ranks_in_runs(sizes_sorted)
     corners = corners[corner_index]
     patch_face = patch_face[perm]
     sizes = sizes_sorted
@@ -255,7 +254,7 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
         sp = np.nonzero(small)[0]
         cnt = sizes[sp] - 2
         tp = np.repeat(sp, cnt)
-        k = np.arange(int(cnt.sum())) - np.repeat(starts_of(cnt), cnt)
+        k = ranks_in_runs(cnt)
         f0 = pstarts[tp]
         tris = np.stack([corners[f0], corners[f0 + k + 1], corners[f0 + k + 2]], axis=1)
         tri_patch = tp

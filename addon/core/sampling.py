@@ -9,6 +9,8 @@ import threading
 
 import numpy as np
 
+from .faces import ranks_in_runs
+
 TWO_PI = np.float32(2.0 * np.pi)
 Z_TOP = np.float32(1.0 - 2.0**-24)  # z = Z_TOP - 2 u: the midpoints of float32's [0, 1) grid
 LAST_BELOW_ONE = np.nextafter(1.0, 0.0)
@@ -191,8 +193,7 @@ def stratified_by_patch(patch, patch_count, rows, rng, dtype=np.float64):
     low-discrepancy set, and patches stay independent of each other)."""
     counts = np.bincount(patch, minlength=patch_count)
     runs = counts.compress(counts > 0)  # the samples of each patch that has any, in order
-    start = np.cumsum(runs) - runs
-    rank = np.arange(patch.size) - np.repeat(start, runs)
+    rank = ranks_in_runs(runs)
     table = SOBOL.rows(int(runs.max(initial=1)))
     shift = rng.integers(0, 1 << 32, size=(len(rows), runs.size), dtype=np.uint32)  # (a patch with no sample draws none)
     points = table[list(rows)].take(rank, axis=1)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .faces import starts_of, triangle_subdivisions
+from .faces import ranks_in_runs, triangle_subdivisions
 
 def _grid_template(n: int, m: int):
     """Points (u, v) of an n x m grid and its cells as local point indices.
@@ -160,9 +160,7 @@ def add_kept_faces(b, plan, points, face_sizes, corner_verts):
     kept = np.nonzero(kept_face)[0]
     if len(kept):
         ksizes = face_sizes[kept]
-        corner_idx = np.repeat(starts[kept], ksizes) + (
-            np.arange(int(ksizes.sum())) - np.repeat(starts_of(ksizes), ksizes)
-        )
+        corner_idx = np.repeat(starts[kept], ksizes) + ranks_in_runs(ksizes)
         verts = corner_verts[corner_idx]
         first = b.add_points(_vertex_keys(verts), points[verts])
         b.add_faces(ksizes, first + np.arange(len(verts)), kept, kept * 0)

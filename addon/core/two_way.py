@@ -51,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import rays
+from .faces import ranks_in_runs
 from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct, split_lost
 from .jacobi import HALTON, systematic_counts
 from .sampling import LAST_BELOW_ONE, SOBOL, unit_floats
@@ -279,10 +280,9 @@ def _paired_ranks(ray_patch, negative, P, rng):
     each sign's set evenly spread): the two leave the patch in the same direction from nearby
     points, and where they land on the same patch their shares, of opposite signs, cancel."""
     key = ray_patch.astype(np.int64) * 2 + negative
-    counts = np.bincount(key, minlength=2 * P)
     order = np.argsort(key, kind="stable")
     rank = np.empty(key.size, dtype=np.int64)
-    rank[order] = np.arange(key.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    rank[order] = ranks_in_runs(np.bincount(key, minlength=2 * P))
     return rank, rng.integers(0, 1 << 32, size=(2, P), dtype=np.uint32)
 
 
