@@ -9,12 +9,13 @@ imported only here, only when a cluster is asked for.
 """
 from __future__ import annotations
 
+import copy
 import hashlib
 import pickle
 import threading
 import time
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -88,7 +89,9 @@ class WalkParameters:
     speedups: object          # Speedups, as the solver resolved them
     gather_samples: tuple | None  # per patch, with the direct light gathered
     method: str = WALK            # how the light is carried (names.METHODS)
-    fate_shares: tuple | None = None  # the gathering's (escaped, blocked) split (first_shot.fate_shares)
+    # The gathering's (escaped, blocked) split, a solve's own (first_shot.fate_shares): not part
+    # of the tables' key, so that solves of other seeds reuse the tables.
+    fate_shares: tuple | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,26 +156,36 @@ def _tables(payload, parameters):
     """This worker's walk tables for the scene and parameters, built once and kept; the
     geometry (and its Embree scene) once per geometry, across solves."""
     _tune_allocator()
-    key = (payload.key, parameters)
     with _worker_lock:
-        tables = _worker_tables.get(key)
-        if tables is not None:
-            _worker_tables.move_to_end(key)
-            return tables
-        geometry = _worker_geometries.get(payload.geometry_key)
-        scene = PatchScene(*payload.arrays, lights=payload.lights, aim=payload.aim, _geometry=geometry)
-        _worker_geometries[payload.geometry_key] = scene.geometry
-        p = parameters
-        tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups)
-        tables.method = p.method
-        if p.gather_samples is not None:
-            tables.gathering = Gathering(scene, np.asarray(p.gather_samples))
-            tables.gathering.fate_shares = p.fate_shares
-        _worker_tables[key] = tables
-        for cache in (_worker_tables, _worker_geometries):
-            while len(cache) > WORKER_TABLES:
-                cache.popitem(last=False)
+        tables = _cached_tables(payload, parameters)
+    if parameters.fate_shares is None:
         return tables
+    tables = copy.copy(tables)  # (the solve's own split, on shared tables)
+    tables.gathering = copy.copy(tables.gathering)
+    tables.gathering.fate_shares = parameters.fate_shares
+    return tables
+
+
+def _cached_tables(payload, parameters):
+    """The tables for the scene and parameters (under _worker_lock), built once and kept."""
+    key = (payload.key, parameters)
+    tables = _worker_tables.get(key)
+    if tables is not None:
+        _worker_tables.move_to_end(key)
+        return tables
+    geometry = _worker_geometries.get(payload.geometry_key)
+    scene = PatchScene(*payload.arrays, lights=payload.lights, aim=payload.aim, _geometry=geometry)
+    _worker_geometries[payload.geometry_key] = scene.geometry
+    p = parameters
+    tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups)
+    tables.method = p.method
+    if p.gather_samples is not None:
+        tables.gathering = Gathering(scene, np.asarray(p.gather_samples))
+    _worker_tables[key] = tables
+    for cache in (_worker_tables, _worker_geometries):
+        while len(cache) > WORKER_TABLES:
+            cache.popitem(last=False)
+    return tables
 
 
 def cluster_chunks(payload, parameters, seed, first_chunk, sizes):

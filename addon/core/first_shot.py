@@ -123,7 +123,9 @@ class Gathering:
         self.shadow_density = self.choice[:scene.patch_count] / scene.patch_area
         self.area_per_sample = scene.patch_area / self.samples
         self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
-        self.fate_shares = (1.0, 0.0)  # (escaped, blocked) of the light found on no front: fate_shares
+        # (escaped, blocked) of the light found on no front: what the solve measures (fate_shares),
+        # all escaped until then.
+        self.fate_shares = (1.0, 0.0)
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
 
     def draw(self, rng):

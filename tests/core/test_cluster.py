@@ -7,9 +7,9 @@ import time
 
 import numpy as np
 import pytest
-from boxes import box_scene
+from boxes import box_scene, rectangles_to_mesh
 
-from addon.core import GATHERED, solve
+from addon.core import GATHERED, PatchScene, solve
 from addon.core.names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE
 from addon.core.cluster import ClusterError
 from addon.core.solver import chunk_paths_for
@@ -64,6 +64,32 @@ def test_the_two_way_iteration_on_a_cluster_is_bitwise_the_local_one(client, sce
     remote = solve(scene, paths=30_000, seed=5, method="two_way", exit_point=exit_point, cluster=client)
     assert np.array_equal(local.radiosity, remote.radiosity) and local.rays == remote.rays
     assert np.array_equal(local.reflected_variance, remote.reflected_variance, equal_nan=True)
+
+
+def _worker_table_ids():
+    from addon.core import cluster
+
+    return sorted(id(tables) for tables in cluster._worker_tables.values())
+
+
+def test_each_solve_s_light_fates_reach_the_workers_and_the_tables_are_kept_across_seeds(client):
+    """An emitter under a card that faces away: the light found on no front is split between
+    escaped and blocked by each solve's own fate_shares. On the cluster the accounts are bitwise
+    the local ones for either seed, and the second seed reuses the workers' tables (the split
+    travels with the solve, not in the tables' key)."""
+    origin = np.array([[0.0, 0, 0], [0.0, 0, 0.5]])
+    u, v = np.array([[1.0, 0, 0], [1.0, 0, 0]]), np.array([[0.0, 1, 0], [0.0, 1, 0]])
+    card = PatchScene(*rectangles_to_mesh(origin, u, v), [0.5, 0.7], [1.0, 0.0])
+    tables = None
+    for seed in (5, 6):
+        local = solve(card, paths=20_000, seed=seed, method="two_way", threads=2)
+        remote = solve(card, paths=20_000, seed=seed, method="two_way", cluster=client)
+        assert local.energy["blocked"][0] > 0 and local.energy["escaped"][0] > 0
+        for key in local.energy:
+            assert np.array_equal(local.energy[key], remote.energy[key]), key
+        now = client.run(_worker_table_ids)
+        assert tables is None or now == tables
+        tables = now
 
 
 def test_a_killed_worker_loses_no_paths(client, scene):
