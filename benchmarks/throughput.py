@@ -140,6 +140,18 @@ def solve_rate(scene, estimator, threads, paths, seed=1, **kw):
     return r.rays / r.seconds, r.rays / cpu
 
 
+def expected_rays_per_path(scene, estimator, method="walk", threshold=1e-3, exit_point="random", **_):
+    """About the rays a path of ``method`` costs, to size a run to its seconds: the paper's
+    expected path length for the walk, the two-way iteration's own count
+    (``two_way.rays_per_path``, and its first reflection's rays with the hit exit)."""
+    from addon.core import two_way
+
+    length = predict(scene, estimator, threshold=threshold).expected_path_length
+    if method != "two_way":
+        return length
+    return two_way.rays_per_path(length) + (two_way.FIRST_REFLECTION_RAYS if exit_point == "hit" else 0.0)
+
+
 def stolen_seconds():
     """CPU time the hypervisor has given to other guests while this machine's CPUs had work
     (/proc/stat's steal, summed over CPUs), or NaN where the system does not say."""
@@ -179,7 +191,7 @@ def paired_ratio(scene, estimator, threads, seconds, rounds=5, max_rounds=12, qu
     fewer than 3 are quiet, or where steal cannot be read).
     Returns the medians of the raw and solve rates, the median, lowest and highest per-round
     ratio, by wall clock and per CPU second, and the quiet and all rounds' counts."""
-    p = predict(scene, estimator, threshold=kw.get("threshold", 1e-3))
+    rays_a_path = expected_rays_per_path(scene, estimator, **kw)
     solve(scene, estimator, paths=20_000, threads=threads, **kw)  # warm up
     tracer = walk_tracer(scene, kw.get("exit_point", "random"))
 
@@ -189,7 +201,7 @@ def paired_ratio(scene, estimator, threads, seconds, rounds=5, max_rounds=12, qu
     raws, rates, ratios, quiet = [], [], [], []
     before, before_steal = raw_now()
     while len(raws) < max_rounds and sum(quiet) < rounds:
-        paths = max(1, int(before[0] * seconds / p.expected_path_length))
+        paths = max(1, int(before[0] * seconds / rays_a_path))
         rate, solve_steal = _with_steal(
             lambda: np.array(solve_rate(scene, estimator, threads, paths, seed=len(raws) + 1, **kw)), threads)
         after, after_steal = raw_now()
@@ -493,17 +505,34 @@ def room_with_sphere(level=4, centre=(5.0, 4.0, 0.61), radius=0.6, reflectivity=
     return PatchScene(vertices, triangles, triangle_patch, reflectivity, emission)
 
 
+# The paper's estimators (the default table), and the methods beyond the paper (--methods).
+ESTIMATOR_CASES = (("finite", {}), ("biased_infinite", {"threshold": 1e-3}))
+METHOD_CASES = (("finite", {"method": "two_way"}), ("finite", {"direct_light": "gathered"}))
+METHOD_LABELS = {("two_way", None): "two-way iteration", (None, "gathered"): "walk, gathered first bounce"}
+METHODS_NOTE = [
+    "The two-way iteration (the panel's Automatic takes it in most scenes) and the finite walk with its",
+    "direct light gathered by shadow rays. Their rays are all counted: the gathering's shadow and",
+    "cosine rays, the hit exit's first-reflection rays, every generation's. Embree's raw rate is the",
+    "same as the walks' (pre-drawn random rays, first hits), so the ratio says how much of a solve's",
+    "time the tracing is, not how well its rays are chosen (the suite, `suite.md`, measures that).",
+    "",
+]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", nargs="+", default=["small_room", "cornell", "room_fig4", "room_fig4_sphere"])
     ap.add_argument("--threads", nargs="+", type=int, default=[1, 2])
     ap.add_argument("--seconds", type=float, default=3.0)
-    ap.add_argument("--out", default=str(RESULTS / "throughput.md"))
+    ap.add_argument("--out", default=None, help="default: results/throughput.md, with --methods throughput_methods.md")
+    ap.add_argument("--methods", action="store_true",
+                    help="the two-way iteration and the walk with its direct light gathered instead of the paper's estimators")
     ap.add_argument("--breakdown", action="store_true",
                     help="where a walk's time goes (1 thread), into results/throughput_breakdown.md")
     ap.add_argument("--short", action="store_true",
                     help="short runs (3e4 to 3e6 paths), chunks grouped or one by one, into results/throughput_short.md")
     args = ap.parse_args(argv)
+    args.out = args.out or str(RESULTS / ("throughput_methods.md" if args.methods else "throughput.md"))
     if args.breakdown:
         return write_breakdown(args)
     if args.short:
@@ -511,7 +540,8 @@ def main(argv=None):
 
     def case_row(name, scene, threads, estimator, exit_point, kw):
         m = paired_ratio(scene, estimator, threads, args.seconds, exit_point=exit_point, **kw)
-        row = (name, scene.triangle_count, m["traced_triangles"], threads, estimator, exit_point,
+        label = METHOD_LABELS.get((kw.get("method"), kw.get("direct_light")), estimator)
+        row = (name, scene.triangle_count, m["traced_triangles"], threads, label, exit_point,
                m["raw"] / 1e6, m["solve"] / 1e6, m["ratio"], m["ratio_low"], m["ratio_high"], m["cpu_ratio"],
                m["own_rays_factor"], m["ratio"] / m["own_rays_factor"], m["raw_triangles"] / 1e6,
                m["solve"] / m["raw_triangles"], m["ratio"] / m["own_rays_on_triangles_factor"],
@@ -527,7 +557,7 @@ def main(argv=None):
     for name in args.scene:
         scene = build_scene(name)
         for threads in args.threads:
-            for estimator, kw in (("finite", {}), ("biased_infinite", {"threshold": 1e-3})):
+            for estimator, kw in (METHOD_CASES if args.methods else ESTIMATOR_CASES):
                 for exit_point in ("random", "hit"):
                     cases.append((name, scene, threads, estimator, exit_point, kw))
                     rows.append(case_row(*cases[-1]))
@@ -540,8 +570,9 @@ def main(argv=None):
             if again[-2] > rows[k][-2]:
                 rows[k] = again
     lines = [
-        "# Throughput: solve() against Embree's raw ray rate",
+        "# Throughput: solve() against Embree's raw ray rate" + (", the methods beyond the paper" if args.methods else ""),
         "",
+        *(METHODS_NOTE if args.methods else []),
         f"Machine: {platform.processor() or platform.machine()}, {platform.python_version()}; "
         f"`python -m benchmarks.throughput {' '.join(sys.argv[1:])}`.",
         "Raw: embreex alone (first hits) on pre-drawn rays of the same kind over the same threads, on the scene the "
@@ -575,7 +606,7 @@ def main(argv=None):
         "triangles in the same alternation): the issue's target read on the scene it names (its",
         "triangles), for the same rays and threads.",
         "",
-        "| scene | triangles | traced | threads | estimator | exit point | raw Mray/s | solve Mray/s | ratio | rounds "
+        "| scene | triangles | traced | threads | " + ("method" if args.methods else "estimator") + " | exit point | raw Mray/s | solve Mray/s | ratio | rounds "
         "| ratio per CPU second | own rays | ratio, own rays | raw on the patch triangles Mray/s | solve / that "
         "| solve / own rays on the patch triangles |",
         "|---|---:|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",

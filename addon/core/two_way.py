@@ -51,10 +51,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import rays
-from .faces import ranks_in_runs
+from .faces import starts_of
 from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct, split_lost
 from .jacobi import HALTON, systematic_counts
-from .sampling import LAST_BELOW_ONE, SOBOL, unit_floats
+from .sampling import SOBOL, unit_floats
 from .tallies import ChunkTally
 
 # Rays of a chunk of n paths: n FIRST_REFLECTION_RAYS from the gathering samples (hit exit),
@@ -72,6 +72,7 @@ DIRECT_SAMPLES = 1.5
 LEAST_RAYS = 0.5
 # A generation's rays (and the first reflection's) are cast this many at a time.
 RAY_BLOCK = 1 << 18
+FLOAT32_BELOW_ONE = np.nextafter(np.float32(1.0), np.float32(0.0))
 
 
 @dataclass
@@ -278,11 +279,14 @@ def _paired_ranks(ray_patch, negative, P, rng):
     ((2,P) uint32). Ray r of a patch's rays that carry more than the patch's mean and ray r of
     those that carry less take Sobol' point r of the patch's shift (each direction uniform,
     each sign's set evenly spread): the two leave the patch in the same direction from nearby
-    points, and where they land on the same patch their shares, of opposite signs, cancel."""
-    key = ray_patch.astype(np.int64) * 2 + negative
-    order = np.argsort(key, kind="stable")
-    rank = np.empty(key.size, dtype=np.int64)
-    rank[order] = ranks_in_runs(np.bincount(key, minlength=2 * P))
+    points, and where they land on the same patch their shares, of opposite signs, cancel.
+    ``ray_patch`` is in patch order (the samples are), so a rank is a count of the rays before
+    it in its patch's run with its sign: no sort."""
+    runs = np.bincount(ray_patch, minlength=P)
+    run_start = np.repeat(starts_of(runs), runs)  # each ray's patch's first ray
+    negative_before = np.cumsum(negative) - negative  # in the whole list
+    negative_rank = negative_before - negative_before[run_start]
+    rank = np.where(negative, negative_rank, np.arange(ray_patch.size) - run_start - negative_rank)
     return rank, rng.integers(0, 1 << 32, size=(2, P), dtype=np.uint32)
 
 
@@ -306,9 +310,10 @@ def _ray_blocks(count, rng):
         for start in range(0, count, RAY_BLOCK):
             n = min(RAY_BLOCK, count - start)
             points = HALTON.rows(n)[:, :n] + (shift if start == 0 else rng.random(4))[:, None]
-            points -= np.floor(points)
-            np.minimum(points, LAST_BELOW_ONE, out=points)
-            yield slice(start, start + n), points.astype(np.float32)
+            points -= points >= 1.0  # (both terms below 1)
+            points = points.astype(np.float32)
+            np.minimum(points, FLOAT32_BELOW_ONE, out=points)  # (a float64 just below 1 rounds to 1)
+            yield slice(start, start + n), points
 
     return blocks()
 
