@@ -66,7 +66,7 @@ class Spot:
         """x of unit world directions (3, n) leaving the light."""
         if self.to_local is None:
             return _dot(np.asarray(self.axis, np.float64)[:, None], directions)
-        local = np.asarray(self.to_local, np.float64) @ directions
+        local = _rotate(self.to_local, directions)
         return local[2] / np.sqrt(_dot(local, local))
 
     def solid_angle(self):
@@ -303,7 +303,7 @@ class WorldLight:
         else:
             towards_sky = _pixel_directions(self.image.shape[:2], rows, u[2], u[3])
             if self.rotation is not None:
-                towards_sky = np.asarray(self.rotation, np.float64).T @ towards_sky
+                towards_sky = _rotate(np.asarray(self.rotation, np.float64).T, towards_sky)
         direction = -towards_sky
         return _disc_origins(direction, u[0], u[1], aim, reach), direction
 
@@ -317,7 +317,7 @@ class WorldLight:
         """(3, n) pi times the sky's radiance in each direction (3, n) towards it: W, or its pixel's."""
         if self.image is None:
             return np.repeat(np.asarray(self.irradiance, np.float64)[:, None], towards.shape[1], axis=1)
-        sky = towards if self.rotation is None else np.asarray(self.rotation, np.float64) @ towards
+        sky = towards if self.rotation is None else _rotate(self.rotation, towards)
         row, column = equirectangular_pixel(sky, self.image.shape[:2])
         return self.image[row, column].T.astype(np.float64)
 
@@ -371,6 +371,12 @@ def _towards(points, x):
 
 def _dot(a, b):
     return np.einsum("in,in->n", a, b) if a.shape[1] == b.shape[1] else (a * b).sum(axis=0)
+
+
+def _rotate(matrix, vectors):
+    """(3, n) ``matrix`` (3, 3) times ``vectors`` (3, n), without BLAS (whose threads, woken by a
+    large product, spin on and take the CPUs from the solve's other threads: two_way._sums)."""
+    return np.einsum("ij,jn->in", np.asarray(matrix, np.float64), vectors)
 
 
 def _sphere_directions(u1, u2):
