@@ -238,3 +238,23 @@ def test_a_patch_s_estimate_is_its_samples_mean_whatever_their_count():
     np.testing.assert_allclose(H[:, 0], 2.0, rtol=1e-6)
     assert set(np.round(H[:, 1], 6)) == {0.0, 4.0}
     assert abs(H[:, 1].mean() - 2.0) < 5 * H[:, 1].std(ddof=1) / np.sqrt(400)
+
+
+def test_paths_leaving_from_the_gathering_samples_never_index_patch_tables_with_their_ids(monkeypatch):
+    """With the hit exit the walk's sources are the gathering samples, ids P, P+1, ... up to a
+    million. A patch table read with such an id in take's "wrap" mode steps down by P at a time
+    (12 ms a call for a million ids against a 600-patch table): every patch index a walk step
+    reads its normals with must be a patch's."""
+    from addon.core import rays
+
+    scene, _ = _box_with_one_emitter()
+    real, seen = rays.patch_normals, []
+
+    def checked(tables, patch):
+        seen.append(int(patch.max(initial=0)))
+        return real(tables, patch)
+
+    monkeypatch.setattr(rays, "patch_normals", checked)
+    # (chunks of more paths than a wavefront holds, so that new paths join live ones)
+    solve(scene, paths=1_000_000, seed=1, direct_light=GATHERED, threads=1, exit_point="hit")
+    assert seen and max(seen) < scene.patch_count
