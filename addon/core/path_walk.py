@@ -131,8 +131,8 @@ class PathWalk:
                 u[:4, n_live:] = first[:, start : start + new]  # stratified first rays
             return rays.leave_sources(t, p.patch, u)
         u = rng.random((2, n), dtype=np.float32)
-        # (new paths from a light take their rays from it below; a light's id, P and on, must not
-        # index a patch table: take's "wrap" steps down by P at a time, a million ids 12 ms a call)
+        # (new paths from a light take their rays from it below; its id, P and on, must not index
+        # a patch table: take's "wrap" mode steps an id down by P at a time)
         normals = rays.patch_normals(t, p.patch if t.lights is None or new <= 0 else rays.on_patches(t, p.patch))
         origins = p.leave_from
         origins += normals[:, :n_live] * np.float32(t.geometry.ray_offset)

@@ -327,5 +327,5 @@ def _bincount(patch, mask, weights, P):
 def _sums(values, weights):
     """(C,) sum over patches of ``values`` (C,P) times ``weights`` (P,), without BLAS: a large
     matrix product wakes BLAS's threads, which spin on after it and take the CPUs from the
-    solve's other threads (the figure 4 room's 2-thread solve 1.35x slower)."""
+    solve's other threads."""
     return np.einsum("cp,p->c", values, weights)
