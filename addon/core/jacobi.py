@@ -29,7 +29,7 @@ import numpy as np
 
 from . import rays
 from .faces import ranks_in_runs
-from .sampling import LAST_BELOW_ONE, GrowingTable, draw_sources, halton
+from .sampling import GrowingTable, draw_sources, halton, shifted_float32
 from .tallies import ChunkTally, chunk_counts, chunk_sums
 
 # Halton points 0..n-1 in bases 2, 3, 5, 7, (4, n) float64.
@@ -73,10 +73,8 @@ def shoot_from_patches(tables, unshot, rng):
     index = ranks_in_runs(rays_of)
     points = HALTON.rows(int(rays_of.max())).take(index, axis=1)
     points += corner.T.take(chunk, axis=1)
-    points -= np.floor(points)
-    np.minimum(points, LAST_BELOW_ONE, out=points)
     u = np.empty((tables.uniforms_per_ray, cell.size), dtype=np.float32)
-    u[:4] = points
+    u[:4] = shifted_float32(points)
     if tables.row_triangle is not None:
         rng.random(dtype=np.float32, out=u[tables.row_triangle])
     origins, directions = rays.leave_random(tables, patch, u)

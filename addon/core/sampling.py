@@ -14,6 +14,7 @@ from .faces import ranks_in_runs
 TWO_PI = np.float32(2.0 * np.pi)
 Z_TOP = np.float32(1.0 - 2.0**-24)  # z = Z_TOP - 2 u: the midpoints of float32's [0, 1) grid
 LAST_BELOW_ONE = np.nextafter(1.0, 0.0)
+FLOAT32_BELOW_ONE = np.nextafter(np.float32(1.0), np.float32(0.0))
 # SourceTable.sample draws multinomial counts when there are at least this many paths per
 # source (a binomial draw per source costs about as much as this many per-path choices).
 MULTINOMIAL_PATHS_PER_SOURCE = 8
@@ -199,6 +200,16 @@ def stratified_by_patch(patch, patch_count, rows, rng, dtype=np.float64):
     points = table[list(rows)].take(rank, axis=1)
     points ^= np.repeat(shift, runs, axis=1)
     return unit_floats(points, dtype)
+
+
+def shifted_float32(points):
+    """float64 ``points`` (changed in place), each a point in [0, 1) plus a shift in [0, 1)
+    (Cranley-Patterson), wrapped modulo 1 into float32 in [0, 1): a float64 just below 1 would
+    round to 1 as float32."""
+    points -= points >= 1.0
+    out = points.astype(np.float32)
+    np.minimum(out, FLOAT32_BELOW_ONE, out=out)
+    return out
 
 
 def unit_floats(points, dtype=np.float64):

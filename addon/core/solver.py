@@ -75,8 +75,8 @@ MEASURED_CAP_FACTOR = 64
 # benchmarks/results/auto_method.md). Its chunks get them as far as TWO_WAY_MAX_CHUNK_PATHS and
 # MIN_MEASURED_CHUNKS chunks in the plan allow; method="auto" takes the walk where they do not,
 # and in scenes of more than AUTO_MAX_PATCHES: a two-way chunk holds several (C,P) arrays, and
-# through the operator two-way solves peaked at 784, 908 and 1,039 MiB at 250,852, 391,999 and
-# 499,968 patches, where the walk keeps a million under 1 GiB (docs/performance.md).
+# this bound keeps a two-way solve through the operator under 1 GiB, as the walk keeps a million
+# patches (docs/performance.md, memory_two_way_sizes.md).
 TWO_WAY_RAYS_PER_PATCH = 4
 AUTO_MAX_PATCHES = 3 << 17
 # ... and grow on to this many, within TWO_WAY_MIN_CHUNKS chunks of the plan: the noise a

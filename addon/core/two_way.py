@@ -51,10 +51,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import rays
-from .faces import starts_of
+from .faces import ranks_in_runs
 from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct, split_lost
 from .jacobi import HALTON, systematic_counts
-from .sampling import SOBOL, unit_floats
+from .sampling import SOBOL, shifted_float32, unit_floats
 from .tallies import ChunkTally
 
 # Rays of a chunk of n paths: n FIRST_REFLECTION_RAYS from the gathering samples (hit exit),
@@ -72,7 +72,6 @@ DIRECT_SAMPLES = 1.5
 LEAST_RAYS = 0.5
 # A generation's rays (and the first reflection's) are cast this many at a time.
 RAY_BLOCK = 1 << 18
-FLOAT32_BELOW_ONE = np.nextafter(np.float32(1.0), np.float32(0.0))
 
 
 @dataclass
@@ -282,11 +281,10 @@ def _paired_ranks(ray_patch, negative, P, rng):
     points, and where they land on the same patch their shares, of opposite signs, cancel.
     ``ray_patch`` is in patch order (the samples are), so a rank is a count of the rays before
     it in its patch's run with its sign: no sort."""
-    runs = np.bincount(ray_patch, minlength=P)
-    run_start = np.repeat(starts_of(runs), runs)  # each ray's patch's first ray
+    position = ranks_in_runs(np.bincount(ray_patch, minlength=P))  # within its patch's run
     negative_before = np.cumsum(negative) - negative  # in the whole list
-    negative_rank = negative_before - negative_before[run_start]
-    rank = np.where(negative, negative_rank, np.arange(ray_patch.size) - run_start - negative_rank)
+    negative_rank = negative_before - negative_before[np.arange(ray_patch.size) - position]
+    rank = np.where(negative, negative_rank, position - negative_rank)
     return rank, rng.integers(0, 1 << 32, size=(2, P), dtype=np.uint32)
 
 
@@ -310,10 +308,7 @@ def _ray_blocks(count, rng):
         for start in range(0, count, RAY_BLOCK):
             n = min(RAY_BLOCK, count - start)
             points = HALTON.rows(n)[:, :n] + (shift if start == 0 else rng.random(4))[:, None]
-            points -= points >= 1.0  # (both terms below 1)
-            points = points.astype(np.float32)
-            np.minimum(points, FLOAT32_BELOW_ONE, out=points)  # (a float64 just below 1 rounds to 1)
-            yield slice(start, start + n), points
+            yield slice(start, start + n), shifted_float32(points)
 
     return blocks()
 

@@ -173,3 +173,17 @@ def test_stratified_points_are_uniform_evenly_spread_and_independent_between_pat
     assert abs(chi2 - 15) < 5 * np.sqrt(30)
     r = np.corrcoef(draws[:, 1, 0], draws[:, 1, 1])[0, 1]
     assert abs(r) < 5 / np.sqrt(4000)
+
+
+def test_shifted_points_wrap_into_float32_below_one():
+    """A point plus its shift, modulo 1, as float32: exactly the float64 remainder where float32
+    holds it, and never 1.0 where a float64 just below 1 would round up to it."""
+    from addon.core.sampling import shifted_float32
+
+    point = np.array([0.25, 0.75, 0.5, 1 - 2.0**-53, 0.0, 1 - 2.0**-30])
+    shift = np.array([0.5, 0.5, 0.5 - 2.0**-40, 0.0, 1 - 2.0**-53, 0.5])
+    out = shifted_float32(point + shift)
+    assert out.dtype == np.float32 and np.all(out < 1.0) and np.all(out >= 0.0)
+    np.testing.assert_array_equal(out[:2], np.float32([0.75, 0.25]))
+    assert out[3] == out[4] == np.nextafter(np.float32(1), np.float32(0))  # (both round to 1.0f before the clamp)
+    np.testing.assert_allclose(out, np.mod(point + shift, 1.0), atol=2.0**-24)
