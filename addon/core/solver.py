@@ -39,7 +39,7 @@ from .names import (
     TWO_WAY,
     WALK,
 )
-from .cluster import ClusterRunner, WalkParameters
+from .cluster import ClusterRunner, WalkParameters, cluster_address
 from .runners import ThreadRunner
 from .speedups import Speedups
 from .tables import WalkTables
@@ -283,6 +283,8 @@ def solve(
         raise ValueError(f"seed must be a non-negative whole number; got {seed!r}")
     if speedups is not None and not isinstance(speedups, Speedups):
         raise ValueError(f"speedups must be a Speedups; got {speedups!r}")
+    if isinstance(cluster, str):
+        cluster = cluster_address(cluster)  # (its form, before any work; connecting comes later)
     threads = int(threads or min(os.cpu_count() or 1, 8))
     paths = None if paths is None else int(paths)  # numpy integers welcome
     start = time.perf_counter()

@@ -244,6 +244,51 @@ def test_an_unreachable_cluster_is_one_line_and_nothing_is_written(tmp_path):
     assert not (tmp_path / "c.blend").exists()
 
 
+def test_a_malformed_cluster_address_is_refused_before_the_scene_is_read(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "addon", "--scene", "cornell", "--cluster", "http://127.0.0.1:8786",
+                           "--no-preview", "-q", "-o", str(tmp_path / "c.blend")], cwd=str(tmp_path),
+                          capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().splitlines() == ["error: the cluster address must be tcp://HOST:PORT, or "
+                                                "tls://HOST:PORT with the cluster's certificates; got 'http://127.0.0.1:8786'"]
+    assert not (tmp_path / "c.blend").exists()
+
+
+def test_a_service_that_is_not_dask_is_one_line_and_nothing_is_written(tmp_path):
+    """An HTTP server's reply where a Dask scheduler's handshake was expected: one line, no
+    traceback (Dask read its first 8 bytes as a frame of 3.07 EiB), nothing written."""
+    import socket
+    import threading
+
+    server = socket.create_server(("127.0.0.1", 0))
+    connections = []
+
+    def serve():
+        while True:
+            try:
+                connection, _ = server.accept()
+            except OSError:
+                return
+            connections.append(connection)
+            connection.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
+
+    threading.Thread(target=serve, daemon=True).start()
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    try:
+        proc = subprocess.run([sys.executable, "-m", "addon", "--scene", "cornell", "--cluster", address,
+                               "--no-preview", "-q", "-o", str(tmp_path / "c.blend")], cwd=str(tmp_path),
+                              capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONPATH": ROOT})
+    finally:
+        server.close()
+        for connection in connections:
+            connection.close()
+    assert proc.returncode == 1
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+    assert lines[0].endswith(f"{address!r} does not answer as a Dask scheduler (another service there?)")
+    assert not (tmp_path / "c.blend").exists()
+
+
 def test_run_sh_takes_paths_from_the_callers_directory(tmp_path):
     """tools/run.sh from another directory: -o and --open are the caller's paths."""
     elsewhere = tmp_path / "work"
