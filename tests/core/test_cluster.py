@@ -209,6 +209,26 @@ def test_a_worker_that_cannot_load_the_core_is_one_clear_error(client, scene, mo
     assert asked and asked[0].get("callback_timeout")  # the check itself is bounded in time
 
 
+def test_a_worker_without_the_core_is_one_clear_error(scene, tmp_path):
+    """A real worker process that cannot import addon.core (started elsewhere, without the
+    repository on its path) cannot even load the check: its answer names the missing module."""
+    scheduler = distributed.LocalCluster(n_workers=0, processes=False, protocol="tcp", host="127.0.0.1",
+                                         dashboard_address=None, silence_logs=50)
+    environment = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", scheduler.scheduler_address,
+                               "--nthreads", "1", "--no-nanny", "--no-dashboard"], cwd=str(tmp_path),
+                              env=environment, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        with distributed.Client(scheduler, set_as_default=False) as client:
+            client.wait_for_workers(1, timeout=60)
+        with pytest.raises(ClusterError, match="1 of the cluster's 1 workers cannot run the walks.*No module named 'addon'"):
+            solve(scene, paths=1000, cluster=scheduler.scheduler_address)
+    finally:
+        worker.kill()
+        worker.wait(timeout=30)
+        scheduler.close()
+
+
 MALFORMED = ["garbage", "http://127.0.0.1:8786", "inproc://127.0.0.1/1/1", "tcp://127.0.0.1:", "tcp://:8786",
              "tcp://127.0.0.1:0", "tcp://127.0.0.1:65536", "ws://127.0.0.1:8786", "tcp://127.0.0.1:8786/x", "",
              "tcp://127.0.0.1 :8786"]
