@@ -104,7 +104,13 @@ def connect(cluster):
 
 
 def _check_workers(client, deadline):
-    """ClusterError unless the cluster has workers and every one can run the walks."""
+    """ClusterError unless the scheduler can load the core (it unpickles the tasks' arguments)
+    and the cluster has workers that can all run the walks."""
+    try:
+        client.run_on_scheduler(_loaded, callback_timeout=max(1.0, deadline - time.monotonic()))
+    except Exception as exc:  # noqa: BLE001 - the scheduler could not load this function, or is silent
+        raise ClusterError(f"the Dask scheduler at {client.scheduler.address} cannot load addon.core "
+                           f"({_one_line(exc)}); start it with the repository on PYTHONPATH, as the workers") from exc
     try:
         workers = client.run(_worker_check, on_error="return", callback_timeout=max(1.0, deadline - time.monotonic()))
     except Exception as exc:  # noqa: BLE001 - a scheduler that does not answer in time
@@ -117,6 +123,11 @@ def _check_workers(client, deadline):
         address, problem = next(iter(missing.items()))
         raise ClusterError(f"{len(missing)} of the cluster's {len(workers)} workers cannot run the walks "
                            f"(e.g. {address}: {problem}); they need numpy, embreex and addon.core importable")
+
+
+def _loaded():
+    """Nothing: that it runs on the scheduler shows addon.core loads there."""
+    return ""
 
 
 def _worker_check():

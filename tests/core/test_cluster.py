@@ -229,6 +229,34 @@ def test_a_worker_without_the_core_is_one_clear_error(scene, tmp_path):
         scheduler.close()
 
 
+def _free_port():
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_a_scheduler_without_the_core_is_one_clear_error(scene, tmp_path):
+    """Dask's scheduler unpickles the tasks' arguments: one started without addon.core on its path
+    is said before any task (a worker with the core is there), not as a failed task's traceback."""
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    environment = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", address.rsplit(":", 1)[1], "--dashboard-address", ":0"], cwd=str(tmp_path),
+                                 env=environment, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+                               "--no-nanny", "--no-dashboard"], cwd=str(tmp_path),
+                              env={**environment, "PYTHONPATH": ROOT}, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        with distributed.Client(address, timeout=60, set_as_default=False) as client:
+            client.wait_for_workers(1, timeout=60)
+        with pytest.raises(ClusterError, match="scheduler at .* cannot load addon.core.*No module named 'addon'"):
+            solve(scene, paths=1000, cluster=address)
+    finally:
+        for process in (worker, scheduler):
+            process.kill()
+            process.wait(timeout=30)
+
+
 MALFORMED = ["garbage", "http://127.0.0.1:8786", "inproc://127.0.0.1/1/1", "tcp://127.0.0.1:", "tcp://:8786",
              "tcp://127.0.0.1:0", "tcp://127.0.0.1:65536", "ws://127.0.0.1:8786", "tcp://127.0.0.1:8786/x", "",
              "tcp://127.0.0.1 :8786"]
