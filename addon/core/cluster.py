@@ -6,6 +6,11 @@ A task is "chunks k, k+1, ... of sizes n_k" with the solve's seed: it draws from
 streams, so its tallies are bitwise those a thread would make, on whatever worker, however many
 times it runs (a lost worker's tasks run again elsewhere). Dask's ``distributed`` is optional:
 imported only here, only when a cluster is asked for.
+
+Dask's messages are pickles: a scheduler can run code in this process, so the cluster is trusted
+like this machine. A ``tls://`` address authenticates it by the cluster's CA (Dask's configuration);
+the address's form is checked, and the scheduler's first message read without pickle and with a size
+limit, before Dask's client connects.
 """
 from __future__ import annotations
 
@@ -72,7 +77,7 @@ def cluster_address(text):
 def connect(cluster):
     """A ``distributed.Client`` for ``cluster`` (a Client, or a scheduler address), and whether it
     was made here (to be closed after the solve): one line (ClusterError) within CONNECT_SECONDS
-    and a few more if the address is malformed, Dask missing, the scheduler unreachable, not
+    (and a second or two) if the address is malformed, Dask missing, the scheduler unreachable, not
     Dask's or refusing the certificates, or its workers lack the core."""
     try:
         import distributed

@@ -257,7 +257,8 @@ def solve(
     paper, ``first_shot``) gathers each patch's direct light by shadow rays and walks only its
     reflection; the paper's formulas do not predict its error, so with ``target_mse`` it always
     stops on the measured error. ``cluster`` (a ``dask.distributed.Client`` or a scheduler
-    address) runs the chunks on a Dask cluster instead of threads: bitwise the same result. ``sampling="stratified"`` (beyond
+    address, ``tcp://host:port`` or ``tls://host:port``, trusted like this machine) runs the chunks on
+    a Dask cluster instead of threads: bitwise the same result. ``sampling="stratified"`` (beyond
     the paper) allots each chunk's paths to sources in proportion to power and draws the first
     ray from a randomly shifted low-discrepancy set: same expectation, usually less noise;
     the predicted path counts are derived for the paper's plain ``"independent"`` sampling.
