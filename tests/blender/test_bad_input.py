@@ -1,4 +1,4 @@
-"""Bad input and bad timing in Blender (issue 6): each case ends with a clear report, the scene
+"""Bad input and bad timing in Blender: each case ends with a clear report, the scene
 is either unchanged or holds the complete new result, and the worker thread is gone."""
 
 import math

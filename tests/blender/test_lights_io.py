@@ -1,4 +1,4 @@
-"""Blender's lights and world read as the core's light sources, in Cycles' units (issue 23)."""
+"""Blender's lights and world read as the core's light sources, in Cycles' units."""
 import math
 
 import bpy

@@ -1,6 +1,6 @@
 """solve(..., cluster=...) on a Dask LocalCluster of 2 worker processes: bitwise the local
 result, surviving a killed worker, with clear errors for an unreachable scheduler and a missing
-Dask, and cancel keeping the complete chunks (issue 25)."""
+Dask, and cancel keeping the complete chunks."""
 import os
 import sys
 import time
