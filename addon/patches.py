@@ -187,14 +187,37 @@ def degenerate_area(objects) -> float:
     return RELATIVE_DEGENERATE_AREA * diagonal**2
 
 
+def check_finite_vertices(objects):
+    """ValueError naming the first object whose faces use a vertex that is NaN or infinite
+    (a script, a driver, a modifier): the scene's extent, and every area, would be NaN."""
+    for o in objects:
+        used = np.unique(o.triangles)
+        bad = int(np.count_nonzero(~np.isfinite(o.vertices[used]).all(axis=1)))
+        if bad:
+            hint = " (its location, rotation or scale?)" if bad == used.size else ""
+            raise ValueError(f"'{o.name}': {bad} of the {used.size} vertices its faces use "
+                             f"{'is' if bad == 1 else 'are'} not a finite number (NaN or infinite){hint}")
+
+
+def _extent_ends(objects):
+    """'from 'A' to 'B'': the objects at both ends of the scene's widest side."""
+    boxes = [(o.name, o.vertices[np.unique(o.triangles)]) for o in objects if len(o.triangles)]
+    lo = np.array([v.min(axis=0) for _, v in boxes])
+    hi = np.array([v.max(axis=0) for _, v in boxes])
+    axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0)))
+    return f"from '{boxes[int(np.argmin(lo[:, axis]))][0]}' to '{boxes[int(np.argmax(hi[:, axis]))][0]}'"
+
+
 def drop_zero_area_faces(objects):
     """(objects, notes): faces with no area at the core's tolerance left out, objects left
     without faces skipped. Such faces (collinear or coincident corners, common in imported
-    meshes) are invisible, and a patch made of them only would make the core refuse the scene."""
+    meshes) are invisible, and a patch made of them only would make the core refuse the scene.
+    Faces with an area of their own that the scene's extent makes too small to trace are said
+    so; a selected object left with none of its faces that way is a ValueError."""
     if not any(len(o.triangles) for o in objects):
         return [], [f"'{o.name}': every face has zero area; the object was skipped" for o in objects]
     threshold = degenerate_area(objects)
-    kept, notes = [], []
+    kept, notes, lost = [], [], []
     for o in objects:
         F = len(o.face_sizes)
         area = meshing.triangle_areas(o.vertices, o.triangles) if len(o.triangles) else np.zeros(0)
@@ -203,12 +226,22 @@ def drop_zero_area_faces(objects):
         if not flat.any():
             kept.append(o)
             continue
+        own = degenerate_area([o])  # the same tolerance with the object's own extent
+        real = np.bincount(o.triangle_face, weights=np.where(area > own, area, 0.0), minlength=F) > 0
+        small = int(np.count_nonzero(flat & real))
+        if small:
+            if flat.all() and o.receives:
+                lost.append(o.name)
+            notes.append(f"'{o.name}': {small} face{' is' if small == 1 else 's are'} too small to trace beside "
+                         f"{_too_small(objects, threshold)}: {'the object was skipped' if flat.all() else 'left out'}")
+        count = int(flat.sum()) - small
         if flat.all():
-            notes.append(f"'{o.name}': every face has zero area; the object was skipped")
+            if not small:
+                notes.append(f"'{o.name}': every face has zero area; the object was skipped")
             continue
-        count = int(flat.sum())
-        notes.append(f"'{o.name}': {count} face{'s' if count > 1 else ''} of zero area "
-                     "(collinear or coincident corners) left out")
+        if count:
+            notes.append(f"'{o.name}': {count} face{'s' if count > 1 else ''} of zero area "
+                         "(collinear or coincident corners) left out")
         keep = ~flat
         corner_face = np.repeat(np.arange(F), o.face_sizes)
         new_index = np.cumsum(keep) - 1
@@ -225,7 +258,16 @@ def drop_zero_area_faces(objects):
             slot_colours=tuple(None if c is None else c[keep_triangle] for c in o.slot_colours),
             face_slot=None if o.face_slot is None else o.face_slot[keep],
         ))
+    if lost:
+        raise ValueError(f"{', '.join(repr(name) for name in lost)}: every face is too small to trace beside "
+                         f"{_too_small(objects, threshold)}; move far objects nearer, or hide them from render")
     return kept, notes
+
+
+def _too_small(objects, threshold):
+    diagonal = (threshold / RELATIVE_DEGENERATE_AREA) ** 0.5
+    return (f"the scene's extent (a diagonal of {diagonal:.3g}, {_extent_ends(objects)}; a face needs an area "
+            f"above {RELATIVE_DEGENERATE_AREA:g} of its square, {threshold:.3g})")
 
 
 def patch_count(objects, patch_size) -> float:
@@ -280,6 +322,7 @@ def make_patches(objects, patch_size) -> Patches:
     patch size that would make more than MAX_PATCHES patches is refused before any meshing.
     A patch size of 0 is automatic (:func:`automatic_patch_size`)."""
     lights = tuple(getattr(objects, "lights", ()))  # (a scene_io.Selection carries them)
+    check_finite_vertices(objects)
     objects, notes = drop_zero_area_faces(objects)
     if not objects:
         raise ValueError("the selected objects have no faces of non-zero area")

@@ -735,3 +735,43 @@ def test_a_patch_size_that_makes_too_many_patches_is_refused_before_meshing(blen
     with pytest.raises(RuntimeError, match="Use a larger patch size"):
         bpy.ops.radiosity.solve()
     assert _snapshot() == before and not result_objects()
+
+
+def test_a_nan_vertex_is_named_with_its_object(blender):
+    """One vertex set to NaN (by a script or a driver) made the scene's extent NaN, so that
+    every face of every object looked like it had no area: the error names the object and
+    how many of its vertices are not numbers. The scene is unchanged."""
+    build_test_scene()
+    configure(blender)
+    block = bpy.data.objects["Block"]
+    block.data.vertices[3].co = (float("nan"), 0.2, 0.0)
+    _unchanged_after_error(blender, r"Radiosity failed: 'Block': 1 of the 8 vertices its faces use is not a finite "
+                                    r"number \(NaN or infinite\)\n")
+    block.data.vertices[3].co = (0.2, 0.5, 0.0)
+    block.location = (float("nan"), 0.0, 0.0)
+    before = sorted(o.name for o in bpy.data.objects), sorted(m.name for m in bpy.data.meshes)
+    with pytest.raises(RuntimeError, match=r"'Block': 8 of the 8 vertices its faces use are not a finite number "
+                                           r"\(NaN or infinite\) \(its location, rotation or scale\?\)"):
+        bpy.ops.radiosity.solve()
+    assert (sorted(o.name for o in bpy.data.objects), sorted(m.name for m in bpy.data.meshes)) == before
+    assert not result_objects()
+
+
+def test_an_object_ten_thousand_km_away_is_named_as_the_cause_of_faces_too_small(blender):
+    """A 1 m cube 10,000 km from a 1 m room: the room's faces are below what the scene's extent
+    lets the ray tracer resolve. The message says so, with the extent and the objects at both
+    of its ends, instead of saying the selection has no faces of non-zero area."""
+    build_test_scene()
+    configure(blender)
+    v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=False)
+    make_object("Far", v, f, location=(1e7, 0, 0))  # not selected: the rest of the scene
+    blender.scene.radiosity.use_scene_objects = True
+    blender.view_layer.update()  # (its matrix_world, for the snapshot of the unchanged scene)
+    _unchanged_after_error(
+        blender, r"'Block', 'Lamp', 'Room': every face is too small to trace beside the scene's extent \(a diagonal of 1e\+07, from "
+                 r"'Room' to 'Far'; a face needs an area above 1e-14 of its square, 1\); move far objects nearer, "
+                 r"or hide them from render")
+    # Nearer (10 km), it solves, the far cube taking part as the rest of the scene.
+    bpy.data.objects["Far"].location = (1e4, 0, 0)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
