@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
-from .core.diagnostics import escaping_light, light_fates
+from .core.diagnostics import back_light, escaping_light, light_fates
 from .core.textures import patch_attribute_average, patch_texture_average
 from .options import AUTOMATIC_PATCH_DIVISIONS
 
@@ -470,3 +470,50 @@ def escaping_sources(patches: Patches, scene) -> list:
                          "emitting faces point away from everything else (a new plane faces up: flip its normals "
                          "or turn it; see Overlays > Face Orientation)")
     return notes
+
+
+#: Light absorbed on back sides in view of the selection above this share of the power gets a warning.
+BLOCKED_WARNING = 0.05
+#: The warning names this many (faces' object, source) pairs, the most light first.
+BLOCKED_NAMED = 3
+
+
+def source_label(patches: Patches, scene, row) -> str:
+    """What emits source row ``row`` of ``scene.source_power``: "emissive faces of 'Lamp'",
+    "sun 'Sun'", "world 'World'", "point light 'Bulb'"..."""
+    if row < scene.patch_count:
+        return f"emissive faces of '{patches.objects[patches.combined.patch_object[row]].name}'"
+    light = scene.lights.lights[scene.lights.light_of[row - scene.patch_count]]
+    kind = {"PointLight": "point light" if getattr(light, "spot", None) is None else "spot light",
+            "AreaLight": "area light", "SunLight": "sun", "WorldLight": "world"}.get(type(light).__name__, "light")
+    return f"{kind} '{light.name}'"
+
+
+def back_light_warning(patches: Patches, scene, blocked, seed=0):
+    """The warning for light absorbed on back sides (``blocked``: the solve's measured share of
+    the power), or None. core.diagnostics.back_light splits it by where it landed: only the share
+    that met back sides in view of the selection counts, named by the faces' objects and the
+    sources it came from; light that met back sides from outside every receiver (a sky under a
+    room's floor) is no concern."""
+    if blocked <= BLOCKED_WARNING:
+        return None
+    source, patch, weight, in_view = back_light(scene, np.array([o.receives for o in patches.objects])[patches.combined.patch_object], seed)
+    advice = ("one-sided faces seen from behind, or flipped normals (see Overlays > Face Orientation; give thin "
+              "walls thickness with a Solidify modifier)")
+    if not weight.size:  # the check's rays found none of it: said as measured, without names
+        return f"{blocked:.1%} of the light reached the back of faces and was absorbed there: {advice}"
+    share = blocked * float(weight[in_view].sum() / weight.sum())
+    if share <= BLOCKED_WARNING:
+        return None
+    owner = patches.combined.patch_object[patch[in_view]]
+    pairs = {}
+    for k, row, w in zip(owner, source[in_view], weight[in_view]):
+        key = (int(k), source_label(patches, scene, int(row)))
+        pairs[key] = pairs.get(key, 0.0) + float(w)
+    total = sum(pairs.values())
+    ranked = sorted(pairs.items(), key=lambda item: -item[1])
+    named = [f"faces of '{patches.objects[k].name}' lit by {label} ({share * w / total:.1%})"
+             for (k, label), w in ranked[:BLOCKED_NAMED]]
+    more = f" and {len(ranked) - BLOCKED_NAMED} more" if len(ranked) > BLOCKED_NAMED else ""
+    return (f"{share:.1%} of the light reached the back of faces in view of the selection and was absorbed there: "
+            f"{', '.join(named)}{more}; {advice}")

@@ -11,6 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
+import addon
 from addon import estimate, images, patches, pipeline, scene_io, worker
 
 from .conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
@@ -775,3 +776,60 @@ def test_an_object_ten_thousand_km_away_is_named_as_the_cause_of_faces_too_small
     bpy.data.objects["Far"].location = (1e4, 0, 0)
     state, reports = _run_sync(blender)
     assert state == {"FINISHED"}, reports
+
+
+def _sky_room(blender, flipped_floor=False):
+    """A 4 x 4 m room 0.5 m high, open at the top under a grey sky (world colour 0.05), its floor
+    an object of its own ('Floor'), built facing down with ``flipped_floor``."""
+    room_v, room_f = box_arrays((0, 0, 0), (4, 4, 0.5), inward=True)
+    walls = [f for k, f in enumerate(room_f) if k >= 2]  # no ceiling (the sky comes in), no floor
+    make_object("Room", room_v, walls, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
+    floor = [tuple(reversed(room_f[0]))] if flipped_floor else [room_f[0]]
+    make_object("Floor", room_v, floor, [principled("Boards", (0.5, 0.4, 0.3))]).select_set(True)
+    world = bpy.data.worlds.new("Sky")
+    blender.scene.world = world
+    background = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    background.inputs["Color"].default_value = (0.05, 0.05, 0.05, 1.0)
+    background.inputs["Strength"].default_value = 1.0
+    configure(blender)
+    blender.scene.radiosity.patch_size = 1.0
+
+
+def test_sky_on_the_outside_of_a_room_gives_no_back_face_warning(blender):
+    """The sky lights the walls and the floor of an open room from outside, on their back sides
+    (most of the light that meets the room): that light met them from outside every receiver,
+    as in any render of the room, and the run says nothing about thin walls."""
+    _sky_room(blender)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
+    assert not any("back of faces" in text for _, text in reports), reports
+
+
+def test_back_face_warnings_name_the_faces_and_the_sources(blender):
+    """A floor built facing down in the open room: the sky that comes in meets its back side,
+    which the walls see. The warning names the floor and the sky (and not the walls, lit from
+    behind only from outside). The test room built inside out around its lamps: the lamp quad's
+    and a bulb's light meet the room's back sides, which the block sees; both are named."""
+    _sky_room(blender, flipped_floor=True)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
+    warning = [text for kind, text in reports if kind == "WARNING" and "back of faces" in text]
+    assert len(warning) == 1, reports
+    assert "of the light reached the back of faces in view of the selection" in warning[0]
+    assert "faces of 'Floor' lit by world 'Sky'" in warning[0] and "'Room'" not in warning[0], warning
+
+    addon.unregister()  # (as the blender fixture starts a test)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    addon.register()
+    build_test_scene()
+    bpy.data.objects["Room"].data.flip_normals()
+    bulb = bpy.data.objects.new("Bulb", bpy.data.lights.new("Bulb", "POINT"))
+    bulb.data.energy, bulb.location = 2.0, (0.7, 0.7, 0.5)
+    blender.scene.collection.objects.link(bulb)
+    configure(blender)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
+    warning = [text for kind, text in reports if kind == "WARNING" and "back of faces" in text]
+    assert len(warning) == 1, reports
+    assert "faces of 'Room' lit by emissive faces of 'Lamp'" in warning[0], warning
+    assert "faces of 'Room' lit by point light 'Bulb'" in warning[0], warning
