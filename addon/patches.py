@@ -191,6 +191,8 @@ def check_finite_vertices(objects):
     """ValueError naming the first object whose faces use a vertex that is NaN or infinite
     (a script, a driver, a modifier): the scene's extent, and every area, would be NaN."""
     for o in objects:
+        if np.isfinite(o.vertices).all():
+            continue
         used = np.unique(o.triangles)
         bad = int(np.count_nonzero(~np.isfinite(o.vertices[used]).all(axis=1)))
         if bad:

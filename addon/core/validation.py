@@ -185,14 +185,20 @@ def _light_numbers(light, prefix=""):
             yield prefix + item.name, np.asarray(value, dtype=np.float64)
 
 
-def validate_lights(lights):
-    """Check that every number of every light is finite (its position, direction, size,
-    colour...) and its power not negative (ValueError naming the light and the field)."""
-    for light in lights.lights:
+def validate_light_numbers(lights):
+    """Check that every number of every light (a sequence of them) is finite: its position,
+    direction, size, colour... (ValueError naming the light and the field), before any is used."""
+    for light in lights:
         if dataclasses.is_dataclass(light):
             for name, values in _light_numbers(light):
                 if not np.isfinite(values).all():
                     raise ValueError(f"light '{light.name}': its {name.replace('_', ' ')} is NaN or infinite")
+
+
+def validate_lights(lights):
+    """Check that every light's power is finite and not negative (ValueError naming it)."""
+    validate_light_numbers(lights.lights)
+    for light in lights.lights:
         power = np.asarray(light.emitter_powers(lights.aim), np.float64)
         if not np.isfinite(power).all():
             raise ValueError(f"light '{light.name}' has a power that is NaN or infinite")
