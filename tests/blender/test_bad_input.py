@@ -166,6 +166,25 @@ def test_image_texture_uses_the_average_linear_colour_and_says_so(blender):
     R, E, notes = scene_io.material_colours(m)
     np.testing.assert_allclose(R, 0.1, rtol=1e-6)
     assert any("no pixels" in n for n in notes)
+    # The same image driving the emission colour: the light is unknown, refused by name (a
+    # white emitter of the socket's colour was solved). At strength 0 it gives no light: no error.
+    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Emission Color"])
+    tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 0.0
+    scene_io.material_colours(m)
+    tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 5.0
+    with pytest.raises(scene_io.SceneError, match=r"^material 'Painted': its 'Emission Color' comes from image 'Gone', "
+                                                  r"which has no pixels \(file not found: .*no_such_file.png\)"):
+        scene_io.material_colours(m)
+    glow = bpy.data.materials.new("Glow")
+    glow.node_tree.nodes.clear()
+    emission = glow.node_tree.nodes.new("ShaderNodeEmission")
+    glow.node_tree.links.new(emission.outputs["Emission"],
+                             glow.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    glow_image = glow.node_tree.nodes.new("ShaderNodeTexImage")
+    glow_image.image = missing
+    glow.node_tree.links.new(glow_image.outputs["Color"], emission.inputs["Color"])
+    with pytest.raises(scene_io.SceneError, match=r"^material 'Glow': its 'Color' comes from image 'Gone'"):
+        scene_io.material_colours(glow)
 
 
 # ---------------------------------------------------------------------------------------------
