@@ -486,9 +486,14 @@ def source_label(patches: Patches, scene, row) -> str:
     if row < scene.patch_count:
         return f"emissive faces of '{patches.objects[patches.combined.patch_object[row]].name}'"
     light = scene.lights.lights[scene.lights.light_of[row - scene.patch_count]]
-    kind = {"PointLight": "point light" if getattr(light, "spot", None) is None else "spot light",
-            "AreaLight": "area light", "SunLight": "sun", "WorldLight": "world"}.get(type(light).__name__, "light")
-    return f"{kind} '{light.name}'"
+    return f"{light_kind(light)} '{light.name}'"
+
+
+def light_kind(light) -> str:
+    """"point light", "spot light", "area light", "sun" or "world"."""
+    if type(light).__name__ == "PointLight":
+        return "point light" if getattr(light, "spot", None) is None else "spot light"
+    return {"AreaLight": "area light", "SunLight": "sun", "WorldLight": "world"}.get(type(light).__name__, "light")
 
 
 def back_light_warning(patches: Patches, scene, blocked, seed=0):
@@ -499,7 +504,8 @@ def back_light_warning(patches: Patches, scene, blocked, seed=0):
     room's floor) is no concern."""
     if blocked <= BLOCKED_WARNING:
         return None
-    source, patch, weight, in_view = back_light(scene, np.array([o.receives for o in patches.objects])[patches.combined.patch_object], seed)
+    receives = np.array([o.receives for o in patches.objects])[patches.combined.patch_object]
+    source, patch, weight, in_view = back_light(scene, receives, seed)
     advice = ("one-sided faces seen from behind, or flipped normals (see Overlays > Face Orientation; give thin "
               "walls thickness with a Solidify modifier)")
     if not weight.size:  # the check's rays found none of it: said as measured, without names

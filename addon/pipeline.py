@@ -14,7 +14,7 @@ from .core.first_shot import direct_irradiance
 from .core.names import AUTO, GATHERED, TWO_WAY, WALK
 from .core.solver import choose_method, planned_paths
 from . import options, trim
-from .patches import Patches, back_light_warning, make_patches, scene_and_notes
+from .patches import Patches, back_light_warning, light_kind, make_patches, scene_and_notes
 
 @dataclass
 class SolveSettings:
@@ -158,8 +158,7 @@ def sources_text(scene) -> str:
     parts = []
     kinds = {}
     for light, power in zip(scene.lights.lights, scene.lights.light_power().mean(axis=1)):
-        kind = {"PointLight": "point light" if getattr(light, "spot", None) is None else "spot light",
-                "AreaLight": "area light", "SunLight": "sun", "WorldLight": "world"}[type(light).__name__]
+        kind = light_kind(light)
         count, share = kinds.get(kind, (0, 0.0))
         kinds[kind] = (count + 1, share + power / total)
     for kind, (count, share) in kinds.items():

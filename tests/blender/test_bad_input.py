@@ -788,9 +788,9 @@ def test_an_object_ten_thousand_km_away_is_named_as_the_cause_of_faces_too_small
     blender.scene.radiosity.use_scene_objects = True
     blender.view_layer.update()  # (its matrix_world, for the snapshot of the unchanged scene)
     _unchanged_after_error(
-        blender, r"'Block', 'Lamp', 'Room': every face is too small to trace beside the scene's extent \(a diagonal of 1e\+07, from "
-                 r"'Room' to 'Far'; a face needs an area above 1e-14 of its square, 1\); move far objects nearer, "
-                 r"or hide them from render")
+        blender, r"'Block', 'Lamp', 'Room': every face is too small to trace beside the scene's extent \(a diagonal "
+                 r"of 1e\+07, from 'Room' to 'Far'; a face needs an area above 1e-14 of its square, 1\); move far "
+                 r"objects nearer, or hide them from render")
     # Nearer (10 km), it solves, the far cube taking part as the rest of the scene.
     bpy.data.objects["Far"].location = (1e4, 0, 0)
     state, reports = _run_sync(blender)
