@@ -11,8 +11,6 @@ from . import live_view, scene_io, worker
 TIMER_SECONDS = 0.1
 #: The last error of ``radiosity.solve`` (with quiet_errors, its only record).
 LAST_ERROR = ""
-#: Above this share of the emitted power absorbed on back sides, the user is warned.
-BLOCKED_WARNING = 0.05
 
 
 def _redraw(context):
@@ -237,11 +235,8 @@ def _after_writing(op, settings, output, stats):
         op.report({"WARNING"}, f"Radiosity: could not store the run's {', '.join(failed)}")
     for note in [*op._notes, *output.notes]:
         op.report({"WARNING"}, note)
-    blocked = output.blocked_fraction()
-    if blocked > BLOCKED_WARNING:
-        op.report({"WARNING"}, f"{blocked * 100:.1f}% of the light reached the back of faces and was "
-                  "absorbed there: one-sided faces seen from behind, or flipped normals (see Overlays > "
-                  "Face Orientation; give thin walls thickness with a Solidify modifier)")
+    if output.back_warning:
+        op.report({"WARNING"}, output.back_warning)
     if stats["last_stopped"] == "time_limit":
         op.report({"WARNING"}, f"Time limit reached after {stats['last_paths']:,} paths; the result is "
                   "noisier than asked")

@@ -14,7 +14,7 @@ from .core.first_shot import direct_irradiance
 from .core.names import AUTO, GATHERED, TWO_WAY, WALK
 from .core.solver import choose_method, planned_paths
 from . import options, trim
-from .patches import Patches, make_patches, scene_and_notes
+from .patches import Patches, back_light_warning, light_kind, make_patches, scene_and_notes
 
 @dataclass
 class SolveSettings:
@@ -51,6 +51,7 @@ class SolveOutput:
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
     sources: str = ""  # the sources that took part (sources_text)
+    back_warning: str | None = None  # light absorbed on back sides in view of the selection (back_light_warning)
 
     def blocked_fraction(self):
         """Share of the emitted power absorbed on the back side of faces."""
@@ -157,8 +158,7 @@ def sources_text(scene) -> str:
     parts = []
     kinds = {}
     for light, power in zip(scene.lights.lights, scene.lights.light_power().mean(axis=1)):
-        kind = {"PointLight": "point light" if getattr(light, "spot", None) is None else "spot light",
-                "AreaLight": "area light", "SunLight": "sun", "WorldLight": "world"}[type(light).__name__]
+        kind = light_kind(light)
         count, share = kinds.get(kind, (0, 0.0))
         kinds[kind] = (count + 1, share + power / total)
     for kind, (count, share) in kinds.items():
@@ -257,6 +257,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
+    out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
     # Light is written as at least 0: an estimate below it is noise about a value near 0 (the two-way
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
     radiosity = np.maximum(result.radiosity, 0.0)

@@ -311,7 +311,7 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     tex.inputs["Color1"].default_value = (0.9, 0.5, 0.1, 1)
     tex.inputs["Color2"].default_value = (0.1, 0.3, 0.5, 1)
     R, E, notes = scene_io.material_colours(m)
-    np.testing.assert_allclose(R, [0.5, 0.4, 0.3], rtol=1e-6)  # the checker's average (issue 6)
+    np.testing.assert_allclose(R, [0.5, 0.4, 0.3], rtol=1e-6)  # the checker's average
     assert any("Base Color" in n and "average" in n for n in notes)
     d = bpy.data.materials.new("Diffuse")
     d.node_tree.nodes.remove(d.node_tree.nodes["Principled BSDF"])
@@ -755,7 +755,7 @@ def test_estimate_predicts_time_from_this_machines_ray_rate_and_warns_when_slow(
 
 
 def test_live_view_data_refines_while_solving_and_writes_nothing(blender):
-    """Issue 24, point 11, headless: a job with the live view on keeps its result so far (the
+    """Headless: a job with the live view on keeps its result so far (the
     data the 3D view draws), refreshed while it solves and ending near the final result; the
     triangles and colours drawn cover every patch; nothing is written into the scene."""
     from addon import live_view

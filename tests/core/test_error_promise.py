@@ -1,4 +1,4 @@
-"""The error target is a promise (issue 24, point 12): with the default stop rule the error
+"""The error target is a promise: with the default stop rule the error
 reached is at most the target; the paper's predicted path count is the plan, and where
 reflectivities vary from patch to patch formula (2) under-predicts the error."""
 import numpy as np
