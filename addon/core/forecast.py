@@ -44,7 +44,7 @@ SOLVE_SHARE_OF_RAW_RATE = 0.5
 class Forecast:
     """What a solve is expected to take: ``paths`` in ``chunks`` chunks of ``chunk``, ``rays``,
     ``seconds``; and what the pilot measured (``measured`` False: no pilot chunk finished in
-    time, the rays from the bounces and the rate from Embree's raw rate)."""
+    time, the error not measured: the run's least paths or the paper's)."""
 
     paths: float
     rays: float
@@ -103,18 +103,6 @@ def raw_rate(scene, rays=1 << 14, seed=0):
     return rays / max(time.perf_counter() - start, 1e-9)
 
 
-def _pace(records, paths, seconds):
-    """(setup seconds, wall seconds per path) through a pilot's (paths, seconds) at each chunk:
-    a line fitted from the first round of chunks on, else the mean."""
-    p = np.array([r[0] for r in records], float)
-    t = np.array([r[1] for r in records], float)
-    if len(set(p)) >= 3 and np.ptp(t) > 0:
-        slope, intercept = np.polyfit(p, t, 1)
-        if slope > 0 and intercept >= 0:
-            return float(intercept), float(slope)
-    return 0.0, seconds / paths
-
-
 def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, stop_rule="measured", method="walk",
              direct_light=None, exit_point="random", sampling="independent", threads=None, max_seconds=None, seed=0,
              bounces=None, budget=PILOT_RAYS):
@@ -126,25 +114,40 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
     bounces = bounces if bounces is not None else plan.prediction.expected_path_length
     guess = guessed_rays_per_path(bounces, method, direct_light)
     pilot_chunk, pilot_chunks = pilot_size(plan.chunk, guess, budget)
-    records = []
     start = time.perf_counter()
-    r = solve(scene, estimator, paths=pilot_chunk * pilot_chunks, threshold=threshold, seed=seed, exit_point=exit_point,
-              sampling=sampling, threads=threads, direct_light=direct_light, method=method, chunk_paths=pilot_chunk,
-              progress=lambda fraction, stats: records.append((stats["paths"], stats["seconds"])),
-              should_stop=lambda: time.perf_counter() - start > PILOT_SECONDS)
-    measured = r.chunks >= 2 and r.paths > 0
+
+    def run(chunk, chunks, limit):
+        """(result, seconds to its last finished chunk, or all it took if it finished none)."""
+        began, finished = time.perf_counter(), []
+        r = solve(scene, estimator, paths=chunk * chunks, threshold=threshold, seed=seed, exit_point=exit_point,
+                  sampling=sampling, threads=threads, direct_light=direct_light, method=method, chunk_paths=chunk,
+                  progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
+                  should_stop=lambda: time.perf_counter() - began > limit)
+        everything = time.perf_counter() - began
+        return r, finished[-1] if finished and r.chunks < chunks else everything
+
+    # Two solves of a path a chunk: the first builds what the scene keeps (its ray tracer's scene
+    # and tables: a run builds them too), the second is a solve's own fixed cost.
+    (_, cold), (_, warm) = run(1, 2, PILOT_SECONDS / 4), run(1, 2, PILOT_SECONDS / 4)
+    r, seconds = run(pilot_chunk, pilot_chunks, PILOT_SECONDS)
+    workers = r.threads
+    measured = r.chunks >= 2
+    variance = math.nan
     if measured:
         variance = r.measured_mse * r.paths
         if method == TWO_WAY:
             variance *= two_way_scale(scene.patch_count, pilot_chunk, plan.chunk)
-        rays_per_path = r.rays / r.paths
-        setup, per_path = _pace(records, r.paths, r.seconds)
-    else:  # not two chunks in PILOT_SECONDS: the bounces and Embree's raw rate
-        variance, rays_per_path, setup = math.nan, guess, 0.0
-        per_path = guess / (raw_rate(scene, seed=seed) * SOLVE_SHARE_OF_RAW_RATE * max(r.threads, 1))
+    if r.chunks:  # (stopped by PILOT_SECONDS, it has what it finished)
+        rays_per_path, setup = r.rays / r.paths, cold
+        per_path = max(seconds - warm, 0.5 * seconds) / r.paths
+    else:  # not a chunk in PILOT_SECONDS (paths of many bounces): the bounces and Embree's raw rate,
+        # and at least the time the pilot's chunks took without finishing
+        rays_per_path, setup = guess, 0.0
+        per_path = max(guess / (raw_rate(scene, seed=seed) * SOLVE_SHARE_OF_RAW_RATE * workers),
+                       seconds / (pilot_chunk * min(workers, pilot_chunks)))
     if paths is not None or not plan.measured_rule:
         expected = float(plan.cap)
-    elif measured:
+    elif variance == variance:
         expected = paths_to_target(1, variance, target_mse, plan.chunk, plan.cap)
     else:  # at least the chunks the measured rule needs, at most the cap
         expected = float(min(plan.cap, max(MIN_MEASURED_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
