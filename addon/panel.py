@@ -87,7 +87,7 @@ def estimate_lines(value):
         ("time", f"Predicted time: {duration_text(value['seconds'])}" if value.get("seconds") == value.get("seconds")
          else "Predicted time: -"),
         ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"
-         + (" (planned)" if value.get("planned") else "")),
+         + (" (expected)" if value.get("planned") else "")),
         ("method", f"Method: {METHOD_LABELS.get(value.get('method'), value.get('method'))}"
          + (" (automatic)" if value.get("automatic") else "")),
         ("patches", f"Objects: {value['objects']} get results, {value.get('others', 0)} more block and reflect"),
@@ -118,8 +118,12 @@ def draw_progress(layout, job):
         box.label(text=text)
     col = box.column(align=True)
     col.label(text=f"Rays/s: {_number(stats.get('rays_per_second'))}")
+    left = stats.get("seconds_left")
+    col.label(text=f"Time left: {duration_text(left)}" if left is not None and left == left else "Time left: -")
     if job.patch_count is not None:
-        col.label(text=f"Patches: {_number(job.patch_count)}   Paths to do: {_number(job.prediction.paths)}")
+        expected = stats.get("expected_paths")
+        expected = expected if expected is not None and expected == expected else job.prediction.paths
+        col.label(text=f"Patches: {_number(job.patch_count)}   Paths to do: {_number(expected)}")
     mse = stats.get("measured_mse")
     relative = job.relative_error(mse)
     target = job.settings.relative_rms * 100

@@ -190,6 +190,7 @@ def estimate(objects, settings: SolveSettings) -> dict:
         "paths": int(math.ceil(f.paths)),
         "rays": float(f.rays),
         "paper_paths": int(p.paths),  # formula (2)/(3) for the target or the paths given
+        "paper_rays": float(p.expected_rays),
         "direct_light": direct_light_for(scene, settings),
         "method": settings.method,
         "automatic": automatic,  # the method chosen by "auto"

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .names import GATHERED, SHOT, TWO_WAY
-from .solver import MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target, solve
+from .solver import MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target, solve
 from .two_way import rays_per_path as two_way_rays_per_path
 
 # A pilot traces about this many rays (about a second on two threads) ...
@@ -126,9 +126,10 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
         everything = time.perf_counter() - began
         return r, finished[-1] if finished and r.chunks < chunks else everything
 
-    # Two solves of a path a chunk: the first builds what the scene keeps (its ray tracer's scene
+    # Two solves of two small chunks: the first builds what the scene keeps (its ray tracer's scene
     # and tables: a run builds them too), the second is a solve's own fixed cost.
-    (_, cold), (_, warm) = run(1, 2, PILOT_SECONDS / 4), run(1, 2, PILOT_SECONDS / 4)
+    small = min(pilot_chunk, MIN_CHUNK_PATHS)
+    (_, cold), (_, warm) = run(small, 2, PILOT_SECONDS / 4), run(small, 2, PILOT_SECONDS / 4)
     r, seconds = run(pilot_chunk, pilot_chunks, PILOT_SECONDS)
     workers = r.threads
     measured = r.chunks >= 2
