@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .core import meshing, predict, relative_rms_to_mse, solve
-from .core.diagnostics import check_bounces
+from .core.diagnostics import MAX_BOUNCES, check_bounces
 from .core.first_shot import direct_irradiance
 from .core.forecast import forecast
 from .core.names import AUTO, GATHERED, TWO_WAY
@@ -104,14 +104,14 @@ def direct_light_for(scene, settings: SolveSettings) -> str:
     return settings.direct_light
 
 
-def forecast_for(scene, settings: SolveSettings, target, bounces):
+def forecast_for(scene, settings: SolveSettings, target, bounces, should_stop=None):
     """The core's Forecast of the solve these settings run (``settings.method`` resolved): a
     pilot of a few of its chunks on this machine."""
     return forecast(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None, target_mse=target,
                     threshold=settings.threshold, stop_rule=settings.stop_rule if target is not None else "predicted",
                     method=settings.method, direct_light=direct_light_for(scene, settings), exit_point=settings.exit_point,
                     sampling=settings.sampling, threads=settings.threads or None, max_seconds=settings.max_seconds or None,
-                    seed=int(settings.seed), bounces=bounces)
+                    seed=int(settings.seed), bounces=bounces, should_stop=should_stop)
 
 
 def efficiency_sentence(relative_efficiency) -> str:
@@ -129,7 +129,7 @@ def slow_warning(seconds, patches, settings: SolveSettings, bounces=1.0) -> str 
     if bounces > LONG_BOUNCES:
         return (f"Predicted {duration_text(seconds)}: the light bounces about {bounces:,.0f} times before it is "
                 "absorbed (base colours near 1 in a closed scene), and every bounce is a ray. Lower the base colours "
-                "(0.99 gives about 100 bounces); above 1,000,000 bounces a solve is refused")
+                f"(0.99 gives about 100 bounces); above {MAX_BOUNCES:,.0f} bounces a solve is refused")
     target = f"the {settings.relative_rms * 100:g}% error target" if not settings.paths else f"{settings.paths:,} paths"
     return (f"Predicted {duration_text(seconds)}: {patches.combined.patch_count:,} patches (patch size "
             f"{patches.patch_size:.3g}) and {target} drive it. Paths grow with the patch count: twice the "
@@ -166,10 +166,11 @@ def sources_text(scene) -> str:
     return ", ".join(parts)
 
 
-def estimate(objects, settings: SolveSettings) -> dict:
+def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     """What the panel and the command line show before a run: the predicted time, paths and
     rays of the run these settings make, from a pilot of it on this machine (core forecast), the
-    paper's predictions beside them; a ValueError where the solve would refuse the scene."""
+    paper's predictions beside them; a ValueError where the solve would refuse the scene.
+    ``should_stop()`` cuts the pilot short (the panel's, when a run starts)."""
     started = time.perf_counter()
     patches = make_patches(objects, settings.patch_size)
     scene, notes = scene_and_notes(patches)
@@ -180,7 +181,7 @@ def estimate(objects, settings: SolveSettings) -> dict:
     bounces = check_bounces(scene, settings.estimator, settings.threshold)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
-    f = forecast_for(scene, settings, target, bounces)
+    f = forecast_for(scene, settings, target, bounces, should_stop)
     seconds = building + f.seconds
     return {
         "objects": sum(o.receives for o in patches.objects),

@@ -94,9 +94,8 @@ def check_bounces(scene, estimator, threshold, seed=0):
     """ValueError if a path would bounce more than MAX_BOUNCES times on average (a closed scene
     of base colours within 10^-6 of 1); else the expected bounces (the paper's estimate where
     no reflectivity comes near the limit, the probe's where one does)."""
-    R_max = float(scene.grey_reflectivity.max())
-    if R_max < 1.0 - 1.0 / MAX_BOUNCES:
-        return min(1.0 / (1.0 - scene.average_reflectivity), 1.0 / (1.0 - R_max))
+    if float(scene.grey_reflectivity.max()) < 1.0 - 1.0 / MAX_BOUNCES:
+        return 1.0 / (1.0 - scene.average_reflectivity)
     bounces = expected_bounces(scene, seed)
     if estimator == BIASED_INFINITE and bounces > 1:
         bounces = min(bounces, 1.0 + math.log(threshold) / math.log1p(-1.0 / bounces))

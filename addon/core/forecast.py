@@ -105,9 +105,10 @@ def raw_rate(scene, rays=1 << 14, seed=0):
 
 def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, stop_rule="measured", method="walk",
              direct_light=None, exit_point="random", sampling="independent", threads=None, max_seconds=None, seed=0,
-             bounces=None, budget=PILOT_RAYS):
+             bounces=None, budget=PILOT_RAYS, should_stop=None):
     """The Forecast of ``solve(scene, estimator, ...)`` with these arguments (``method`` a
-    method, not "auto"; ``bounces`` the expected bounces of a path, diagnostics.check_bounces)."""
+    method, not "auto"; ``bounces`` the expected bounces of a path, diagnostics.check_bounces).
+    ``should_stop()`` ends the pilot early (a run starting): the forecast is then from what it has."""
     direct_light = direct_light or (GATHERED if method == TWO_WAY else SHOT)
     plan = chunk_plan(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold, stop_rule=stop_rule,
                       direct_light=direct_light, method=method, max_seconds=max_seconds)
@@ -122,7 +123,7 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
         r = solve(scene, estimator, paths=chunk * chunks, threshold=threshold, seed=seed, exit_point=exit_point,
                   sampling=sampling, threads=threads, direct_light=direct_light, method=method, chunk_paths=chunk,
                   progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
-                  should_stop=lambda: time.perf_counter() - began > limit)
+                  should_stop=lambda: time.perf_counter() - began > limit or bool(should_stop and should_stop()))
         everything = time.perf_counter() - began
         return r, finished[-1] if finished and r.chunks < chunks else everything
 
