@@ -84,8 +84,7 @@ def estimate_lines(value):
     has a tooltip with the paper's meaning (operators.EXPLANATIONS)."""
     size = f"{value['patch_size']:.3g}" if value.get("patch_size") else "-"
     lines = [
-        ("time", f"Predicted time: {duration_text(value['seconds'])}" if value.get("seconds") == value.get("seconds")
-         else "Predicted time: -"),
+        ("time", _time_text(value)),
         ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"
          + (" (expected)" if value.get("planned") else "")),
         ("method", f"Method: {METHOD_LABELS.get(value.get('method'), value.get('method'))}"
@@ -99,6 +98,15 @@ def estimate_lines(value):
     if value.get("target_mse") is not None:
         lines.append(("target", f"Target MSE (the paper's measure): {value['target_mse']:.3g}"))
     return lines
+
+
+def _time_text(value):
+    if value.get("seconds") != value.get("seconds"):  # (NaN)
+        return "Predicted time: -"
+    if value.get("time_limited"):
+        return (f"Predicted time: {duration_text(value['seconds'])} (time limit; the target needs "
+                f"{duration_text(value['seconds_needed'])})")
+    return f"Predicted time: {duration_text(value['seconds'])}"
 
 
 def _explained(layout, term, text):

@@ -182,7 +182,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
     f = forecast_for(scene, settings, target, bounces, should_stop)
-    seconds = building + f.seconds
+    needed = building + f.seconds  # (what the settings need; a time limit may end the run first)
+    seconds = min(needed, building + settings.max_seconds) if f.time_limited else needed
     return {
         "objects": sum(o.receives for o in patches.objects),
         "others": sum(not o.receives for o in patches.objects),
@@ -199,6 +200,7 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
         "measured": f.measured,  # from the pilot's chunks (else from the bounces and Embree's raw rate)
         "rays_per_second": float(f.rays_per_second),
         "seconds": seconds,
+        "seconds_needed": needed,
         "time_limited": f.time_limited,
         "pilot_seconds": f.pilot_seconds,
         "bounces": float(bounces),
@@ -209,7 +211,7 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
         "target_mse": target,
         "predicted_mse": float(p.predicted_mse),
         "other_estimator": other,
-        "warning": slow_warning(seconds, patches, settings, bounces),
+        "warning": slow_warning(needed, patches, settings, bounces),
         "sources": sources_text(scene),
         "notes": notes,
     }

@@ -59,7 +59,7 @@ class Forecast:
     pilot_chunks: int
     pilot_seconds: float
     measured: bool
-    time_limited: bool = False
+    time_limited: bool = False  # the time limit ends the run before ``seconds``
 
     @property
     def rays_per_second(self):
@@ -155,7 +155,7 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
         expected = float(min(plan.cap, max(MIN_MEASURED_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
     seconds = setup + per_path * expected
     limited = max_seconds is not None and seconds > max_seconds
-    return Forecast(paths=expected, rays=expected * rays_per_path, seconds=min(seconds, max_seconds) if limited else seconds,
+    return Forecast(paths=expected, rays=expected * rays_per_path, seconds=seconds,
                     chunk=plan.chunk, chunks=expected / plan.chunk, variance_per_path=variance,
                     rays_per_path=rays_per_path, seconds_per_path=per_path, setup_seconds=setup,
                     pilot_chunk=pilot_chunk, pilot_chunks=r.chunks, pilot_seconds=time.perf_counter() - start,
