@@ -442,16 +442,17 @@ def progress_text(job) -> str:
     """The progress line of a running job (worker.SolveJob)."""
     p = job.snapshot()
     fraction, paths, seconds = p.get("fraction", 0.0), p.get("paths", 0), p.get("seconds", 0.0)
-    planned = getattr(job.prediction, "paths", None)
-    parts = [f"{fraction * 100:5.1f}%", f"{paths:,} of {planned:,} planned paths" if planned else f"{paths:,} paths"]
+    planned = p.get("expected_paths", math.nan)  # where the run is expected to end, from its measured error
+    planned = int(planned) if planned == planned and planned is not None else getattr(job.prediction, "paths", None)
+    parts = [f"{fraction * 100:5.1f}%", f"{paths:,} of {planned:,} expected paths" if planned else f"{paths:,} paths"]
     if p.get("rays_per_second"):
         parts.append(f"{p['rays_per_second'] / 1e6:.2f} Mray/s")
     error = job.relative_error(p.get("measured_mse"))
     if error is not None:
         target = job.settings.relative_rms
         parts.append(f"error {error * 100:.2f}%" + (f" (target {target * 100:g}%)" if not job.settings.paths else ""))
-    if 0 < fraction < 1 and seconds > 0:
-        left = seconds * (1 - fraction) / fraction
+    left = p.get("seconds_left", math.nan)
+    if left == left and left is not None and fraction < 1:  # (NaN until the run has measured its error)
         parts.append(f"{int(left // 60)}:{int(left % 60):02d} left")
     return "  ".join(parts)
 

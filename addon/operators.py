@@ -307,13 +307,12 @@ class RADIOSITY_OT_cancel(bpy.types.Operator):
 
 # The tooltips of the panel's estimate: the paper's terms for an artist.
 EXPLANATIONS = {
-    "time": "The predicted rays over this machine's ray rate on this scene (measured by a short solve, "
-            "then by each run). With 'Stop at: Measured error' the run stops when its own error estimate "
-            "meets the target, which can be sooner or later",
-    "paths": "Sbert & Brusi's formula (2) (finite) or (3) (biased infinite): the paths that reach the "
-             "error target, and the rays they trace (paths x the expected path length). With the direct "
-             "light gathered no formula holds: the paths planned (a quarter of the paper's) at the rays a path "
-             "measured, and the run stops on its own error estimate",
+    "time": "Measured before the run: a pilot of a few of its chunks on this machine gives the error per path, "
+            "the rays per path and the seconds per path, and the run's own plan and stop rule give the paths "
+            "it will end at; meshing included. During the run the time left follows its measured error",
+    "paths": "The paths (and the rays they trace) the run is expected to end at: with 'Stop at: Measured error', "
+             "where its error estimate meets the target (in whole batches, at least 8); else the paper's formula "
+             "(2) (finite) or (3) (biased infinite) for the target, or the paths given",
     "method": "How the light is carried: the paper's random walks, or the two-way iteration (beyond the paper). "
               "Automatic takes the two-way iteration where each patch gets enough of its rays to pay, else the walks",
     "patches": "Selected objects get results; the other visible objects (Rest of the scene) block and "

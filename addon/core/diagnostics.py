@@ -1,8 +1,11 @@
 """Checks that trace a few rays before a solve: sources whose light leaves the scene or meets only back faces."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from .names import BIASED_INFINITE
 from .rays import meets_front
 from .sampling import cosine_directions, points_on_patches
 
@@ -136,3 +139,52 @@ def back_light(scene, receives, seed=0):
     in_view = np.zeros(P, dtype=bool)
     in_view[lit] = sees_receiver | ~escapes
     return source, patch, weight, in_view[patch]
+
+
+# Rays of the path-length probe.
+BOUNCE_RAYS = 1 << 14
+# A scene whose light bounces more than this many times on average before it is absorbed is
+# refused: the shortest run that measures its error (MIN_MEASURED_CHUNKS chunks of
+# MIN_CHUNK_PATHS paths, 1,024 paths) would trace over a billion rays, a path's bounces one
+# after another.
+MAX_BOUNCES = 1e6
+
+
+def expected_bounces(scene, seed=0):
+    """The hits a finite path is expected to make, 1 / (1 - s): s, a bounce's chance to go on,
+    from cosine rays leaving patches in proportion to area, as the product of meeting a front
+    face and that face's reflectivity (R_bar). Unlike the paper's 1 / (1 - R_ave) it sees light
+    leave an open scene; it is exact for a closed scene of one reflectivity."""
+    g = scene.geometry
+    rng = np.random.default_rng(seed)
+    area = scene.patch_area / scene.total_area
+    patch = np.minimum(np.searchsorted(np.cumsum(area), rng.random(BOUNCE_RAYS), side="right"),
+                       scene.patch_count - 1).astype(np.int32)
+    u = rng.random((5, patch.size), dtype=np.float32)
+    origins = points_on_patches(g, patch, u[4], u[0], u[1])
+    directions = cosine_directions(g, patch, u[2], u[3])
+    hit, u1, u2, _, normal = g.surface_tracer.first_hit_barycentric(origins, directions)
+    front = (hit >= 0) & meets_front(np.ascontiguousarray(directions.T), normal)
+    grids = g.patch_grids
+    met = grids.hit_patches(hit, u1, u2) if grids is not None else g.triangle_patch[np.maximum(hit, 0)]
+    survival = np.where(front, scene.grey_reflectivity[np.maximum(met, 0)], 0.0)
+    s = float(survival.mean())
+    return 1.0 / (1.0 - s) if s < 1 else np.inf
+
+
+def check_bounces(scene, estimator, threshold, seed=0):
+    """ValueError if a path would bounce more than MAX_BOUNCES times on average (a closed scene
+    of base colours within 10^-6 of 1); else the expected bounces (the paper's estimate where
+    no reflectivity comes near the limit, the probe's where one does)."""
+    if float(scene.grey_reflectivity.max()) < 1.0 - 1.0 / MAX_BOUNCES:
+        return 1.0 / (1.0 - scene.average_reflectivity)
+    bounces = expected_bounces(scene, seed)
+    if estimator == BIASED_INFINITE and bounces > 1:
+        bounces = min(bounces, 1.0 + math.log(threshold) / math.log1p(-1.0 / bounces))
+    if bounces > MAX_BOUNCES:
+        raise ValueError(
+            f"the light bounces about {bounces:,.0f} times before it is absorbed (average reflectivity "
+            f"{scene.average_reflectivity:.7g}, in a closed scene): a solve is refused above "
+            f"{MAX_BOUNCES:,.0f} bounces (its shortest measured run, 1,024 paths, would trace over a billion "
+            "rays, a path's bounces one after another). Lower the base colours: 0.999 gives about 1,000 bounces")
+    return bounces

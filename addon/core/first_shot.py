@@ -159,7 +159,8 @@ def gather_direct(tables, gathering, rng):
     for rows in _blocks(patch, SAMPLE_BLOCK):  # (a large chunk's memory stays that of a block)
         rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng)
     value *= scale
-    H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)])
+    # (float64 even for a chunk that drew no sample: bincount of nothing gives integers)
+    H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)]).astype(np.float64, copy=False)
     H /= gathering.samples
     return H, rays, (patch, x, value)
 

@@ -303,8 +303,9 @@ def test_run_sh_takes_paths_from_the_callers_directory(tmp_path):
 
 
 def test_progress_line_and_summary_speak_of_the_target():
-    """The progress line (on a terminal) says paths of planned, the rate, the error against the
-    target and the time left; the summary the error reached as a share of the target."""
+    """The progress line (on a terminal) says paths of those the run is expected to end at, the
+    rate, the error against the target and the time left (the solve's, from its measured error);
+    the summary the error reached as a share of the target."""
     from types import SimpleNamespace
 
     from addon.__main__ import progress_text, summary
@@ -315,13 +316,13 @@ def test_progress_line_and_summary_speak_of_the_target():
 
         def snapshot(self):
             return {"fraction": 0.25, "paths": 250_000, "seconds": 3.0, "rays_per_second": 2.5e6,
-                    "measured_mse": (0.06 * 2.0) ** 2}
+                    "measured_mse": (0.06 * 2.0) ** 2, "expected_paths": 1_000_000.0, "seconds_left": 9.0}
 
         def relative_error(self, mse):
             return mse**0.5 / 2.0
 
     text = progress_text(Job())
-    assert "250,000 of 1,000,000 planned paths" in text and "2.50 Mray/s" in text
+    assert "250,000 of 1,000,000 expected paths" in text and "2.50 Mray/s" in text
     assert "error 6.00% (target 5%)" in text and "0:09 left" in text
     settings = SimpleNamespace(last_relative_error=4.5, last_target_error=5.0, last_patches=10, last_paths=100,
                                last_rays=300, last_seconds=1.0, last_mean_path_length=3.0, last_stopped="target",
