@@ -367,6 +367,26 @@ def leaving_frames(corners, ray_offset, inset=RELATIVE_EDGE_INSET):
     )
 
 
+# Patches whose ray offset, set by the float32 spacing of the scene's coordinates, exceeds this
+# share of their side are reported: their form factors drift with it.
+COARSE_OFFSET_SHARE = 0.02
+
+
+def warn_coarse(offset, side, diagonal):
+    """Warns (naming how many patches and how far) where float32 positions of a scene this large
+    are coarse beside some patches: their rays leave more than COARSE_OFFSET_SHARE of their
+    side off them (unit-space ``offset`` and ``side``, (P,) each)."""
+    coarse = offset > COARSE_OFFSET_SHARE * side
+    if coarse.any():
+        share = float((offset / side)[coarse].max())
+        warnings.warn(
+            f"{int(coarse.sum())} patches are small beside the scene's extent ({diagonal:.3g} across): float32 "
+            f"positions put their rays up to {float(offset[coarse].max()) * diagonal:.3g} off them ({share:.1%} of "
+            "their size), which shifts their light; keep far objects out of the scene or solve them apart",
+            stacklevel=4,
+        )
+
+
 def build_geometry(vertices, triangles, triangle_patch, patch_count):
     """The :class:`Geometry` of a mesh whose triangles make ``patch_count`` patches (checked:
     ValueError naming what is wrong)."""
@@ -447,6 +467,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     else:
         ray_offset = float(patch_ray_offset.min())  # (the lights', at least)
         inset, offset = patch_edge_inset, patch_ray_offset
+        warn_coarse(patch_ray_offset, np.sqrt(patch_area), diagonal)
     leave_table = np.empty((12, patch_count), np.float32)
     is_parallelogram = parallelogram_frames(sorted_corners, first, count, inset, offset, patch_normal, leave_table[0:9])
     leave_table[9:12] = patch_normal.T

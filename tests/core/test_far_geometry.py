@@ -100,3 +100,17 @@ def test_two_way_keeps_the_rooms_light_beside_a_far_object(distance):
     t = (r.reflected[: b.size, 0] - b) / np.sqrt(r.reflected_variance[: b.size, 0])
     assert np.abs(t).max() < T, np.abs(t).max()
     assert r.energy["blocked"].max() == 0
+
+
+def test_a_room_too_small_for_the_scenes_float32_positions_is_reported():
+    """Where the float32 spacing of the scene's coordinates sets offsets of more than 2% of a
+    patch's size (the room at 1e5 m, whose per-patch results drift), the build says how many
+    patches and how far; at 1e4 m (exact within the noise, above) and alone it says nothing."""
+    with pytest.warns(UserWarning, match=r"25 patches are small beside the scene's extent .* up to 0\.0477 off them"):
+        _room(1e5)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _room(1e4)
+        _room(None)
