@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .frames import RELATIVE_EDGE_INSET, RELATIVE_HIT_EDGE_CLEARANCE, edge_barycentric, parallelogram_blocks
+from .frames import RELATIVE_EDGE_INSET, edge_barycentric, parallelogram_blocks
 from .raytrace import RayTracer
 
 # Unit space (the scene's diagonal is 1): patch edges and plane offsets that agree to within
@@ -114,10 +114,15 @@ class PatchGrids:
 def patch_grids(geometry):
     """The grids of a scene's parallelogram patches, with every other patch's own triangles
     (a grid of one cell each), or None where they would not take at most MAX_TRIANGLE_FRACTION
-    of the scene's triangles. ``geometry`` is a :class:`.geometry.Geometry` (triangles sorted by
-    patch)."""
+    of the scene's triangles, or where patches are small beside the scene (their own offsets:
+    ``geometry.patch_ray_offset``). ``geometry`` is a :class:`.geometry.Geometry` (triangles
+    sorted by patch)."""
     P, T = geometry.patch_count, geometry.triangle_count
-    if P == 0 or P >= MAX_CELLS:
+    # Where rectangles of cells meet in a T, the float32 corner of one lies off the other's edge
+    # by a spacing of the scene's coordinates: a crack nothing beside an ordinary scene, but one
+    # rays go through where the patches are small beside it (the patches' own triangles share
+    # their corners exactly).
+    if P == 0 or P >= MAX_CELLS or geometry.patch_ray_offset is not None:
         return None
     merged, patch_corners = _parallelogram_patches(geometry)
     M = merged.size  # the parallelogram patches, in patch order; grid cells 0..M-1
@@ -185,15 +190,11 @@ def patch_grids(geometry):
     # triangles keep theirs (Geometry.triangle_frame, with their patch's normal).
     A, B = end_a - c00, end_b - c00
     area = np.linalg.norm(np.cross(A, B), axis=1)
-    inset, offset = RELATIVE_EDGE_INSET, geometry.ray_offset
-    if geometry.patch_ray_offset is not None:  # a rectangle's cells are its patches: theirs
-        inset = geometry.patch_edge_inset[rect.corner_patch[:, 0]]
-        offset = geometry.patch_ray_offset[rect.corner_patch[:, 0]][:, None]
-    d_a = np.minimum(inset * np.linalg.norm(B, axis=1) / area, 0.25)[:, None]
-    d_b = np.minimum(inset * np.linalg.norm(A, axis=1) / area, 0.25)[:, None]
+    d_a = np.minimum(RELATIVE_EDGE_INSET * np.linalg.norm(B, axis=1) / area, 0.25)[:, None]
+    d_b = np.minimum(RELATIVE_EDGE_INSET * np.linalg.norm(A, axis=1) / area, 0.25)[:, None]
     inset_a, inset_b = (1 - 2 * d_a) * A, (1 - 2 * d_b) * B
     frames = np.empty((12, 2 * R + L))
-    frames[0:3, : 2 * R] = np.repeat((c00 + d_a * A + d_b * B + offset * normal).T, 2, axis=1)
+    frames[0:3, : 2 * R] = np.repeat((c00 + d_a * A + d_b * B + geometry.ray_offset * normal).T, 2, axis=1)
     frames[3:6, 0 : 2 * R : 2] = inset_a.T  # u along A', v along A' + B': S = u + v, T = v
     frames[6:9, 0 : 2 * R : 2] = (inset_a + inset_b).T
     frames[3:6, 1 : 2 * R : 2] = (inset_a + inset_b).T  # S = u, T = u + v
@@ -207,17 +208,8 @@ def patch_grids(geometry):
         cell_patch=cell_patch,
         rectangles=R,
         hit_frames=np.ascontiguousarray(frames, dtype=np.float32),
-        edge_barycentric=edge_barycentric(corners, _clearance(geometry, rect.corner_patch[:, 0], other_triangle)),
+        edge_barycentric=edge_barycentric(corners),
     )
-
-
-def _clearance(geometry, rectangle_patch, other_triangle):
-    """RELATIVE_HIT_EDGE_CLEARANCE, or where patches take their own insets, (2R+L,) the
-    clearance of each grid triangle's patch (a rectangle's: ``rectangle_patch``'s)."""
-    if geometry.patch_edge_inset is None:
-        return RELATIVE_HIT_EDGE_CLEARANCE
-    patch = np.concatenate([np.repeat(rectangle_patch, 2), geometry.triangle_patch[other_triangle]])
-    return RELATIVE_HIT_EDGE_CLEARANCE / RELATIVE_EDGE_INSET * geometry.patch_edge_inset[patch]
 
 
 def _parallelogram_patches(geometry):
