@@ -10,19 +10,21 @@ import numpy as np
 # diagonal are the bounding box's, so that float32 precision and Embree's internal tolerances
 # (its barycentrics fail below a scene size of ~1e-8) see the same scene at any scale or
 # distance from the origin. Rays leave a patch from a point pushed this far along its normal
-# (~170 float32 ulps at the scene's extent).
+# (~170 float32 ulps at the scene's extent), or less where it is small beside the scene
+# (local_offsets).
 RELATIVE_RAY_OFFSET = 1e-5
 
 # Points where rays leave a patch keep this distance (relative to the diagonal, ~17 float32
 # ulps at the scene's extent) from the patch's edges, so that float32 rounding never puts an
-# origin on the far side of an adjacent wall, where its ray would hit that wall's back.
+# origin on the far side of an adjacent wall, where its ray would hit that wall's back (less,
+# as the offset, for patches small beside the scene).
 RELATIVE_EDGE_INSET = 1e-6
 
 # A ray leaving from where the previous one hit starts at that hit point (origin + t direction,
 # pushed off along the normal) if the point lies at least this far (relative to the diagonal)
-# from every edge of its triangle: four times the edge inset, which leaves room for float32's
-# error in the point (~2e-7 in unit space). Closer to an edge, the hit's barycentric
-# coordinates are mapped onto the triangle's inset leaving frame instead.
+# from every edge of its triangle: four times the edge inset (its patch's own, where it has
+# one), which leaves room for float32's error in the point (~2e-7 in unit space). Closer to an
+# edge, the hit's barycentric coordinates are mapped onto the triangle's inset leaving frame.
 RELATIVE_HIT_EDGE_CLEARANCE = 4 * RELATIVE_EDGE_INSET
 
 # Geometry small beside the scene's extent (a room beside a far object, a house on a terrain)
