@@ -622,7 +622,8 @@ class Interrupt:
             self.progress.end()
         if self.outputs is not None:
             self.outputs.discard()
-        print(self.MESSAGE, file=sys.stderr, flush=True)
+        at_start = "\r" if _isatty(sys.stderr) else ""  # (over the "^C" the terminal echoed)
+        print(at_start + self.MESSAGE, file=sys.stderr, flush=True)
 
     def _watch(self):
         read = self._pipe[0]
@@ -643,6 +644,13 @@ class Interrupt:
                     return
                 self._leave()
                 exit_now(self.STATUS)
+
+
+def _isatty(stream):
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):
+        return False
 
 
 def exit_now(status):
