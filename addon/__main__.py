@@ -412,9 +412,9 @@ def _run(args, names, interrupt):
         for target in (out_blend, png):
             if target:
                 os.makedirs(os.path.dirname(target), exist_ok=True)
-        for target in (out_blend, png):
-            if target:
-                outputs.add(target)
+        outputs.add(out_blend, check_blend)
+        if png:
+            outputs.add(png, check_png)
         if png and own_scene:
             # a scene built here: saved with the preview's settings, so F12 renders the same
             render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io), keep_settings=True,
@@ -501,37 +501,37 @@ class Outputs:
     together: until then an earlier file of the same name stays as it was."""
 
     def __init__(self):
-        self.files = []  # (temporary path, target)
+        self.files = []  # (temporary path, target, check: raises OSError unless the file is whole)
         self.existed = set()
         self.stage = None  # the target being written
 
-    def add(self, target):
+    def add(self, target, check):
         folder, name = os.path.split(target)
         stem, ext = os.path.splitext(name)
-        self.files.append((os.path.join(folder, f".{stem}.{os.getpid()}.partial{ext}"), target))
+        self.files.append((os.path.join(folder, f".{stem}.{os.getpid()}.partial{ext}"), target, check))
         if os.path.exists(target):
             self.existed.add(target)
 
     def writing(self, target):
         """The temporary path to write ``target``'s content to."""
         self.stage = target
-        return next(path for path, t in self.files if t == target)
+        return next(path for path, t, _ in self.files if t == target)
 
     def check(self):
-        for path, target in self.files:
+        for path, target, check in self.files:
             self.stage = target
-            (check_blend if target.lower().endswith(".blend") else check_png)(path)
+            check(path)
         self.stage = None
 
     def commit(self):
-        for path, target in self.files:
+        for path, target, _ in self.files:
             self.stage = target
             os.replace(path, target)
         self.files, self.stage = [], None
 
     def discard(self):
         """Remove the temporary files (and Blender's own temporary, "<path>@"); never raises."""
-        for path, _ in self.files:
+        for path, _, _ in self.files:
             for name in (path, path + "@"):
                 with contextlib.suppress(OSError):
                     os.remove(name)

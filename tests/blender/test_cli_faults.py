@@ -66,6 +66,26 @@ def test_a_truncated_save_keeps_the_earlier_file_and_says_so(tmp_path):
     assert sorted(os.listdir(folder)) == ["box.blend", "box.png"]
 
 
+def test_a_preview_cut_short_is_not_taken_for_an_image(tmp_path):
+    import zlib
+
+    from addon.__main__ import check_png
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 1, 1, 8, 0, 0, 0, 0))
+           + chunk(b"IDAT", zlib.compress(b"\x00\x80")) + chunk(b"IEND", b""))
+    whole, cut = tmp_path / "whole.png", tmp_path / "cut.png"
+    whole.write_bytes(png)
+    cut.write_bytes(png[:-5])
+    check_png(str(whole))
+    for path in (cut, tmp_path / "empty.png"):
+        path.touch()
+        with pytest.raises(OSError, match="incomplete"):
+            check_png(str(path))
+
+
 def _tmpfs(path, size):
     path.mkdir()
     proc = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], capture_output=True)
