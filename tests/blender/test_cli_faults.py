@@ -93,8 +93,9 @@ def _tmpfs(path, size):
 
 
 def test_a_full_disk_keeps_the_earlier_file(tmp_path):
-    """A small tmpfs filled but for a little (root only): wherever the writing fails, the
-    earlier file stays as it was, nothing is said saved and the status is non-zero."""
+    """A small tmpfs filled but for a little (root only): wherever the writing fails (Blender
+    notices "No space left on device", or not and the file comes out truncated: which one varies
+    from run to run), the earlier file stays as it was, nothing is said saved and the status is 1."""
     disk = tmp_path / "disk"
     if not _tmpfs(disk, "1000k"):
         pytest.skip("mounting a tmpfs needs root (the injected truncation above covers the check)")
@@ -104,8 +105,7 @@ def test_a_full_disk_keeps_the_earlier_file(tmp_path):
         assert proc.returncode == 0, proc.stderr[-2000:]
         earlier = blend.read_bytes()
         free = os.statvfs(disk).f_bavail * os.statvfs(disk).f_frsize
-        outcomes = set()
-        for left in (0.03, 0.25, 0.5, 0.8):  # the new file (about the earlier's size) fails at different points
+        for left in (0.0, 0.03, 0.25, 0.5, 0.8):  # the new file (about the earlier's size) fails at different points
             filler = disk / "fill"
             filler.write_bytes(b"\0" * int(free - left * len(earlier)))
             proc = _cli([*QUICK, "--seed", "1", "-o", str(blend), "--no-preview"], str(tmp_path))
@@ -115,11 +115,7 @@ def test_a_full_disk_keeps_the_earlier_file(tmp_path):
             errors = [line for line in proc.stderr.splitlines() if line.strip()]
             assert len(errors) == 1 and errors[0].startswith(f"error: cannot save {blend}: "), proc.stderr
             assert errors[0].endswith("the earlier file is kept")
-            outcomes.add("No space left" in errors[0])
             assert blend.read_bytes() == earlier and sorted(os.listdir(disk)) == ["box.blend"]
-        # both ways a save fails there: an error Blender notices, and a truncated file it does not
-        # (caught by reading it back)
-        assert outcomes == {True, False}
     finally:
         subprocess.run(["umount", str(disk)], check=False)
 
