@@ -87,11 +87,11 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
     _notes = ()
     _scene_uid = None
 
-    def _error(self, text):
+    def _error(self, text, kind="ERROR"):
         global LAST_ERROR
         LAST_ERROR = text
         if not self.quiet_errors:
-            self.report({"ERROR"}, text)
+            self.report({kind}, text)
 
     @classmethod
     def poll(cls, context):
@@ -160,8 +160,12 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             self._job.live_view = True
             self._live = _live_view(self._job)
             self._job.start()
-        else:
-            self._job.run()
+        else:  # (the running job while it runs: radiosity.cancel and the command line's Ctrl-C stop it)
+            worker.set_running_job(self._job)
+            try:
+                self._job.run()
+            finally:
+                worker.set_running_job(None)
         return None
 
     def _cleanup(self, context):
@@ -187,7 +191,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             self._error(f"Radiosity failed: {job.error}")
             return {"CANCELLED"}
         if output is None or output.result.stopped == "cancelled":
-            self.report({"INFO"}, "Radiosity cancelled: the scene is unchanged")
+            self._error("Radiosity cancelled: the scene is unchanged", kind="INFO")
             return {"CANCELLED"}
         if job.file_generation != worker.file_generation():
             self.report({"WARNING"}, "Radiosity: the file changed while solving; the result was discarded")
