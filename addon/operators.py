@@ -6,7 +6,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import live_view, scene_io, worker
+from . import live_view, pipeline, scene_io, worker
 
 TIMER_SECONDS = 0.1
 #: The last error of ``radiosity.solve`` (with quiet_errors, its only record).
@@ -38,6 +38,7 @@ def _run_stats(output):
         "last_measured_mse": measured if measured == measured else -1.0,  # NaN -> -1
         "last_patches": int(output.patches.combined.patch_count),
         "last_sources": output.sources,
+        "last_light_account": pipeline.light_account_text(r.energy),
         "last_patch_size": float(output.patches.patch_size),
         "last_stopped": str(r.stopped),
         "last_estimator": _method_text(r),
@@ -251,7 +252,8 @@ def _after_writing(op, settings, output, stats):
     op.report(
         {"INFO"},
         f"Radiosity: {stats['last_patches']:,} patches, {stats['last_paths']:,} paths, "
-        f"{stats['last_rays']:,} rays in {stats['last_seconds']:.1f} s",
+        f"{stats['last_rays']:,} rays in {stats['last_seconds']:.1f} s"
+        + (f"; {stats['last_light_account']}" if stats["last_light_account"] else ""),
     )
 
 

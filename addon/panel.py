@@ -160,6 +160,8 @@ def draw_last_run(layout, settings):
     col.label(text=f"Stopped by: {settings.last_stopped}")
     if settings.last_sources:
         col.label(text=f"Sources: {settings.last_sources}")
+    if settings.last_light_account:
+        col.label(text=settings.last_light_account[:1].upper() + settings.last_light_account[1:])
 
 
 def _wrap(text, width):

@@ -166,6 +166,24 @@ def sources_text(scene) -> str:
     return ", ".join(parts)
 
 
+def light_account_text(energy) -> str:
+    """Where the emitted light went, as shares of it, e.g. "light: 71.8% absorbed by surfaces
+    (0.9% on the back of faces), 28.2% left the scene": every run says how much it lost."""
+    emitted = float(np.sum(energy["emitted"])) if energy else 0.0
+    if not emitted > 0:
+        return ""
+    # the two-way iteration's accounts are estimates, a little below 0 or above 1 by noise
+    share = {k: min(max(float(np.sum(energy[k])) / emitted, 0.0), 1.0)
+             for k in ("absorbed", "escaped", "blocked", "undistributed")}
+    text = f"light: {share['absorbed']:.1%} absorbed by surfaces"
+    if share["blocked"] >= 5e-4:
+        text += f" ({share['blocked']:.1%} on the back of faces)"
+    text += f", {share['escaped']:.1%} left the scene"
+    if share["undistributed"] >= 5e-4:
+        text += f", {share['undistributed']:.1%} left undistributed (paths cut at t)"
+    return text
+
+
 def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     """What the panel and the command line show before a run: the predicted time, paths and
     rays of the run these settings make, from a pilot of it on this machine (core forecast), the

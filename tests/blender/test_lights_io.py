@@ -1,5 +1,6 @@
 """Blender's lights and world read as the core's light sources, in Cycles' units."""
 import math
+import re
 
 import bpy
 import numpy as np
@@ -230,6 +231,9 @@ def test_the_sources_and_their_shares_are_listed(blender):
     assert value["sources"] == f"1 point light {bulb / (bulb + lamp):.0%}, emissive faces {lamp / (bulb + lamp):.0%}"
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     assert blender.scene.radiosity.last_sources == value["sources"]
+    # and where the light went, from the run's own accounts
+    assert re.fullmatch(r"light: \d+\.\d% absorbed by surfaces( \(\d+\.\d% on the back of faces\))?, "
+                        r"\d+\.\d% left the scene", blender.scene.radiosity.last_light_account)
 
 
 def test_the_rest_of_the_scene_blocks_and_reflects_without_results(blender):
