@@ -228,7 +228,7 @@ def test_ctrl_c_during_the_solve_stops_at_once_with_one_line_and_130(tmp_path, h
             term.read_until(r"warning: Predicted", 120)  # said before the solve starts
             time.sleep(1.5)
         else:
-            term.read_until(r"planned paths", 120)
+            term.read_until(r"expected paths", 120)
         before = len(term.data)
         sent = time.monotonic()
         if how == "key":
@@ -280,9 +280,9 @@ def test_the_progress_line_ends_cleanly_on_a_narrow_terminal(tmp_path):
     finally:
         term.close()
     assert status == 0, term.text[-3000:]
-    assert "planned paths" in term.text  # a progress line was shown
+    assert "expected paths" in term.text  # a progress line was shown
     rows = screen(term.text, columns)
-    progress = re.compile(r"^\s*\d+\.\d%  |planned paths|Mray/s|\d:\d\d left|\(target ")
+    progress = re.compile(r"^\s*\d+\.\d%  |expected paths|Mray/s|\d:\d\d left|\(target ")
     assert not [row for row in rows if progress.search(row)], rows
     assert any(row.startswith("Warning: Time limit reached") for row in rows), rows
     assert any(row.startswith("saved: ") for row in rows), rows
