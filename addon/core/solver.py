@@ -68,6 +68,12 @@ MIN_MEASURED_CHUNKS = 8
 # paths (it needs several times fewer: docs/performance.md).
 GATHERED_PLAN_DIVISOR = 4
 MEASURED_CAP_FACTOR = 64
+# With stop_rule="measured" the run stops once the measured MSE plus MEASURED_STOP_Z of its own
+# standard errors (Batches.mse_upper_bound) meets the target, on at least MEASURED_STOP_CHUNKS
+# chunks: the estimate alone, read after every chunk, stops on its first lucky low reading, and
+# few or heavy-tailed chunks make such readings common.
+MEASURED_STOP_Z = 2.0
+MEASURED_STOP_CHUNKS = 16
 # The two-way iteration needs this many first-generation rays a patch in a chunk: with fewer,
 # what a generation passes on is mostly its own noise, which the next generation's gathering
 # reads, and its gain over the walk per ray goes (the closed Cornell box, 2,940-535,815
@@ -310,7 +316,7 @@ def solve(
     if gathered:
         with tables.numpy_turn:  # (it casts, and a cast lets go of the turn while it traces)
             tables.gathering.fate_shares = fate_shares(tables, int(seed))
-    total = Batches(scene, tables)
+    total = Batches(scene, tables, increments=measured_rule)
     chunk_count = math.ceil(cap / chunk)
     group = 1 if gathered else chunks_per_group(tables, chunk, prediction.expected_path_length)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
@@ -350,7 +356,8 @@ def solve(
                 if progress is not None:
                     progress(*_progress(total, prediction, cap, target_mse if measured_rule else None, start))
             # (The batch estimate costs passes over the patches: made only where it is used.)
-            if measured_rule and total.chunks >= MIN_MEASURED_CHUNKS and total.measured_mse() <= target_mse:
+            if measured_rule and total.chunks >= MEASURED_STOP_CHUNKS and total.measured_mse() <= target_mse \
+                    and total.mse_upper_bound(MEASURED_STOP_Z) <= target_mse:
                 stopped = STOP_TARGET
             elif total.paths >= cap:
                 stopped = done_rule
