@@ -1,12 +1,14 @@
-"""The measured stop rule against exact references: delivered MSE over the target, per method.
+"""The measured stop rule against exact references: delivered MSE over the target, per method;
+and its price: the paths and time to the same target on the sample scenes.
 
     python -m benchmarks.stop_rule            # writes benchmarks/results/stop_rule.md
 
 Closed boxes of rectangular patches with exact form factors (tests/core/boxes.py), solved by the
 direct linear solve (core.reference), then by the solver with stop_rule="measured" at the
 panel's relative targets, 12 seeds, one thread. "old" is the rule before the confidence margin
-(stop once the measured MSE alone meets the target, from MIN_MEASURED_CHUNKS chunks); "new" the
-solver's (MEASURED_STOP_Z standard errors of the estimate, MEASURED_STOP_CHUNKS chunks at least).
+(stop once the measured MSE alone meets the target, from MIN_MEASURED_CHUNKS chunks, the two-way
+plan in TWO_WAY_MIN_CHUNKS chunks); "new" the solver's (MEASURED_STOP_Z standard errors of the
+estimate, MEASURED_STOP_CHUNKS chunks at least, the two-way plan in TWO_WAY_MEASURED_CHUNKS).
 """
 from __future__ import annotations
 
@@ -27,8 +29,13 @@ from addon.core import solver  # noqa: E402
 from addon.core.reference import area_weighted_mse, rectangle_form_factors, solve_radiosity_system  # noqa: E402
 
 SEEDS = range(12)
-NEW = (solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS)
-OLD = (0.0, solver.MIN_MEASURED_CHUNKS)
+NEW = (solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS, solver.TWO_WAY_MEASURED_CHUNKS)
+OLD = (0.0, solver.MIN_MEASURED_CHUNKS, solver.TWO_WAY_MIN_CHUNKS)
+PRICE_SEEDS = range(3)
+
+
+def use(rule):
+    solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS, solver.TWO_WAY_MEASURED_CHUNKS = rule
 
 
 def small_source_box(n=8, reflectivity=0.8, corner=False):
@@ -63,7 +70,8 @@ def grey_room():
 
 CASES = [  # (name, scene maker, methods, relative targets)
     ("small source, middle (384 patches, R 0.8)", small_source_box, ("auto", "walk"), (0.05, 0.02)),
-    ("small source, corner (384 patches, R 0.8)", lambda: small_source_box(corner=True), ("walk",), (0.05, 0.02)),
+    ("small source, corner (384 patches, R 0.8)", lambda: small_source_box(corner=True), ("auto", "walk"), (0.05,)),
+    ("small source, corner (384 patches, R 0.8)", lambda: small_source_box(corner=True), ("walk",), (0.02,)),
     ("bright box (216 patches, R 0.95)", bright_box, ("auto", "walk"), (0.10, 0.05)),
     ("colour box (96 patches)", colour_box, ("auto", "walk"), (0.05, 0.02)),
     ("grey room (384 patches, R 0.5)", grey_room, ("auto", "walk"), (0.05, 0.02)),
@@ -71,7 +79,7 @@ CASES = [  # (name, scene maker, methods, relative targets)
 
 
 def run(scene, exact, method, relative, rule):
-    solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS = rule
+    use(rule)
     target = relative_rms_to_mse(predict(scene), relative)
     ratios, paths, seconds, ran = [], [], [], set()
     for seed in SEEDS:
@@ -81,8 +89,43 @@ def run(scene, exact, method, relative, rule):
         paths.append(r.paths)
         ran.add(f"{r.method}/{r.stopped}")
         ratios.append(area_weighted_mse(r.reflected, exact - scene.emission, scene.patch_area) / target)
-    solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS = NEW
+    use(NEW)
     return np.array(ratios), np.mean(paths), np.sum(seconds), ",".join(sorted(ran))
+
+
+def price():
+    """The paths and seconds to the same target, old and new rule, on sample scenes (no exact
+    reference: what the margin costs), 3 seeds, 2 threads."""
+    import sample_scenes
+
+    lines = ["", "## The price on the sample scenes", "",
+             f"Mean paths a run and the {len(PRICE_SEEDS)} runs' seconds (2 threads, a shared 2-core machine: "
+             "the paths are the measure), old and new rule, at the same target.", "",
+             "| scene | method (ran/stopped/chunks) | target | paths old | paths new | new/old | s old | s new |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, kwargs in (("cornell_box", {"closed": True}), ("cornell_box", {}), ("fig1_r0.5", {})):
+        scene = sample_scenes.build(name, **kwargs).scene
+        label = f"{name}{' closed' if kwargs else ''} ({scene.patch_count:,} patches)"
+        for relative in (0.05, 0.02):
+            target = relative_rms_to_mse(predict(scene), relative)
+            for method in ("auto", "walk"):
+                out = []
+                for rule in (OLD, NEW):
+                    use(rule)
+                    paths, seconds, ran = [], 0.0, set()
+                    for seed in PRICE_SEEDS:
+                        start = time.perf_counter()
+                        r = solve(scene, target_mse=target, seed=seed, stop_rule="measured", threads=2, method=method)
+                        seconds += time.perf_counter() - start
+                        paths.append(r.paths)
+                        ran.add(f"{r.method}/{r.stopped}/{r.chunks}")
+                    out.append((np.mean(paths), seconds, ran))
+                use(NEW)
+                row = (f"| {label} | {method} ({', '.join(sorted(out[1][2]))}) | {relative:.0%} | {out[0][0]:,.0f} | "
+                       f"{out[1][0]:,.0f} | {out[1][0] / out[0][0]:.2f} | {out[0][1]:.1f} | {out[1][1]:.1f} |")
+                print(row, flush=True)
+                lines.append(row)
+    return lines
 
 
 def main():
@@ -104,6 +147,7 @@ def main():
                            f"{paths:,.0f} | {seconds:.1f} |")
                     print(row, flush=True)
                     lines.append(row)
+    lines += price()
     out = ROOT / "benchmarks" / "results" / "stop_rule.md"
     out.write_text("\n".join(lines) + "\n")
     print("wrote", out)

@@ -183,14 +183,15 @@ class Batches:
         return total * (n * N / (N + n))
 
     def mse_upper_bound(self, z):
-        """measured_mse plus ``z`` standard errors of it, the standard error from the spread of
-        the chunks' increments (measured_mse is their mean over N): large where they disagree,
-        as when a rare chunk carries most of the error or chunks are few. NaN below 3 chunks or
-        without increments."""
+        """The measured MSE (the increments' mean over N: measured_mse to rounding) plus ``z``
+        standard errors of it, from the increments' spread: large where they disagree, as when
+        a rare chunk carries most of the error or chunks are few. NaN below 3 chunks or without
+        increments."""
         if self.increments is None or len(self.increments) < 2:
             return math.nan
+        mean = float(np.mean(self.increments))
         spread = float(np.std(self.increments, ddof=1)) / math.sqrt(len(self.increments))
-        return self.measured_mse() + z * spread / self.paths
+        return (mean + z * spread) / self.paths
 
     def let_go_of_squares(self):
         """The measured MSE, then the sums of squares let go of (a (C,P) array less while the
