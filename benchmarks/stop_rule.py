@@ -6,9 +6,8 @@ and its price: the paths and time to the same target on the sample scenes.
 Closed boxes of rectangular patches with exact form factors (tests/core/boxes.py), solved by the
 direct linear solve (core.reference), then by the solver with stop_rule="measured" at the
 panel's relative targets, 12 seeds, one thread. "old" is the rule before the confidence margin
-(stop once the measured MSE alone meets the target, from MIN_MEASURED_CHUNKS chunks, the two-way
-plan in TWO_WAY_MIN_CHUNKS chunks); "new" the solver's (MEASURED_STOP_Z standard errors of the
-estimate, MEASURED_STOP_CHUNKS chunks at least, the two-way plan in TWO_WAY_MEASURED_CHUNKS).
+(stop once the measured MSE alone meets the target, from MIN_MEASURED_CHUNKS chunks); "new" the
+solver's (plus MEASURED_STOP_Z standard errors of the estimate, MEASURED_STOP_CHUNKS chunks at least).
 """
 from __future__ import annotations
 
@@ -29,13 +28,13 @@ from addon.core import solver  # noqa: E402
 from addon.core.reference import area_weighted_mse, rectangle_form_factors, solve_radiosity_system  # noqa: E402
 
 SEEDS = range(12)
-NEW = (solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS, solver.TWO_WAY_MEASURED_CHUNKS)
-OLD = (0.0, solver.MIN_MEASURED_CHUNKS, solver.TWO_WAY_MIN_CHUNKS)
+NEW = (solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS)
+OLD = (0.0, solver.MIN_MEASURED_CHUNKS)
 PRICE_SEEDS = range(3)
 
 
 def use(rule):
-    solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS, solver.TWO_WAY_MEASURED_CHUNKS = rule
+    solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS = rule
 
 
 def small_source_box(n=8, reflectivity=0.8, corner=False):

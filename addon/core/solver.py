@@ -73,7 +73,7 @@ MEASURED_CAP_FACTOR = 64
 # chunks: the estimate alone, read after every chunk, stops on its first lucky low reading, and
 # few or heavy-tailed chunks make such readings common.
 MEASURED_STOP_Z = 2.0
-MEASURED_STOP_CHUNKS = 16
+MEASURED_STOP_CHUNKS = 12
 # The two-way iteration needs this many first-generation rays a patch in a chunk: with fewer,
 # what a generation passes on is mostly its own noise, which the next generation's gathering
 # reads, and its gain over the walk per ray goes (the closed Cornell box, 2,940-535,815
@@ -95,9 +95,6 @@ TWO_WAY_CHUNK_RAYS_PER_PATCH = 32
 # room than in 32 chunks, 2-3% more in 8 (docs/performance.md); 16 leave the batch estimate 15
 # degrees of freedom.
 TWO_WAY_MIN_CHUNKS = 16
-# Under the measured rule a run often stops at half its plan, and must have MEASURED_STOP_CHUNKS
-# chunks by then: its plan is in twice as many, smaller chunks.
-TWO_WAY_MEASURED_CHUNKS = 2 * MEASURED_STOP_CHUNKS
 # A chunk's gathering samples and rays go a block at a time (first_shot.SAMPLE_BLOCK,
 # two_way.RAY_BLOCK); what it holds at once beyond a block is its samples' points and values.
 TWO_WAY_MAX_CHUNK_PATHS = 1 << 20
@@ -162,20 +159,18 @@ def chunk_paths_for(expected_path_length, planned_paths, min_chunks=MIN_CHUNKS):
     return int(min(MAX_CHUNK_PATHS, max(MIN_CHUNK_PATHS, min(by_rays, by_batches))))
 
 
-def two_way_chunk_paths(patch_count, expected_path_length, planned_paths, time_limited=False, measured=False):
-    """A two-way chunk: the usual rays (a small plan in TWO_WAY_MIN_CHUNKS chunks, or
-    TWO_WAY_MEASURED_CHUNKS for a run stopping on its measured error), or more: up to
-    TWO_WAY_CHUNK_RAYS_PER_PATCH first-generation rays a patch (GENERATION_RAYS a path) within
-    those chunks of the plan, and at least TWO_WAY_RAYS_PER_PATCH within MIN_MEASURED_CHUNKS;
-    never more than TWO_WAY_MAX_CHUNK_PATHS. Under a time limit, the usual rays (about
-    RAYS_PER_CHUNK): a chunk of a million paths can take longer than the limit, and a run
-    stopped before its first chunk has nothing to give."""
-    chunks = TWO_WAY_MEASURED_CHUNKS if measured else TWO_WAY_MIN_CHUNKS
-    usual = chunk_paths_for(rays_per_path(expected_path_length), planned_paths, chunks)
+def two_way_chunk_paths(patch_count, expected_path_length, planned_paths, time_limited=False):
+    """A two-way chunk: the usual rays (a small plan in TWO_WAY_MIN_CHUNKS chunks), or more: up
+    to TWO_WAY_CHUNK_RAYS_PER_PATCH first-generation rays a patch (GENERATION_RAYS a path)
+    within TWO_WAY_MIN_CHUNKS chunks of the plan, and at least TWO_WAY_RAYS_PER_PATCH within
+    MIN_MEASURED_CHUNKS; never more than TWO_WAY_MAX_CHUNK_PATHS. Under a time limit, the usual
+    rays (about RAYS_PER_CHUNK): a chunk of a million paths can take longer than the limit, and
+    a run stopped before its first chunk has nothing to give."""
+    usual = chunk_paths_for(rays_per_path(expected_path_length), planned_paths, TWO_WAY_MIN_CHUNKS)
     if time_limited:
         return usual
     paths_for = lambda rays: math.ceil(rays * patch_count / GENERATION_RAYS)  # noqa: E731
-    grown = min(paths_for(TWO_WAY_CHUNK_RAYS_PER_PATCH), math.ceil(planned_paths / chunks))
+    grown = min(paths_for(TWO_WAY_CHUNK_RAYS_PER_PATCH), math.ceil(planned_paths / TWO_WAY_MIN_CHUNKS))
     enough = min(paths_for(TWO_WAY_RAYS_PER_PATCH), math.ceil(planned_paths / MIN_MEASURED_CHUNKS))
     return int(min(TWO_WAY_MAX_CHUNK_PATHS, max(usual, grown, enough)))
 
@@ -195,7 +190,7 @@ def choose_method(scene, estimator=FINITE, *, paths=None, target_mse=None, thres
         return WALK
     prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
     planned = paths if paths is not None else planned_paths(prediction.paths_for(target_mse), GATHERED, TWO_WAY)
-    chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None, paths is None)
+    chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
     return TWO_WAY if first_generation_rays(scene.patch_count, chunk) >= TWO_WAY_RAYS_PER_PATCH else WALK
 
 
@@ -309,7 +304,7 @@ def solve(
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
     if method == TWO_WAY:
-        chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None, measured_rule)
+        chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
     else:
         chunk = chunk_paths_for(prediction.expected_path_length, planned)
     tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups)
