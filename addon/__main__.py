@@ -13,14 +13,17 @@ synchronously through the same operator the panel uses (``radiosity.solve``).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import math
 import os
+import shutil
+import signal
 import sys
+import threading
 import time
 
-import numpy as np
-
-from . import options
+from . import options  # (numpy and bpy are imported where used: Ctrl-C is handled from the start)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -123,6 +126,7 @@ def world_bounds(objects):
     geometry's vertices (``to_mesh``, read with foreach_get; an evaluated curve's bound box
     holds its control points, not its bevel or extrusion). (0, 0) when there is no geometry."""
     import bpy
+    import numpy as np
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     lows, highs = [], []
@@ -260,8 +264,9 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     return changes
 
 
-def render_preview(path, sources, width=480, samples=16, exposure=0.0, keep_settings=False):
-    """Render the result objects (their baked colours as emission) with Cycles to ``path``.
+def render_preview(path, sources, width=480, samples=16, exposure=0.0, keep_settings=False, write_to=None):
+    """Render the result objects (their baked colours as emission) with Cycles to ``path``
+    (the scene's output path), written to ``write_to`` if given (a temporary file).
 
     The source objects are hidden from the render while it runs; they and the preview's
     settings (``preview_settings``) are restored afterwards unless ``keep_settings`` (a scene
@@ -276,7 +281,9 @@ def render_preview(path, sources, width=480, samples=16, exposure=0.0, keep_sett
         for o, _ in hidden:
             o.hide_render = True
         scene.render.filepath = os.path.abspath(path)
-        bpy.ops.render.render(write_still=True)
+        bpy.ops.render.render()
+        result = next(i for i in bpy.data.images if i.type == "RENDER_RESULT")
+        result.save_render(filepath=os.path.abspath(write_to or path), scene=scene)
     finally:
         if not keep_settings:
             for o, h in hidden:
@@ -311,6 +318,14 @@ def main(argv=None):
     if args.list:
         print("\n".join(names))
         return 0
+    with Interrupt() as interrupt:
+        try:
+            return _run(args, names, interrupt)
+        except Interrupted:
+            return interrupt.stopped()
+
+
+def _run(args, names, interrupt):
     root = _repo_root()
     if root not in sys.path:
         sys.path.insert(0, root)
@@ -318,6 +333,7 @@ def main(argv=None):
 
     from . import scene_io
 
+    interrupt.check()
     t0 = time.perf_counter()
     scene_name = args.scene or "cornell"
     if args.open:
@@ -342,6 +358,12 @@ def main(argv=None):
             build_sample_scene(scene_name)
         else:
             return _fail(f"unknown scene {scene_name!r}; choose from: {', '.join(names)}", 2)
+    out_blend = os.path.abspath(args.blend_path or os.path.join("out", f"{scene_name}.blend"))
+    png = None if args.no_preview else os.path.abspath(args.preview or os.path.splitext(out_blend)[0] + ".png")
+    for target in (out_blend, png):  # said before the run, not after it
+        problem = target and output_problem(target)
+        if problem:
+            return _fail(problem, 2)
     if args.select_all:
         for o in bpy.context.view_layer.objects:
             o.select_set(o.type == "MESH" and not scene_io.is_result_object(o))
@@ -362,41 +384,287 @@ def main(argv=None):
         warning = pipeline.estimate(objects, settings.solve_settings())["warning"]
     except ValueError:
         warning = None  # bad input: the solve says what is wrong
+    interrupt.check()
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
     operators.LAST_ERROR = ""
     progress = ProgressLine(sys.stderr) if (not args.quiet and sys.stderr.isatty()) else None
+    interrupt.progress = progress
     worker.PROGRESS_LISTENER = progress
+    reports = io.StringIO()  # the operator's reports, after the progress line, on lines of their own
     try:
-        result = bpy.ops.radiosity.solve(quiet_errors=True)
+        with contextlib.redirect_stdout(reports):
+            result = bpy.ops.radiosity.solve(quiet_errors=True)
     except RuntimeError as exc:  # an error the operator did not keep quiet
         return _fail(_one_line(exc))
     finally:
         worker.PROGRESS_LISTENER = None
         if progress is not None:
             progress.end()
+        interrupt.check()
+        sys.stdout.write(reports.getvalue())
     if "FINISHED" not in result:
         return _fail(operators.LAST_ERROR or "the solve did not finish")
     print(summary(scene_name, settings))
     print(f"sources: {settings.last_sources}")
-    out_blend = os.path.abspath(args.blend_path or os.path.join("out", f"{scene_name}.blend"))
-    os.makedirs(os.path.dirname(out_blend), exist_ok=True)
-    png = None if args.no_preview else os.path.abspath(args.preview or os.path.splitext(out_blend)[0] + ".png")
+    outputs = interrupt.outputs = Outputs()
     try:
+        for target in (out_blend, png):
+            if target:
+                os.makedirs(os.path.dirname(target), exist_ok=True)
+        outputs.add(out_blend, check_blend)
+        if png:
+            outputs.add(png, check_png)
         if png and own_scene:
             # a scene built here: saved with the preview's settings, so F12 renders the same
-            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io), keep_settings=True)
+            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io), keep_settings=True,
+                           write_to=outputs.writing(png))
+            interrupt.check()
         # the user's scene is saved as it is, plus the results (a copy: the open file stays the same)
-        bpy.ops.wm.save_as_mainfile(filepath=out_blend, copy=True)
+        save_blend(outputs.writing(out_blend))
+        interrupt.check()
         if png and not own_scene:
             # then the preview, with temporary settings undone afterwards
-            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io))
-    except RuntimeError as exc:
-        return _fail(_one_line(exc))
+            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io),
+                           write_to=outputs.writing(png))
+        outputs.check()
+        with interrupt.lock:  # all files in place, or none
+            interrupt.check()
+            outputs.commit()
+            interrupt.committed = True
+    except (RuntimeError, OSError) as exc:
+        outputs.discard()
+        return _fail(outputs.failure(exc))
     if png:
         print(f"preview: {png}")
     print(f"saved: {out_blend}  ({time.perf_counter() - t0:.1f} s in all)")
     return 0
+
+
+def output_problem(path):
+    """Why ``path`` cannot be written (a folder on the way is a file, or not writable), or None."""
+    if os.path.isdir(path):
+        return f"cannot write {path}: it is a folder"
+    folder = os.path.dirname(path)
+    existing = folder
+    while not os.path.exists(existing):
+        existing = os.path.dirname(existing)
+    if not os.path.isdir(existing):
+        return f"cannot create the folder {folder}: {existing} is a file"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"cannot write in {existing}: permission denied"
+    return None
+
+
+def save_blend(path):
+    """Save the open file's data to ``path`` as a copy (the open file keeps its name), without
+    Blender's report naming ``path`` (a temporary name)."""
+    import bpy
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+
+
+def check_blend(path):
+    """Raise OSError unless Blender reads ``path`` back as a .blend file (a truncated one, e.g. on
+    a full disk, lacks its DNA block)."""
+    import bpy
+
+    if os.path.getsize(path) == 0:
+        raise OSError("the file written is empty")
+    try:
+        with bpy.data.libraries.load(path) as (_data_from, _data_to):
+            pass
+    except OSError as exc:
+        reason = _one_line(exc).rsplit(": ", 1)[-1]
+        raise OSError(f"the file written does not read back ({reason})") from None
+
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"  # the empty IEND chunk that ends every PNG
+
+
+def check_png(path):
+    """Raise OSError unless ``path`` is a whole PNG file (its signature, and its IEND chunk last)."""
+    with open(path, "rb") as f:
+        head = f.read(len(PNG_SIGNATURE))
+        f.seek(0, os.SEEK_END)
+        f.seek(max(f.tell() - len(PNG_END), 0))
+        tail = f.read()
+    if head != PNG_SIGNATURE or tail != PNG_END:
+        raise OSError("the image written is incomplete")
+
+
+class Outputs:
+    """The run's files, each written beside its target under a temporary name (the same folder:
+    relative paths in a .blend stay right, and the rename is atomic), checked, then put in place
+    together: until then an earlier file of the same name stays as it was."""
+
+    def __init__(self):
+        self.files = []  # (temporary path, target, check: raises OSError unless the file is whole)
+        self.existed = set()
+        self.stage = None  # the target being written
+
+    def add(self, target, check):
+        folder, name = os.path.split(target)
+        stem, ext = os.path.splitext(name)
+        self.files.append((os.path.join(folder, f".{stem}.{os.getpid()}.partial{ext}"), target, check))
+        if os.path.exists(target):
+            self.existed.add(target)
+
+    def writing(self, target):
+        """The temporary path to write ``target``'s content to."""
+        self.stage = target
+        return next(path for path, t, _ in self.files if t == target)
+
+    def check(self):
+        for path, target, check in self.files:
+            self.stage = target
+            check(path)
+        self.stage = None
+
+    def commit(self):
+        for path, target, _ in self.files:
+            self.stage = target
+            os.replace(path, target)
+        self.files, self.stage = [], None
+
+    def discard(self):
+        """Remove the temporary files (and Blender's own temporary, "<path>@"); never raises."""
+        for path, _, _ in self.files:
+            for name in (path, path + "@"):
+                with contextlib.suppress(OSError):
+                    os.remove(name)
+
+    def failure(self, exc):
+        """The one line saying what failed, and that the earlier files are kept."""
+        reason = _one_line(exc) if isinstance(exc, RuntimeError) else (exc.strerror or str(exc))
+        where = f" {self.stage}" if self.stage else ""
+        kept = "; the earlier file is kept" if self.existed else "; nothing was saved"
+        if isinstance(exc, OSError) and exc.filename and not self.stage:
+            where = f" {exc.filename}"
+        return f"cannot save{where}: {reason}{kept}"
+
+
+class Interrupted(Exception):
+    """Ctrl-C was pressed: the run stops at the next point that can stop."""
+
+
+class Interrupt:
+    """Ctrl-C on the command line: the running solve is cancelled, nothing is saved (the files
+    are put in place only at the end, ``Outputs``), one line is printed and the status is 130.
+
+    The main thread stops at its next ``check()``; when it cannot (held in Blender's C code, a
+    render or a save), a watchdog thread woken by the signal (``signal.set_wakeup_fd``) ends the
+    process GRACE seconds later, with the same line and status, after removing the temporary
+    files. Installed only over Python's own SIGINT handler, on the main thread."""
+
+    GRACE = 0.5
+    STATUS = 130
+    MESSAGE = "interrupted: stopped by Ctrl-C; nothing was saved"
+
+    def __init__(self):
+        self.requested = threading.Event()
+        self.finished = threading.Event()
+        self.lock = threading.Lock()  # held while the files are put in place
+        self.committed = False
+        self.progress = None  # the ProgressLine to end
+        self.outputs = None  # the Outputs to discard
+        self._pipe = None
+
+    def __enter__(self):
+        if (threading.current_thread() is not threading.main_thread()
+                or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+            return self  # someone else's handler (Blender's, a host's): left alone
+        read, write = os.pipe()
+        os.set_blocking(write, False)
+        self._wakeup = signal.set_wakeup_fd(write, warn_on_full_buffer=False)
+        self._previous = signal.signal(signal.SIGINT, self._on_signal)
+        self._pipe = (read, write)
+        self._watchdog = threading.Thread(target=self._watch, name="radiosity-interrupt", daemon=True)
+        self._watchdog.start()
+        return self
+
+    def __exit__(self, *exc_info):
+        self.finished.set()
+        if self._pipe is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            signal.set_wakeup_fd(self._wakeup)
+            os.close(self._pipe[1])  # the watchdog reads the end of the pipe and ends
+            self._watchdog.join(timeout=1)
+            os.close(self._pipe[0])
+            self._pipe = None
+        return False
+
+    def _on_signal(self, signum, frame):  # (main thread, between two Python steps: never raises)
+        self._request()
+
+    def _request(self):
+        self.requested.set()
+        worker = sys.modules.get(f"{__package__}.worker")  # (no import here: it could wait on the main thread's)
+        job = worker.running_job() if worker is not None else None
+        if job is not None:
+            job.cancel()
+
+    def check(self):
+        if self.requested.is_set():
+            raise Interrupted
+
+    def stopped(self):
+        """The main thread's way out after Ctrl-C: discard, one line, the status."""
+        with self.lock:
+            self._leave()
+        return self.STATUS
+
+    def _leave(self):
+        self.finished.set()
+        if self.progress is not None:
+            self.progress.end()
+        if self.outputs is not None:
+            self.outputs.discard()
+        at_start = "\r" if _isatty(sys.stderr) else ""  # (over the "^C" the terminal echoed)
+        print(at_start + self.MESSAGE, file=sys.stderr, flush=True)
+
+    def _watch(self):
+        read = self._pipe[0]
+        while True:
+            try:
+                data = os.read(read, 64)
+            except OSError:
+                return
+            if not data or self.finished.is_set():
+                return
+            if signal.SIGINT not in data:
+                continue
+            self._request()
+            if self.finished.wait(self.GRACE):
+                return
+            with self.lock:  # (a commit under way ends first: its files are whole)
+                if self.finished.is_set() or self.committed:
+                    return
+                self._leave()
+                exit_now(self.STATUS)
+
+
+def _isatty(stream):
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def exit_now(status):
+    """End the process at once (Blender's own exit takes half a second): streams flushed and
+    Blender's session folder removed, as its exit would."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    blender_tempdir = None
+    with contextlib.suppress(Exception):  # (bpy may still be importing: its folder exists already)
+        blender_tempdir = sys.modules["bpy"].app.tempdir
+    if blender_tempdir and os.path.basename(os.path.normpath(blender_tempdir)).startswith("blender_"):
+        shutil.rmtree(blender_tempdir, ignore_errors=True)
+    os._exit(status)
 
 
 def summary(scene_name, settings) -> str:
@@ -413,12 +681,15 @@ def summary(scene_name, settings) -> str:
 
 class ProgressLine:
     """One line on a terminal, rewritten after batches (at most every PERIOD seconds): paths
-    done of planned, ray rate, the error estimate against the target, and the time left."""
+    done of planned, ray rate, the error estimate against the target, and the time left.
+    Cut to the terminal's width: a line that wraps cannot be rewritten, each rewrite would
+    leave a line behind."""
 
     PERIOD = 0.25
 
     def __init__(self, stream):
         self.stream, self.shown, self.width = stream, 0.0, 0
+        self._lock = threading.Lock()  # (ended by the interrupt's watchdog too)
 
     def __call__(self, job):
         now = time.perf_counter()
@@ -428,36 +699,54 @@ class ProgressLine:
         self.write(progress_text(job))
 
     def write(self, text):
-        self.stream.write("\r" + text.ljust(self.width))
-        self.stream.flush()
-        self.width = len(text)
+        with self._lock:
+            text = text[:terminal_columns(self.stream) - 1]
+            self.stream.write("\r" + text.ljust(self.width))
+            self.stream.flush()
+            self.width = len(text)
 
     def end(self):
-        if self.width:
-            self.stream.write("\r" + " " * self.width + "\r")
-            self.stream.flush()
+        """Clear the line (and a "^C" the terminal echoed after it)."""
+        with self._lock:
+            if self.width:
+                blank = min(self.width + 2, terminal_columns(self.stream) - 1)
+                self.stream.write("\r" + " " * blank + "\r")
+                self.stream.flush()
+                self.width = 0
+
+
+def terminal_columns(stream) -> int:
+    """The width of the terminal ``stream`` writes to (80 where it does not say)."""
+    try:
+        columns = os.get_terminal_size(stream.fileno()).columns
+    except (AttributeError, ValueError, OSError, io.UnsupportedOperation):
+        columns = 0
+    return columns if columns > 1 else 80
 
 
 def progress_text(job) -> str:
     """The progress line of a running job (worker.SolveJob)."""
     p = job.snapshot()
     fraction, paths, seconds = p.get("fraction", 0.0), p.get("paths", 0), p.get("seconds", 0.0)
-    planned = getattr(job.prediction, "paths", None)
-    parts = [f"{fraction * 100:5.1f}%", f"{paths:,} of {planned:,} planned paths" if planned else f"{paths:,} paths"]
+    planned = p.get("expected_paths", math.nan)  # where the run is expected to end, from its measured error
+    planned = int(planned) if planned == planned and planned is not None else getattr(job.prediction, "paths", None)
+    parts = [f"{fraction * 100:5.1f}%", f"{paths:,} of {planned:,} expected paths" if planned else f"{paths:,} paths"]
     if p.get("rays_per_second"):
         parts.append(f"{p['rays_per_second'] / 1e6:.2f} Mray/s")
     error = job.relative_error(p.get("measured_mse"))
     if error is not None:
         target = job.settings.relative_rms
         parts.append(f"error {error * 100:.2f}%" + (f" (target {target * 100:g}%)" if not job.settings.paths else ""))
-    if 0 < fraction < 1 and seconds > 0:
-        left = seconds * (1 - fraction) / fraction
+    left = p.get("seconds_left", math.nan)
+    if left == left and left is not None and fraction < 1:  # (NaN until the run has measured its error)
         parts.append(f"{int(left // 60)}:{int(left % 60):02d} left")
     return "  ".join(parts)
 
 
 def _auto_exposure(scene_io):
     """Exposure (stops) that maps the median reflected radiosity to 0.35."""
+    import numpy as np
+
     values = []
     for obj in scene_io.previous_results():
         attr = obj.data.color_attributes.get(scene_io.ATTRIBUTE_NAME)
@@ -477,4 +766,11 @@ def _auto_exposure(scene_io):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        status = main()
+    except KeyboardInterrupt:  # before the run's own handler was in place
+        print(Interrupt.MESSAGE, file=sys.stderr)
+        status = Interrupt.STATUS
+    if status == Interrupt.STATUS:
+        exit_now(status)
+    sys.exit(status)

@@ -14,7 +14,7 @@ import threading
 
 import bpy
 
-from . import pipeline, scene_io
+from . import pipeline, scene_io, worker
 
 DELAY_SECONDS = 0.3
 POLL_SECONDS = 0.1
@@ -93,7 +93,8 @@ def _start():
 
     def run():
         try:
-            value = pipeline.estimate(objects, settings)
+            # (its pilot stops when a run starts: the panel then shows the run, not the estimate)
+            value = pipeline.estimate(objects, settings, should_stop=lambda: worker.running_job() is not None)
         except ValueError as exc:
             value = {"error": str(exc)}
         except Exception as exc:  # noqa: BLE001

@@ -72,6 +72,7 @@ def read_light(data, matrix, name, notes):
     # point light of radius 0 is 4, of a sun of angle 0 is 1).
     unnormalized = not getattr(data, "normalize", True)
     shadow = bool(getattr(data, "use_shadow", True))
+    _check_finite(name, data, matrix)
     position = matrix[:3, 3]
     axes = matrix[:3, :3]
     down = -axes[:, 2] / np.linalg.norm(axes[:, 2])  # lights shine along their local -Z
@@ -111,6 +112,25 @@ def read_light(data, matrix, name, notes):
     return None
 
 
+# The settings each kind of light reads, by the name the user sees.
+SIZES = {"POINT": {"radius": "shadow_soft_size"},
+         "SPOT": {"radius": "shadow_soft_size", "spot size": "spot_size", "spot blend": "spot_blend"},
+         "AREA": {"size": "size", "size Y": "size_y"},
+         "SUN": {"angle": "angle"}}
+
+
+def _check_finite(name, data, matrix):
+    """LightError naming the light and the setting where its place or a size is NaN or infinite
+    (from a driver or a script): its light would go nowhere, leaving the scene dark."""
+    if not np.isfinite(matrix[:3, 3]).all():
+        raise LightError(f"light '{name}': its location is not a finite number (NaN or infinite)")
+    if not np.isfinite(matrix[:3, :3]).all():
+        raise LightError(f"light '{name}': its rotation or scale is not a finite number (NaN or infinite)")
+    for label, attribute in SIZES.get(data.type, {}).items():
+        if not math.isfinite(float(getattr(data, attribute, 0.0))):
+            raise LightError(f"light '{name}': its {label} is not a finite number (NaN or infinite)")
+
+
 def _spot_frame(axes, name):
     """A spot's ``to_local`` where its object is scaled unevenly (Cycles then makes the cone
     elliptical: the inverse matrix, z turned towards the axis), else None (a round cone)."""
@@ -133,10 +153,10 @@ def read_world(scene, notes):
         raise LightError(f"world '{world.name}': its colour or strength is not a finite number")
     if strength < 0 or (colour < 0).any():
         raise LightError(f"world '{world.name}' has a negative colour or strength")
+    if strength == 0:
+        return None
     if image is not None:
-        pixels = image_pixels(image, notes)
-        if pixels is not None:
-            return WorldLight(image=pixels * strength, name=world.name)
+        return WorldLight(image=image_pixels(image, world.name) * strength, name=world.name)
     if strength == 0 or not colour.any():
         return None
     return WorldLight(irradiance=colour * strength, name=world.name)
@@ -175,12 +195,17 @@ def _background(world, notes):
     return np.array(colour_socket.default_value[:3], dtype=np.float64), strength, None
 
 
-def image_pixels(image, notes):
+def image_pixels(image, world_name):
     """(H, W, 3) linear pixels of an equirectangular image, top row first (Blender stores the
-    bottom row first), or None with a note where the image cannot be read."""
+    bottom row first). An image without pixels (a missing file) is a LightError naming it: the
+    sky's light is then unknown (Cycles renders it magenta), and no made-up sky is solved."""
     pixels = linear_pixels(image, np.float64)
     if pixels is None:
-        notes.append(f"environment image '{image.name}' could not be read (missing file?); "
-                     "the world gives no light here")
-        return None
+        path = bpy.path.abspath(image.filepath) if image.filepath else ""
+        where = f"file not found: {path}" if path else "no file"
+        raise LightError(f"world '{world_name}': its environment image '{image.name}' has no pixels ({where}); "
+                         "find the file (File > External Data) or unlink the image")
+    if not np.isfinite(pixels).all() or (pixels < 0).any():
+        raise LightError(f"world '{world_name}': its environment image '{image.name}' has pixels that are "
+                         "negative or not finite")
     return pixels[::-1]

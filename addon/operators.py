@@ -6,13 +6,11 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import live_view, scene_io, worker
+from . import live_view, pipeline, scene_io, worker
 
 TIMER_SECONDS = 0.1
 #: The last error of ``radiosity.solve`` (with quiet_errors, its only record).
 LAST_ERROR = ""
-#: Above this share of the emitted power absorbed on back sides, the user is warned.
-BLOCKED_WARNING = 0.05
 
 
 def _redraw(context):
@@ -40,6 +38,7 @@ def _run_stats(output):
         "last_measured_mse": measured if measured == measured else -1.0,  # NaN -> -1
         "last_patches": int(output.patches.combined.patch_count),
         "last_sources": output.sources,
+        "last_light_account": pipeline.light_account_text(r.energy),
         "last_patch_size": float(output.patches.patch_size),
         "last_stopped": str(r.stopped),
         "last_estimator": _method_text(r),
@@ -89,11 +88,11 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
     _notes = ()
     _scene_uid = None
 
-    def _error(self, text):
+    def _error(self, text, kind="ERROR"):
         global LAST_ERROR
         LAST_ERROR = text
         if not self.quiet_errors:
-            self.report({"ERROR"}, text)
+            self.report({kind}, text)
 
     @classmethod
     def poll(cls, context):
@@ -162,8 +161,12 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             self._job.live_view = True
             self._live = _live_view(self._job)
             self._job.start()
-        else:
-            self._job.run()
+        else:  # (the running job while it runs: radiosity.cancel and the command line's Ctrl-C stop it)
+            worker.set_running_job(self._job)
+            try:
+                self._job.run()
+            finally:
+                worker.set_running_job(None)
         return None
 
     def _cleanup(self, context):
@@ -189,7 +192,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             self._error(f"Radiosity failed: {job.error}")
             return {"CANCELLED"}
         if output is None or output.result.stopped == "cancelled":
-            self.report({"INFO"}, "Radiosity cancelled: the scene is unchanged")
+            self._error("Radiosity cancelled: the scene is unchanged", kind="INFO")
             return {"CANCELLED"}
         if job.file_generation != worker.file_generation():
             self.report({"WARNING"}, "Radiosity: the file changed while solving; the result was discarded")
@@ -237,11 +240,8 @@ def _after_writing(op, settings, output, stats):
         op.report({"WARNING"}, f"Radiosity: could not store the run's {', '.join(failed)}")
     for note in [*op._notes, *output.notes]:
         op.report({"WARNING"}, note)
-    blocked = output.blocked_fraction()
-    if blocked > BLOCKED_WARNING:
-        op.report({"WARNING"}, f"{blocked * 100:.1f}% of the light reached the back of faces and was "
-                  "absorbed there: one-sided faces seen from behind, or flipped normals (see Overlays > "
-                  "Face Orientation; give thin walls thickness with a Solidify modifier)")
+    if output.back_warning:
+        op.report({"WARNING"}, output.back_warning)
     if stats["last_stopped"] == "time_limit":
         op.report({"WARNING"}, f"Time limit reached after {stats['last_paths']:,} paths; the result is "
                   "noisier than asked")
@@ -252,7 +252,8 @@ def _after_writing(op, settings, output, stats):
     op.report(
         {"INFO"},
         f"Radiosity: {stats['last_patches']:,} patches, {stats['last_paths']:,} paths, "
-        f"{stats['last_rays']:,} rays in {stats['last_seconds']:.1f} s",
+        f"{stats['last_rays']:,} rays in {stats['last_seconds']:.1f} s"
+        + (f"; {stats['last_light_account']}" if stats["last_light_account"] else ""),
     )
 
 
@@ -312,13 +313,12 @@ class RADIOSITY_OT_cancel(bpy.types.Operator):
 
 # The tooltips of the panel's estimate: the paper's terms for an artist.
 EXPLANATIONS = {
-    "time": "The predicted rays over this machine's ray rate on this scene (measured by a short solve, "
-            "then by each run). With 'Stop at: Measured error' the run stops when its own error estimate "
-            "meets the target, which can be sooner or later",
-    "paths": "Sbert & Brusi's formula (2) (finite) or (3) (biased infinite): the paths that reach the "
-             "error target, and the rays they trace (paths x the expected path length). With the direct "
-             "light gathered no formula holds: the paths planned (a quarter of the paper's) at the rays a path "
-             "measured, and the run stops on its own error estimate",
+    "time": "Measured before the run: a pilot of a few of its chunks on this machine gives the error per path, "
+            "the rays per path and the seconds per path, and the run's own plan and stop rule give the paths "
+            "it will end at; meshing included. During the run the time left follows its measured error",
+    "paths": "The paths (and the rays they trace) the run is expected to end at: with 'Stop at: Measured error', "
+             "where its error estimate meets the target (in whole batches, at least 8); else the paper's formula "
+             "(2) (finite) or (3) (biased infinite) for the target, or the paths given",
     "method": "How the light is carried: the paper's random walks, or the two-way iteration (beyond the paper). "
               "Automatic takes the two-way iteration where each patch gets enough of its rays to pay, else the walks",
     "patches": "Selected objects get results; the other visible objects (Rest of the scene) block and "

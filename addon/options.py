@@ -80,6 +80,18 @@ class Text:
         return str(value).strip()
 
 
+class ClusterAddress(Text):
+    def check(self, value):
+        """'' (this machine), or a scheduler address in a form Dask's client takes (tcp://, tls://),
+        or ValueError saying which: checked without connecting."""
+        text = super().check(value)
+        if not text:
+            return text
+        from .core.cluster import cluster_address
+
+        return cluster_address(text)
+
+
 METHOD = Choice("method", "--method", "auto", (
     ("auto", "Automatic", "The two-way iteration where each patch gets enough rays for it to pay (scenes of up "
      "to about 390,000 patches, at error targets that need some rays a patch), else the paper's random walks, "
@@ -151,9 +163,13 @@ INDIRECT_OUTPUT = Flag("indirect_output", "--indirect-output", False, "Indirect 
                        "Also write the light arriving after at least one bounce, without the surface's colour "
                        "('Radiosity Indirect')")
 
-CLUSTER = Text("cluster", "--cluster", "", "Cluster",
-               "A Dask scheduler's address (e.g. tcp://host:8786) to run the walks on its workers; empty: this "
-               "machine. Same seed, bitwise the same result")
+CLUSTER = ClusterAddress("cluster", "--cluster", "", "Cluster",
+                         "A Dask scheduler's address, tcp://host:port or tls://host:port, to run the walks on its "
+                         "workers; empty: this machine. Same seed, bitwise the same result. Trust the cluster as "
+                         "you trust this machine: Dask's messages can run code on either side. Across a network "
+                         "use tls:// with the cluster's certificates, from Dask's configuration "
+                         "(distributed.comm.tls.ca-file, .client.cert, .client.key) or its environment "
+                         "(DASK_DISTRIBUTED__COMM__TLS__CA_FILE, __CLIENT__CERT, __CLIENT__KEY)")
 
 SETTINGS = (METHOD, ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, EXIT_POINT, SAMPLING, DIRECT_LIGHT, STOP_RULE, OUTPUT, SEED,
             TIME_LIMIT, THREADS, SCENE_OBJECTS, LIGHT_OUTPUT, INDIRECT_OUTPUT, CLUSTER)

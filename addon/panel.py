@@ -84,10 +84,9 @@ def estimate_lines(value):
     has a tooltip with the paper's meaning (operators.EXPLANATIONS)."""
     size = f"{value['patch_size']:.3g}" if value.get("patch_size") else "-"
     lines = [
-        ("time", f"Predicted time: {duration_text(value['seconds'])}" if value.get("seconds") == value.get("seconds")
-         else "Predicted time: -"),
+        ("time", _time_text(value)),
         ("paths", f"Paths: {_number(value['paths'])}   Rays: {_number(value['rays'])}"
-         + (" (planned)" if value.get("planned") else "")),
+         + (" (expected)" if value.get("planned") else "")),
         ("method", f"Method: {METHOD_LABELS.get(value.get('method'), value.get('method'))}"
          + (" (automatic)" if value.get("automatic") else "")),
         ("patches", f"Objects: {value['objects']} get results, {value.get('others', 0)} more block and reflect"),
@@ -99,6 +98,15 @@ def estimate_lines(value):
     if value.get("target_mse") is not None:
         lines.append(("target", f"Target MSE (the paper's measure): {value['target_mse']:.3g}"))
     return lines
+
+
+def _time_text(value):
+    if value.get("seconds") != value.get("seconds"):  # (NaN)
+        return "Predicted time: -"
+    if value.get("time_limited"):
+        return (f"Predicted time: {duration_text(value['seconds'])} (time limit; the target needs "
+                f"{duration_text(value['seconds_needed'])})")
+    return f"Predicted time: {duration_text(value['seconds'])}"
 
 
 def _explained(layout, term, text):
@@ -118,8 +126,12 @@ def draw_progress(layout, job):
         box.label(text=text)
     col = box.column(align=True)
     col.label(text=f"Rays/s: {_number(stats.get('rays_per_second'))}")
+    left = stats.get("seconds_left")
+    col.label(text=f"Time left: {duration_text(left)}" if left is not None and left == left else "Time left: -")
     if job.patch_count is not None:
-        col.label(text=f"Patches: {_number(job.patch_count)}   Paths to do: {_number(job.prediction.paths)}")
+        expected = stats.get("expected_paths")
+        expected = expected if expected is not None and expected == expected else job.prediction.paths
+        col.label(text=f"Patches: {_number(job.patch_count)}   Paths to do: {_number(expected)}")
     mse = stats.get("measured_mse")
     relative = job.relative_error(mse)
     target = job.settings.relative_rms * 100
@@ -148,6 +160,8 @@ def draw_last_run(layout, settings):
     col.label(text=f"Stopped by: {settings.last_stopped}")
     if settings.last_sources:
         col.label(text=f"Sources: {settings.last_sources}")
+    if settings.last_light_account:
+        col.label(text=settings.last_light_account[:1].upper() + settings.last_light_account[1:])
 
 
 def _wrap(text, width):

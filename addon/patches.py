@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
-from .core.diagnostics import escaping_light, light_fates
+from .core.diagnostics import back_light, escaping_light, light_fates
 from .core.textures import patch_attribute_average, patch_texture_average
 from .options import AUTOMATIC_PATCH_DIVISIONS
 
@@ -187,14 +187,39 @@ def degenerate_area(objects) -> float:
     return RELATIVE_DEGENERATE_AREA * diagonal**2
 
 
+def check_finite_vertices(objects):
+    """ValueError naming the first object whose faces use a vertex that is NaN or infinite
+    (a script, a driver, a modifier): the scene's extent, and every area, would be NaN."""
+    for o in objects:
+        if np.isfinite(o.vertices).all():
+            continue
+        used = np.unique(o.triangles)
+        bad = int(np.count_nonzero(~np.isfinite(o.vertices[used]).all(axis=1)))
+        if bad:
+            hint = " (its location, rotation or scale?)" if bad == used.size else ""
+            raise ValueError(f"'{o.name}': {bad} of the {used.size} vertices its faces use "
+                             f"{'is' if bad == 1 else 'are'} not a finite number (NaN or infinite){hint}")
+
+
+def _extent_ends(objects):
+    """'from 'A' to 'B'': the objects at both ends of the scene's widest side."""
+    boxes = [(o.name, o.vertices[np.unique(o.triangles)]) for o in objects if len(o.triangles)]
+    lo = np.array([v.min(axis=0) for _, v in boxes])
+    hi = np.array([v.max(axis=0) for _, v in boxes])
+    axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0)))
+    return f"from '{boxes[int(np.argmin(lo[:, axis]))][0]}' to '{boxes[int(np.argmax(hi[:, axis]))][0]}'"
+
+
 def drop_zero_area_faces(objects):
     """(objects, notes): faces with no area at the core's tolerance left out, objects left
     without faces skipped. Such faces (collinear or coincident corners, common in imported
-    meshes) are invisible, and a patch made of them only would make the core refuse the scene."""
+    meshes) are invisible, and a patch made of them only would make the core refuse the scene.
+    Faces with an area of their own that the scene's extent makes too small to trace are said
+    so; a selected object left with none of its faces that way is a ValueError."""
     if not any(len(o.triangles) for o in objects):
         return [], [f"'{o.name}': every face has zero area; the object was skipped" for o in objects]
     threshold = degenerate_area(objects)
-    kept, notes = [], []
+    kept, notes, lost = [], [], []
     for o in objects:
         F = len(o.face_sizes)
         area = meshing.triangle_areas(o.vertices, o.triangles) if len(o.triangles) else np.zeros(0)
@@ -203,12 +228,22 @@ def drop_zero_area_faces(objects):
         if not flat.any():
             kept.append(o)
             continue
+        own = degenerate_area([o])  # the same tolerance with the object's own extent
+        real = np.bincount(o.triangle_face, weights=np.where(area > own, area, 0.0), minlength=F) > 0
+        small = int(np.count_nonzero(flat & real))
+        if small:
+            if flat.all() and o.receives:
+                lost.append(o.name)
+            notes.append(f"'{o.name}': {small} face{' is' if small == 1 else 's are'} too small to trace beside "
+                         f"{_too_small(objects, threshold)}: {'the object was skipped' if flat.all() else 'left out'}")
+        count = int(flat.sum()) - small
         if flat.all():
-            notes.append(f"'{o.name}': every face has zero area; the object was skipped")
+            if not small:
+                notes.append(f"'{o.name}': every face has zero area; the object was skipped")
             continue
-        count = int(flat.sum())
-        notes.append(f"'{o.name}': {count} face{'s' if count > 1 else ''} of zero area "
-                     "(collinear or coincident corners) left out")
+        if count:
+            notes.append(f"'{o.name}': {count} face{'s' if count > 1 else ''} of zero area "
+                         "(collinear or coincident corners) left out")
         keep = ~flat
         corner_face = np.repeat(np.arange(F), o.face_sizes)
         new_index = np.cumsum(keep) - 1
@@ -225,7 +260,16 @@ def drop_zero_area_faces(objects):
             slot_colours=tuple(None if c is None else c[keep_triangle] for c in o.slot_colours),
             face_slot=None if o.face_slot is None else o.face_slot[keep],
         ))
+    if lost:
+        raise ValueError(f"{', '.join(repr(name) for name in lost)}: every face is too small to trace beside "
+                         f"{_too_small(objects, threshold)}; move far objects nearer, or hide them from render")
     return kept, notes
+
+
+def _too_small(objects, threshold):
+    diagonal = (threshold / RELATIVE_DEGENERATE_AREA) ** 0.5
+    return (f"the scene's extent (a diagonal of {diagonal:.3g}, {_extent_ends(objects)}; a face needs an area "
+            f"above {RELATIVE_DEGENERATE_AREA:g} of its square, {threshold:.3g})")
 
 
 def patch_count(objects, patch_size) -> float:
@@ -280,6 +324,7 @@ def make_patches(objects, patch_size) -> Patches:
     patch size that would make more than MAX_PATCHES patches is refused before any meshing.
     A patch size of 0 is automatic (:func:`automatic_patch_size`)."""
     lights = tuple(getattr(objects, "lights", ()))  # (a scene_io.Selection carries them)
+    check_finite_vertices(objects)
     objects, notes = drop_zero_area_faces(objects)
     if not objects:
         raise ValueError("the selected objects have no faces of non-zero area")
@@ -427,3 +472,56 @@ def escaping_sources(patches: Patches, scene) -> list:
                          "emitting faces point away from everything else (a new plane faces up: flip its normals "
                          "or turn it; see Overlays > Face Orientation)")
     return notes
+
+
+#: Light absorbed on back sides in view of the selection above this share of the power gets a warning.
+BLOCKED_WARNING = 0.05
+#: The warning names this many (faces' object, source) pairs, the most light first.
+BLOCKED_NAMED = 3
+
+
+def source_label(patches: Patches, scene, row) -> str:
+    """What emits source row ``row`` of ``scene.source_power``: "emissive faces of 'Lamp'",
+    "sun 'Sun'", "world 'World'", "point light 'Bulb'"..."""
+    if row < scene.patch_count:
+        return f"emissive faces of '{patches.objects[patches.combined.patch_object[row]].name}'"
+    light = scene.lights.lights[scene.lights.light_of[row - scene.patch_count]]
+    return f"{light_kind(light)} '{light.name}'"
+
+
+def light_kind(light) -> str:
+    """"point light", "spot light", "area light", "sun" or "world"."""
+    if type(light).__name__ == "PointLight":
+        return "point light" if getattr(light, "spot", None) is None else "spot light"
+    return {"AreaLight": "area light", "SunLight": "sun", "WorldLight": "world"}.get(type(light).__name__, "light")
+
+
+def back_light_warning(patches: Patches, scene, blocked, seed=0):
+    """The warning for light absorbed on back sides (``blocked``: the solve's measured share of
+    the power), or None. core.diagnostics.back_light splits it by where it landed: only the share
+    that met back sides in view of the selection counts, named by the faces' objects and the
+    sources it came from; light that met back sides from outside every receiver (a sky under a
+    room's floor) is no concern."""
+    if blocked <= BLOCKED_WARNING:
+        return None
+    receives = np.array([o.receives for o in patches.objects])[patches.combined.patch_object]
+    source, patch, weight, in_view = back_light(scene, receives, seed)
+    advice = ("one-sided faces seen from behind, or flipped normals (see Overlays > Face Orientation; give thin "
+              "walls thickness with a Solidify modifier)")
+    if not weight.size:  # the check's rays found none of it: said as measured, without names
+        return f"{blocked:.1%} of the light reached the back of faces and was absorbed there: {advice}"
+    share = blocked * float(weight[in_view].sum() / weight.sum())
+    if share <= BLOCKED_WARNING:
+        return None
+    owner = patches.combined.patch_object[patch[in_view]]
+    pairs = {}
+    for k, row, w in zip(owner, source[in_view], weight[in_view]):
+        key = (int(k), source_label(patches, scene, int(row)))
+        pairs[key] = pairs.get(key, 0.0) + float(w)
+    total = sum(pairs.values())
+    ranked = sorted(pairs.items(), key=lambda item: -item[1])
+    named = [f"faces of '{patches.objects[k].name}' lit by {label} ({share * w / total:.1%})"
+             for (k, label), w in ranked[:BLOCKED_NAMED]]
+    more = f" and {len(ranked) - BLOCKED_NAMED} more" if len(ranked) > BLOCKED_NAMED else ""
+    return (f"{share:.1%} of the light reached the back of faces in view of the selection and was absorbed there: "
+            f"{', '.join(named)}{more}; {advice}")

@@ -5,16 +5,20 @@ operator's synchronous mode); ``worker`` runs the same on a thread. No bpy.
 """
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .core import meshing, predict, relative_rms_to_mse, solve
+from .core.diagnostics import MAX_BOUNCES, check_bounces
 from .core.first_shot import direct_irradiance
-from .core.names import AUTO, GATHERED, TWO_WAY, WALK
-from .core.solver import choose_method, planned_paths
+from .core.forecast import forecast
+from .core.names import AUTO, GATHERED, TWO_WAY
+from .core.solver import choose_method
 from . import options, trim
-from .patches import Patches, make_patches, scene_and_notes
+from .patches import Patches, back_light_warning, light_kind, make_patches, scene_and_notes
 
 @dataclass
 class SolveSettings:
@@ -51,6 +55,7 @@ class SolveOutput:
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
     sources: str = ""  # the sources that took part (sources_text)
+    back_warning: str | None = None  # light absorbed on back sides in view of the selection (back_light_warning)
 
     def blocked_fraction(self):
         """Share of the emitted power absorbed on the back side of faces."""
@@ -85,16 +90,10 @@ LIGHT_ATTRIBUTE = "Radiosity Light"
 INDIRECT_ATTRIBUTE = "Radiosity Indirect"
 INDIRECT_SAMPLES = 64  # gathering samples a patch for the direct light the indirect output leaves out
 
-# Ray rates (rays per second of a whole solve) measured on this machine, by (geometry, estimator,
-# exit point): from a short calibration solve, replaced by each finished run's own rate.
-RAY_RATES = {}
-# Rays per path of the same walks, measured alike: the gathered first shot's plan needs it (its
-# paths also pay for the gathering's shadow and cosine rays).
-RAYS_PER_PATH = {}
-CALIBRATION_PATHS = 4096
-CALIBRATION_SECONDS = 2.0  # at most (paths of endless bounces never finish a chunk)
 #: Above this predicted time the estimate warns and says which settings drive it.
 SLOW_SECONDS = 60.0
+#: Above this many expected bounces a path the warning says the reflectivity drives the time.
+LONG_BOUNCES = 1000.0
 
 
 def direct_light_for(scene, settings: SolveSettings) -> str:
@@ -106,23 +105,14 @@ def direct_light_for(scene, settings: SolveSettings) -> str:
     return settings.direct_light
 
 
-def _walk_key(patches: Patches, settings: SolveSettings, direct_light):
-    """What RAY_RATES and RAYS_PER_PATH are kept by: the geometry and the walk."""
-    return patches.geometry_key, settings.method, settings.estimator, settings.exit_point, direct_light
-
-
-def ray_rate(scene, patches: Patches, settings: SolveSettings) -> float:
-    """This machine's ray rate for this scene and walk: the last run's, else a short solve's."""
-    direct_light = direct_light_for(scene, settings)
-    key = _walk_key(patches, settings, direct_light)
-    if key not in RAY_RATES:
-        r = solve(scene, settings.estimator, paths=CALIBRATION_PATHS, threshold=settings.threshold,
-                  exit_point=settings.exit_point, threads=settings.threads or None, max_seconds=CALIBRATION_SECONDS,
-                  direct_light=direct_light, method=settings.method)
-        if not r.rays:
-            return float("nan")  # not one chunk in the time: unknown, measured again next time
-        RAY_RATES[key], RAYS_PER_PATH[key] = r.rays_per_second, r.rays / r.paths
-    return RAY_RATES[key]
+def forecast_for(scene, settings: SolveSettings, target, bounces, should_stop=None):
+    """The core's Forecast of the solve these settings run (``settings.method`` resolved): a
+    pilot of a few of its chunks on this machine."""
+    return forecast(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None, target_mse=target,
+                    threshold=settings.threshold, stop_rule=settings.stop_rule if target is not None else "predicted",
+                    method=settings.method, direct_light=direct_light_for(scene, settings), exit_point=settings.exit_point,
+                    sampling=settings.sampling, threads=settings.threads or None, max_seconds=settings.max_seconds or None,
+                    seed=int(settings.seed), bounces=bounces, should_stop=should_stop)
 
 
 def efficiency_sentence(relative_efficiency) -> str:
@@ -132,10 +122,15 @@ def efficiency_sentence(relative_efficiency) -> str:
     return f"Biased infinite needs {1 / relative_efficiency:.1f}x less time than finite for this error"
 
 
-def slow_warning(seconds, patches, settings: SolveSettings) -> str | None:
-    """A warning when the predicted time passes SLOW_SECONDS, naming what drives it."""
+def slow_warning(seconds, patches, settings: SolveSettings, bounces=1.0) -> str | None:
+    """A warning when the predicted time passes SLOW_SECONDS, naming what drives it: the light's
+    bounces where they are many (base colours near 1), else the patches and the target."""
     if not seconds > SLOW_SECONDS:
         return None
+    if bounces > LONG_BOUNCES:
+        return (f"Predicted {duration_text(seconds)}: the light bounces about {bounces:,.0f} times before it is "
+                "absorbed (base colours near 1 in a closed scene), and every bounce is a ray. Lower the base colours "
+                f"(0.99 gives about 100 bounces); above {MAX_BOUNCES:,.0f} bounces a solve is refused")
     target = f"the {settings.relative_rms * 100:g}% error target" if not settings.paths else f"{settings.paths:,} paths"
     return (f"Predicted {duration_text(seconds)}: {patches.combined.patch_count:,} patches (patch size "
             f"{patches.patch_size:.3g}) and {target} drive it. Paths grow with the patch count: twice the "
@@ -143,6 +138,8 @@ def slow_warning(seconds, patches, settings: SolveSettings) -> str | None:
 
 
 def duration_text(seconds) -> str:
+    if not math.isfinite(seconds):
+        return "unknown"
     if seconds < 60:
         return f"{seconds:.0f} s" if seconds >= 1 else f"{seconds:.1f} s"
     if seconds < 3600:
@@ -157,8 +154,7 @@ def sources_text(scene) -> str:
     parts = []
     kinds = {}
     for light, power in zip(scene.lights.lights, scene.lights.light_power().mean(axis=1)):
-        kind = {"PointLight": "point light" if getattr(light, "spot", None) is None else "spot light",
-                "AreaLight": "area light", "SunLight": "sun", "WorldLight": "world"}[type(light).__name__]
+        kind = light_kind(light)
         count, share = kinds.get(kind, (0, 0.0))
         kinds[kind] = (count + 1, share + power / total)
     for kind, (count, share) in kinds.items():
@@ -170,39 +166,62 @@ def sources_text(scene) -> str:
     return ", ".join(parts)
 
 
-def estimate(objects, settings: SolveSettings) -> dict:
-    """What the panel and the command line show before a run: the predicted time (from this
-    machine's ray rate), paths and rays, and the paper's predictions behind them."""
+def light_account_text(energy) -> str:
+    """Where the emitted light went, as shares of it, e.g. "light: 71.8% absorbed by surfaces
+    (0.9% on the back of faces), 28.2% left the scene": every run says how much it lost."""
+    emitted = float(np.sum(energy["emitted"])) if energy else 0.0
+    if not emitted > 0:
+        return ""
+    # the two-way iteration's accounts are estimates, a little below 0 or above 1 by noise
+    share = {k: min(max(float(np.sum(energy[k])) / emitted, 0.0), 1.0)
+             for k in ("absorbed", "escaped", "blocked", "undistributed")}
+    text = f"light: {share['absorbed']:.1%} absorbed by surfaces"
+    if share["blocked"] >= 5e-4:
+        text += f" ({share['blocked']:.1%} on the back of faces)"
+    text += f", {share['escaped']:.1%} left the scene"
+    if share["undistributed"] >= 5e-4:
+        text += f", {share['undistributed']:.1%} left undistributed (paths cut at t)"
+    return text
+
+
+def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
+    """What the panel and the command line show before a run: the predicted time, paths and
+    rays of the run these settings make, from a pilot of it on this machine (core forecast), the
+    paper's predictions beside them; a ValueError where the solve would refuse the scene.
+    ``should_stop()`` cuts the pilot short (the panel's, when a run starts)."""
+    started = time.perf_counter()
     patches = make_patches(objects, settings.patch_size)
     scene, notes = scene_and_notes(patches)
+    building = time.perf_counter() - started  # (a run meshes again)
     automatic = settings.method == AUTO
     p, target = prediction_for(scene, settings)
     settings = method_for(scene, settings, target)
+    bounces = check_bounces(scene, settings.estimator, settings.threshold)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
-    rate = ray_rate(scene, patches, settings)
-    paths, rays = int(p.paths), float(p.expected_rays)
-    direct_light = direct_light_for(scene, settings)
-    planned = (direct_light == GATHERED or settings.method != WALK) and not settings.paths
-    if planned:
-        # No formula predicts the error of a gathered first bounce or the two-way iteration: the
-        # solve's plan at its measured rays per path; the run stops on its measured error.
-        paths = planned_paths(paths, direct_light, settings.method)
-        rays = paths * RAYS_PER_PATH.get(_walk_key(patches, settings, direct_light), float("nan"))
-    seconds = rays / rate if rate > 0 else float("nan")  # (NaN > 0 is False)
+    f = forecast_for(scene, settings, target, bounces, should_stop)
+    needed = building + f.seconds  # (what the settings need; a time limit may end the run first)
+    seconds = min(needed, building + settings.max_seconds) if f.time_limited else needed
     return {
         "objects": sum(o.receives for o in patches.objects),
         "others": sum(not o.receives for o in patches.objects),
         "patches": int(scene.patch_count),
         "patch_size": float(patches.patch_size),
-        "paths": paths,
-        "rays": rays,
-        "direct_light": direct_light,
+        "paths": int(math.ceil(f.paths)),
+        "rays": float(f.rays),
+        "paper_paths": int(p.paths),  # formula (2)/(3) for the target or the paths given
+        "paper_rays": float(p.expected_rays),
+        "direct_light": direct_light_for(scene, settings),
         "method": settings.method,
         "automatic": automatic,  # the method chosen by "auto"
-        "planned": planned,
-        "rays_per_second": float(rate),
+        "planned": bool(target is not None),  # the paths where the measured error is expected to meet the target
+        "measured": f.measured,  # from the pilot's chunks (else from the bounces and Embree's raw rate)
+        "rays_per_second": float(f.rays_per_second),
         "seconds": seconds,
+        "seconds_needed": needed,
+        "time_limited": f.time_limited,
+        "pilot_seconds": f.pilot_seconds,
+        "bounces": float(bounces),
         "path_length": float(p.expected_path_length),
         "R_ave": float(p.R_ave),
         "relative_efficiency": relative_efficiency,
@@ -210,7 +229,7 @@ def estimate(objects, settings: SolveSettings) -> dict:
         "target_mse": target,
         "predicted_mse": float(p.predicted_mse),
         "other_estimator": other,
-        "warning": slow_warning(seconds, patches, settings),
+        "warning": slow_warning(needed, patches, settings, bounces),
         "sources": sources_text(scene),
         "notes": notes,
     }
@@ -251,12 +270,10 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         method=settings.method,
     )
     trim.give_back()
-    if result.seconds > 0 and result.rays:
-        key = _walk_key(patches, settings, result.direct_light)
-        RAY_RATES[key], RAYS_PER_PATH[key] = result.rays_per_second, result.rays / result.paths
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
+    out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
     # Light is written as at least 0: an estimate below it is noise about a value near 0 (the two-way
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
     radiosity = np.maximum(result.radiosity, 0.0)

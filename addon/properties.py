@@ -86,6 +86,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
     last_patch_size: FloatProperty(name="Patch size used", default=0.0, subtype="DISTANCE", unit="LENGTH")
     last_stopped: StringProperty(name="Stopped by", default="")
     last_sources: StringProperty(name="Sources", default="", description="The sources of the last run and their shares of the power")
+    last_light_account: StringProperty(name="Light", default="", description="Where the last run's emitted light went: absorbed by surfaces (and on the back of faces), left the scene, left undistributed")
     last_estimator: StringProperty(name="Estimator", default="")
     last_relative_error: FloatProperty(name="Error reached", default=-1.0, description="Measured relative RMS error of the last run, percent (-1: unknown)")
     last_target_error: FloatProperty(name="Error target", default=0.0, description="The last run's error target, percent (0: a path count was given)")

@@ -43,9 +43,10 @@ def _text(colour):
     return "(" + ", ".join(f"{c:.3g}" for c in colour) + ")"
 
 
-def _linked_colour(socket, node, name, notes, what):
+def _linked_colour(socket, node, name, notes, what, emitting=False):
     """The colour of a socket driven by a link: an image's or a checker's average when that is
-    known, else the socket's own default; always with a note saying which."""
+    known, else the socket's own default; always with a note saying which. An emission colour
+    (``emitting``) from an image without pixels is a SceneError: no made-up light is solved."""
     default = np.array(socket.default_value[:3], dtype=np.float64)
     source = socket.links[0].from_node
     while source.bl_idname == "NodeReroute" and source.inputs[0].is_linked:
@@ -56,6 +57,11 @@ def _linked_colour(socket, node, name, notes, what):
             notes.append(f"{what}: '{name}' comes from image '{source.image.name}'; "
                          f"its average colour {_text(average)} was used")
             return average
+        if emitting:
+            path = bpy.path.abspath(source.image.filepath) if source.image.filepath else ""
+            raise SceneError(f"{what}: its '{name}' comes from image '{source.image.name}', which has no pixels "
+                             f"({f'file not found: {path}' if path else 'no file'}); its light is unknown: find the "
+                             "file (File > External Data) or unlink the image")
         notes.append(f"{what}: '{name}' comes from image '{source.image.name}', which has no pixels "
                      f"(missing file?); the socket's colour {_text(default)} was used")
         return default
@@ -125,12 +131,12 @@ def _mapping_affine(node):
     return np.column_stack([linear, location])
 
 
-def _socket_colour(node, name, notes, what, per_patch=()):
+def _socket_colour(node, name, notes, what, per_patch=(), emitting=False):
     socket = node.inputs.get(name)
     if socket is None:
         return np.zeros(3)
     if socket.is_linked:  # sockets read per patch need no note about their average
-        return _linked_colour(socket, node, name, [] if name in per_patch else notes, what)
+        return _linked_colour(socket, node, name, [] if name in per_patch else notes, what, emitting)
     value = socket.default_value
     return np.array(value[:3], dtype=np.float64)
 
@@ -204,17 +210,15 @@ def material_colours(material, per_patch=()):
     if node.bl_idname == "ShaderNodeBsdfPrincipled":
         reflectivity = _socket_colour(node, "Base Color", notes, what, per_patch)
         name = "Emission Color" if "Emission Color" in node.inputs else "Emission"
-        emission = _socket_colour(node, name, notes, what, per_patch) * _socket_float(
-            node, "Emission Strength", notes, what, 1.0
-        )
+        strength = _socket_float(node, "Emission Strength", notes, what, 1.0)
+        emission = _socket_colour(node, name, notes, what, per_patch, emitting=strength != 0) * strength
     elif node.bl_idname == "ShaderNodeBsdfDiffuse":
         reflectivity = _socket_colour(node, "Color", notes, what, per_patch)
         emission = np.zeros(3)
     else:  # Emission
         reflectivity = np.zeros(3)
-        emission = _socket_colour(node, "Color", notes, what, per_patch) * _socket_float(
-            node, "Strength", notes, what, 1.0
-        )
+        strength = _socket_float(node, "Strength", notes, what, 1.0)
+        emission = _socket_colour(node, "Color", notes, what, per_patch, emitting=strength != 0) * strength
     return reflectivity, emission, notes
 
 

@@ -1,4 +1,4 @@
-"""Memory freed by one stage of a solve given back to the system before the next (issue 26).
+"""Memory freed by one stage of a solve given back to the system before the next.
 
 glibc's malloc keeps freed blocks below its mmap threshold (which grows to 32 MiB as large
 arrays come and go) in its heaps, where they stay resident until ``malloc_trim``: between

@@ -1,4 +1,4 @@
-"""When the two-way iteration beats the walk: its gain against the rays each patch gets in a chunk (issue 26).
+"""When the two-way iteration beats the walk: its gain against the rays each patch gets in a chunk.
 
     python -m benchmarks.auto_method            # into benchmarks/results/auto_method.md and .png
     python -m benchmarks.auto_method --quick    # two sizes, into out/
@@ -94,7 +94,7 @@ def plot(rows, path):
 
 
 def report(rows, command, out):
-    lines = ["# When the two-way iteration beats the walk (issue 26)", "", f"`{command}`", "",
+    lines = ["# When the two-way iteration beats the walk", "", f"`{command}`", "",
              __doc__.split("\n\n", 1)[1].strip(), "",
              "| patches | paths a patch | two-way chunks | first-generation rays a patch | walk error | two-way error | "
              "gain in rays | gain in seconds | auto takes |",

@@ -1,4 +1,4 @@
-"""The walks on a Dask cluster against this machine's threads (issue 25).
+"""The walks on a Dask cluster against this machine's threads.
 
     python -m benchmarks.cluster            # about 10 minutes on 2 cores
     python -m benchmarks.cluster --quick    # a smoke run, to out/

@@ -1,4 +1,4 @@
-"""What carrying three colour channels on one path costs in saturated scenes (issue 26).
+"""What carrying three colour channels on one path costs in saturated scenes.
 
     .venv/bin/python -m benchmarks.colour_channels           # into benchmarks/results/colour_channels.md
     .venv/bin/python -m benchmarks.colour_channels --quick   # into out/
@@ -87,7 +87,7 @@ def main(argv=None):
                   f"cost colour / three walks {colour_cost / own_cost:.2f}", flush=True)
     out = (ROOT / "out" if args.quick else RESULTS) / "colour_channels.md"
     out.parent.mkdir(exist_ok=True)
-    L = ["# Three channels on one path, or one walk per channel (issue 26)", "",
+    L = ["# Three channels on one path, or one walk per channel", "",
          f"`python -m benchmarks.colour_channels{' --quick' if args.quick else ''}`: {paths:,} paths a run, medians of "
          f"{seeds} seeds, 2 threads; the scenes and the measure in the module's docstring. Relative variance: "
          "area-weighted batch-means variance of b_c over (mean b_c)^2. Cost = relative variance x seconds; the "

@@ -8,7 +8,7 @@
 A run's JSON may carry a list "notes": checks made by hand after the run, printed at the end of the
 reading (and kept by --replot).
 
-The scene (issue 5): a closed room [0,1]^3 m, every face meshed into 10 x 10 square patches of
+The scene: a closed room [0,1]^3 m, every face meshed into 10 x 10 square patches of
 0.1 m (600 patches), all with albedo 0.5 (pure Lambertian). The light is the 2 x 2 ceiling
 patches in [0.4,0.6]^2 at z = 1 (a 0.2 m square flush with the ceiling, facing down), emitting
 1 (Cycles: an Emission shader of strength 1 added to the Diffuse BSDF of albedo 0.5, so the
@@ -466,7 +466,7 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
     gap = relative_rms(refs["discrete"], refs["continuous"])
     uncertainty = relative_rms(refs["fine4"], refs["continuous"])
     L = []
-    L.append("# Time to a patch error: solve() against Cycles' COMBINED bake (issue 5)")
+    L.append("# Time to a patch error: solve() against Cycles' COMBINED bake ")
     L.append("")
     L.append(f"`python -m benchmarks.cycles_comparison {command}`".replace(" `", "`"))
     cpu = f" ({settings['cpu']})" if settings.get("cpu") else ""
@@ -511,7 +511,7 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
     L.append("## Result: time to reach a relative RMS patch error")
     L.append("")
     L.append("Each product against the reference of what it converges to (ours `random` and `stratified` -> "
-             "discrete; Cycles and ours `hit` -> continuous). Ratio = ours / Cycles (issue 5: at most 0.5, aim 0.33). "
+             "discrete; Cycles and ours `hit` -> continuous). Ratio = ours / Cycles (the target: at most 0.5; the aim: 0.33). "
              "`stratified` is `sampling=\"stratified\"` with `exit_point=\"random\"` (beyond the paper, off by default).")
     L.append("")
     ours_ = [k for k in present(records) if k != "cycles"]
@@ -616,7 +616,7 @@ def reading(refs, settings, records, table):
                 / table[(metric, clock, "cycles", "native", level)][0])
 
     def verdict(values):
-        """Issue 5's target (at most half of Cycles' time) and aim (a third), for all of ``values``."""
+        """The target (at most half of Cycles' time) and aim (a third), for all of ``values``."""
         worst = max(values)
         if worst <= 1 / 3:
             text = "meets the target (at most half) and the aim (a third)"
@@ -681,7 +681,7 @@ def reading(refs, settings, records, table):
              "estimation sees the light from every wall and floor point, so its direct light has little noise; "
              "our shooting walks have no such term and count first hits instead. By the exact variances "
              f"of table 1, the first bounce alone is {share:.0%} of our per-path variance (summed over patches; "
-             f"{mean_share:.0%} on average per patch). Stratifying the starting points and the first bounce (issue 5, "
+             f"{mean_share:.0%} on average per patch). Stratifying the starting points and the first bounce ("
              "'beyond the paper') attacks exactly that part; a higher ray rate helps everywhere.")
     L.append("* Both curves fall as t^-1/2 down to about 0.2% against their own references, so neither shows a "
              "bias above that (and both give the light patches B = 1.004: the same units).")

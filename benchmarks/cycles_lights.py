@@ -1,5 +1,5 @@
 """Lights and the world against Cycles: one small scene per source kind, Cycles' COMBINED bake as
-the referee (issue 23).
+the referee.
 
     python -m benchmarks.cycles_lights            # about 10 minutes on 2 cores
     python -m benchmarks.cycles_lights --quick    # fewer samples and paths, to out/

@@ -1,4 +1,4 @@
-"""Peak memory of a solve on the figure-4 room (66,572 patches), at several path counts (issue 5).
+"""Peak memory of a solve on the figure-4 room (66,572 patches), at several path counts.
 
     python -m benchmarks.memory                 # 1M, 4M, 16M, 64M and 256M paths, into benchmarks/results/memory.md
     python -m benchmarks.memory --quick         # 250k and 1M paths, into out/
@@ -13,9 +13,9 @@ share is the last minus the one before. A second child per path count runs the s
 ``tracemalloc``, whose peak counts the numpy and Python allocations made during the solve (not
 Embree's own, which are made once with the BVH, before it).
 
-Issue 5's target: the peak stays under 1 GiB and does not grow with the number of paths.
+The target: the peak stays under 1 GiB and does not grow with the number of paths.
 
-``--operator`` (issue 26) measures the extension in Blender (the ``bpy`` module, headless) on a
+``--operator`` measures the extension in Blender (the ``bpy`` module, headless) on a
 room of about a million patches: see :mod:`benchmarks.memory_operator`.
 """
 from __future__ import annotations
@@ -139,7 +139,7 @@ def main(argv=None):
               flush=True)
     p0 = rows[0][0]
     L = [
-        "# Peak memory of a solve on the figure-4 room (issue 5)",
+        "# Peak memory of a solve on the figure-4 room",
         "",
         f"`python -m benchmarks.memory {' '.join(a for a in (argv if argv is not None else sys.argv[1:]))}`".replace(" `", "`"),
         f"Machine: {platform.machine()}, Python {platform.python_version()}; scene `{args.scene}` "

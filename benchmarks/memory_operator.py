@@ -1,4 +1,4 @@
-"""Peak memory of the Solve operator on a room of about a million patches (issue 26).
+"""Peak memory of the Solve operator on a room of about a million patches.
 
     python -m benchmarks.memory --operator            # into benchmarks/results/memory_operator.md
     python -m benchmarks.memory --operator --quick    # a 100k-patch room, into out/
@@ -296,7 +296,7 @@ def main(argv=None):
             print(f"{layout} {plain['patches']:,} patches, {plain['paths']:,} paths ({error:g}%): peaks "
                   f"{', '.join(f'{p / MIB:.0f}' for p in plain['run_peaks'])} MiB, {plain['seconds']:.0f} s", flush=True)
     L = [
-        "# Peak memory of the Solve operator on a room of a million patches (issue 26)",
+        "# Peak memory of the Solve operator on a room of a million patches",
         "",
         f"`python -m benchmarks.memory --operator {' '.join(argv or [])}`".replace(" `", "`"),
         f"Machine: {platform.machine()}, Python {platform.python_version()}; each measurement in a fresh process "

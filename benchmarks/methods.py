@@ -1,4 +1,4 @@
-"""Every way the core carries the light, on the suite's scenes, in the core alone (issue 26).
+"""Every way the core carries the light, on the suite's scenes, in the core alone.
 
     python -m benchmarks.methods            # into benchmarks/results/methods.md
     python -m benchmarks.methods --quick    # fewer paths, into out/
@@ -77,7 +77,7 @@ def measure(name, paths):
 
 
 def report(results, command, out):
-    lines = ["# Every method of the core on the suite's scenes (issue 26)", "", f"`{command}`", "",
+    lines = ["# Every method of the core on the suite's scenes", "", f"`{command}`", "",
              __doc__.split("\n\n", 1)[1].strip(), ""]
     for res in results:
         base = res["rows"][0]

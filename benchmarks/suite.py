@@ -1,4 +1,4 @@
-"""Time to 1% and to 0.25% against Cycles on a suite of scenes nobody tuned for (issue 26).
+"""Time to 1% and to 0.25% against Cycles on a suite of scenes nobody tuned for.
 
     python -m benchmarks.suite             # the whole suite (about 30 minutes on 2 cores)
     python -m benchmarks.suite --quick     # small sample and path counts, to out/
@@ -347,7 +347,7 @@ def _ours(row):
 
 def report(rows, command, out):
     sides = [side for side in SIDES if any(side in r for r in rows)]
-    lines = ["# The issue 26 suite: time to 1% and 0.25% against Cycles", "", f"`{command}`", "",
+    lines = ["# The suite: time to 1% and 0.25% against Cycles", "", f"`{command}`", "",
              (__doc__.split("\n\n", 2)[2]).strip(), "",
              "## Agreement", "",
              "| scene | patches | " + " | ".join(f"{LABELS[k][6:]} / Cycles | z RMS" for k in sides) + " | sources |",

@@ -85,7 +85,7 @@ def own_rays_factor(scene, estimator, threads, paths, rounds=5, every=4, limit=1
     the patches' grids) the median ratio of the own rays' rate on the patches' triangles to
     the pre-drawn rays' rate on the grids, else NaN. (A walk's rays are not the pre-drawn ones:
     paths start more often where light arrives, and walks trace rays grouped by patch; the
-    issue's "the same rays" is this stricter reading.)"""
+    target's "the same rays" is this stricter reading.)"""
     tracer = walk_tracer(scene, kw.get("exit_point", "random"))
     casts, lock, calls = [], threading.Lock(), [0]
 
@@ -603,7 +603,7 @@ def main(argv=None):
         "own triangles, the patches' (what the walk traced before grids): its rate on pre-drawn rays",
         "(measured once after the rounds) and the solve's rate over it; then the solve's rate over",
         "Embree's on the solve's own rays (the same casts as *own rays*, traced on the patches'",
-        "triangles in the same alternation): the issue's target read on the scene it names (its",
+        "triangles in the same alternation): the target read on the scene it names (its",
         "triangles), for the same rays and threads.",
         "",
         "| scene | triangles | traced | threads | " + ("method" if args.methods else "estimator") + " | exit point | raw Mray/s | solve Mray/s | ratio | rounds "
@@ -656,8 +656,8 @@ def write_breakdown(args):
         "and later, last-level read misses elsewhere; `benchmarks/counters.py`) measure what the time",
         "between casts does to Embree: the same casts traced again back to back, and again each after",
         "a pause as long as the walk's numpy work before it (spinning in Python, which reads next to no",
-        "memory). On the patches' triangles (the figure 4 room's 133,144, about 10 MB; until stop 17 for",
-        "every walk, until stop 18 for walks leaving from hit points) Embree inside a walk was 7-24%",
+        "memory). On the patches' triangles (the figure 4 room's 133,144, about 10 MB; what every walk traced",
+        "before grids) Embree inside a walk was 7-24%",
         "slower than back to back: it fetched lines of its scene from memory that back to back it found",
         "in the shared L3 cache. On the grids it runs inside the walk as fast as back to back, and reads",
         "next to nothing from memory. The walk is timed alone; its rays are kept from a second walk",

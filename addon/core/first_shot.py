@@ -159,7 +159,8 @@ def gather_direct(tables, gathering, rng):
     for rows in _blocks(patch, SAMPLE_BLOCK):  # (a large chunk's memory stays that of a block)
         rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng)
     value *= scale
-    H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)])
+    # (float64 even for a chunk that drew no sample: bincount of nothing gives integers)
+    H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)]).astype(np.float64, copy=False)
     H /= gathering.samples
     return H, rays, (patch, x, value)
 
@@ -221,14 +222,14 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, value):
     unshadowed = np.zeros(n, dtype=bool)  # from a light that casts no shadow: always seen
     # The estimate's geometry is the surfaces' own: the points lie a ray offset off them (for the
     # rays), which seen at a grazing angle changes cos and distance by far more than the offset.
-    surface = x - normal * g.ray_offset
+    surface = x - normal * g.ray_offsets(patch, np.float64)
     on_patch = source < P
     at_patch = slice(None) if on_patch.all() else np.flatnonzero(on_patch)
     if on_patch.any():
         s = source[at_patch]
         e = patch_point_rows(g, s, u[8, at_patch], u[3, at_patch].copy(), u[4, at_patch].copy()).astype(np.float64)
         normal_s = g.patch_normal_rows.take(s, axis=1)
-        e -= normal_s * g.ray_offset
+        e -= normal_s * g.ray_offsets(s, np.float64)
         e -= surface[:, at_patch]  # surface to surface (the shadow ray follows it from x)
         length = np.sqrt(np.einsum("in,in->n", e, e))
         e /= length
@@ -263,7 +264,13 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, value):
         # to a point near its far edge passes the point and misses the patch. Asking for the
         # patch alone lost 0.23% of the figure 4 room's direct light, 2% on its walls' tops.)
         met_source = (hit >= 0) & (hit_patch == source[live]) & front & on_patch[live]
-        clear = (hit < 0) | (t >= distance[live] * SEEN_BEFORE)
+        reach = distance[live]
+        if g.patch_ray_offset is not None:
+            # The ray leaves x, an offset along the normal from the surface the distance is
+            # measured from: it comes nearest the point looked at that much sooner (an offset
+            # of a few float32 spacings of a large scene may exceed a lamp's gap to a ceiling).
+            reach = reach - g.ray_offsets(patch[live], np.float64) * np.einsum("in,in->n", normal[:, live], towards[:, live])
+        clear = (hit < 0) | (t >= reach * SEEN_BEFORE)
         blocked = live[~(met_source | clear)]
         weight[blocked] = 0.0
         if lit is not None:

@@ -10,33 +10,59 @@ import numpy as np
 # diagonal are the bounding box's, so that float32 precision and Embree's internal tolerances
 # (its barycentrics fail below a scene size of ~1e-8) see the same scene at any scale or
 # distance from the origin. Rays leave a patch from a point pushed this far along its normal
-# (~170 float32 ulps at the scene's extent).
+# (~170 float32 ulps at the scene's extent), or less where it is small beside the scene
+# (local_offsets).
 RELATIVE_RAY_OFFSET = 1e-5
 
 # Points where rays leave a patch keep this distance (relative to the diagonal, ~17 float32
 # ulps at the scene's extent) from the patch's edges, so that float32 rounding never puts an
-# origin on the far side of an adjacent wall, where its ray would hit that wall's back.
+# origin on the far side of an adjacent wall, where its ray would hit that wall's back (less,
+# as the offset, for patches small beside the scene).
 RELATIVE_EDGE_INSET = 1e-6
 
 # A ray leaving from where the previous one hit starts at that hit point (origin + t direction,
 # pushed off along the normal) if the point lies at least this far (relative to the diagonal)
-# from every edge of its triangle: four times the edge inset, which leaves room for float32's
-# error in the point (~2e-7 in unit space). Closer to an edge, the hit's barycentric
-# coordinates are mapped onto the triangle's inset leaving frame instead.
+# from every edge of its triangle: four times the edge inset (its patch's own, where it has
+# one), which leaves room for float32's error in the point (~2e-7 in unit space). Closer to an
+# edge, the hit's barycentric coordinates are mapped onto the triangle's inset leaving frame.
 RELATIVE_HIT_EDGE_CLEARANCE = 4 * RELATIVE_EDGE_INSET
 
+# Geometry small beside the scene's extent (a room beside a far object, a house on a terrain)
+# would be crossed by offsets and insets of the diagonal: there a patch's offset and inset
+# shrink with its own size (its side, the square root of its area, times these), down to a few
+# float32 spacings of the scene's largest unit-space coordinate, what rounding of its positions
+# needs. A patch of at least 1e-3 of the diagonal keeps RELATIVE_RAY_OFFSET and
+# RELATIVE_EDGE_INSET.
+LOCAL_RAY_OFFSET = 1e-2
+LOCAL_EDGE_INSET = 1e-3
+RAY_OFFSET_SPACINGS = 8
+EDGE_INSET_SPACINGS = 4
+LIGHT_OFFSET_SPACINGS = 4
 
-def edge_barycentric(corners):
+
+def local_offsets(side, largest_coordinate):
+    """(ray offsets, edge insets), each (n,) float64 unit space, of patches of unit-space
+    ``side`` (n,) in a scene whose unit-space coordinates reach ``largest_coordinate``: the
+    relative ones, or less for patches small beside the scene, never below the float32
+    spacings that rounding of positions needs."""
+    spacing = float(np.spacing(np.float32(largest_coordinate)))
+    side = np.asarray(side, dtype=np.float64)
+    offset = np.maximum(RAY_OFFSET_SPACINGS * spacing, np.minimum(RELATIVE_RAY_OFFSET, LOCAL_RAY_OFFSET * side))
+    inset = np.maximum(EDGE_INSET_SPACINGS * spacing, np.minimum(RELATIVE_EDGE_INSET, LOCAL_EDGE_INSET * side))
+    return offset, inset
+
+
+def edge_barycentric(corners, clearance=RELATIVE_HIT_EDGE_CLEARANCE):
     """(T,) float32: for (T,3,3) unit-space triangles, the barycentric coordinate below which a
-    point may lie closer than RELATIVE_HIT_EDGE_CLEARANCE to one of the triangle's edges (the
-    clearance over its smallest altitude, 2 area / longest edge; 1 for triangles too small to
-    have such points)."""
+    point may lie closer than ``clearance`` (a number, or (T,) one per triangle) to one of the
+    triangle's edges (the clearance over its smallest altitude, 2 area / longest edge; 1 for
+    triangles too small to have such points)."""
     corners = np.asarray(corners, dtype=np.float64)
     edges = corners[:, [1, 2, 0]] - corners
     longest = np.linalg.norm(edges, axis=2).max(axis=1)
     twice_area = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        threshold = RELATIVE_HIT_EDGE_CLEARANCE * longest / twice_area
+        threshold = clearance * longest / twice_area
     return np.where(np.isfinite(threshold), np.minimum(threshold, 1.0), 1.0).astype(np.float32)
 
 
@@ -58,7 +84,7 @@ def parallelogram_frames(sorted_corners, first, count, inset, offset, normal, ou
     """Which patches are two triangles forming a parallelogram ((P,) bool), with their leaving
     frames written into ``out`` ((9,P) float32, one coordinate per row): the corner, inset and
     pushed ``offset`` along the patch's ``normal`` ((P,3)), then the edges a and b; zeros for
-    the other patches.
+    the other patches. ``inset`` and ``offset`` are numbers, or (P,) one per patch.
 
     Such a patch (any quad with parallel sides: the grids meshing makes) is sampled as
     corner + u a + v b, without choosing a triangle or folding. Computed a block of patches at a
@@ -70,10 +96,11 @@ def parallelogram_frames(sorted_corners, first, count, inset, offset, normal, ou
     for two, ok, (p, s1, s2, _) in parallelogram_blocks(sorted_corners, first, count):
         edge_a, edge_b = s1 - p, s2 - p
         # Inset every side by ``inset`` (at most a quarter of the patch): corner + d_a a + d_b b.
-        d_a = np.minimum(inset / np.linalg.norm(edge_a, axis=1), 0.25)[:, None]
-        d_b = np.minimum(inset / np.linalg.norm(edge_b, axis=1), 0.25)[:, None]
+        inset_here = inset if np.ndim(inset) == 0 else inset[two]
+        d_a = np.minimum(inset_here / np.linalg.norm(edge_a, axis=1), 0.25)[:, None]
+        d_b = np.minimum(inset_here / np.linalg.norm(edge_b, axis=1), 0.25)[:, None]
         corner = p + d_a * edge_a + d_b * edge_b
-        corner += offset * normal[two]
+        corner += (offset if np.ndim(offset) == 0 else offset[two][:, None]) * normal[two]
         rows = two[ok]
         for start, values in ((0, corner), (3, (1 - 2 * d_a) * edge_a), (6, (1 - 2 * d_b) * edge_b)):
             out[start:start + 3, rows] = values[ok].T

@@ -11,7 +11,16 @@ from functools import cached_property
 
 import numpy as np
 
-from .frames import RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET, edge_barycentric, inset_triangles, parallelogram_frames
+from .frames import (
+    RELATIVE_EDGE_INSET,
+    RELATIVE_HIT_EDGE_CLEARANCE,
+    LIGHT_OFFSET_SPACINGS,
+    RELATIVE_RAY_OFFSET,
+    edge_barycentric,
+    inset_triangles,
+    local_offsets,
+    parallelogram_frames,
+)
 from .patch_grids import patch_grids
 from .raytrace import RayTracer
 from .validation import (
@@ -63,6 +72,11 @@ class Geometry:
     # not), then its normal, one coordinate per row: one gather gives a random exit's origin
     # frame and the normal its direction is built on
     leave_table: np.ndarray
+    # (P,) float64 each patch's ray offset and edge inset (frames.local_offsets), where a patch
+    # small beside the scene takes less than ``ray_offset`` and RELATIVE_EDGE_INSET; None where
+    # every patch takes those (ordinary scenes: then ``ray_offset`` is every patch's)
+    patch_ray_offset: np.ndarray | None = None
+    patch_edge_inset: np.ndarray | None = None
 
     @property
     def patch_count(self):
@@ -113,11 +127,42 @@ class Geometry:
     def triangle_frame(self):
         """(9,T) float32: origin (pushed off), edge1, edge2 of each triangle's leaving frame, one
         row per coordinate (:meth:`frames_of`)."""
-        return self._per_triangle(lambda c: leaving_frames(c, self.ray_offset), axis=1)
+        if self.patch_ray_offset is None:
+            return self._per_triangle(lambda c: leaving_frames(c, self.ray_offset), axis=1)
+        out = np.empty((9, self.triangle_count), np.float32)
+        for start in range(0, self.triangle_count, BLOCK_TRIANGLES):
+            rows = np.arange(start, min(start + BLOCK_TRIANGLES, self.triangle_count))
+            out[:, rows] = self.frames_of(rows)
+        return out
 
     def frames_of(self, rows):
         """Columns ``rows`` of :attr:`triangle_frame`, without making it whole."""
-        return leaving_frames(self.corners[rows], self.ray_offset)
+        if self.patch_ray_offset is None:
+            return leaving_frames(self.corners[rows], self.ray_offset)
+        patch = self.triangle_patch[rows]
+        return leaving_frames(self.corners[rows], self.patch_ray_offset[patch][:, None], self.patch_edge_inset[patch])
+
+    def ray_offsets(self, patch, dtype=np.float32):
+        """The ray offset of each of the given patches: ``ray_offset`` where every patch takes
+        it (a Python number, which numpy rounds to the array's dtype), else (n,) ``dtype``."""
+        if self.patch_ray_offset is None:
+            return self.ray_offset
+        table = self.patch_ray_offset if dtype == np.float64 else self.patch_offset32
+        return table.take(patch, mode="wrap")
+
+    @cached_property
+    def patch_offset32(self):
+        return self.patch_ray_offset.astype(np.float32)
+
+    def light_offsets(self, unit_origins):
+        """How far a light's rays from ``unit_origins`` (3,n) start along their direction: the
+        scene's ray offset, or where patches take less (small beside the scene), a few float32
+        spacings of each origin's coordinates, which is all its rounding needs (a number, or
+        (n,))."""
+        if self.patch_ray_offset is None:
+            return self.ray_offset
+        largest = np.abs(unit_origins).max(axis=0).astype(np.float32)
+        return LIGHT_OFFSET_SPACINGS * np.spacing(largest).astype(np.float64)
 
     def to_world(self, points):
         """Unit-space points (n,3) back in the scene's coordinates, float64."""
@@ -176,7 +221,10 @@ class Geometry:
         return largest
 
     def _own_edge_barycentric(self):
-        return edge_barycentric(self.triangle_corners)
+        if self.patch_edge_inset is None:
+            return edge_barycentric(self.triangle_corners)
+        clearance = RELATIVE_HIT_EDGE_CLEARANCE / RELATIVE_EDGE_INSET * self.patch_edge_inset[self.triangle_patch]
+        return edge_barycentric(self.triangle_corners, clearance)
 
     @cached_property
     def triangle_normal_rows(self):
@@ -304,7 +352,8 @@ def triangle_normals(corners):
 
 def leaving_frames(corners, ray_offset, inset=RELATIVE_EDGE_INSET):
     """(9,n) float32 leaving frames of (n,3,3) corners: the inset triangle's first corner pushed
-    off along the normal, and its two edges from it."""
+    off along the normal, and its two edges from it (``ray_offset`` a number or (n,1),
+    ``inset`` a number or (n,))."""
     leave_corners = inset_triangles(corners, inset)
     return np.ascontiguousarray(
         np.hstack(
@@ -316,6 +365,26 @@ def leaving_frames(corners, ray_offset, inset=RELATIVE_EDGE_INSET):
         ).T,
         dtype=np.float32,
     )
+
+
+# Patches whose ray offset, set by the float32 spacing of the scene's coordinates, exceeds this
+# share of their side are reported: their form factors drift with it.
+COARSE_OFFSET_SHARE = 0.02
+
+
+def warn_coarse(offset, side, diagonal):
+    """Warns (naming how many patches and how far) where float32 positions of a scene this large
+    are coarse beside some patches: their rays leave more than COARSE_OFFSET_SHARE of their
+    side off them (unit-space ``offset`` and ``side``, (P,) each)."""
+    coarse = offset > COARSE_OFFSET_SHARE * side
+    if coarse.any():
+        share = float((offset / side)[coarse].max())
+        warnings.warn(
+            f"{int(coarse.sum())} patches are small beside the scene's extent ({diagonal:.3g} across): float32 "
+            f"positions put their rays up to {float(offset[coarse].max()) * diagonal:.3g} off them ({share:.1%} of "
+            "their size), which shifts their light; keep far objects out of the scene or solve them apart",
+            stacklevel=4,
+        )
 
 
 def build_geometry(vertices, triangles, triangle_patch, patch_count):
@@ -388,11 +457,19 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     del cumulative
     last = first + count - 1
     fraction[last] = 1.0  # exact upper end, whatever the rounding
-    ray_offset = RELATIVE_RAY_OFFSET
+    used = np.unique(T)
+    largest = np.abs((V[used] - centre) / diagonal).max()
+    del used
+    patch_ray_offset, patch_edge_inset = local_offsets(np.sqrt(patch_area), largest)
+    if (patch_ray_offset == RELATIVE_RAY_OFFSET).all() and (patch_edge_inset == RELATIVE_EDGE_INSET).all():
+        ray_offset, patch_ray_offset, patch_edge_inset = RELATIVE_RAY_OFFSET, None, None
+        inset, offset = RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET
+    else:
+        ray_offset = float(patch_ray_offset.min())  # (the lights', at least)
+        inset, offset = patch_edge_inset, patch_ray_offset
+        warn_coarse(patch_ray_offset, np.sqrt(patch_area), diagonal)
     leave_table = np.empty((12, patch_count), np.float32)
-    is_parallelogram = parallelogram_frames(
-        sorted_corners, first, count, RELATIVE_EDGE_INSET, ray_offset, patch_normal, leave_table[0:9]
-    )
+    is_parallelogram = parallelogram_frames(sorted_corners, first, count, inset, offset, patch_normal, leave_table[0:9])
     leave_table[9:12] = patch_normal.T
 
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
@@ -411,4 +488,6 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         patch_first_fraction=f32(fraction[first]),
         patch_parallelogram=is_parallelogram,
         leave_table=leave_table,
+        patch_ray_offset=patch_ray_offset,
+        patch_edge_inset=patch_edge_inset,
     )

@@ -1,6 +1,6 @@
 """Stochastic Jacobi iteration with incremental shooting: the light shot generation by generation.
 
-Beyond the paper (issue 26). A chunk of n "paths" starts as the walk does: n first rays from the
+Beyond the paper. A chunk of n "paths" starts as the walk does: n first rays from the
 sources, drawn in proportion to power, each carrying the relative weight 1 (Phi_T / n of power).
 The power incident on each patch in one generation is scored, and the part the patches reflect,
 U_j = R_j I_j, is the next generation's unshot power. It is shot again from the patches as a

@@ -483,5 +483,6 @@ class Lights:
         """:meth:`emit`'s rays in ``geometry``'s unit space, as a walk traces them: origins
         pushed off along their direction like a patch's along its normal ((3, n) each)."""
         origins, directions = self.emit(rows, u)
-        origins = (origins - geometry.centre[:, None]) / geometry.diagonal + geometry.ray_offset * directions
+        origins = (origins - geometry.centre[:, None]) / geometry.diagonal
+        origins += geometry.light_offsets(origins) * directions
         return origins, directions

@@ -114,10 +114,15 @@ class PatchGrids:
 def patch_grids(geometry):
     """The grids of a scene's parallelogram patches, with every other patch's own triangles
     (a grid of one cell each), or None where they would not take at most MAX_TRIANGLE_FRACTION
-    of the scene's triangles. ``geometry`` is a :class:`.geometry.Geometry` (triangles sorted by
-    patch)."""
+    of the scene's triangles, or where patches are small beside the scene (their own offsets:
+    ``geometry.patch_ray_offset``). ``geometry`` is a :class:`.geometry.Geometry` (triangles
+    sorted by patch)."""
     P, T = geometry.patch_count, geometry.triangle_count
-    if P == 0 or P >= MAX_CELLS:
+    # Where rectangles of cells meet in a T, the float32 corner of one lies off the other's edge
+    # by a spacing of the scene's coordinates: a crack nothing beside an ordinary scene, but one
+    # rays go through where the patches are small beside it (the patches' own triangles share
+    # their corners exactly).
+    if P == 0 or P >= MAX_CELLS or geometry.patch_ray_offset is not None:
         return None
     merged, patch_corners = _parallelogram_patches(geometry)
     M = merged.size  # the parallelogram patches, in patch order; grid cells 0..M-1

@@ -135,7 +135,8 @@ class PathWalk:
         # a patch table: take's "wrap" mode steps an id down by P at a time)
         normals = rays.patch_normals(t, p.patch if t.lights is None or new <= 0 else rays.on_patches(t, p.patch))
         origins = p.leave_from
-        origins += normals[:, :n_live] * np.float32(t.geometry.ray_offset)
+        g = t.geometry
+        origins += normals[:, :n_live] * (g.ray_offset if g.patch_ray_offset is None else g.ray_offsets(p.patch[:n_live]))
         light = None
         if new > 0:
             # New paths leave from points of their sources (their directions take u's rows).

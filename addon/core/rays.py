@@ -193,7 +193,9 @@ def hit_points(tables, origins, directions, distance, hit, hit_patch, u, v, fron
         frame = tables.hit_frames.take(hit.take(index, mode="wrap"), axis=1, mode="wrap")
         # The frame's corner is pushed off along the triangle's normal; the walk pushes every
         # hit point along its patch's normal (frame rows 9:12): take that off here.
-        pushed_back = frame[9:12] * np.float32(tables.geometry.ray_offset)
+        g = tables.geometry
+        offset = g.ray_offset if g.patch_ray_offset is None else g.ray_offsets(hit_patch.take(index, mode="wrap"))
+        pushed_back = frame[9:12] * offset
         points = frame_points(frame, u.take(index, mode="wrap"), v.take(index, mode="wrap"))
         points -= pushed_back
         origins[:, index] = points

@@ -13,7 +13,7 @@ import numpy as np
 
 from .geometry import build_geometry
 from .lights import Lights
-from .validation import PatchError, validate_lights, validate_materials
+from .validation import PatchError, material_rows, validate_light_numbers, validate_lights, validate_materials
 
 class PatchScene:
     """Patches (groups of coplanar triangles) with their reflectivity and emittance.
@@ -38,7 +38,7 @@ class PatchScene:
         reflectivity_arr = np.asarray(reflectivity)
         if reflectivity_arr.ndim not in (1, 2) or reflectivity_arr.shape[0] == 0:
             raise ValueError(f"reflectivity must have shape (P,) or (P, 3) with P > 0; got {reflectivity_arr.shape}")
-        patch_count = reflectivity_arr.shape[0]
+        patch_count = material_rows(reflectivity_arr, emission, triangle_patch)
         lights = tuple(lights.lights if isinstance(lights, Lights) else lights)
         self.reflectivity, self.emission = validate_materials(reflectivity, emission, patch_count, require_emitter=not lights)
         self.vertices = np.asarray(vertices, dtype=np.float64)
@@ -60,6 +60,7 @@ class PatchScene:
             aim = (g.centre, 0.5 * g.diagonal)
         # Sun and world rays start beyond the whole scene, seen from the aim's centre.
         reach = float(np.linalg.norm(np.asarray(aim[0], np.float64) - g.centre)) + g.diagonal
+        validate_light_numbers(lights)
         self.lights = Lights(lights, aim, reach)
         validate_lights(self.lights)
         if lights and not (self.source_power > 0).any():

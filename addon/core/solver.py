@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .batches import Batches
+from .diagnostics import check_bounces
 from .error_model import check_estimator, check_positive, predict
 from .first_shot import Gathering, fate_shares, gather_samples
 from .two_way import GENERATION_RAYS, direct_samples, rays_per_path
@@ -39,7 +40,7 @@ from .names import (
     TWO_WAY,
     WALK,
 )
-from .cluster import ClusterRunner, WalkParameters
+from .cluster import ClusterRunner, WalkParameters, cluster_address
 from .runners import ThreadRunner
 from .speedups import Speedups
 from .tables import WalkTables
@@ -153,6 +154,47 @@ class SolveResult:
         return self.rays / self.seconds if self.seconds > 0 else math.nan
 
 
+@dataclass(frozen=True)
+class ChunkPlan:
+    """How a solve splits its paths: the paper's prediction, the stop rule, the most paths it
+    runs (``cap``) and the paths of a chunk."""
+
+    prediction: object
+    measured_rule: bool
+    cap: int
+    chunk: int
+
+
+def chunk_plan(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3, stop_rule=PREDICTED,
+               direct_light=SHOT, method=WALK, max_seconds=None):
+    """The chunk plan of a solve with these arguments (``method`` resolved, not "auto")."""
+    prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
+    beyond_formulas = direct_light == GATHERED or method != WALK
+    measured_rule = stop_rule == MEASURED or (beyond_formulas and target_mse is not None)
+    if measured_rule:
+        planned = planned_paths(prediction.paths_for(target_mse), direct_light, method)
+        cap = paths if paths is not None else MEASURED_CAP_FACTOR * planned
+    else:
+        planned = paths if paths is not None else prediction.paths_for(target_mse)
+        cap = planned
+    if method == TWO_WAY:
+        chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
+    else:
+        chunk = chunk_paths_for(prediction.expected_path_length, planned)
+    return ChunkPlan(prediction, measured_rule, int(cap), int(chunk))
+
+
+def paths_to_target(paths, measured_mse, target_mse, chunk, cap):
+    """The paths a run stopping on its measured error is expected to end at, from its MSE after
+    ``paths`` (which falls as 1 / paths): whole chunks, at least MEASURED_STOP_CHUNKS, at most
+    ``cap``. NaN MSE (fewer than 2 chunks): NaN."""
+    if not measured_mse >= 0 or paths <= 0:
+        return math.nan
+    needed = paths * measured_mse / target_mse
+    chunks = max(MEASURED_STOP_CHUNKS, math.ceil(needed / chunk))
+    return float(min(cap, chunks * chunk))
+
+
 def chunk_paths_for(expected_path_length, planned_paths, min_chunks=MIN_CHUNKS):
     by_rays = int(RAYS_PER_CHUNK / max(expected_path_length, 1.0))
     by_batches = math.ceil(planned_paths / min_chunks)
@@ -254,6 +296,7 @@ def solve(
     direct_light=None,
     cluster=None,
     method=WALK,
+    chunk_paths=None,
 ):
     """Radiosity of ``scene`` by shooting random walks.
 
@@ -263,7 +306,8 @@ def solve(
     paper, ``first_shot``) gathers each patch's direct light by shadow rays and walks only its
     reflection; the paper's formulas do not predict its error, so with ``target_mse`` it always
     stops on the measured error. ``cluster`` (a ``dask.distributed.Client`` or a scheduler
-    address) runs the chunks on a Dask cluster instead of threads: bitwise the same result. ``sampling="stratified"`` (beyond
+    address, ``tcp://host:port`` or ``tls://host:port``, trusted like this machine) runs the chunks on
+    a Dask cluster instead of threads: bitwise the same result. ``sampling="stratified"`` (beyond
     the paper) allots each chunk's paths to sources in proportion to power and draws the first
     ray from a randomly shifted low-discrepancy set: same expectation, usually less noise;
     the predicted path counts are derived for the paper's plain ``"independent"`` sampling.
@@ -276,6 +320,7 @@ def solve(
     ``progress(fraction, stats)`` and ``should_stop()`` are called from the calling thread
     between chunks (``stats["radiosity"](dtype)`` gives the result so far); ``max_seconds`` bounds the wall time. A stopped run returns the complete
     chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
+    ``chunk_paths`` replaces the plan's chunk size (the estimate's pilot: ``forecast``).
     """
     if method == AUTO and (paths is not None or target_mse is not None):
         check_estimator(estimator, threshold)
@@ -289,24 +334,21 @@ def solve(
         raise ValueError(f"seed must be a non-negative whole number; got {seed!r}")
     if speedups is not None and not isinstance(speedups, Speedups):
         raise ValueError(f"speedups must be a Speedups; got {speedups!r}")
+    if isinstance(cluster, str):
+        cluster = cluster_address(cluster)  # (its form, before any work; connecting comes later)
+    check_bounces(scene, estimator, threshold)
     threads = int(threads or min(os.cpu_count() or 1, 8))
     paths = None if paths is None else int(paths)  # numpy integers welcome
     start = time.perf_counter()
 
-    prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
+    plan = chunk_plan(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold, stop_rule=stop_rule,
+                      direct_light=direct_light, method=method, max_seconds=max_seconds)
+    prediction, measured_rule, cap, chunk = plan.prediction, plan.measured_rule, plan.cap, plan.chunk
+    check_positive("chunk_paths", chunk_paths, integer=True)
+    if chunk_paths is not None:
+        chunk = int(chunk_paths)
     gathered = direct_light == GATHERED
     beyond_formulas = gathered or method != WALK  # the paper's formulas do not predict their error
-    measured_rule = stop_rule == MEASURED or (beyond_formulas and target_mse is not None)
-    if measured_rule:
-        planned = planned_paths(prediction.paths_for(target_mse), direct_light, method)
-        cap = paths if paths is not None else MEASURED_CAP_FACTOR * planned
-    else:
-        planned = paths if paths is not None else prediction.paths_for(target_mse)
-        cap = planned
-    if method == TWO_WAY:
-        chunk = two_way_chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
-    else:
-        chunk = chunk_paths_for(prediction.expected_path_length, planned)
     tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups)
     tables.method = method
     if method == TWO_WAY:
@@ -354,7 +396,7 @@ def solve(
             for tally in tallies:  # progress once per chunk
                 total.add(tally)
                 if progress is not None:
-                    progress(*_progress(total, prediction, cap, target_mse if measured_rule else None, start))
+                    progress(*_progress(total, prediction, cap, target_mse if measured_rule else None, start, chunk))
             # (The batch estimate costs passes over the patches: made only where it is used.)
             if measured_rule and total.chunks >= MEASURED_STOP_CHUNKS and total.measured_mse() <= target_mse \
                     and total.mse_upper_bound(MEASURED_STOP_Z) <= target_mse:
@@ -402,21 +444,26 @@ def solve(
     )
 
 
-def _progress(total, prediction, cap, measured_target, start):
-    """(fraction, stats) for ``progress``: the share of the planned paths done (with the
-    measured stop rule, or of the target reached by the bound the rule stops on, if more)."""
+def _progress(total, prediction, cap, measured_target, start, chunk):
+    """(fraction, stats) for ``progress``: the share of the paths the run is expected to end at
+    (the cap; with the measured stop rule, where the bound it stops on says it will meet the
+    target), and the seconds left at the run's pace so far (NaN until it is known)."""
     elapsed = time.perf_counter() - start
     mse_now = total.measured_mse()
-    fraction = total.paths / cap
-    bound = total.mse_upper_bound(MEASURED_STOP_Z) if measured_target is not None else math.nan
-    if bound > 0:  # NaN compares False
-        fraction = max(fraction, min(measured_target / bound, total.chunks / MEASURED_STOP_CHUNKS))
+    expected = float(cap)
+    if measured_target is not None:
+        bound = total.mse_upper_bound(MEASURED_STOP_Z)
+        expected = paths_to_target(total.paths, bound if bound == bound else mse_now, measured_target, chunk, cap)
+    fraction = total.paths / expected if expected > 0 else 0.0  # (NaN > 0 is False)
+    left = (expected - total.paths) * elapsed / total.paths if total.paths else math.nan
     return min(1.0, fraction), {
         "paths": total.paths,
         "rays": total.rays,
         "seconds": elapsed,
         "rays_per_second": total.rays / elapsed if elapsed > 0 else math.nan,
         "measured_mse": mse_now,
+        "expected_paths": expected,  # NaN while unknown
+        "seconds_left": max(0.0, left) if left == left else math.nan,
         "predicted_mse": prediction.mse_for(total.paths),
         # The result so far, (P,3) B, computed only if called (a pass over the patches).
         "radiosity": total.radiosity,  # (dtype=np.float64)

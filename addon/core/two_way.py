@@ -1,6 +1,6 @@
 """Two-way stochastic Jacobi iteration: every ray used twice, with a constant control variate.
 
-Beyond the paper (issue 26). A chunk estimates the light in generations, as stochastic Jacobi
+Beyond the paper. A chunk estimates the light in generations, as stochastic Jacobi
 iteration does (``jacobi``), but each generation's rays leave every patch, not only those with
 power to shoot, so that each ray serves two estimates:
 

@@ -5,6 +5,7 @@ use; warnings for what they can use but the user should know (coincident faces).
 """
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -120,6 +121,26 @@ def _as_channels(values, patch_count, name):
     raise ValueError(f"{name} must have shape (P,) or (P, 3); got {array.shape}")
 
 
+def material_rows(reflectivity, emission, triangle_patch):
+    """The patch count P the material arrays give, one row per patch. Where reflectivity and
+    emission disagree, the one that matches the patches the triangles name is taken, so that
+    the error names the array that is short or long."""
+    rows = {}
+    for name, values in (("reflectivity", reflectivity), ("emission", emission)):
+        shape = np.shape(values)
+        rows[name] = shape[0] if len(shape) in (1, 2) else None
+    if rows["emission"] is None or rows["emission"] == rows["reflectivity"]:
+        return rows["reflectivity"]
+    tp = np.asarray(triangle_patch)
+    named = int(tp.max()) + 1 if tp.size and np.issubdtype(tp.dtype, np.integer) else None
+    if named in rows.values():
+        return named
+    raise ValueError(
+        f"reflectivity has {rows['reflectivity']} rows and emission {rows['emission']}: each needs one row per patch"
+        + (f" (the triangles name {named} patches)" if named is not None else "")
+    )
+
+
 def validate_materials(reflectivity, emission, patch_count, require_emitter=True):
     """Check reflectivity and emission arrays; return them as (P,3) float64.
 
@@ -154,8 +175,29 @@ def validate_materials(reflectivity, emission, patch_count, require_emitter=True
     return R, E
 
 
+def _light_numbers(light, prefix=""):
+    """(field, values) of each numeric field of a light (a dataclass; a spot's cone within it)."""
+    for item in dataclasses.fields(light):
+        value = getattr(light, item.name)
+        if dataclasses.is_dataclass(value):
+            yield from _light_numbers(value, f"{prefix}{item.name} ")
+        elif value is not None and not isinstance(value, (str, bool)):
+            yield prefix + item.name, np.asarray(value, dtype=np.float64)
+
+
+def validate_light_numbers(lights):
+    """Check that every number of every light (a sequence of them) is finite: its position,
+    direction, size, colour... (ValueError naming the light and the field), before any is used."""
+    for light in lights:
+        if dataclasses.is_dataclass(light):
+            for name, values in _light_numbers(light):
+                if not np.isfinite(values).all():
+                    raise ValueError(f"light '{light.name}': its {name.replace('_', ' ')} is NaN or infinite")
+
+
 def validate_lights(lights):
     """Check that every light's power is finite and not negative (ValueError naming it)."""
+    validate_light_numbers(lights.lights)
     for light in lights.lights:
         power = np.asarray(light.emitter_powers(lights.aim), np.float64)
         if not np.isfinite(power).all():

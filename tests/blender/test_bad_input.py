@@ -1,4 +1,4 @@
-"""Bad input and bad timing in Blender (issue 6): each case ends with a clear report, the scene
+"""Bad input and bad timing in Blender: each case ends with a clear report, the scene
 is either unchanged or holds the complete new result, and the worker thread is gone."""
 
 import math
@@ -11,6 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
+import addon
 from addon import estimate, images, patches, pipeline, scene_io, worker
 
 from .conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
@@ -165,6 +166,25 @@ def test_image_texture_uses_the_average_linear_colour_and_says_so(blender):
     R, E, notes = scene_io.material_colours(m)
     np.testing.assert_allclose(R, 0.1, rtol=1e-6)
     assert any("no pixels" in n for n in notes)
+    # The same image driving the emission colour: the light is unknown, refused by name (a
+    # white emitter of the socket's colour was solved). At strength 0 it gives no light: no error.
+    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Emission Color"])
+    tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 0.0
+    scene_io.material_colours(m)
+    tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 5.0
+    with pytest.raises(scene_io.SceneError, match=r"^material 'Painted': its 'Emission Color' comes from image 'Gone', "
+                                                  r"which has no pixels \(file not found: .*no_such_file.png\)"):
+        scene_io.material_colours(m)
+    glow = bpy.data.materials.new("Glow")
+    glow.node_tree.nodes.clear()
+    emission = glow.node_tree.nodes.new("ShaderNodeEmission")
+    glow.node_tree.links.new(emission.outputs["Emission"],
+                             glow.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    glow_image = glow.node_tree.nodes.new("ShaderNodeTexImage")
+    glow_image.image = missing
+    glow.node_tree.links.new(glow_image.outputs["Color"], emission.inputs["Color"])
+    with pytest.raises(scene_io.SceneError, match=r"^material 'Glow': its 'Color' comes from image 'Gone'"):
+        scene_io.material_colours(glow)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -735,3 +755,100 @@ def test_a_patch_size_that_makes_too_many_patches_is_refused_before_meshing(blen
     with pytest.raises(RuntimeError, match="Use a larger patch size"):
         bpy.ops.radiosity.solve()
     assert _snapshot() == before and not result_objects()
+
+
+def test_a_nan_vertex_is_named_with_its_object(blender):
+    """One vertex set to NaN (by a script or a driver) made the scene's extent NaN, so that
+    every face of every object looked like it had no area: the error names the object and
+    how many of its vertices are not numbers. The scene is unchanged."""
+    build_test_scene()
+    configure(blender)
+    block = bpy.data.objects["Block"]
+    block.data.vertices[3].co = (float("nan"), 0.2, 0.0)
+    _unchanged_after_error(blender, r"Radiosity failed: 'Block': 1 of the 8 vertices its faces use is not a finite "
+                                    r"number \(NaN or infinite\)\n")
+    block.data.vertices[3].co = (0.2, 0.5, 0.0)
+    block.location = (float("nan"), 0.0, 0.0)
+    before = sorted(o.name for o in bpy.data.objects), sorted(m.name for m in bpy.data.meshes)
+    with pytest.raises(RuntimeError, match=r"'Block': 8 of the 8 vertices its faces use are not a finite number "
+                                           r"\(NaN or infinite\) \(its location, rotation or scale\?\)"):
+        bpy.ops.radiosity.solve()
+    assert (sorted(o.name for o in bpy.data.objects), sorted(m.name for m in bpy.data.meshes)) == before
+    assert not result_objects()
+
+
+def test_an_object_ten_thousand_km_away_is_named_as_the_cause_of_faces_too_small(blender):
+    """A 1 m cube 10,000 km from a 1 m room: the room's faces are below what the scene's extent
+    lets the ray tracer resolve. The message says so, with the extent and the objects at both
+    of its ends, instead of saying the selection has no faces of non-zero area."""
+    build_test_scene()
+    configure(blender)
+    v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=False)
+    make_object("Far", v, f, location=(1e7, 0, 0))  # not selected: the rest of the scene
+    blender.scene.radiosity.use_scene_objects = True
+    blender.view_layer.update()  # (its matrix_world, for the snapshot of the unchanged scene)
+    _unchanged_after_error(
+        blender, r"'Block', 'Lamp', 'Room': every face is too small to trace beside the scene's extent \(a diagonal "
+                 r"of 1e\+07, from 'Room' to 'Far'; a face needs an area above 1e-14 of its square, 1\); move far "
+                 r"objects nearer, or hide them from render")
+    # Nearer (10 km), it solves, the far cube taking part as the rest of the scene.
+    bpy.data.objects["Far"].location = (1e4, 0, 0)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
+
+
+def _sky_room(blender, flipped_floor=False):
+    """A 4 x 4 m room 0.5 m high, open at the top under a grey sky (world colour 0.05), its floor
+    an object of its own ('Floor'), built facing down with ``flipped_floor``."""
+    room_v, room_f = box_arrays((0, 0, 0), (4, 4, 0.5), inward=True)
+    walls = [f for k, f in enumerate(room_f) if k >= 2]  # no ceiling (the sky comes in), no floor
+    make_object("Room", room_v, walls, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
+    floor = [tuple(reversed(room_f[0]))] if flipped_floor else [room_f[0]]
+    make_object("Floor", room_v, floor, [principled("Boards", (0.5, 0.4, 0.3))]).select_set(True)
+    world = bpy.data.worlds.new("Sky")
+    blender.scene.world = world
+    background = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    background.inputs["Color"].default_value = (0.05, 0.05, 0.05, 1.0)
+    background.inputs["Strength"].default_value = 1.0
+    configure(blender)
+    blender.scene.radiosity.patch_size = 1.0
+
+
+def test_sky_on_the_outside_of_a_room_gives_no_back_face_warning(blender):
+    """The sky lights the walls and the floor of an open room from outside, on their back sides
+    (most of the light that meets the room): that light met them from outside every receiver,
+    as in any render of the room, and the run says nothing about thin walls."""
+    _sky_room(blender)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
+    assert not any("back of faces" in text for _, text in reports), reports
+
+
+def test_back_face_warnings_name_the_faces_and_the_sources(blender):
+    """A floor built facing down in the open room: the sky that comes in meets its back side,
+    which the walls see. The warning names the floor and the sky (and not the walls, lit from
+    behind only from outside). The test room built inside out around its lamps: the lamp quad's
+    and a bulb's light meet the room's back sides, which the block sees; both are named."""
+    _sky_room(blender, flipped_floor=True)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
+    warning = [text for kind, text in reports if kind == "WARNING" and "back of faces" in text]
+    assert len(warning) == 1, reports
+    assert "of the light reached the back of faces in view of the selection" in warning[0]
+    assert "faces of 'Floor' lit by world 'Sky'" in warning[0] and "'Room'" not in warning[0], warning
+
+    addon.unregister()  # (as the blender fixture starts a test)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    addon.register()
+    build_test_scene()
+    bpy.data.objects["Room"].data.flip_normals()
+    bulb = bpy.data.objects.new("Bulb", bpy.data.lights.new("Bulb", "POINT"))
+    bulb.data.energy, bulb.location = 2.0, (0.7, 0.7, 0.5)
+    blender.scene.collection.objects.link(bulb)
+    configure(blender)
+    state, reports = _run_sync(blender)
+    assert state == {"FINISHED"}, reports
+    warning = [text for kind, text in reports if kind == "WARNING" and "back of faces" in text]
+    assert len(warning) == 1, reports
+    assert "faces of 'Room' lit by emissive faces of 'Lamp'" in warning[0], warning
+    assert "faces of 'Room' lit by point light 'Bulb'" in warning[0], warning

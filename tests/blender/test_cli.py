@@ -244,6 +244,51 @@ def test_an_unreachable_cluster_is_one_line_and_nothing_is_written(tmp_path):
     assert not (tmp_path / "c.blend").exists()
 
 
+def test_a_malformed_cluster_address_is_refused_before_the_scene_is_read(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "addon", "--scene", "cornell", "--cluster", "http://127.0.0.1:8786",
+                           "--no-preview", "-q", "-o", str(tmp_path / "c.blend")], cwd=str(tmp_path),
+                          capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().splitlines() == ["error: the cluster address must be tcp://HOST:PORT, or "
+                                                "tls://HOST:PORT with the cluster's certificates; got 'http://127.0.0.1:8786'"]
+    assert not (tmp_path / "c.blend").exists()
+
+
+def test_a_service_that_is_not_dask_is_one_line_and_nothing_is_written(tmp_path):
+    """An HTTP server's reply where a Dask scheduler's handshake was expected: one line, no
+    traceback (Dask read its first 8 bytes as a frame of 3.07 EiB), nothing written."""
+    import socket
+    import threading
+
+    server = socket.create_server(("127.0.0.1", 0))
+    connections = []
+
+    def serve():
+        while True:
+            try:
+                connection, _ = server.accept()
+            except OSError:
+                return
+            connections.append(connection)
+            connection.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
+
+    threading.Thread(target=serve, daemon=True).start()
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    try:
+        proc = subprocess.run([sys.executable, "-m", "addon", "--scene", "cornell", "--cluster", address,
+                               "--no-preview", "-q", "-o", str(tmp_path / "c.blend")], cwd=str(tmp_path),
+                              capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONPATH": ROOT})
+    finally:
+        server.close()
+        for connection in connections:
+            connection.close()
+    assert proc.returncode == 1
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+    assert lines[0].endswith(f"{address!r} does not answer as a Dask scheduler (another service there?)")
+    assert not (tmp_path / "c.blend").exists()
+
+
 def test_run_sh_takes_paths_from_the_callers_directory(tmp_path):
     """tools/run.sh from another directory: -o and --open are the caller's paths."""
     elsewhere = tmp_path / "work"
@@ -258,8 +303,9 @@ def test_run_sh_takes_paths_from_the_callers_directory(tmp_path):
 
 
 def test_progress_line_and_summary_speak_of_the_target():
-    """The progress line (on a terminal) says paths of planned, the rate, the error against the
-    target and the time left; the summary the error reached as a share of the target."""
+    """The progress line (on a terminal) says paths of those the run is expected to end at, the
+    rate, the error against the target and the time left (the solve's, from its measured error);
+    the summary the error reached as a share of the target."""
     from types import SimpleNamespace
 
     from addon.__main__ import progress_text, summary
@@ -270,13 +316,13 @@ def test_progress_line_and_summary_speak_of_the_target():
 
         def snapshot(self):
             return {"fraction": 0.25, "paths": 250_000, "seconds": 3.0, "rays_per_second": 2.5e6,
-                    "measured_mse": (0.06 * 2.0) ** 2}
+                    "measured_mse": (0.06 * 2.0) ** 2, "expected_paths": 1_000_000.0, "seconds_left": 9.0}
 
         def relative_error(self, mse):
             return mse**0.5 / 2.0
 
     text = progress_text(Job())
-    assert "250,000 of 1,000,000 planned paths" in text and "2.50 Mray/s" in text
+    assert "250,000 of 1,000,000 expected paths" in text and "2.50 Mray/s" in text
     assert "error 6.00% (target 5%)" in text and "0:09 left" in text
     settings = SimpleNamespace(last_relative_error=4.5, last_target_error=5.0, last_patches=10, last_paths=100,
                                last_rays=300, last_seconds=1.0, last_mean_path_length=3.0, last_stopped="target",

@@ -147,16 +147,16 @@ def test_stratified_sampling_and_measured_stop_reach_the_core(blender):
 
 def test_gathered_direct_light_reaches_the_core_and_the_estimate_plans_for_it(blender):
     """The panel's Direct light 'Gathered' is the core's direct_light="gathered" (bitwise the
-    core's result on the same patches); the estimate then shows the solve's plan (a quarter of
-    the paper's paths, at the rays a gathered path measured), not the paper's prediction."""
+    core's result on the same patches); the estimate then shows the paths the run is expected to
+    end at and the paper's prediction beside them."""
     spec = build_test_scene()
     s = configure(blender)
     s.method = "walk"  # (the direct light setting is the walks')
     paper = estimate.compute(blender)
     s.direct_light = "gathered"
     value = estimate.compute(blender)
-    assert value["direct_light"] == "gathered" and value["paths"] == paper["paths"] // 4
-    assert value["rays"] > value["paths"] and value["seconds"] == pytest.approx(value["rays"] / value["rays_per_second"])
+    assert value["direct_light"] == "gathered" and value["paper_paths"] == paper["paper_paths"]
+    assert value["rays"] > value["paths"] and value["seconds"] >= value["rays"] / value["rays_per_second"] > 0
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     names, meshes, combined, ref = reference(spec, method="walk", direct_light="gathered")
     assert ref.direct_light == "gathered" and s.last_paths == ref.paths and s.last_rays == ref.rays
@@ -170,8 +170,8 @@ def test_gathered_direct_light_reaches_the_core_and_the_estimate_plans_for_it(bl
 def test_two_way_iteration_reaches_the_core_and_the_estimate_plans_for_it(blender):
     """The panel's Method 'Two-way iteration' is the core's method="two_way" (bitwise the core's
     result on the same patches, its direct light gathered whatever the walks' setting says);
-    the estimate shows the solve's plan (a quarter of the paper's paths at the rays a path of
-    it measured), and the last run names the method."""
+    the estimate shows the paths it is expected to end at (more than two rays each), and the
+    last run names the method."""
     spec = build_test_scene()
     s = configure(blender)
     s.method = "walk"
@@ -179,7 +179,7 @@ def test_two_way_iteration_reaches_the_core_and_the_estimate_plans_for_it(blende
     s.method = "two_way"
     s.direct_light = "shot"  # (the walks' setting: not the two-way iteration's)
     value = estimate.compute(blender)
-    assert value["planned"] and value["direct_light"] == "gathered" and value["paths"] == paper["paths"] // 4
+    assert value["planned"] and value["direct_light"] == "gathered" and value["paper_paths"] == paper["paper_paths"]
     assert value["rays"] > 2 * value["paths"] and value["efficiency"] == paper["efficiency"]
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     names, meshes, combined, ref = reference(spec, method="two_way")
@@ -311,7 +311,7 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     tex.inputs["Color1"].default_value = (0.9, 0.5, 0.1, 1)
     tex.inputs["Color2"].default_value = (0.1, 0.3, 0.5, 1)
     R, E, notes = scene_io.material_colours(m)
-    np.testing.assert_allclose(R, [0.5, 0.4, 0.3], rtol=1e-6)  # the checker's average (issue 6)
+    np.testing.assert_allclose(R, [0.5, 0.4, 0.3], rtol=1e-6)  # the checker's average
     assert any("Base Color" in n and "average" in n for n in notes)
     d = bpy.data.materials.new("Diffuse")
     d.node_tree.nodes.remove(d.node_tree.nodes["Principled BSDF"])
@@ -464,8 +464,8 @@ def test_estimate_matches_the_core_prediction(blender):
                        np.concatenate([spec[n][3][m.patch_face] for n, m in zip(names, meshes)]))
     p = predict(scene, "finite", target_mse=relative_rms_to_mse(predict(scene), ERROR / 100))
     assert value["patches"] == combined.patch_count
-    assert value["paths"] == p.paths
-    assert value["rays"] == pytest.approx(p.expected_rays)
+    assert value["paper_paths"] == p.paths
+    assert value["paper_rays"] == pytest.approx(p.expected_rays)
     R = p.R_ave
     t = blender.scene.radiosity.threshold
     assert value["relative_efficiency"] == pytest.approx((1 - R) * (1 + math.log(t) / math.log(R)) / (1 + R))
@@ -733,8 +733,8 @@ def test_the_estimate_thread_leaves_bpy_to_the_main_thread(blender, monkeypatch)
 
 
 def test_estimate_predicts_time_from_this_machines_ray_rate_and_warns_when_slow(blender):
-    """The estimate's time is the predicted rays over a ray rate measured on this scene (a short
-    solve, then each run's own); past a minute it warns, naming the patch size and the target;
+    """The estimate's time is the expected rays over a ray rate measured on this scene (a pilot of
+    the run), with the fixed costs; past a minute it warns, naming the patch size and the target;
     every line of the panel's estimate has a tooltip."""
     from addon import operators
     from addon.panel import estimate_lines
@@ -742,20 +742,20 @@ def test_estimate_predicts_time_from_this_machines_ray_rate_and_warns_when_slow(
     build_test_scene()
     configure(blender)
     value = estimate.compute(blender)
-    assert value["rays_per_second"] > 0 and value["seconds"] == pytest.approx(value["rays"] / value["rays_per_second"])
+    assert value["rays_per_second"] > 0 and value["seconds"] >= value["rays"] / value["rays_per_second"]
     assert value["warning"] is None  # a few seconds at most
     for term, _text in estimate_lines(value):
         assert operators.EXPLANATIONS[term]
     blender.scene.radiosity.patch_size = 0.05
-    blender.scene.radiosity.target_error = 0.2  # (0.5% was about a minute on a fast machine: 6x that)
+    blender.scene.radiosity.target_error = 0.1  # (0.2% is predicted 40-50 s on one thread: 4x that)
     slow = estimate.compute(blender)
-    assert slow["seconds"] > 60 and "patch size 0.05" in slow["warning"] and "0.2% error target" in slow["warning"]
+    assert slow["seconds"] > 60 and "patch size 0.05" in slow["warning"] and "0.1% error target" in slow["warning"]
     assert pipeline.efficiency_sentence(3.6) == "Finite needs 3.6x less time than biased infinite for this error"
     assert pipeline.efficiency_sentence(0.5).startswith("Biased infinite needs 2.0x less time")
 
 
 def test_live_view_data_refines_while_solving_and_writes_nothing(blender):
-    """Issue 24, point 11, headless: a job with the live view on keeps its result so far (the
+    """Headless: a job with the live view on keeps its result so far (the
     data the 3D view draws), refreshed while it solves and ending near the final result; the
     triangles and colours drawn cover every patch; nothing is written into the scene."""
     from addon import live_view

@@ -1,5 +1,6 @@
-"""Blender's lights and world read as the core's light sources, in Cycles' units (issue 23)."""
+"""Blender's lights and world read as the core's light sources, in Cycles' units."""
 import math
+import re
 
 import bpy
 import numpy as np
@@ -230,6 +231,9 @@ def test_the_sources_and_their_shares_are_listed(blender):
     assert value["sources"] == f"1 point light {bulb / (bulb + lamp):.0%}, emissive faces {lamp / (bulb + lamp):.0%}"
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     assert blender.scene.radiosity.last_sources == value["sources"]
+    # and where the light went, from the run's own accounts
+    assert re.fullmatch(r"light: \d+\.\d% absorbed by surfaces( \(\d+\.\d% on the back of faces\))?, "
+                        r"\d+\.\d% left the scene", blender.scene.radiosity.last_light_account)
 
 
 def test_the_rest_of_the_scene_blocks_and_reflects_without_results(blender):
@@ -444,3 +448,62 @@ def test_an_emission_texture_is_averaged_per_patch_times_its_strength(blender):
     np.testing.assert_allclose(made.emission[left], 3.0, atol=3 * 0.0125 / 0.8 + 1e-9)
     np.testing.assert_allclose(made.emission[~left], 0.0, atol=3 * 0.0125 / 0.8 + 1e-9)
     assert not any("comes from image" in n for n in notes)
+
+
+def _room_under_a_world_image(blender, image):
+    room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    room_f = room_f[1:]  # open at the top: the sky comes in
+    make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
+    world = bpy.data.worlds.new("Grey sky")
+    blender.scene.world = world
+    tree = world.node_tree
+    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    environment = tree.nodes.new("ShaderNodeTexEnvironment")
+    environment.image = image
+    tree.links.new(environment.outputs["Color"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = 0.05
+    blender.scene.radiosity.patch_size, blender.scene.radiosity.threads = 0.5, 1
+
+
+def test_a_missing_world_image_is_an_error_naming_the_world_and_the_file(blender):
+    """An environment image whose file is not found has no pixels: its sky was solved as a
+    white sky of strength 1 (the socket's white times the strength, 'world 100%') while a note
+    said the world gave no light. Its light is unknown (Cycles draws it magenta): the run is
+    refused, naming the world, the image and the path, and nothing is written."""
+    image = bpy.data.images.new("sky.hdr", 4, 4, float_buffer=True)
+    image.source, image.filepath = "FILE", "//textures/sky.hdr"
+    _room_under_a_world_image(blender, image)
+    with pytest.raises(lights_io.LightError, match=r"^world 'Grey sky': its environment image 'sky.hdr' has no pixels "
+                                                   r"\(file not found: .*textures/sky.hdr\); find the file"):
+        lights_io.read_world(blender.scene, [])
+    before = sorted(o.name for o in bpy.data.objects)
+    with pytest.raises(RuntimeError, match="world 'Grey sky': its environment image 'sky.hdr' has no pixels"):
+        bpy.ops.radiosity.solve()
+    assert sorted(o.name for o in bpy.data.objects) == before and not result_objects()
+    # At strength 0 the world gives no light whatever its image: no error.
+    blender.scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    assert lights_io.read_world(blender.scene, []) is None
+
+
+@pytest.mark.parametrize("kind, setting, value, field", [
+    ("POINT", "location", (math.nan, 0.5, 0.5), "location"),
+    ("SUN", "scale", (math.nan, 1.0, 1.0), "rotation or scale"),
+    ("POINT", "shadow_soft_size", math.nan, "radius"),
+    ("SPOT", "spot_size", math.nan, "spot size"),
+    ("AREA", "size", math.nan, "size"),
+    ("SUN", "angle", math.nan, "angle"),
+])
+def test_a_light_with_a_setting_that_is_not_a_number_is_named(blender, kind, setting, value, field):
+    """A lamp at a NaN location (a driver, a script) was taken: its light went nowhere, the room
+    came out black and the warning blamed the lamp's placement. It is refused by name and
+    setting, the scene unchanged."""
+    room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
+    lamp = _lamp(kind, "Lamp", location=(0.5, 0.5, 0.5), energy=10.0)
+    setattr(lamp if setting in ("location", "scale") else lamp.data, setting, value)
+    with pytest.raises(lights_io.LightError, match=f"^light 'Lamp': its {field} is not a finite number"):
+        _read(blender)
+    before = sorted(o.name for o in bpy.data.objects)
+    with pytest.raises(RuntimeError, match=f"light 'Lamp': its {field} is not a finite number"):
+        bpy.ops.radiosity.solve()
+    assert sorted(o.name for o in bpy.data.objects) == before and not result_objects()

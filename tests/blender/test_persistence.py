@@ -1,4 +1,4 @@
-"""Nothing lost (issue 6): results survive save and reload, a failed write leaves the previous
+"""Nothing lost: results survive save and reload, a failed write leaves the previous
 results whole, a save during a solve holds no half result, and a re-run touches nothing
 outside the "Radiosity" collection."""
 

@@ -1,4 +1,4 @@
-"""What a scene does not need costs nothing (issue 5): a scene that reflects nothing traces one
+"""What a scene does not need costs nothing: a scene that reflects nothing traces one
 bounce per path; grey walks never touch per-channel weights; rays that leave an open scene end
 at once (test_stress.test_open_scene_everything_escapes)."""
 import numpy as np

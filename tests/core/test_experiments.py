@@ -1,4 +1,4 @@
-"""The paper's claims on a small version of its figure 1 scene (issue 4).
+"""The paper's claims on a small version of its figure 1 scene.
 
 Scene: ``sample_scenes.cube_enclosure`` with 4 x 4 patches per enclosure face and one patch
 per small-cube face (258 patches), uniform reflectivity R, so R_ave = R exactly and the scene
@@ -8,7 +8,7 @@ errors are independent, so they add) -- and asserted to be small, so the subtrac
 correction, not the result.
 
 How the bands relate to the statistics. The bands themselves (factor 1.5, 30%, 5%) are the
-issue's claims: how far the paper's heuristic may be from the truth. What the tests add is that
+claims tested: how far the paper's heuristic may be from the truth. What the tests add is that
 the *measurement* is precise enough for a band to test the heuristic rather than luck: every
 measured quantity comes with its standard error from independent seeds, and each test first
 asserts that Z = 4 standard errors are small against the band (and the reference's own error

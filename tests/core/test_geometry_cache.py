@@ -71,7 +71,7 @@ def _plane_over_box(normal_up):
 
 
 def test_an_emitter_facing_away_from_everything_is_named():
-    """Issue 24, point 7: an emissive plane facing up above the other objects sends all its
+    """An emissive plane facing up above the other objects sends all its
     light out of the scene: a note names it; facing down, no note."""
     up = patches.make_patches(_plane_over_box(normal_up=True), patch_size=0.25)
     _, notes = patches.scene_and_notes(up)

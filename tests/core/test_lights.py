@@ -337,6 +337,24 @@ def test_lights_alone_light_a_scene_without_emissive_patches_and_bad_lights_are_
         _box(lights=[PointLight(np.zeros(3) + 0.5, np.array([1.0, np.nan, 1.0]), name="Lamp")])
 
 
+@pytest.mark.parametrize("light, field", [
+    (PointLight(np.array([np.nan, 0.5, 0.5]), np.ones(3), name="Lamp"), "position"),
+    (PointLight(np.full(3, 0.5), np.ones(3), radius=np.inf, name="Lamp"), "radius"),
+    (PointLight(np.full(3, 0.5), np.ones(3), spot=Spot(np.array([0.0, 0.0, np.nan]), 0.5, 0.7), name="Lamp"),
+     "spot axis"),
+    (AreaLight(np.full(3, 0.5), np.array([0.1, 0, 0]), np.array([0, np.nan, 0]), np.array([0, 0, -1.0]), np.ones(3),
+               name="Panel"), "half v"),
+    (SunLight(np.array([0.0, np.nan, -1.0]), np.ones(3), name="Sun"), "direction"),
+    (SunLight(np.array([0.0, 0.0, -1.0]), np.ones(3), angle=np.nan, name="Sun"), "angle"),
+    (WorldLight(image=np.where(np.eye(4)[:, :, None] > 0, np.nan, 1.0) * np.ones((4, 4, 3)), name="Sky"), "image"),
+])
+def test_a_light_with_a_number_that_is_not_finite_is_refused_by_its_name_and_field(light, field):
+    """A light at a NaN position (a driver, a script) lit nothing and left a black scene
+    with a warning about the light's placement: it is refused, naming the light and the field."""
+    with pytest.raises(ValueError, match=f"^light '{light.name}': its {field} is NaN or infinite$"):
+        _box(lights=[light])
+
+
 @pytest.mark.parametrize("kind", ["point", "area"])
 def test_a_light_that_casts_no_shadow_lights_the_floor_through_an_occluder(kind):
     """A light above a board that hides part of the floor: with Cast Shadow off (Cycles) the

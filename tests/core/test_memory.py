@@ -1,4 +1,4 @@
-"""Memory of a solve on the figure-4 room: under 1 GiB, and not growing with the paths (issue 5).
+"""Memory of a solve on the figure-4 room: under 1 GiB, and not growing with the paths.
 
 Runs in a fresh Python process, so that its peak resident set is its own: the 66,572-patch room
 (sample_scenes.room_fig4) is solved with N paths and then with 4N paths, both with chunks of
@@ -72,7 +72,7 @@ def test_solve_memory_does_not_grow_with_paths():
     out = json.loads(done.stdout.strip().splitlines()[-1])
     small, large = out["small"], out["large"]
     assert out["patches"] == 66_572
-    assert large["rss"] < 1 << 30, large  # issue 5's bound (about 200 MiB measured)
+    assert large["rss"] < 1 << 30, large  # the bound (what is measured: benchmarks/results/memory.md)
     # the peak resident set after the 4x longer run: no more than MARGIN above the first run's
     assert large["rss"] - small["rss"] <= MARGIN_RSS, (small, large)
     assert large["traced"] - small["traced"] <= MARGIN_TRACED, (small, large)
@@ -81,7 +81,7 @@ def test_solve_memory_does_not_grow_with_paths():
     assert large["traced"] < 8 * large["paths"] / 2, (small, large)
 
 
-# --- The operator's arrays at a million patches (issue 26) ------------------------------------
+# --- The operator's arrays at a million patches ------------------------------------
 # A solve of a million patches through the operator peaked at 3.1 GB, then 2.4 GiB, then 1.5 GiB
 # (benchmarks/results/memory_operator.md). What the extension's own stages hold and peak at is
 # measured here on the room of _room_objects(128) (98,788 patches) with tracemalloc, per patch,

@@ -1,4 +1,4 @@
-"""Stress tests of the numerical core (issue 6): extreme reflectivities and thresholds, scale and
+"""Stress tests of the numerical core: extreme reflectivities and thresholds, scale and
 position, long runs, awkward geometry, and the energy accounting of every run.
 
 Every statistical band comes from a known variance:

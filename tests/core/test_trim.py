@@ -1,5 +1,5 @@
 """The glue's memory give-back (addon/trim.py): with glibc's mmap threshold fixed, a freed array
-of a solve's (C,P) size leaves the resident set at once (issue 26's million-patch peak)."""
+of a solve's (C,P) size leaves the resident set at once (it lowers the million-patch peak)."""
 import platform
 import subprocess
 import sys

@@ -47,7 +47,11 @@ def test_valid_scene(mesh):
         (None, with_value(24, 11, -1.0), r"emission is negative on patches 11"),
         (None, with_value(24, 12, np.nan, channels=3), r"emission is NaN or infinite on patches 12"),
         (None, np.zeros(24), r"no emitting patch"),
-        (np.full(23, 0.5), None, r"reflectivity has 23 values but the scene has 24 patches|23"),
+        (np.full(23, 0.5), None, r"^reflectivity has 23 values but the scene has 24 patches$"),
+        (np.full((23, 3), 0.5), None, r"^reflectivity has 23 rows but the scene has 24 patches$"),
+        (np.full(25, 0.5), None, r"^reflectivity has 25 values but the scene has 24 patches$"),
+        (np.full(23, 0.5), np.ones(25), r"^reflectivity has 23 rows and emission 25: each needs one row per patch "
+                                       r"\(the triangles name 24 patches\)$"),
         (None, np.ones(25), r"emission has 25 values but the scene has 24 patches"),
         (np.full((24, 2), 0.5), None, r"shape \(P,\) or \(P, 3\)"),
     ],

@@ -1,0 +1,162 @@
+"""The time a solve will take, measured before it: a short pilot of the same solve.
+
+The paper's formulas (2)/(3) predict the walk's error, not the two-way iteration's or the
+gathered walk's, and a run with the measured stop rule ends where its own batch estimate meets
+the target. So the forecast runs a few chunks of the solve the settings ask for (its method,
+estimator, exit point, sampling), at most PILOT_RAYS rays, and reads from them what the run
+will meet: the variance per path (batch means), the rays per path and the seconds per path on
+this machine. The paths the run ends at follow from the solve's own chunk plan and stop rule
+(whole chunks, at least MEASURED_STOP_CHUNKS, at most the cap).
+
+A pilot's chunks are the run's when they fit in the budget; else smaller. A walk's paths are
+independent, so its variance per path does not depend on the chunk; the two-way iteration's
+falls as its chunks grow (what a chunk's sparse last generations and their roulette carry is
+noise of the chunk, not of a path), and is scaled by v(n) = v_inf (1 + TWO_WAY_GROWTH P / n).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .names import GATHERED, SHOT, TWO_WAY
+from .solver import MEASURED_STOP_CHUNKS, MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target, solve
+from .two_way import rays_per_path as two_way_rays_per_path
+
+# A pilot traces about this many rays (about a second on two threads) ...
+PILOT_RAYS = 1 << 20
+# ... in at most this many chunks (the batch estimate the run stops on, at its fewest), at
+# least 2 (a batch variance), and stops after this long whatever it has.
+PILOT_CHUNKS = MIN_MEASURED_CHUNKS
+PILOT_SECONDS = 3.0
+# The two-way iteration's variance per path in chunks of n paths over P patches, as
+# v_inf (1 + TWO_WAY_GROWTH P / n): fitted over chunk sizes 4x apart, 6-30 in the suite and
+# sample scenes (docs/performance.md, "The time prediction").
+TWO_WAY_GROWTH = 12.0
+# Without a pilot chunk (paths of a million bounces), a solve's ray rate is taken as this share
+# of Embree's own on the probe's rays, per thread (benchmarks/results/throughput_methods.md).
+SOLVE_SHARE_OF_RAW_RATE = 0.5
+
+
+@dataclass(frozen=True)
+class Forecast:
+    """What a solve is expected to take: ``paths`` in ``chunks`` chunks of ``chunk``, ``rays``,
+    ``seconds``; and what the pilot measured (``measured`` False: no pilot chunk finished in
+    time, the error not measured: the run's least paths or the paper's)."""
+
+    paths: float
+    rays: float
+    seconds: float
+    chunk: int
+    chunks: float
+    variance_per_path: float  # at the run's chunk size (NaN for a path count)
+    rays_per_path: float
+    seconds_per_path: float
+    setup_seconds: float
+    pilot_chunk: int
+    pilot_chunks: int
+    pilot_seconds: float
+    measured: bool
+    time_limited: bool = False  # the time limit ends the run before ``seconds``
+
+    @property
+    def rays_per_second(self):
+        return self.rays_per_path / self.seconds_per_path if self.seconds_per_path > 0 else math.nan
+
+
+def guessed_rays_per_path(bounces, method, direct_light):
+    """Rays a path costs, before measuring: the walk's bounces, or the two-way iteration's
+    rays for them (a gathered walk pays for its gathering alike)."""
+    if method == TWO_WAY or direct_light == GATHERED:
+        return two_way_rays_per_path(bounces)
+    return max(bounces, 1.0)
+
+
+def pilot_size(chunk, rays_per_path, budget=PILOT_RAYS):
+    """(chunk paths, chunks) of a pilot: the run's chunks, as many as fit in ``budget`` rays
+    (2 to PILOT_CHUNKS); where 2 do not fit, 2 smaller ones that do."""
+    chunk_rays = chunk * rays_per_path
+    chunks = int(min(PILOT_CHUNKS, max(2, budget // max(chunk_rays, 1.0))))
+    return int(max(1, min(chunk, budget // (chunks * rays_per_path)))), chunks
+
+
+def two_way_scale(patch_count, pilot_chunk, chunk):
+    """The two-way iteration's variance per path in chunks of ``chunk`` over that in chunks
+    of ``pilot_chunk``."""
+    return (1 + TWO_WAY_GROWTH * patch_count / chunk) / (1 + TWO_WAY_GROWTH * patch_count / pilot_chunk)
+
+
+def raw_rate(scene, rays=1 << 14, seed=0):
+    """Embree's rays per second on cosine rays from the patches (one thread)."""
+    from .sampling import cosine_directions, points_on_patches
+
+    g = scene.geometry
+    rng = np.random.default_rng(seed)
+    patch = rng.integers(0, scene.patch_count, rays).astype(np.int32)
+    u = rng.random((5, rays), dtype=np.float32)
+    origins, directions = points_on_patches(g, patch, u[4], u[0], u[1]), cosine_directions(g, patch, u[2], u[3])
+    g.surface_tracer.first_hit(origins, directions)  # (built, warm)
+    start = time.perf_counter()
+    g.surface_tracer.first_hit(origins, directions)
+    return rays / max(time.perf_counter() - start, 1e-9)
+
+
+def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, stop_rule="measured", method="walk",
+             direct_light=None, exit_point="random", sampling="independent", threads=None, max_seconds=None, seed=0,
+             bounces=None, budget=PILOT_RAYS, should_stop=None):
+    """The Forecast of ``solve(scene, estimator, ...)`` with these arguments (``method`` a
+    method, not "auto"; ``bounces`` the expected bounces of a path, diagnostics.check_bounces).
+    ``should_stop()`` ends the pilot early (a run starting): the forecast is then from what it has."""
+    direct_light = direct_light or (GATHERED if method == TWO_WAY else SHOT)
+    plan = chunk_plan(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold, stop_rule=stop_rule,
+                      direct_light=direct_light, method=method, max_seconds=max_seconds)
+    bounces = bounces if bounces is not None else plan.prediction.expected_path_length
+    guess = guessed_rays_per_path(bounces, method, direct_light)
+    pilot_chunk, pilot_chunks = pilot_size(plan.chunk, guess, budget)
+    start = time.perf_counter()
+
+    def run(chunk, chunks, limit):
+        """(result, seconds to its last finished chunk, or all it took if it finished none)."""
+        began, finished = time.perf_counter(), []
+        r = solve(scene, estimator, paths=chunk * chunks, threshold=threshold, seed=seed, exit_point=exit_point,
+                  sampling=sampling, threads=threads, direct_light=direct_light, method=method, chunk_paths=chunk,
+                  progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
+                  should_stop=lambda: time.perf_counter() - began > limit or bool(should_stop and should_stop()))
+        everything = time.perf_counter() - began
+        return r, finished[-1] if finished and r.chunks < chunks else everything
+
+    # Two solves of two small chunks: the first builds what the scene keeps (its ray tracer's scene
+    # and tables: a run builds them too), the second is a solve's own fixed cost.
+    small = min(pilot_chunk, MIN_CHUNK_PATHS)
+    (_, cold), (_, warm) = run(small, 2, PILOT_SECONDS / 4), run(small, 2, PILOT_SECONDS / 4)
+    r, seconds = run(pilot_chunk, pilot_chunks, PILOT_SECONDS)
+    workers = r.threads
+    measured = r.chunks >= 2
+    variance = math.nan
+    if measured:
+        variance = r.measured_mse * r.paths
+        if method == TWO_WAY:
+            variance *= two_way_scale(scene.patch_count, pilot_chunk, plan.chunk)
+    if r.chunks:  # (stopped by PILOT_SECONDS, it has what it finished)
+        rays_per_path, setup = r.rays / r.paths, cold
+        per_path = max(seconds - warm, 0.5 * seconds) / r.paths
+    else:  # not a chunk in PILOT_SECONDS (paths of many bounces): the bounces and Embree's raw rate,
+        # and at least the time the pilot's chunks took without finishing
+        rays_per_path, setup = guess, 0.0
+        per_path = max(guess / (raw_rate(scene, seed=seed) * SOLVE_SHARE_OF_RAW_RATE * workers),
+                       seconds / (pilot_chunk * min(workers, pilot_chunks)))
+    if paths is not None or not plan.measured_rule:
+        expected = float(plan.cap)
+    elif variance == variance:
+        expected = paths_to_target(1, variance, target_mse, plan.chunk, plan.cap)
+    else:  # at least the chunks the measured rule needs, at most the cap
+        expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
+    seconds = setup + per_path * expected
+    limited = max_seconds is not None and seconds > max_seconds
+    return Forecast(paths=expected, rays=expected * rays_per_path, seconds=seconds,
+                    chunk=plan.chunk, chunks=expected / plan.chunk, variance_per_path=variance,
+                    rays_per_path=rays_per_path, seconds_per_path=per_path, setup_seconds=setup,
+                    pilot_chunk=pilot_chunk, pilot_chunks=r.chunks, pilot_seconds=time.perf_counter() - start,
+                    measured=measured, time_limited=limited)

@@ -1,0 +1,288 @@
+"""The command line under faults: a failed or truncated save, an output folder that cannot be
+made, Ctrl-C (on a pseudo-terminal, as a user presses it) and the progress line's end."""
+
+import fcntl
+import os
+import pty
+import re
+import select
+import signal
+import struct
+import subprocess
+import sys
+import termios
+import time
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ENV = {**os.environ, "PYTHONPATH": ROOT}
+INTERRUPTED = "interrupted: stopped by Ctrl-C; nothing was saved"
+
+# A save whose file comes out truncated without an error (as on a nearly full disk, where the
+# compressed writer's failure went unnoticed): Blender's save_post handler cuts the file in half.
+TRUNCATING_SAVE = """
+import os, sys
+import bpy
+from addon.__main__ import main
+
+@bpy.app.handlers.persistent
+def truncate(path, *_):
+    with open(path, "r+b") as f:
+        f.truncate(os.path.getsize(path) // 2)
+
+bpy.app.handlers.save_post.append(truncate)
+sys.exit(main(sys.argv[1:]))
+"""
+
+QUICK = ["--scene", "cornell", "--error", "20", "--patch-size", "0.4", "--threads", "1"]
+
+
+def _cli(args, cwd, code=None, timeout=300):
+    command = [sys.executable, "-c", code, *args] if code else [sys.executable, "-m", "addon", *args]
+    return subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout, env=ENV)
+
+
+def _earlier(tmp_path):
+    """A good earlier output in out/, made by a first run: (folder, .blend, .png, their bytes)."""
+    folder = tmp_path / "out"
+    blend, png = folder / "box.blend", folder / "box.png"
+    proc = _cli([*QUICK, "-o", str(blend), "--resolution", "32", "--samples", "1"], str(tmp_path))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return folder, blend, png, blend.read_bytes(), png.read_bytes()
+
+
+def test_a_truncated_save_keeps_the_earlier_file_and_says_so(tmp_path):
+    folder, blend, png, blend_bytes, png_bytes = _earlier(tmp_path)
+    proc = _cli([*QUICK, "--seed", "1", "-o", str(blend), "--resolution", "32", "--samples", "1"], str(tmp_path),
+                code=TRUNCATING_SAVE)
+    assert proc.returncode == 1, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert "saved:" not in proc.stdout and "preview:" not in proc.stdout
+    errors = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(errors) == 1 and errors[0].startswith(f"error: cannot save {blend}: "), proc.stderr
+    assert "Missing DNA block" in errors[0] and "the earlier file is kept" in errors[0]
+    # the earlier pair stays whole and together; no backup, no temporary left behind
+    assert blend.read_bytes() == blend_bytes and png.read_bytes() == png_bytes
+    assert sorted(os.listdir(folder)) == ["box.blend", "box.png"]
+
+
+def test_a_preview_cut_short_is_not_taken_for_an_image(tmp_path):
+    import zlib
+
+    from addon.__main__ import check_png
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 1, 1, 8, 0, 0, 0, 0))
+           + chunk(b"IDAT", zlib.compress(b"\x00\x80")) + chunk(b"IEND", b""))
+    whole, cut = tmp_path / "whole.png", tmp_path / "cut.png"
+    whole.write_bytes(png)
+    cut.write_bytes(png[:-5])
+    check_png(str(whole))
+    for path in (cut, tmp_path / "empty.png"):
+        path.touch()
+        with pytest.raises(OSError, match="incomplete"):
+            check_png(str(path))
+
+
+def _tmpfs(path, size):
+    path.mkdir()
+    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], capture_output=True)
+    return proc.returncode == 0
+
+
+def test_a_full_disk_keeps_the_earlier_file(tmp_path):
+    """A small tmpfs filled but for a little (root only): wherever the writing fails (Blender
+    notices "No space left on device", or not and the file comes out truncated: which one varies
+    from run to run), the earlier file stays as it was, nothing is said saved and the status is 1."""
+    disk = tmp_path / "disk"
+    if not _tmpfs(disk, "1000k"):
+        pytest.skip("mounting a tmpfs needs root (the injected truncation above covers the check)")
+    try:
+        blend = disk / "box.blend"
+        proc = _cli([*QUICK, "-o", str(blend), "--no-preview"], str(tmp_path))
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        earlier = blend.read_bytes()
+        free = os.statvfs(disk).f_bavail * os.statvfs(disk).f_frsize
+        for left in (0.0, 0.03, 0.25, 0.5, 0.8):  # the new file (about the earlier's size) fails at different points
+            filler = disk / "fill"
+            filler.write_bytes(b"\0" * int(free - left * len(earlier)))
+            proc = _cli([*QUICK, "--seed", "1", "-o", str(blend), "--no-preview"], str(tmp_path))
+            filler.unlink()
+            assert proc.returncode == 1, proc.stdout[-2000:] + proc.stderr[-2000:]
+            assert "saved:" not in proc.stdout
+            errors = [line for line in proc.stderr.splitlines() if line.strip()]
+            assert len(errors) == 1 and errors[0].startswith(f"error: cannot save {blend}: "), proc.stderr
+            assert errors[0].endswith("the earlier file is kept")
+            assert blend.read_bytes() == earlier and sorted(os.listdir(disk)) == ["box.blend"]
+    finally:
+        subprocess.run(["umount", str(disk)], check=False)
+
+
+def test_an_output_folder_that_cannot_be_made_is_one_line_before_the_run(tmp_path):
+    afile = tmp_path / "afile"
+    afile.write_text("not a folder")
+    for args in (["-o", str(afile / "sub" / "x.blend")],
+                 ["-o", str(tmp_path / "x.blend"), "--preview", str(afile / "x.png")],
+                 ["-o", str(tmp_path)]):
+        proc = _cli([*QUICK, *args], str(tmp_path))
+        assert proc.returncode == 2, proc.stderr[-2000:]
+        assert "Traceback" not in proc.stderr and "patches" not in proc.stdout  # said before the solve
+        errors = [line for line in proc.stderr.splitlines() if line.strip()]
+        assert len(errors) == 1 and errors[0].startswith("error: cannot "), proc.stderr
+    assert sorted(os.listdir(tmp_path)) == ["afile"]
+
+
+# ---------------------------------------------------------------------------------------------
+# On a terminal: Ctrl-C and the progress line
+# ---------------------------------------------------------------------------------------------
+
+class Terminal:
+    """``python -m addon`` on a pseudo-terminal ``columns`` wide, its output read as it comes."""
+
+    def __init__(self, args, cwd, columns=80):
+        pid, fd = pty.fork()
+        if pid == 0:  # the child: the terminal's size, then the command line
+            try:
+                fcntl.ioctl(1, termios.TIOCSWINSZ, struct.pack("HHHH", 24, columns, 0, 0))
+                os.chdir(cwd)
+                os.execve(sys.executable, [sys.executable, "-m", "addon", *args], ENV)
+            finally:
+                os._exit(127)
+        self.pid, self.fd, self.data, self.status = pid, fd, b"", None
+
+    @property
+    def text(self):
+        return self.data.decode(errors="replace")
+
+    def _read(self, seconds):
+        ready, _, _ = select.select([self.fd], [], [], seconds)
+        if ready:
+            try:
+                chunk = os.read(self.fd, 65536)
+            except OSError:  # the child has closed the terminal
+                chunk = b""
+            self.data += chunk
+            return bool(chunk)
+        return True
+
+    def read_until(self, pattern, timeout):
+        end = time.monotonic() + timeout
+        while re.search(pattern, self.text) is None:
+            assert time.monotonic() < end, f"no {pattern!r} in {self.text[-2000:]!r}"
+            if not self._read(0.05):
+                raise AssertionError(f"ended before {pattern!r}: {self.text[-2000:]!r}")
+
+    def wait(self, timeout):
+        """The exit status, reading the output until the process ends (None after ``timeout``)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            pid, status = os.waitpid(self.pid, os.WNOHANG)
+            if pid:
+                while self._read(0.05) and select.select([self.fd], [], [], 0)[0]:
+                    pass
+                self.status = os.waitstatus_to_exitcode(status)
+                return self.status
+            self._read(0.05)
+        return None
+
+    def close(self):
+        if self.status is None:
+            os.kill(self.pid, signal.SIGKILL)
+            os.waitpid(self.pid, 0)
+        os.close(self.fd)
+
+
+def screen(text, columns):
+    """The rows a terminal ``columns`` wide shows for ``text`` (carriage returns, line feeds and
+    the wrap at the last column; colour codes dropped)."""
+    rows, row, col, wrap = [], [], 0, False
+    for ch in re.sub(r"\x1b\[[0-9;]*[A-Za-z]", "", text):
+        if ch == "\r":
+            col, wrap = 0, False
+        elif ch == "\n":
+            rows.append("".join(row).rstrip())
+            row, col, wrap = [], 0, False
+        elif ch >= " ":
+            if wrap:
+                rows.append("".join(row).rstrip())
+                row, col, wrap = [], 0, False
+            row[col:col + 1] = [ch] if col < len(row) else [" "] * (col - len(row)) + [ch]
+            col += 1
+            if col == columns:
+                col, wrap = columns - 1, True
+    return rows + ["".join(row).rstrip()]
+
+
+SLOW = ["--scene", "cornell", "--error", "0.3", "--no-preview"]  # minutes: Ctrl-C comes first
+
+
+@pytest.mark.parametrize("quiet", [False, True], ids=["progress", "quiet"])
+@pytest.mark.parametrize("how", ["key", "signal"])
+def test_ctrl_c_during_the_solve_stops_at_once_with_one_line_and_130(tmp_path, how, quiet):
+    out = tmp_path / "out"
+    term = Terminal([*SLOW, "-o", str(out / "slow.blend"), *(["-q"] if quiet else [])], str(tmp_path))
+    try:
+        if quiet:
+            term.read_until(r"warning: Predicted", 120)  # said before the solve starts
+            time.sleep(1.5)
+        else:
+            term.read_until(r"planned paths", 120)
+        before = len(term.data)
+        sent = time.monotonic()
+        if how == "key":
+            os.write(term.fd, b"\x03")  # the terminal makes it SIGINT, to the foreground group
+        else:
+            os.kill(term.pid, signal.SIGINT)
+        status = term.wait(30)
+        seconds = time.monotonic() - sent
+    finally:
+        term.close()
+    after = term.data[before:].decode(errors="replace")
+    assert status == 130, term.text[-3000:]
+    assert seconds < 2.0, seconds
+    assert "Traceback" not in term.text and "KeyboardInterrupt" not in term.text and "rror" not in after, after
+    assert [row for row in screen(after, 80) if row.strip()] == [INTERRUPTED], repr(after)
+    assert not out.exists()  # nothing written, not even the folder
+
+
+def test_ctrl_c_during_the_preview_render_leaves_no_file(tmp_path):
+    """The render holds the main thread in Blender's code: the watchdog ends the process."""
+    out = tmp_path / "out"
+    term = Terminal(["--scene", "cornell", "--error", "20", "--patch-size", "0.4", "--resolution", "2000",
+                     "--samples", "4096", "-o", str(out / "box.blend")], str(tmp_path))
+    try:
+        term.read_until(r"sources: ", 120)
+        time.sleep(1.0)  # rendering (minutes at this size)
+        before = len(term.data)
+        sent = time.monotonic()
+        os.write(term.fd, b"\x03")
+        status = term.wait(30)
+        seconds = time.monotonic() - sent
+    finally:
+        term.close()
+    after = term.data[before:].decode(errors="replace")
+    assert status == 130 and seconds < 2.0, (status, seconds, term.text[-3000:])
+    assert "Traceback" not in term.text and "saved:" not in term.text
+    assert [row for row in screen(after, 80) if row.strip()] == [INTERRUPTED], repr(after)
+    assert os.listdir(out) == []  # no half-written file, no temporary
+
+
+def test_the_progress_line_ends_cleanly_on_a_narrow_terminal(tmp_path):
+    """On a terminal narrower than the progress text, the line is rewritten in place (no trail
+    of progress rows), cleared at the end, and the run's warnings start rows of their own."""
+    columns = 60
+    term = Terminal(["--scene", "cornell", "--error", "0.3", "--time-limit", "4", "--no-preview",
+                     "-o", str(tmp_path / "t.blend")], str(tmp_path), columns=columns)
+    try:
+        status = term.wait(300)
+    finally:
+        term.close()
+    assert status == 0, term.text[-3000:]
+    assert "planned paths" in term.text  # a progress line was shown
+    rows = screen(term.text, columns)
+    progress = re.compile(r"^\s*\d+\.\d%  |planned paths|Mray/s|\d:\d\d left|\(target ")
+    assert not [row for row in rows if progress.search(row)], rows
+    assert any(row.startswith("Warning: Time limit reached") for row in rows), rows
+    assert any(row.startswith("saved: ") for row in rows), rows
