@@ -4,6 +4,13 @@ Chunks are the independent batches of the a-posteriori error estimate ("batch me
 chunks of n_k paths giving per-chunk estimates b^(k), the per-path variance of each patch is
 estimated by sum_k n_k (b^(k) - b)^2 / (K - 1), and the MSE of the result by its area-weighted
 mean over patches (and channels) divided by N.
+
+That sum of squares is also the sum of K - 1 increments, one a chunk from the second on (the
+weighted Helmert decomposition, Welford's update): chunk k adds n_k N_<k / N_<=k (b^(k) - b_<k)^2,
+its distance from the chunks before it. Area-weighted, each increment is one scalar sample of the
+per-path variance, independent of the others for Gaussian tallies; their spread says how well
+the estimate is known (few chunks, heavy tails, error in one common mode), which a stop rule
+needs (mse_upper_bound).
 """
 from __future__ import annotations
 
@@ -19,7 +26,7 @@ MSE_BLOCK = 1 << 16
 class Batches:
     """Sums chunk tallies in chunk order, with what the batch error estimate needs."""
 
-    def __init__(self, scene, tables):
+    def __init__(self, scene, tables, increments=False):
         C, P = tables.channels, scene.patch_count
         self.scene = scene
         self.channels = C
@@ -39,8 +46,13 @@ class Batches:
         self._reflectivity = tables.reflectivity  # (C,P)
         self.weight = scene.patch_area / scene.total_area
         self._mse_at = (0, math.nan)  # (chunks, measured_mse at that many chunks)
+        # Area-weighted Helmert increments of the sum of squares, one a chunk from the second on:
+        # a pass over the patches a chunk, made only for a run that stops on its measured error.
+        self.increments = [] if increments else None
 
     def add(self, tally):
+        if self.increments is not None and self.paths > 0:
+            self.increments.append(self._increment(tally))
         self.incident += tally.incident
         for c, row in enumerate(tally.incident):  # a channel at a time: a (P,) temporary, not (C,P)
             square = np.square(row)
@@ -151,6 +163,35 @@ class Batches:
         mse = spread_sum / ((self.chunks - 1) * self.paths)
         self._mse_at = (self.chunks, mse)
         return mse
+
+    def _increment(self, tally):
+        """sum over patches (and channels) of A_j / (C A_T) score^2 n N / (N + n) (I_k / n - I / N)^2:
+        what ``tally`` (n paths) adds to the area-weighted sum of squares of the chunks so far (N)."""
+        n, N = tally.paths, self.paths
+        total = 0.0
+        for start in range(0, self.scene.patch_count, MSE_BLOCK):
+            rows = slice(start, start + MSE_BLOCK)
+            area_share = self.weight[rows] / self.channels
+            for k in range(self.channels):
+                weight = self._score(k, rows)
+                weight *= weight  # (score**2)
+                weight *= area_share
+                gap = tally.incident[k, rows] / n
+                gap -= self.incident[k, rows] / N
+                np.square(gap, out=gap)
+                total += float(np.einsum("i,i->", gap, weight))
+        return total * (n * N / (N + n))
+
+    def mse_upper_bound(self, z):
+        """The measured MSE (the increments' mean over N: measured_mse to rounding) plus ``z``
+        standard errors of it, from the increments' spread: large where they disagree, as when
+        a rare chunk carries most of the error or chunks are few. NaN below 3 chunks or without
+        increments."""
+        if self.increments is None or len(self.increments) < 2:
+            return math.nan
+        mean = float(np.mean(self.increments))
+        spread = float(np.std(self.increments, ddof=1)) / math.sqrt(len(self.increments))
+        return (mean + z * spread) / self.paths
 
     def let_go_of_squares(self):
         """The measured MSE, then the sums of squares let go of (a (C,P) array less while the

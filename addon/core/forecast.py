@@ -6,7 +6,7 @@ the target. So the forecast runs a few chunks of the solve the settings ask for 
 estimator, exit point, sampling), at most PILOT_RAYS rays, and reads from them what the run
 will meet: the variance per path (batch means), the rays per path and the seconds per path on
 this machine. The paths the run ends at follow from the solve's own chunk plan and stop rule
-(whole chunks, at least MIN_MEASURED_CHUNKS, at most the cap).
+(whole chunks, at least MEASURED_STOP_CHUNKS, at most the cap).
 
 A pilot's chunks are the run's when they fit in the budget; else smaller. A walk's paths are
 independent, so its variance per path does not depend on the chunk; the two-way iteration's
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .names import GATHERED, SHOT, TWO_WAY
-from .solver import MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target, solve
+from .solver import MEASURED_STOP_CHUNKS, MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target, solve
 from .two_way import rays_per_path as two_way_rays_per_path
 
 # A pilot traces about this many rays (about a second on two threads) ...
@@ -152,7 +152,7 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
     elif variance == variance:
         expected = paths_to_target(1, variance, target_mse, plan.chunk, plan.cap)
     else:  # at least the chunks the measured rule needs, at most the cap
-        expected = float(min(plan.cap, max(MIN_MEASURED_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
+        expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
     seconds = setup + per_path * expected
     limited = max_seconds is not None and seconds > max_seconds
     return Forecast(paths=expected, rays=expected * rays_per_path, seconds=seconds,

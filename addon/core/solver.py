@@ -69,6 +69,12 @@ MIN_MEASURED_CHUNKS = 8
 # paths (it needs several times fewer: docs/performance.md).
 GATHERED_PLAN_DIVISOR = 4
 MEASURED_CAP_FACTOR = 64
+# With stop_rule="measured" the run stops once the measured MSE plus MEASURED_STOP_Z of its own
+# standard errors (Batches.mse_upper_bound) meets the target, on at least MEASURED_STOP_CHUNKS
+# chunks: the estimate alone, read after every chunk, stops on its first lucky low reading, and
+# few or heavy-tailed chunks make such readings common.
+MEASURED_STOP_Z = 2.0
+MEASURED_STOP_CHUNKS = 12
 # The two-way iteration needs this many first-generation rays a patch in a chunk: with fewer,
 # what a generation passes on is mostly its own noise, which the next generation's gathering
 # reads, and its gain over the walk per ray goes (the closed Cornell box, 2,940-535,815
@@ -180,12 +186,12 @@ def chunk_plan(scene, estimator=FINITE, *, paths=None, target_mse=None, threshol
 
 def paths_to_target(paths, measured_mse, target_mse, chunk, cap):
     """The paths a run stopping on its measured error is expected to end at, from its MSE after
-    ``paths`` (which falls as 1 / paths): whole chunks, at least MIN_MEASURED_CHUNKS, at most
+    ``paths`` (which falls as 1 / paths): whole chunks, at least MEASURED_STOP_CHUNKS, at most
     ``cap``. NaN MSE (fewer than 2 chunks): NaN."""
     if not measured_mse >= 0 or paths <= 0:
         return math.nan
     needed = paths * measured_mse / target_mse
-    chunks = max(MIN_MEASURED_CHUNKS, math.ceil(needed / chunk))
+    chunks = max(MEASURED_STOP_CHUNKS, math.ceil(needed / chunk))
     return float(min(cap, chunks * chunk))
 
 
@@ -352,7 +358,7 @@ def solve(
     if gathered:
         with tables.numpy_turn:  # (it casts, and a cast lets go of the turn while it traces)
             tables.gathering.fate_shares = fate_shares(tables, int(seed))
-    total = Batches(scene, tables)
+    total = Batches(scene, tables, increments=measured_rule)
     chunk_count = math.ceil(cap / chunk)
     group = 1 if gathered else chunks_per_group(tables, chunk, prediction.expected_path_length)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
@@ -392,7 +398,8 @@ def solve(
                 if progress is not None:
                     progress(*_progress(total, prediction, cap, target_mse if measured_rule else None, start, chunk))
             # (The batch estimate costs passes over the patches: made only where it is used.)
-            if measured_rule and total.chunks >= MIN_MEASURED_CHUNKS and total.measured_mse() <= target_mse:
+            if measured_rule and total.chunks >= MEASURED_STOP_CHUNKS and total.measured_mse() <= target_mse \
+                    and total.mse_upper_bound(MEASURED_STOP_Z) <= target_mse:
                 stopped = STOP_TARGET
             elif total.paths >= cap:
                 stopped = done_rule
@@ -439,13 +446,14 @@ def solve(
 
 def _progress(total, prediction, cap, measured_target, start, chunk):
     """(fraction, stats) for ``progress``: the share of the paths the run is expected to end at
-    (the cap; with the measured stop rule, where its measured MSE so far says it will meet the
+    (the cap; with the measured stop rule, where the bound it stops on says it will meet the
     target), and the seconds left at the run's pace so far (NaN until it is known)."""
     elapsed = time.perf_counter() - start
     mse_now = total.measured_mse()
     expected = float(cap)
     if measured_target is not None:
-        expected = paths_to_target(total.paths, mse_now, measured_target, chunk, cap)
+        bound = total.mse_upper_bound(MEASURED_STOP_Z)
+        expected = paths_to_target(total.paths, bound if bound == bound else mse_now, measured_target, chunk, cap)
     fraction = total.paths / expected if expected > 0 else 0.0  # (NaN > 0 is False)
     left = (expected - total.paths) * elapsed / total.paths if total.paths else math.nan
     return min(1.0, fraction), {

@@ -57,6 +57,19 @@ def box_scene(reflectivity_by_face, emission_by_face, size=(1.0, 1.0, 1.0), n=1,
     return scene, rectangle_form_factors(origin, u, v), face
 
 
+def small_source_box(n=8, reflectivity=0.8, corner=False):
+    """A closed unit box of n x n patches a face, every patch of reflectivity R, lit by one
+    ceiling patch of emittance 1 (1/n^2 of the ceiling), at its middle or in a corner.
+    (PatchScene, F)."""
+    origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n)
+    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
+    emission = np.zeros(origin.shape[0])
+    ceiling = np.flatnonzero(face == CEILING).reshape(n, n)
+    emission[ceiling[0, 0] if corner else ceiling[n // 2, n // 2]] = 1.0
+    scene = PatchScene(vertices, triangles, triangle_patch, np.full(origin.shape[0], reflectivity), emission)
+    return scene, rectangle_form_factors(origin, u, v)
+
+
 def open_box_with_card(reflectivity=0.6):
     """A unit box open at the top (n = 2) with a card facing down at half height, which rays
     from above hit from behind; the first 4 patches (the floor) emit 1: rays escape and are
