@@ -66,6 +66,8 @@ SHADOW, COSINE = range(2)
 # of the solve's seed.
 FATE_RAYS = 1 << 13
 FATE_STREAM = 1 << 62
+# The stream of a solve's seed its pilot gathering draws from (pilot_irradiance).
+PILOT_STREAM = FATE_STREAM + 1
 # A light is seen if the shadow ray meets nothing before this share of the way to it.
 SEEN_BEFORE = 1.0 - 1e-5
 
@@ -391,6 +393,15 @@ def fate_shares(tables, seed):
         return 1.0, 0.0
     share = blocked / (escaped + blocked)
     return 1.0 - share, share
+
+
+def pilot_irradiance(tables, gathering, seed):
+    """(P,) each patch's direct irradiance summed over channels, from one draw of
+    ``gathering``'s samples from the seed's own stream: what a solve allots its chunks'
+    samples by (two_way.direct_samples). Only the allotment reads it, so each chunk's
+    estimate stays unbiased whatever it says."""
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(PILOT_STREAM,))))
+    return gather_direct(tables, gathering, rng)[0].sum(axis=0)
 
 
 def split_lost(gathering, lost):

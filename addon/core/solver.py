@@ -17,7 +17,7 @@ import numpy as np
 from .batches import Batches
 from .diagnostics import check_bounces
 from .error_model import check_estimator, check_positive, predict
-from .first_shot import Gathering, fate_shares, gather_samples
+from .first_shot import Gathering, fate_shares, gather_samples, pilot_irradiance
 from .two_way import GENERATION_RAYS, direct_samples, rays_per_path
 from .names import (
     AUTO,
@@ -353,6 +353,9 @@ def solve(
     tables.method = method
     if method == TWO_WAY:
         tables.gathering = Gathering(scene, direct_samples(chunk, scene))
+        with tables.numpy_turn:  # (the samples allotted partly by a pilot's direct light)
+            pilot = pilot_irradiance(tables, tables.gathering, int(seed))
+        tables.gathering = Gathering(scene, direct_samples(chunk, scene, pilot))
     elif gathered:
         tables.gathering = Gathering(scene, gather_samples(chunk, prediction.expected_path_length, scene))
     if gathered:

@@ -63,6 +63,9 @@ FIRST_REFLECTION_RAYS = 3.0
 GENERATION_RAYS = 2.0
 # ... and n DIRECT_SAMPLES gathering samples of the direct light (two rays each).
 DIRECT_SAMPLES = 1.5
+# The share of them allotted by each patch's estimated direct light; the rest by the allotment
+# weight alone, so that no patch's share falls below that part of it.
+RECEIVED_SHARE = 0.5
 # A generation casts at least this many rays a patch: one whose power would pay for fewer plays
 # Russian roulette, going on with this many rays or not at all. Fewer rays a patch, and a
 # generation's estimate is spikier than the last's (a chain of sparse generations lets a few
@@ -103,12 +106,20 @@ def rays_per_path(expected_path_length):
     return 2 * DIRECT_SAMPLES + GENERATION_RAYS * max(expected_path_length, 1.0)
 
 
-def direct_samples(chunk_paths, scene):
+def direct_samples(chunk_paths, scene, irradiance=None):
     """(P,) expected gathering samples of each patch's direct light in a chunk of ``chunk_paths``:
     DIRECT_SAMPLES a path in all, allotted as a generation's rays are (a share below one is a
-    chance of a sample)."""
+    chance of a sample); given an estimate of each patch's direct ``irradiance`` (P,)
+    (first_shot.pilot_irradiance), RECEIVED_SHARE of them in proportion to the allotment
+    weight times it (a sample's error goes as the light it finds: where a small source sends
+    much of its light to a few patches, they need many more samples than their area's)."""
     weight = allotment_weight(scene.patch_area, scene.grey_reflectivity)
-    return np.clip(weight * (DIRECT_SAMPLES * chunk_paths / weight.sum()), 1e-3, MAX_GATHER_SAMPLES)
+    share = weight / weight.sum()
+    if irradiance is not None:
+        received = weight * np.maximum(np.nan_to_num(np.asarray(irradiance, dtype=np.float64)), 0.0)
+        if received.sum() > 0:
+            share = (1.0 - RECEIVED_SHARE) * share + RECEIVED_SHARE * received / received.sum()
+    return np.clip(share * (DIRECT_SAMPLES * chunk_paths), 1e-3, MAX_GATHER_SAMPLES)
 
 
 def two_way_chunk(tables, paths, rng, check=None):

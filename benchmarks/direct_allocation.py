@@ -1,0 +1,140 @@
+"""The two-way iteration's direct-light samples allotted by area alone or partly by each
+patch's light from the sources (two_way.RECEIVED_SHARE), against exact references.
+
+    python -m benchmarks.direct_allocation [fixed|stop|sample]
+
+fixed: each share's delivered MSE at a fixed path count (12 seeds, one thread) and its
+MSE x seconds (the variance per path times seconds a path: lower is better); stop: delivered
+MSE over the target with the measured stop rule at 5% (12 seeds); sample: MSE x seconds on the
+Cornell box against a long run of the area allotment (no exact reference).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests" / "core"))
+
+from boxes import box_scene, small_source_box  # noqa: E402
+
+from addon.core import predict, relative_rms_to_mse, solve, two_way  # noqa: E402
+from addon.core.reference import area_weighted_mse, solve_radiosity_system  # noqa: E402
+
+SEEDS = range(12)
+SHARES = (0.0, 0.5, 0.8)
+
+
+def colour_box():
+    R = [(0.9,) * 3, (0.2,) * 3, (0.8, 0.3, 0.1), (0.1, 0.7, 0.3), (0.85,) * 3, (0.3, 0.3, 0.6)]
+    E = [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4
+    scene, F, _ = box_scene(R, E, n=4)
+    return scene, F
+
+
+def grey_room():
+    scene, F, _ = box_scene([(0.5,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, (1.0, 1.4, 0.8), n=8)
+    return scene, F
+
+
+def bright_box():
+    scene, F, _ = box_scene([(0.95,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, n=6)
+    return scene, F
+
+
+CASES = [  # (name, maker, paths for the fixed runs)
+    ("small source, corner (384 patches, R 0.8)", lambda: small_source_box(corner=True), 40_000),
+    ("small source, middle (384 patches, R 0.8)", small_source_box, 20_000),
+    ("colour box (96 patches)", colour_box, 10_000),
+    ("grey room (384 patches, R 0.5)", grey_room, 20_000),
+    ("bright box (216 patches, R 0.95)", bright_box, 20_000),
+]
+
+
+def exact_of(scene, F):
+    return solve_radiosity_system(F, scene.reflectivity, scene.emission) - scene.emission
+
+
+def fixed():
+    lines = ["| scene | share | paths | mean MSE / target(5%) | worst | MSE x s (rel. to area) |", "|---|---|---|---|---|---|"]
+    for name, make, paths in CASES:
+        scene, F = make()
+        exact = exact_of(scene, F)
+        target = relative_rms_to_mse(predict(scene), 0.05)
+        base = None
+        for share in SHARES:
+            two_way.RECEIVED_SHARE = share
+            mse, seconds = [], []
+            for seed in SEEDS:
+                start = time.perf_counter()
+                r = solve(scene, paths=paths, seed=seed, threads=1, method="two_way")
+                seconds.append(time.perf_counter() - start)
+                mse.append(area_weighted_mse(r.reflected, exact, scene.patch_area))
+            cost = np.mean(mse) * np.mean(seconds)
+            base = base or cost
+            row = (f"| {name} | {share:g} | {paths:,} | {np.mean(mse) / target:.3f} | {np.max(mse) / target:.3f} | "
+                   f"{cost / base:.2f} ({np.mean(seconds):.2f} s) |")
+            print(row, flush=True)
+            lines.append(row)
+    return lines
+
+
+def stop():
+    lines = ["| scene | share | mean | median | worst | over 1 | paths | time (s) | stopped |", "|---|---|---|---|---|---|---|---|---|"]
+    for name, make, _ in CASES:
+        scene, F = make()
+        exact = exact_of(scene, F)
+        target = relative_rms_to_mse(predict(scene), 0.05)
+        for share in SHARES[:2]:
+            two_way.RECEIVED_SHARE = share
+            ratios, paths, seconds, ran = [], [], 0.0, set()
+            for seed in SEEDS:
+                start = time.perf_counter()
+                r = solve(scene, target_mse=target, seed=seed, stop_rule="measured", threads=1, method="auto")
+                seconds += time.perf_counter() - start
+                paths.append(r.paths)
+                ran.add(f"{r.method}/{r.stopped}")
+                ratios.append(area_weighted_mse(r.reflected, exact, scene.patch_area) / target)
+            ratios = np.array(ratios)
+            row = (f"| {name} | {share:g} | {ratios.mean():.2f} | {np.median(ratios):.2f} | {ratios.max():.2f} | "
+                   f"{np.sum(ratios > 1)}/{len(ratios)} | {np.mean(paths):,.0f} | {seconds:.1f} | {','.join(sorted(ran))} |")
+            print(row, flush=True)
+            lines.append(row)
+    return lines
+
+
+def sample():
+    import sample_scenes
+
+    lines = ["| scene | share | paths | MSE / long-run MSE | MSE x s (rel. to area) |", "|---|---|---|---|---|"]
+    for name, kwargs, paths in (("cornell_box", {"closed": True}, 100_000), ("cornell_box", {}, 100_000)):
+        scene = sample_scenes.build(name, **kwargs).scene
+        two_way.RECEIVED_SHARE = 0.0
+        reference = solve(scene, paths=40 * paths, seed=1000, threads=2, method="two_way").reflected
+        base = None
+        for share in SHARES[:2]:
+            two_way.RECEIVED_SHARE = share
+            mse, seconds = [], []
+            for seed in range(6):
+                start = time.perf_counter()
+                r = solve(scene, paths=paths, seed=seed, threads=2, method="two_way")
+                seconds.append(time.perf_counter() - start)
+                mse.append(area_weighted_mse(r.reflected, reference, scene.patch_area))
+            cost = np.mean(mse) * np.mean(seconds)
+            base = base or cost
+            row = f"| {name}{' closed' if kwargs else ''} | {share:g} | {paths:,} | {np.mean(mse):.3e} | {cost / base:.2f} ({np.mean(seconds):.2f} s) |"
+            print(row, flush=True)
+            lines.append(row)
+    return lines
+
+
+if __name__ == "__main__":
+    which = sys.argv[1:] or ["fixed", "stop", "sample"]
+    out = []
+    for w in which:
+        out += ["", f"## {w}", ""] + globals()[w]()
+    print("\n".join(out))
