@@ -396,12 +396,17 @@ def fate_shares(tables, seed):
 
 
 def pilot_irradiance(tables, gathering, seed):
-    """(P,) each patch's direct irradiance summed over channels, from one draw of
-    ``gathering``'s samples from the seed's own stream: what a solve allots its chunks'
-    samples by (two_way.direct_samples). Only the allotment reads it, so each chunk's
-    estimate stays unbiased whatever it says."""
+    """(P,) the root mean square, over each patch's samples, of their estimates of its direct
+    irradiance (channels summed), from one draw of ``gathering``'s samples from the seed's own
+    stream (0 where a patch drew none): what a solve allots its chunks' samples by
+    (two_way.direct_samples), the second moment because a sample's variance goes as it (a
+    patch beside a small source finds light as heavy-tailed as it is strong). Only the
+    allotment reads it, so each chunk's estimate stays unbiased whatever it says."""
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(PILOT_STREAM,))))
-    return gather_direct(tables, gathering, rng)[0].sum(axis=0)
+    patch, value = gather_direct(tables, gathering, rng)[2][::2]
+    square = value.sum(axis=0) ** 2
+    count = np.bincount(patch, minlength=tables.patch_count)
+    return np.sqrt(np.bincount(patch, weights=square, minlength=tables.patch_count) / np.maximum(count, 1))
 
 
 def split_lost(gathering, lost):

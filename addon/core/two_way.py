@@ -109,10 +109,12 @@ def rays_per_path(expected_path_length):
 def direct_samples(chunk_paths, scene, irradiance=None):
     """(P,) expected gathering samples of each patch's direct light in a chunk of ``chunk_paths``:
     DIRECT_SAMPLES a path in all, allotted as a generation's rays are (a share below one is a
-    chance of a sample); given an estimate of each patch's direct ``irradiance`` (P,)
-    (first_shot.pilot_irradiance), RECEIVED_SHARE of them in proportion to the allotment
-    weight times it (a sample's error goes as the light it finds: where a small source sends
-    much of its light to a few patches, they need many more samples than their area's)."""
+    chance of a sample); given each patch's ``irradiance`` (P,), a pilot's root mean square
+    sample of its direct light (first_shot.pilot_irradiance), RECEIVED_SHARE of them in
+    proportion to the allotment weight times it (what minimises the weighted sum of the
+    patches' variances, sum_j w_j^2 E[X_j^2] / n_j: where a small source sends much of its
+    light to a few patches, they need many more samples than their area's), the rest by the
+    weight alone (no patch gets less than that part of its share: none is starved)."""
     weight = allotment_weight(scene.patch_area, scene.grey_reflectivity)
     share = weight / weight.sum()
     if irradiance is not None:

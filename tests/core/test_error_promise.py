@@ -45,14 +45,18 @@ def test_the_default_stop_rule_keeps_the_error_at_most_the_target():
 SMALL_SOURCE_SEEDS = range(12)
 
 
-@pytest.mark.parametrize("relative", [0.05, 0.02])
-def test_the_measured_rule_keeps_the_target_where_one_small_source_lights_a_bright_room(relative):
+@pytest.mark.parametrize("corner,relative", [(False, 0.05), (False, 0.02), (True, 0.05)])
+def test_the_measured_rule_keeps_the_target_where_one_small_source_lights_a_bright_room(corner, relative):
     """A closed box (R 0.8) lit by one ceiling patch, 1/64 of the ceiling, at the panel's 5% and
     at 2%, Automatic (the two-way iteration here), over 12 seeds, against the exact discrete
     solution: the mean error delivered is under the target by two of its standard errors, and
     no run is over twice the target (the estimate alone, read after every chunk of a few, stopped
-    on lucky low readings: at 2% one run of these 12 delivered 2.6 times the target)."""
-    scene, F = small_source_box()
+    on lucky low readings: at 2% one run of these 12 delivered 2.6 times the target). With the
+    source in a corner of the ceiling, the two wall patches beside it take about 40% of its
+    light: their direct light, gathered with samples allotted by area alone, was so noisy that
+    every run ended at its path cap, delivering 1.8 times the target on average (7.3 at worst);
+    allotted partly by the light each patch receives, they stop on the target and keep it."""
+    scene, F = small_source_box(corner=corner)
     exact = solve_radiosity_system(F, scene.reflectivity, scene.emission)
     target = relative_rms_to_mse(predict(scene), relative)
     ratios = []
