@@ -1,12 +1,13 @@
-"""The two-way iteration's direct-light samples allotted by area alone or partly by each
-patch's light from the sources (two_way.RECEIVED_SHARE), against exact references.
+"""The two-way iteration's direct-light samples allotted by area alone or half by a pilot's
+light (two_way.RECEIVED_SHARE, first_shot.pilot_irradiance), against exact references.
 
-    python -m benchmarks.direct_allocation [fixed|stop|sample]
+    python -m benchmarks.direct_allocation [fixed|stop|sample]   # all three: writes
+                                                                 # benchmarks/results/direct_allocation.md
 
 fixed: each share's delivered MSE at a fixed path count (12 seeds, one thread) and its
 MSE x seconds (the variance per path times seconds a path: lower is better); stop: delivered
 MSE over the target with the measured stop rule at 5% (12 seeds); sample: MSE x seconds on the
-Cornell box against a long run of the area allotment (no exact reference).
+Cornell boxes against long runs (no exact reference).
 """
 from __future__ import annotations
 
@@ -60,6 +61,9 @@ def exact_of(scene, F):
 
 
 def fixed():
+    """Delivered MSE over the 5% target's at a fixed path count (two_way, 12 seeds, one thread),
+    and MSE x seconds a run relative to the area allotment's (the seconds are a busy 2-core
+    machine's: the MSE at equal paths is the measure)."""
     lines = ["| scene | share | paths | mean MSE / target(5%) | worst | MSE x s (rel. to area) |", "|---|---|---|---|---|---|"]
     for name, make, paths in CASES:
         scene, F = make()
@@ -84,6 +88,8 @@ def fixed():
 
 
 def stop():
+    """Automatic with the measured stop rule at 5%: delivered MSE over the target (12 seeds, one
+    thread), mean, median, worst, runs over; mean paths; the 12 runs' seconds; how they ran."""
     lines = ["| scene | share | mean | median | worst | over 1 | paths | time (s) | stopped |", "|---|---|---|---|---|---|---|---|---|"]
     for name, make, _ in CASES:
         scene, F = make()
@@ -108,25 +114,34 @@ def stop():
 
 
 def sample():
+    """The Cornell boxes: MSE at 100k paths (16 seeds, 2 threads) against the mean of two
+    8M-path runs (one of each allotment), and the seconds a run (median of the 16)."""
     import sample_scenes
 
-    lines = ["| scene | share | paths | MSE / long-run MSE | MSE x s (rel. to area) |", "|---|---|---|---|---|"]
+    lines = ["| scene | share | paths | MSE (+- its standard error) | MSE x s (rel. to area) | rays a run |",
+             "|---|---|---|---|---|---|"]
     for name, kwargs, paths in (("cornell_box", {"closed": True}, 100_000), ("cornell_box", {}, 100_000)):
         scene = sample_scenes.build(name, **kwargs).scene
-        two_way.RECEIVED_SHARE = 0.0
-        reference = solve(scene, paths=40 * paths, seed=1000, threads=2, method="two_way").reflected
+        references = []
+        for share, seed in ((0.0, 5000), (0.5, 5001)):
+            two_way.RECEIVED_SHARE = share
+            references.append(solve(scene, paths=80 * paths, seed=seed, threads=2, method="two_way").reflected)
+        reference = (references[0] + references[1]) / 2
         base = None
         for share in SHARES[:2]:
             two_way.RECEIVED_SHARE = share
-            mse, seconds = [], []
-            for seed in range(6):
+            mse, seconds, rays = [], [], []
+            for seed in range(16):
                 start = time.perf_counter()
                 r = solve(scene, paths=paths, seed=seed, threads=2, method="two_way")
                 seconds.append(time.perf_counter() - start)
+                rays.append(r.rays)
                 mse.append(area_weighted_mse(r.reflected, reference, scene.patch_area))
-            cost = np.mean(mse) * np.mean(seconds)
+            cost = np.mean(mse) * np.median(seconds)
             base = base or cost
-            row = f"| {name}{' closed' if kwargs else ''} | {share:g} | {paths:,} | {np.mean(mse):.3e} | {cost / base:.2f} ({np.mean(seconds):.2f} s) |"
+            row = (f"| {name}{' closed' if kwargs else ''} ({scene.patch_count:,} patches) | {share:g} | {paths:,} | "
+                   f"{np.mean(mse):.3e} (+- {np.std(mse, ddof=1) / 4:.1e}) | {cost / base:.2f} ({np.median(seconds):.2f} s) | "
+                   f"{np.mean(rays):,.0f} |")
             print(row, flush=True)
             lines.append(row)
     return lines
@@ -134,7 +149,11 @@ def sample():
 
 if __name__ == "__main__":
     which = sys.argv[1:] or ["fixed", "stop", "sample"]
-    out = []
+    out = [f"# The two-way iteration's direct-light samples: by area, or half by a pilot's light", "",
+           f"`python -m benchmarks.direct_allocation {' '.join(which)}`; share 0: the allotment by sqrt(A) R alone; "
+           f"0.5: two_way.RECEIVED_SHARE (the solver's).", ""]
     for w in which:
-        out += ["", f"## {w}", ""] + globals()[w]()
+        out += ["", f"## {w}", "", " ".join(globals()[w].__doc__.split()) if globals()[w].__doc__ else "", ""] + globals()[w]()
     print("\n".join(out))
+    if which == ["fixed", "stop", "sample"]:
+        (ROOT / "benchmarks" / "results" / "direct_allocation.md").write_text("\n".join(out) + "\n")
