@@ -1,12 +1,12 @@
 """The two-way iteration's direct-light samples allotted by area alone or half by a pilot's
 light (two_way.RECEIVED_SHARE, first_shot.pilot_irradiance), against exact references.
 
-    python -m benchmarks.direct_allocation [fixed|stop|sample]   # all three: writes
+    python -m benchmarks.direct_allocation [fixed|stop|stop2|sample]   # all: writes
                                                                  # benchmarks/results/direct_allocation.md
 
 fixed: each share's delivered MSE at a fixed path count (12 seeds, one thread) and its
 MSE x seconds (the variance per path times seconds a path: lower is better); stop: delivered
-MSE over the target with the measured stop rule at 5% (12 seeds); sample: MSE x seconds on the
+MSE over the target with the measured stop rule at 5% (12 seeds); stop2: at 2%; sample: MSE x seconds on the
 Cornell boxes against long runs (no exact reference).
 """
 from __future__ import annotations
@@ -113,6 +113,32 @@ def stop():
     return lines
 
 
+def stop2():
+    """The small-source boxes at 2%, as ``stop`` (the corner with the pilot's allotment only:
+    by area it runs to its cap)."""
+    lines = ["| scene | share | mean | median | worst | over 1 | paths | time (s) | stopped |", "|---|---|---|---|---|---|---|---|---|"]
+    for name, make, _ in CASES[:2]:
+        scene, F = make()
+        exact = exact_of(scene, F)
+        target = relative_rms_to_mse(predict(scene), 0.02)
+        for share in SHARES[1:] if "corner" in name else SHARES:
+            two_way.RECEIVED_SHARE = share
+            ratios, paths, seconds, ran = [], [], 0.0, set()
+            for seed in SEEDS:
+                start = time.perf_counter()
+                r = solve(scene, target_mse=target, seed=seed, stop_rule="measured", threads=1, method="auto")
+                seconds += time.perf_counter() - start
+                paths.append(r.paths)
+                ran.add(f"{r.method}/{r.stopped}")
+                ratios.append(area_weighted_mse(r.reflected, exact, scene.patch_area) / target)
+            ratios = np.array(ratios)
+            row = (f"| {name} | {share:g} | {ratios.mean():.2f} | {np.median(ratios):.2f} | {ratios.max():.2f} | "
+                   f"{np.sum(ratios > 1)}/{len(ratios)} | {np.mean(paths):,.0f} | {seconds:.1f} | {','.join(sorted(ran))} |")
+            print(row, flush=True)
+            lines.append(row)
+    return lines
+
+
 def sample():
     """The Cornell boxes: MSE at 100k paths (16 seeds, 2 threads) against the mean of two
     8M-path runs (one of each allotment), and the seconds a run (median of the 16)."""
@@ -148,12 +174,12 @@ def sample():
 
 
 if __name__ == "__main__":
-    which = sys.argv[1:] or ["fixed", "stop", "sample"]
+    which = sys.argv[1:] or ["fixed", "stop", "stop2", "sample"]
     out = [f"# The two-way iteration's direct-light samples: by area, or half by a pilot's light", "",
            f"`python -m benchmarks.direct_allocation {' '.join(which)}`; share 0: the allotment by sqrt(A) R alone; "
            f"0.5: two_way.RECEIVED_SHARE (the solver's).", ""]
     for w in which:
         out += ["", f"## {w}", "", " ".join(globals()[w].__doc__.split()) if globals()[w].__doc__ else "", ""] + globals()[w]()
     print("\n".join(out))
-    if which == ["fixed", "stop", "sample"]:
+    if which == ["fixed", "stop", "stop2", "sample"]:
         (ROOT / "benchmarks" / "results" / "direct_allocation.md").write_text("\n".join(out) + "\n")
