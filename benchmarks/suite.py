@@ -226,7 +226,7 @@ def direct_only(paths, chunks=32):
 
     from addon import patches as patch_making
     from addon import scene_io
-    from addon.core.first_shot import Gathering, gather_direct
+    from addon.core.first_shot import Gathering, gather_direct, pilot_irradiance
     from addon.core.tables import WalkTables
     from addon.core.two_way import direct_samples
     from addon.core.walk import FreeTurn
@@ -237,6 +237,9 @@ def direct_only(paths, chunks=32):
     tables = WalkTables(scene, "finite", 1e-3, "hit")
     tables.numpy_turn = FreeTurn()  # (as the two-way iteration gathers: walk.takes_turns)
     gathering = Gathering(scene, direct_samples(math.ceil(paths / chunks), scene))
+    with tables.numpy_turn:  # (the samples allotted as a solve allots them: half by a pilot's light)
+        pilot = pilot_irradiance(tables, gathering, 9)
+    gathering = Gathering(scene, direct_samples(math.ceil(paths / chunks), scene, pilot))
     R = scene.reflectivity.T
 
     def run(k):
