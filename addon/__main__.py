@@ -248,6 +248,10 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     changes.set(view, "view_transform", "Standard")
     changes.set(view, "look", "None")
     changes.set(view, "exposure", exposure)
+    # The results only need to be seen (no bounces): as lights, Cycles would build a light tree
+    # over every emitting triangle, which at a million patches took more memory than the scene.
+    for material in _result_materials(scene):
+        changes.set(material.cycles, "emission_sampling", "NONE")
     world = bpy.data.worlds.new("Radiosity Preview World")
     world.color = (0.0, 0.0, 0.0)
     if world.node_tree is not None:
@@ -258,6 +262,18 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     changes.made(lambda world=world: bpy.data.worlds.remove(world))
     changes.keep("filepath", owner=render)
     return changes
+
+
+def _result_materials(scene):
+    """The materials of the scene's result objects (ours, and any the user gave them)."""
+    from . import scene_io
+
+    materials = {}
+    for obj in scene_io.previous_results(scene):
+        for slot in obj.material_slots:
+            if slot.material is not None:
+                materials[slot.material.name] = slot.material
+    return list(materials.values())
 
 
 def render_preview(path, sources, width=480, samples=16, exposure=0.0, keep_settings=False):
@@ -358,8 +374,7 @@ def main(argv=None):
     from . import operators, pipeline, worker
 
     try:  # a costly setting is said before the run, as the panel says it
-        objects, _ = scene_io.read_selection(bpy.context)
-        warning = pipeline.estimate(objects, settings.solve_settings())["warning"]
+        warning = pipeline.estimate(scene_io.read_selection(bpy.context)[0], settings.solve_settings())["warning"]
     except ValueError:
         warning = None  # bad input: the solve says what is wrong
     if warning:
@@ -367,14 +382,19 @@ def main(argv=None):
     operators.LAST_ERROR = ""
     progress = ProgressLine(sys.stderr) if (not args.quiet and sys.stderr.isatty()) else None
     worker.PROGRESS_LISTENER = progress
+    exposure = []
+    if not args.no_preview:  # from the arrays written: reading Blender's back would copy them
+        operators.OUTPUT_LISTENER = lambda output: exposure.append(preview_exposure(output, settings.output))
     try:
         result = bpy.ops.radiosity.solve(quiet_errors=True)
     except RuntimeError as exc:  # an error the operator did not keep quiet
         return _fail(_one_line(exc))
     finally:
         worker.PROGRESS_LISTENER = None
+        operators.OUTPUT_LISTENER = None
         if progress is not None:
             progress.end()
+    release_solve_memory()
     if "FINISHED" not in result:
         return _fail(operators.LAST_ERROR or "the solve did not finish")
     print(summary(scene_name, settings))
@@ -385,18 +405,33 @@ def main(argv=None):
     try:
         if png and own_scene:
             # a scene built here: saved with the preview's settings, so F12 renders the same
-            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io), keep_settings=True)
+            render_preview(png, sources, args.resolution, args.samples, exposure[-1] if exposure else _auto_exposure(scene_io),
+                           keep_settings=True)
         # the user's scene is saved as it is, plus the results (a copy: the open file stays the same)
         bpy.ops.wm.save_as_mainfile(filepath=out_blend, copy=True)
         if png and not own_scene:
             # then the preview, with temporary settings undone afterwards
-            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io))
+            render_preview(png, sources, args.resolution, args.samples,
+                           exposure[-1] if exposure else _auto_exposure(scene_io))
     except RuntimeError as exc:
         return _fail(_one_line(exc))
     if png:
         print(f"preview: {png}")
     print(f"saved: {out_blend}  ({time.perf_counter() - t0:.1f} s in all)")
     return 0
+
+
+def release_solve_memory():
+    """Let go of what the solve kept for the panel (the meshed geometry and the core's scene with
+    its ray tracer, kept for a re-run) and give it back to the system: the command line saves and
+    renders next, and Cycles' copy of the results needs the room."""
+    import gc
+
+    from . import patches, trim
+
+    patches._GEOMETRY_CACHE.clear()
+    gc.collect()
+    trim.give_back()
 
 
 def summary(scene_name, settings) -> str:
@@ -457,7 +492,8 @@ def progress_text(job) -> str:
 
 
 def _auto_exposure(scene_io):
-    """Exposure (stops) that maps the median reflected radiosity to 0.35."""
+    """Exposure (stops) that maps the median reflected radiosity to 0.35, from the result
+    objects' colours as written in Blender (reading them back makes Blender copy them)."""
     values = []
     for obj in scene_io.previous_results():
         attr = obj.data.color_attributes.get(scene_io.ATTRIBUTE_NAME)
@@ -466,6 +502,27 @@ def _auto_exposure(scene_io):
         c = np.empty(len(attr.data) * 4, dtype=np.float32)
         attr.data.foreach_get("color", c)
         values.append(c.reshape(-1, 4)[:, :3].mean(axis=1))
+    return _exposure_of(values)
+
+
+def preview_exposure(output, mode) -> float:
+    """``_auto_exposure`` of the results a solve's ``output`` (pipeline.SolveOutput) writes in
+    colour mode ``mode``, from its arrays: the 'Radiosity' attribute's values (per patch on every
+    corner, or per point with VERTEX), as the float32 colours written."""
+    from . import scene_io
+
+    values = []
+    for mesh, faces, points in zip(output.patches.meshes, output.face_colours, output.point_colours):
+        if faces is None:  # the rest of the scene: no results
+            continue
+        shown = points if mode == "VERTEX" else faces
+        grey = scene_io._rgba(shown).reshape(-1, 4)[:, :3].mean(axis=1)
+        values.append(grey if mode == "VERTEX" else np.repeat(grey, mesh.face_sizes))
+    return _exposure_of(values)
+
+
+def _exposure_of(values):
+    """Exposure (stops) that maps the median of the positive values (arrays) to 0.35."""
     if not values:
         return 0.0
     v = np.concatenate(values)

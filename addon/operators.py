@@ -13,6 +13,9 @@ TIMER_SECONDS = 0.1
 LAST_ERROR = ""
 #: Above this share of the emitted power absorbed on back sides, the user is warned.
 BLOCKED_WARNING = 0.05
+#: Called with a finished solve's output (pipeline.SolveOutput) before its results are written
+#: (the command line's preview exposure), or None.
+OUTPUT_LISTENER = None
 
 
 def _redraw(context):
@@ -211,6 +214,8 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             stats = _run_stats(output)
+            if OUTPUT_LISTENER is not None:
+                OUTPUT_LISTENER(output)
             scene_io.write_results(context, output, job.settings.output, scene=scene)
         except Exception as exc:  # noqa: BLE001 - report, never a traceback
             import traceback
@@ -227,6 +232,8 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
 
             print(traceback.format_exc())
             self.report({"WARNING"}, f"Radiosity: the result was written, but reporting on the run failed ({exc})")
+        # Blender keeps the last operator (for its redo panel, which runs a new one): not its arrays
+        self._job = None
         return {"FINISHED"}
 
 
