@@ -83,7 +83,9 @@ def traced_main(argv, out_path):
     marks.mark("bpy imported")
 
     def wrap(owner, name, label):
-        function = getattr(owner, name)
+        function = getattr(owner, name, None)
+        if function is None:  # (an earlier version of the command line)
+            return
 
         def wrapped(*args, **kwargs):
             marks.mark(f"before {label}")
