@@ -383,8 +383,13 @@ def main(argv=None):
     progress = ProgressLine(sys.stderr) if (not args.quiet and sys.stderr.isatty()) else None
     worker.PROGRESS_LISTENER = progress
     exposure = []
-    if not args.no_preview:  # from the arrays written: reading Blender's back would copy them
-        operators.OUTPUT_LISTENER = lambda output: exposure.append(preview_exposure(output, settings.output))
+
+    def before_writing(output):
+        if not args.no_preview:  # from the arrays written: reading Blender's back would copy them
+            exposure.append(preview_exposure(output, settings.output))
+        release_solve_memory()  # writing the colours needs the patches, not the core's scene
+
+    operators.OUTPUT_LISTENER = before_writing
     try:
         result = bpy.ops.radiosity.solve(quiet_errors=True)
     except RuntimeError as exc:  # an error the operator did not keep quiet

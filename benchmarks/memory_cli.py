@@ -178,13 +178,12 @@ def stage_table(runs):
 
 def crossing(runs):
     """The patch count at which the whole process's peak (with the preview) reaches 1 GiB, by a
-    straight line through the measured runs (None if it is not crossed between or beyond them)."""
+    straight line between the two runs around it (None if no two runs bracket it)."""
     points = sorted((r["patches"], r["peak"]) for r in runs if r["preview"])
-    if len(points) < 2:
-        return None
-    (p0, m0), (p1, m1) = points[0], points[-1]
-    slope = (m1 - m0) / (p1 - p0)
-    return None if slope <= 0 else p0 + (GIB - m0) / slope
+    for (p0, m0), (p1, m1) in zip(points, points[1:]):
+        if m0 < GIB <= m1:
+            return p0 + (GIB - m0) * (p1 - p0) / (m1 - m0)
+    return None
 
 
 def report(runs, argv):
@@ -212,7 +211,8 @@ def report(runs, argv):
     cross = crossing(runs)
     if per_patch:
         L += ["", "Largest peak: " + ", ".join(f"{peak / MIB:.0f} MiB at {patches:,} patches" for peak, patches in per_patch)
-              + (f"; 1 GiB is reached at about {cross:,.0f} patches (a straight line through the runs)." if cross else ".")]
+              + (f"; 1 GiB is reached at about {round(cross, -4):,.0f} patches (a straight line between the runs around it)."
+                 if cross else ".")]
     L += ["", "Per interval between two marks of a traced run (same arguments): the peak resident set during it "
           "(`VmHWM`, reset at every mark) and the resident set at its end. `before X` ends where X starts.", ""]
     L += stage_table(runs)
