@@ -232,8 +232,6 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
 
             print(traceback.format_exc())
             self.report({"WARNING"}, f"Radiosity: the result was written, but reporting on the run failed ({exc})")
-        # Blender keeps the last operator (for its redo panel, which runs a new one): not its arrays
-        self._job = None
         return {"FINISHED"}
 
 
