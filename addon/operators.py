@@ -11,6 +11,9 @@ from . import live_view, pipeline, scene_io, worker
 TIMER_SECONDS = 0.1
 #: The last error of ``radiosity.solve`` (with quiet_errors, its only record).
 LAST_ERROR = ""
+#: Called with a finished solve's output (pipeline.SolveOutput) before its results are written
+#: (the command line's preview exposure), or None.
+OUTPUT_LISTENER = None
 
 
 def _redraw(context):
@@ -214,6 +217,8 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             stats = _run_stats(output)
+            if OUTPUT_LISTENER is not None:
+                OUTPUT_LISTENER(output)
             scene_io.write_results(context, output, job.settings.output, scene=scene)
         except Exception as exc:  # noqa: BLE001 - report, never a traceback
             import traceback
