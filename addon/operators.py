@@ -247,6 +247,9 @@ def _after_writing(op, settings, output, stats):
         op.report({"WARNING"}, note)
     if output.back_warning:
         op.report({"WARNING"}, output.back_warning)
+    missed = pipeline.target_missed_text(stats["last_stopped"], stats["last_relative_error"], stats["last_target_error"])
+    if missed:
+        op.report({"WARNING"}, missed)
     if stats["last_stopped"] == "time_limit":
         op.report({"WARNING"}, f"Time limit reached after {stats['last_paths']:,} paths; the result is "
                   "noisier than asked")
