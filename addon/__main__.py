@@ -252,6 +252,10 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     changes.set(view, "view_transform", "Standard")
     changes.set(view, "look", "None")
     changes.set(view, "exposure", exposure)
+    # The results only need to be seen (no bounces): as lights, Cycles would build a light tree
+    # over every emitting triangle, which at a million patches took more memory than the scene.
+    for material in _result_materials(scene):
+        changes.set(material.cycles, "emission_sampling", "NONE")
     world = bpy.data.worlds.new("Radiosity Preview World")
     world.color = (0.0, 0.0, 0.0)
     if world.node_tree is not None:
@@ -262,6 +266,18 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     changes.made(lambda world=world: bpy.data.worlds.remove(world))
     changes.keep("filepath", owner=render)
     return changes
+
+
+def _result_materials(scene):
+    """The materials of the scene's result objects (ours, and any the user gave them)."""
+    from . import scene_io
+
+    materials = {}
+    for obj in scene_io.previous_results(scene):
+        for slot in obj.material_slots:
+            if slot.material is not None:
+                materials[slot.material.name] = slot.material
+    return list(materials.values())
 
 
 def render_preview(path, sources, width=480, samples=16, exposure=0.0, keep_settings=False, write_to=None):
@@ -380,8 +396,7 @@ def _run(args, names, interrupt):
     from . import operators, pipeline, worker
 
     try:  # a costly setting is said before the run, as the panel says it
-        objects, _ = scene_io.read_selection(bpy.context)
-        warning = pipeline.estimate(objects, settings.solve_settings())["warning"]
+        warning = pipeline.estimate(scene_io.read_selection(bpy.context)[0], settings.solve_settings())["warning"]
     except ValueError:
         warning = None  # bad input: the solve says what is wrong
     interrupt.check()
@@ -391,6 +406,14 @@ def _run(args, names, interrupt):
     progress = ProgressLine(sys.stderr) if (not args.quiet and sys.stderr.isatty()) else None
     interrupt.progress = progress
     worker.PROGRESS_LISTENER = progress
+    exposure = []
+
+    def before_writing(output):
+        if not args.no_preview:  # from the arrays written: reading Blender's back would copy them
+            exposure.append(preview_exposure(output, settings.output))
+        release_solve_memory()  # writing the colours needs the patches, not the core's scene
+
+    operators.OUTPUT_LISTENER = before_writing
     reports = io.StringIO()  # the operator's reports, after the progress line, on lines of their own
     try:
         with contextlib.redirect_stdout(reports):
@@ -399,10 +422,12 @@ def _run(args, names, interrupt):
         return _fail(_one_line(exc))
     finally:
         worker.PROGRESS_LISTENER = None
+        operators.OUTPUT_LISTENER = None
         if progress is not None:
             progress.end()
         interrupt.check()
         sys.stdout.write(reports.getvalue())
+    release_solve_memory()
     if "FINISHED" not in result:
         return _fail(operators.LAST_ERROR or "the solve did not finish")
     print(summary(scene_name, settings))
@@ -417,16 +442,16 @@ def _run(args, names, interrupt):
             outputs.add(png, check_png)
         if png and own_scene:
             # a scene built here: saved with the preview's settings, so F12 renders the same
-            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io), keep_settings=True,
-                           write_to=outputs.writing(png))
+            render_preview(png, sources, args.resolution, args.samples, exposure[-1] if exposure else _auto_exposure(scene_io),
+                           keep_settings=True, write_to=outputs.writing(png))
             interrupt.check()
         # the user's scene is saved as it is, plus the results (a copy: the open file stays the same)
         save_blend(outputs.writing(out_blend))
         interrupt.check()
         if png and not own_scene:
             # then the preview, with temporary settings undone afterwards
-            render_preview(png, sources, args.resolution, args.samples, _auto_exposure(scene_io),
-                           write_to=outputs.writing(png))
+            render_preview(png, sources, args.resolution, args.samples,
+                           exposure[-1] if exposure else _auto_exposure(scene_io), write_to=outputs.writing(png))
         outputs.check()
         with interrupt.lock:  # all files in place, or none
             interrupt.check()
@@ -667,6 +692,19 @@ def exit_now(status):
     os._exit(status)
 
 
+def release_solve_memory():
+    """Let go of what the solve kept for the panel (the meshed geometry and the core's scene with
+    its ray tracer, kept for a re-run) and give it back to the system: the command line saves and
+    renders next, and Cycles' copy of the results needs the room."""
+    import gc
+
+    from . import patches, trim
+
+    patches._GEOMETRY_CACHE.clear()
+    gc.collect()
+    trim.give_back()
+
+
 def summary(scene_name, settings) -> str:
     """The run in one line, with the error reached against the target (both relative RMS)."""
     error = settings.last_relative_error
@@ -744,7 +782,8 @@ def progress_text(job) -> str:
 
 
 def _auto_exposure(scene_io):
-    """Exposure (stops) that maps the median reflected radiosity to 0.35."""
+    """Exposure (stops) that maps the median reflected radiosity to 0.35, from the result
+    objects' colours as written in Blender (reading them back makes Blender copy them)."""
     import numpy as np
 
     values = []
@@ -755,6 +794,31 @@ def _auto_exposure(scene_io):
         c = np.empty(len(attr.data) * 4, dtype=np.float32)
         attr.data.foreach_get("color", c)
         values.append(c.reshape(-1, 4)[:, :3].mean(axis=1))
+    return _exposure_of(values)
+
+
+def preview_exposure(output, mode) -> float:
+    """``_auto_exposure`` of the results a solve's ``output`` (pipeline.SolveOutput) writes in
+    colour mode ``mode``, from its arrays: the 'Radiosity' attribute's values (per patch on every
+    corner, or per point with VERTEX), as the float32 colours written."""
+    import numpy as np
+
+    from . import scene_io
+
+    values = []
+    for mesh, faces, points in zip(output.patches.meshes, output.face_colours, output.point_colours):
+        if faces is None:  # the rest of the scene: no results
+            continue
+        shown = points if mode == "VERTEX" else faces
+        grey = scene_io._rgba(shown).reshape(-1, 4)[:, :3].mean(axis=1)
+        values.append(grey if mode == "VERTEX" else np.repeat(grey, mesh.face_sizes))
+    return _exposure_of(values)
+
+
+def _exposure_of(values):
+    """Exposure (stops) that maps the median of the positive values (arrays) to 0.35."""
+    import numpy as np
+
     if not values:
         return 0.0
     v = np.concatenate(values)

@@ -11,6 +11,9 @@ from . import live_view, pipeline, scene_io, worker
 TIMER_SECONDS = 0.1
 #: The last error of ``radiosity.solve`` (with quiet_errors, its only record).
 LAST_ERROR = ""
+#: Called with a finished solve's output (pipeline.SolveOutput) before its results are written
+#: (the command line's preview exposure), or None.
+OUTPUT_LISTENER = None
 
 
 def _redraw(context):
@@ -214,6 +217,8 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             stats = _run_stats(output)
+            if OUTPUT_LISTENER is not None:
+                OUTPUT_LISTENER(output)
             scene_io.write_results(context, output, job.settings.output, scene=scene)
         except Exception as exc:  # noqa: BLE001 - report, never a traceback
             import traceback
@@ -242,6 +247,9 @@ def _after_writing(op, settings, output, stats):
         op.report({"WARNING"}, note)
     if output.back_warning:
         op.report({"WARNING"}, output.back_warning)
+    missed = pipeline.target_missed_text(stats["last_stopped"], stats["last_relative_error"], stats["last_target_error"])
+    if missed:
+        op.report({"WARNING"}, missed)
     if stats["last_stopped"] == "time_limit":
         op.report({"WARNING"}, f"Time limit reached after {stats['last_paths']:,} paths; the result is "
                   "noisier than asked")

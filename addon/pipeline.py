@@ -166,6 +166,16 @@ def sources_text(scene) -> str:
     return ", ".join(parts)
 
 
+def target_missed_text(stopped, relative_error, target) -> str:
+    """A warning where a run with an error target ended at its path cap with its measured error
+    (relative RMS, percent) above the target: the target was not kept, and the user must know."""
+    if stopped != "paths" or not target or target <= 0 or not relative_error >= 0 or relative_error <= target:
+        return ""
+    return (f"The {target:g}% error target was not reached: the run stopped at its path cap with a measured "
+            f"error of {relative_error:.2f}% ({relative_error / target:.1f}x the target). Solve again with a "
+            "larger patch size or a looser target, or try Method: Random walks (paper)")
+
+
 def light_account_text(energy) -> str:
     """Where the emitted light went, as shares of it, e.g. "light: 71.8% absorbed by surfaces
     (0.9% on the back of faces), 28.2% left the scene": every run says how much it lost."""

@@ -21,11 +21,11 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "core"))
 
-from boxes import CEILING, box_rectangles, box_scene, rectangles_to_mesh  # noqa: E402
+from boxes import box_scene, small_source_box  # noqa: E402
 
-from addon.core import PatchScene, predict, relative_rms_to_mse, solve  # noqa: E402
+from addon.core import predict, relative_rms_to_mse, solve  # noqa: E402
 from addon.core import solver  # noqa: E402
-from addon.core.reference import area_weighted_mse, rectangle_form_factors, solve_radiosity_system  # noqa: E402
+from addon.core.reference import area_weighted_mse, solve_radiosity_system  # noqa: E402
 
 SEEDS = range(12)
 NEW = (solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS)
@@ -35,18 +35,6 @@ PRICE_SEEDS = range(3)
 
 def use(rule):
     solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS = rule
-
-
-def small_source_box(n=8, reflectivity=0.8, corner=False):
-    """A closed unit box of n x n patches a face, reflectivity R, lit by one ceiling patch of
-    emittance 1 (1/n^2 of the ceiling): at its middle or in a corner. (PatchScene, F)."""
-    origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n)
-    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
-    emission = np.zeros(origin.shape[0])
-    ceiling = np.flatnonzero(face == CEILING).reshape(n, n)
-    emission[ceiling[0, 0] if corner else ceiling[n // 2, n // 2]] = 1.0
-    scene = PatchScene(vertices, triangles, triangle_patch, np.full(origin.shape[0], reflectivity), emission)
-    return scene, rectangle_form_factors(origin, u, v)
 
 
 def colour_box():

@@ -151,15 +151,9 @@ class Batches:
         if self._mse_at[0] == self.chunks:
             return self._mse_at[1]
         spread_sum = 0.0
-        for start in range(0, self.scene.patch_count, MSE_BLOCK):
-            rows = slice(start, start + MSE_BLOCK)
-            area_share = self.weight[rows] / self.channels
-            for k in range(self.channels):
-                weight = self._score(k, rows)
-                weight *= weight  # (score**2)
-                weight *= area_share
-                # (einsum, not a BLAS dot: OpenBLAS's threads would spin beside the walks' threads)
-                spread_sum += float(np.einsum("i,i->", self._spread(k, rows), weight))
+        for k, rows, weight in self._squared_score_weights():
+            # (einsum, not a BLAS dot: OpenBLAS's threads would spin beside the walks' threads)
+            spread_sum += float(np.einsum("i,i->", self._spread(k, rows), weight))
         mse = spread_sum / ((self.chunks - 1) * self.paths)
         self._mse_at = (self.chunks, mse)
         return mse
@@ -169,6 +163,16 @@ class Batches:
         what ``tally`` (n paths) adds to the area-weighted sum of squares of the chunks so far (N)."""
         n, N = tally.paths, self.paths
         total = 0.0
+        for k, rows, weight in self._squared_score_weights():
+            gap = tally.incident[k, rows] / n
+            gap -= self.incident[k, rows] / N
+            np.square(gap, out=gap)
+            total += float(np.einsum("i,i->", gap, weight))
+        return total * (n * N / (N + n))
+
+    def _squared_score_weights(self):
+        """(channel k, rows, score^2 A_j / (C A_T) of those rows) a block of MSE_BLOCK patches at a
+        time: the weights of the area-weighted mean of squared errors, never a (C,P) array."""
         for start in range(0, self.scene.patch_count, MSE_BLOCK):
             rows = slice(start, start + MSE_BLOCK)
             area_share = self.weight[rows] / self.channels
@@ -176,11 +180,7 @@ class Batches:
                 weight = self._score(k, rows)
                 weight *= weight  # (score**2)
                 weight *= area_share
-                gap = tally.incident[k, rows] / n
-                gap -= self.incident[k, rows] / N
-                np.square(gap, out=gap)
-                total += float(np.einsum("i,i->", gap, weight))
-        return total * (n * N / (N + n))
+                yield k, rows, weight
 
     def mse_upper_bound(self, z):
         """The measured MSE (the increments' mean over N: measured_mse to rounding) plus ``z``

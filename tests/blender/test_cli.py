@@ -229,7 +229,10 @@ def test_cli_warns_before_a_slow_run(tmp_path):
                            "--time-limit", "1", "--no-preview", "-q", "-o", str(tmp_path / "slow.blend")],
                           cwd=str(tmp_path), capture_output=True, text=True, timeout=600,
                           env={**os.environ, "PYTHONPATH": ROOT})
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    # the warning is said before the run, whatever the run then does in its second: ends with
+    # the chunks done, or (on a loaded machine) before its first chunk, said in one line
+    first_batch = "the time limit (1 s) ended the run before the first batch"
+    assert proc.returncode == 0 or (proc.returncode == 1 and first_batch in proc.stderr), proc.stderr[-2000:]
     warning = next(line for line in proc.stderr.splitlines() if line.startswith("warning: Predicted"))
     assert "patch size 0.01" in warning and "0.3% error target" in warning
 

@@ -215,7 +215,7 @@ def screen(text, columns):
     return rows + ["".join(row).rstrip()]
 
 
-SLOW = ["--scene", "cornell", "--error", "0.3", "--no-preview"]  # minutes: Ctrl-C comes first
+SLOW = ["--scene", "cornell", "--error", "0.15", "--no-preview"]  # minutes (warned before): Ctrl-C comes first
 
 
 @pytest.mark.parametrize("quiet", [False, True], ids=["progress", "quiet"])

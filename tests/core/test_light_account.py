@@ -1,4 +1,4 @@
-"""Every run says where its light went: the shares of the emitted power absorbed by surfaces
+"""Every run says where its light went, and whether it kept its error target: the shares of the emitted power absorbed by surfaces
 (on the back of faces among them), left the scene and left undistributed, from the run's own
 power accounts (pipeline.light_account_text, shown after a run by the panel and the command line)."""
 import re
@@ -44,3 +44,16 @@ def test_a_closed_box_loses_nothing_and_says_so():
 def test_no_account_without_light():
     assert light_account_text({}) == ""
     assert light_account_text({"emitted": np.zeros(3)}) == ""
+
+
+def test_a_target_missed_at_the_path_cap_is_said():
+    from addon.pipeline import target_missed_text
+
+    text = target_missed_text("paths", 9.5, 5.0)
+    assert "5% error target was not reached" in text and "9.50%" in text and "1.9x" in text, text
+    # kept, or ended for another reason, or no target (a path count), or no measured error: quiet
+    assert target_missed_text("paths", 4.9, 5.0) == ""
+    assert target_missed_text("target", 9.5, 5.0) == ""
+    assert target_missed_text("time_limit", 9.5, 5.0) == ""  # (the time limit has its own warning)
+    assert target_missed_text("paths", 9.5, 0.0) == ""
+    assert target_missed_text("paths", -1.0, 5.0) == ""

@@ -1,0 +1,101 @@
+"""Memory of the command line, ``python -m addon``: the whole process, preview and save included.
+
+benchmarks/memory_cli.py measures it at about a million patches (results/memory_cli.md); here a
+smaller run checks the growth per patch, and the mechanisms that keep it down are checked one by
+one: the preview renders the results without making them lights for Cycles, the solve's cached
+geometry is let go of before the save and the render, and the preview's exposure comes from the
+solve's arrays (the same value as read back from Blender, which copies the colours to read them).
+"""
+
+import os
+import subprocess
+import sys
+
+import bpy
+import pytest
+
+from .conftest import build_test_scene, result_objects
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+MIB = 1 << 20
+
+
+def _peak_of(cmd, cwd):
+    """(exit status, output, the process's peak resident set in bytes), from os.wait4."""
+    log = os.path.join(cwd, "log.txt")
+    with open(log, "w") as f:
+        process = subprocess.Popen(cmd, cwd=cwd, stdout=f, stderr=subprocess.STDOUT,
+                                   env={**os.environ, "PYTHONPATH": ROOT})
+        _, status, usage = os.wait4(process.pid, 0)
+    with open(log) as f:
+        return os.waitstatus_to_exitcode(status), f.read(), usage.ru_maxrss * 1024
+
+
+# The command line's growth above Blender with the extension registered, per patch, at 162,560
+# patches with the preview: 2,255 B when Cycles built a light tree over every emitting triangle of
+# the preview, 1,141-1,243 B since; runs differ by up to 40 MiB (250 B a patch here). At a million
+# patches it is about 0.75 KiB (docs/performance.md, results/memory_cli.md).
+GROWTH_PER_PATCH = 1.75 * 1024
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ru_maxrss in KiB and os.wait4: Linux")
+def test_the_whole_command_line_grows_by_less_than_a_bound_per_patch(tmp_path):
+    status, out, base = _peak_of([sys.executable, "-c", "import bpy, addon; bpy.ops.wm.read_factory_settings("
+                                  "use_empty=True); addon.register()"], str(tmp_path))
+    assert status == 0, out[-3000:]
+    status, out, peak = _peak_of([sys.executable, "-m", "addon", "--scene", "cornell", "--patch-size", "0.007",
+                                  "--error", "40", "--resolution", "64", "--samples", "1", "--threads", "2",
+                                  "-o", str(tmp_path / "c.blend"), "-q"], str(tmp_path))
+    assert status == 0, out[-3000:]
+    assert "cornell: 162,560 patches" in out and (tmp_path / "c.png").exists(), out[-3000:]
+    growth = (peak - base) / 162_560
+    assert growth < GROWTH_PER_PATCH, (f"{peak / MIB:.0f} MiB at 162,560 patches, {base / MIB:.0f} MiB for Blender "
+                                       f"and the extension: {growth:.0f} B a patch")
+
+
+def _solve(blender, output="BOTH"):
+    build_test_scene()
+    settings = blender.scene.radiosity
+    settings.target_error, settings.threads, settings.output = 20.0, 1, output
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+
+
+def test_the_preview_renders_the_results_without_emission_sampling_and_restores_it(blender):
+    from addon.__main__ import preview_settings
+
+    _solve(blender)
+    materials = {slot.material for o in result_objects() for slot in o.material_slots}
+    assert materials and all(m.cycles.emission_sampling == "AUTO" for m in materials)
+    sources = [o for o in bpy.data.objects if o.type == "MESH" and "radiosity_source" not in o.keys()]
+    changes = preview_settings(blender.scene, sources, 32, 1)
+    # seen by camera rays only (no bounces): Cycles does not make a light of every emitting triangle
+    assert all(m.cycles.emission_sampling == "NONE" for m in materials)
+    changes.restore()
+    assert all(m.cycles.emission_sampling == "AUTO" for m in materials)
+
+
+@pytest.mark.parametrize("output", ["BOTH", "FACE", "VERTEX"])
+def test_the_preview_exposure_from_the_arrays_is_the_one_read_back(blender, output):
+    from addon import operators, scene_io
+    from addon.__main__ import _auto_exposure, preview_exposure
+
+    exposures = []
+    operators.OUTPUT_LISTENER = lambda out: exposures.append(preview_exposure(out, output))
+    try:
+        _solve(blender, output)
+    finally:
+        operators.OUTPUT_LISTENER = None
+    assert len(exposures) == 1 and exposures[0] != 0.0
+    assert exposures[0] == _auto_exposure(scene_io)  # exactly: the same float32 values, the same median
+
+
+def test_the_command_line_lets_go_of_the_solve_before_saving(blender, tmp_path):
+    from addon import patches
+    from addon.__main__ import main
+
+    build_test_scene()
+    assert main(["--current", "--no-preview", "--error", "30", "--threads", "1", "-q",
+                 "-o", str(tmp_path / "out.blend")]) == 0
+    assert result_objects()
+    # the meshed geometry and the core's scene with its ray tracer, which the panel keeps for a re-run
+    assert not patches._GEOMETRY_CACHE._entries
