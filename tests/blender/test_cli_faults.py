@@ -146,6 +146,9 @@ class Terminal:
         if pid == 0:  # the child: the terminal's size, then the command line
             try:
                 fcntl.ioctl(1, termios.TIOCSWINSZ, struct.pack("HHHH", 24, columns, 0, 0))
+                # as a shell starts a job in the foreground: a test run started in the background
+                # (CI) has SIGINT ignored, which exec would hand on, and a program rightly keeps
+                signal.signal(signal.SIGINT, signal.SIG_DFL)
                 os.chdir(cwd)
                 os.execve(sys.executable, [sys.executable, "-m", "addon", *args], ENV)
             finally:
