@@ -21,30 +21,13 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "core"))
 
-from boxes import box_scene, small_source_box  # noqa: E402
+from boxes import bright_box, colour_box, grey_room, small_source_box  # noqa: E402
 
 from addon.core import predict, relative_rms_to_mse, solve, two_way  # noqa: E402
 from addon.core.reference import area_weighted_mse, solve_radiosity_system  # noqa: E402
 
 SEEDS = range(12)
 SHARES = (0.0, 0.5)
-
-
-def colour_box():
-    R = [(0.9,) * 3, (0.2,) * 3, (0.8, 0.3, 0.1), (0.1, 0.7, 0.3), (0.85,) * 3, (0.3, 0.3, 0.6)]
-    E = [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4
-    scene, F, _ = box_scene(R, E, n=4)
-    return scene, F
-
-
-def grey_room():
-    scene, F, _ = box_scene([(0.5,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, (1.0, 1.4, 0.8), n=8)
-    return scene, F
-
-
-def bright_box():
-    scene, F, _ = box_scene([(0.95,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, n=6)
-    return scene, F
 
 
 CASES = [  # (name, maker, paths for the fixed runs)
@@ -87,56 +70,45 @@ def fixed():
     return lines
 
 
+STOP_HEADER = ["| scene | share | mean | median | worst | over 1 | paths | time (s) | stopped |", "|---|---|---|---|---|---|---|---|---|"]
+
+
+def _stop_rows(name, make, relative, shares):
+    """Automatic with the measured stop rule at ``relative``, each allotment share of ``shares``:
+    delivered MSE over the target (12 seeds, one thread), mean, median, worst, runs over; mean
+    paths; the 12 runs' seconds; how they ran. The table's rows."""
+    scene, F = make()
+    exact = exact_of(scene, F)
+    target = relative_rms_to_mse(predict(scene), relative)
+    rows = []
+    for share in shares:
+        two_way.RECEIVED_SHARE = share
+        ratios, paths, seconds, ran = [], [], 0.0, set()
+        for seed in SEEDS:
+            start = time.perf_counter()
+            r = solve(scene, target_mse=target, seed=seed, stop_rule="measured", threads=1, method="auto")
+            seconds += time.perf_counter() - start
+            paths.append(r.paths)
+            ran.add(f"{r.method}/{r.stopped}")
+            ratios.append(area_weighted_mse(r.reflected, exact, scene.patch_area) / target)
+        ratios = np.array(ratios)
+        row = (f"| {name} | {share:g} | {ratios.mean():.2f} | {np.median(ratios):.2f} | {ratios.max():.2f} | "
+               f"{np.sum(ratios > 1)}/{len(ratios)} | {np.mean(paths):,.0f} | {seconds:.1f} | {','.join(sorted(ran))} |")
+        print(row, flush=True)
+        rows.append(row)
+    return rows
+
+
 def stop():
-    """Automatic with the measured stop rule at 5%: delivered MSE over the target (12 seeds, one
-    thread), mean, median, worst, runs over; mean paths; the 12 runs' seconds; how they ran."""
-    lines = ["| scene | share | mean | median | worst | over 1 | paths | time (s) | stopped |", "|---|---|---|---|---|---|---|---|---|"]
-    for name, make, _ in CASES:
-        scene, F = make()
-        exact = exact_of(scene, F)
-        target = relative_rms_to_mse(predict(scene), 0.05)
-        for share in SHARES[:2]:
-            two_way.RECEIVED_SHARE = share
-            ratios, paths, seconds, ran = [], [], 0.0, set()
-            for seed in SEEDS:
-                start = time.perf_counter()
-                r = solve(scene, target_mse=target, seed=seed, stop_rule="measured", threads=1, method="auto")
-                seconds += time.perf_counter() - start
-                paths.append(r.paths)
-                ran.add(f"{r.method}/{r.stopped}")
-                ratios.append(area_weighted_mse(r.reflected, exact, scene.patch_area) / target)
-            ratios = np.array(ratios)
-            row = (f"| {name} | {share:g} | {ratios.mean():.2f} | {np.median(ratios):.2f} | {ratios.max():.2f} | "
-                   f"{np.sum(ratios > 1)}/{len(ratios)} | {np.mean(paths):,.0f} | {seconds:.1f} | {','.join(sorted(ran))} |")
-            print(row, flush=True)
-            lines.append(row)
-    return lines
+    """Every case at 5% (``_stop_rows``)."""
+    return STOP_HEADER + [row for name, make, _ in CASES for row in _stop_rows(name, make, 0.05, SHARES[:2])]
 
 
 def stop2():
     """The small-source boxes at 2%, as ``stop`` (the corner with the pilot's allotment only:
     by area it runs to its cap)."""
-    lines = ["| scene | share | mean | median | worst | over 1 | paths | time (s) | stopped |", "|---|---|---|---|---|---|---|---|---|"]
-    for name, make, _ in CASES[:2]:
-        scene, F = make()
-        exact = exact_of(scene, F)
-        target = relative_rms_to_mse(predict(scene), 0.02)
-        for share in SHARES[1:] if "corner" in name else SHARES:
-            two_way.RECEIVED_SHARE = share
-            ratios, paths, seconds, ran = [], [], 0.0, set()
-            for seed in SEEDS:
-                start = time.perf_counter()
-                r = solve(scene, target_mse=target, seed=seed, stop_rule="measured", threads=1, method="auto")
-                seconds += time.perf_counter() - start
-                paths.append(r.paths)
-                ran.add(f"{r.method}/{r.stopped}")
-                ratios.append(area_weighted_mse(r.reflected, exact, scene.patch_area) / target)
-            ratios = np.array(ratios)
-            row = (f"| {name} | {share:g} | {ratios.mean():.2f} | {np.median(ratios):.2f} | {ratios.max():.2f} | "
-                   f"{np.sum(ratios > 1)}/{len(ratios)} | {np.mean(paths):,.0f} | {seconds:.1f} | {','.join(sorted(ran))} |")
-            print(row, flush=True)
-            lines.append(row)
-    return lines
+    return STOP_HEADER + [row for name, make, _ in CASES[:2]
+                          for row in _stop_rows(name, make, 0.02, SHARES[1:] if "corner" in name else SHARES)]
 
 
 def sample():

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "core"))
 
-from boxes import box_scene, small_source_box  # noqa: E402
+from boxes import bright_box, colour_box, grey_room, small_source_box  # noqa: E402
 
 from addon.core import predict, relative_rms_to_mse, solve  # noqa: E402
 from addon.core import solver  # noqa: E402
@@ -35,24 +35,6 @@ PRICE_SEEDS = range(3)
 
 def use(rule):
     solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS = rule
-
-
-def colour_box():
-    R = [(0.9,) * 3, (0.2,) * 3, (0.8, 0.3, 0.1), (0.1, 0.7, 0.3), (0.85,) * 3, (0.3, 0.3, 0.6)]
-    E = [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4
-    scene, F, _ = box_scene(R, E, n=4)
-    return scene, F
-
-
-def bright_box():
-    """Reflectivity 0.95 everywhere, the whole ceiling emitting: long paths, and at 10% short runs."""
-    scene, F, _ = box_scene([(0.95,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, n=6)
-    return scene, F
-
-
-def grey_room():
-    scene, F, _ = box_scene([(0.5,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, (1.0, 1.4, 0.8), n=8)
-    return scene, F
 
 
 CASES = [  # (name, scene maker, methods, relative targets)

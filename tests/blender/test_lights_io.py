@@ -169,6 +169,21 @@ def test_the_world_colour_and_strength(blender):
     assert lights_io.read_world(blender.scene, []) is None
 
 
+def _world_image(blender, name, image, strength):
+    """A new world ``name`` lighting the scene by ``image`` (an Environment Texture) at ``strength``."""
+    world = bpy.data.worlds.new(name)
+    blender.scene.world = world
+    if not world.use_nodes:
+        world.use_nodes = True
+    tree = world.node_tree
+    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    environment = tree.nodes.new("ShaderNodeTexEnvironment")
+    environment.image = image
+    tree.links.new(environment.outputs["Color"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = strength
+    return world
+
+
 def test_an_environment_image_is_read_top_row_first(blender):
     """An equirectangular image lights by its pixels, top row first (Blender stores the bottom
     row first), in linear colour."""
@@ -176,16 +191,7 @@ def test_an_environment_image_is_read_top_row_first(blender):
     pixels = np.zeros((4, 8, 4), np.float32)
     pixels[3] = (1.0, 0.5, 0.25, 1.0)  # Blender's last row: the top of the image, the zenith
     image.pixels.foreach_set(pixels.ravel())
-    world = bpy.data.worlds.new("Env")
-    blender.scene.world = world
-    if not world.use_nodes:
-        world.use_nodes = True
-    tree = world.node_tree
-    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
-    env = tree.nodes.new("ShaderNodeTexEnvironment")
-    env.image = image
-    tree.links.new(env.outputs["Color"], background.inputs["Color"])
-    background.inputs["Strength"].default_value = 2.0
+    _world_image(blender, "Env", image, 2.0)
     sky = lights_io.read_world(blender.scene, [])
     assert sky.image.shape == (4, 8, 3)
     np.testing.assert_allclose(sky.image[0], np.tile([2.0, 1.0, 0.5], (8, 1)))
@@ -454,14 +460,7 @@ def _room_under_a_world_image(blender, image):
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
     room_f = room_f[1:]  # open at the top: the sky comes in
     make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
-    world = bpy.data.worlds.new("Grey sky")
-    blender.scene.world = world
-    tree = world.node_tree
-    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
-    environment = tree.nodes.new("ShaderNodeTexEnvironment")
-    environment.image = image
-    tree.links.new(environment.outputs["Color"], background.inputs["Color"])
-    background.inputs["Strength"].default_value = 0.05
+    _world_image(blender, "Grey sky", image, 0.05)
     blender.scene.radiosity.patch_size, blender.scene.radiosity.threads = 0.5, 1
 
 

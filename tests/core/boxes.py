@@ -70,6 +70,28 @@ def small_source_box(n=8, reflectivity=0.8, corner=False):
     return scene, rectangle_form_factors(origin, u, v)
 
 
+def colour_box():
+    """A closed box of 4 x 4 patches a face, each face its own colour, the ceiling emitting 1.
+    (PatchScene, F)."""
+    R = [(0.9,) * 3, (0.2,) * 3, (0.8, 0.3, 0.1), (0.1, 0.7, 0.3), (0.85,) * 3, (0.3, 0.3, 0.6)]
+    E = [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4
+    scene, F, _ = box_scene(R, E, n=4)
+    return scene, F
+
+
+def grey_room():
+    """A closed 1 x 1.4 x 0.8 room of 8 x 8 patches a face, R 0.5, the ceiling emitting 1. (PatchScene, F)."""
+    scene, F, _ = box_scene([(0.5,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, (1.0, 1.4, 0.8), n=8)
+    return scene, F
+
+
+def bright_box():
+    """Reflectivity 0.95 everywhere, the whole ceiling emitting: long paths, and at 10% short runs.
+    (PatchScene, F)."""
+    scene, F, _ = box_scene([(0.95,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, n=6)
+    return scene, F
+
+
 def open_box_with_card(reflectivity=0.6):
     """A unit box open at the top (n = 2) with a card facing down at half height, which rays
     from above hit from behind; the first 4 patches (the floor) emit 1: rays escape and are
