@@ -514,10 +514,13 @@ def back_light_warning(patches: Patches, scene, blocked, seed=0):
     if share <= BLOCKED_WARNING:
         return None
     owner = patches.combined.patch_object[patch[in_view]]
+    # summed per (object, source row) at once; the few distinct pairs then named
+    pair_rows, which = np.unique(np.stack([owner, source[in_view]]), axis=1, return_inverse=True)
+    pair_weights = np.bincount(which.ravel(), weights=weight[in_view], minlength=pair_rows.shape[1])
     pairs = {}
-    for k, row, w in zip(owner, source[in_view], weight[in_view]):
+    for (k, row), w in zip(pair_rows.T.tolist(), pair_weights.tolist()):
         key = (int(k), source_label(patches, scene, int(row)))
-        pairs[key] = pairs.get(key, 0.0) + float(w)
+        pairs[key] = pairs.get(key, 0.0) + w
     total = sum(pairs.values())
     ranked = sorted(pairs.items(), key=lambda item: -item[1])
     named = [f"faces of '{patches.objects[k].name}' lit by {label} ({share * w / total:.1%})"
