@@ -54,6 +54,13 @@ class RegionTracer:
         self.triangle_count = triangle_corners.shape[0]
         self._index = [np.flatnonzero(triangle_region == k).astype(np.int32) for k in range(regions.count)]
         self._tracers = [RayTracer(triangle_corners[index]) if index.size else None for index in self._index]
+        # Each region's box in its own frame (float32, for the cheap test of a start inside it),
+        # and how far apart any two boxes are (a ray from inside one that meets something
+        # nearer than that never reaches the other).
+        self._home_lower = (regions.lower - regions.centre).astype(np.float32)
+        self._home_upper = (regions.upper - regions.centre).astype(np.float32)
+        apart = np.maximum(0.0, np.maximum(regions.lower[:, None] - regions.upper[None], regions.lower[None] - regions.upper[:, None]))
+        self._apart = np.sqrt(np.einsum("abi,abi->ab", apart, apart))
 
     def first_hit(self, origins, directions, region):
         return self.first_hit_barycentric(origins, directions, region)[0]
@@ -68,28 +75,43 @@ class RegionTracer:
         u, v = np.zeros(n, np.float32), np.zeros(n, np.float32)
         t = np.full(n, np.inf, np.float32)
         normal = np.zeros((n, 3), np.float32)
-        unit_origins = np.asarray(origins, np.float64) + self.regions.centre[region]
-        d64 = np.asarray(directions, np.float64)
-        at_home = np.zeros(n, bool)  # traced in its own region as it is
-        for home in (True, False):  # from inside its own region first: the nearest hit, mostly
-            for k, tracer in enumerate(self._tracers):
-                if tracer is None:
-                    continue
-                rows = np.flatnonzero((region == k) if home else ~(at_home & (region == k)))
-                entry = self.regions.entry(k, unit_origins[rows], d64[rows])
-                keep = (entry == 0) if home else (entry < t[rows])
-                rows, entry = rows[keep], entry[keep]
-                if rows.size == 0:
-                    continue
-                if home:
-                    at_home[rows] = True
-                    o = origins[rows]
-                else:
-                    o = (unit_origins[rows] + entry[:, None] * d64[rows] - self.regions.centre[k]).astype(np.float32)
-                triangle, uk, vk, tk, nk = tracer.first_hit_barycentric(np.ascontiguousarray(o), np.ascontiguousarray(directions[rows]))
-                tk = tk + entry  # (float64 where carried: from the origin given)
-                nearer = (triangle >= 0) & (tk < t[rows])
-                at = rows[nearer]
-                hit[at] = self._index[k][triangle[nearer]]
-                u[at], v[at], t[at], normal[at] = uk[nearer], vk[nearer], tk[nearer], nk[nearer]
+        inside = np.zeros(n, bool)  # started inside its own region's box: traced there as it is
+        for k, tracer in enumerate(self._tracers):
+            home = region == k
+            whole = bool(home.all())  # (a walk's rays mostly: no gathers, no scatters)
+            o = origins if whole else origins[home]
+            within = ((o >= self._home_lower[k]) & (o <= self._home_upper[k])).all(axis=1)
+            if whole and within.all():
+                inside[:] = True
+                hit, u, v, t, normal = tracer.first_hit_barycentric(origins, directions)
+                hit = np.where(hit >= 0, self._index[k].take(hit, mode="wrap"), -1).astype(np.int32)
+                break
+            rows = np.flatnonzero(home)[within]
+            if rows.size == 0:
+                continue
+            inside[rows] = True
+            triangle, uk, vk, tk, nk = tracer.first_hit_barycentric(np.ascontiguousarray(origins[rows]), np.ascontiguousarray(directions[rows]))
+            hit[rows] = np.where(triangle >= 0, self._index[k].take(triangle, mode="wrap"), -1)
+            u[rows], v[rows], t[rows], normal[rows] = uk, vk, tk, nk
+        for k, tracer in enumerate(self._tracers):  # then every other box the ray may reach first
+            if tracer is None:
+                continue
+            rows = np.flatnonzero(t > np.where(inside, self._apart[region, k], 0.0))
+            rows = rows[~(inside[rows] & (region[rows] == k))]
+            if rows.size == 0:
+                continue
+            unit_origins = origins[rows].astype(np.float64) + self.regions.centre[region[rows]]
+            d64 = directions[rows].astype(np.float64)
+            entry = self.regions.entry(k, unit_origins, d64)
+            keep = entry < t[rows]
+            rows, entry = rows[keep], entry[keep]
+            if rows.size == 0:
+                continue
+            o = (unit_origins[keep] + entry[:, None] * d64[keep] - self.regions.centre[k]).astype(np.float32)
+            triangle, uk, vk, tk, nk = tracer.first_hit_barycentric(o, np.ascontiguousarray(directions[rows]))
+            tk = tk + entry  # (float64: from the origin given)
+            nearer = (triangle >= 0) & (tk < t[rows])
+            at = rows[nearer]
+            hit[at] = self._index[k][triangle[nearer]]
+            u[at], v[at], t[at], normal[at] = uk[nearer], vk[nearer], tk[nearer], nk[nearer]
         return hit, u, v, t, normal

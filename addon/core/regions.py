@@ -73,20 +73,27 @@ class Regions:
 def split_regions(lower, upper, side, ratio=SPLIT_RATIO, max_regions=MAX_REGIONS):
     """The :class:`Regions` of patches with unit-space bounding boxes ``lower``, ``upper`` (P,3)
     and sides ``side`` (P,): a part is cut at its widest empty gap (along any axis, between the
-    patches' boxes) while it is more than ``ratio`` times its smallest side across, up to
-    ``max_regions`` parts; None where that leaves one region."""
+    patches' boxes), or where it has none its patches more than 1 / ``ratio`` of its size go
+    apart from the others, while it is more than ``ratio`` times its smallest side across, up
+    to ``max_regions`` parts; None where that leaves one region."""
     done, todo = [], [np.arange(lower.shape[0])]
     while todo:
         part = todo.pop()
         size = np.linalg.norm(upper[part].max(axis=0) - lower[part].min(axis=0))
-        cut = None
+        below = None
         if size > ratio * side[part].min() and len(done) + len(todo) + 2 <= max_regions:
             cut = widest_gap(lower[part], upper[part])
-        if cut is None:
+            if cut is not None:
+                below = lower[part, cut[0]] < cut[1]
+            else:
+                # No gap (a house on a terrain): the patches large enough for a frame of the
+                # whole part's size go apart from the small ones (their boxes may overlap).
+                below = side[part] > size / ratio
+                if below.all() or not below.any():
+                    below = None
+        if below is None:
             done.append(part)
             continue
-        axis, position = cut
-        below = lower[part, axis] < position
         todo += [part[below], part[~below]]
     if len(done) == 1:
         return None

@@ -49,7 +49,7 @@ def test_a_far_cube_leaves_a_lamp_lit_room_as_it_is(blender, distance):
 
 
 def test_a_room_joined_to_a_1000_km_strip_says_so_and_does_not_blame_its_lamp(blender):
-    """A room standing on a strip 1,000 km long (one piece of the scene: no gap parts them),
+    """A room beside a strip 1,000 km long that touches its floor (no gap parts them),
     its lamp 3 cm under the ceiling: the notes say the room's faces are small beside it for
     float32 positions (6 cm apart there), and none says the lamp's light reaches no face.
     (Before offsets of the patches' own size, the lamp's rays started 10 m off it, all of its
@@ -59,8 +59,11 @@ def test_a_room_joined_to_a_1000_km_strip_says_so_and_does_not_blame_its_lamp(bl
 
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
     make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
-    strip_v = np.array([[0, 0, 0], [1e6, 0, 0], [1e6, 1, 0], [0, 1, 0]], float)
-    make_object("Strip", strip_v, [[0, 1, 2, 3]]).select_set(False)
+    # (1,000 faces of 1,000 m beside the room's floor: none large enough for a frame of its own)
+    x = np.arange(1001) * 1e3
+    strip_v = np.concatenate([np.stack([x, np.ones_like(x), 0 * x], 1), np.stack([x, 2 + 0 * x, 0 * x], 1)])
+    strip_f = [[k, k + 1, 1002 + k, 1001 + k] for k in range(1000)]
+    make_object("Strip", strip_v, strip_f).select_set(False)
     _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.97), energy=40.0)
     objects, _ = scene_io.read_selection(blender)
     _, notes = patch_making.scene_and_notes(patch_making.make_patches(objects, 0.25))

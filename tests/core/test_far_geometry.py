@@ -117,30 +117,44 @@ def test_far_parts_of_the_scene_take_region_frames_of_their_own():
     assert _room(None)[0].geometry.regions is None
 
 
-def _room_on_a_strip(length):
-    """test_stress's box joined to a 1 m wide strip ``length`` m long along x, which touches it:
-    no empty gap parts them, so they are one region whatever the length."""
-    origin, u, v, R, E, _, _ = _exact_box()
-    V, Tr, TP = rectangles_to_mesh(origin, u, v)
+def _room_on_a_strip(length, pieces=1):
+    """test_stress's box beside a 1 m wide strip ``length`` m long along x, of ``pieces`` patches
+    (each then length / pieces m long), which touches its floor's edge: no empty gap parts them.
+    (scene, exact b, exact variance of the box)."""
+    origin, u, v, R, E, b, var = _exact_box()
     P = origin.shape[0]
-    V = np.vstack([V, [[0, 0, 0], [length, 0, 0], [0, 0, -1]]])
-    return PatchScene(V, np.vstack([Tr, [[len(V) - 3, len(V) - 2, len(V) - 1]]]), np.append(TP, P),
-                      np.append(R, 0.5), np.append(E, 0.0))
+    step = length / pieces
+    strip = np.stack([np.arange(pieces) * step, np.full(pieces, 1.3), np.zeros(pieces)], axis=1)  # (the box is 1.3 deep)
+    V, Tr, TP = rectangles_to_mesh(np.vstack([origin, strip]), np.vstack([u, np.tile([step, 0, 0], (pieces, 1))]),
+                                   np.vstack([v, np.tile([0, 1, 0], (pieces, 1))]))
+    scene = PatchScene(V, Tr, TP, np.append(R, np.full(pieces, 0.5)), np.append(E, np.zeros(pieces)))
+    return scene, b, var
+
+
+def test_a_room_on_a_strip_of_one_long_face_is_a_region_of_its_own():
+    """A box standing on one face 1e5 m long (a terrain of large faces, no gap between them):
+    the long face, large enough for a frame of the whole scene, is a region apart, and the box
+    is its exact solution patch by patch."""
+    scene, b, var = _room_on_a_strip(1e5)
+    assert scene.geometry.regions is not None and scene.geometry.regions.count == 2
+    r = solve(scene, paths=PATHS, seed=87, threads=2, method="walk")
+    z = (r.reflected[: b.size, 0] - b) / np.sqrt(var / PATHS)
+    assert np.abs(z).max() < Z, np.abs(z).max()
 
 
 def test_a_room_too_small_for_its_regions_float32_positions_is_reported():
-    """Where a region is itself large beside its patches (a room on a strip 1e5 m long, no gap
-    between them), float32 spacings of its coordinates set offsets of more than 2% of a patch's
-    size: the build says how many patches and how far; beside a far object (two regions) and
-    alone it says nothing."""
+    """Where a region is itself large beside its patches (a room on a strip 1e5 m long of 50 m
+    pieces: no gap parts them, and no piece is large enough for a frame of the whole), float32
+    spacings of its coordinates set offsets of more than 2% of a patch's size: the build says
+    how many patches and how far; beside a far object (two regions) and alone it says nothing."""
     with pytest.warns(UserWarning, match=r"\d+ patches are small beside the scene's extent .* off them"):
-        g = _room_on_a_strip(1e5).geometry
+        g = _room_on_a_strip(1e5, pieces=2000)[0].geometry
     assert g.regions is None
     import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        _room_on_a_strip(1e3)
+        _room_on_a_strip(1e3, pieces=20)
         _room(1e6)
         _room(None)
 
