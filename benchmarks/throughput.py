@@ -96,8 +96,8 @@ def own_rays_factor(scene, estimator, threads, paths, rounds=5, every=4, limit=1
                 casts.append((np.ascontiguousarray(origins), np.ascontiguousarray(directions)))
 
     real_first, real_bary = tracer.first_hit, tracer.first_hit_barycentric
-    tracer.first_hit = lambda o, d: (keep(o, d), real_first(o, d))[1]
-    tracer.first_hit_barycentric = lambda o, d: (keep(o, d), real_bary(o, d))[1]
+    tracer.first_hit = lambda o, d, *region: (keep(o, d), real_first(o, d, *region))[1]
+    tracer.first_hit_barycentric = lambda o, d, *region: (keep(o, d), real_bary(o, d, *region))[1]
     try:
         solve(scene, estimator, paths=paths, threads=threads, seed=99, **kw)
     finally:

@@ -37,7 +37,7 @@ import numpy as np
 
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
-from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front
+from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front, region_of
 from .sampling import SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights, stratified_by_patch
 from .tables import WalkTables
 from .tallies import ChunkTally
@@ -233,6 +233,8 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, value):
         normal_s = g.patch_normal_rows.take(s, axis=1)
         e -= normal_s * g.ray_offsets(s, np.float64)
         e -= surface[:, at_patch]  # surface to surface (the shadow ray follows it from x)
+        if g.regions is not None:  # (from the source's region frame to the receiver's)
+            e += g.regions.shift(g.regions.of(s)) - g.regions.shift(g.regions.of(patch[at_patch]))
         length = np.sqrt(np.einsum("in,in->n", e, e))
         e /= length
         cos_x = np.einsum("in,in->n", normal[:, at_patch], e)
@@ -246,7 +248,7 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, value):
     if at_light.size:
         lit = np.zeros_like(value)
         light = source[at_light] - P
-        x_world = g.to_world(surface[:, at_light].T).T
+        x_world = g.to_world(surface[:, at_light].T, patch[at_light]).T
         for k in np.unique(light):
             here = light == k
             cols = at_light[here]
@@ -260,7 +262,7 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, value):
         live |= lit.any(axis=0) & ~unshadowed
     live = np.flatnonzero(live)
     if live.size:
-        hit, hit_patch, front, t = _trace(tables, x[:, live], towards[:, live])
+        hit, hit_patch, front, t = _trace(tables, x[:, live], towards[:, live], g.region_of(patch[live]))
         # Seen if nothing is met before the point looked at; on an emitting patch, also if the
         # patch is met first. (A patch's points lie a ray offset off it: at grazing angles a ray
         # to a point near its far edge passes the point and misses the patch. Asking for the
@@ -298,7 +300,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
     towards = add_sphere_points(g.patch_normal_rows.take(patch, axis=1), u[5], u[6])
     towards = towards.astype(np.float64)
     towards /= np.sqrt(np.einsum("in,in->n", towards, towards))  # (normal + a sphere point: cosine distributed)
-    hit, source, front, t = _trace(tables, x, towards)
+    hit, source, front, t = _trace(tables, x, towards, g.region_of(patch))
     met = np.flatnonzero(front & (hit >= 0) & (gathering.emission[:, source].any(axis=0)) & (source != patch))
     if met.size:
         s = source[met]
@@ -312,11 +314,12 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
     return patch.size
 
 
-def _trace(tables, origins, directions):
-    """Shadow or cosine rays (3,n rows, unit space): (triangle, patch, front, distance)."""
+def _trace(tables, origins, directions, region=None):
+    """Shadow or cosine rays (3,n rows, unit space; ``region``: their origins' region frames,
+    where the scene has regions): (triangle, patch, front, distance)."""
     o = np.ascontiguousarray(origins.T, dtype=np.float32)
     d = np.ascontiguousarray(directions.T, dtype=np.float32)
-    triangle, u, v, t, ng = tables.outside_turn(tables.tracer.first_hit_barycentric, o, d)
+    triangle, u, v, t, ng = tables.outside_turn(tables.tracer.first_hit_barycentric, o, d, region)
     patch = hit_patches(tables, triangle, u, v)
     return triangle, patch, meets_front(d.T, ng) & (triangle >= 0), t
 
@@ -346,6 +349,7 @@ class ReflectedPoints:
         patch, x, value = samples
         factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
         self.power = np.ascontiguousarray((value * factor.take(patch, axis=1)).T)
+        self.patch = patch
         self.points = np.asarray(x, dtype=np.float32)
         self.normals = geometry.patch_normal_rows.take(patch, axis=1)
 
@@ -355,6 +359,10 @@ class ReflectedPoints:
         as :meth:`.lights.Lights.unit_rays` gives them (the points are in unit space already:
         ``geometry`` is not read)."""
         return self.points.take(rows, axis=1), add_sphere_points(self.normals.take(rows, axis=1), u[2], u[3])
+
+    def regions(self, rows, geometry):
+        """(n,) the region frame of samples ``rows``' points (their patches'), or None."""
+        return geometry.region_of(self.patch.take(rows))
 
 
 def reflected_sources(tables, emission, samples):
@@ -386,7 +394,7 @@ def fate_shares(tables, seed):
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(FATE_STREAM,))))
     source = tables.sources.sample(FATE_RAYS, rng)
     u = rng.random((tables.uniforms_per_ray, FATE_RAYS), dtype=np.float32)
-    hits = ray_cast(tables, *leave_sources(tables, source, u))
+    hits = ray_cast(tables, *leave_sources(tables, source, u), region_of(tables, source))
     escaped = np.count_nonzero(hits.hit < 0)
     blocked = np.count_nonzero((hits.hit >= 0) & ~hits.front)
     if escaped + blocked == 0:

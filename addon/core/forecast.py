@@ -97,9 +97,10 @@ def raw_rate(scene, rays=1 << 14, seed=0):
     patch = rng.integers(0, scene.patch_count, rays).astype(np.int32)
     u = rng.random((5, rays), dtype=np.float32)
     origins, directions = points_on_patches(g, patch, u[4], u[0], u[1]), cosine_directions(g, patch, u[2], u[3])
-    g.surface_tracer.first_hit(origins, directions)  # (built, warm)
+    region = g.region_of(patch)
+    g.surface_tracer.first_hit(origins, directions, region)  # (built, warm)
     start = time.perf_counter()
-    g.surface_tracer.first_hit(origins, directions)
+    g.surface_tracer.first_hit(origins, directions, region)
     return rays / max(time.perf_counter() - start, 1e-9)
 
 

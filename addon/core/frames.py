@@ -42,10 +42,10 @@ LIGHT_OFFSET_SPACINGS = 4
 
 def local_offsets(side, largest_coordinate):
     """(ray offsets, edge insets), each (n,) float64 unit space, of patches of unit-space
-    ``side`` (n,) in a scene whose unit-space coordinates reach ``largest_coordinate``: the
+    ``side`` (n,) whose frame's coordinates reach ``largest_coordinate`` (a number, or (n,)): the
     relative ones, or less for patches small beside the scene, never below the float32
     spacings that rounding of positions needs."""
-    spacing = float(np.spacing(np.float32(largest_coordinate)))
+    spacing = np.spacing(np.asarray(largest_coordinate, np.float32)).astype(np.float64)
     side = np.asarray(side, dtype=np.float64)
     offset = np.maximum(RAY_OFFSET_SPACINGS * spacing, np.minimum(RELATIVE_RAY_OFFSET, LOCAL_RAY_OFFSET * side))
     inset = np.maximum(EDGE_INSET_SPACINGS * spacing, np.minimum(RELATIVE_EDGE_INSET, LOCAL_EDGE_INSET * side))

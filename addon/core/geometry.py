@@ -22,7 +22,8 @@ from .frames import (
     parallelogram_frames,
 )
 from .patch_grids import patch_grids
-from .raytrace import RayTracer
+from .raytrace import RayTracer, RegionTracer
+from .regions import Regions, split_regions
 from .validation import (
     MIN_PATCH_NORMAL_COSINE,
     RELATIVE_DEGENERATE_AREA,
@@ -77,6 +78,9 @@ class Geometry:
     # every patch takes those (ordinary scenes: then ``ray_offset`` is every patch's)
     patch_ray_offset: np.ndarray | None = None
     patch_edge_inset: np.ndarray | None = None
+    # Parts of the scene far apart, each with positions in a frame of its own (.regions): then
+    # every position above is in its patch's region frame; None where the scene is one frame
+    regions: Regions | None = None
 
     @property
     def patch_count(self):
@@ -164,9 +168,18 @@ class Geometry:
         largest = np.abs(unit_origins).max(axis=0).astype(np.float32)
         return LIGHT_OFFSET_SPACINGS * np.spacing(largest).astype(np.float64)
 
-    def to_world(self, points):
-        """Unit-space points (n,3) back in the scene's coordinates, float64."""
-        return np.asarray(points, dtype=np.float64) * self.diagonal + self.centre
+    def to_world(self, points, patch=None):
+        """Unit-space points (n,3) back in the scene's coordinates, float64 (points of the
+        given ``patch`` (n,) each, in its region's frame, where the scene has regions)."""
+        points = np.asarray(points, dtype=np.float64)
+        if self.regions is not None:
+            points = points + self.regions.centre[self.regions.of(patch)]
+        return points * self.diagonal + self.centre
+
+    def region_of(self, patch):
+        """(n,) int32 the region frame of each of the given patches' positions, or None where
+        the scene is one frame."""
+        return None if self.regions is None else self.regions.of(patch)
 
     @property
     def parallelogram_frame(self):
@@ -248,7 +261,10 @@ class Geometry:
 
     @cached_property
     def tracer(self):
-        """The Embree scene over these triangles, built on first use and then reused."""
+        """The Embree scene over these triangles, built on first use and then reused (one a
+        region, where the scene has regions)."""
+        if self.regions is not None:
+            return RegionTracer(self.triangle_corners, self.regions.of(self.triangle_patch), self.regions)
         return RayTracer(self.triangle_corners)
 
     @property
@@ -311,20 +327,27 @@ class UnitCorners:
     for: the same numbers as indexing the whole array, without holding it (rounded to
     ``dtype`` where given)."""
 
-    def __init__(self, vertices, triangles, centre, diagonal, rows=None, dtype=None):
+    def __init__(self, vertices, triangles, centre, diagonal, rows=None, dtype=None, frames=None):
         self.vertices, self.triangles, self.rows = vertices, triangles, rows
         self.centre, self.diagonal, self.dtype = centre, diagonal, dtype
+        # (region centres (K,3), region of each of ``triangles`` (T,)): corners in their
+        # regions' frames (.regions), or None
+        self.frames = frames
 
     def float32(self):
         """These corners rounded to float32 (the rows of Geometry.triangle_corners)."""
-        return UnitCorners(self.vertices, self.triangles, self.centre, self.diagonal, self.rows, np.float32)
+        return UnitCorners(self.vertices, self.triangles, self.centre, self.diagonal, self.rows, np.float32, self.frames)
 
     def __len__(self):
         return len(self.triangles if self.rows is None else self.rows)
 
     def __getitem__(self, index):
-        triangles = self.triangles[index if self.rows is None else self.rows[index]]
+        index = index if self.rows is None else self.rows[index]
+        triangles = self.triangles[index]
         corners = (self.vertices[triangles] - self.centre) / self.diagonal
+        if self.frames is not None:
+            region_centre, region = self.frames
+            corners -= region_centre[region[index]][..., None, :]
         return corners if self.dtype is None else corners.astype(self.dtype)
 
 
@@ -460,11 +483,18 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     used = np.unique(T)
     largest = np.abs((V[used] - centre) / diagonal).max()
     del used
-    patch_ray_offset, patch_edge_inset = local_offsets(np.sqrt(patch_area), largest)
+    side = np.sqrt(patch_area)
+    patch_ray_offset, patch_edge_inset = local_offsets(side, largest)
+    regions = None
     if (patch_ray_offset == RELATIVE_RAY_OFFSET).all() and (patch_edge_inset == RELATIVE_EDGE_INSET).all():
         ray_offset, patch_ray_offset, patch_edge_inset = RELATIVE_RAY_OFFSET, None, None
         inset, offset = RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET
     else:
+        # Some patches are small beside the scene: parts far apart take frames of their own.
+        regions = split_regions(*patch_bounds(sorted_corners, tp_sorted, first, blocks, patch_count), side)
+        if regions is not None:
+            sorted_corners = UnitCorners(V, T, centre, diagonal, order, frames=(regions.centre, regions.patch_region[tp]))
+            patch_ray_offset, patch_edge_inset = local_offsets(side, regions.largest_coordinate()[regions.patch_region])
         ray_offset = float(patch_ray_offset.min())  # (the lights', at least)
         inset, offset = patch_edge_inset, patch_ray_offset
         warn_coarse(patch_ray_offset, np.sqrt(patch_area), diagonal)
@@ -490,4 +520,18 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         leave_table=leave_table,
         patch_ray_offset=patch_ray_offset,
         patch_edge_inset=patch_edge_inset,
+        regions=regions,
     )
+
+
+def patch_bounds(sorted_corners, triangle_patch, first, blocks, patch_count):
+    """((P,3), (P,3)) float64 unit-space bounding box of each patch, block by block of whole
+    patches of the triangles sorted by patch."""
+    lower, upper = np.empty((patch_count, 3)), np.empty((patch_count, 3))
+    for start, stop in blocks:
+        corners = sorted_corners[start:stop]
+        patches = slice(int(triangle_patch[start]), int(triangle_patch[stop - 1]) + 1)
+        runs = first[patches] - start  # (each patch's triangles a run of the block)
+        lower[patches] = np.minimum.reduceat(corners.min(axis=1), runs, axis=0)
+        upper[patches] = np.maximum.reduceat(corners.max(axis=1), runs, axis=0)
+    return lower, upper

@@ -484,5 +484,21 @@ class Lights:
         pushed off along their direction like a patch's along its normal ((3, n) each)."""
         origins, directions = self.emit(rows, u)
         origins = (origins - geometry.centre[:, None]) / geometry.diagonal
+        if geometry.regions is not None:
+            origins -= geometry.regions.shift(self.regions(rows, geometry))
         origins += geometry.light_offsets(origins) * directions
         return origins, directions
+
+    def regions(self, rows, geometry):
+        """(n,) the region frame (.regions) of emitter ``rows``' rays in ``geometry``: the region
+        nearest its light's position (the first region for the sun and the world, whose rays
+        start beyond the scene), or None where the scene is one frame."""
+        if geometry.regions is None:
+            return None
+        at = [getattr(light, "position", getattr(light, "centre", None)) for light in self.lights]
+        region = np.zeros(len(self.lights), np.int32)
+        placed = [k for k, p in enumerate(at) if p is not None]
+        if placed:
+            points = (np.array([at[k] for k in placed], np.float64) - geometry.centre) / geometry.diagonal
+            region[placed] = geometry.regions.nearest(points.T)
+        return region.take(self.light_of.take(rows))

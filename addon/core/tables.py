@@ -132,11 +132,11 @@ class WalkTables:
             return self.class_grey_reflectivity.take(self.class_of(patch), mode="wrap")
         return self.grey_reflectivity.take(patch, mode="wrap")
 
-    def outside_turn(self, trace, origins, directions):
-        """``trace(origins, directions)`` with the numpy turn released: other walks work meanwhile."""
+    def outside_turn(self, trace, *rays):
+        """``trace(*rays)`` with the numpy turn released: other walks work meanwhile."""
         self.numpy_turn.release()
         try:
-            return trace(origins, directions)
+            return trace(*rays)
         finally:
             self.numpy_turn.acquire()
 

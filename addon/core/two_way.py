@@ -221,7 +221,7 @@ def reflect_first(tables, state, samples, paths, rng):
         u = np.empty((4, k.size), dtype=np.float32)  # (a sample's point is its origin: u[2:4] the direction)
         u[2:4] = _shifted_points(table, rank[rows], shift.take(ray_patch[rows], axis=1))
         origins, directions = points.unit_rays(k, u, tables.geometry)
-        hits = rays.cast(tables, origins, directions)
+        hits = rays.cast(tables, origins, directions, points.regions(k, tables.geometry))
         carried = left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
         correction += _bincount(hits.patch, hits.front, carried, P)
         state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
@@ -267,7 +267,7 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
     segment's two estimates to H (C,P, times the area), its lost rays to ``lost`` (2,P)."""
     P = tables.patch_count
     origins, directions = rays.leave_random(tables, patch, u)
-    hits = rays.cast(tables, origins, directions)
+    hits = rays.cast(tables, origins, directions, tables.geometry.region_of(patch))
     met = hits.front
     i, j = patch.compress(met), hits.patch.compress(met)
     # Segment i -> j adds dB_j s / A_i to H_i and dB_i s / A_j to H_j, s = 1 / (n_i/A_i + n_j/A_j).
