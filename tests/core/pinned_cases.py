@@ -3,7 +3,7 @@ fingerprint of a result. The pins in ``pinned_results.json`` were made on commit
 the walk was split into named stages, with that commit's module constants set as each case's
 speed-ups say (counted=False: COUNTED_MAX_PATCHES = 0; sorted_paths=True: SORT_MIN_PATCHES = 1;
 patch_classes=True: CLASSES_MIN_PATCHES = 1; grids=False: patch_grids.MAX_TRIANGLE_FRACTION = 0;
-grouped_chunks=False: solver.GROUP_MAX_CHUNKS = 1)."""
+grouped_chunks=False: that commit's solver.GROUP_MAX_CHUNKS = 1)."""
 import hashlib
 
 import numpy as np
