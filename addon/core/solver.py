@@ -111,9 +111,9 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     bounds the wall time. A stopped run returns the complete chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
     ``chunk_paths`` replaces the plan's chunk size (the estimate's pilot: ``forecast``).
     """
+    _check_amounts(estimator, threshold, paths, target_mse, max_seconds, threads, chunk_paths)
     method = _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds)
-    _check(scene, estimator, paths, target_mse, threshold, seed, exit_point, stop_rule, max_seconds, threads, sampling,
-           speedups, method, chunk_paths)
+    _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method)
     cluster = cluster_address(cluster) if isinstance(cluster, str) else cluster  # (its form; connecting comes later)
     paths = None if paths is None else int(paths)  # numpy integers welcome
     start = time.perf_counter()
@@ -135,18 +135,14 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
 def _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds):
     """The Method the solve runs: Automatic's choice (``methods.automatic``) where it is asked
     for, with the direct light asked (None: the method's own)."""
-    if method == AUTO and (paths is not None or target_mse is not None):
-        check_estimator(estimator, threshold)
-        check_positive("paths", paths, integer=True)
-        check_positive("target_mse", target_mse)
+    if method == AUTO:
         method = methods.choose(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
                                 max_seconds=max_seconds)
     return methods.create(method, direct_light)
 
 
-def _check(scene, estimator, paths, target_mse, threshold, seed, exit_point, stop_rule, max_seconds, threads, sampling,
-           speedups, method, chunk_paths):
-    """ValueError, in one line, for any argument the solve cannot run with; else nothing."""
+def _check_amounts(estimator, threshold, paths, target_mse, max_seconds, threads, chunk_paths):
+    """ValueError, in one line, for an estimator, threshold or amount the solve cannot take."""
     check_estimator(estimator, threshold)
     for name, value, integer in (("paths", paths, True), ("target_mse", target_mse, False),
                                  ("max_seconds", max_seconds, False), ("threads", threads, True),
@@ -154,6 +150,10 @@ def _check(scene, estimator, paths, target_mse, threshold, seed, exit_point, sto
         check_positive(name, value, integer=integer)
     if paths is None and target_mse is None:
         raise ValueError("give paths (a path count) or target_mse (an error target)")
+
+
+def _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method):
+    """ValueError, in one line, for any other argument the solve cannot run with; else nothing."""
     if exit_point not in EXIT_POINTS:
         raise ValueError(f"exit_point must be one of {', '.join(EXIT_POINTS)}; got {exit_point!r}")
     if sampling not in SAMPLINGS:

@@ -30,6 +30,12 @@ class Method:
     direct_lights = ()
 
     def __init__(self, direct_light=None):
+        """The method with ``direct_light`` (None: its own); ValueError where it cannot take it."""
+        if direct_light is not None and direct_light not in self.direct_lights:
+            if len(self.direct_lights) == 1:
+                raise ValueError(f"method='{self.name}' gathers its direct light: direct_light must be "
+                                 f"'{self.direct_lights[0]}' (or None); got {direct_light!r}")
+            raise ValueError(f"direct_light must be one of {', '.join(self.direct_lights)}; got {direct_light!r}")
         self.direct_light = self.direct_lights[0] if direct_light is None else direct_light
 
     def __repr__(self):
