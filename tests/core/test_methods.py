@@ -97,6 +97,18 @@ def test_each_method_says_what_it_predicts_and_plans():
         methods.create("two_way", "shot")
     with pytest.raises(ValueError, match="method must be one of walk, jacobi, two_way, auto"):
         methods.create("bogus")
+    with pytest.raises(ValueError, match="direct_light must be one of shot, gathered"):
+        methods.create("jacobi", "both")
+
+
+def test_bad_method_arguments_are_one_line_before_anything_runs(scene):
+    """Automatic without a path count or a target, a method that cannot take the direct light
+    asked, an unknown method: one line each, no chunk traced."""
+    for kwargs, message in (({"method": "auto"}, "give paths"),
+                            ({"method": "two_way", "direct_light": "shot", "paths": 10}, "gathers its direct light"),
+                            ({"method": "paper", "paths": 10}, "method must be one of")):
+        with pytest.raises(ValueError, match=message):
+            solver.solve(scene, **kwargs)
 
 
 def test_the_automatic_tooltip_quotes_the_bound_automatic_keeps(monkeypatch):
