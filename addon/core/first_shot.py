@@ -31,8 +31,6 @@ walk does.
 """
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 
 from .lights import WorldLight
@@ -105,7 +103,7 @@ class Gathering:
     patches, then every light but the world, which the cosine rays find), and the scene's
     quantities in world units."""
 
-    def __init__(self, scene, samples, stratified=True):
+    def __init__(self, scene, samples, stratified=True, fate_shares=(1.0, 0.0)):
         self.samples = np.asarray(samples, dtype=np.float64)  # (P,) expected, per patch
         self.stratified = stratified  # a patch's samples a low-discrepancy set (else independent)
         self.whole = np.floor(self.samples).astype(np.int64)
@@ -125,9 +123,8 @@ class Gathering:
         self.shadow_density = self.choice[:scene.patch_count] / scene.patch_area
         self.area_per_sample = scene.patch_area / self.samples
         self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
-        # (escaped, blocked) of the light found on no front: what the solve measures (fate_shares),
-        # all escaped until then.
-        self.fate_shares = (1.0, 0.0)
+        # (escaped, blocked) of the light found on no front: what the solve measures (fate_shares).
+        self.fate_shares = tuple(fate_shares)
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
 
     def draw(self, rng):
@@ -365,23 +362,17 @@ class ReflectedPoints:
         return geometry.region_of(self.patch.take(rows))
 
 
-def reflected_sources(tables, emission, samples):
+def reflected_sources(tables, gathering, emission, samples):
     """The walk's tables with the patches' reflected direct light as its only sources
     (everything else shared): ``emission`` (P,3) E' from uniform points of each patch (random
     exit), or, leaving from hit points, the gathering ``samples`` (gather_direct's) as
     ReflectedPoints."""
-    walk = copy.copy(tables)
-    walk.gathering = None
+    area = tables.geometry.patch_area
     if tables.exit_random:
-        walk.sources = SourceTable(source_weights(tables.geometry.patch_area, emission))
-        walk.emission = emission
-        walk.lights = None
-        return walk
-    points = ReflectedPoints(tables.gathering, tables.geometry, samples)
-    walk.emission = np.zeros_like(emission)
-    walk.sources = SourceTable(source_weights(tables.geometry.patch_area, walk.emission, points.power))
-    walk.lights = points
-    return walk
+        return tables.with_sources(SourceTable(source_weights(area, emission)), emission, None)
+    points = ReflectedPoints(gathering, tables.geometry, samples)
+    none = np.zeros_like(emission)
+    return tables.with_sources(SourceTable(source_weights(area, none, points.power)), none, points)
 
 
 def fate_shares(tables, seed):
@@ -424,11 +415,10 @@ def split_lost(gathering, lost):
     return lost * escaped, lost * blocked
 
 
-def gathered_chunk(tables, paths, rng, walk):
+def gathered_chunk(tables, gathering, paths, rng, walk):
     """One chunk of the gathered estimate: the direct light of every patch, then ``paths``
     walks from its reflection (``walk(tables, paths, rng)`` gives their ChunkTally). Returns
     a ChunkTally in the solve's relative weights (times Phi_T / N)."""
-    gathering = tables.gathering
     H, gather_rays, samples = gather_direct(tables, gathering, rng)
     C = tables.channels
     direct = H * gathering.patch_area  # (3,P) power incident on each patch's front
@@ -442,7 +432,7 @@ def gathered_chunk(tables, paths, rng, walk):
     blocked, undistributed, walk_absorbed, walk_escaped = (np.zeros(C) for _ in range(4))
     rays, ended = gather_rays, {}
     if walk_power > 0:
-        tally = walk(reflected_sources(tables, np.ascontiguousarray(reflected.T), samples), paths, rng)
+        tally = walk(reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples), paths, rng)
         w = walk_power / gathering.total_power
         incident = incident + tally.incident * w
         walked, walk_absorbed, walk_escaped = tally.emitted * w, tally.absorbed * w, tally.escaped * w
