@@ -129,7 +129,7 @@ def parallelogram_corners(sorted_corners, first, count, block=None):
     p is the first triangle's own corner, s1 and s2 the two corners the triangles share (the
     edges are a = s1 - p and b = s2 - p), q the second triangle's own corner (p + a + b to
     within rounding). ``sorted_corners[rows]`` gives triangles' corners (an array or
-    geometry.UnitCorners); the patches are taken ``block`` at a time (each on its own)."""
+    triangles.UnitCorners); the patches are taken ``block`` at a time (each on its own)."""
     two = np.flatnonzero(count == 2)
     parts = [(ok, c) for _, ok, c in parallelogram_blocks(sorted_corners, first, count, block)]
     if not parts:
