@@ -52,7 +52,8 @@ import numpy as np
 
 from . import rays
 from .faces import ranks_in_runs
-from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct, split_lost
+from .first_shot import MAX_GATHER_SAMPLES, gather_direct
+from .gathered_walk import ReflectedPoints, split_lost
 from .jacobi import HALTON, systematic_counts
 from .sampling import SOBOL, shifted_float32, unit_floats
 from .tallies import ChunkTally
@@ -186,7 +187,7 @@ def reflect_first(tables, gathering, state, samples, paths, rng):
     """The first reflection as uneven over each patch as the light that landed on it (hit exit).
 
     Each sample k of patch j is a point source of what it found (power p_k,
-    first_shot.ReflectedPoints), sum_k p_k = R_j A_j H_j. The samples are uniform points of j,
+    gathered_walk.ReflectedPoints), sum_k p_k = R_j A_j H_j. The samples are uniform points of j,
     m_j of them, so sources of power sum_k p_k / m_j at them are patch j reflecting R_j H_j
     uniformly, which the first two-way generation carries (``state.reflected``). What is left
     (zero in sum over each patch), c_k = p_k - sum / m_j, is shot from the samples: rays

@@ -10,7 +10,8 @@ measured. Small chunks of the shot walk are traced together in groups (one wavef
 from __future__ import annotations
 
 from .. import walk as stages
-from ..first_shot import gather_samples, gathered_chunk
+from ..first_shot import gather_samples
+from ..gathered_walk import gathered_chunk
 from ..names import GATHERED, SHOT, WALK
 from ..two_way import rays_per_path as gathered_rays_per_path
 from .base import GatheringIntegrator, Integrator, Method, solve_gathering, spec_gathering
