@@ -1,0 +1,317 @@
+"""Smooth display of per-patch light: corner values without seams, and a noise filter.
+
+Both work on the scene's triangles as the solver sees them (world positions, the patch of each
+triangle), whatever object each came from.
+
+Welding. Corners are joined by position, not by vertex index: two vertices closer than ``weld``
+on every axis are one point (eight grids of cell 2*weld, shifted by half a cell on each axis, and
+their cells' minimum labels propagated to a fixed point), so pieces of different objects that touch
+share their corners. Points more than 2*sqrt(3)*weld apart are never joined in one step.
+
+Creases. Every corner carries its patch's normal (the area-weighted mean of the patch's triangle
+normals). A corner's value is built only from the corners at its point whose normal is within
+``crease_angle`` of its own: a wall and the ceiling keep their own values at their shared edge,
+and back-to-back faces never mix. Points whose normals all lie within half the angle of their mean
+are smooth (every pair compatible) and take one sum per point; only the other points ("crease
+points") are handled pair by pair, so memory stays linear in the triangles.
+
+Mean preservation (``corner_values``). Starting from each corner at its patch's value, two steps
+alternate: (a) every corner takes the area-weighted average of the compatible corners at its point
+(continuity); (b) every patch's corners are scaled by value / (area-weighted mean of the linear
+interpolation over its triangles), which makes that mean exactly the solved value. The last step
+is (b), so the mean is preserved to float error whatever the iteration count; the iterations
+shrink the remaining jumps between patches (iterative proportional fitting: it converges to a
+continuous mean-preserving field wherever one exists). Both steps keep values non-negative (an
+average of non-negative values, a non-negative scale), so non-negative input gives non-negative
+corners; negative or non-finite input is refused.
+
+Noise (``filter_noise``). Each patch is replaced by a precision-weighted average of itself and its
+neighbours (patches sharing a welded point, normals within the crease angle), each neighbour
+weighted by k = max(0, 1 - d^2 / c^2), d^2 the largest over channels of
+(v_p - v_q)^2 / (s_p^2 + s_q^2) with s^2 the measured variances of the two estimates: neighbours
+whose difference is within their noise are averaged in, neighbours that differ by more than c
+standard errors (real detail: a shadow edge, a hot spot) are not used at all. Bias bound: the
+result is a convex combination of values that differ from the patch's own by less than
+c * sqrt(s_p^2 + s_q^2) in every channel, so no patch moves by more than c combined standard errors
+of the pair it is averaged with (returned by ``filter_noise(..., bound=True)``).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+CREASE_ANGLE = 30.0  # degrees, as Blender's auto smooth
+WELD_FRACTION = 1e-4  # of the median patch's side
+NOISE_CUTOFF = 3.0  # standard errors beyond which a neighbour is real detail, not noise
+ITERATIONS = 10
+
+
+def _starts(sorted_keys):
+    """Start of each run of equal values in a sorted 1-D array."""
+    return np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
+
+
+def _cells(points, cell, shift):
+    """Cell number (V,) of every point in a grid of ``cell`` shifted by ``shift`` cells per axis."""
+    q = np.floor(points / cell + shift).astype(np.int64)
+    order = np.lexsort(q.T[::-1])
+    qs = q[order]
+    new = np.r_[True, (qs[1:] != qs[:-1]).any(axis=1)]
+    cells = np.empty(len(points), np.int64)
+    cells[order] = np.cumsum(new) - 1
+    return cells
+
+
+def weld_points(points, weld):
+    """Point label (V,) of every vertex: equal for vertices within ``weld`` of each other on every
+    axis (transitively), labels 0..n-1."""
+    points = np.asarray(points, np.float64)
+    V = len(points)
+    if V == 0:
+        return np.zeros(0, np.int64)
+    shifts = [(a, b, c) for a in (0, 0.5) for b in (0, 0.5) for c in (0, 0.5)]
+    grids = []
+    for s in shifts:
+        cells = _cells(points, 2.0 * weld, np.asarray(s))
+        if np.bincount(cells).max() > 1:  # a grid joining nothing adds nothing
+            order = np.argsort(cells, kind="stable")
+            grids.append((cells, order, _starts(cells[order])))
+    labels = np.arange(V, dtype=np.int64)
+    while grids:
+        before = labels
+        for cells, order, starts in grids:
+            labels = np.minimum(labels, np.minimum.reduceat(labels[order], starts)[cells])
+        labels = labels[labels]  # pointer jumping: chains shorten geometrically
+        if np.array_equal(labels, before):
+            break
+    return np.unique(labels, return_inverse=True)[1].astype(np.int64)
+
+
+@dataclass
+class Surface:
+    """The scene's triangles as one welded surface, built once for any number of value sets.
+
+    point        (T,3) welded point of every triangle corner
+    corner_normal(T,3) unit normal each corner carries (its patch's)
+    triangle_area (T,)  area of each triangle
+    patch_area   (P,)  area of each patch
+    """
+    point: np.ndarray
+    triangle_patch: np.ndarray
+    triangle_area: np.ndarray
+    patch_area: np.ndarray
+    patch_normal: np.ndarray
+    patch_centroid: np.ndarray
+    cos_crease: float
+    smooth_point: np.ndarray  # (n,) bool: every pair of corners at the point compatible
+    pairs: tuple  # (corner, other corner) flat indices, compatible, at crease points
+
+    @property
+    def patch_count(self):
+        return len(self.patch_area)
+
+    @classmethod
+    def of(cls, vertices, triangles, triangle_patch, patch_count=None, crease_angle=CREASE_ANGLE, weld=None):
+        """``vertices`` (V,3) world positions, ``triangles`` (T,3) vertex indices, ``triangle_patch``
+        (T,) patch of each triangle; ``weld`` a length (default WELD_FRACTION of the median
+        patch's side, at least float32 rounding of the coordinates)."""
+        vertices = np.asarray(vertices, np.float64)
+        triangles = np.asarray(triangles, np.int64)
+        triangle_patch = np.asarray(triangle_patch, np.int64)
+        if not 0.0 <= crease_angle <= 180.0:
+            raise ValueError(f"crease angle {crease_angle} is not between 0 and 180 degrees")
+        P = int(patch_count if patch_count is not None else (triangle_patch.max() + 1 if len(triangle_patch) else 0))
+        corners = vertices[triangles]
+        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        triangle_area = 0.5 * np.linalg.norm(cross, axis=1)
+        patch_area = np.bincount(triangle_patch, weights=triangle_area, minlength=P)
+        normal = np.stack([np.bincount(triangle_patch, weights=cross[:, k], minlength=P) for k in range(3)], axis=1)
+        length = np.linalg.norm(normal, axis=1, keepdims=True)
+        patch_normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
+        if weld is None:
+            side = np.sqrt(np.median(patch_area[patch_area > 0])) if (patch_area > 0).any() else 1.0
+            extent = np.abs(vertices).max() if len(vertices) else 1.0
+            weld = max(WELD_FRACTION * side, 4 * np.finfo(np.float32).eps * extent)
+        centre = corners.mean(axis=1) * triangle_area[:, None]
+        centroid = np.stack([np.bincount(triangle_patch, weights=centre[:, k], minlength=P) for k in range(3)], axis=1)
+        centroid = np.divide(centroid, patch_area[:, None], out=np.zeros((P, 3)),
+                             where=patch_area[:, None] > 0)
+        point = weld_points(vertices, weld)[triangles]
+        cos_crease = float(np.cos(np.radians(crease_angle)))
+        smooth_point, pairs = _crease_pairs(point, patch_normal[triangle_patch], triangle_area, cos_crease)
+        return cls(point, triangle_patch, triangle_area, patch_area, patch_normal, centroid, cos_crease, smooth_point, pairs)
+
+    # -- corner values -------------------------------------------------------------------------
+    def _averaging(self):
+        """What step (a) needs, fixed for the surface: per corner weight, the reciprocal of the
+        compatible weight around it (0 where it is zero), the crease corners and their pairs
+        renumbered among them."""
+        point = self.point.ravel()
+        w = np.repeat(self.triangle_area, 3)
+        total = np.bincount(point, weights=w, minlength=len(self.smooth_point))[point]
+        crease = np.flatnonzero(~self.smooth_point[point])
+        c, o = self.pairs
+        local = np.searchsorted(crease, c)
+        if len(crease):
+            total[crease] = np.bincount(local, weights=w[o], minlength=len(crease))
+        inverse = np.divide(1.0, total, out=np.zeros_like(total), where=total > 0)
+        return point, w, inverse, crease, local, o
+
+    def _average_corners(self, x, averaging):
+        """(a): every corner's value (k, T*3) the area-weighted mean of the compatible corners
+        at its point; 0 where they all have zero area."""
+        point, w, inverse, crease, local, o = averaging
+        n = len(self.smooth_point)
+        out = np.empty_like(x)
+        for k in range(len(x)):  # over colour channels, not elements
+            wx = w * x[k]
+            out[k] = np.bincount(point, weights=wx, minlength=n)[point]
+            if len(crease):
+                out[k, crease] = np.bincount(local, weights=wx[o], minlength=len(crease))
+            out[k] *= inverse
+        return out
+
+    def _patch_means(self, x):
+        """Area-weighted mean (k, P) of the linear interpolation of corner values (k, T*3)."""
+        tri = x.reshape(len(x), -1, 3).sum(axis=2) * (self.triangle_area / 3.0)
+        sums = np.stack([np.bincount(self.triangle_patch, weights=t, minlength=self.patch_count) for t in tri])
+        return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
+
+    def corner_values(self, patch_values, iterations=ITERATIONS):
+        """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
+        compatible corners, the area-weighted mean of each patch's linear interpolation equal to
+        its value, non-negative."""
+        values = _checked(patch_values, self.patch_count, "patch values").T.copy()  # (k, P)
+        corner_patch = np.repeat(self.triangle_patch, 3)
+        own = values[:, corner_patch]
+        averaging = self._averaging()
+        x = own
+        for _ in range(max(int(iterations), 1)):
+            x = self._average_corners(x, averaging)
+            means = self._patch_means(x)
+            # a patch whose corners all averaged to zero keeps its own value, flat
+            scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
+            x = np.where((means > 0)[:, corner_patch], x * scale[:, corner_patch], own)
+        return np.ascontiguousarray(x.T).reshape(len(self.triangle_patch), 3, len(values))
+
+    # -- noise ---------------------------------------------------------------------------------
+    def neighbours(self):
+        """Patch pairs (p, q), p != q, both directions: sharing a welded point, normals within the
+        crease angle."""
+        P = max(self.patch_count, 1)
+        code = np.unique(self.point.ravel() * P + np.repeat(self.triangle_patch, 3))
+        point, patch = code // P, code % P
+        starts = _starts(point)
+        sizes = np.diff(np.r_[starts, len(point)])
+        first = np.repeat(starts, sizes * sizes)
+        size = np.repeat(sizes, sizes * sizes)
+        rank = np.arange(len(first)) - np.repeat(np.cumsum(sizes * sizes) - sizes * sizes, sizes * sizes)
+        a, b = patch[first + rank // size], patch[first + rank % size]
+        keep = (a != b) & ((self.patch_normal[a] * self.patch_normal[b]).sum(axis=1) >= self.cos_crease)
+        pair = np.unique(a[keep] * P + b[keep])
+        return pair // P, pair % P
+
+    def filter_noise(self, patch_values, patch_variances, cutoff=NOISE_CUTOFF, bound=False):
+        """Noise-filtered per-patch values (P,k) from values and the variances of their estimates
+        (P,k); patches with a NaN or infinite variance are left as they are and not used. With
+        ``bound``, also the largest change each patch may have been given (P,k)."""
+        values = _checked(patch_values, self.patch_count, "patch values", negative=True)
+        var = np.asarray(patch_variances, np.float64).reshape(values.shape)
+        known = np.isfinite(var).all(axis=1) & (var >= 0).all(axis=1)
+        floor = 1e-12 * max(float(np.abs(values).max()) if values.size else 0.0, 1e-300) ** 2
+        var = np.where(known[:, None], np.maximum(np.nan_to_num(var, nan=0.0, posinf=0.0), floor), np.inf)
+        p, q = self.neighbours()
+        pair_var = var[p] + var[q]
+        d2 = ((values[p] - values[q]) ** 2 / pair_var).max(axis=1)
+        k = np.where(known[p] & known[q], np.clip(1.0 - d2 / cutoff ** 2, 0.0, None), 0.0)
+        used = k > 0
+        p, q, k, pair_var = p[used], q[used], k[used], pair_var[used]
+        limit = np.zeros_like(values)
+        for c in range(values.shape[1]):
+            np.maximum.at(limit[:, c], p, cutoff * np.sqrt(pair_var[:, c]))
+        fitted = self._local_fit(values, var, known, p, q, k)
+        out = np.clip(fitted, values - limit, values + limit)
+        out = np.where(values >= 0, np.maximum(out, 0.0), out)
+        return (out, limit) if bound else out
+
+    def _local_fit(self, values, var, known, p, q, k):
+        """Each patch's value from a weighted least-squares plane (value = a + gradient . offset,
+        in the patch's tangent plane) through itself and its neighbours q, weights k / var:
+        a gradient across the neighbourhood moves no patch."""
+        n = self.patch_normal
+        axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+        t1 = np.cross(n, axis)
+        t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-300)
+        t2 = np.cross(n, t1)
+        offset = self.patch_centroid[q] - self.patch_centroid[p]
+        design = np.stack([np.ones(len(p)), (offset * t1[p]).sum(axis=1), (offset * t2[p]).sum(axis=1)], axis=1)
+        outer = design[:, :, None] * design[:, None, :]
+        # a little ridge on the gradient keeps a row of neighbours (an edge) solvable
+        ridge = 1e-3 * self.patch_area
+        out = values.copy()
+        P = len(values)
+        for c in range(values.shape[1]):  # over colour channels, not elements
+            own = np.where(known, 1.0 / var[:, c], 0.0)
+            w = k / var[q, c]
+            M = np.stack([np.bincount(p, weights=w * outer[:, i, j], minlength=P)
+                          for i in range(3) for j in range(3)], axis=1).reshape(P, 3, 3)
+            rhs = np.stack([np.bincount(p, weights=w * values[q, c] * design[:, i], minlength=P) for i in range(3)], axis=1)
+            M[:, 0, 0] += own
+            rhs[:, 0] += own * values[:, c]
+            M[:, 1, 1] += ridge * M[:, 0, 0]
+            M[:, 2, 2] += ridge * M[:, 0, 0]
+            solvable = known & (M[:, 0, 0] > 0)
+            fit = np.linalg.solve(np.where(solvable[:, None, None], M, np.eye(3)), rhs[:, :, None])[:, 0, 0]
+            out[:, c] = np.where(solvable, fit, values[:, c])
+        return out
+
+
+def _checked(values, P, what, negative=False):
+    values = np.asarray(values, np.float64)
+    values = values.reshape(len(values), -1) if values.ndim != 2 else values
+    if len(values) != P:
+        raise ValueError(f"{what}: {len(values)} rows for {P} patches")
+    if not np.isfinite(values).all():
+        raise ValueError(f"{what} are not all finite")
+    if not negative and (values < 0).any():
+        raise ValueError(f"{what} must be non-negative (smallest {values.min():g})")
+    return values
+
+
+def _crease_pairs(point, corner_normal, triangle_area, cos_crease):
+    """(smooth point flags (n,), compatible (corner, other) pairs at the other points)."""
+    p = point.ravel()
+    n = int(p.max()) + 1 if len(p) else 0
+    normal = corner_normal.reshape(-1, 3) if corner_normal.ndim == 3 else np.repeat(corner_normal, 3, axis=0)
+    mean = np.stack([np.bincount(p, weights=normal[:, k], minlength=n) for k in range(3)], axis=1)
+    length = np.linalg.norm(mean, axis=1, keepdims=True)
+    mean = np.divide(mean, length, out=np.zeros_like(mean), where=length > 0)
+    half = np.cos(0.5 * np.arccos(np.clip(cos_crease, -1.0, 1.0)))
+    lowest = np.full(n, np.inf)
+    np.minimum.at(lowest, p, (normal * mean[p]).sum(axis=1))
+    smooth = (lowest >= half) & (length[:, 0] > 0)
+    corners = np.flatnonzero(~smooth[p])
+    if len(corners) == 0:
+        return smooth, (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    corners = corners[np.argsort(p[corners], kind="stable")]
+    starts = _starts(p[corners])
+    sizes = np.diff(np.r_[starts, len(corners)])
+    square = sizes * sizes
+    first = np.repeat(starts, square)
+    size = np.repeat(sizes, square)
+    rank = np.arange(len(first)) - np.repeat(np.cumsum(square) - square, square)
+    c, o = corners[first + rank // size], corners[first + rank % size]
+    keep = (normal[c] * normal[o]).sum(axis=1) >= cos_crease
+    return smooth, (c[keep], o[keep])
+
+
+def corner_values(vertices, triangles, triangle_patch, patch_values, crease_angle=CREASE_ANGLE, iterations=ITERATIONS):
+    """Smooth per-corner values (T,3,k) of per-patch values (P,k) (``Surface.corner_values``)."""
+    surface = Surface.of(vertices, triangles, triangle_patch, len(patch_values), crease_angle)
+    return surface.corner_values(patch_values, iterations)
+
+
+def filter_noise(vertices, triangles, triangle_patch, patch_values, patch_variances, crease_angle=CREASE_ANGLE,
+                 cutoff=NOISE_CUTOFF):
+    """Noise-filtered per-patch values (P,k) (``Surface.filter_noise``)."""
+    surface = Surface.of(vertices, triangles, triangle_patch, len(patch_values), crease_angle)
+    return surface.filter_noise(patch_values, patch_variances, cutoff)
