@@ -15,25 +15,31 @@ and back-to-back faces never mix. Points whose normals all lie within half the a
 are smooth (every pair compatible) and take one sum per point; only the other points ("crease
 points") are handled pair by pair, so memory stays linear in the triangles.
 
-Mean preservation (``corner_values``). Starting from each corner at its patch's value, two steps
-alternate: (a) every corner takes the area-weighted average of the compatible corners at its point
-(continuity); (b) every patch's corners are scaled by value / (area-weighted mean of the linear
-interpolation over its triangles), which makes that mean exactly the solved value. The last step
-is (b), so the mean is preserved to float error whatever the iteration count; the iterations
-shrink the remaining jumps between patches (iterative proportional fitting: it converges to a
-continuous mean-preserving field wherever one exists). Both steps keep values non-negative (an
-average of non-negative values, a non-negative scale), so non-negative input gives non-negative
-corners; negative or non-finite input is refused.
+Mean preservation (``corner_values``). The corners start as the area-weighted average of the
+compatible corners around them (a continuous field). Then, ``iterations`` times, each patch's
+missing light (its value less the area-weighted mean of the linear interpolation over its
+triangles) is spread the same way, continuously, over the corners around it (over-relaxed by 1.5,
+values clipped at 0). A last step scales each patch's corners by value / mean, which makes every
+patch's mean exactly its value (float error) whatever the iteration count and whatever the mesh;
+what the iterations buy is small jumps left by that last step where a continuous answer exists
+(benchmarks/results/smoothing.md); a sharp step of light across a smooth joint has no
+non-negative continuous answer, and keeps part of its step. Every step keeps values
+non-negative (averages of non-negative values, a clip at 0, a non-negative scale); negative or
+non-finite input is refused.
 
-Noise (``filter_noise``). Each patch is replaced by a precision-weighted average of itself and its
-neighbours (patches sharing a welded point, normals within the crease angle), each neighbour
-weighted by k = max(0, 1 - d^2 / c^2), d^2 the largest over channels of
-(v_p - v_q)^2 / (s_p^2 + s_q^2) with s^2 the measured variances of the two estimates: neighbours
-whose difference is within their noise are averaged in, neighbours that differ by more than c
-standard errors (real detail: a shadow edge, a hot spot) are not used at all. Bias bound: the
-result is a convex combination of values that differ from the patch's own by less than
-c * sqrt(s_p^2 + s_q^2) in every channel, so no patch moves by more than c combined standard errors
-of the pair it is averaged with (returned by ``filter_noise(..., bound=True)``).
+Noise (``filter_noise``). Each patch's value is re-estimated from itself and its neighbours
+(patches sharing a welded point, normals within the crease angle) by a weighted least-squares
+plane in the patch's tangent plane (value = a + gradient . offset of the neighbour's centroid;
+the estimate is a). Weights are precision times k = max(0, 1 - d^2 / c^2), d^2 the largest over
+channels of (v_p - v_q)^2 / (s_p^2 + s_q^2), s^2 the measured (batch-means) variances: neighbours
+within their noise of the patch are used, neighbours more than c standard errors away (real
+detail: a shadow edge, a hot spot) are not used at all, and a linear gradient across the
+neighbourhood (light falling off along a wall) is fitted, not averaged away. Bias bound: the
+result is clipped to v_p +- c * max over used neighbours of sqrt(s_p^2 + s_q^2), per channel, so
+no patch moves by more than c combined standard errors of the estimates it was compared with,
+whatever the light (``filter_noise(..., bound=True)`` returns that limit); non-negative values
+stay non-negative (clipped at 0). Patches without a variance (NaN: fewer than two batches) are
+left as they are.
 """
 from dataclasses import dataclass
 
@@ -43,6 +49,7 @@ CREASE_ANGLE = 30.0  # degrees, as Blender's auto smooth
 WELD_FRACTION = 1e-4  # of the median patch's side
 NOISE_CUTOFF = 3.0  # standard errors beyond which a neighbour is real detail, not noise
 ITERATIONS = 10
+RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
 
 
 def _starts(sorted_keys):
@@ -184,13 +191,15 @@ class Surface:
         corner_patch = np.repeat(self.triangle_patch, 3)
         own = values[:, corner_patch]
         averaging = self._averaging()
-        x = own
-        for _ in range(max(int(iterations), 1)):
-            x = self._average_corners(x, averaging)
-            means = self._patch_means(x)
-            # a patch whose corners all averaged to zero keeps its own value, flat
-            scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
-            x = np.where((means > 0)[:, corner_patch], x * scale[:, corner_patch], own)
+        x = self._average_corners(own, averaging)
+        for _ in range(int(iterations)):
+            # each patch's missing light, spread continuously over the corners around it
+            missing = values - self._patch_means(x)
+            x = np.maximum(x + RELAXATION * self._average_corners(missing[:, corner_patch], averaging), 0.0)
+        means = self._patch_means(x)
+        # exact at last: a patch whose corners all came to zero keeps its own value, flat
+        scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
+        x = np.where((means > 0)[:, corner_patch], x * scale[:, corner_patch], own)
         return np.ascontiguousarray(x.T).reshape(len(self.triangle_patch), 3, len(values))
 
     # -- noise ---------------------------------------------------------------------------------
@@ -252,9 +261,9 @@ class Surface:
         for c in range(values.shape[1]):  # over colour channels, not elements
             own = np.where(known, 1.0 / var[:, c], 0.0)
             w = k / var[q, c]
-            M = np.stack([np.bincount(p, weights=w * outer[:, i, j], minlength=P)
+            M = np.stack([_sum(p, w * outer[:, i, j], P)
                           for i in range(3) for j in range(3)], axis=1).reshape(P, 3, 3)
-            rhs = np.stack([np.bincount(p, weights=w * values[q, c] * design[:, i], minlength=P) for i in range(3)], axis=1)
+            rhs = np.stack([_sum(p, w * values[q, c] * design[:, i], P) for i in range(3)], axis=1)
             M[:, 0, 0] += own
             rhs[:, 0] += own * values[:, c]
             M[:, 1, 1] += ridge * M[:, 0, 0]
@@ -263,6 +272,11 @@ class Surface:
             fit = np.linalg.solve(np.where(solvable[:, None, None], M, np.eye(3)), rhs[:, :, None])[:, 0, 0]
             out[:, c] = np.where(solvable, fit, values[:, c])
         return out
+
+
+def _sum(index, weights, n):
+    """np.bincount's sums as floats, also when there is nothing to sum."""
+    return np.bincount(index, weights=weights, minlength=n).astype(np.float64, copy=False)
 
 
 def _checked(values, P, what, negative=False):
