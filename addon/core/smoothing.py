@@ -144,7 +144,7 @@ class Surface:
                              where=patch_area[:, None] > 0)
         point = weld_points(vertices, weld)[triangles]
         cos_crease = float(np.cos(np.radians(crease_angle)))
-        smooth_point, pairs = _crease_pairs(point, patch_normal[triangle_patch], triangle_area, cos_crease)
+        smooth_point, pairs = _crease_pairs(point, triangle_patch, patch_normal, cos_crease)
         return cls(point, triangle_patch, triangle_area, patch_area, patch_normal, centroid, cos_crease, smooth_point, pairs)
 
     # -- corner values -------------------------------------------------------------------------
@@ -164,60 +164,77 @@ class Surface:
         return point, w, inverse, crease, local, o
 
     def _average_corners(self, x, averaging):
-        """(a): every corner's value (k, T*3) the area-weighted mean of the compatible corners
-        at its point; 0 where they all have zero area."""
+        """(a): every corner's value (T*3,) the area-weighted mean of the compatible corners at
+        its point; 0 where they all have zero area."""
         point, w, inverse, crease, local, o = averaging
-        n = len(self.smooth_point)
-        out = np.empty_like(x)
-        for k in range(len(x)):  # over colour channels, not elements
-            wx = w * x[k]
-            out[k] = np.bincount(point, weights=wx, minlength=n)[point]
-            if len(crease):
-                out[k, crease] = np.bincount(local, weights=wx[o], minlength=len(crease))
-            out[k] *= inverse
+        wx = w * x
+        out = np.bincount(point, weights=wx, minlength=len(self.smooth_point))[point]
+        if len(crease):
+            out[crease] = np.bincount(local, weights=wx[o], minlength=len(crease))
+        out *= inverse
         return out
 
     def _patch_means(self, x):
-        """Area-weighted mean (k, P) of the linear interpolation of corner values (k, T*3)."""
-        tri = x.reshape(len(x), -1, 3).sum(axis=2) * (self.triangle_area / 3.0)
-        sums = np.stack([np.bincount(self.triangle_patch, weights=t, minlength=self.patch_count) for t in tri])
+        """Area-weighted mean (P,) of the linear interpolation of corner values (T*3,)."""
+        tri = x.reshape(-1, 3).sum(axis=1) * (self.triangle_area / 3.0)
+        sums = _sum(self.triangle_patch, tri, self.patch_count)
         return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
 
     def corner_values(self, patch_values, iterations=ITERATIONS):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
         compatible corners, the area-weighted mean of each patch's linear interpolation equal to
         its value, non-negative."""
-        values = _checked(patch_values, self.patch_count, "patch values").T.copy()  # (k, P)
+        values = _checked(patch_values, self.patch_count, "patch values")
         corner_patch = np.repeat(self.triangle_patch, 3)
-        own = values[:, corner_patch]
         averaging = self._averaging()
-        x = self._average_corners(own, averaging)
+        out = np.empty((len(self.triangle_patch), 3, values.shape[1]))
+        for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
+            out[:, :, k] = self._corner_channel(np.ascontiguousarray(values[:, k]), corner_patch, averaging, iterations).reshape(-1, 3)
+        return out
+
+    def _corner_channel(self, values, corner_patch, averaging, iterations):
+        x = self._average_corners(values[corner_patch], averaging)
         for _ in range(int(iterations)):
             # each patch's missing light, spread continuously over the corners around it
-            missing = values - self._patch_means(x)
-            x = np.maximum(x + RELAXATION * self._average_corners(missing[:, corner_patch], averaging), 0.0)
+            missing = (values - self._patch_means(x))[corner_patch]
+            x += RELAXATION * self._average_corners(missing, averaging)
+            np.maximum(x, 0.0, out=x)
         means = self._patch_means(x)
         # exact at last: a patch whose corners all came to zero keeps its own value, flat
         scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
-        x = np.where((means > 0)[:, corner_patch], x * scale[:, corner_patch], own)
-        return np.ascontiguousarray(x.T).reshape(len(self.triangle_patch), 3, len(values))
+        x *= scale[corner_patch]
+        flat = np.flatnonzero((means <= 0)[corner_patch])
+        x[flat] = values[corner_patch[flat]]
+        return x
 
     # -- noise ---------------------------------------------------------------------------------
-    def neighbours(self):
-        """Patch pairs (p, q), p != q, both directions: sharing a welded point, normals within the
-        crease angle."""
+    def neighbours(self, block=1 << 18):
+        """Patch pairs (p, q), p != q, both directions, sorted by p: sharing a welded point,
+        normals within the crease angle. Made a block of points at a time (``block`` candidate
+        pairs), so memory goes with the patches, not with the points' valences squared."""
         P = max(self.patch_count, 1)
         code = np.unique(self.point.ravel() * P + np.repeat(self.triangle_patch, 3))
         point, patch = code // P, code % P
+        del code
         starts = _starts(point)
         sizes = np.diff(np.r_[starts, len(point)])
-        first = np.repeat(starts, sizes * sizes)
-        size = np.repeat(sizes, sizes * sizes)
-        rank = np.arange(len(first)) - np.repeat(np.cumsum(sizes * sizes) - sizes * sizes, sizes * sizes)
-        a, b = patch[first + rank // size], patch[first + rank % size]
-        keep = (a != b) & ((self.patch_normal[a] * self.patch_normal[b]).sum(axis=1) >= self.cos_crease)
-        pair = np.unique(a[keep] * P + b[keep])
-        return pair // P, pair % P
+        ends = np.cumsum(sizes * sizes)
+        found = []
+        lo = 0
+        while lo < len(starts):
+            hi = max(int(np.searchsorted(ends, ends[lo] - sizes[lo] ** 2 + block, "right")), lo + 1)
+            s, n = starts[lo:hi], sizes[lo:hi]
+            square = n * n
+            first = np.repeat(s, square)
+            size = np.repeat(n, square)
+            rank = np.arange(len(first)) - np.repeat(np.cumsum(square) - square, square)
+            a, b = patch[first + rank // size], patch[first + rank % size]
+            keep = (a != b) & (np.einsum("ij,ij->i", self.patch_normal[a], self.patch_normal[b]) >= self.cos_crease)
+            found.append(np.unique(a[keep] * P + b[keep]))
+            lo = hi
+        pair = np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)
+        small = np.int32 if P < 2 ** 31 else np.int64
+        return (pair // P).astype(small), (pair % P).astype(small)
 
     def filter_noise(self, patch_values, patch_variances, cutoff=NOISE_CUTOFF, bound=False):
         """Noise-filtered per-patch values (P,k) from values and the variances of their estimates
@@ -229,14 +246,18 @@ class Surface:
         floor = 1e-12 * max(float(np.abs(values).max()) if values.size else 0.0, 1e-300) ** 2
         var = np.where(known[:, None], np.maximum(np.nan_to_num(var, nan=0.0, posinf=0.0), floor), np.inf)
         p, q = self.neighbours()
-        pair_var = var[p] + var[q]
-        d2 = ((values[p] - values[q]) ** 2 / pair_var).max(axis=1)
+        d2 = np.zeros(len(p))
+        for c in range(values.shape[1]):  # over colour channels, not elements
+            np.maximum(d2, (values[p, c] - values[q, c]) ** 2 / (var[p, c] + var[q, c]), out=d2)
         k = np.where(known[p] & known[q], np.clip(1.0 - d2 / cutoff ** 2, 0.0, None), 0.0)
+        del d2
         used = k > 0
-        p, q, k, pair_var = p[used], q[used], k[used], pair_var[used]
+        p, q, k = p[used], q[used], k[used]
         limit = np.zeros_like(values)
-        for c in range(values.shape[1]):
-            np.maximum.at(limit[:, c], p, cutoff * np.sqrt(pair_var[:, c]))
+        if len(p):
+            runs = _starts(p)
+            for c in range(values.shape[1]):
+                limit[p[runs], c] = cutoff * np.sqrt(np.maximum.reduceat(var[p, c] + var[q, c], runs))
         fitted = self._local_fit(values, var, known, p, q, k)
         out = np.clip(fitted, values - limit, values + limit)
         out = np.where(values >= 0, np.maximum(out, 0.0), out)
@@ -251,9 +272,13 @@ class Surface:
         t1 = np.cross(n, axis)
         t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-300)
         t2 = np.cross(n, t1)
-        offset = self.patch_centroid[q] - self.patch_centroid[p]
-        design = np.stack([np.ones(len(p)), (offset * t1[p]).sum(axis=1), (offset * t2[p]).sum(axis=1)], axis=1)
-        outer = design[:, :, None] * design[:, None, :]
+        design = np.zeros((3, len(p)))  # 1 and the neighbour's offset along t1 and t2
+        design[0] = 1.0
+        for a in range(3):  # over axes, not elements
+            offset = self.patch_centroid[q, a] - self.patch_centroid[p, a]
+            design[1] += offset * t1[p, a]
+            design[2] += offset * t2[p, a]
+        del offset
         # a little ridge on the gradient keeps a row of neighbours (an edge) solvable
         ridge = 1e-3 * self.patch_area
         out = values.copy()
@@ -261,9 +286,11 @@ class Surface:
         for c in range(values.shape[1]):  # over colour channels, not elements
             own = np.where(known, 1.0 / var[:, c], 0.0)
             w = k / var[q, c]
-            M = np.stack([_sum(p, w * outer[:, i, j], P)
-                          for i in range(3) for j in range(3)], axis=1).reshape(P, 3, 3)
-            rhs = np.stack([_sum(p, w * values[q, c] * design[:, i], P) for i in range(3)], axis=1)
+            M = np.empty((P, 3, 3))
+            for i in range(3):
+                for j in range(i, 3):
+                    M[:, i, j] = M[:, j, i] = _sum(p, w * design[i] * design[j], P)
+            rhs = np.stack([_sum(p, w * values[q, c] * design[i], P) for i in range(3)], axis=1)
             M[:, 0, 0] += own
             rhs[:, 0] += own * values[:, c]
             M[:, 1, 1] += ridge * M[:, 0, 0]
@@ -291,17 +318,22 @@ def _checked(values, P, what, negative=False):
     return values
 
 
-def _crease_pairs(point, corner_normal, triangle_area, cos_crease):
-    """(smooth point flags (n,), compatible (corner, other) pairs at the other points)."""
+def _crease_pairs(point, triangle_patch, patch_normal, cos_crease):
+    """(smooth point flags (n,), compatible (corner, other) pairs at the other points); a
+    corner's normal is its patch's."""
     p = point.ravel()
+    cp = np.repeat(triangle_patch, 3)
     n = int(p.max()) + 1 if len(p) else 0
-    normal = corner_normal.reshape(-1, 3) if corner_normal.ndim == 3 else np.repeat(corner_normal, 3, axis=0)
-    mean = np.stack([np.bincount(p, weights=normal[:, k], minlength=n) for k in range(3)], axis=1)
+    mean = np.stack([np.bincount(p, weights=patch_normal[cp, k], minlength=n) for k in range(3)], axis=1)
     length = np.linalg.norm(mean, axis=1, keepdims=True)
     mean = np.divide(mean, length, out=np.zeros_like(mean), where=length > 0)
+    dot = np.zeros(len(p))
+    for k in range(3):  # over axes, not elements
+        dot += patch_normal[cp, k] * mean[p, k]
     half = np.cos(0.5 * np.arccos(np.clip(cos_crease, -1.0, 1.0)))
     lowest = np.full(n, np.inf)
-    np.minimum.at(lowest, p, (normal * mean[p]).sum(axis=1))
+    np.minimum.at(lowest, p, dot)
+    del dot
     smooth = (lowest >= half) & (length[:, 0] > 0)
     corners = np.flatnonzero(~smooth[p])
     if len(corners) == 0:
@@ -314,7 +346,7 @@ def _crease_pairs(point, corner_normal, triangle_area, cos_crease):
     size = np.repeat(sizes, square)
     rank = np.arange(len(first)) - np.repeat(np.cumsum(square) - square, square)
     c, o = corners[first + rank // size], corners[first + rank % size]
-    keep = (normal[c] * normal[o]).sum(axis=1) >= cos_crease
+    keep = np.einsum("ij,ij->i", patch_normal[cp[c]], patch_normal[cp[o]]) >= cos_crease
     return smooth, (c[keep], o[keep])
 
 
