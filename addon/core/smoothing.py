@@ -63,7 +63,8 @@ def _cells(points, cell, shift):
     order = np.lexsort(q.T[::-1])
     qs = q[order]
     new = np.r_[True, (qs[1:] != qs[:-1]).any(axis=1)]
-    cells = np.empty(len(points), np.int64)
+    del qs
+    cells = np.empty(len(points), _index_type(len(points)))
     cells[order] = np.cumsum(new) - 1
     return cells
 
@@ -80,9 +81,9 @@ def weld_points(points, weld):
     for s in shifts:
         cells = _cells(points, 2.0 * weld, np.asarray(s))
         if np.bincount(cells).max() > 1:  # a grid joining nothing adds nothing
-            order = np.argsort(cells, kind="stable")
-            grids.append((cells, order, _starts(cells[order])))
-    labels = np.arange(V, dtype=np.int64)
+            order = np.argsort(cells, kind="stable").astype(cells.dtype)
+            grids.append((cells, order, _starts(cells[order]).astype(cells.dtype)))
+    labels = np.arange(V, dtype=_index_type(V))
     while grids:
         before = labels
         for cells, order, starts in grids:
@@ -90,7 +91,12 @@ def weld_points(points, weld):
         labels = labels[labels]  # pointer jumping: chains shorten geometrically
         if np.array_equal(labels, before):
             break
-    return np.unique(labels, return_inverse=True)[1].astype(np.int64)
+    return np.unique(labels, return_inverse=True)[1].astype(_index_type(V))
+
+
+def _index_type(n):
+    """The smallest of int32 and int64 that numbers n things: half the memory of index arrays."""
+    return np.int32 if n < 2 ** 31 - 1 else np.int64
 
 
 @dataclass
@@ -122,13 +128,13 @@ class Surface:
         (T,) patch of each triangle; ``weld`` a length (default WELD_FRACTION of the median
         patch's side, at least float32 rounding of the coordinates)."""
         vertices = np.asarray(vertices, np.float64)
-        triangles = np.asarray(triangles, np.int64)
-        triangle_patch = np.asarray(triangle_patch, np.int64)
+        triangles = np.asarray(triangles)
+        triangle_patch = np.asarray(triangle_patch)
         if not 0.0 <= crease_angle <= 180.0:
             raise ValueError(f"crease angle {crease_angle} is not between 0 and 180 degrees")
         P = int(patch_count if patch_count is not None else (triangle_patch.max() + 1 if len(triangle_patch) else 0))
-        corners = vertices[triangles]
-        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        first = vertices[triangles[:, 0]]
+        cross = np.cross(vertices[triangles[:, 1]] - first, vertices[triangles[:, 2]] - first)
         triangle_area = 0.5 * np.linalg.norm(cross, axis=1)
         patch_area = np.bincount(triangle_patch, weights=triangle_area, minlength=P)
         normal = np.stack([np.bincount(triangle_patch, weights=cross[:, k], minlength=P) for k in range(3)], axis=1)
@@ -138,8 +144,11 @@ class Surface:
             side = np.sqrt(np.median(patch_area[patch_area > 0])) if (patch_area > 0).any() else 1.0
             extent = np.abs(vertices).max() if len(vertices) else 1.0
             weld = max(WELD_FRACTION * side, 4 * np.finfo(np.float32).eps * extent)
-        centre = corners.mean(axis=1) * triangle_area[:, None]
-        centroid = np.stack([np.bincount(triangle_patch, weights=centre[:, k], minlength=P) for k in range(3)], axis=1)
+        centroid = np.zeros((P, 3))
+        for k in range(3):  # over axes, not elements
+            centre = vertices[triangles, k].mean(axis=1) * triangle_area
+            centroid[:, k] = np.bincount(triangle_patch, weights=centre, minlength=P)
+        del centre, first, cross
         centroid = np.divide(centroid, patch_area[:, None], out=np.zeros((P, 3)),
                              where=patch_area[:, None] > 0)
         point = weld_points(vertices, weld)[triangles]
@@ -213,7 +222,7 @@ class Surface:
         normals within the crease angle. Made a block of points at a time (``block`` candidate
         pairs), so memory goes with the patches, not with the points' valences squared."""
         P = max(self.patch_count, 1)
-        code = np.unique(self.point.ravel() * P + np.repeat(self.triangle_patch, 3))
+        code = np.unique(self.point.ravel().astype(np.int64) * P + np.repeat(self.triangle_patch, 3))
         point, patch = code // P, code % P
         del code
         starts = _starts(point)
