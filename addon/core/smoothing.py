@@ -38,8 +38,9 @@ neighbourhood (light falling off along a wall) is fitted, not averaged away. Bia
 result is clipped to v_p +- c * max over used neighbours of sqrt(s_p^2 + s_q^2), per channel, so
 no patch moves by more than c combined standard errors of the estimates it was compared with,
 whatever the light (``filter_noise(..., bound=True)`` returns that limit); non-negative values
-stay non-negative (clipped at 0). Patches without a variance (NaN: fewer than two batches) are
-left as they are.
+stay non-negative (clipped at 0). A zero variance (a patch no path reached) is replaced by the
+mean of its neighbours' (and the bound with it), so a black speckle neither anchors its neighbours
+nor stays black. Patches without a variance (NaN: fewer than two batches) are left as they are.
 """
 from dataclasses import dataclass
 
@@ -253,8 +254,9 @@ class Surface:
         var = np.asarray(patch_variances, np.float64).reshape(values.shape)
         known = np.isfinite(var).all(axis=1) & (var >= 0).all(axis=1)
         floor = 1e-12 * max(float(np.abs(values).max()) if values.size else 0.0, 1e-300) ** 2
-        var = np.where(known[:, None], np.maximum(np.nan_to_num(var, nan=0.0, posinf=0.0), floor), np.inf)
         p, q = self.neighbours()
+        var = _unmeasured_from_neighbours(np.where(known[:, None], var, np.nan), p, q)
+        var = np.where(known[:, None], np.maximum(var, floor), np.inf)
         d2 = np.zeros(len(p))
         for c in range(values.shape[1]):  # over colour channels, not elements
             np.maximum(d2, (values[p, c] - values[q, c]) ** 2 / (var[p, c] + var[q, c]), out=d2)
@@ -308,6 +310,22 @@ class Surface:
             fit = np.linalg.solve(np.where(solvable[:, None, None], M, np.eye(3)), rhs[:, :, None])[:, 0, 0]
             out[:, c] = np.where(solvable, fit, values[:, c])
         return out
+
+
+def _unmeasured_from_neighbours(var, p, q):
+    """Variances (P,k) where a zero (a patch no path reached: its batches all agree on nothing)
+    is replaced by the mean of its neighbours' non-zero ones, so that it neither anchors its
+    neighbours nor stays as it is when they disagree with it."""
+    zero = (var == 0).all(axis=1)
+    if not zero.any():
+        return var
+    out = var.copy()
+    give = (~zero[q]) & zero[p] & np.isfinite(var[q]).all(axis=1)
+    count = np.bincount(p[give], minlength=len(var))
+    for c in range(var.shape[1]):
+        total = _sum(p[give], var[q[give], c], len(var))
+        out[:, c] = np.where(zero & (count > 0), total / np.maximum(count, 1), var[:, c])
+    return out
 
 
 def _sum(index, weights, n):
