@@ -24,8 +24,8 @@ patch's mean exactly its value (float error) whatever the iteration count and wh
 what the iterations buy is small jumps left by that last step where a continuous answer exists
 (benchmarks/results/smoothing.md); a sharp step of light across a smooth joint has no
 non-negative continuous answer, and keeps part of its step. Every step keeps values
-non-negative (averages of non-negative values, a clip at 0, a non-negative scale); negative or
-non-finite input is refused.
+non-negative (averages of non-negative values, a clip at 0, a non-negative scale); negative
+values (a signed estimator's noise) count as 0, non-finite ones are refused.
 
 Noise (``filter_noise``). Each patch's value is re-estimated from itself and its neighbours
 (patches sharing a welded point, normals within the crease angle) by a weighted least-squares
@@ -104,10 +104,11 @@ def _index_type(n):
 class Surface:
     """The scene's triangles as one welded surface, built once for any number of value sets.
 
-    point        (T,3) welded point of every triangle corner
-    corner_normal(T,3) unit normal each corner carries (its patch's)
-    triangle_area (T,)  area of each triangle
-    patch_area   (P,)  area of each patch
+    point          (T,3) welded point of every triangle corner
+    triangle_area  (T,)  area of each triangle
+    patch_area     (P,)  area of each patch
+    patch_normal   (P,3) unit normal of each patch (the normal each of its corners carries)
+    patch_centroid (P,3) area-weighted centre of each patch
     """
     point: np.ndarray
     triangle_patch: np.ndarray
@@ -155,7 +156,8 @@ class Surface:
         point = weld_points(vertices, weld)[triangles]
         cos_crease = float(np.cos(np.radians(crease_angle)))
         smooth_point, pairs = _crease_pairs(point, triangle_patch, patch_normal, cos_crease)
-        return cls(point, triangle_patch, triangle_area, patch_area, patch_normal, centroid, cos_crease, smooth_point, pairs)
+        return cls(point, triangle_patch, triangle_area, patch_area, patch_normal, centroid, cos_crease,
+                   smooth_point, pairs)
 
     # -- corner values -------------------------------------------------------------------------
     def _averaging(self):
@@ -193,13 +195,15 @@ class Surface:
     def corner_values(self, patch_values, iterations=ITERATIONS):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
         compatible corners, the area-weighted mean of each patch's linear interpolation equal to
-        its value, non-negative."""
-        values = _checked(patch_values, self.patch_count, "patch values")
+        its value (negative values taken as 0), non-negative."""
+        # a signed estimator's slightly negative patches show as black: light is never negative
+        values = np.maximum(_checked(patch_values, self.patch_count, "patch values"), 0.0)
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
         out = np.empty((len(self.triangle_patch), 3, values.shape[1]))
         for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
-            out[:, :, k] = self._corner_channel(np.ascontiguousarray(values[:, k]), corner_patch, averaging, iterations).reshape(-1, 3)
+            channel = np.ascontiguousarray(values[:, k])
+            out[:, :, k] = self._corner_channel(channel, corner_patch, averaging, iterations).reshape(-1, 3)
         return out
 
     def _corner_channel(self, values, corner_patch, averaging, iterations):
@@ -250,7 +254,7 @@ class Surface:
         """Noise-filtered per-patch values (P,k) from values and the variances of their estimates
         (P,k); patches with a NaN or infinite variance are left as they are and not used. With
         ``bound``, also the largest change each patch may have been given (P,k)."""
-        values = _checked(patch_values, self.patch_count, "patch values", negative=True)
+        values = _checked(patch_values, self.patch_count, "patch values")
         var = np.asarray(patch_variances, np.float64).reshape(values.shape)
         known = np.isfinite(var).all(axis=1) & (var >= 0).all(axis=1)
         floor = 1e-12 * max(float(np.abs(values).max()) if values.size else 0.0, 1e-300) ** 2
@@ -333,15 +337,13 @@ def _sum(index, weights, n):
     return np.bincount(index, weights=weights, minlength=n).astype(np.float64, copy=False)
 
 
-def _checked(values, P, what, negative=False):
+def _checked(values, P, what):
     values = np.asarray(values, np.float64)
     values = values.reshape(len(values), -1) if values.ndim != 2 else values
     if len(values) != P:
         raise ValueError(f"{what}: {len(values)} rows for {P} patches")
     if not np.isfinite(values).all():
         raise ValueError(f"{what} are not all finite")
-    if not negative and (values < 0).any():
-        raise ValueError(f"{what} must be non-negative (smallest {values.min():g})")
     return values
 
 

@@ -220,11 +220,14 @@ def test_each_patch_keeps_its_mean_and_values_stay_non_negative(seed, iterations
     assert np.abs(corners - values[TP][:, None, :]).max() > 0.1
 
 
-def test_bad_values_are_refused_with_one_line():
+def test_bad_values_are_refused_with_one_line_and_negative_light_is_none():
     V, T, TP, values = _random_mesh(0)
     surface = smoothing.Surface.of(V, T, TP)
-    with pytest.raises(ValueError, match="must be non-negative"):
-        surface.corner_values(values - 1.0)
+    signed = values - 0.5  # a signed estimator's noise: negative light shows as none
+    corners = surface.corner_values(signed)
+    assert (corners >= 0).all()
+    np.testing.assert_allclose(_patch_means(V, T, TP, corners, len(values)), np.maximum(signed, 0.0),
+                               rtol=1e-12, atol=1e-15 * values.max())
     with pytest.raises(ValueError, match="not all finite"):
         surface.corner_values(np.where(values > 1, np.nan, values))
     with pytest.raises(ValueError, match="rows for"):
