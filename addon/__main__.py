@@ -393,7 +393,9 @@ def _run(args, names, interrupt):
     for option in options.SETTINGS:
         setattr(settings, option.name, getattr(args, option.name))
 
-    from . import operators, pipeline, worker
+    from . import pipeline
+    from .bpy_free import worker
+    from .ui import operators
 
     try:  # a costly setting is said before the run, as the panel says it
         warning = pipeline.estimate(scene_io.read_selection(bpy.context)[0], settings.solve_settings())["warning"]
@@ -626,7 +628,7 @@ class Interrupt:
 
     def _request(self):
         self.requested.set()
-        worker = sys.modules.get(f"{__package__}.worker")  # (no import here: it could wait on the main thread's)
+        worker = sys.modules.get(f"{__package__}.bpy_free.worker")  # (no import here: it could wait on the main thread's)
         job = worker.running_job() if worker is not None else None
         if job is not None:
             job.cancel()
@@ -698,7 +700,7 @@ def release_solve_memory():
     renders next, and Cycles' copy of the results needs the room."""
     import gc
 
-    from . import patches, trim
+    from .bpy_free import patches, trim
 
     patches._GEOMETRY_CACHE.clear()
     gc.collect()

@@ -14,7 +14,8 @@ import threading
 
 import bpy
 
-from . import pipeline, scene_io, worker
+from . import pipeline, scene_io
+from .bpy_free import worker
 
 DELAY_SECONDS = 0.3
 POLL_SECONDS = 0.1

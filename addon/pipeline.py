@@ -17,8 +17,9 @@ from .core.first_shot import direct_irradiance
 from .core.forecast import forecast
 from .core.names import AUTO, GATHERED, TWO_WAY
 from .core.solver import choose_method
-from . import options, trim
-from .patches import Patches, back_light_warning, light_kind, make_patches, scene_and_notes
+from . import options
+from .bpy_free import trim
+from .bpy_free.patches import Patches, back_light_warning, light_kind, make_patches, scene_and_notes
 
 @dataclass
 class SolveSettings:

@@ -13,9 +13,9 @@ import bpy
 import numpy as np
 
 from .core import meshing
-from . import lights_io
-from .images import image_average, linear_pixels
-from .patches import ObjectArrays
+from .blender_read import lights as lights_io
+from .blender_read.images import image_average, linear_pixels
+from .bpy_free.patches import ObjectArrays
 
 #: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
 #: need R < 1; without the setting, a base colour of 1 or more is refused).

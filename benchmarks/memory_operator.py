@@ -140,7 +140,9 @@ def child(layout, n, target_error, method, use_tracemalloc):
     import bpy
 
     import addon
-    from addon import live_view, operators, pipeline, scene_io, worker
+    from addon import pipeline, scene_io
+    from addon.bpy_free import worker
+    from addon.ui import live_view, operators
     from addon.core import solver
 
     mark("bpy imported")
@@ -205,7 +207,7 @@ def child(layout, n, target_error, method, use_tracemalloc):
     # Release every array of ours: the live view's, the geometry cache, the operator's job
     # (Blender keeps the last operator, and so its job, for the redo panel).
     live["arrays"] = None
-    from addon import patches
+    from addon.bpy_free import patches
 
     patches._GEOMETRY_CACHE.clear()
     pipeline.RAY_RATES.clear()

@@ -224,7 +224,7 @@ def direct_only(paths, chunks=32):
     import bpy
     from concurrent.futures import ThreadPoolExecutor
 
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
     from addon import scene_io
     from addon.core.first_shot import Gathering, gather_direct, pilot_irradiance
     from addon.core.tables import WalkTables

@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 import addon
-from addon import estimate, images, patches, pipeline, scene_io, worker
+from addon import estimate, pipeline, scene_io
+from addon.blender_read import images
+from addon.bpy_free import patches, worker
 
 from .conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
 from .test_extension import _drive, _modal_operator, _snapshot, configure
@@ -226,7 +228,7 @@ def test_a_target_not_reached_at_the_path_cap_is_said(blender):
     """A run whose measured error is still above the target when it reaches its path cap says so
     in a warning with the error it reached (the operator's reports after writing, from the
     run's statistics); a run that met its target does not."""
-    from addon import operators
+    from addon.ui import operators
 
     build_test_scene()
     configure(blender)
@@ -299,7 +301,7 @@ def test_new_file_while_solving_stops_the_worker_and_writes_nothing(blender, ble
     bpy.ops.wm.read_homefile(use_empty=True)  # load_pre: the worker is stopped
     assert not job.alive and job.cancelled and worker.running_job() is None
     if blender_cancels_the_modal:  # what Blender does to running modal operators on a load
-        from addon.operators import RADIOSITY_OT_solve
+        from addon.ui.operators import RADIOSITY_OT_solve
 
         RADIOSITY_OT_solve.cancel(op, bpy.context)
     else:  # a last timer tick reaches the operator: it must not write into the new file
@@ -527,7 +529,7 @@ def test_switching_scene_while_solving_writes_into_the_scene_solved(blender):
 
 def test_the_load_handler_comes_and_goes_with_the_extension():
     import addon
-    from addon.operators import _on_load_pre
+    from addon.ui.operators import _on_load_pre
 
     addon.register()
     assert _on_load_pre in bpy.app.handlers.load_pre
@@ -714,7 +716,7 @@ def test_path_and_ray_counts_beyond_32_bits_are_stored_exactly(blender, monkeypa
 def test_a_failure_after_writing_keeps_the_results_and_finishes(blender, monkeypatch):
     """Whatever goes wrong once the results are written (statistics, reports), the operator
     finishes -- with its undo step -- and says so, instead of raising over a changed scene."""
-    from addon import operators
+    from addon.ui import operators
 
     build_test_scene()
     configure(blender)

@@ -187,7 +187,7 @@ def test_cli_names_and_defaults_are_the_panels():
     defaults = _parser().parse_args([])
     addon.register()
     try:
-        from addon.properties import RadiositySettings
+        from addon.ui.properties import RadiositySettings
 
         props = RadiositySettings.bl_rna.properties
         for option in options.SETTINGS:

@@ -76,7 +76,8 @@ def test_the_preview_renders_the_results_without_emission_sampling_and_restores_
 
 @pytest.mark.parametrize("output", ["BOTH", "FACE", "VERTEX"])
 def test_the_preview_exposure_from_the_arrays_is_the_one_read_back(blender, output):
-    from addon import operators, scene_io
+    from addon import scene_io
+    from addon.ui import operators
     from addon.__main__ import _auto_exposure, preview_exposure
 
     exposures = []
@@ -90,7 +91,7 @@ def test_the_preview_exposure_from_the_arrays_is_the_one_read_back(blender, outp
 
 
 def test_the_command_line_lets_go_of_the_solve_before_saving(blender, tmp_path):
-    from addon import patches
+    from addon.bpy_free import patches
     from addon.__main__ import main
 
     build_test_scene()

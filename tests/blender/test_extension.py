@@ -8,7 +8,9 @@ import pytest
 
 import addon
 from addon.options import METHOD, STOP_RULE
-from addon import estimate, panel, patches, pipeline, scene_io, worker
+from addon import estimate, pipeline, scene_io
+from addon.bpy_free import patches, worker
+from addon.ui import panel
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
 from addon.core.meshing import concatenate, mesh_patches, point_average, triangle_areas
 
@@ -42,7 +44,7 @@ def _trace():
             ops.append(op)
         except KeyError:
             pass
-    from addon import operators, properties
+    from addon.ui import operators, properties
 
     registered = [c.__name__ for c in (*properties.classes, *operators.classes, *panel.classes) if c.is_registered]
     return {
@@ -191,7 +193,7 @@ def test_two_way_iteration_reaches_the_core_and_the_estimate_plans_for_it(blende
         expected = np.maximum(ref.radiosity[combined.patch_slice(k)], 0).astype(np.float32)  # written at least 0
         np.testing.assert_array_equal(colours[:, :3], np.repeat(expected, meshes[k].face_sizes, axis=0))
     # "Automatic" is the core's method="auto": the estimate names what it takes here, and says so.
-    from addon.panel import estimate_lines
+    from addon.ui.panel import estimate_lines
 
     s.method = "auto"
     value = estimate.compute(blender)
@@ -618,7 +620,7 @@ class FakeEvent:
 
 
 def _modal_operator():
-    from addon.operators import RADIOSITY_OT_solve as Op
+    from addon.ui.operators import RADIOSITY_OT_solve as Op
 
     class ModalStandIn:
         _job = None
@@ -736,8 +738,8 @@ def test_estimate_predicts_time_from_this_machines_ray_rate_and_warns_when_slow(
     """The estimate's time is the expected rays over a ray rate measured on this scene (a pilot of
     the run), with the fixed costs; past a minute it warns, naming the patch size and the target;
     every line of the panel's estimate has a tooltip."""
-    from addon import operators
-    from addon.panel import estimate_lines
+    from addon.ui import operators
+    from addon.ui.panel import estimate_lines
 
     build_test_scene()
     configure(blender)
@@ -758,7 +760,7 @@ def test_live_view_data_refines_while_solving_and_writes_nothing(blender):
     """Headless: a job with the live view on keeps its result so far (the
     data the 3D view draws), refreshed while it solves and ending near the final result; the
     triangles and colours drawn cover every patch; nothing is written into the scene."""
-    from addon import live_view
+    from addon.ui import live_view
 
     build_test_scene()
     configure(blender)

@@ -43,7 +43,7 @@ def test_a_room_1000_km_from_a_cube_says_so_and_does_not_blame_its_lamp(blender)
     too large beside the room's faces for float32 positions (6 cm apart there), and none says
     the lamp's light reaches no face. (Before, the lamp's rays started 10 m off it, all of its
     light escaped, and the only note blamed the lamp.)"""
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
     from addon import scene_io
 
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)

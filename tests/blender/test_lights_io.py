@@ -6,7 +6,8 @@ import bpy
 import numpy as np
 import pytest
 
-from addon import lights_io, scene_io
+from addon import scene_io
+from addon.blender_read import lights as lights_io
 from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
 
 from .conftest import box_arrays, build_test_scene, make_object, principled, result_objects
@@ -313,7 +314,7 @@ def test_light_and_indirect_outputs_beside_the_radiosity(blender):
 def test_lights_that_cannot_light_the_selection_are_named(blender):
     """A lamp inside a closed box of its own, and a sun over a closed room: the estimate names
     them (nothing of their light reaches the front of a face)."""
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
 
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
     make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
@@ -363,7 +364,7 @@ def test_an_image_texture_colours_each_patch_by_its_own_uv_footprint(blender):
     """Base colour from an image through the UV map: each patch takes the image's mean over
     its own part of UV space (left patches red, right ones blue), not one average for the whole
     material; a Mapping node's scale of 2 repeats the image, so every patch is half and half."""
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
 
     _textured_wall(blender)
     objects, notes = scene_io.read_selection(blender)
@@ -403,7 +404,7 @@ def test_a_colour_attribute_feeding_the_base_colour_is_averaged_per_patch(blende
     """A point colour attribute, red at x = 0 and blue at x = 1, drives the base colour: each
     patch takes the mean over its own footprint, the linear interpolation's value at its
     centre (red fading into blue across the wall), not one colour for the material."""
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
 
     material = principled("Painted", (0.5, 0.5, 0.5))
     tree = material.node_tree
@@ -430,7 +431,7 @@ def test_a_colour_attribute_feeding_the_base_colour_is_averaged_per_patch(blende
 def test_an_emission_texture_is_averaged_per_patch_times_its_strength(blender):
     """Emission colour from an image (left half white, right half black) at strength 3: the
     left patches emit 3, the right ones nothing (up to the half texel blended at the seam)."""
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
 
     image = bpy.data.images.new("Sign", 64, 4, float_buffer=True)
     pixels = np.zeros((4, 64, 4), np.float32)

@@ -5,7 +5,8 @@ their results are written patch by patch onto the right source faces."""
 import bpy
 import numpy as np
 
-from addon import patches, pipeline, scene_io, worker
+from addon import pipeline, scene_io
+from addon.bpy_free import patches, worker
 from addon.core import meshing
 
 from .conftest import make_object, mesh_arrays, read_colours, result_objects

@@ -8,8 +8,9 @@ import bpy
 import numpy as np
 import pytest
 
-from addon import patches, pipeline, scene_io, worker
-from addon.operators import RADIOSITY_OT_solve
+from addon import pipeline, scene_io
+from addon.bpy_free import patches, worker
+from addon.ui.operators import RADIOSITY_OT_solve
 
 from .conftest import build_test_scene, read_colours, result_objects
 from .test_extension import _drive, _modal_operator, _snapshot, configure

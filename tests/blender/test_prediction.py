@@ -6,7 +6,8 @@ import math
 import bpy
 import pytest
 
-from addon import estimate, operators, pipeline, scene_io
+from addon import estimate, pipeline, scene_io
+from addon.ui import operators
 
 from .conftest import box_arrays, build_test_scene, make_object, principled
 

@@ -1,9 +1,9 @@
 """The extension's patch making reuses meshing, geometry tables and the Embree scene when only the
 materials (or estimator, target, seed) change: the panel's estimate and a re-run neither
-re-mesh nor rebuild. (addon.patches imports no bpy.)"""
+re-mesh nor rebuild. (addon.bpy_free.patches imports no bpy.)"""
 import numpy as np
 
-from addon import patches
+from addon.bpy_free import patches
 
 
 def box_object(name="Box", size=1.0, reflectivity=0.5):

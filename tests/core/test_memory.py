@@ -102,7 +102,7 @@ def _room_objects(n, side=4.0):
     """Six walls of n x n quads facing into a room, and an emitting quad under the ceiling, as
     scene_io reads them (ObjectArrays: int32 indices, one material a broadcast row; one face,
     one patch)."""
-    from addon.patches import ObjectArrays
+    from addon.bpy_free.patches import ObjectArrays
 
     L = side
     walls = [((0, 0, 0), (L, 0, 0), (0, L, 0)), ((0, 0, L), (0, L, 0), (L, 0, 0)), ((0, 0, 0), (0, L, 0), (0, 0, L)),
@@ -163,7 +163,8 @@ def test_the_operator_arrays_stay_within_a_per_patch_budget(scaled_blocks):
     """Meshing, the core's scene (with the diagnostics' rays) and the walk's tables of a room of
     98,788 patches, each within its budget per patch (tracemalloc), and the live view's arrays
     48 bytes a triangle."""
-    from addon import live_view, patches
+    from addon.bpy_free import patches
+    from addon.ui import live_view
     from addon.core import solve
     from addon.core.tables import WalkTables
 

@@ -48,7 +48,7 @@ def test_to_blender_round_trip(empty_scene, sample):
 def test_extension_reads_back_the_same_scene(empty_scene):
     """Through the extension's own reader and patch meshing: same patches, areas and materials."""
     scene_io = pytest.importorskip("addon.scene_io")
-    patch_making = pytest.importorskip("addon.patches")
+    patch_making = pytest.importorskip("addon.bpy_free.patches")
     sample = cornell_box.build(divisions=10)
     for obj in to_blender(sample):
         obj.select_set(True)

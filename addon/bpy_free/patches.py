@@ -13,10 +13,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
-from .core.diagnostics import back_light, escaping_light, light_fates
-from .core.textures import patch_attribute_average, patch_texture_average
-from .options import AUTOMATIC_PATCH_DIVISIONS
+from ..core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
+from ..core.diagnostics import back_light, escaping_light, light_fates
+from ..core.textures import patch_attribute_average, patch_texture_average
+from ..options import AUTOMATIC_PATCH_DIVISIONS
 
 #: A patch size that would make more patches than this is refused before meshing (memory and
 #: time grow with the patch count: a tiny patch size could otherwise exhaust the memory).

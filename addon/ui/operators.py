@@ -6,7 +6,9 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import live_view, pipeline, scene_io, worker
+from . import live_view
+from .. import pipeline, scene_io
+from ..bpy_free import worker
 
 TIMER_SECONDS = 0.1
 #: The last error of ``radiosity.solve`` (with quiet_errors, its only record).

@@ -1,0 +1,4 @@
+"""Reading the Blender scene into arrays: objects, materials, images, lights and the world (bpy).
+
+What is read goes on as ``bpy_free.patches.ObjectArrays`` and the core's light sources; nothing here
+writes into Blender."""
