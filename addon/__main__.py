@@ -270,10 +270,10 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
 
 def _result_materials(scene):
     """The materials of the scene's result objects (ours, and any the user gave them)."""
-    from . import scene_io
+    from .blender_write.results import previous_results
 
     materials = {}
-    for obj in scene_io.previous_results(scene):
+    for obj in previous_results(scene):
         for slot in obj.material_slots:
             if slot.material is not None:
                 materials[slot.material.name] = slot.material
@@ -347,7 +347,8 @@ def _run(args, names, interrupt):
         sys.path.insert(0, root)
     import bpy
 
-    from . import scene_io
+    from .blender_read.objects import source_objects
+    from .blender_write.results import is_result_object
 
     interrupt.check()
     t0 = time.perf_counter()
@@ -382,8 +383,8 @@ def _run(args, names, interrupt):
             return _fail(problem, 2)
     if args.select_all:
         for o in bpy.context.view_layer.objects:
-            o.select_set(o.type == "MESH" and not scene_io.is_result_object(o))
-    sources = scene_io.source_objects(bpy.context)
+            o.select_set(o.type == "MESH" and not is_result_object(o))
+    sources = source_objects(bpy.context)
     if not sources:
         return _fail("no mesh object selected (use --select-all)", 2)
 
@@ -394,11 +395,12 @@ def _run(args, names, interrupt):
         setattr(settings, option.name, getattr(args, option.name))
 
     from . import pipeline
+    from .blender_read.selection import read_selection
     from .bpy_free import worker
     from .ui import operators
 
     try:  # a costly setting is said before the run, as the panel says it
-        warning = pipeline.estimate(scene_io.read_selection(bpy.context)[0], settings.solve_settings())["warning"]
+        warning = pipeline.estimate(read_selection(bpy.context)[0], settings.solve_settings())["warning"]
     except ValueError:
         warning = None  # bad input: the solve says what is wrong
     interrupt.check()
@@ -444,7 +446,7 @@ def _run(args, names, interrupt):
             outputs.add(png, check_png)
         if png and own_scene:
             # a scene built here: saved with the preview's settings, so F12 renders the same
-            render_preview(png, sources, args.resolution, args.samples, exposure[-1] if exposure else _auto_exposure(scene_io),
+            render_preview(png, sources, args.resolution, args.samples, exposure[-1] if exposure else _auto_exposure(),
                            keep_settings=True, write_to=outputs.writing(png))
             interrupt.check()
         # the user's scene is saved as it is, plus the results (a copy: the open file stays the same)
@@ -453,7 +455,7 @@ def _run(args, names, interrupt):
         if png and not own_scene:
             # then the preview, with temporary settings undone afterwards
             render_preview(png, sources, args.resolution, args.samples,
-                           exposure[-1] if exposure else _auto_exposure(scene_io), write_to=outputs.writing(png))
+                           exposure[-1] if exposure else _auto_exposure(), write_to=outputs.writing(png))
         outputs.check()
         with interrupt.lock:  # all files in place, or none
             interrupt.check()
@@ -783,14 +785,16 @@ def progress_text(job) -> str:
     return "  ".join(parts)
 
 
-def _auto_exposure(scene_io):
+def _auto_exposure():
     """Exposure (stops) that maps the median reflected radiosity to 0.35, from the result
     objects' colours as written in Blender (reading them back makes Blender copy them)."""
     import numpy as np
 
+    from .blender_write.results import ATTRIBUTE_NAME, previous_results
+
     values = []
-    for obj in scene_io.previous_results():
-        attr = obj.data.color_attributes.get(scene_io.ATTRIBUTE_NAME)
+    for obj in previous_results():
+        attr = obj.data.color_attributes.get(ATTRIBUTE_NAME)
         if attr is None:
             continue
         c = np.empty(len(attr.data) * 4, dtype=np.float32)
@@ -805,14 +809,14 @@ def preview_exposure(output, mode) -> float:
     corner, or per point with VERTEX), as the float32 colours written."""
     import numpy as np
 
-    from . import scene_io
+    from .blender_write.results import rgba
 
     values = []
     for mesh, faces, points in zip(output.patches.meshes, output.face_colours, output.point_colours):
         if faces is None:  # the rest of the scene: no results
             continue
         shown = points if mode == "VERTEX" else faces
-        grey = scene_io._rgba(shown).reshape(-1, 4)[:, :3].mean(axis=1)
+        grey = rgba(shown).reshape(-1, 4)[:, :3].mean(axis=1)
         values.append(grey if mode == "VERTEX" else np.repeat(grey, mesh.face_sizes))
     return _exposure_of(values)
 

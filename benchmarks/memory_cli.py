@@ -77,8 +77,9 @@ def traced_main(argv, out_path):
     import bpy  # noqa: F401
 
     import addon.__main__ as cli
-    from addon import pipeline, scene_io
+    from addon import pipeline
     from addon.core import solver
+    from addon.ui import operators
 
     marks.mark("bpy imported")
 
@@ -98,12 +99,12 @@ def traced_main(argv, out_path):
 
     wrap(cli, "build_sample_scene", "scene built in bpy")
     wrap(pipeline, "estimate", "estimate (meshing, scene, calibration)")
-    wrap(scene_io, "read_selection", "objects read")
+    wrap(operators, "read_selection", "objects read")
     wrap(pipeline, "make_patches", "patches meshed")
     wrap(pipeline, "scene_and_notes", "core scene")
     wrap(solver, "WalkTables", "tables and BVH")
     wrap(pipeline, "solve", "solve")
-    wrap(scene_io, "write_results", "colours written")
+    wrap(operators, "write_results", "colours written")
     wrap(cli, "release_solve_memory", "solve's memory released")
     wrap(cli, "_auto_exposure", "exposure read")
     wrap(cli, "preview_settings", "preview set up")

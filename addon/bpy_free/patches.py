@@ -1,6 +1,6 @@
 """Patches of the selected objects: faces cleaned, meshed (cached per geometry) and given materials.
 
-No bpy: scene reading (``scene_io``) gives :class:`ObjectArrays`; :func:`make_patches` makes the
+No bpy: reading the scene (``blender_read``) gives :class:`ObjectArrays`; :func:`make_patches` makes the
 :class:`Patches` the pipeline solves, and :func:`scene_and_notes` their core scene.
 """
 from __future__ import annotations
@@ -42,11 +42,11 @@ class ObjectArrays:
 
     name: str
     vertices: np.ndarray  # (V,3) float64
-    face_sizes: np.ndarray  # (F,) int32 or int64 (scene_io: int32, as Blender's)
+    face_sizes: np.ndarray  # (F,) int32 or int64 (blender_read: int32, as Blender's)
     corner_verts: np.ndarray  # (C,) int32 or int64
     triangles: np.ndarray  # (T,3) int32 or int64, Blender's loop triangles (vertex indices)
     triangle_face: np.ndarray  # (T,) int32 or int64
-    face_reflectivity: np.ndarray  # (F,3) float64 in [0, 1) (scene_io: a broadcast row for one material)
+    face_reflectivity: np.ndarray  # (F,3) float64 in [0, 1) (blender_read: a broadcast row for one material)
     face_emission: np.ndarray  # (F,3) float64 >= 0, emission colour x strength
     uid: int | None = None  # the source object's session_uid (to find it again)
     face_slot: np.ndarray | None = None  # (F,) material slot of each face
@@ -83,7 +83,7 @@ class Patches:
     geometry_key: str | None = None  # fingerprint of the meshed geometry (see _GeometryCache)
     notes: list = field(default_factory=list)  # what reading the geometry left out, for the user
     patch_size: float = 0.0  # the size meshed with (an automatic size resolved)
-    lights: tuple = ()  # the core's light sources (scene_io.Selection.lights)
+    lights: tuple = ()  # the core's light sources (blender_read.selection.Selection.lights)
 
     def patch_scene(self):
         """The core scene; geometry, sampling tables and the Embree scene are built once per
@@ -323,7 +323,7 @@ def make_patches(objects, patch_size) -> Patches:
     unchanged geometry comes from the cache). Faces of zero area are left out first, and a
     patch size that would make more than MAX_PATCHES patches is refused before any meshing.
     A patch size of 0 is automatic (:func:`automatic_patch_size`)."""
-    lights = tuple(getattr(objects, "lights", ()))  # (a scene_io.Selection carries them)
+    lights = tuple(getattr(objects, "lights", ()))  # (a blender_read.selection.Selection carries them)
     check_finite_vertices(objects)
     objects, notes = drop_zero_area_faces(objects)
     if not objects:

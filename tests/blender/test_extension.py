@@ -8,7 +8,9 @@ import pytest
 
 import addon
 from addon.options import METHOD, STOP_RULE
-from addon import estimate, pipeline, scene_io
+from addon import estimate, pipeline
+from addon.blender_read.materials import material_colours
+from addon.blender_read.selection import read_selection
 from addon.bpy_free import patches, worker
 from addon.ui import panel
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
@@ -312,7 +314,7 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
     tex.inputs["Color1"].default_value = (0.9, 0.5, 0.1, 1)
     tex.inputs["Color2"].default_value = (0.1, 0.3, 0.5, 1)
-    R, E, notes = scene_io.material_colours(m)
+    R, E, notes = material_colours(m)
     np.testing.assert_allclose(R, [0.5, 0.4, 0.3], rtol=1e-6)  # the checker's average
     assert any("Base Color" in n and "average" in n for n in notes)
     d = bpy.data.materials.new("Diffuse")
@@ -320,7 +322,7 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     diffuse = d.node_tree.nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = (0.1, 0.5, 0.2, 1)
     d.node_tree.links.new(diffuse.outputs["BSDF"], d.node_tree.nodes["Material Output"].inputs["Surface"])
-    R, E, notes = scene_io.material_colours(d)
+    R, E, notes = material_colours(d)
     np.testing.assert_allclose(R, [0.1, 0.5, 0.2], rtol=1e-6)
     np.testing.assert_array_equal(E, 0)
     e = bpy.data.materials.new("Lamp")
@@ -329,16 +331,16 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     em.inputs["Color"].default_value = (1, 0.5, 0.25, 1)
     em.inputs["Strength"].default_value = 8.0
     e.node_tree.links.new(em.outputs["Emission"], e.node_tree.nodes["Material Output"].inputs["Surface"])
-    R, E, _ = scene_io.material_colours(e)
+    R, E, _ = material_colours(e)
     np.testing.assert_allclose(E, [8, 4, 2])
     np.testing.assert_array_equal(R, 0)
-    R, E, _ = scene_io.material_colours(None)
+    R, E, _ = material_colours(None)
     np.testing.assert_allclose(R, 0.8)
     # No shader the reader knows (here: nothing linked to the output): the viewport colour.
     v = bpy.data.materials.new("Viewport only")
     v.node_tree.nodes.remove(v.node_tree.nodes["Principled BSDF"])
     v.diffuse_color = (0.3, 0.6, 0.1, 1)
-    R, E, notes = scene_io.material_colours(v)
+    R, E, notes = material_colours(v)
     np.testing.assert_allclose(R, [0.3, 0.6, 0.1], rtol=1e-6)
     np.testing.assert_array_equal(E, 0)
     assert any("viewport colour" in n for n in notes)
@@ -547,7 +549,7 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
     objects, _ = (None, None)
     for name in ("Room", "Lamp", "Block"):
         bpy.data.objects[name].select_set(True)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     job = worker.SolveJob(objects, blender.scene.radiosity.solve_settings())
     scene = patches.make_patches(objects, PATCH_SIZE).patch_scene()
     prediction, _ = pipeline.prediction_for(scene, job.settings)
@@ -578,7 +580,7 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
 def test_worker_thread_cancels_between_batches(blender):
     build_test_scene()
     configure(blender)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     settings = blender.scene.radiosity.solve_settings()
     settings.paths = 50_000_000  # far more than the test waits for
     job = worker.SolveJob(objects, settings).start()
@@ -599,7 +601,7 @@ def test_worker_thread_cancels_between_batches(blender):
 def test_worker_reports_core_errors_as_messages(blender):
     build_test_scene()
     configure(blender)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     settings = blender.scene.radiosity.solve_settings()
     settings.estimator = "biased_infinite"
     settings.threshold = 2.0  # outside (0, 1): the core refuses
@@ -764,7 +766,7 @@ def test_live_view_data_refines_while_solving_and_writes_nothing(blender):
 
     build_test_scene()
     configure(blender)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     settings = blender.scene.radiosity.solve_settings()
     settings.relative_rms = 0.02
     job = worker.SolveJob(objects, settings)

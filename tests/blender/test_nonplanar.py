@@ -5,7 +5,8 @@ their results are written patch by patch onto the right source faces."""
 import bpy
 import numpy as np
 
-from addon import pipeline, scene_io
+from addon import pipeline
+from addon.blender_read.selection import read_selection
 from addon.bpy_free import patches, worker
 from addon.core import meshing
 
@@ -30,7 +31,7 @@ def _nonplanar_scene(context):
     make_object("Bumpy", v, quads)  # facing up, towards the lamp
     for o in bpy.data.objects:
         o.select_set(True)
-    objects, _ = scene_io.read_selection(context)
+    objects, _ = read_selection(context)
     return {o.name: o for o in objects}
 
 

@@ -100,7 +100,7 @@ LIVE_VIEW_BYTES = 48     # a triangle's three corners: float32 positions, 8-bit 
 
 def _room_objects(n, side=4.0):
     """Six walls of n x n quads facing into a room, and an emitting quad under the ceiling, as
-    scene_io reads them (ObjectArrays: int32 indices, one material a broadcast row; one face,
+    blender_read reads them (ObjectArrays: int32 indices, one material a broadcast row; one face,
     one patch)."""
     from addon.bpy_free.patches import ObjectArrays
 
