@@ -19,7 +19,8 @@ from .core.names import AUTO, GATHERED, TWO_WAY
 from .core.solver import choose_method
 from . import options
 from .bpy_free import trim
-from .bpy_free.patches import Patches, back_light_warning, light_kind, make_patches, scene_and_notes
+from .bpy_free.patches import Patches, make_patches
+from .bpy_free.scene_notes import back_light_warning, light_kind, scene_and_notes
 
 @dataclass
 class SolveSettings:

@@ -226,6 +226,7 @@ def direct_only(paths, chunks=32):
     from concurrent.futures import ThreadPoolExecutor
 
     from addon.bpy_free import patches as patch_making
+    from addon.bpy_free.scene_notes import scene_and_notes
     from addon.blender_read.selection import read_selection
     from addon.core.first_shot import Gathering, gather_direct, pilot_irradiance
     from addon.core.tables import WalkTables
@@ -234,7 +235,7 @@ def direct_only(paths, chunks=32):
 
     objects, _ = read_selection(bpy.context)
     patches = patch_making.make_patches(objects, 1e6)
-    scene, _ = patch_making.scene_and_notes(patches)
+    scene, _ = scene_and_notes(patches)
     tables = WalkTables(scene, "finite", 1e-3, "hit")
     tables.numpy_turn = FreeTurn()  # (as the two-way iteration gathers: walk.takes_turns)
     gathering = Gathering(scene, direct_samples(math.ceil(paths / chunks), scene))

@@ -1,7 +1,8 @@
-"""Patches of the selected objects: faces cleaned, meshed (cached per geometry) and given materials.
+"""Patches of the selected objects: faces cleaned (``cleaning``), meshed (cached per geometry)
+and given materials.
 
 No bpy: reading the scene (``blender_read``) gives :class:`ObjectArrays`; :func:`make_patches` makes the
-:class:`Patches` the pipeline solves, and :func:`scene_and_notes` their core scene.
+:class:`Patches` the pipeline solves, and ``scene_notes.scene_and_notes`` their core scene.
 """
 from __future__ import annotations
 
@@ -9,22 +10,18 @@ import hashlib
 import threading
 import warnings
 from collections import OrderedDict
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import RELATIVE_DEGENERATE_AREA, PatchScene, meshing
-from ..core.diagnostics import back_light, escaping_light, light_fates
+from ..core import PatchScene, meshing
 from ..core.textures import patch_attribute_average, patch_texture_average
 from ..options import AUTOMATIC_PATCH_DIVISIONS
+from .cleaning import check_finite_vertices, degenerate_area, drop_zero_area_faces
 
 #: A patch size that would make more patches than this is refused before meshing (memory and
 #: time grow with the patch count: a tiny patch size could otherwise exhaust the memory).
 MAX_PATCHES = 2_000_000
-
-#: An object whose emitting faces send at least this share of their light out of the scene
-#: (none of it reaching the other objects) gets a warning.
-ESCAPING_WARNING = 0.9
 
 #: The rest of the scene (objects that block and reflect but get no results) is meshed this
 #: many times coarser than the selection.
@@ -174,104 +171,6 @@ class _GeometryCache:
 _GEOMETRY_CACHE = _GeometryCache()
 
 
-def degenerate_area(objects) -> float:
-    """The core's degenerate-triangle area for the scene these objects make: triangles of this
-    area or less are dropped by the core (RELATIVE_DEGENERATE_AREA x the squared diagonal of the
-    vertices the triangles use). The meshing gets it too, so that the faces it cuts into
-    triangles (non-planar ones) never make a patch of dropped triangles only."""
-    used = [o.vertices[np.unique(o.triangles)] for o in objects if len(o.triangles)]
-    if not used:
-        return 0.0
-    used = np.vstack(used)
-    diagonal = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0)))
-    return RELATIVE_DEGENERATE_AREA * diagonal**2
-
-
-def check_finite_vertices(objects):
-    """ValueError naming the first object whose faces use a vertex that is NaN or infinite
-    (a script, a driver, a modifier): the scene's extent, and every area, would be NaN."""
-    for o in objects:
-        if np.isfinite(o.vertices).all():
-            continue
-        used = np.unique(o.triangles)
-        bad = int(np.count_nonzero(~np.isfinite(o.vertices[used]).all(axis=1)))
-        if bad:
-            hint = " (its location, rotation or scale?)" if bad == used.size else ""
-            raise ValueError(f"'{o.name}': {bad} of the {used.size} vertices its faces use "
-                             f"{'is' if bad == 1 else 'are'} not a finite number (NaN or infinite){hint}")
-
-
-def _extent_ends(objects):
-    """'from 'A' to 'B'': the objects at both ends of the scene's widest side."""
-    boxes = [(o.name, o.vertices[np.unique(o.triangles)]) for o in objects if len(o.triangles)]
-    lo = np.array([v.min(axis=0) for _, v in boxes])
-    hi = np.array([v.max(axis=0) for _, v in boxes])
-    axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0)))
-    return f"from '{boxes[int(np.argmin(lo[:, axis]))][0]}' to '{boxes[int(np.argmax(hi[:, axis]))][0]}'"
-
-
-def drop_zero_area_faces(objects):
-    """(objects, notes): faces with no area at the core's tolerance left out, objects left
-    without faces skipped. Such faces (collinear or coincident corners, common in imported
-    meshes) are invisible, and a patch made of them only would make the core refuse the scene.
-    Faces with an area of their own that the scene's extent makes too small to trace are said
-    so; a selected object left with none of its faces that way is a ValueError."""
-    if not any(len(o.triangles) for o in objects):
-        return [], [f"'{o.name}': every face has zero area; the object was skipped" for o in objects]
-    threshold = degenerate_area(objects)
-    kept, notes, lost = [], [], []
-    for o in objects:
-        F = len(o.face_sizes)
-        area = meshing.triangle_areas(o.vertices, o.triangles) if len(o.triangles) else np.zeros(0)
-        face_area = np.bincount(o.triangle_face, weights=np.where(area > threshold, area, 0.0), minlength=F)
-        flat = face_area <= 0
-        if not flat.any():
-            kept.append(o)
-            continue
-        own = degenerate_area([o])  # the same tolerance with the object's own extent
-        real = np.bincount(o.triangle_face, weights=np.where(area > own, area, 0.0), minlength=F) > 0
-        small = int(np.count_nonzero(flat & real))
-        if small:
-            if flat.all() and o.receives:
-                lost.append(o.name)
-            notes.append(f"'{o.name}': {small} face{' is' if small == 1 else 's are'} too small to trace beside "
-                         f"{_too_small(objects, threshold)}: {'the object was skipped' if flat.all() else 'left out'}")
-        count = int(flat.sum()) - small
-        if flat.all():
-            if not small:
-                notes.append(f"'{o.name}': every face has zero area; the object was skipped")
-            continue
-        if count:
-            notes.append(f"'{o.name}': {count} face{'s' if count > 1 else ''} of zero area "
-                         "(collinear or coincident corners) left out")
-        keep = ~flat
-        corner_face = np.repeat(np.arange(F), o.face_sizes)
-        new_index = np.cumsum(keep) - 1
-        keep_triangle = keep[o.triangle_face]
-        kept.append(replace(
-            o,
-            face_sizes=o.face_sizes[keep],
-            corner_verts=o.corner_verts[keep[corner_face]],
-            triangles=o.triangles[keep_triangle],
-            triangle_face=new_index[o.triangle_face[keep_triangle]],
-            face_reflectivity=o.face_reflectivity[keep],
-            face_emission=o.face_emission[keep],
-            triangle_uv=None if o.triangle_uv is None else o.triangle_uv[keep_triangle],
-            slot_colours=tuple(None if c is None else c[keep_triangle] for c in o.slot_colours),
-            face_slot=None if o.face_slot is None else o.face_slot[keep],
-        ))
-    if lost:
-        raise ValueError(f"{', '.join(repr(name) for name in lost)}: every face is too small to trace beside "
-                         f"{_too_small(objects, threshold)}; move far objects nearer, or hide them from render")
-    return kept, notes
-
-
-def _too_small(objects, threshold):
-    diagonal = (threshold / RELATIVE_DEGENERATE_AREA) ** 0.5
-    return (f"the scene's extent (a diagonal of {diagonal:.3g}, {_extent_ends(objects)}; a face needs an area "
-            f"above {RELATIVE_DEGENERATE_AREA:g} of its square, {threshold:.3g})")
-
-
 def patch_count(objects, patch_size) -> float:
     """How many patches ``meshing.mesh_patches`` makes of these objects at this patch size,
     counted without meshing (``meshing.count_patches``; a float, so that absurd counts do not
@@ -405,126 +304,3 @@ def patch_materials(o, mesh):
     return reflectivity, emission
 
 
-def objects_of_patches(patches: Patches, indices) -> str:
-    """' (objects 'A', 'B')' for the source objects of the given patch indices, or ''."""
-    if indices is None or len(indices) == 0:
-        return ""
-    owners = np.unique(patches.combined.patch_object[np.asarray(indices, dtype=np.int64)])
-    names = ", ".join(f"'{patches.objects[k].name}'" for k in owners)
-    return f" (in {names})"
-
-
-def scene_and_notes(patches: Patches):
-    """(PatchScene, notes): the core's errors and warnings name the objects of their patches."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            scene = patches.patch_scene()
-        except ValueError as exc:
-            where = objects_of_patches(patches, getattr(exc, "patches", None))
-            raise ValueError(f"{exc}{where}") from exc
-    notes = list(patches.notes) + [
-        f"{w.message}{objects_of_patches(patches, getattr(w.message, 'patches', None))}"
-        for w in caught
-        if issubclass(w.category, UserWarning)
-    ]
-    return scene, notes + escaping_sources(patches, scene) + light_notes(scene)
-
-
-def light_notes(scene) -> list:
-    """A note for each light none of whose light reaches the front of a face (inside a closed
-    object, or a sun or sky outside a closed room), and for each that casts no shadow."""
-    gathered = dict(scene.lights.gathered_only())
-    notes = [f"light '{name}' {why} (as Cycles draws it): the direct light of every source is gathered by "
-             "shadow rays from each patch, not shot" for name, why in gathered.items()]
-    for light, (missed, back) in zip(scene.lights.lights, light_fates(scene)):
-        if gathered.get(light.name) == "casts no shadow":  # its light passes through objects
-            continue
-        if missed + back < 0.999:  # some of it reaches the front of a face
-            continue
-        if type(light).__name__ in ("SunLight", "WorldLight"):
-            if back > 0:
-                notes.append(f"light '{light.name}': no light entered; it meets only the outside (the back) of "
-                             "the faces, as a sun or sky outside a closed room: the result is dark")
-            else:
-                notes.append(f"light '{light.name}': none of its light reaches the selection")
-        elif back >= ESCAPING_WARNING:
-            notes.append(f"light '{light.name}': {back:.0%} of its light meets the back of faces; it sits inside "
-                         "a closed object or behind faces")
-        else:
-            notes.append(f"light '{light.name}': none of its light reaches the front of a face")
-    return notes
-
-
-def escaping_sources(patches: Patches, scene) -> list:
-    """A note for each object whose emitting faces send (almost) all their light out of the
-    scene: they face away from everything else."""
-    emitting, missed = escaping_light(scene)
-    if not emitting.size:
-        return []
-    owner = patches.combined.patch_object[emitting]
-    power = scene.patch_power[emitting]
-    notes = []
-    for k in np.unique(owner):
-        share = float(np.average(missed[owner == k], weights=power[owner == k]))
-        if share >= ESCAPING_WARNING:
-            notes.append(f"'{patches.objects[k].name}' sends {share:.0%} of its light out of the scene: its "
-                         "emitting faces point away from everything else (a new plane faces up: flip its normals "
-                         "or turn it; see Overlays > Face Orientation)")
-    return notes
-
-
-#: Light absorbed on back sides in view of the selection above this share of the power gets a warning.
-BLOCKED_WARNING = 0.05
-#: The warning names this many (faces' object, source) pairs, the most light first.
-BLOCKED_NAMED = 3
-
-
-def source_label(patches: Patches, scene, row) -> str:
-    """What emits source row ``row`` of ``scene.source_power``: "emissive faces of 'Lamp'",
-    "sun 'Sun'", "world 'World'", "point light 'Bulb'"..."""
-    if row < scene.patch_count:
-        return f"emissive faces of '{patches.objects[patches.combined.patch_object[row]].name}'"
-    light = scene.lights.lights[scene.lights.light_of[row - scene.patch_count]]
-    return f"{light_kind(light)} '{light.name}'"
-
-
-def light_kind(light) -> str:
-    """"point light", "spot light", "area light", "sun" or "world"."""
-    if type(light).__name__ == "PointLight":
-        return "point light" if getattr(light, "spot", None) is None else "spot light"
-    return {"AreaLight": "area light", "SunLight": "sun", "WorldLight": "world"}.get(type(light).__name__, "light")
-
-
-def back_light_warning(patches: Patches, scene, blocked, seed=0):
-    """The warning for light absorbed on back sides (``blocked``: the solve's measured share of
-    the power), or None. core.diagnostics.back_light splits it by where it landed: only the share
-    that met back sides in view of the selection counts, named by the faces' objects and the
-    sources it came from; light that met back sides from outside every receiver (a sky under a
-    room's floor) is no concern."""
-    if blocked <= BLOCKED_WARNING:
-        return None
-    receives = np.array([o.receives for o in patches.objects])[patches.combined.patch_object]
-    source, patch, weight, in_view = back_light(scene, receives, seed)
-    advice = ("one-sided faces seen from behind, or flipped normals (see Overlays > Face Orientation; give thin "
-              "walls thickness with a Solidify modifier)")
-    if not weight.size:  # the check's rays found none of it: said as measured, without names
-        return f"{blocked:.1%} of the light reached the back of faces and was absorbed there: {advice}"
-    share = blocked * float(weight[in_view].sum() / weight.sum())
-    if share <= BLOCKED_WARNING:
-        return None
-    owner = patches.combined.patch_object[patch[in_view]]
-    # summed per (object, source row) at once; the few distinct pairs then named
-    pair_rows, which = np.unique(np.stack([owner, source[in_view]]), axis=1, return_inverse=True)
-    pair_weights = np.bincount(which.ravel(), weights=weight[in_view], minlength=pair_rows.shape[1])
-    pairs = {}
-    for (k, row), w in zip(pair_rows.T.tolist(), pair_weights.tolist()):
-        key = (int(k), source_label(patches, scene, int(row)))
-        pairs[key] = pairs.get(key, 0.0) + w
-    total = sum(pairs.values())
-    ranked = sorted(pairs.items(), key=lambda item: -item[1])
-    named = [f"faces of '{patches.objects[k].name}' lit by {label} ({share * w / total:.1%})"
-             for (k, label), w in ranked[:BLOCKED_NAMED]]
-    more = f" and {len(ranked) - BLOCKED_NAMED} more" if len(ranked) > BLOCKED_NAMED else ""
-    return (f"{share:.1%} of the light reached the back of faces in view of the selection and was absorbed there: "
-            f"{', '.join(named)}{more}; {advice}")

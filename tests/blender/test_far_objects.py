@@ -44,6 +44,7 @@ def test_a_room_1000_km_from_a_cube_says_so_and_does_not_blame_its_lamp(blender)
     the lamp's light reaches no face. (Before, the lamp's rays started 10 m off it, all of its
     light escaped, and the only note blamed the lamp.)"""
     from addon.bpy_free import patches as patch_making
+    from addon.bpy_free.scene_notes import scene_and_notes
     from addon.blender_read.selection import read_selection
 
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
@@ -52,6 +53,6 @@ def test_a_room_1000_km_from_a_cube_says_so_and_does_not_blame_its_lamp(blender)
     make_object("Cube", cube_v, cube_f).select_set(False)
     _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.97), energy=40.0)
     objects, _ = read_selection(blender)
-    _, notes = patch_making.scene_and_notes(patch_making.make_patches(objects, 0.25))
+    _, notes = scene_and_notes(patch_making.make_patches(objects, 0.25))
     assert any("patches are small beside the scene's extent (1e+06 across)" in n for n in notes), notes
     assert not any(n.startswith("light 'Bulb'") for n in notes), notes

@@ -6,9 +6,8 @@ import bpy
 import numpy as np
 import pytest
 
-from addon.blender_read import SceneError
+from addon.blender_read import SceneError, lights as lights_io
 from addon.blender_read.selection import read_selection
-from addon.blender_read import lights as lights_io
 from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
 
 from .conftest import box_arrays, build_test_scene, make_object, principled, result_objects
@@ -316,6 +315,7 @@ def test_lights_that_cannot_light_the_selection_are_named(blender):
     """A lamp inside a closed box of its own, and a sun over a closed room: the estimate names
     them (nothing of their light reaches the front of a face)."""
     from addon.bpy_free import patches as patch_making
+    from addon.bpy_free.scene_notes import scene_and_notes
 
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
     make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
@@ -325,7 +325,7 @@ def test_lights_that_cannot_light_the_selection_are_named(blender):
     _lamp("SUN", "Sun", location=(0, 0, 3), energy=2.0)
     objects, _ = read_selection(blender)
     made = patch_making.make_patches(objects, 0.25)
-    _, notes = patch_making.scene_and_notes(made)
+    _, notes = scene_and_notes(made)
     assert any(n.startswith("light 'Trapped': 100% of its light meets the back of faces; it sits inside") for n in notes), notes
     assert any(n.startswith("light 'Sun'") and "no light entered" in n for n in notes), notes
 

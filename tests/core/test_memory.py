@@ -164,6 +164,7 @@ def test_the_operator_arrays_stay_within_a_per_patch_budget(scaled_blocks):
     98,788 patches, each within its budget per patch (tracemalloc), and the live view's arrays
     48 bytes a triangle."""
     from addon.bpy_free import patches
+    from addon.bpy_free.scene_notes import scene_and_notes
     from addon.ui import live_view
     from addon.core import solve
     from addon.core.tables import WalkTables
@@ -173,7 +174,7 @@ def test_the_operator_arrays_stay_within_a_per_patch_budget(scaled_blocks):
     try:
         made, mesh_held, mesh_peak = _traced(lambda: patches.make_patches(objects, patch_size))
         del objects
-        (scene, _), scene_held, scene_peak = _traced(lambda: patches.scene_and_notes(made))
+        (scene, _), scene_held, scene_peak = _traced(lambda: scene_and_notes(made))
         _, _, tables_peak = _traced(lambda: WalkTables(scene, "finite", 1e-3, "random"))
         P = scene.patch_count
         assert P == PATCHES
