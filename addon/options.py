@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .core.methods import automatic
+
 
 @dataclass(frozen=True)
 class Number:
@@ -87,15 +89,15 @@ class ClusterAddress(Text):
         text = super().check(value)
         if not text:
             return text
-        from .core.cluster import cluster_address
+        from .core.cluster_connect import cluster_address
 
         return cluster_address(text)
 
 
 METHOD = Choice("method", "--method", "auto", (
     ("auto", "Automatic", "The two-way iteration where each patch gets enough rays for it to pay (scenes of up "
-     "to about 390,000 patches, at error targets that need some rays a patch), else the paper's random walks, "
-     "which need fewer rays at a few a patch. The estimate says which"),
+     f"to {automatic.patches_text()} patches, at error targets that need some rays a patch), else the paper's random "
+     "walks, which need fewer rays at a few a patch. The estimate says which"),
     ("walk", "Random walks (paper)", "The paper's shooting random walks, with its estimators: their predicted path "
      "counts and relative efficiency hold for them"),
     ("two_way", "Two-way iteration", "Beyond the paper: the direct light gathered by shadow rays, then the light "

@@ -15,8 +15,8 @@ from .core import meshing, predict, relative_rms_to_mse, solve
 from .core.diagnostics import MAX_BOUNCES, check_bounces
 from .core.first_shot import direct_irradiance
 from .core.forecast import forecast
-from .core.names import AUTO, GATHERED, TWO_WAY
-from .core.solver import choose_method
+from .core import methods
+from .core.names import AUTO
 from . import options
 from .bpy_free import trim
 from .bpy_free.patches import Patches, make_patches
@@ -79,11 +79,11 @@ def prediction_for(scene, settings: SolveSettings):
 
 def method_for(scene, settings: SolveSettings, target) -> SolveSettings:
     """The settings with the method "auto" replaced by what it runs on this scene (the core's
-    choose_method: the two-way iteration where its chunks give every patch enough rays);
+    methods.choose: the two-way iteration where its chunks give every patch enough rays);
     ``target``: prediction_for's, which the method does not change."""
     if settings.method != AUTO:
         return settings
-    chosen = choose_method(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
+    chosen = methods.choose(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
                            target_mse=target, threshold=settings.threshold, max_seconds=settings.max_seconds or None)
     return replace(settings, method=chosen)
 
@@ -99,12 +99,10 @@ LONG_BOUNCES = 1000.0
 
 
 def direct_light_for(scene, settings: SolveSettings) -> str:
-    """How the direct light is computed: as the settings say, but gathered by the two-way
-    iteration, and where a light's direct light cannot be shot (no shadow, soft falloff:
-    ``Lights.gathered_only``; ``light_notes`` says so)."""
-    if settings.method == TWO_WAY or scene.lights.gathered_only():
-        return GATHERED
-    return settings.direct_light
+    """How the direct light is computed (``settings.method`` resolved): as the settings say, but
+    as the method has it where it has one alone (the two-way iteration gathers it), and
+    gathered where a light's cannot be shot (``Lights.gathered_only``; ``light_notes`` says so)."""
+    return methods.direct_light_for(settings.method, settings.direct_light, scene.lights)
 
 
 def forecast_for(scene, settings: SolveSettings, target, bounces, should_stop=None):
@@ -286,6 +284,14 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
     out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
+    _write_colours(out, scene, result, settings)
+    return out
+
+
+def _write_colours(out, scene, result, settings):
+    """The colours ``out`` carries to the objects: per patch and per point, and the extra
+    outputs (light only, indirect), per object that receives."""
+    patches = out.patches
     # Light is written as at least 0: an estimate below it is noise about a value near 0 (the two-way
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
     radiosity = np.maximum(result.radiosity, 0.0)
@@ -309,4 +315,3 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         out.point_colours.append(
             meshing.point_average(mesh, B) if settings.output in ("VERTEX", "BOTH") else None
         )
-    return out

@@ -10,12 +10,12 @@ the rays it got; with about one ray a patch that estimate is mostly noise, which
 generation's gathering reads, and the iteration's gain over the walk goes. This measures it:
 the closed Cornell box (two blocks, colour walls, a small ceiling light) meshed at several patch
 counts, and for each, solves of 4, 16, 64 and 256 paths a patch (the plan sets the rays a patch
-a chunk gets: ``solver.two_way_chunk_paths``, up to ``TWO_WAY_MAX_CHUNK_PATHS`` paths a chunk,
+a chunk gets: ``methods.two_way.TwoWay.chunk_paths``, up to ``TWO_WAY_MAX_CHUNK_PATHS`` paths a chunk,
 so that past about 2^19 patches no plan gives a patch 4 first-generation rays). Each solve's error is the RMS over
 patches / mean of the reflected radiosity from its batch means; the gain is the walk's error^2 x
 rays (and x seconds, 2 threads) over the two-way iteration's at the same plan: above 1 the
 two-way iteration reaches an error with fewer rays (less time). Exit point hit (the panel's
-default). ``method="auto"``'s choice (``solver.choose_method``) is shown beside each.
+default). ``method="auto"``'s choice (``methods.choose``) is shown beside each.
 """
 from __future__ import annotations
 
@@ -31,7 +31,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 RESULTS = ROOT / "benchmarks" / "results"
 
-from addon.core import solve, solver  # noqa: E402
+from addon.core import solve  # noqa: E402
+from addon.core.methods import choose, two_way  # noqa: E402
 from addon.core.error_model import predict  # noqa: E402
 
 DIVISIONS = (20, 40, 60, 90, 120, 190, 270)
@@ -51,10 +52,10 @@ def measure(divisions, paths_a_patch):
     rows = []
     for k in paths_a_patch:
         paths = k * P
-        chunk = solver.two_way_chunk_paths(P, predict(scene).expected_path_length, paths)
+        chunk = two_way.TwoWay().chunk_paths(P, predict(scene).expected_path_length, paths)
         row = {"patches": P, "paths_a_patch": k, "paths": paths,
-               "first_generation_rays": solver.first_generation_rays(P, chunk),
-               "auto": solver.choose_method(scene, paths=paths)}
+               "first_generation_rays": two_way.first_generation_rays(P, chunk),
+               "auto": choose(scene, paths=paths)}
         for method in ("walk", "two_way"):
             r = solve(scene, paths=paths, seed=1, threads=2, exit_point="hit", method=method)
             row[method] = {"error": error(r), "rays": r.rays, "seconds": r.seconds, "chunks": r.chunks}

@@ -97,7 +97,8 @@ def main(argv=None):
         f"`python -m benchmarks.far_geometry --paths {args.paths}` (seed {args.seed}, 2 threads, core at {commit}). "
         "Relative error of the room (furnace: mean reflected radiosity; lamp: total reflected power) against "
         "the exact value; one run each, so about 0.3% (walk) to 1% (two-way, lamp) is noise. Seconds: one solve. "
-        "(w): the scene's build warned that float32 positions are coarse beside the room's patches.",
+        "(w): the scene's build warned that float32 positions are coarse beside the room's patches. With a far "
+        "object the room and the triangle are two regions (docs/precision.md).",
         "",
         "| lit by | method | exit | " + " | ".join("alone" if d is None else f"D = {d:g} m" for d in DISTANCES) + " |",
         "|---|---|---|" + "---|" * len(DISTANCES),
@@ -121,9 +122,10 @@ def main(argv=None):
     lines += [
         "",
         "The cost of a far object: rays per CPU second of one thread (best of 2, alternating), a room of 10 x 10 "
-        "patches a face alone and beside a triangle 1e4 m away (its patches take their own offsets, read per "
-        "patch, and the walks trace its 1,200 patch triangles instead of 6 merged grids). Seconds in the table "
-        "above vary with the shared machine's load.",
+        "patches a face alone and beside a triangle 1e4 m away (two regions, each its own Embree scene: a ray is "
+        "traced in its own and checked against the other's box; its patches take their own offsets, read per "
+        "patch, every hit point of the hit exit is made from its barycentrics, and the walks trace its 1,200 "
+        "patch triangles instead of 6 merged grids). Seconds in the table above vary with the shared machine's load.",
         "",
         "| method | exit | alone (Mrays/s) | beside (Mrays/s) | ratio |",
         "|---|---|---|---|---|",

@@ -92,7 +92,7 @@ def child(paths, threads, use_tracemalloc, scene_name):
     out["current_after_solve"] = current_rss()
     out["rays"] = result.rays
     out["chunks"] = result.chunks
-    from addon.core.solver import chunk_paths_for
+    from addon.core.plan import chunk_paths_for
 
     out["max_chunk"] = chunk_paths_for(result.prediction.expected_path_length, 10**15)
     print(json.dumps(out))
@@ -163,11 +163,11 @@ def main(argv=None):
             f"{traced['traced_peak'] / MIB:.1f} | {traced['traced_after'] / MIB:.2f} |"
         )
     peaks = [p["after_solve"] for p, _ in rows]
-    from addon.core import solver
+    from addon.core import plan
 
     # The smallest run whose chunks have the maximum size (smaller runs split into MIN_CHUNKS).
     max_chunk = rows[0][0]["max_chunk"]
-    full_size = solver.MIN_CHUNKS * max_chunk
+    full_size = plan.MIN_CHUNKS * max_chunk
     full = next((k for k, n in enumerate(paths) if n >= full_size), len(paths) - 1)
     traced = [t["traced_peak"] for _, t in rows]
     L += [
@@ -179,9 +179,9 @@ def main(argv=None):
            f"{(traced[-1] - traced[full]) / MIB:+.1f} MiB." if full < len(paths) - 1 else "."),
         "",
         "What the solve holds: per-patch tallies (a few float64 arrays of P per channel), and up to threads + 1 "
-        f"chunks in flight, each at most {max_chunk:,} paths (about {solver.RAYS_PER_CHUNK:,} rays) with its "
+        f"chunks in flight, each at most {max_chunk:,} paths (about {plan.RAYS_PER_CHUNK:,} rays) with its "
         "paths' sources, a wavefront of about 16k paths and the scores of at most 2^18 hits; chunk tallies are "
-        f"added in order and dropped, so nothing scales with the path count. Runs below {solver.MIN_CHUNKS} x "
+        f"added in order and dropped, so nothing scales with the path count. Runs below {plan.MIN_CHUNKS} x "
         f"{max_chunk:,} = {full_size / 1e6:.1f}M paths use smaller chunks, hence a smaller peak there.",
     ]
     (out / "memory.md").write_text("\n".join(L) + "\n")

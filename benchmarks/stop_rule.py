@@ -24,17 +24,17 @@ sys.path.insert(0, str(ROOT / "tests" / "core"))
 from boxes import bright_box, colour_box, grey_room, small_source_box  # noqa: E402
 
 from addon.core import predict, relative_rms_to_mse, solve  # noqa: E402
-from addon.core import solver  # noqa: E402
+from addon.core import plan  # noqa: E402
 from addon.core.reference import area_weighted_mse, solve_radiosity_system  # noqa: E402
 
 SEEDS = range(12)
-NEW = (solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS)
-OLD = (0.0, solver.MIN_MEASURED_CHUNKS)
+NEW = (plan.MEASURED_STOP_Z, plan.MEASURED_STOP_CHUNKS)
+OLD = (0.0, plan.MIN_MEASURED_CHUNKS)
 PRICE_SEEDS = range(3)
 
 
 def use(rule):
-    solver.MEASURED_STOP_Z, solver.MEASURED_STOP_CHUNKS = rule
+    plan.MEASURED_STOP_Z, plan.MEASURED_STOP_CHUNKS = rule
 
 
 CASES = [  # (name, scene maker, methods, relative targets)

@@ -96,8 +96,8 @@ def own_rays_factor(scene, estimator, threads, paths, rounds=5, every=4, limit=1
                 casts.append((np.ascontiguousarray(origins), np.ascontiguousarray(directions)))
 
     real_first, real_bary = tracer.first_hit, tracer.first_hit_barycentric
-    tracer.first_hit = lambda o, d: (keep(o, d), real_first(o, d))[1]
-    tracer.first_hit_barycentric = lambda o, d: (keep(o, d), real_bary(o, d))[1]
+    tracer.first_hit = lambda o, d, *region: (keep(o, d), real_first(o, d, *region))[1]
+    tracer.first_hit_barycentric = lambda o, d, *region: (keep(o, d), real_bary(o, d, *region))[1]
     try:
         solve(scene, estimator, paths=paths, threads=threads, seed=99, **kw)
     finally:
@@ -251,7 +251,7 @@ def breakdown(scene, estimator, rounds=4, **kw):
     fetches from memory a ray: inside the walk, back to back and after pauses; else NaN."""
     from addon.core.tables import WalkTables
     from addon.core.walk import walk_chunk
-    from addon.core.solver import chunk_paths_for
+    from addon.core.plan import chunk_paths_for
 
     from .counters import Counters
 
@@ -345,12 +345,13 @@ SHORT_PATHS = (30_000, 100_000, 300_000, 1_000_000, 3_000_000)
 
 def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
     """The default estimator's ratio to the raw rate in short runs, whose chunks are small (a
-    run makes at least solver.MIN_CHUNKS of them): with small chunks traced in groups
+    run makes at least plan.MIN_CHUNKS of them): with small chunks traced in groups
     (walk.walk_chunks, the default) and one by one (Speedups(grouped_chunks=False), as
     before groups). Each round brackets one solve of each kind, in alternating order, between
     two raw measurements. Returns {paths: (ratio grouped, ratio one by one, seconds grouped,
     chunks per group)}, medians over the rounds."""
-    from addon.core import solver
+    from addon.core import plan
+    from addon.core.methods.walk import ShotWalk
     from addon.core.tables import WalkTables
 
     solve(scene, "finite", paths=20_000, threads=threads)  # warm up
@@ -358,7 +359,7 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
     tables = WalkTables(scene, "finite", 1e-3, "random")
     out = {}
     for paths in path_counts:
-        group = solver.chunks_per_group(tables, solver.chunk_paths_for(length, paths), length)
+        group = ShotWalk(tables).group(plan.chunk_paths_for(length, paths), length)
         ratios = {True: [], False: []}
         seconds = []
         before = raw_rate(scene, threads, 0.25, tracer=tables.tracer)[0]

@@ -6,7 +6,7 @@ Walks on several threads hold a lock (``tables.numpy_turn``) for their numpy wor
 it while they trace, so that one traces while the other computes. Without the lock both may
 compute at once: numpy lets go of the GIL inside most operations on large arrays. Which is
 faster depends on the arrays' size. Each case solves the same scene and seed with turns taken
-and not (``walk.takes_turns`` forced either way), alternating which goes first, over 2
+and not (``walk.takes_turns`` forced either way, the paper's walk run as chunk-wide work for "not"), alternating which goes first, over 2
 threads; reported: median wall seconds of each and the median of the rounds' ratios (no turns /
 turns; below 1: faster without), with its range. The rule in ``walk.takes_turns`` is read off
 this table.
@@ -36,15 +36,19 @@ CASES = (
 
 def timed(scene, turns, paths, arguments, seed):
     from addon.core import solve, walk
+    from addon.core.methods.walk import ShotWalk
 
-    rule = walk.takes_turns
+    rule, shot = walk.takes_turns, ShotWalk.run
     walk.takes_turns = lambda tables, paths: turns
+    if not turns:  # (the paper's walk always takes turns: run it as chunk-wide work)
+        ShotWalk.run = lambda self, sizes, rng, abort=None: walk.walk_chunks(
+            walk.chunk_wide(self.tables, sum(sizes)), sizes, rng, abort)
     try:
         start = time.perf_counter()
         result = solve(scene, "finite", paths=paths, threads=2, seed=seed, exit_point="hit", **arguments)
         return time.perf_counter() - start, result
     finally:
-        walk.takes_turns = rule
+        walk.takes_turns, ShotWalk.run = rule, shot
 
 
 def main(argv=None):
@@ -66,7 +70,7 @@ def main(argv=None):
                     seconds[turns].append(t)
             ratio = np.array(seconds[False]) / np.array(seconds[True])
             rows.append((name, label, np.median(seconds[True]), np.median(seconds[False]), np.median(ratio), ratio.min(), ratio.max(),
-                         "turns" if walk.takes_turns(_tables_like(scene, arguments), result.paths // result.chunks) else "no turns"))
+                         _rule(walk, scene, arguments, result.paths // result.chunks)))
             print(rows[-1], flush=True)
     lines = ["# Taking turns at numpy, or not, on 2 threads", "", "`" + " ".join(["python -m benchmarks.turns", *(sys.argv[1:] if argv is None else argv)]) + "`", "",
              __doc__.split("\n\n", 2)[2].strip(), "",
@@ -78,12 +82,14 @@ def main(argv=None):
     print("\n".join(lines))
 
 
-def _tables_like(scene, arguments):
-    """Stand-in tables with the method and gathering a solve with ``arguments`` sets."""
+def _rule(walk, scene, arguments, chunk_paths):
+    """What the rule takes for a solve with ``arguments``: the paper's walk always turns;
+    chunk-wide work by walk.takes_turns."""
     from types import SimpleNamespace
 
-    return SimpleNamespace(method=arguments.get("method", "walk"), patch_count=scene.patch_count,
-                           gathering=object() if arguments.get("direct_light") == "gathered" else None)
+    if not arguments:
+        return "turns"
+    return "turns" if walk.takes_turns(SimpleNamespace(patch_count=scene.patch_count), chunk_paths) else "no turns"
 
 
 if __name__ == "__main__":

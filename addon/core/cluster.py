@@ -1,301 +1,52 @@
 """Chunks on a Dask cluster: the runner ``solve(..., cluster=...)`` uses instead of threads.
 
 The scene travels once to each worker (scattered); a worker builds its walk tables (and the
-Embree scene) once per scene and solve parameters and keeps them for later tasks and solves.
-A task is "chunks k, k+1, ... of sizes n_k" with the solve's seed: it draws from its own
-streams, so its tallies are bitwise those a thread would make, on whatever worker, however many
-times it runs (a lost worker's tasks run again elsewhere). Dask's ``distributed`` is optional:
-imported only here, only when a cluster is asked for.
-
-Dask's messages are pickles: a scheduler can run code in this process, so the cluster is trusted
-like this machine. A ``tls://`` address authenticates it by the cluster's CA (Dask's configuration);
-the address's form is checked, and the scheduler's first message read without pickle and with a size
-limit, before Dask's client connects.
+Embree scene) and its method's state once per scene and solve parameters and keeps them for
+later tasks and solves. A task is "chunks k, k+1, ... of sizes n_k" with the solve's seed: it
+draws from its own streams, so its tallies are bitwise those a thread would make, on whatever
+worker, however many times it runs (a lost worker's tasks run again elsewhere). Connecting, and
+what the cluster is trusted with, is ``cluster_connect``'s.
 """
 from __future__ import annotations
 
-import copy
 import hashlib
-import os
 import pickle
-import re
-import socket
-import ssl
-import struct
-import sys
 import threading
 import time
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from .first_shot import Gathering
-from .names import WALK
+from . import methods
+from .cluster_connect import CONNECT_SECONDS, ClusterError, connect
 from .runners import run_chunks
 from .scene import PatchScene
 from .tables import WalkTables
 
-INSTALL = "pip install 'dask[distributed]' (or pip install '.[distributed]' in the repository)"
-CONNECT_SECONDS = 10
 # Tasks queued per worker thread beyond the running ones (the solver reads results in order).
 QUEUE_PER_WORKER = 2
 # How often a wait for a task's result looks again (seconds).
 WAIT_STEP = 0.002
-# Walk tables a worker keeps (one per scene and solve parameters).
+# Methods' states (and their walk tables) a worker keeps: one per scene and solve parameters.
 WORKER_TABLES = 4
-# A Dask scheduler's first message (its handshake) is about 60 bytes: far more is another service.
-HANDSHAKE_LIMIT = 1 << 16
-ADDRESS_FORMS = "tcp://HOST:PORT, or tls://HOST:PORT with the cluster's certificates"
-TLS_SETTINGS = ("Dask's configuration distributed.comm.tls.ca-file, .client.cert and .client.key (environment: "
-                "DASK_DISTRIBUTED__COMM__TLS__CA_FILE, DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT and "
-                "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY)")
-_ADDRESS = re.compile(r"(?:(?P<scheme>[A-Za-z][A-Za-z0-9+.-]*)://)?"
-                      r"(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_](?:[A-Za-z0-9_.-]*[A-Za-z0-9_])?):(?P<port>[0-9]{1,5})")
-
-
-class ClusterError(ValueError):
-    """A cluster the solve cannot use (Dask missing, a malformed address, a scheduler that cannot
-    be reached or is not Dask's, workers without the core): said in one line, nothing run."""
-
-
-def cluster_address(text):
-    """``text`` as ``tcp://host:port`` or ``tls://host:port`` (a bare ``host:port`` is tcp), or
-    ClusterError saying which forms are accepted; no connection is tried."""
-    if not isinstance(text, str):
-        raise ClusterError(f"the cluster must be a Dask scheduler's address ({ADDRESS_FORMS}); got {text!r}")
-    match = _ADDRESS.fullmatch(text.strip())
-    scheme = (match.group("scheme") or "tcp").lower() if match else None
-    if match is None or scheme not in ("tcp", "tls"):
-        raise ClusterError(f"the cluster address must be {ADDRESS_FORMS}; got {text!r}")
-    port = int(match.group("port"))
-    if not 1 <= port <= 65535:
-        raise ClusterError(f"the cluster address's port must be between 1 and 65535; got {text!r}")
-    return f"{scheme}://{match.group('host')}:{port}"
-
-
-def connect(cluster):
-    """A ``distributed.Client`` for ``cluster`` (a Client, or a scheduler address), and whether it
-    was made here (to be closed after the solve): one line (ClusterError) within CONNECT_SECONDS
-    (and a second or two) if the address is malformed, Dask missing, the scheduler unreachable, not
-    Dask's or refusing the certificates, or its workers lack the core."""
-    try:
-        import distributed
-    except ImportError as exc:
-        raise ClusterError(f"solve(cluster=...) needs Dask's distributed package: {INSTALL}") from exc
-    deadline = time.monotonic() + CONNECT_SECONDS
-    if isinstance(cluster, distributed.Client):
-        client, made = cluster, False
-    elif isinstance(cluster, str):
-        address = cluster_address(cluster)
-        security = _security(address)
-        context = security.get_connection_args("client")["ssl_context"] if address.startswith("tls") else None
-        _probe(address, context, deadline)
-        try:
-            client = distributed.Client(address, timeout=max(1.0, deadline - time.monotonic()), security=security,
-                                        set_as_default=False)
-        except Exception as exc:  # noqa: BLE001 - any failure to connect is the one line
-            raise ClusterError(f"cannot connect to the Dask scheduler at {address!r} ({_one_line(exc)})") from exc
-        made = True
-    else:
-        raise ClusterError(f"cluster must be a dask.distributed.Client or a scheduler address; got {cluster!r}")
-    try:
-        _check_workers(client, deadline)
-    except BaseException:
-        if made:
-            client.close(timeout=CONNECT_SECONDS)
-        raise
-    return client, made
-
-
-def _check_workers(client, deadline):
-    """ClusterError unless the scheduler can load the core (it unpickles the tasks' arguments)
-    and the cluster has workers that can all run the walks."""
-    try:
-        client.run_on_scheduler(_loaded, callback_timeout=max(1.0, deadline - time.monotonic()))
-    except Exception as exc:  # noqa: BLE001 - the scheduler could not load this function, or is silent
-        raise ClusterError(f"the Dask scheduler at {client.scheduler.address} cannot load addon.core "
-                           f"({_one_line(exc)}); start it with the repository on PYTHONPATH, as the workers") from exc
-    try:
-        workers = client.run(_worker_check, on_error="return", callback_timeout=max(1.0, deadline - time.monotonic()))
-    except Exception as exc:  # noqa: BLE001 - a scheduler that does not answer in time
-        raise ClusterError(f"the Dask cluster at {client.scheduler.address} did not answer ({_one_line(exc)})") from exc
-    if not workers:
-        raise ClusterError(f"the Dask cluster at {client.scheduler.address} has no workers")
-    missing = {address: problem if isinstance(problem, str) else _one_line(problem)
-               for address, problem in workers.items() if problem}
-    if missing:
-        address, problem = next(iter(missing.items()))
-        raise ClusterError(f"{len(missing)} of the cluster's {len(workers)} workers cannot run the walks "
-                           f"(e.g. {address}: {problem}); they need numpy, embreex and addon.core importable")
-
-
-def _loaded():
-    """Nothing: that it runs on the scheduler shows addon.core loads there."""
-    return ""
-
-
-def _worker_check():
-    """'' if this worker can run walks, else what is missing (a worker without addon.core fails
-    to load this function: the client gets that error instead)."""
-    try:
-        import embreex  # noqa: F401
-    except Exception as exc:  # noqa: BLE001 - reported to the client
-        return _one_line(exc)
-    return ""
-
-
-def _one_line(exc):
-    text = " ".join(str(exc).split())
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
-
-
-def _security(address):
-    """Dask's Security from its configuration (files or DASK_* variables), checked against the
-    address: tls:// needs the CA and the client's certificate and key; tcp:// must not be
-    refused by the configuration."""
-    from distributed.security import Security
-
-    try:
-        security = Security()
-    except Exception as exc:  # noqa: BLE001 - a malformed setting
-        raise ClusterError(f"Dask's TLS configuration is not usable ({_one_line(exc)})") from exc
-    if address.startswith("tls://"):
-        if not (security.tls_ca_file and security.tls_client_cert):
-            raise ClusterError(f"a tls:// cluster needs the cluster's CA and this client's certificate and key in {TLS_SETTINGS}")
-        for key, path in (("ca-file", security.tls_ca_file), ("client.cert", security.tls_client_cert),
-                          ("client.key", security.tls_client_key)):
-            if path and "\n" not in path and not os.path.isfile(path):  # (a setting may hold the PEM text)
-                raise ClusterError(f"the file {path!r} named by distributed.comm.tls.{key} does not exist")
-        try:
-            security.get_connection_args("client")
-        except Exception as exc:  # noqa: BLE001 - missing or unreadable files
-            raise ClusterError(f"cannot load the cluster's certificates from {TLS_SETTINGS} ({_one_line(exc)})") from exc
-    elif security.require_encryption:
-        raise ClusterError(f"Dask's configuration requires encryption (distributed.comm.require-encryption): "
-                           f"use a tls:// address, not {address!r}")
-    return security
-
-
-def _probe(address, ssl_context, deadline):
-    """ClusterError unless a Dask scheduler answers at ``address`` before ``deadline``: one
-    handshake each way with no pickle (the scheduler's first message, read with a size limit), so
-    that another service, a TLS mismatch or silence is one line instead of Dask reading whatever
-    comes as frames of any size."""
-    scheme, rest = address.split("://")
-    host, port = rest.rsplit(":", 1)
-    host = host.strip("[]")
-    try:
-        sock = socket.create_connection((host, int(port)), timeout=max(0.1, deadline - time.monotonic()))
-    except socket.gaierror as exc:
-        raise ClusterError(f"cannot reach the Dask scheduler at {address!r} (unknown host {host!r})") from exc
-    except OSError as exc:
-        raise ClusterError(f"cannot reach the Dask scheduler at {address!r} ({_one_line(exc)})") from exc
-    try:
-        if ssl_context is not None:
-            try:
-                sock.settimeout(max(0.1, deadline - time.monotonic()))
-                sock = ssl_context.wrap_socket(sock)
-            except ssl.SSLError as exc:
-                raise ClusterError(f"the TLS handshake with {address!r} failed ({exc.reason or _one_line(exc)}): "
-                                   f"{_tls_hint(exc)}") from exc
-        _send(sock, _handshake(), deadline)
-        first = _receive(sock, 8, deadline)
-        if ssl_context is None and len(first) >= 2 and first[0] in (0x15, 0x16) and first[1] == 3:
-            raise ClusterError(f"the scheduler at {address!r} speaks TLS: use tls://{rest} with {TLS_SETTINGS}")
-        if len(first) < 8:
-            hint = "" if ssl_context else " (a scheduler with TLS? its address starts tls://)"
-            raise ClusterError(f"{address!r} closed the connection without Dask's handshake{hint}")
-        (size,) = struct.unpack("<Q", first)
-        message = _receive(sock, size, deadline) if 16 <= size <= HANDSHAKE_LIMIT else b""
-        if not _is_dask_handshake(message):
-            raise ClusterError(f"{address!r} does not answer as a Dask scheduler (another service there?)")
-    except (socket.timeout, TimeoutError) as exc:
-        hint = "" if ssl_context else " (a scheduler with TLS? its address starts tls://)"
-        raise ClusterError(f"no Dask handshake from {address!r} within {CONNECT_SECONDS} s{hint}") from exc
-    except ssl.SSLError as exc:  # (with TLS 1.3 the scheduler refuses a certificate after the handshake)
-        raise ClusterError(f"the TLS connection to {address!r} failed ({exc.reason or _one_line(exc)}): "
-                           f"{_tls_hint(exc)}") from exc
-    except OSError as exc:  # (a TLS server resets a connection that does not start with TLS)
-        hint = "" if ssl_context else " (a scheduler with TLS? its address starts tls://)"
-        raise ClusterError(f"the connection to {address!r} failed ({_one_line(exc)}){hint}") from exc
-    finally:
-        sock.close()
-
-
-def _tls_hint(exc):
-    """What a failed TLS handshake most likely means, in words."""
-    if exc.reason in ("WRONG_VERSION_NUMBER", "RECORD_LAYER_FAILURE", "PACKET_LENGTH_TOO_LONG", "HTTP_REQUEST"):
-        return "no TLS there (a scheduler without TLS has a tcp:// address)"
-    return ("the scheduler's certificate is not of the CA in distributed.comm.tls.ca-file, or it refuses this "
-            "client's certificate")
-
-
-def _handshake():
-    """What Dask's comms send first: one msgpack frame behind its size and the frame count."""
-    import msgpack
-
-    info = msgpack.packb({"compression": None, "python": tuple(sys.version_info[:3]),
-                          "pickle-protocol": pickle.HIGHEST_PROTOCOL}, use_bin_type=True)
-    return struct.pack("<QQQ", 16 + len(info), 1, len(info)) + info
-
-
-
-def _send(sock, data, deadline):
-    sock.settimeout(max(0.1, deadline - time.monotonic()))
-    sock.sendall(data)
-
-
-def _receive(sock, size, deadline):
-    """Up to ``size`` bytes (fewer: the peer closed), each wait bounded by ``deadline``."""
-    data = bytearray()
-    while len(data) < size:
-        remaining = deadline - time.monotonic()
-        if remaining <= 0:
-            raise TimeoutError
-        sock.settimeout(remaining)
-        part = sock.recv(min(size - len(data), 1 << 16))
-        if not part:
-            break
-        data += part
-    return bytes(data)
-
-
-def _is_dask_handshake(message):
-    """Whether ``message`` (frame count, frame sizes, frames) holds Dask's handshake: a map with
-    the pickle protocol and Python version (read by msgpack alone: nothing is run)."""
-    import msgpack
-
-    if len(message) < 16:
-        return False
-    (count,) = struct.unpack_from("<Q", message)
-    if not 1 <= count <= 16 or len(message) < 8 * (1 + count):
-        return False
-    sizes = struct.unpack_from(f"<{count}Q", message, 8)
-    start = 8 * (1 + count)
-    if start + sizes[0] > len(message):
-        return False
-    try:
-        info = msgpack.unpackb(message[start:start + sizes[0]], raw=False, strict_map_key=False)
-    except Exception:  # noqa: BLE001 - not msgpack: not Dask
-        return False
-    return isinstance(info, dict) and "pickle-protocol" in info and "python" in info
 
 
 @dataclass(frozen=True)
 class WalkParameters:
-    """What a worker needs besides the scene to build the walk tables a solve uses."""
+    """What a worker needs besides the scene to build the state a solve's chunks read."""
 
     estimator: str
     threshold: float
     exit_point: str
     sampling: str
-    speedups: object          # Speedups, as the solver resolved them
-    gather_samples: tuple | None  # per patch, with the direct light gathered
-    method: str = WALK            # how the light is carried (names.METHODS)
-    # The gathering's (escaped, blocked) split, a solve's own (first_shot.fate_shares): not part
-    # of the tables' key, so that solves of other seeds reuse the tables.
-    fate_shares: tuple | None = field(default=None, compare=False)
+    speedups: object  # Speedups, as the solver resolved them
+    method: str       # names.METHODS
+    direct_light: str
+    # What the method's state is rebuilt from (methods.base.Integrator.spec; None: the tables
+    # alone). A gathering's split of what it finds on no front is a solve's own, no part of the
+    # key: solves of other seeds reuse the state.
+    spec: object = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -329,7 +80,7 @@ def _digest(arrays, *extra):
 
 
 _worker_geometries = OrderedDict()  # geometry key -> Geometry (with its Embree scene)
-_worker_tables = OrderedDict()      # (scene key, parameters) -> WalkTables
+_worker_states = OrderedDict()      # (scene key, parameters) -> the method's state (with its WalkTables)
 _worker_lock = threading.Lock()
 
 
@@ -356,45 +107,38 @@ M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters
 TRIM_THRESHOLD, MMAP_THRESHOLD = 1 << 27, 1 << 25  # (32 MiB: glibc's own largest dynamic threshold)
 
 
-def _tables(payload, parameters):
-    """This worker's walk tables for the scene and parameters, built once and kept; the
-    geometry (and its Embree scene) once per geometry, across solves."""
+def _state(payload, parameters):
+    """This worker's state of the solve's method for the scene and parameters, built once and
+    kept (the geometry, and its Embree scene, once per geometry, across solves), with the
+    solve's own spec."""
     _tune_allocator()
     with _worker_lock:
-        tables = _cached_tables(payload, parameters)
-    if parameters.fate_shares is None:
-        return tables
-    tables = copy.copy(tables)  # (the solve's own split, on shared tables)
-    tables.gathering = copy.copy(tables.gathering)
-    tables.gathering.fate_shares = parameters.fate_shares
-    return tables
+        state = _cached_state(payload, parameters)
+    return state if parameters.spec is None else state.with_spec(parameters.spec)
 
 
-def _cached_tables(payload, parameters):
-    """The tables for the scene and parameters (under _worker_lock), built once and kept."""
+def _cached_state(payload, parameters):
+    """The state for the scene and parameters (under _worker_lock), built once and kept."""
     key = (payload.key, parameters)
-    tables = _worker_tables.get(key)
-    if tables is not None:
-        _worker_tables.move_to_end(key)
-        return tables
+    state = _worker_states.get(key)
+    if state is not None:
+        _worker_states.move_to_end(key)
+        return state
     geometry = _worker_geometries.get(payload.geometry_key)
     scene = PatchScene(*payload.arrays, lights=payload.lights, aim=payload.aim, _geometry=geometry)
     _worker_geometries[payload.geometry_key] = scene.geometry
     p = parameters
     tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups)
-    tables.method = p.method
-    if p.gather_samples is not None:
-        tables.gathering = Gathering(scene, np.asarray(p.gather_samples))
-    _worker_tables[key] = tables
-    for cache in (_worker_tables, _worker_geometries):
+    state = _worker_states[key] = methods.create(p.method, p.direct_light).rebuild(scene, tables, p.spec)
+    for cache in (_worker_states, _worker_geometries):
         while len(cache) > WORKER_TABLES:
             cache.popitem(last=False)
-    return tables
+    return state
 
 
 def cluster_chunks(payload, parameters, seed, first_chunk, sizes):
     """A task: the tallies of chunks ``first_chunk``... of ``sizes`` paths, on a worker."""
-    return run_chunks(_tables(payload, parameters), seed, first_chunk, sizes)
+    return run_chunks(_state(payload, parameters), seed, first_chunk, sizes)
 
 
 class _Result:
@@ -434,7 +178,7 @@ class ClusterRunner:
         self.slots = threads * QUEUE_PER_WORKER + 1
         self.threads = threads
 
-    def start(self, tables, seed):
+    def start(self, state, seed):
         self.seed = int(seed)
         # The scene goes to every worker once; tasks refer to it.
         self._scene = self.client.scatter(ScenePayload.of(self.scene), broadcast=True, hash=False)

@@ -28,7 +28,7 @@ def escaping_light(scene, seed=0):
     u = rng.random((5, patch.size), dtype=np.float32)
     origins = points_on_patches(g, patch, u[4], u[0], u[1])
     directions = cosine_directions(g, patch, u[2], u[3])
-    missed = g.surface_tracer.first_hit(origins, directions) < 0
+    missed = g.surface_tracer.first_hit(origins, directions, g.region_of(patch)) < 0
     return emitting, missed.reshape(-1, RAYS_PER_EMITTER).mean(axis=1)
 
 
@@ -52,7 +52,8 @@ def light_fates(scene, seed=0):
         rows = np.minimum(rows, last - 1)
         origins, directions = lights.unit_rays(rows, rng.random((4, RAYS_PER_LIGHT), dtype=np.float32), g)
         o, d = origins.astype(np.float32), directions.astype(np.float32)
-        hit, _, _, _, normal = g.surface_tracer.first_hit_barycentric(np.ascontiguousarray(o.T), np.ascontiguousarray(d.T))
+        hit, _, _, _, normal = g.surface_tracer.first_hit_barycentric(np.ascontiguousarray(o.T), np.ascontiguousarray(d.T),
+                                                                      lights.regions(rows, g))
         met = hit >= 0
         back = met & ~meets_front(d, normal)
         fates.append((float(np.mean(~met)), float(np.mean(back))))
@@ -66,13 +67,14 @@ BACK_BOUNCES = 8
 BEHIND_RAYS = 64
 
 
-def _trace(g, origins, directions):
-    """(patch (n,) int, -1 for a miss; met the front (n,) bool) of rays (n,3) float32, unit space."""
+def _trace(g, origins, directions, region=None):
+    """(patch (n,) int, -1 for a miss; met the front (n,) bool) of rays (n,3) float32, unit space
+    (``region``: their origins' region frames, where the scene has regions)."""
     if g.patch_grids is not None:
         triangle, u, v, _, normal = g.patch_grids.tracer.first_hit_barycentric(origins, directions)
         patch = g.patch_grids.hit_patches(triangle, u, v)
     else:
-        triangle, _, _, _, normal = g.tracer.first_hit_barycentric(origins, directions)
+        triangle, _, _, _, normal = g.tracer.first_hit_barycentric(origins, directions, region)
         patch = g.triangle_patch.take(triangle, mode="wrap")
     patch = np.where(triangle >= 0, patch, -1)
     return patch, (patch >= 0) & meets_front(directions.T, normal)
@@ -113,27 +115,33 @@ def back_light(scene, receives, seed=0):
     origins = np.empty((rows.size, 3), np.float32)
     directions = np.empty((rows.size, 3), np.float32)
     from_patch = rows < P
+    region = None if g.regions is None else np.zeros(rows.size, np.int32)
     if from_patch.any():
         origins[from_patch], directions[from_patch] = _leave(g, rows[from_patch].astype(np.int32), rng)
+        if region is not None:
+            region[from_patch] = g.region_of(rows[from_patch])
     if (~from_patch).any():
         lit = rows[~from_patch] - P
         o, d = scene.lights.unit_rays(lit, rng.random((4, lit.size), dtype=np.float32), g)
         origins[~from_patch], directions[~from_patch] = o.T, d.T
+        if region is not None:
+            region[~from_patch] = scene.lights.regions(lit, g)
     weight = np.full(rows.size, 1.0 / rows.size)
     source = rows
     found = []
     for _ in range(BACK_BOUNCES):
-        patch, front = _trace(g, origins, directions)
+        patch, front = _trace(g, origins, directions, region)
         back = (patch >= 0) & ~front
         found.append((source[back], patch[back], weight[back]))
         source, patch, weight = source[front], patch[front], weight[front] * scene.grey_reflectivity[patch[front]]
         if not source.size:
             break
         origins, directions = _leave(g, patch.astype(np.int32), rng)
+        region = g.region_of(patch)
     source, patch, weight = (np.concatenate(a) for a in zip(*found))
     lit = np.unique(patch)
     behind = np.repeat(lit, BEHIND_RAYS).astype(np.int32)
-    seen, front = _trace(g, *_leave(g, behind, rng, behind=True))
+    seen, front = _trace(g, *_leave(g, behind, rng, behind=True), g.region_of(behind))
     sees_receiver = (front & receives[np.maximum(seen, 0)]).reshape(-1, BEHIND_RAYS).any(axis=1)
     escapes = (seen < 0).reshape(-1, BEHIND_RAYS).any(axis=1)
     in_view = np.zeros(P, dtype=bool)
@@ -163,7 +171,7 @@ def expected_bounces(scene, seed=0):
     u = rng.random((5, patch.size), dtype=np.float32)
     origins = points_on_patches(g, patch, u[4], u[0], u[1])
     directions = cosine_directions(g, patch, u[2], u[3])
-    hit, u1, u2, _, normal = g.surface_tracer.first_hit_barycentric(origins, directions)
+    hit, u1, u2, _, normal = g.surface_tracer.first_hit_barycentric(origins, directions, g.region_of(patch))
     front = (hit >= 0) & meets_front(np.ascontiguousarray(directions.T), normal)
     grids = g.patch_grids
     met = grids.hit_patches(hit, u1, u2) if grids is not None else g.triangle_patch[np.maximum(hit, 0)]

@@ -19,7 +19,7 @@ a source of emittance E'_j = R_j H_j, and the walk adds the light of every later
 continuous walk), the reflected light leaves from where it arrived: each sample is a point
 source of what it found, times R_j A_j / n_j (n_j the patch's expected gathering samples), so
 that the first reflection is as uneven over a patch as the light that lands on it
-(:class:`ReflectedPoints`).
+(:class:`.gathered_walk.ReflectedPoints`).
 
 Each chunk gathers with its own points and shoots its own walk from what it gathered, so the
 chunks stay independent replicas of the whole estimate: batch means measure its error, which
@@ -31,16 +31,13 @@ walk does.
 """
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
-from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front
-from .sampling import SourceTable, add_sphere_points, channel_sum, patch_point_rows, source_weights, stratified_by_patch
+from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front, region_of
+from .sampling import SourceTable, add_sphere_points, patch_point_rows, source_weights, stratified_by_patch
 from .tables import WalkTables
-from .tallies import ChunkTally
 
 # A chunk's gathering aims at about this share of the rays its walk traces.
 GATHER_SHARE = 0.3
@@ -105,7 +102,7 @@ class Gathering:
     patches, then every light but the world, which the cosine rays find), and the scene's
     quantities in world units."""
 
-    def __init__(self, scene, samples, stratified=True):
+    def __init__(self, scene, samples, stratified=True, fate_shares=(1.0, 0.0)):
         self.samples = np.asarray(samples, dtype=np.float64)  # (P,) expected, per patch
         self.stratified = stratified  # a patch's samples a low-discrepancy set (else independent)
         self.whole = np.floor(self.samples).astype(np.int64)
@@ -125,9 +122,8 @@ class Gathering:
         self.shadow_density = self.choice[:scene.patch_count] / scene.patch_area
         self.area_per_sample = scene.patch_area / self.samples
         self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
-        # (escaped, blocked) of the light found on no front: what the solve measures (fate_shares),
-        # all escaped until then.
-        self.fate_shares = (1.0, 0.0)
+        # (escaped, blocked) of the light found on no front: what the solve measures (fate_shares).
+        self.fate_shares = tuple(fate_shares)
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
 
     def draw(self, rng):
@@ -228,25 +224,13 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, value):
     on_patch = source < P
     at_patch = slice(None) if on_patch.all() else np.flatnonzero(on_patch)
     if on_patch.any():
-        s = source[at_patch]
-        e = patch_point_rows(g, s, u[8, at_patch], u[3, at_patch].copy(), u[4, at_patch].copy()).astype(np.float64)
-        normal_s = g.patch_normal_rows.take(s, axis=1)
-        e -= normal_s * g.ray_offsets(s, np.float64)
-        e -= surface[:, at_patch]  # surface to surface (the shadow ray follows it from x)
-        length = np.sqrt(np.einsum("in,in->n", e, e))
-        e /= length
-        cos_x = np.einsum("in,in->n", normal[:, at_patch], e)
-        cos_y = -np.einsum("in,in->n", normal_s, e)
-        ok = (cos_x > 0) & (cos_y > 0) & (s != patch[at_patch])
-        towards[:, at_patch] = e
-        distance[at_patch] = length
-        w = _emitter_weight(gathering, SHADOW, s, cos_x, np.maximum(cos_y, 1e-12), length * g.diagonal)
-        weight[at_patch] = np.where(ok, w, 0.0)
+        towards[:, at_patch], distance[at_patch], weight[at_patch] = _towards_emitters(
+            tables, gathering, patch[at_patch], source[at_patch], surface[:, at_patch], normal[:, at_patch], u[:, at_patch])
     at_light = np.flatnonzero(~on_patch)
     if at_light.size:
         lit = np.zeros_like(value)
         light = source[at_light] - P
-        x_world = g.to_world(surface[:, at_light].T).T
+        x_world = g.to_world(surface[:, at_light].T, patch[at_light]).T
         for k in np.unique(light):
             here = light == k
             cols = at_light[here]
@@ -260,7 +244,7 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, value):
         live |= lit.any(axis=0) & ~unshadowed
     live = np.flatnonzero(live)
     if live.size:
-        hit, hit_patch, front, t = _trace(tables, x[:, live], towards[:, live])
+        hit, hit_patch, front, t = _trace(tables, x[:, live], towards[:, live], g.region_of(patch[live]))
         # Seen if nothing is met before the point looked at; on an emitting patch, also if the
         # patch is met first. (A patch's points lie a ray offset off it: at grazing angles a ray
         # to a point near its far edge passes the point and misses the patch. Asking for the
@@ -284,6 +268,26 @@ def _shadow_rays(tables, gathering, patch, x, normal, u, value):
     return live.size
 
 
+def _towards_emitters(tables, gathering, patch, source, surface, normal, u):
+    """For samples at ``surface`` (3,n) of ``patch`` looking at points of emitting patches
+    ``source``: (unit directions (3,n), unit-space distances (n,), the estimate over the
+    emittance of each, 0 where the emitter faces away or is the patch itself)."""
+    g = tables.geometry
+    e = patch_point_rows(g, source, u[8], u[3].copy(), u[4].copy()).astype(np.float64)
+    normal_s = g.patch_normal_rows.take(source, axis=1)
+    e -= normal_s * g.ray_offsets(source, np.float64)
+    e -= surface  # surface to surface (the shadow ray follows it from x)
+    if g.regions is not None:  # (from the source's region frame to the receiver's)
+        e += g.regions.shift(g.regions.of(source)) - g.regions.shift(g.regions.of(patch))
+    length = np.sqrt(np.einsum("in,in->n", e, e))
+    e /= length
+    cos_x = np.einsum("in,in->n", normal, e)
+    cos_y = -np.einsum("in,in->n", normal_s, e)
+    ok = (cos_x > 0) & (cos_y > 0) & (source != patch)
+    w = _emitter_weight(gathering, SHADOW, source, cos_x, np.maximum(cos_y, 1e-12), length * g.diagonal)
+    return e, length, np.where(ok, w, 0.0)
+
+
 def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
     """Adds each sample's cosine-ray estimate to ``value``: the emitting patch it meets (weighted
     against the shadow rays), or the sky where it escapes. A sample casts one with probability
@@ -298,7 +302,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
     towards = add_sphere_points(g.patch_normal_rows.take(patch, axis=1), u[5], u[6])
     towards = towards.astype(np.float64)
     towards /= np.sqrt(np.einsum("in,in->n", towards, towards))  # (normal + a sphere point: cosine distributed)
-    hit, source, front, t = _trace(tables, x, towards)
+    hit, source, front, t = _trace(tables, x, towards, g.region_of(patch))
     met = np.flatnonzero(front & (hit >= 0) & (gathering.emission[:, source].any(axis=0)) & (source != patch))
     if met.size:
         s = source[met]
@@ -312,11 +316,12 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
     return patch.size
 
 
-def _trace(tables, origins, directions):
-    """Shadow or cosine rays (3,n rows, unit space): (triangle, patch, front, distance)."""
+def _trace(tables, origins, directions, region=None):
+    """Shadow or cosine rays (3,n rows, unit space; ``region``: their origins' region frames,
+    where the scene has regions): (triangle, patch, front, distance)."""
     o = np.ascontiguousarray(origins.T, dtype=np.float32)
     d = np.ascontiguousarray(directions.T, dtype=np.float32)
-    triangle, u, v, t, ng = tables.outside_turn(tables.tracer.first_hit_barycentric, o, d)
+    triangle, u, v, t, ng = tables.outside_turn(tables.tracer.first_hit_barycentric, o, d, region)
     patch = hit_patches(tables, triangle, u, v)
     return triangle, patch, meets_front(d.T, ng) & (triangle >= 0), t
 
@@ -335,47 +340,6 @@ def direct_irradiance(scene, samples=64, seed=0):
     return (total / rounds).T
 
 
-class ReflectedPoints:
-    """The gathering samples as the walk's light sources (leaving from hit points): sample k,
-    at point x_k of patch j, reflects R_j A_j / n_j times the irradiance it found (``power``
-    (K,3), in the walk's source table after the patches), in cosine-distributed directions
-    about the patch's normal. Their sum over patch j's samples is A_j E'_j. Points and normals
-    stay in the walk's unit space, float32 (the points already pushed off the surface)."""
-
-    def __init__(self, gathering, geometry, samples):
-        patch, x, value = samples
-        factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
-        self.power = np.ascontiguousarray((value * factor.take(patch, axis=1)).T)
-        self.points = np.asarray(x, dtype=np.float32)
-        self.normals = geometry.patch_normal_rows.take(patch, axis=1)
-
-    def unit_rays(self, rows, u, geometry):
-        """Rays from samples ``rows`` with uniforms ``u`` (4, n) float32 (directions from u[2:4],
-        as a patch's: normal plus a uniform sphere point): (3, n) unit-space origins, directions,
-        as :meth:`.lights.Lights.unit_rays` gives them (the points are in unit space already:
-        ``geometry`` is not read)."""
-        return self.points.take(rows, axis=1), add_sphere_points(self.normals.take(rows, axis=1), u[2], u[3])
-
-
-def reflected_sources(tables, emission, samples):
-    """The walk's tables with the patches' reflected direct light as its only sources
-    (everything else shared): ``emission`` (P,3) E' from uniform points of each patch (random
-    exit), or, leaving from hit points, the gathering ``samples`` (gather_direct's) as
-    ReflectedPoints."""
-    walk = copy.copy(tables)
-    walk.gathering = None
-    if tables.exit_random:
-        walk.sources = SourceTable(source_weights(tables.geometry.patch_area, emission))
-        walk.emission = emission
-        walk.lights = None
-        return walk
-    points = ReflectedPoints(tables.gathering, tables.geometry, samples)
-    walk.emission = np.zeros_like(emission)
-    walk.sources = SourceTable(source_weights(tables.geometry.patch_area, walk.emission, points.power))
-    walk.lights = points
-    return walk
-
-
 def fate_shares(tables, seed):
     """(escaped, blocked): how FATE_RAYS rays from the sources (drawn and leaving as the walk's
     first rays) that find no patch's front divide between nothing and a back side, so that
@@ -386,7 +350,7 @@ def fate_shares(tables, seed):
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(FATE_STREAM,))))
     source = tables.sources.sample(FATE_RAYS, rng)
     u = rng.random((tables.uniforms_per_ray, FATE_RAYS), dtype=np.float32)
-    hits = ray_cast(tables, *leave_sources(tables, source, u))
+    hits = ray_cast(tables, *leave_sources(tables, source, u), region_of(tables, source))
     escaped = np.count_nonzero(hits.hit < 0)
     blocked = np.count_nonzero((hits.hit >= 0) & ~hits.front)
     if escaped + blocked == 0:
@@ -407,43 +371,3 @@ def pilot_irradiance(tables, gathering, seed):
     square = value.sum(axis=0) ** 2
     count = np.bincount(patch, minlength=tables.patch_count)
     return np.sqrt(np.bincount(patch, weights=square, minlength=tables.patch_count) / np.maximum(count, 1))
-
-
-def split_lost(gathering, lost):
-    """(escaped, blocked) (C,) each: ``lost`` (C,), the direct light the gathering found on no
-    patch's front, split by the solve's ``gathering.fate_shares``."""
-    escaped, blocked = gathering.fate_shares
-    return lost * escaped, lost * blocked
-
-
-def gathered_chunk(tables, paths, rng, walk):
-    """One chunk of the gathered estimate: the direct light of every patch, then ``paths``
-    walks from its reflection (``walk(tables, paths, rng)`` gives their ChunkTally). Returns
-    a ChunkTally in the solve's relative weights (times Phi_T / N)."""
-    gathering = tables.gathering
-    H, gather_rays, samples = gather_direct(tables, gathering, rng)
-    C = tables.channels
-    direct = H * gathering.patch_area  # (3,P) power incident on each patch's front
-    reflected = gathering.reflectivity * H  # (3,P) E'
-    walk_power = float((gathering.patch_area * channel_sum(reflected.T)).sum() / 3)
-    scale = paths / gathering.total_power  # relative weight per unit of power
-    incident = direct[:C] * scale
-    absorbed = ((1.0 - gathering.reflectivity) * direct).sum(axis=1)[:C] * scale
-    emitted = gathering.channel_power[:C] * scale
-    walked = np.zeros(C)  # what the walk started with
-    blocked, undistributed, walk_absorbed, walk_escaped = (np.zeros(C) for _ in range(4))
-    rays, ended = gather_rays, {}
-    if walk_power > 0:
-        tally = walk(reflected_sources(tables, np.ascontiguousarray(reflected.T), samples), paths, rng)
-        w = walk_power / gathering.total_power
-        incident = incident + tally.incident * w
-        walked, walk_absorbed, walk_escaped = tally.emitted * w, tally.absorbed * w, tally.escaped * w
-        blocked, undistributed = tally.blocked * w, tally.undistributed * w
-        rays += tally.rays
-        ended = tally.ended
-    # What the direct light brought no patch (in expectation, what escaped or met a back side
-    # on its first flight), so that the accounts balance exactly; below zero where a light that
-    # casts no shadow reaches, through objects, more than it emits.
-    lost_escaped, lost_blocked = split_lost(gathering, emitted - absorbed - walked)
-    return ChunkTally(paths, rays, incident, emitted, absorbed + walk_absorbed, lost_escaped + walk_escaped,
-                      blocked + lost_blocked, undistributed, ended)

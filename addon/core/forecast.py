@@ -11,7 +11,7 @@ this machine. The paths the run ends at follow from the solve's own chunk plan a
 A pilot's chunks are the run's when they fit in the budget; else smaller. A walk's paths are
 independent, so its variance per path does not depend on the chunk; the two-way iteration's
 falls as its chunks grow (what a chunk's sparse last generations and their roulette carry is
-noise of the chunk, not of a path), and is scaled by v(n) = v_inf (1 + TWO_WAY_GROWTH P / n).
+noise of the chunk, not of a path), and is scaled as its method says (``Method.variance_scale``).
 """
 from __future__ import annotations
 
@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .names import GATHERED, SHOT, TWO_WAY
-from .solver import MEASURED_STOP_CHUNKS, MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target, solve
-from .two_way import rays_per_path as two_way_rays_per_path
+from . import methods
+from .plan import MEASURED_STOP_CHUNKS, MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target
+from .solver import solve
 
 # A pilot traces about this many rays (about a second on two threads) ...
 PILOT_RAYS = 1 << 20
@@ -31,10 +31,6 @@ PILOT_RAYS = 1 << 20
 # least 2 (a batch variance), and stops after this long whatever it has.
 PILOT_CHUNKS = MIN_MEASURED_CHUNKS
 PILOT_SECONDS = 3.0
-# The two-way iteration's variance per path in chunks of n paths over P patches, as
-# v_inf (1 + TWO_WAY_GROWTH P / n): fitted over chunk sizes 4x apart, 6-30 in the suite and
-# sample scenes (docs/performance.md, "The time prediction").
-TWO_WAY_GROWTH = 12.0
 # Without a pilot chunk (paths of a million bounces), a solve's ray rate is taken as this share
 # of Embree's own on the probe's rays, per thread (benchmarks/results/throughput_methods.md).
 SOLVE_SHARE_OF_RAW_RATE = 0.5
@@ -66,26 +62,12 @@ class Forecast:
         return self.rays_per_path / self.seconds_per_path if self.seconds_per_path > 0 else math.nan
 
 
-def guessed_rays_per_path(bounces, method, direct_light):
-    """Rays a path costs, before measuring: the walk's bounces, or the two-way iteration's
-    rays for them (a gathered walk pays for its gathering alike)."""
-    if method == TWO_WAY or direct_light == GATHERED:
-        return two_way_rays_per_path(bounces)
-    return max(bounces, 1.0)
-
-
 def pilot_size(chunk, rays_per_path, budget=PILOT_RAYS):
     """(chunk paths, chunks) of a pilot: the run's chunks, as many as fit in ``budget`` rays
     (2 to PILOT_CHUNKS); where 2 do not fit, 2 smaller ones that do."""
     chunk_rays = chunk * rays_per_path
     chunks = int(min(PILOT_CHUNKS, max(2, budget // max(chunk_rays, 1.0))))
     return int(max(1, min(chunk, budget // (chunks * rays_per_path)))), chunks
-
-
-def two_way_scale(patch_count, pilot_chunk, chunk):
-    """The two-way iteration's variance per path in chunks of ``chunk`` over that in chunks
-    of ``pilot_chunk``."""
-    return (1 + TWO_WAY_GROWTH * patch_count / chunk) / (1 + TWO_WAY_GROWTH * patch_count / pilot_chunk)
 
 
 def raw_rate(scene, rays=1 << 14, seed=0):
@@ -97,9 +79,10 @@ def raw_rate(scene, rays=1 << 14, seed=0):
     patch = rng.integers(0, scene.patch_count, rays).astype(np.int32)
     u = rng.random((5, rays), dtype=np.float32)
     origins, directions = points_on_patches(g, patch, u[4], u[0], u[1]), cosine_directions(g, patch, u[2], u[3])
-    g.surface_tracer.first_hit(origins, directions)  # (built, warm)
+    region = g.region_of(patch)
+    g.surface_tracer.first_hit(origins, directions, region)  # (built, warm)
     start = time.perf_counter()
-    g.surface_tracer.first_hit(origins, directions)
+    g.surface_tracer.first_hit(origins, directions, region)
     return rays / max(time.perf_counter() - start, 1e-9)
 
 
@@ -109,11 +92,11 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
     """The Forecast of ``solve(scene, estimator, ...)`` with these arguments (``method`` a
     method, not "auto"; ``bounces`` the expected bounces of a path, diagnostics.check_bounces).
     ``should_stop()`` ends the pilot early (a run starting): the forecast is then from what it has."""
-    direct_light = direct_light or (GATHERED if method == TWO_WAY else SHOT)
-    plan = chunk_plan(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold, stop_rule=stop_rule,
-                      direct_light=direct_light, method=method, max_seconds=max_seconds)
+    chosen = methods.create(method, direct_light)
+    plan = chunk_plan(scene, chosen, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
+                      stop_rule=stop_rule, max_seconds=max_seconds)
     bounces = bounces if bounces is not None else plan.prediction.expected_path_length
-    guess = guessed_rays_per_path(bounces, method, direct_light)
+    guess = chosen.rays_per_path(bounces)
     pilot_chunk, pilot_chunks = pilot_size(plan.chunk, guess, budget)
     start = time.perf_counter()
 
@@ -121,7 +104,7 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
         """(result, seconds to its last finished chunk, or all it took if it finished none)."""
         began, finished = time.perf_counter(), []
         r = solve(scene, estimator, paths=chunk * chunks, threshold=threshold, seed=seed, exit_point=exit_point,
-                  sampling=sampling, threads=threads, direct_light=direct_light, method=method, chunk_paths=chunk,
+                  sampling=sampling, threads=threads, direct_light=chosen.direct_light, method=method, chunk_paths=chunk,
                   progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
                   should_stop=lambda: time.perf_counter() - began > limit or bool(should_stop and should_stop()))
         everything = time.perf_counter() - began
@@ -136,9 +119,7 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
     measured = r.chunks >= 2
     variance = math.nan
     if measured:
-        variance = r.measured_mse * r.paths
-        if method == TWO_WAY:
-            variance *= two_way_scale(scene.patch_count, pilot_chunk, plan.chunk)
+        variance = r.measured_mse * r.paths * chosen.variance_scale(scene.patch_count, pilot_chunk, plan.chunk)
     if r.chunks:  # (stopped by PILOT_SECONDS, it has what it finished)
         rays_per_path, setup = r.rays / r.paths, cold
         per_path = max(seconds - warm, 0.5 * seconds) / r.paths

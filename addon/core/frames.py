@@ -42,10 +42,10 @@ LIGHT_OFFSET_SPACINGS = 4
 
 def local_offsets(side, largest_coordinate):
     """(ray offsets, edge insets), each (n,) float64 unit space, of patches of unit-space
-    ``side`` (n,) in a scene whose unit-space coordinates reach ``largest_coordinate``: the
+    ``side`` (n,) whose frame's coordinates reach ``largest_coordinate`` (a number, or (n,)): the
     relative ones, or less for patches small beside the scene, never below the float32
     spacings that rounding of positions needs."""
-    spacing = float(np.spacing(np.float32(largest_coordinate)))
+    spacing = np.spacing(np.asarray(largest_coordinate, np.float32)).astype(np.float64)
     side = np.asarray(side, dtype=np.float64)
     offset = np.maximum(RAY_OFFSET_SPACINGS * spacing, np.minimum(RELATIVE_RAY_OFFSET, LOCAL_RAY_OFFSET * side))
     inset = np.maximum(EDGE_INSET_SPACINGS * spacing, np.minimum(RELATIVE_EDGE_INSET, LOCAL_EDGE_INSET * side))
@@ -129,7 +129,7 @@ def parallelogram_corners(sorted_corners, first, count, block=None):
     p is the first triangle's own corner, s1 and s2 the two corners the triangles share (the
     edges are a = s1 - p and b = s2 - p), q the second triangle's own corner (p + a + b to
     within rounding). ``sorted_corners[rows]`` gives triangles' corners (an array or
-    geometry.UnitCorners); the patches are taken ``block`` at a time (each on its own)."""
+    triangles.UnitCorners); the patches are taken ``block`` at a time (each on its own)."""
     two = np.flatnonzero(count == 2)
     parts = [(ok, c) for _, ok, c in parallelogram_blocks(sorted_corners, first, count, block)]
     if not parts:

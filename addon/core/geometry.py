@@ -1,37 +1,21 @@
-"""Geometry arrays derived once from a scene's mesh and shared by every material set on it.
+"""Geometry arrays derived once from a scene's mesh and shared by every material set on it
+(made by :func:`.geometry_build.build_geometry`).
 
 Triangles are sorted by patch; positions are in unit space, (world - centre) / diagonal, in
 float32; areas are in the scene's units.
 """
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 
-from .frames import (
-    RELATIVE_EDGE_INSET,
-    RELATIVE_HIT_EDGE_CLEARANCE,
-    LIGHT_OFFSET_SPACINGS,
-    RELATIVE_RAY_OFFSET,
-    edge_barycentric,
-    inset_triangles,
-    local_offsets,
-    parallelogram_frames,
-)
+from .frames import LIGHT_OFFSET_SPACINGS, RELATIVE_EDGE_INSET, RELATIVE_HIT_EDGE_CLEARANCE, edge_barycentric
 from .patch_grids import patch_grids
-from .raytrace import RayTracer
-from .validation import (
-    MIN_PATCH_NORMAL_COSINE,
-    RELATIVE_DEGENERATE_AREA,
-    PatchError,
-    indices_of,
-    indices_text,
-    validate_mesh,
-    warn_coincident,
-)
+from .raytrace import RayTracer, RegionTracer
+from .regions import Regions
+from .triangles import BLOCK_PATCHES, BLOCK_TRIANGLES, UnitCorners, leaving_frames, triangle_cross, triangle_normals
 
 # At most this many distinct leaving-frame shapes (edges and normal) are kept as a table of
 # their own (Geometry.leave_shapes; 2^12 shapes take 144 kB): more, and the table is no
@@ -77,6 +61,9 @@ class Geometry:
     # every patch takes those (ordinary scenes: then ``ray_offset`` is every patch's)
     patch_ray_offset: np.ndarray | None = None
     patch_edge_inset: np.ndarray | None = None
+    # Parts of the scene far apart, each with positions in a frame of its own (.regions): then
+    # every position above is in its patch's region frame; None where the scene is one frame
+    regions: Regions | None = None
 
     @property
     def patch_count(self):
@@ -164,9 +151,18 @@ class Geometry:
         largest = np.abs(unit_origins).max(axis=0).astype(np.float32)
         return LIGHT_OFFSET_SPACINGS * np.spacing(largest).astype(np.float64)
 
-    def to_world(self, points):
-        """Unit-space points (n,3) back in the scene's coordinates, float64."""
-        return np.asarray(points, dtype=np.float64) * self.diagonal + self.centre
+    def to_world(self, points, patch=None):
+        """Unit-space points (n,3) back in the scene's coordinates, float64 (points of the
+        given ``patch`` (n,) each, in its region's frame, where the scene has regions)."""
+        points = np.asarray(points, dtype=np.float64)
+        if self.regions is not None:
+            points = points + self.regions.centre[self.regions.of(patch)]
+        return points * self.diagonal + self.centre
+
+    def region_of(self, patch):
+        """(n,) int32 the region frame of each of the given patches' positions, or None where
+        the scene is one frame."""
+        return None if self.regions is None else self.regions.of(patch)
 
     @property
     def parallelogram_frame(self):
@@ -248,7 +244,10 @@ class Geometry:
 
     @cached_property
     def tracer(self):
-        """The Embree scene over these triangles, built on first use and then reused."""
+        """The Embree scene over these triangles, built on first use and then reused (one a
+        region, where the scene has regions)."""
+        if self.regions is not None:
+            return RegionTracer(self.triangle_corners, self.regions.of(self.triangle_patch), self.regions)
         return RayTracer(self.triangle_corners)
 
     @property
@@ -295,199 +294,3 @@ def leave_shapes(leave_table, max_shapes=LEAVE_SHAPES_MAX, shape_hash=_SHAPE_HAS
         if shapes.shape[0] > max_shapes:
             return None
     return np.ascontiguousarray(shapes.view(np.float32).T), shape_of_patch.reshape(-1).astype(np.uint16)
-
-# Per-patch arrays are computed in blocks of this many patches (every value patch by patch).
-BLOCK_PATCHES = 1 << 16
-
-# Per-triangle arrays are computed in blocks of about this many triangles (whole patches), so
-# that the float64 temporaries are a block's, not the scene's: every value is computed
-# triangle by triangle (and every per-patch sum within one block), so the bits are the same.
-BLOCK_TRIANGLES = 1 << 16
-
-
-class UnitCorners:
-    """The (T,3,3) float64 unit-space corners (world - centre) / diagonal of the triangles
-    ``triangles[rows]`` (all of them without ``rows``), computed on demand for the rows asked
-    for: the same numbers as indexing the whole array, without holding it (rounded to
-    ``dtype`` where given)."""
-
-    def __init__(self, vertices, triangles, centre, diagonal, rows=None, dtype=None):
-        self.vertices, self.triangles, self.rows = vertices, triangles, rows
-        self.centre, self.diagonal, self.dtype = centre, diagonal, dtype
-
-    def float32(self):
-        """These corners rounded to float32 (the rows of Geometry.triangle_corners)."""
-        return UnitCorners(self.vertices, self.triangles, self.centre, self.diagonal, self.rows, np.float32)
-
-    def __len__(self):
-        return len(self.triangles if self.rows is None else self.rows)
-
-    def __getitem__(self, index):
-        triangles = self.triangles[index if self.rows is None else self.rows[index]]
-        corners = (self.vertices[triangles] - self.centre) / self.diagonal
-        return corners if self.dtype is None else corners.astype(self.dtype)
-
-
-def triangle_blocks(count, size=None):
-    """(start, stop) ranges of about ``size`` (BLOCK_TRIANGLES) of the triangles sorted by patch,
-    cut only between patches (``count``: (P,) triangles of each patch)."""
-    size = size or BLOCK_TRIANGLES
-    end = np.cumsum(count)
-    total = int(end[-1]) if end.size else 0
-    cuts = end[np.maximum(np.searchsorted(end, np.arange(size, total, size), side="right") - 1, 0)]
-    cuts = np.unique(np.concatenate([[0], cuts, [total]]))
-    return list(zip(cuts[:-1].tolist(), cuts[1:].tolist()))
-
-
-def triangle_cross(corners):
-    """(n,3) float64 (corner1 - corner0) x (corner2 - corner0) of (n,3,3) corners."""
-    return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-
-
-def triangle_normals(corners):
-    """(n,3) float64 unit normals of (n,3,3) corners."""
-    cross = triangle_cross(corners)
-    return cross / np.linalg.norm(cross, axis=1)[:, None]
-
-
-def leaving_frames(corners, ray_offset, inset=RELATIVE_EDGE_INSET):
-    """(9,n) float32 leaving frames of (n,3,3) corners: the inset triangle's first corner pushed
-    off along the normal, and its two edges from it (``ray_offset`` a number or (n,1),
-    ``inset`` a number or (n,))."""
-    leave_corners = inset_triangles(corners, inset)
-    return np.ascontiguousarray(
-        np.hstack(
-            [
-                leave_corners[:, 0] + ray_offset * triangle_normals(corners),
-                leave_corners[:, 1] - leave_corners[:, 0],
-                leave_corners[:, 2] - leave_corners[:, 0],
-            ]
-        ).T,
-        dtype=np.float32,
-    )
-
-
-# Patches whose ray offset, set by the float32 spacing of the scene's coordinates, exceeds this
-# share of their side are reported: their form factors drift with it.
-COARSE_OFFSET_SHARE = 0.02
-
-
-def warn_coarse(offset, side, diagonal):
-    """Warns (naming how many patches and how far) where float32 positions of a scene this large
-    are coarse beside some patches: their rays leave more than COARSE_OFFSET_SHARE of their
-    side off them (unit-space ``offset`` and ``side``, (P,) each)."""
-    coarse = offset > COARSE_OFFSET_SHARE * side
-    if coarse.any():
-        share = float((offset / side)[coarse].max())
-        warnings.warn(
-            f"{int(coarse.sum())} patches are small beside the scene's extent ({diagonal:.3g} across): float32 "
-            f"positions put their rays up to {float(offset[coarse].max()) * diagonal:.3g} off them ({share:.1%} of "
-            "their size), which shifts their light; keep far objects out of the scene or solve them apart",
-            stacklevel=4,
-        )
-
-
-def build_geometry(vertices, triangles, triangle_patch, patch_count):
-    """The :class:`Geometry` of a mesh whose triangles make ``patch_count`` patches (checked:
-    ValueError naming what is wrong)."""
-    V, T, tp, centre, diagonal = validate_mesh(vertices, triangles, triangle_patch, patch_count)
-    corners = UnitCorners(V, T, centre, diagonal)
-    area = np.empty(len(T))                       # unit space
-    for start in range(0, len(T), BLOCK_TRIANGLES):
-        area[start:start + BLOCK_TRIANGLES] = 0.5 * np.linalg.norm(triangle_cross(corners[start:start + BLOCK_TRIANGLES]), axis=1)
-    degenerate = area <= RELATIVE_DEGENERATE_AREA
-    if degenerate.any():
-        warnings.warn(
-            f"dropped {int(degenerate.sum())} degenerate (zero-area) triangles: {indices_text(degenerate)}",
-            stacklevel=3,
-        )
-    keep = np.flatnonzero(~degenerate)
-    del degenerate
-    kept_patch = tp[keep]
-    warn_coincident(UnitCorners(V, T, centre, diagonal, keep), kept_patch)
-    patch_area = np.bincount(kept_patch, weights=area[keep], minlength=patch_count)
-    empty = patch_area <= 0
-    if empty.any():
-        raise PatchError(f"patches {indices_text(empty)} have no area (no triangles, or only degenerate ones)", indices_of(empty))
-
-    order = keep[np.argsort(kept_patch, kind="stable")].astype(np.int32)  # (T < 2^31: checked)
-    del keep, kept_patch
-    tp_sorted = tp[order]
-    count = np.bincount(tp_sorted, minlength=patch_count).astype(np.int64)
-    sorted_corners = UnitCorners(V, T, centre, diagonal, order)
-    blocks = triangle_blocks(count)
-    weighted = np.zeros((patch_count, 3))  # area-weighted normal sum (x2), block by block of whole patches
-    for start, stop in blocks:
-        cross = triangle_cross(sorted_corners[start:stop])
-        patches = tp_sorted[start:stop]
-        first_patch = patches[0]
-        for k in range(3):
-            weighted[first_patch:patches[-1] + 1, k] = np.bincount(patches - first_patch, weights=cross[:, k])
-    norm = np.linalg.norm(weighted, axis=1)
-    folded = norm <= 1e-12 * patch_area * 2
-    if folded.any():
-        raise PatchError(
-            f"patches {indices_text(folded)} have triangles of opposite winding that cancel: "
-            "a patch must be coplanar triangles facing one way",
-            indices_of(folded),
-        )
-    patch_normal = weighted / norm[:, None]
-    del weighted, norm
-
-    # Every triangle within MIN_PATCH_NORMAL_COSINE of its patch's normal, block by block.
-    crooked = np.zeros(len(order), bool)
-    for start, stop in blocks:
-        cosine = np.einsum("ij,ij->i", triangle_normals(sorted_corners[start:stop]), patch_normal[tp_sorted[start:stop]])
-        crooked[start:stop] = cosine < MIN_PATCH_NORMAL_COSINE
-    if crooked.any():
-        crooked_patches = np.unique(tp_sorted[crooked])
-        raise PatchError(
-            f"patches {indices_text(crooked_patches)} mix triangles of different "
-            "orientation: a patch must be coplanar triangles with the same winding",
-            crooked_patches,
-        )
-    del crooked
-
-    first = np.concatenate(([0], np.cumsum(count)[:-1]))
-    sorted_area = area[order]
-    del area
-    cumulative = np.cumsum(sorted_area)
-    before_patch = np.concatenate(([0.0], cumulative))[first]
-    fraction = (cumulative - before_patch[tp_sorted]) / patch_area[tp_sorted]
-    del cumulative
-    last = first + count - 1
-    fraction[last] = 1.0  # exact upper end, whatever the rounding
-    used = np.unique(T)
-    largest = np.abs((V[used] - centre) / diagonal).max()
-    del used
-    patch_ray_offset, patch_edge_inset = local_offsets(np.sqrt(patch_area), largest)
-    if (patch_ray_offset == RELATIVE_RAY_OFFSET).all() and (patch_edge_inset == RELATIVE_EDGE_INSET).all():
-        ray_offset, patch_ray_offset, patch_edge_inset = RELATIVE_RAY_OFFSET, None, None
-        inset, offset = RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET
-    else:
-        ray_offset = float(patch_ray_offset.min())  # (the lights', at least)
-        inset, offset = patch_edge_inset, patch_ray_offset
-        warn_coarse(patch_ray_offset, np.sqrt(patch_area), diagonal)
-    leave_table = np.empty((12, patch_count), np.float32)
-    is_parallelogram = parallelogram_frames(sorted_corners, first, count, inset, offset, patch_normal, leave_table[0:9])
-    leave_table[9:12] = patch_normal.T
-
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-    return Geometry(
-        centre=centre,
-        diagonal=diagonal,
-        ray_offset=ray_offset,
-        triangle_index=order,
-        triangle_patch=tp_sorted.astype(np.int32, copy=False),
-        corners=sorted_corners,
-        patch_area=patch_area * diagonal**2,
-        patch_normal=leave_table[9:12].T,  # (the same float32 numbers: one copy)
-        patch_first_triangle=first.astype(np.int32),
-        patch_triangle_count=count.astype(np.int32),
-        triangle_key=tp_sorted + fraction if count.max() > 2 else None,
-        patch_first_fraction=f32(fraction[first]),
-        patch_parallelogram=is_parallelogram,
-        leave_table=leave_table,
-        patch_ray_offset=patch_ray_offset,
-        patch_edge_inset=patch_edge_inset,
-    )

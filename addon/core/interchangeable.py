@@ -72,6 +72,7 @@ class InterchangeableWalk:
             self.scores = Scores(1, G * K)
         self.started = 0
         self.n_live = 0
+        self.region = None  # the region frame of each ray's origin (.regions), or None
 
     def refill(self):
         """New paths take the places of ended ones; False once none is left."""
@@ -108,18 +109,20 @@ class InterchangeableWalk:
         u = rng.random((t.uniforms_per_ray, n), dtype=np.float32)
         if self.live is not None:
             # The leave table's columns, each repeated as many times as paths are on its patch.
+            on_patch = self.live.sum(axis=0) if self.tagged else self.live[0]
             if self.tagged:
-                frame = np.repeat(t.leave_table, self.live.sum(axis=0), axis=1)
                 self.chunk = np.repeat(self.chunk_of_pair, self.live.T.ravel())
-            else:
-                frame = np.repeat(t.leave_table, self.live[0], axis=1)
+            frame = np.repeat(t.leave_table, on_patch, axis=1)
+            if t.geometry.regions is not None:
+                self.region = np.repeat(t.geometry.regions.patch_region, on_patch)
             return rays.rays_from_frames(frame, u[0], u[1], u[2:4])
+        self.region = rays.region_of(t, self.patch)
         if self.first_uniforms is not None and new > 0:
             u[:4, self.n_live :] = self.first_uniforms[:, start : start + new]  # stratified first rays
         return rays.leave_sources(t, self.patch, u)
 
     def intersect(self, origins, directions):
-        return rays.cast(self.tables, origins, directions)
+        return rays.cast(self.tables, origins, directions, self.region)
 
     def handle_escaped(self, hits):
         """Escaped and blocked rays go to their chunk's last two bins."""

@@ -97,6 +97,7 @@ def jacobi_chunks(tables, sizes, rng, check=None):
     if first is not None:
         u[:4] = first
     origins, directions = rays.leave_sources(tables, source, u)
+    region = rays.region_of(tables, source)
     chunk = np.zeros(source.size, dtype=np.int32) if chunk is None else chunk
     weights = np.ones((1, source.size)) if C == 1 else tables.start_weight(source)
     emitted = chunk_sums(weights, chunk, G)
@@ -107,7 +108,7 @@ def jacobi_chunks(tables, sizes, rng, check=None):
     while True:
         if check is not None:
             check()
-        hits = rays.cast(tables, origins, directions)
+        hits = rays.cast(tables, origins, directions, region)
         traced = chunk_counts(chunk, G)
         ray_count += traced
         generations += traced > 0
@@ -128,6 +129,7 @@ def jacobi_chunks(tables, sizes, rng, check=None):
             absorbed += reflected  # (the roulette's end: nothing leaves)
             break
         patch, chunk, weights, leaving, origins, directions = shot
+        region = tables.geometry.region_of(patch)
         absorbed += reflected - leaving  # what leaves beyond what was reflected: the roulette's, either sign
     incident = incident.reshape(C, G, P)
     return [

@@ -32,6 +32,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .light_directions import (
+    basis,
+    cone_directions,
+    cosine_directions_about,
+    disc_origins,
+    dot,
+    equirectangular_pixel,
+    pixel_directions,
+    pixel_solid_angles,
+    rotate,
+    sphere_directions,
+    direction_to,
+)
+
 TWO_PI = 2.0 * np.pi
 # An elliptical spot's solid angle: Gauss-Legendre nodes in the angle to the axis (per part), and
 # trapezoid steps around it (periodic: both converge fast on the smooth integrand).
@@ -65,9 +79,9 @@ class Spot:
     def local_cosine(self, directions):
         """x of unit world directions (3, n) leaving the light."""
         if self.to_local is None:
-            return _dot(np.asarray(self.axis, np.float64)[:, None], directions)
-        local = _rotate(self.to_local, directions)
-        return local[2] / np.sqrt(_dot(local, local))
+            return dot(np.asarray(self.axis, np.float64)[:, None], directions)
+        local = rotate(self.to_local, directions)
+        return local[2] / np.sqrt(dot(local, local))
 
     def solid_angle(self):
         """The integral of the mask over directions. Round: 2 pi times its integral over x in
@@ -87,7 +101,7 @@ class Spot:
             theta = start + (end - start) * 0.5 * (nodes + 1.0)
             l = np.stack([np.outer(np.sin(theta), np.cos(phi)), np.outer(np.sin(theta), np.sin(phi)),
                           np.repeat(np.cos(theta)[:, None], phi.size, axis=1)]).reshape(3, -1)
-            jacobian = abs(np.linalg.det(A)) / np.sqrt(_dot(A @ l, A @ l)) ** 3
+            jacobian = abs(np.linalg.det(A)) / np.sqrt(dot(A @ l, A @ l)) ** 3
             f = (self.mask(l[2]) * jacobian).reshape(theta.size, phi.size) * np.sin(theta)[:, None]
             total += 0.5 * (end - start) * (weights @ f.sum(axis=1)) * (TWO_PI / phi.size)
         return total
@@ -100,8 +114,8 @@ class Spot:
         phi = TWO_PI * np.arange(1024) / 1024
         sin_outer = np.sqrt(max(1.0 - self.cos_outer**2, 0.0))
         edge = A @ np.stack([sin_outer * np.cos(phi), sin_outer * np.sin(phi), np.full(phi.size, self.cos_outer)])
-        widest = np.arccos(np.clip(np.min(_dot(np.asarray(self.axis, np.float64)[:, None], edge)
-                                          / np.sqrt(_dot(edge, edge))), -1.0, 1.0))
+        widest = np.arccos(np.clip(np.min(dot(np.asarray(self.axis, np.float64)[:, None], edge)
+                                          / np.sqrt(dot(edge, edge))), -1.0, 1.0))
         return float(np.cos(min(widest + BOUNDING_MARGIN, np.pi)))
 
     def sample(self, u_cos, u_phi):
@@ -110,15 +124,15 @@ class Spot:
         of its mask; the ones left draw again from a generator seeded with their own uniforms
         (reproducible, and independent of other paths)."""
         if self.to_local is None or u_cos.size == 0:
-            return _cone_directions(self.axis, self.sample_cosine(u_cos), u_phi)
+            return cone_directions(self.axis, self.sample_cosine(u_cos), u_phi)
         axis, cos_bound = np.asarray(self.axis, np.float64), self.bounding_cos()
         cos_theta = 1.0 - u_cos.astype(np.float64) * (1.0 - cos_bound)
-        directions = _cone_directions(axis, cos_theta, u_phi)
+        directions = cone_directions(axis, cos_theta, u_phi)
         rng = np.random.default_rng(np.frombuffer(np.ascontiguousarray(np.stack([u_cos, u_phi]), np.float32).tobytes(), np.uint32))
         redraw = np.flatnonzero(rng.random(directions.shape[1]) >= self.mask(self.local_cosine(directions)))
         while redraw.size:
             cos_theta = 1.0 - rng.random(redraw.size) * (1.0 - cos_bound)
-            directions[:, redraw] = _cone_directions(axis, cos_theta, rng.random(redraw.size))
+            directions[:, redraw] = cone_directions(axis, cos_theta, rng.random(redraw.size))
             kept = rng.random(redraw.size) < self.mask(self.local_cosine(directions[:, redraw]))
             redraw = redraw[~kept]
         return directions
@@ -163,14 +177,14 @@ class PointLight:
     def emit(self, rows, u, aim, reach):
         n = u.shape[1]
         if self.spot is None:
-            direction = _sphere_directions(u[2], u[3])
+            direction = sphere_directions(u[2], u[3])
         else:
             direction = self.spot.sample(u[2], u[3])
         origin = np.repeat(np.asarray(self.position, np.float64)[:, None], n, axis=1)
         if self.radius > 0:
             # A point of the sphere seen from the direction: a uniform point of the disc facing
             # it, moved onto the near hemisphere (a Lambertian sphere's rays in one direction).
-            a, b = _basis(direction)
+            a, b = basis(direction)
             r = self.radius * np.sqrt(u[0].astype(np.float64))
             phi = TWO_PI * u[1].astype(np.float64)
             x, y = r * np.cos(phi), r * np.sin(phi)
@@ -183,28 +197,28 @@ class PointLight:
         if self.radius > 0 and self.soft_falloff:
             # Cycles' soft falloff: a disc of the sphere's radiance I / (pi r^2) facing x; a
             # uniform point y of it gives I cos_y / |x - y|^2 along x -> y.
-            axis, _ = _towards(position, x)
-            a, b = _basis(axis)
+            axis, _ = direction_to(position, x)
+            a, b = basis(axis)
             r, phi = self.radius * np.sqrt(u[0].astype(np.float64)), TWO_PI * u[1].astype(np.float64)
-            towards, distance = _towards(position + a * (r * np.cos(phi)) + b * (r * np.sin(phi)), x)
-            value = np.maximum(_dot(axis, towards), 0.0) / distance**2
+            towards, distance = direction_to(position + a * (r * np.cos(phi)) + b * (r * np.sin(phi)), x)
+            value = np.maximum(dot(axis, towards), 0.0) / distance**2
         elif self.radius > 0:
             # A uniform direction of the cone the sphere subtends (solid angle Omega): the sphere
             # (exitance I / r^2, Lambertian) gives (I / r^2) cos_x Omega / pi along it.
-            axis, centre_distance = _towards(position, x)
+            axis, centre_distance = direction_to(position, x)
             sin2 = np.minimum((self.radius / centre_distance) ** 2, 1.0)  # (inside: the whole sphere)
             cos_alpha = np.sqrt(1.0 - sin2)
             cos_theta = 1.0 - u[0].astype(np.float64) * (1.0 - cos_alpha)
-            towards = _cone_directions(axis, cos_theta, u[1])
+            towards = cone_directions(axis, cos_theta, u[1])
             reach = np.sqrt(np.maximum(self.radius**2 - centre_distance**2 * (1.0 - cos_theta**2), 0.0))
             distance = centre_distance * cos_theta - reach  # to the sphere's near side
             value = TWO_PI * (1.0 - cos_alpha) / (np.pi * self.radius**2)
         else:
-            towards, distance = _towards(position, x)
+            towards, distance = direction_to(position, x)
             value = 1.0 / distance**2
         if self.spot is not None:
             value = value * self.spot.mask(self.spot.local_cosine(-towards))
-        value = value * np.maximum(_dot(normal, towards), 0.0)
+        value = value * np.maximum(dot(normal, towards), 0.0)
         return towards, distance, np.asarray(self.intensity, np.float64)[:, None] * value
 
 
@@ -241,9 +255,9 @@ class AreaLight:
 
     def gather(self, x, normal, u):
         # A uniform point y of the light: M cos_x cos_y A / (pi d^2).
-        towards, distance = _towards(self._points(u[0], u[1]), x)
-        cos_y = np.maximum(-_dot(np.asarray(self.normal, np.float64)[:, None], towards), 0.0)
-        value = np.maximum(_dot(normal, towards), 0.0) * cos_y * (self.area / np.pi) / distance**2
+        towards, distance = direction_to(self._points(u[0], u[1]), x)
+        cos_y = np.maximum(-dot(np.asarray(self.normal, np.float64)[:, None], towards), 0.0)
+        value = np.maximum(dot(normal, towards), 0.0) * cos_y * (self.area / np.pi) / distance**2
         return towards, distance, np.asarray(self.exitance, np.float64)[:, None] * value
 
 
@@ -270,16 +284,16 @@ class SunLight:
     def emit(self, rows, u, aim, reach):
         half = 0.5 * self.angle
         cos_theta = 1.0 - u[2].astype(np.float64) * (1.0 - np.cos(half))
-        direction = _cone_directions(np.asarray(self.direction, np.float64), cos_theta, u[3])
-        return _disc_origins(direction, u[0], u[1], aim, reach), direction
+        direction = cone_directions(np.asarray(self.direction, np.float64), cos_theta, u[3])
+        return disc_origins(direction, u[0], u[1], aim, reach), direction
 
     def gather(self, x, normal, u):
         # A uniform direction of the sun's cone: its radiance H / (pi sin^2) times cos_x times
         # the cone's solid angle is H cos_x times the beam factor.
         half = 0.5 * self.angle
         cos_theta = 1.0 - u[0].astype(np.float64) * (1.0 - np.cos(half))
-        towards = -_cone_directions(np.asarray(self.direction, np.float64), cos_theta, u[1])
-        value = np.maximum(_dot(normal, towards), 0.0) * self._beam_factor()
+        towards = -cone_directions(np.asarray(self.direction, np.float64), cos_theta, u[1])
+        value = np.maximum(dot(normal, towards), 0.0) * self._beam_factor()
         return towards, np.full(x.shape[1], np.inf), np.asarray(self.irradiance, np.float64)[:, None] * value
 
 
@@ -295,17 +309,17 @@ class WorldLight:
         if self.image is None:
             return (np.asarray(self.irradiance, np.float64) * 4.0 * np.pi * radius**2)[None]
         # An image pixel's flux through a disc perpendicular to its directions: (W / pi) pi R^2 Omega.
-        return self.image.reshape(-1, 3) * (_pixel_solid_angles(self.image.shape[:2]).reshape(-1, 1) * radius**2)
+        return self.image.reshape(-1, 3) * (pixel_solid_angles(self.image.shape[:2]).reshape(-1, 1) * radius**2)
 
     def emit(self, rows, u, aim, reach):
         if self.image is None:
-            towards_sky = _sphere_directions(u[2], u[3])
+            towards_sky = sphere_directions(u[2], u[3])
         else:
-            towards_sky = _pixel_directions(self.image.shape[:2], rows, u[2], u[3])
+            towards_sky = pixel_directions(self.image.shape[:2], rows, u[2], u[3])
             if self.rotation is not None:
-                towards_sky = _rotate(np.asarray(self.rotation, np.float64).T, towards_sky)
+                towards_sky = rotate(np.asarray(self.rotation, np.float64).T, towards_sky)
         direction = -towards_sky
-        return _disc_origins(direction, u[0], u[1], aim, reach), direction
+        return disc_origins(direction, u[0], u[1], aim, reach), direction
 
     def gather(self, x, normal, u):
         # A cosine-distributed direction about the normal: radiance W / pi over the density
@@ -317,117 +331,9 @@ class WorldLight:
         """(3, n) pi times the sky's radiance in each direction (3, n) towards it: W, or its pixel's."""
         if self.image is None:
             return np.repeat(np.asarray(self.irradiance, np.float64)[:, None], towards.shape[1], axis=1)
-        sky = towards if self.rotation is None else _rotate(self.rotation, towards)
+        sky = towards if self.rotation is None else rotate(self.rotation, towards)
         row, column = equirectangular_pixel(sky, self.image.shape[:2])
         return self.image[row, column].T.astype(np.float64)
-
-
-def equirectangular_direction(row, column, shape):
-    """The direction (3, n) towards the sky at the centre of pixel (row, column) of an
-    equirectangular image of ``shape`` (H, W): row 0 at the top (z = 1), column 0 at azimuth
-    pi (the -x direction), azimuth falling to the right, as Blender maps a world image."""
-    H, W = shape
-    theta = (np.asarray(row) + 0.5) / H * np.pi
-    phi = np.pi - (np.asarray(column) + 0.5) / W * TWO_PI
-    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
-
-
-def equirectangular_pixel(direction, shape):
-    """(row, column) of the pixel of an equirectangular image of ``shape`` (H, W) that holds
-    each unit direction (3, n): the inverse of :func:`_pixel_directions`."""
-    H, W = shape
-    z = np.clip(direction[2], -1.0, 1.0)
-    row = np.minimum((np.arccos(z) / np.pi * H).astype(np.int64), H - 1)
-    phi = np.arctan2(direction[1], direction[0])
-    column = np.floor((np.pi - phi) / TWO_PI * W).astype(np.int64) % W
-    return row, column
-
-
-def _pixel_solid_angles(shape):
-    """(H, W) solid angle of each pixel of an equirectangular image."""
-    H, W = shape
-    edges = np.cos(np.arange(H + 1) * np.pi / H)
-    band = (edges[:-1] - edges[1:]) * TWO_PI / W
-    return np.repeat(band[:, None], W, axis=1)
-
-
-def _pixel_directions(shape, pixel, u_z, u_phi):
-    """Uniform directions (in solid angle) within the given pixels of an equirectangular image."""
-    H, W = shape
-    row, column = np.divmod(np.asarray(pixel), W)
-    z_top, z_bottom = np.cos(row * np.pi / H), np.cos((row + 1) * np.pi / H)
-    z = z_top + (z_bottom - z_top) * u_z.astype(np.float64)
-    phi = np.pi - (column + u_phi.astype(np.float64)) / W * TWO_PI
-    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z])
-
-
-def _towards(points, x):
-    """Unit directions (3, n) from each x to each point, and the distances."""
-    d = points - x
-    distance = np.sqrt(_dot(d, d))
-    return d / distance, distance
-
-
-def _dot(a, b):
-    return np.einsum("in,in->n", a, b) if a.shape[1] == b.shape[1] else (a * b).sum(axis=0)
-
-
-def _rotate(matrix, vectors):
-    """(3, n) ``matrix`` (3, 3) times ``vectors`` (3, n), without BLAS (whose threads, woken by a
-    large product, spin on and take the CPUs from the solve's other threads: two_way._sums)."""
-    return np.einsum("ij,jn->in", np.asarray(matrix, np.float64), vectors)
-
-
-def _sphere_directions(u1, u2):
-    """Uniform unit directions (3, n)."""
-    z = 1.0 - 2.0 * u1.astype(np.float64)
-    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
-    phi = TWO_PI * u2.astype(np.float64)
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z])
-
-
-def _basis(direction):
-    """Two unit vectors (3, n) perpendicular to each unit direction (3, n) and to each other."""
-    d = direction
-    helper = np.where(np.abs(d[0]) < 0.9, 1.0, 0.0)
-    other = np.stack([helper, 1.0 - helper, np.zeros_like(helper)])
-    a = _cross_rows(d, other)
-    a /= np.linalg.norm(a, axis=0)
-    return a, _cross_rows(d, a)
-
-
-def _cross_rows(a, b):
-    """np.cross of (3, n) rows, term for term as it computes it, without its per-call cost
-    (a solve's small chunks call this a few times each)."""
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _cone_directions(axis, cos_theta, u_phi):
-    """Unit directions (3, n) at angles arccos(cos_theta) from ``axis`` ((3,), or one (3, n) a
-    direction), azimuth 2 pi u."""
-    axis = np.asarray(axis, np.float64)
-    axis = axis[:, None] if axis.ndim == 1 else axis
-    a, b = _basis(axis)
-    sin_theta = np.sqrt(np.maximum(1.0 - cos_theta**2, 0.0))
-    phi = TWO_PI * u_phi.astype(np.float64)
-    return axis * cos_theta + a * (sin_theta * np.cos(phi)) + b * (sin_theta * np.sin(phi))
-
-
-def cosine_directions_about(normal, u1, u2):
-    """Cosine-distributed unit directions (3, n) about ``normal`` ((3,) or (3, n)): cos(theta)
-    = sqrt(1 - u1) has the density cos / pi (Malley)."""
-    return _cone_directions(normal, np.sqrt(1.0 - u1.astype(np.float64)), u2)
-
-
-def _disc_origins(direction, u1, u2, aim, reach):
-    """Origins on a disc perpendicular to each direction that covers the ``aim`` sphere
-    (centre, radius), ``reach`` back from its centre (beyond the whole scene)."""
-    centre, radius = aim
-    a, b = _basis(direction)
-    r = radius * np.sqrt(u1.astype(np.float64))
-    phi = TWO_PI * u2.astype(np.float64)
-    return np.asarray(centre, np.float64)[:, None] - direction * reach + a * (r * np.cos(phi)) + b * (r * np.sin(phi))
 
 
 class Lights:
@@ -484,5 +390,21 @@ class Lights:
         pushed off along their direction like a patch's along its normal ((3, n) each)."""
         origins, directions = self.emit(rows, u)
         origins = (origins - geometry.centre[:, None]) / geometry.diagonal
+        if geometry.regions is not None:
+            origins -= geometry.regions.shift(self.regions(rows, geometry))
         origins += geometry.light_offsets(origins) * directions
         return origins, directions
+
+    def regions(self, rows, geometry):
+        """(n,) the region frame (.regions) of emitter ``rows``' rays in ``geometry``: the region
+        nearest its light's position (the first region for the sun and the world, whose rays
+        start beyond the scene), or None where the scene is one frame."""
+        if geometry.regions is None:
+            return None
+        at = [getattr(light, "position", getattr(light, "centre", None)) for light in self.lights]
+        region = np.zeros(len(self.lights), np.int32)
+        placed = [k for k, p in enumerate(at) if p is not None]
+        if placed:
+            points = (np.array([at[k] for k in placed], np.float64) - geometry.centre) / geometry.diagonal
+            region[placed] = geometry.regions.nearest(points.T)
+        return region.take(self.light_of.take(rows))

@@ -202,21 +202,38 @@ def mesh_patches(
 def _assemble(b, points, kept_face, face_triangles, triangle_face):
     """The patch mesh of the built faces: points welded, patches in source-face order, and
     the patches' triangulation."""
-    F = len(kept_face)
     if b.count == 0:
         empty_i = np.zeros(0, dtype=np.int32)
         return PatchMesh(
             np.zeros((0, 3)), empty_i, empty_i, empty_i,
             np.zeros((0, 3), dtype=np.int32), empty_i, np.zeros(0),
         )
+    uniq, out_points, inverse = _welded_points(b, points)
+    sizes, corners, patch_face = _patches_in_face_order(b, inverse)
+    del inverse
+    tris, tri_patch = _triangulated(sizes, corners, patch_face, kept_face, uniq, len(points), face_triangles, triangle_face)
+    area = np.bincount(tri_patch, weights=triangle_areas(out_points, tris), minlength=len(sizes))
+    return PatchMesh(
+        points=out_points,
+        face_sizes=sizes.astype(np.int32),
+        corner_verts=corners.astype(np.int32),
+        patch_face=patch_face.astype(np.int32),
+        triangles=tris,
+        triangle_patch=tri_patch,
+        patch_area=area,
+    )
+
+
+def _welded_points(b, points):
+    """(welded keys, their points, each generated point's welded index): canonical positions,
+    source vertices exactly, edge points from the lower-indexed vertex, so both neighbouring
+    faces agree bit for bit."""
     # (the builder's parts go once joined: one copy of the generated points and their keys)
     keys, positions = _joined(b.keys), _joined(b.positions)
     uniq, first_index, inverse = weld(keys, len(points))
     del keys
     out_points = positions[first_index]
     del positions
-    # canonical positions: source vertices exactly, edge points from the
-    # lower-indexed vertex, so both neighbouring faces agree bit for bit
     kind0 = uniq[:, 0] == 0
     out_points[kind0] = points[uniq[kind0, 1]]
     kind1 = uniq[:, 0] == 1
@@ -225,29 +242,32 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
         c = points[uniq[kind1, 2]]
         frac = (uniq[kind1, 3] / uniq[kind1, 4])[:, None]
         out_points[kind1] = a + frac * (c - a)
+    return uniq, out_points, inverse
 
+
+def _patches_in_face_order(b, inverse):
+    """(corner count of each patch, their corners (welded indices), the source face of each),
+    patches in source-face order (the builder's faces are let go of)."""
     sizes = np.concatenate([f[0] for f in b.faces])
     corners = inverse[np.concatenate([f[1] for f in b.faces])]
-    del inverse
     patch_face = np.concatenate([f[2] for f in b.faces])
     order = np.concatenate([f[3] for f in b.faces])
     b.faces.clear()
-    # patches in source-face order
     perm = np.lexsort((order, patch_face))
     fstarts = starts_of(sizes)
     sizes_sorted = sizes[perm]
     corner_index = np.repeat(fstarts[perm], sizes_sorted) + ranks_in_runs(sizes_sorted)
-    corners = corners[corner_index]
-    patch_face = patch_face[perm]
-    sizes = sizes_sorted
+    return sizes_sorted, corners[corner_index], patch_face[perm]
 
-    # triangulation of the patches
-    P = len(sizes)
+
+def _triangulated(sizes, corners, patch_face, kept_face, uniq, point_count, face_triangles, triangle_face):
+    """(triangles (T,3) int32, patch of each (T,) int32), sorted by patch: triangles and grid
+    cells as fans (exact for a planar cell); kept quads and kept n-gons with the source
+    triangulation (Blender's, when given) mapped onto the patch points."""
+    F = len(kept_face)
     pstarts = starts_of(sizes)
     tri_patch = np.zeros(0, dtype=np.int64)
     tris = np.zeros((0, 3), dtype=np.int64)
-    # triangles and grid cells: fan (exact for a planar cell); kept quads and
-    # kept n-gons: the source triangulation (Blender's, when given)
     kept_patch = kept_face[patch_face]
     small = (sizes == 3) | ((sizes == 4) & ~kept_patch)
     if np.any(small):
@@ -258,12 +278,12 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
         f0 = pstarts[tp]
         tris = np.stack([corners[f0], corners[f0 + k + 1], corners[f0 + k + 2]], axis=1)
         tri_patch = tp
-    # kept quads and n-gons: the source triangulation, mapped onto the patch points
     if np.any(~small):
         ng = np.nonzero(~small)[0]
         src_face = patch_face[ng]
         # map source vertex -> output point for the n-gon corners
-        vkey_point = -np.ones(len(points), dtype=np.int64)
+        kind0 = uniq[:, 0] == 0
+        vkey_point = -np.ones(point_count, dtype=np.int64)
         vkey_point[uniq[kind0, 1]] = np.nonzero(kind0)[0]
         patch_of_face = -np.ones(F, dtype=np.int64)
         patch_of_face[src_face] = ng
@@ -272,18 +292,7 @@ def _assemble(b, points, kept_face, face_triangles, triangle_face):
         tris = np.concatenate([tris, vkey_point[face_triangles[tsel]]])
         tri_patch = np.concatenate([tri_patch, patch_of_face[triangle_face[tsel]]])
     order_t = np.argsort(tri_patch, kind="stable")
-    tris = tris[order_t].astype(np.int32)
-    tri_patch = tri_patch[order_t].astype(np.int32)
-    area = np.bincount(tri_patch, weights=triangle_areas(out_points, tris), minlength=P)
-    return PatchMesh(
-        points=out_points,
-        face_sizes=sizes.astype(np.int32),
-        corner_verts=corners.astype(np.int32),
-        patch_face=patch_face.astype(np.int32),
-        triangles=tris,
-        triangle_patch=tri_patch,
-        patch_area=area,
-    )
+    return tris[order_t].astype(np.int32), tri_patch[order_t].astype(np.int32)
 
 
 def _joined(parts):

@@ -1,4 +1,5 @@
-"""The names a solve is asked for by: estimators, exit points, samplings, stop rules and stop reasons."""
+"""The names a solve is asked for by: estimators, exit points, samplings, direct lights, methods, stop
+rules and stop reasons (each method's policy is its module's in ``methods``)."""
 
 # The paper's two estimators.
 FINITE = "finite"                    # Phi_T: constant power, die-or-survive with R_bar at each hit
@@ -25,7 +26,7 @@ WALK = "walk"      # the paper's: shooting random walks, path by path
 JACOBI = "jacobi"  # stochastic Jacobi iteration: shot generation by generation, stratified (jacobi.py)
 TWO_WAY = "two_way"  # stochastic Jacobi with every ray shooting and gathering, a control variate (two_way.py)
 METHODS = (WALK, JACOBI, TWO_WAY)
-AUTO = "auto"      # the two-way iteration where its chunks give every patch enough rays, else the walk (solver.choose_method)
+AUTO = "auto"      # the two-way iteration where its chunks give every patch enough rays, else the walk (methods.automatic)
 
 # When a solve with an error target stops.
 PREDICTED = "predicted"  # after the paths formula (2)/(3) predicts for the target

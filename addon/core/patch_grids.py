@@ -129,6 +129,42 @@ def patch_grids(geometry):
     if M == 0:
         return None
     normal = geometry.patch_normal[merged]
+    rect = _merged_rectangles(patch_corners, normal)
+    R = rect.first.size
+    # Every other patch is traced as its own triangles, each a grid of one cell: the patch's
+    # cell, M and on in patch order.
+    is_merged = np.zeros(P, dtype=bool)
+    is_merged[merged] = True
+    other_patch = np.flatnonzero(~is_merged)
+    other_triangle = np.flatnonzero(~is_merged[geometry.triangle_patch])
+    L = other_triangle.size
+    if 2 * R + L > MAX_TRIANGLE_FRACTION * T:
+        return None
+    c00, end_a, end_b, c11, normal, n_a, n_b, cell = _wound(rect, patch_corners, normal)
+    corners = np.empty((2 * R + L, 3, 3))
+    corners[0 : 2 * R : 2] = np.stack([c00, end_a, c11], axis=1)  # s = u + v, t = v
+    corners[1 : 2 * R : 2] = np.stack([c00, c11, end_b], axis=1)  # s = u, t = u + v
+    corners[2 * R :] = geometry.float32_corners[other_triangle]
+    other_cell = np.full(P, P)
+    other_cell[other_patch] = M + np.arange(other_patch.size)
+    table = _cell_table(n_a, n_b, rect.first, other_cell[geometry.triangle_patch[other_triangle]], P)
+    cell_patch = np.full(P + 1, -1, dtype=np.int32)
+    cell_patch[cell] = merged
+    cell_patch[M:P] = other_patch
+    return PatchGrids(
+        corners=np.ascontiguousarray(corners, dtype=np.float32),
+        cell_table=np.ascontiguousarray(table, dtype=np.float32),
+        cell_patch=cell_patch,
+        rectangles=R,
+        hit_frames=np.ascontiguousarray(_hit_frames(geometry, c00, end_a, end_b, normal, other_triangle), dtype=np.float32),
+        edge_barycentric=edge_barycentric(corners),
+    )
+
+
+def _merged_rectangles(patch_corners, normal):
+    """The Rectangles the parallelogram patches (corners (p, s1, s2, q), normals) merge into:
+    groups of one plane and lattice, cut into rectangles of cells; a rectangle whose corners
+    are misplaced falls back to cells of their own."""
     p, s1, s2, _ = patch_corners
     p = p.astype(np.float64)
     a = s1 - p  # (float32 s1 promoted: the differences of the float64 corners)
@@ -143,21 +179,16 @@ def patch_grids(geometry):
         # The cells of a failed rectangle become rectangles of their own.
         group = _alone(group, bad[rect.of_cell])
         rect = _rectangles(group, I, J)
-    R = rect.first.size
-    # Every other patch is traced as its own triangles, each a grid of one cell: the patch's
-    # cell, M and on in patch order.
-    is_merged = np.zeros(P, dtype=bool)
-    is_merged[merged] = True
-    other_patch = np.flatnonzero(~is_merged)
-    other_triangle = np.flatnonzero(~is_merged[geometry.triangle_patch])
-    L = other_triangle.size
-    if 2 * R + L > MAX_TRIANGLE_FRACTION * T:
-        return None
+    return rect
+
+
+def _wound(rect, patch_corners, normal):
+    """(c00, end_a, end_b, c11, each rectangle's normal, n_a, n_b, each cell's index) of the
+    rectangles wound so that Embree's geometric normal of their triangles, which points like
+    (corner1 - corner0) x (corner2 - corner0), points like their patches' normals (the walk's
+    facing test reads it): where (c10 - c00) x (c01 - c00) does not, the axes are swapped (the
+    rectangle transposed: a patch's cell is first + j n_a + i)."""
     c00, c10, c01, c11 = rect.corners(patch_corners)
-    # A rectangle is wound so that Embree's geometric normal of its triangles, which points like
-    # (corner1 - corner0) x (corner2 - corner0), points like its patches' normals (the walk's
-    # facing test reads it): where (c10 - c00) x (c01 - c00) does not, its axes are swapped
-    # (the rectangle transposed: a patch's cell is first + j n_a + i).
     normal = normal[rect.corner_patch[:, 0]]
     turned = np.einsum("ij,ij->i", np.cross(c10 - c00, c01 - c00), normal) < 0
     end_a = np.where(turned[:, None], c01, c10)
@@ -166,34 +197,37 @@ def patch_grids(geometry):
     n_b = np.where(turned, rect.n_a, rect.n_b)
     r = rect.of_cell
     cell = np.where(turned[r], rect.first[r] + rect.j * rect.n_a[r] + rect.i, rect.cell)
-    corners = np.empty((2 * R + L, 3, 3))
-    corners[0 : 2 * R : 2] = np.stack([c00, end_a, c11], axis=1)  # s = u + v, t = v
-    corners[1 : 2 * R : 2] = np.stack([c00, c11, end_b], axis=1)  # s = u, t = u + v
-    corners[2 * R :] = geometry.float32_corners[other_triangle]
-    # Rows per triangle (s and t of one-cell grids are u and v: cs = ct = 0), then a miss's.
+    return c00, end_a, end_b, c11, normal, n_a, n_b, cell
+
+
+def _cell_table(n_a, n_b, first, other_cell, P):
+    """(7, 2R + L + 1) rows per triangle, the rectangles' two each, then the other patches' L
+    (s and t of one-cell grids are u and v: cs = ct = 0), then a miss's: a miss (-1) wraps to
+    the last column, cell P (patch -1)."""
+    R, L = n_a.size, other_cell.size
     table = np.zeros((7, 2 * R + L + 1))
     table[0, 0 : 2 * R : 2] = 1.0
     table[1, 1 : 2 * R : 2] = 1.0
-    for row, values in ((2, n_a), (3, n_b), (4, n_a - 1), (5, n_b - 1), (6, rect.first)):
+    for row, values in ((2, n_a), (3, n_b), (4, n_a - 1), (5, n_b - 1), (6, first)):
         table[row, : 2 * R] = np.repeat(values, 2)
     table[2:4, 2 * R :] = 1.0
-    other_cell = np.full(P, P)
-    other_cell[other_patch] = M + np.arange(other_patch.size)
-    table[6, 2 * R : -1] = other_cell[geometry.triangle_patch[other_triangle]]
-    table[6, -1] = P  # a miss (-1) wraps to the last column: cell P, patch -1
-    cell_patch = np.full(P + 1, -1, dtype=np.int32)
-    cell_patch[cell] = merged
-    cell_patch[M:P] = other_patch
-    # A hit-point exit's leaving frames (see PatchGrids): each rectangle inset by
-    # RELATIVE_EDGE_INSET on every side (d_a of A = c_a - c00 off the sides along B, which lie
-    # area / |B| apart), its corner pushed off along the patches' normal; the other patches'
-    # triangles keep theirs (Geometry.triangle_frame, with their patch's normal).
+    table[6, 2 * R : -1] = other_cell
+    table[6, -1] = P
+    return table
+
+
+def _hit_frames(geometry, c00, end_a, end_b, normal, other_triangle):
+    """(12, 2R + L) a hit-point exit's leaving frames (see PatchGrids): each rectangle inset by
+    RELATIVE_EDGE_INSET on every side (d_a of A = c_a - c00 off the sides along B, which lie
+    area / |B| apart), its corner pushed off along the patches' normal; the other patches'
+    triangles keep theirs (Geometry.triangle_frame, with their patch's normal)."""
+    R = c00.shape[0]
     A, B = end_a - c00, end_b - c00
     area = np.linalg.norm(np.cross(A, B), axis=1)
     d_a = np.minimum(RELATIVE_EDGE_INSET * np.linalg.norm(B, axis=1) / area, 0.25)[:, None]
     d_b = np.minimum(RELATIVE_EDGE_INSET * np.linalg.norm(A, axis=1) / area, 0.25)[:, None]
     inset_a, inset_b = (1 - 2 * d_a) * A, (1 - 2 * d_b) * B
-    frames = np.empty((12, 2 * R + L))
+    frames = np.empty((12, 2 * R + other_triangle.size))
     frames[0:3, : 2 * R] = np.repeat((c00 + d_a * A + d_b * B + geometry.ray_offset * normal).T, 2, axis=1)
     frames[3:6, 0 : 2 * R : 2] = inset_a.T  # u along A', v along A' + B': S = u + v, T = v
     frames[6:9, 0 : 2 * R : 2] = (inset_a + inset_b).T
@@ -202,14 +236,7 @@ def patch_grids(geometry):
     frames[9:12, : 2 * R] = np.repeat(normal.T, 2, axis=1)
     frames[0:9, 2 * R :] = geometry.frames_of(other_triangle)
     frames[9:12, 2 * R :] = geometry.patch_normal_rows[:, geometry.triangle_patch[other_triangle]]
-    return PatchGrids(
-        corners=np.ascontiguousarray(corners, dtype=np.float32),
-        cell_table=np.ascontiguousarray(table, dtype=np.float32),
-        cell_patch=cell_patch,
-        rectangles=R,
-        hit_frames=np.ascontiguousarray(frames, dtype=np.float32),
-        edge_barycentric=edge_barycentric(corners),
-    )
+    return frames
 
 
 def _parallelogram_patches(geometry):

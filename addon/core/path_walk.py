@@ -164,7 +164,8 @@ class PathWalk:
         """What each ray meets first (and, leaving from hit points, where)."""
         t = self.tables
         self.accounts.rays += self.per_chunk_count()
-        return rays.cast(t, origins, directions) if t.exit_random else rays.cast_to_points(t, origins, directions)
+        region = rays.region_of(t, self.paths.patch)
+        return rays.cast(t, origins, directions, region) if t.exit_random else rays.cast_to_points(t, origins, directions, region)
 
     def handle_escaped(self, hits):
         """Paths whose ray hit nothing escape, those that hit a back side are absorbed there

@@ -54,6 +54,19 @@ def on_patches(tables, source):
     return np.where(source < tables.patch_count, source, 0).astype(source.dtype)
 
 
+def region_of(tables, source):
+    """(n,) the region frame (.regions) of rays leaving ``source`` (patches, or lights' emitters
+    from the patch count on), or None where the scene is one frame."""
+    g = tables.geometry
+    if g.regions is None:
+        return None
+    region = g.regions.of(on_patches(tables, source) if tables.lights is not None else source)
+    light = light_columns(tables, source)
+    if light is not None:
+        region[light] = tables.lights.regions(source[light] - tables.patch_count, g)
+    return region
+
+
 def set_light_rays(tables, source, u, origins, directions, columns):
     """Rays from the lights' emitters ``source`` (ids from the patch count on) with uniforms
     ``u`` (4, m), written into ``columns`` of (3,n) ``origins`` and ``directions`` (unit space:
@@ -119,26 +132,28 @@ def patch_normals(tables, patch):
     return tables.geometry.patch_normal_rows.take(patch, axis=1, mode="wrap")
 
 
-def cast(tables, origins, directions):
+def cast(tables, origins, directions, region=None):
     """A random exit's rays, traced outside the numpy turn: Hits without points. On the grids a
     hit's patch is its grid cell and the facing test reads Embree's geometric normal of the
-    triangle hit, whose sign the grids keep (no table is read)."""
+    triangle hit, whose sign the grids keep (no table is read). ``region``: each origin's
+    region frame (:func:`region_of`), where the scene has regions."""
     if tables.grids is not None:
         triangle, u, v, _, normal = tables.outside_turn(tables.tracer.first_hit_barycentric, origins.T, directions.T)
         hit = tables.grids.hit_patches(triangle, u, v)
         patch, front = np.maximum(hit, 0), meets_front(directions, normal)
     else:
-        hit = tables.outside_turn(tables.tracer.first_hit, origins.T, directions.T)
+        hit = tables.outside_turn(tables.tracer.first_hit, origins.T, directions.T, region)
         patch = hit_patches(tables, hit)
         front = facing(tables, directions, hit, patch)
     front &= hit >= 0
     return Hits(hit, patch, front)
 
 
-def cast_to_points(tables, origins, directions):
+def cast_to_points(tables, origins, directions, region=None):
     """A hit-point exit's rays, traced outside the numpy turn: Hits with the points they go on
-    from (computed in place in ``origins``; ``directions`` is overwritten)."""
-    hit, u, v, distance, normal = tables.outside_turn(tables.tracer.first_hit_barycentric, origins.T, directions.T)
+    from (computed in place in ``origins``; ``directions`` is overwritten). ``region`` as for
+    :func:`cast`."""
+    hit, u, v, distance, normal = tables.outside_turn(tables.tracer.first_hit_barycentric, origins.T, directions.T, region)
     patch = hit_patches(tables, hit, u, v)
     front = meets_front(directions, normal)
     front &= hit >= 0
@@ -187,6 +202,10 @@ def hit_points(tables, origins, directions, distance, hit, hit_patch, u, v, fron
     else:
         limit = tables.edge_barycentric.take(np.maximum(hit, 0), mode="wrap")
     near = nearest < limit
+    if tables.geometry.regions is not None:
+        # origin + t direction is in the origin's frame, not the hit's (or far from it): every
+        # hit point is made from its barycentrics, in its own region's frame.
+        near[:] = True
     near &= front
     index = np.flatnonzero(near)
     if index.size:

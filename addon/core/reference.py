@@ -112,7 +112,7 @@ def form_factors_raycast(scene, rays_per_patch=100_000, seed=0, block_rays=1 << 
         u = rng.random((5, patch.size), dtype=np.float32)
         origins = points_on_patches(g, patch, u[0], u[1], u[2])
         directions = cosine_directions(g, patch, u[3], u[4])
-        hit = scene.tracer.first_hit(origins, directions)
+        hit = scene.tracer.first_hit(origins, directions, g.region_of(patch))
         ok = hit >= 0
         hit_safe = np.where(ok, hit, 0)
         front = ok & (np.einsum("ij,ij->i", directions, g.triangle_normal[hit_safe]) < 0)

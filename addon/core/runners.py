@@ -12,17 +12,16 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .walk import walk_chunks
-
 
 def chunk_generator(seed, first_chunk):
     """The random numbers of chunk ``first_chunk`` (and of the chunks traced with it)."""
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(first_chunk,))))
 
 
-def run_chunks(tables, seed, first_chunk, sizes, abort=None):
-    """The tallies of chunks ``first_chunk``, ``first_chunk`` + 1, ... of ``sizes`` paths."""
-    return walk_chunks(tables, sizes, chunk_generator(seed, first_chunk), abort)
+def run_chunks(state, seed, first_chunk, sizes, abort=None):
+    """The tallies of chunks ``first_chunk``, ``first_chunk`` + 1, ... of ``sizes`` paths of the
+    method whose state (``methods.base.Integrator``) is ``state``."""
+    return state.run(sizes, chunk_generator(seed, first_chunk), abort)
 
 
 class ThreadRunner:
@@ -34,13 +33,13 @@ class ThreadRunner:
         self._abort = threading.Event()
         self._executor = None
 
-    def start(self, tables, seed):
-        self._tables, self._seed = tables, seed
+    def start(self, state, seed):
+        self._state, self._seed = state, seed
         self._executor = ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="radiosity")
 
     def submit(self, first_chunk, sizes):
         """A future of the tallies of chunks ``first_chunk``... of ``sizes`` paths."""
-        return self._executor.submit(run_chunks, self._tables, self._seed, first_chunk, sizes, self._abort)
+        return self._executor.submit(run_chunks, self._state, self._seed, first_chunk, sizes, self._abort)
 
     def stop(self, pending):
         """Abandon the tasks still running (at their next step) or queued; wait for the threads."""

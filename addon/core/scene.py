@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .geometry import build_geometry
+from .geometry_build import build_geometry
 from .lights import Lights
 from .validation import PatchError, material_rows, validate_light_numbers, validate_lights, validate_materials
 

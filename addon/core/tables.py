@@ -7,11 +7,12 @@ checking one.
 """
 from __future__ import annotations
 
+import copy
 import threading
 
 import numpy as np
 
-from .names import EXIT_RANDOM, FINITE, INDEPENDENT, JACOBI, STRATIFIED, WALK
+from .names import EXIT_RANDOM, FINITE, INDEPENDENT, STRATIFIED
 from .sampling import SourceTable, channel_sum, source_weights
 from .speedups import Speedups
 
@@ -21,8 +22,10 @@ PATCH_CLASSES_MAX = 1 << 12
 
 
 class WalkTables:
-    """What every chunk of a solve reads: materials (C,P), the sources, the leaving frames,
-    the Embree scene the walk traces, and which speed-ups it uses (``speedups``)."""
+    """What every chunk of a solve reads, whatever its method: materials (C,P), the sources, the
+    leaving frames, the Embree scene the walk traces, and which speed-ups it uses
+    (``speedups``). Every attribute is always there (None where the scene or the exit point
+    has no use for it); a variant is a copy (``with_turn``, ``with_sources``)."""
 
     def __init__(self, scene, estimator, threshold, exit_point, sampling=INDEPENDENT, speedups=None, max_classes=PATCH_CLASSES_MAX):
         g = self.geometry = scene.geometry
@@ -52,19 +55,12 @@ class WalkTables:
         self.row_triangle = None if g.all_parallelograms else 4
         # Sorted paths go by a 16-bit key, patch >> shift (numpy's radix sort).
         self.patch_key_shift = max(0, int(scene.patch_count - 1).bit_length() - 16)
-        if g.all_parallelograms:
-            self.leave_table = g.leave_table
-        else:
-            self.exit_table = g.exit_table
-        self.patch_class = None
-        if speedups.patch_classes:
-            classes = patch_classes(g, self.grey_reflectivity, max_classes)
-            if classes is None:
-                speedups = speedups.without("patch_classes")
-            else:
-                self.patch_class, self.class_shape, self.class_grey_reflectivity, class_shape_index = classes
-                self.class_normals = np.ascontiguousarray(self.class_shape[6:9])
-                self.leave_corners = self.leave_table[0:3]  # contiguous: the table's first rows
+        # Leaving frames: per patch in a scene of parallelograms, else per triangle.
+        self.leave_table = g.leave_table if g.all_parallelograms else None
+        self.exit_table = None if g.all_parallelograms else g.exit_table
+        class_shape_index = self._set_classes(g, speedups, max_classes)
+        if speedups.patch_classes and self.patch_class is None:
+            speedups = speedups.without("patch_classes")
         self.speedups = speedups
         # In a scene of parallelograms the triangles come in pairs, in patch order: triangle t
         # is half of patch t >> 1.
@@ -72,16 +68,7 @@ class WalkTables:
         self.grids = g.patch_grids if speedups.grids else None
         # The Embree scene the walk traces, built here (once per geometry), not on a thread.
         self.tracer = g.tracer if self.grids is None else self.grids.tracer
-        # A hit-point exit's edge thresholds and the frames a hit near an edge is mapped onto
-        # (rays.hit_points), per triangle traced, or per class where classes have shapes.
-        self.class_edge_barycentric = None
-        if not self.exit_random:
-            if self.grids is None:
-                self.hit_frames, self.edge_barycentric = g.exit_table, g.edge_barycentric
-                if self.patch_class is not None:
-                    self.class_edge_barycentric = g.shape_edge_barycentric[class_shape_index]
-            else:
-                self.hit_frames, self.edge_barycentric = self.grids.hit_frames, self.grids.edge_barycentric
+        self._set_hit_exit(g, class_shape_index)
         # A random exit's facing test off the grids: in a scene of parallelograms against the
         # hit patch's normal (rows the next step gathers again), else the triangle's.
         self.facing_by_patch = g.all_parallelograms
@@ -89,16 +76,46 @@ class WalkTables:
         # Walks on several threads take turns at their numpy work: a walk holds this lock
         # except while it traces (walk.walk_chunks).
         self.numpy_turn = threading.Lock()
-        # The first shot gathered (first_shot.Gathering), or None: the walk shoots it.
-        self.gathering = None
-        # How the light is carried (names.METHODS): path by path walks, or generation by
-        # generation (jacobi.py, two_way.py).
-        self.method = WALK
 
-    @property
-    def jacobi(self):
-        """Shooting stochastic Jacobi iteration (jacobi.py)."""
-        return self.method == JACOBI
+    def _set_classes(self, g, speedups, max_classes):
+        """The patch classes (tables.patch_classes), or None throughout where the speed-up is
+        off or the classes too many; returns each class's shape index (or None)."""
+        classes = patch_classes(g, self.grey_reflectivity, max_classes) if speedups.patch_classes else None
+        self.patch_class = self.class_shape = self.class_grey_reflectivity = None
+        self.class_normals = self.leave_corners = None
+        if classes is None:
+            return None
+        self.patch_class, self.class_shape, self.class_grey_reflectivity, class_shape_index = classes
+        self.class_normals = np.ascontiguousarray(self.class_shape[6:9])
+        self.leave_corners = self.leave_table[0:3]  # contiguous: the table's first rows
+        return class_shape_index
+
+    def _set_hit_exit(self, g, class_shape_index):
+        """A hit-point exit's edge thresholds and the frames a hit near an edge is mapped onto
+        (rays.hit_points), per triangle traced, or per class where classes have shapes; None
+        with the random exit."""
+        self.hit_frames = self.edge_barycentric = self.class_edge_barycentric = None
+        if self.exit_random:
+            return
+        if self.grids is not None:
+            self.hit_frames, self.edge_barycentric = self.grids.hit_frames, self.grids.edge_barycentric
+            return
+        self.hit_frames, self.edge_barycentric = g.exit_table, g.edge_barycentric
+        if self.patch_class is not None:
+            self.class_edge_barycentric = g.shape_edge_barycentric[class_shape_index]
+
+    def with_turn(self, turn):
+        """These tables with another numpy turn (walk.FreeTurn: none), everything else shared."""
+        tables = copy.copy(self)
+        tables.numpy_turn = turn
+        return tables
+
+    def with_sources(self, sources, emission, lights):
+        """These tables with other sources (a SourceTable, (P,3) emission, lights or None),
+        everything else shared: a walk of the light the patches reflect (first_shot)."""
+        tables = copy.copy(self)
+        tables.sources, tables.emission, tables.lights = sources, emission, lights
+        return tables
 
     def survivor_weight(self, patch):
         """R_jc / R_bar_j (C,n) at the given patches: what survivors multiply each channel's
@@ -132,11 +149,11 @@ class WalkTables:
             return self.class_grey_reflectivity.take(self.class_of(patch), mode="wrap")
         return self.grey_reflectivity.take(patch, mode="wrap")
 
-    def outside_turn(self, trace, origins, directions):
-        """``trace(origins, directions)`` with the numpy turn released: other walks work meanwhile."""
+    def outside_turn(self, trace, *rays):
+        """``trace(*rays)`` with the numpy turn released: other walks work meanwhile."""
         self.numpy_turn.release()
         try:
-            return trace(origins, directions)
+            return trace(*rays)
         finally:
             self.numpy_turn.acquire()
 

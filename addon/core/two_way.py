@@ -52,7 +52,8 @@ import numpy as np
 
 from . import rays
 from .faces import ranks_in_runs
-from .first_shot import MAX_GATHER_SAMPLES, ReflectedPoints, gather_direct, split_lost
+from .first_shot import MAX_GATHER_SAMPLES, gather_direct
+from .gathered_walk import ReflectedPoints, split_lost
 from .jacobi import HALTON, systematic_counts
 from .sampling import SOBOL, shifted_float32, unit_floats
 from .tallies import ChunkTally
@@ -124,13 +125,12 @@ def direct_samples(chunk_paths, scene, irradiance=None):
     return np.clip(share * (DIRECT_SAMPLES * chunk_paths), 1e-3, MAX_GATHER_SAMPLES)
 
 
-def two_way_chunk(tables, paths, rng, check=None):
+def two_way_chunk(tables, gathering, paths, rng, check=None):
     """One chunk of ``paths`` (the unit its rays are counted in): the direct light gathered,
     then the reflected light generation by generation. Returns a ChunkTally in the walk's
     relative weights (times Phi_T / N). ``check()`` is called every generation (it raises to
     stop)."""
-    gathering = tables.gathering
-    C = tables.channels
+    C, area = tables.channels, gathering.patch_area
     H, gather_rays, samples = gather_direct(tables, gathering, rng)
     H = H[:C]
     direct = H * gathering.patch_area  # (C,P) power arriving straight from the sources
@@ -142,52 +142,52 @@ def two_way_chunk(tables, paths, rng, check=None):
     if tables.exit_random:
         state.reflected = R * H
     else:
-        reflect_first(tables, state, samples, paths, rng)
-    first_power = reflected_power(tables, state.reflected)
+        reflect_first(tables, gathering, state, samples, paths, rng)
+    first_power = reflected_power(area, state.reflected)
     budget = GENERATION_RAYS * paths / max(first_power, 1e-300)  # rays per unit of reflected power
-    weight = allotment_weight(gathering.patch_area, tables.reflectivity.max(axis=0))
+    weight = allotment_weight(area, tables.reflectivity.max(axis=0))
     least = int(np.ceil(LEAST_RAYS * weight.size))
     while True:
         if check is not None:
             check()
-        count = budget * reflected_power(tables, state.reflected)
+        count = budget * reflected_power(area, state.reflected)
         if count <= 0:
             break
         if count < least:
             go_on = count / least
             if rng.random() >= go_on:
-                state.absorbed += leaving(tables, state.reflected)  # (the roulette's end: nothing leaves)
+                state.absorbed += leaving(area, state.reflected)  # (the roulette's end: nothing leaves)
                 break
-            state.absorbed -= leaving(tables, state.reflected) * (1.0 / go_on - 1.0)  # what leaves beyond it
+            state.absorbed -= leaving(area, state.reflected) * (1.0 / go_on - 1.0)  # what leaves beyond it
             state.reflected = state.reflected / go_on
             count = least
-        generation(tables, state, weight, int(np.rint(count)), rng)
-    incident = state.irradiance * gathering.patch_area
+        generation(tables, area, state, weight, int(np.rint(count)), rng)
+    incident = state.irradiance * area
     absorbed = state.absorbed + ((1.0 - R) * incident).sum(axis=1)
     scale = paths / gathering.total_power  # relative weight per unit of power
     return ChunkTally(paths, state.rays, incident * scale, emitted * scale, absorbed * scale, state.escaped * scale,
                       state.blocked * scale, np.zeros(C), {"generations": state.generations})
 
 
-def reflected_power(tables, reflected):
+def reflected_power(area, reflected):
     """What a generation's rays are counted by: the power it reflects, sum_j A_j |dB_j| (an
     estimate about a control variate can be below zero in places), in its strongest channel.
     (Counted by the channels' mean, a saturated channel outlives the others between red walls
     and the roulette's 1/chance lifted it generation after generation: in the closed Cornell
     box one run in four had a chunk that put half the variance on five patches.)"""
-    return float(_sums(np.abs(reflected), tables.gathering.patch_area).max())
+    return float(_sums(np.abs(reflected), area).max())
 
 
-def leaving(tables, reflected):
+def leaving(area, reflected):
     """(C,) the power each channel reflects, sum_j A_j dB_j."""
-    return _sums(reflected, tables.gathering.patch_area)
+    return _sums(reflected, area)
 
 
-def reflect_first(tables, state, samples, paths, rng):
+def reflect_first(tables, gathering, state, samples, paths, rng):
     """The first reflection as uneven over each patch as the light that landed on it (hit exit).
 
     Each sample k of patch j is a point source of what it found (power p_k,
-    first_shot.ReflectedPoints), sum_k p_k = R_j A_j H_j. The samples are uniform points of j,
+    gathered_walk.ReflectedPoints), sum_k p_k = R_j A_j H_j. The samples are uniform points of j,
     m_j of them, so sources of power sum_k p_k / m_j at them are patch j reflecting R_j H_j
     uniformly, which the first two-way generation carries (``state.reflected``). What is left
     (zero in sum over each patch), c_k = p_k - sum / m_j, is shot from the samples: rays
@@ -195,7 +195,7 @@ def reflect_first(tables, state, samples, paths, rng):
     a patch's positive and negative rays in pairs of one direction (_paired_ranks). It is small
     where the direct light is even over a patch; its irradiance (``state.correction``) joins
     the first generation's."""
-    gathering, C, P = tables.gathering, tables.channels, tables.patch_count
+    C, P = tables.channels, tables.patch_count
     patch = samples[0]
     state.reflected = tables.reflectivity * state.irradiance
     points = ReflectedPoints(gathering, tables.geometry, samples)
@@ -221,7 +221,7 @@ def reflect_first(tables, state, samples, paths, rng):
         u = np.empty((4, k.size), dtype=np.float32)  # (a sample's point is its origin: u[2:4] the direction)
         u[2:4] = _shifted_points(table, rank[rows], shift.take(ray_patch[rows], axis=1))
         origins, directions = points.unit_rays(k, u, tables.geometry)
-        hits = rays.cast(tables, origins, directions)
+        hits = rays.cast(tables, origins, directions, points.regions(k, tables.geometry))
         carried = left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
         correction += _bincount(hits.patch, hits.front, carried, P)
         state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
@@ -229,11 +229,11 @@ def reflect_first(tables, state, samples, paths, rng):
     state.correction = correction / gathering.patch_area
 
 
-def generation(tables, state, weight, count, rng):
+def generation(tables, area, state, weight, count, rng):
     """One two-way generation of ``count`` rays: their irradiance added to ``state``, its
     reflection the next ``state.reflected``. The rays go out RAY_BLOCK at a time (a run of
     patches' rays each), so that a large chunk's memory stays that of a block."""
-    area, P = tables.gathering.patch_area, tables.patch_count
+    P = tables.patch_count
     expected = weight * (count / weight.sum())  # n_i
     patch = np.repeat(np.arange(P, dtype=np.int32), systematic_counts(weight, count, rng.random()))
     blocks = _ray_blocks(count, rng)  # (its first shift drawn here, as before blocks)
@@ -267,7 +267,7 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
     segment's two estimates to H (C,P, times the area), its lost rays to ``lost`` (2,P)."""
     P = tables.patch_count
     origins, directions = rays.leave_random(tables, patch, u)
-    hits = rays.cast(tables, origins, directions)
+    hits = rays.cast(tables, origins, directions, tables.geometry.region_of(patch))
     met = hits.front
     i, j = patch.compress(met), hits.patch.compress(met)
     # Segment i -> j adds dB_j s / A_i to H_i and dB_i s / A_j to H_j, s = 1 / (n_i/A_i + n_j/A_j).

@@ -58,7 +58,7 @@ BLOCK_TRIANGLES = 1 << 16
 def warn_coincident(corners, triangle_patch, block=None):
     """Warn about triangles with exactly the same corners as another (in any order or winding):
     a ray hits one of them at random, so each shows only part of the light it gets.
-    ``corners[rows]`` gives the (n,3,3) corners of triangle rows (an array or geometry.UnitCorners)."""
+    ``corners[rows]`` gives the (n,3,3) corners of triangle rows (an array or triangles.UnitCorners)."""
     # A key that does not depend on the corners' order: each corner's projection, sorted, then
     # projected again. Equal triangles get equal keys; neighbours with equal keys are then
     # compared exactly (corners in lexicographic order). O(T log T), no false positives. The

@@ -18,18 +18,13 @@ path tagged with its chunk, every chunk with its own tallies. The stages run on 
 states: :class:`.path_walk.PathWalk` (paths as arrays of what they carry) or, for the paper's
 plain walk whose paths are interchangeable, :class:`.interchangeable.InterchangeableWalk`.
 With the direct light gathered (``first_shot``), each chunk first gathers every patch's direct
-light by shadow rays, then runs these stages from what the patches reflect of it.
+light by shadow rays, then runs these stages from what the patches reflect of it. Which chunks
+a solve runs, and with what, is its method's (``methods``).
 """
 from __future__ import annotations
 
-import copy
-
-from .first_shot import gathered_chunk
-from .jacobi import jacobi_chunk, jacobi_chunks
 from .interchangeable import InterchangeableWalk
 from .path_walk import PathWalk
-from .names import TWO_WAY, WALK
-from .two_way import two_way_chunk
 
 
 class Aborted(Exception):
@@ -40,30 +35,10 @@ def walk_chunks(tables, sizes, rng, abort=None):
     """Trace the paths of chunks of ``sizes`` paths as one wavefront; return each chunk's own
     tallies (ChunkTally), in order. ``abort`` (a threading.Event) stops it at the next step.
 
-    Path-by-path walks on several threads take turns at their numpy work
-    (``tables.numpy_turn``, released while they trace): taking turns hands the GIL over about
-    once a step. Chunk-wide work (:func:`takes_turns`) does not wait for a turn."""
-    sizes = [int(n) for n in sizes]
-    if not takes_turns(tables, sum(sizes)):
-        tables = copy.copy(tables)
-        tables.numpy_turn = FreeTurn()
+    Walks on several threads take turns at their numpy work (``tables.numpy_turn``, released
+    while they trace): taking turns hands the GIL over about once a step."""
     with tables.numpy_turn:
-        if tables.method == TWO_WAY:  # (it gathers its own direct light)
-            return [two_way_chunk(tables, n, rng, lambda: _check(abort)) for n in sizes]
-        if tables.jacobi:
-            if tables.gathering is None:
-                return jacobi_chunks(tables, sizes, rng, lambda: _check(abort))
-            walk = lambda t, n, r: jacobi_chunk(t, n, r, lambda: _check(abort))  # noqa: E731
-        elif tables.gathering is None:
-            return _stages(tables, sizes, rng, abort)
-        else:
-            walk = lambda t, n, r: _stages(t, [n], r, abort)[0]  # noqa: E731
-        # The first shot gathered (first_shot): each chunk gathers, then walks from what it gathered.
-        tallies = []
-        for n in sizes:
-            _check(abort)
-            tallies.append(gathered_chunk(tables, n, rng, walk))
-        return tallies
+        return run_stages(tables, [int(n) for n in sizes], rng, abort)
 
 
 # Chunk-wide work takes no turns where a task's paths or the scene's patches reach this many
@@ -75,16 +50,20 @@ TURN_FREE_SIZE = 1 << 14
 
 
 def takes_turns(tables, paths):
-    """Whether walks on several threads take turns at their numpy work, for a task of
-    ``paths`` paths: the paper's walks do (their steps' arrays are a wavefront's, small, and a
-    turn a step keeps the GIL from changing hands inside them); the gathered walk and the
-    generations of the Jacobi and two-way iterations do not (their arrays span a whole chunk,
-    numpy lets go of the GIL inside most of their operations, and two threads' numpy work then
-    runs side by side; ``benchmarks/turns.py``), unless both the task's paths and the scene's
-    patches, the lengths of its arrays, are below TURN_FREE_SIZE."""
-    if tables.method == WALK and tables.gathering is None:
-        return True
+    """Whether chunk-wide work (the gathered walk, the generations of the Jacobi and two-way
+    iterations) takes turns at numpy for a task of ``paths`` paths. The paper's walks always do
+    (:func:`walk_chunks`: their steps' arrays are a wavefront's, small, and a turn a step keeps
+    the GIL from changing hands inside them); chunk-wide arrays span a whole chunk, numpy lets
+    go of the GIL inside most of their operations, and two threads' numpy work then runs side
+    by side (``benchmarks/turns.py``), unless both the task's paths and the scene's patches,
+    the lengths of its arrays, are below TURN_FREE_SIZE."""
     return max(paths, tables.patch_count) < TURN_FREE_SIZE
+
+
+def chunk_wide(tables, paths):
+    """``tables`` for chunk-wide work on a task of ``paths`` paths: with a numpy turn that
+    never waits where it takes no turns (:func:`takes_turns`)."""
+    return tables if takes_turns(tables, paths) else tables.with_turn(FreeTurn())
 
 
 class FreeTurn:
@@ -106,11 +85,13 @@ class FreeTurn:
         return False
 
 
-def _stages(tables, sizes, rng, abort):
+def run_stages(tables, sizes, rng, abort=None):
+    """The stages, step after step, until the chunks' paths have all ended (the caller holds
+    the numpy turn)."""
     state = InterchangeableWalk if tables.speedups.interchangeable else PathWalk
     walk = state(tables, sizes, rng)
     while True:
-        _check(abort)
+        check(abort)
         if not walk.refill():
             break
         hits = walk.intersect(*walk.generate(rng))
@@ -120,7 +101,8 @@ def _stages(tables, sizes, rng, abort):
     return walk.tallies()
 
 
-def _check(abort):
+def check(abort):
+    """Raises Aborted once ``abort`` (a threading.Event, or None) is set."""
     if abort is not None and abort.is_set():
         raise Aborted
 

@@ -3,7 +3,7 @@ fingerprint of a result. The pins in ``pinned_results.json`` were made on commit
 the walk was split into named stages, with that commit's module constants set as each case's
 speed-ups say (counted=False: COUNTED_MAX_PATCHES = 0; sorted_paths=True: SORT_MIN_PATCHES = 1;
 patch_classes=True: CLASSES_MIN_PATCHES = 1; grids=False: patch_grids.MAX_TRIANGLE_FRACTION = 0;
-grouped_chunks=False: solver.GROUP_MAX_CHUNKS = 1)."""
+grouped_chunks=False: that commit's solver.GROUP_MAX_CHUNKS = 1)."""
 import hashlib
 
 import numpy as np
@@ -122,3 +122,78 @@ def fingerprint(result):
         "stopped": result.stopped,
         "path_ends": {k: int(v) for k, v in sorted(result.path_ends.items())},
     }
+
+
+def every_light():
+    """The open box with a card, an emissive patch and a light of every kind."""
+    from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
+
+    base = open_box_with_card()
+    lights = [
+        PointLight(np.array([0.5, 0.5, 0.3]), np.array([1.0, 0.8, 0.6]), radius=0.05),
+        AreaLight(np.array([0.7, 0.3, 0.9]), np.array([0.1, 0, 0]), np.array([0, 0.1, 0]), np.array([0, 0, -1.0]),
+                  np.full(3, 2.0)),
+        SunLight(np.array([0.3, 0.1, -1.0]) / np.linalg.norm([0.3, 0.1, -1.0]), np.full(3, 1.5), angle=0.1),
+        WorldLight(irradiance=np.array([0.2, 0.3, 0.4])),
+    ]
+    return base.with_materials(base.reflectivity, base.emission, lights=lights)
+
+
+SCENES["lights"] = every_light
+
+
+def _method_cases():
+    """Every method, direct light, exit point and stop rule solve() runs (the walk's shot cases
+    are CASES): the gathered walk, stochastic Jacobi, the two-way iteration, Automatic, the
+    measured stop rule, a time limit that changes the plan but never ends the run, and a chunk
+    size given."""
+    cases = []
+
+    def add(scene, estimator="finite", exit_point="random", **solve):
+        solve.setdefault("paths", 20_000)
+        solve.setdefault("threads", 2)
+        tag = "-".join(f"{k}={v}" for k, v in sorted(solve.items()))
+        cases.append({"id": f"{scene}-{estimator}-{exit_point}-{tag}", "scene": scene, "estimator": estimator,
+                      "exit_point": exit_point, "speedups": {}, "solve": solve})
+
+    for scene in ("cornell", "mixed"):
+        for estimator, exit_point in WALKS:
+            add(scene, estimator, exit_point, direct_light="gathered")
+    add("lights", direct_light="gathered", sampling="stratified")
+    add("lights", "biased_infinite", "hit", direct_light="gathered")
+    add("fig1", direct_light="gathered", paths=3_000)
+    for scene in ("cornell", "mixed", "lights", "fig1"):
+        for exit_point in ("random", "hit"):
+            add(scene, "finite", exit_point, method="two_way")
+    add("cornell", "biased_infinite", "random", method="two_way", seed=5)
+    add("fig4", method="two_way", paths=30_000)
+    add("cornell", method="jacobi")
+    add("mixed", method="jacobi")
+    add("cornell", method="jacobi", direct_light="gathered")
+    add("fig1", method="jacobi", paths=3_000)
+    add("cornell", method="auto", paths=200_000)
+    add("cornell", method="auto", paths=2_000)
+    add("cornell", method="auto", relative_rms=0.05)
+    add("cornell", method="auto", paths=200_000, max_seconds=1e6)
+    add("cornell", method="two_way", relative_rms=0.05)
+    add("cornell", method="two_way", relative_rms=0.05, stop_rule="measured")
+    add("cornell", direct_light="gathered", relative_rms=0.05)
+    add("mixed", "biased_infinite", "hit", direct_light="gathered", relative_rms=0.08, stop_rule="measured")
+    add("cornell", method="jacobi", relative_rms=0.05, stop_rule="measured")
+    add("cornell", method="two_way", paths=50_000, max_seconds=1e6)
+    add("fig1", paths=50_000, max_seconds=1e6)
+    add("cornell", method="two_way", paths=8_000, chunk_paths=1_000)
+    add("fig1", paths=8_000, chunk_paths=500)
+    add("fig1", direct_light="gathered", paths=8_000, chunk_paths=500)
+    return cases
+
+
+METHOD_CASES = _method_cases()
+
+
+def method_fingerprint(result):
+    """fingerprint(), and what the method decides beyond the walk: which ran, its direct light,
+    its gathering rays and the light arriving."""
+    digest = hashlib.sha256(np.ascontiguousarray(result.irradiance).tobytes()).hexdigest()[:24]
+    return {**fingerprint(result), "irradiance": digest, "method": result.method,
+            "direct_light": result.direct_light, "gather_rays": int(result.gather_rays)}

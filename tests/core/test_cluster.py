@@ -18,7 +18,7 @@ from boxes import box_scene, rectangles_to_mesh
 from addon.core import GATHERED, PatchScene, solve
 from addon.core.names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE
 from addon.core.cluster import ClusterError
-from addon.core.solver import chunk_paths_for
+from addon.core.plan import chunk_paths_for
 
 dask = pytest.importorskip("dask", reason="Dask is in requirements.txt: CI installs it")
 distributed = pytest.importorskip("distributed", reason="Dask's distributed is in requirements.txt: CI installs it")
@@ -75,7 +75,7 @@ def test_the_two_way_iteration_on_a_cluster_is_bitwise_the_local_one(client, sce
 def _worker_table_ids():
     from addon.core import cluster
 
-    return sorted(id(tables) for tables in cluster._worker_tables.values())
+    return sorted(id(state.tables) for state in cluster._worker_states.values())
 
 
 def test_each_solve_s_light_fates_reach_the_workers_and_the_tables_are_kept_across_seeds(client):
@@ -275,7 +275,7 @@ def test_a_malformed_address_is_one_line_and_no_connection_is_tried(scene, addre
 @pytest.mark.parametrize("address", ["localhost:8786", "tcp://scheduler.example.org:8786", "TLS://10.0.0.1:1",
                                      "tls://[::1]:8786", " tcp://127.0.0.1:8786 "])
 def test_the_address_forms_dask_takes_are_kept(address):
-    from addon.core.cluster import cluster_address
+    from addon.core.cluster_connect import cluster_address
 
     scheme = "tls" if address.strip().lower().startswith("tls") else "tcp"
     assert cluster_address(address) == f"{scheme}://" + address.strip().split("://")[-1]
@@ -314,9 +314,9 @@ GREETINGS = [b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n", b"SSH-2.0
 
 @pytest.mark.parametrize("greeting", GREETINGS)
 def test_a_service_that_is_not_dask_is_one_line_within_the_timeout(scene, greeting, monkeypatch):
-    from addon.core import cluster
+    from addon.core import cluster_connect
 
-    monkeypatch.setattr(cluster, "CONNECT_SECONDS", 2)  # (the silent one waits it out)
+    monkeypatch.setattr(cluster_connect, "CONNECT_SECONDS", 2)  # (the silent one waits it out)
     server = _Server(greeting)
     try:
         started = time.monotonic()

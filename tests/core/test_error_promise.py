@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from boxes import box_scene, small_source_box
 
-from addon.core import predict, relative_rms_to_mse, solve, solver
+from addon.core import plan, predict, relative_rms_to_mse, solve
 from addon.core.batches import Batches
 from addon.core.reference import area_weighted_mse, solve_radiosity_system
 from addon.options import STOP_RULE
@@ -83,7 +83,7 @@ def test_the_stop_rule_waits_for_its_margin_and_its_chunks(monkeypatch):
     scene, _ = small_source_box()
     target = relative_rms_to_mse(predict(scene), 0.05)
     r = solve(scene, target_mse=target, seed=3, stop_rule="measured", threads=1, method="two_way")
-    assert r.stopped == "target" and r.chunks >= solver.MEASURED_STOP_CHUNKS
+    assert r.stopped == "target" and r.chunks >= plan.MEASURED_STOP_CHUNKS
     assert len(kept["inc"]) == kept["k"] - 1
     assert sum(kept["inc"]) / ((kept["k"] - 1) * kept["n"]) == pytest.approx(r.measured_mse, rel=1e-9)
     assert all(mse <= bound for _, mse, bound in bounds)

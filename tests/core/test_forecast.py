@@ -8,7 +8,8 @@ import pytest
 from addon.core import predict, relative_rms_to_mse, solve
 from addon.core import forecast as fc
 from addon.core.diagnostics import MAX_BOUNCES, check_bounces, expected_bounces
-from addon.core.solver import MIN_MEASURED_CHUNKS, choose_method
+from addon.core.methods import TwoWay, choose as choose_method
+from addon.core.plan import MIN_MEASURED_CHUNKS
 
 from boxes import box_scene, open_box_with_card
 
@@ -97,8 +98,8 @@ def test_a_run_predicts_its_end_from_its_measured_error_as_it_goes():
 def test_a_walk_pilot_keeps_its_variance_per_path_and_the_two_way_scales_it_with_its_chunks():
     """A walk's paths are independent: the pilot's variance per path is the run's at any chunk
     size. The two-way iteration's falls as chunks grow, as v_inf (1 + G P / n)."""
-    assert fc.two_way_scale(1000, 4000, 4000) == 1.0
-    assert fc.two_way_scale(1000, 4000, 16000) == pytest.approx((1 + 12 / 16) / (1 + 12 / 4))
+    assert TwoWay().variance_scale(1000, 4000, 4000) == 1.0
+    assert TwoWay().variance_scale(1000, 4000, 16000) == pytest.approx((1 + 12 / 16) / (1 + 12 / 4))
     assert fc.pilot_size(1000, 5.0, budget=1 << 20) == (1000, fc.PILOT_CHUNKS)
     chunk, chunks = fc.pilot_size(10**6, 5.0, budget=1 << 20)
     assert chunks == 2 and chunk * chunks * 5.0 <= 1 << 20

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from addon.core import PatchScene, Speedups, solve
-from addon.core import runners, solver
+from addon.core import plan, runners
+from addon.core.methods import walk as walk_method
 from addon.core.tables import WalkTables
 from addon.core.walk import walk_chunk, walk_chunks
 from addon.core.reference import path_variances
@@ -169,31 +170,31 @@ def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_po
     """A small run traces its chunks in groups (fewer, fuller wavefronts), still reports
     progress once per chunk, and is the same run whatever the threads."""
     groups = []
-    real = runners.walk_chunks
+    real = runners.run_chunks
 
-    def recorded(tables, sizes, rng, abort=None):
+    def recorded(state, seed, first_chunk, sizes, abort=None):
         groups.append(len(sizes))
-        return real(tables, sizes, rng, abort)
+        return real(state, seed, first_chunk, sizes, abort)
 
-    monkeypatch.setattr(runners, "walk_chunks", recorded)
+    monkeypatch.setattr(runners, "run_chunks", recorded)
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
     tables = WalkTables(scene, estimator, THRESHOLD, exit_point)
-    limit = solver.GROUP_RAYS_COUNTED if tables.speedups.interchangeable else solver.GROUP_RAYS
-    assert solver.chunks_per_group(tables, 100, 2.0) == solver.GROUP_MAX_CHUNKS
-    assert solver.chunks_per_group(tables, limit // 2, 2.0) == 1
+    limit = walk_method.GROUP_RAYS_COUNTED if tables.speedups.interchangeable else walk_method.GROUP_RAYS
+    assert walk_method.ShotWalk(tables).group(100, 2.0) == walk_method.GROUP_MAX_CHUNKS
+    assert walk_method.ShotWalk(tables).group(limit // 2, 2.0) == 1
     # Powers of two: a run of 32 chunks makes an even number of tasks.
-    assert solver.chunks_per_group(tables, limit // 2 // 5, 2.0) == 4
+    assert walk_method.ShotWalk(tables).group(limit // 2 // 5, 2.0) == 4
     # A group's scores stay small in big colour scenes: 3 channels x 500,000 patches a chunk.
     from types import SimpleNamespace
 
-    big = SimpleNamespace(speedups=tables.speedups, channels=3, patch_count=500_000, jacobi=False)
-    assert solver.chunks_per_group(big, 100, 2.0) == 2
+    big = SimpleNamespace(speedups=tables.speedups, channels=3, patch_count=500_000)
+    assert walk_method.ShotWalk(big).group(100, 2.0) == 2
     fractions = []
     kw = dict(paths=20_000, seed=3, exit_point=exit_point)
     a = solve(scene, estimator, threads=1, progress=lambda f, s: fractions.append(f), **kw)
     b = solve(scene, estimator, threads=2, **kw)
-    assert a.chunks == solver.MIN_CHUNKS and len(fractions) == a.chunks
-    group = solver.chunks_per_group(tables, 20_000 // a.chunks, a.prediction.expected_path_length)
+    assert a.chunks == plan.MIN_CHUNKS and len(fractions) == a.chunks
+    group = walk_method.ShotWalk(tables).group(20_000 // a.chunks, a.prediction.expected_path_length)
     assert group > 1 and groups[: a.chunks // group] == [group] * (a.chunks // group)  # the first run's tasks
     assert all(y > x for x, y in zip(fractions, fractions[1:])) and fractions[-1] == 1.0
     np.testing.assert_array_equal(a.radiosity, b.radiosity)

@@ -2,7 +2,7 @@
 
 Runs in a fresh Python process, so that its peak resident set is its own: the 66,572-patch room
 (sample_scenes.room_fig4) is solved with N paths and then with 4N paths, both with chunks of
-the maximum size (solver.chunk_paths_for), so the second run's extra chunks (96) are the only
+the maximum size (plan.chunk_paths_for), so the second run's extra chunks (96) are the only
 difference. To keep the test short the child caps chunks at 65,536 paths (production: 2^19 paths
 or 2^20 rays), so that N is 32 chunks: what a chunk holds while it runs does not depend on its
 size beyond the wavefront (path_walk.WAVEFRONT_PATHS) and the scores kept between bincounts
@@ -43,17 +43,17 @@ CHILD = textwrap.dedent(
     import json, resource, sys, tracemalloc
     sys.path.insert(0, {root!r})
     import numpy as np
-    import addon.core.solver as solver
+    import addon.core.plan as plan
     from addon.core import predict, solve
 
     from sample_scenes import room_fig4
 
     scene = room_fig4.build().scene
-    solver.MAX_CHUNK_PATHS = 1 << 16
-    chunk = solver.chunk_paths_for(predict(scene, "finite").expected_path_length, 10**12)
-    assert chunk == 1 << 16 and solver.chunk_paths_for(2.0, solver.MIN_CHUNKS * chunk) == chunk
+    plan.MAX_CHUNK_PATHS = 1 << 16
+    chunk = plan.chunk_paths_for(predict(scene, "finite").expected_path_length, 10**12)
+    assert chunk == 1 << 16 and plan.chunk_paths_for(2.0, plan.MIN_CHUNKS * chunk) == chunk
     out = {{"patches": scene.patch_count, "chunk": chunk}}
-    for name, paths in (("small", solver.MIN_CHUNKS * chunk), ("large", 4 * solver.MIN_CHUNKS * chunk)):
+    for name, paths in (("small", plan.MIN_CHUNKS * chunk), ("large", 4 * plan.MIN_CHUNKS * chunk)):
         tracemalloc.start()
         result = solve(scene, "finite", paths=paths, threads=2, seed=1)
         traced = tracemalloc.get_traced_memory()[1]

@@ -7,7 +7,7 @@ from boxes import box_rectangles, box_scene, rays_to_triangle_points, rectangles
 from addon.core import patch_grids as PG
 from addon.core.tables import WalkTables
 from addon.core.frames import parallelogram_corners
-from addon.core.geometry import build_geometry
+from addon.core.geometry_build import build_geometry
 
 
 def _rotation(seed):

@@ -10,11 +10,12 @@ import json
 from pathlib import Path
 
 import pytest
-from pinned_cases import CASES, SCENES, fingerprint, solve_arguments
+from pinned_cases import CASES, METHOD_CASES, SCENES, fingerprint, method_fingerprint, solve_arguments
 
 from addon.core import Speedups, solve
 
 PINS = json.loads((Path(__file__).parent / "pinned_results.json").read_text())
+METHOD_PINS = json.loads((Path(__file__).parent / "pinned_methods.json").read_text())
 VARIANTS = json.loads((Path(__file__).parent / "pinned_variants.json").read_text())["cases"]
 _scenes = {}
 
@@ -30,6 +31,15 @@ def test_results_are_the_pinned_ones(case):
     scene = _scene(case["scene"])
     result = solve(scene, speedups=Speedups(**case["speedups"]), **solve_arguments(scene, case))
     assert fingerprint(result) in [PINS[case["id"]], *VARIANTS.get(case["id"], [])]
+
+
+@pytest.mark.parametrize("case", METHOD_CASES, ids=[c["id"] for c in METHOD_CASES])
+def test_methods_give_the_pinned_results(case):
+    """The gathered walk, Jacobi, the two-way iteration and Automatic, under every stop rule,
+    give the results recorded with benchmarks/hash_solves.py (on c085628, before each method
+    owned its policy)."""
+    scene = _scene(case["scene"])
+    assert method_fingerprint(solve(scene, **solve_arguments(scene, case))) == METHOD_PINS[case["id"]]
 
 
 def test_a_planted_change_fails_the_pins():

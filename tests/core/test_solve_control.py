@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from addon.core import predict, solve
-from addon.core.solver import chunk_paths_for
+from addon.core.plan import chunk_paths_for
 from boxes import box_scene
 
 
@@ -161,7 +161,7 @@ def test_batch_estimate_is_made_only_where_it_is_used(scene, monkeypatch):
 def test_measured_stop_rule_reads_the_estimate_once_a_group(scene, monkeypatch, estimator):
     """Under the measured rule the estimate is read after each task's chunks are all added:
     the run stops as soon as it meets the target there, on whole chunks."""
-    from addon.core import solver
+    from addon.core import plan
     from addon.core.batches import Batches
 
     made = []
@@ -171,7 +171,7 @@ def test_measured_stop_rule_reads_the_estimate_once_a_group(scene, monkeypatch, 
     r = solve(scene, estimator, target_mse=target, stop_rule="measured", seed=5, threads=1)
     assert r.stopped == "target" and r.measured_mse <= target
     # Read at MIN_MEASURED_CHUNKS chunks and after, once per task, then for the result.
-    assert made[-2:] == [r.chunks, r.chunks] and made[0] >= solver.MIN_MEASURED_CHUNKS
+    assert made[-2:] == [r.chunks, r.chunks] and made[0] >= plan.MIN_MEASURED_CHUNKS
     assert all(b > a for a, b in zip(made[:-1], made[1:-1]))
 
 

@@ -20,7 +20,7 @@ import pytest
 
 from addon.core import PatchScene, solve
 from addon.core.reference import path_variances, rectangle_form_factors, solve_radiosity_system
-from addon.core.solver import chunk_paths_for
+from addon.core.plan import chunk_paths_for
 from boxes import box_rectangles, box_scene, rectangles_to_mesh
 
 Z = 4.5
@@ -237,18 +237,17 @@ def test_1e8_paths_equal_their_two_halves_and_the_exact_solution(monkeypatch):
     assert chunk_count >= 100  # enough batches for the variance check below
     half_chunks = chunk_count // 2
     halves = np.zeros((2, scene.patch_count), dtype=np.int64)
-    real_walk = runners.walk_chunks
+    real_run = runners.run_chunks
     lock = threading.Lock()
 
-    def locked_walk(tables, sizes, rng, abort=None):
-        tallies = real_walk(tables, sizes, rng, abort)
-        (first,) = rng.bit_generator.seed_seq.spawn_key
+    def locked_run(state, seed, first, sizes, abort=None):
+        tallies = real_run(state, seed, first, sizes, abort)
         with lock:
             for k, tally in enumerate(tallies, start=first):
                 halves[int(k >= half_chunks)] += tally.incident[0].astype(np.int64)
         return tallies
 
-    monkeypatch.setattr(runners, "walk_chunks", locked_walk)
+    monkeypatch.setattr(runners, "run_chunks", locked_run)
     full = solve(scene, "finite", paths=N, seed=66, threads=2)
     assert full.paths == N and full.chunks == chunk_count
     hits = _incident(full, scene)

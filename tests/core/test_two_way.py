@@ -8,13 +8,14 @@ import pytest
 from boxes import CEILING, box_rectangles, box_scene, rectangles_to_mesh, small_source_box
 from test_first_shot import R_FACES, _box_with_one_emitter, floor_lit_unevenly_and_a_wall
 
-from addon.core import PatchScene, solve, solver, two_way
+from addon.core import PatchScene, plan, solve, two_way
 from addon.core.first_shot import Gathering, pilot_irradiance
+from addon.core.methods import automatic
+from addon.core.methods import two_way as tw
 from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
 from addon.core.reference import rectangle_form_factors, solve_radiosity_system
 from addon.core.tables import WalkTables
 from addon.core.two_way import direct_samples
-from addon.core.walk import walk_chunks
 
 Z = 5.0
 
@@ -51,7 +52,7 @@ def test_two_way_is_the_direct_solve(box):
     (rays that escape see 0 about the control variate, from their own patch only)."""
     scene, exact = _box_with_one_emitter() if box == "closed" else _open_box()
     r = solve(scene, paths=200_000, seed=1, method="two_way")
-    assert r.chunks == solver.TWO_WAY_MIN_CHUNKS and r.method == "two_way" and r.direct_light == "gathered"
+    assert r.chunks == tw.TWO_WAY_MIN_CHUNKS and r.method == "two_way" and r.direct_light == "gathered"
     assert r.path_ends["generations"] > r.chunks * 5
     assert _z_ok(_z(r, exact), r.chunks)
 
@@ -63,9 +64,8 @@ def test_samples_go_where_the_light_lands_and_every_patch_keeps_its_floor():
     chunk's total."""
     scene, _ = small_source_box(corner=True)
     tables = WalkTables(scene, "finite", 1e-3, "random")
-    tables.gathering = Gathering(scene, direct_samples(768, scene))
     with tables.numpy_turn:
-        pilot = pilot_irradiance(tables, tables.gathering, 0)
+        pilot = pilot_irradiance(tables, Gathering(scene, direct_samples(768, scene)), 0)
     area, allotted = direct_samples(768, scene), direct_samples(768, scene, pilot)
     assert (allotted >= (1 - two_way.RECEIVED_SHARE) * area * (1 - 1e-12)).all()
     assert math.isclose(allotted.sum(), area.sum())
@@ -136,9 +136,8 @@ def test_the_accounts_balance_in_expectation(exit_point):
     channel, while the escaped and blocked power are far from 0."""
     scene = _scene_with_every_light()
     tables = WalkTables(scene, "finite", 1e-3, exit_point)
-    tables.method = "two_way"
-    tables.gathering = Gathering(scene, direct_samples(3000, scene))
-    tallies = walk_chunks(tables, [3000] * 64, np.random.default_rng(5))
+    chunks = tw.TwoWayChunks(tables, Gathering(scene, direct_samples(3000, scene)))
+    tallies = chunks.run([3000] * 64, np.random.default_rng(5))
     emitted = np.array([t.emitted for t in tallies])
     imbalance = np.array([t.emitted - t.absorbed - t.escaped - t.blocked - t.undistributed for t in tallies])
     z = imbalance.mean(axis=0) / (imbalance.std(axis=0, ddof=1) / math.sqrt(len(tallies)))
@@ -189,10 +188,10 @@ def test_automatic_method_takes_the_two_way_iteration_only_where_each_patch_gets
     method's own and names it."""
     scene, _ = _box_with_one_emitter()
     P = scene.patch_count
-    few = 8 * solver.MIN_CHUNK_PATHS  # a plan of 8 minimal chunks: far under 4 rays a patch
-    assert solver.first_generation_rays(P, solver.two_way_chunk_paths(P, 2.0, few)) < solver.TWO_WAY_RAYS_PER_PATCH
-    assert solver.choose_method(scene, paths=few) == "walk"
-    assert solver.choose_method(scene, paths=200_000) == "two_way"
+    few = 8 * plan.MIN_CHUNK_PATHS  # a plan of 8 minimal chunks: far under 4 rays a patch
+    assert tw.first_generation_rays(P, tw.TwoWay().chunk_paths(P, 2.0, few)) < tw.TWO_WAY_RAYS_PER_PATCH
+    assert automatic.choose(scene, paths=few) == "walk"
+    assert automatic.choose(scene, paths=200_000) == "two_way"
     for paths, method in ((few, "walk"), (20_000, "two_way")):
         auto = solve(scene, paths=paths, seed=2, method="auto", threads=2)
         own = solve(scene, paths=paths, seed=2, method=method, threads=2)
@@ -205,24 +204,24 @@ def test_two_way_chunks_grow_to_enough_rays_a_patch_within_the_plan():
     TWO_WAY_RAYS_PER_PATCH (4) when it has room for MIN_MEASURED_CHUNKS of those, never more
     than the cap; a scene too big for that (or a plan too small) gets fewer, and "auto" takes
     the walk there."""
-    rays = lambda P, planned: solver.first_generation_rays(P, solver.two_way_chunk_paths(P, 2.5, planned))  # noqa: E731
-    assert rays(50_000, 10**9) >= solver.TWO_WAY_CHUNK_RAYS_PER_PATCH > solver.TWO_WAY_RAYS_PER_PATCH
-    assert rays(50_000, 10**9) < solver.TWO_WAY_CHUNK_RAYS_PER_PATCH + 0.01  # (no bigger than it needs)
-    enough = 50_000 * solver.TWO_WAY_RAYS_PER_PATCH // 2  # paths of a chunk of that many rays a patch
-    assert solver.two_way_chunk_paths(50_000, 2.5, 8 * enough) == enough  # (8 chunks of them)
-    assert rays(50_000, 8 * enough) >= solver.TWO_WAY_RAYS_PER_PATCH
-    assert solver.two_way_chunk_paths(1_000_000, 2.5, 10**9) == solver.TWO_WAY_MAX_CHUNK_PATHS
-    assert rays(1_000_000, 10**9) < solver.TWO_WAY_RAYS_PER_PATCH
-    assert math.ceil(10**6 / solver.two_way_chunk_paths(50_000, 2.5, 10**6)) >= solver.MIN_MEASURED_CHUNKS
+    rays = lambda P, planned: tw.first_generation_rays(P, tw.TwoWay().chunk_paths(P, 2.5, planned))  # noqa: E731
+    assert rays(50_000, 10**9) >= tw.TWO_WAY_CHUNK_RAYS_PER_PATCH > tw.TWO_WAY_RAYS_PER_PATCH
+    assert rays(50_000, 10**9) < tw.TWO_WAY_CHUNK_RAYS_PER_PATCH + 0.01  # (no bigger than it needs)
+    enough = 50_000 * tw.TWO_WAY_RAYS_PER_PATCH // 2  # paths of a chunk of that many rays a patch
+    assert tw.TwoWay().chunk_paths(50_000, 2.5, 8 * enough) == enough  # (8 chunks of them)
+    assert rays(50_000, 8 * enough) >= tw.TWO_WAY_RAYS_PER_PATCH
+    assert tw.TwoWay().chunk_paths(1_000_000, 2.5, 10**9) == tw.TWO_WAY_MAX_CHUNK_PATHS
+    assert rays(1_000_000, 10**9) < tw.TWO_WAY_RAYS_PER_PATCH
+    assert math.ceil(10**6 / tw.TwoWay().chunk_paths(50_000, 2.5, 10**6)) >= plan.MIN_MEASURED_CHUNKS
 
 
 def test_a_small_plan_runs_in_fewer_larger_chunks_than_the_walk_s():
     """A small plan's two-way chunks are TWO_WAY_MIN_CHUNKS (16), twice the walk's size: a
     chunk's variance per path falls as it grows. A solve of a million paths in the 600-patch
     box runs 16 of them, and its batch estimate is there."""
-    assert solver.TWO_WAY_MIN_CHUNKS == 16 < solver.MIN_CHUNKS
-    assert solver.two_way_chunk_paths(600, 2.0, 1_000_000) == 1_000_000 // 16
-    assert solver.chunk_paths_for(2.0, 1_000_000) == 1_000_000 // 32
+    assert tw.TWO_WAY_MIN_CHUNKS == 16 < plan.MIN_CHUNKS
+    assert tw.TwoWay().chunk_paths(600, 2.0, 1_000_000) == 1_000_000 // 16
+    assert plan.chunk_paths_for(2.0, 1_000_000) == 1_000_000 // 32
     scene = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=10)[0]
     r = solve(scene, paths=1_000_000, seed=1, method="two_way", threads=2)
     assert r.chunks == 16 and np.isfinite(r.reflected_variance).all()
@@ -255,27 +254,27 @@ def test_automatic_method_takes_the_walk_past_its_measured_scene_size(monkeypatc
     """Past AUTO_MAX_PATCHES (the largest scene the rule was measured on, and memory: a million
     patches stay under 1 GiB with the walk) "auto" takes the walk, whatever the rays a patch."""
     scene, _ = _box_with_one_emitter()
-    assert solver.choose_method(scene, paths=200_000) == "two_way"
-    monkeypatch.setattr(solver, "AUTO_MAX_PATCHES", scene.patch_count - 1)
-    assert solver.choose_method(scene, paths=200_000) == "walk"
+    assert automatic.choose(scene, paths=200_000) == "two_way"
+    monkeypatch.setattr(automatic, "AUTO_MAX_PATCHES", scene.patch_count - 1)
+    assert automatic.choose(scene, paths=200_000) == "walk"
 
 
 def test_under_a_time_limit_two_way_chunks_stay_the_usual_size(monkeypatch):
     """A chunk of a million paths can outlast a time limit, and a run stopped before its first
     chunk has nothing to give: under a time limit two-way chunks keep the usual size (about
     RAYS_PER_CHUNK rays), and "auto" decides on those chunks."""
-    usual = solver.chunk_paths_for(solver.rays_per_path(2.5), 10**9, solver.TWO_WAY_MIN_CHUNKS)
-    assert solver.two_way_chunk_paths(50_000, 2.5, 10**9, time_limited=True) == usual
-    assert usual < solver.two_way_chunk_paths(50_000, 2.5, 10**9)
+    usual = plan.chunk_paths_for(two_way.rays_per_path(2.5), 10**9, tw.TWO_WAY_MIN_CHUNKS)
+    assert tw.TwoWay().chunk_paths(50_000, 2.5, 10**9, time_limited=True) == usual
+    assert usual < tw.TwoWay().chunk_paths(50_000, 2.5, 10**9)
     scene, _ = _box_with_one_emitter()
-    monkeypatch.setattr(solver, "RAYS_PER_CHUNK", 1_000)  # usual chunks of under 4 rays a patch here
-    assert solver.choose_method(scene, paths=200_000) == "two_way"
-    assert solver.choose_method(scene, paths=200_000, max_seconds=60) == "walk"
+    monkeypatch.setattr(plan, "RAYS_PER_CHUNK", 1_000)  # usual chunks of under 4 rays a patch here
+    assert automatic.choose(scene, paths=200_000) == "two_way"
+    assert automatic.choose(scene, paths=200_000, max_seconds=60) == "walk"
     r = solve(scene, paths=200_000, seed=1, method="auto", max_seconds=60, threads=2)
     assert r.method == "walk"
     limited = solve(scene, paths=20_000, seed=1, method="two_way", max_seconds=60, threads=2)
     free = solve(scene, paths=20_000, seed=1, method="two_way", threads=2)
-    assert limited.paths == free.paths == 20_000 and free.chunks == solver.TWO_WAY_MIN_CHUNKS and limited.chunks > 8 * free.chunks
+    assert limited.paths == free.paths == 20_000 and free.chunks == tw.TWO_WAY_MIN_CHUNKS and limited.chunks > 8 * free.chunks
 
 
 def test_paired_ranks_count_each_patch_and_sign_in_order():

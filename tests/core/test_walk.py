@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from addon.core import Speedups
+from addon.core import Speedups, predict
 from addon.core.tables import WalkTables
 from addon.core.walk import walk_chunk
 from boxes import box_scene
@@ -180,15 +180,13 @@ def test_chunk_wide_work_does_not_wait_for_a_turn(monkeypatch):
     rule's comment give the measurements."""
     from addon.core import two_way, walk
     from addon.core.first_shot import Gathering
-    from addon.core.names import JACOBI, TWO_WAY
+    from addon.core.methods import jacobi, two_way as method, walk as walk_method
 
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
     tables = WalkTables(scene, "finite", 1e-3, "hit")
     big = walk.TURN_FREE_SIZE
-    assert walk.takes_turns(tables, big)
-    tables.method = TWO_WAY
-    tables.gathering = Gathering(scene, two_way.direct_samples(big, scene))
     assert not walk.takes_turns(tables, big) and walk.takes_turns(tables, big - 1)  # (small chunks' arrays are short)
+    chunks = method.TwoWayChunks(tables, Gathering(scene, two_way.direct_samples(big, scene)))
     held = []
     real = two_way.generation
 
@@ -197,12 +195,16 @@ def test_chunk_wide_work_does_not_wait_for_a_turn(monkeypatch):
         return real(t, *args)
 
     monkeypatch.setattr(two_way, "generation", generation)
-    tally = walk.walk_chunks(tables, [big], np.random.default_rng(1))[0]
+    tally = chunks.run([big], np.random.default_rng(1))[0]
     assert held and not any(held) and tally.paths == big
     held.clear()
-    walk.walk_chunks(tables, [2_000], np.random.default_rng(1))
+    chunks.run([2_000], np.random.default_rng(1))
     assert held and all(held)
-    tables.method = JACOBI
-    assert not walk.takes_turns(tables, big)
-    tables.method, tables.gathering = "walk", object()  # the gathered walk
-    assert not walk.takes_turns(tables, big)
+    # Jacobi iteration and the gathered walk run chunk-wide too; the paper's walk always takes turns.
+    asked = []
+    monkeypatch.setattr(walk, "chunk_wide", lambda t, paths: asked.append(paths) or t)
+    jacobi.Jacobi().create(scene, tables, big, 0, None).run([64], np.random.default_rng(1))
+    gathered = walk_method.Walk("gathered").create(scene, tables, big, 0, predict(scene))
+    gathered.run([64], np.random.default_rng(1))
+    walk_method.Walk().create(scene, tables, big, 0, None).run([64], np.random.default_rng(1))
+    assert asked == [64, 64] and not tables.numpy_turn.locked()

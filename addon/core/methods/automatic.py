@@ -1,0 +1,34 @@
+"""Automatic (method="auto"): the two-way iteration where it pays, else the paper's walk.
+
+The two-way iteration pays where its chunks give every patch enough first-generation rays
+(``TwoWay.pays``: at error targets that plan at least plan.MIN_MEASURED_CHUNKS such chunks;
+under a time limit, in chunks of the usual size), in a scene of at most AUTO_MAX_PATCHES
+patches; elsewhere the walk needs fewer rays to the same error.
+"""
+from __future__ import annotations
+
+from ..error_model import predict
+from ..names import FINITE, TWO_WAY, WALK
+from .two_way import TwoWay
+
+# The largest scene Automatic runs the two-way iteration in: a two-way chunk holds several (C,P)
+# arrays, and this bound keeps a two-way solve through the operator under 1 GiB, as the walk
+# keeps a million patches (docs/performance.md, memory_two_way_sizes.md); the rule was measured
+# up to 535,815 patches (benchmarks/results/auto_method.md).
+AUTO_MAX_PATCHES = 3 << 17
+
+
+def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None):
+    """The method (its name) Automatic runs for a solve with these arguments."""
+    if scene.patch_count > AUTO_MAX_PATCHES:
+        return WALK
+    two_way = TwoWay()
+    prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
+    planned = paths if paths is not None else two_way.planned_paths(prediction.paths_for(target_mse))
+    chunk = two_way.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
+    return TWO_WAY if two_way.pays(scene.patch_count, chunk) else WALK
+
+
+def patches_text():
+    """AUTO_MAX_PATCHES in words for the panel, e.g. "about 390,000"."""
+    return f"about {round(AUTO_MAX_PATCHES, -4):,}"

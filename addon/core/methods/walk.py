@@ -1,0 +1,103 @@
+"""The paper's method: shooting random walks, path by path (``walk``), its direct light shot
+by the walks (the paper's) or gathered by shadow rays (``first_shot``, beyond the paper).
+
+Its estimator (finite or biased infinite) and exit point (random or hit) are the walk tables'
+(``tables``); here is what a solve plans for it. With the direct light shot, the paper's
+formulas (2)/(3) predict its error and the paths for a target; gathered, they do not (it needs
+several times fewer: the plan takes base.UNPREDICTED_PLAN_DIVISOR of them), and its error is
+measured. Small chunks of the shot walk are traced together in groups (one wavefront).
+"""
+from __future__ import annotations
+
+from .. import walk as stages
+from ..first_shot import gather_samples
+from ..gathered_walk import gathered_chunk
+from ..names import GATHERED, SHOT, WALK
+from ..two_way import rays_per_path as gathered_rays_per_path
+from .base import GatheringIntegrator, Integrator, Method, solve_gathering, spec_gathering
+
+# Grouped chunks: up to GROUP_MAX_CHUNKS chunks (a power of two, so that a run of MIN_CHUNKS
+# chunks makes an even number of tasks) are traced as one wavefront while a group has fewer rays
+# than GROUP_RAYS (GROUP_RAYS_COUNTED for interchangeable paths, whose steps also pass over the
+# patches), and its scores take at most GROUP_SCORES float64s.
+GROUP_RAYS = 1 << 16
+GROUP_RAYS_COUNTED = 1 << 18
+GROUP_MAX_CHUNKS = 16
+GROUP_SCORES = 1 << 22
+
+
+class Walk(Method):
+    """The paper's shooting random walk."""
+
+    name = WALK
+    direct_lights = (SHOT, GATHERED)
+
+    @property
+    def predicted(self):
+        return self.direct_light == SHOT
+
+    def planned_paths(self, predicted_paths):
+        return predicted_paths if self.predicted else super().planned_paths(predicted_paths)
+
+    def rays_per_path(self, bounces):
+        # (gathered, guessed as the two-way iteration's: its gathering costs about as much)
+        return super().rays_per_path(bounces) if self.direct_light == SHOT else gathered_rays_per_path(bounces)
+
+    def create(self, scene, tables, chunk, seed, prediction):
+        if self.direct_light == SHOT:
+            return ShotWalk(tables)
+        samples = gather_samples(chunk, prediction.expected_path_length, scene)
+        return Gathered(tables, solve_gathering(scene, tables, samples, seed), walk_one)
+
+    def rebuild(self, scene, tables, spec):
+        if spec is None:
+            return ShotWalk(tables)
+        return Gathered(tables, spec_gathering(scene, spec), walk_one)
+
+
+class ShotWalk(Integrator):
+    """The paper's walk: its tables alone."""
+
+    def group(self, chunk_paths, expected_path_length):
+        group_rays = GROUP_RAYS_COUNTED if self.tables.speedups.interchangeable else GROUP_RAYS
+        return chunks_per_group(self.tables, max(1.0, chunk_paths * expected_path_length), group_rays)
+
+    def run(self, sizes, rng, abort=None):
+        return stages.walk_chunks(self.tables, sizes, rng, abort)
+
+
+def walk_one(tables, paths, rng, abort):
+    """One chunk of the paper's walk (from the sources ``tables`` has), in the caller's turn."""
+    return stages.run_stages(tables, [paths], rng, abort)[0]
+
+
+class Gathered(GatheringIntegrator):
+    """A walk whose chunks first gather every patch's direct light (``gathering``), then walk
+    from its reflection (``walk(tables, paths, rng, abort)``, a chunk's tally)."""
+
+    def __init__(self, tables, gathering, walk):
+        super().__init__(tables, gathering)
+        self.walk = walk
+
+    def run(self, sizes, rng, abort=None):
+        tables = stages.chunk_wide(self.tables, sum(int(n) for n in sizes))
+        walk = self.walk
+        tallies = []
+        with tables.numpy_turn:
+            for n in sizes:
+                stages.check(abort)
+                tallies.append(gathered_chunk(tables, self.gathering, int(n), rng,
+                                              lambda t, paths, r: walk(t, paths, r, abort)))
+        return tallies
+
+
+def chunks_per_group(tables, chunk_rays, group_rays):
+    """How many chunks of ``chunk_rays`` a task traces together: 1 unless the chunks are small
+    and grouped chunks are on, else a power of two, up to ``group_rays`` rays a group. It
+    depends on the walk and the chunk plan alone, never on the threads, so runs stay bitwise
+    reproducible."""
+    if not tables.speedups.grouped_chunks:
+        return 1
+    by_scores = GROUP_SCORES // (tables.channels * tables.patch_count)
+    most = int(min(GROUP_MAX_CHUNKS, group_rays // chunk_rays, by_scores))
+    return 1 << (most.bit_length() - 1) if most > 1 else 1

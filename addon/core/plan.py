@@ -1,0 +1,88 @@
+"""How a solve splits its paths into chunks and when it stops: what every method shares.
+
+A method sizes its own chunks (``methods``); here are the sizes all start from, the stop rules'
+numbers, and the plan a solve makes of them: the paths it runs at most and a chunk's paths.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .error_model import predict
+from .names import MEASURED
+
+# A chunk aims at about this many rays: enough wavefront steps that its last short ones cost
+# little, few enough that progress and the batch error estimate come often.
+RAYS_PER_CHUNK = 1 << 20
+MAX_CHUNK_PATHS = 1 << 19
+MIN_CHUNK_PATHS = 128
+# The batch estimate wants this many chunks in a run when the run is small.
+MIN_CHUNKS = 32
+# With stop_rule="measured": never stop on fewer chunks than this, nor run past this many
+# times the planned paths (unless paths= is given as the cap).
+MIN_MEASURED_CHUNKS = 8
+MEASURED_CAP_FACTOR = 64
+# With stop_rule="measured" the run stops once the measured MSE plus MEASURED_STOP_Z of its own
+# standard errors (Batches.mse_upper_bound) meets the target, on at least MEASURED_STOP_CHUNKS
+# chunks: the estimate alone, read after every chunk, stops on its first lucky low reading, and
+# few or heavy-tailed chunks make such readings common.
+MEASURED_STOP_Z = 2.0
+MEASURED_STOP_CHUNKS = 12
+
+
+@dataclass(frozen=True)
+class ChunkPlan:
+    """How a solve splits its paths: the paper's prediction, the stop rule, the most paths it
+    runs (``cap``) and the paths of a chunk."""
+
+    prediction: object
+    measured_rule: bool
+    cap: int
+    chunk: int
+
+
+def chunk_plan(scene, method, estimator, *, paths=None, target_mse=None, threshold=1e-3, stop_rule=None,
+               max_seconds=None):
+    """The chunk plan of a solve of ``method`` (a ``methods`` method) with these arguments. A
+    method whose error the paper's formulas do not predict stops on its measured error."""
+    prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
+    measured_rule = stop_rule == MEASURED or (not method.predicted and target_mse is not None)
+    if measured_rule:
+        planned = method.planned_paths(prediction.paths_for(target_mse))
+        cap = paths if paths is not None else MEASURED_CAP_FACTOR * planned
+    else:
+        planned = paths if paths is not None else prediction.paths_for(target_mse)
+        cap = planned
+    chunk = method.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
+    return ChunkPlan(prediction, measured_rule, int(cap), int(chunk))
+
+
+def chunk_paths_for(expected_path_length, planned_paths, min_chunks=MIN_CHUNKS):
+    """A chunk of about RAYS_PER_CHUNK rays, at least ``min_chunks`` of them in the plan."""
+    by_rays = int(RAYS_PER_CHUNK / max(expected_path_length, 1.0))
+    by_batches = math.ceil(planned_paths / min_chunks)
+    return int(min(MAX_CHUNK_PATHS, max(MIN_CHUNK_PATHS, min(by_rays, by_batches))))
+
+
+def paths_to_target(paths, measured_mse, target_mse, chunk, cap):
+    """The paths a run stopping on its measured error is expected to end at, from its MSE after
+    ``paths`` (which falls as 1 / paths): whole chunks, at least MEASURED_STOP_CHUNKS, at most
+    ``cap``. NaN MSE (fewer than 2 chunks): NaN."""
+    if not measured_mse >= 0 or paths <= 0:
+        return math.nan
+    needed = paths * measured_mse / target_mse
+    chunks = max(MEASURED_STOP_CHUNKS, math.ceil(needed / chunk))
+    return float(min(cap, chunks * chunk))
+
+
+def meets_target(total, target_mse):
+    """Whether a run's batches (``Batches``) meet ``target_mse`` by the measured stop rule. (The
+    batch estimate costs passes over the patches: read only where the rule is used.)"""
+    return total.chunks >= MEASURED_STOP_CHUNKS and total.measured_mse() <= target_mse \
+        and target_bound(total) <= target_mse
+
+
+def target_bound(total):
+    """The bound the measured stop rule holds to the target: the batches' MSE plus
+    MEASURED_STOP_Z of its standard errors."""
+    return total.mse_upper_bound(MEASURED_STOP_Z)
