@@ -22,7 +22,8 @@ _registered_modules = []
 
 
 def _glue_modules():
-    from . import properties, operators, panel, estimate
+    from . import estimate
+    from .ui import operators, panel, properties
 
     return [properties, operators, panel, estimate]
 
@@ -38,7 +39,7 @@ def register():
 
 def unregister():
     """Undo :func:`register` completely (classes, properties, handlers, timers)."""
-    from . import worker
+    from .bpy_free import worker
 
     worker.cancel_running_job()
     while _registered_modules:

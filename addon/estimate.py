@@ -14,7 +14,10 @@ import threading
 
 import bpy
 
-from . import pipeline, scene_io, worker
+from . import pipeline
+from .blender_read.objects import skipped_objects, source_objects
+from .blender_read.selection import read_selection
+from .bpy_free import worker
 
 DELAY_SECONDS = 0.3
 POLL_SECONDS = 0.1
@@ -39,7 +42,7 @@ def invalidate(*_args):
 
 def _key(context):
     settings = context.scene.radiosity
-    names = tuple(o.name for o in (*scene_io.source_objects(context), *scene_io.skipped_objects(context)))
+    names = tuple(o.name for o in (*source_objects(context), *skipped_objects(context)))
     return (
         context.scene.name, names, settings.estimator, round(settings.threshold, 9),
         round(settings.target_error, 6), round(settings.patch_size, 9), STATE.generation,
@@ -49,7 +52,7 @@ def _key(context):
 def compute(context) -> dict:
     """The estimate for the current selection, synchronously (tests, scripts)."""
     try:
-        objects, _notes = scene_io.read_selection(context)
+        objects, _notes = read_selection(context)
         return pipeline.estimate(objects, context.scene.radiosity.solve_settings())
     except ValueError as exc:
         return {"error": str(exc)}
@@ -77,7 +80,7 @@ def _start():
         return 0.2  # one estimate at a time
     try:
         key = _key(context)
-        objects, _notes = scene_io.read_selection(context)
+        objects, _notes = read_selection(context)
         settings = context.scene.radiosity.solve_settings()
     except ValueError as exc:
         STATE.value, STATE.key = {"error": str(exc)}, _key(context)

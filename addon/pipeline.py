@@ -17,8 +17,10 @@ from .core.first_shot import direct_irradiance
 from .core.forecast import forecast
 from .core import methods
 from .core.names import AUTO
-from . import options, trim
-from .patches import Patches, back_light_warning, light_kind, make_patches, scene_and_notes
+from . import options
+from .bpy_free import trim
+from .bpy_free.patches import Patches, make_patches
+from .bpy_free.scene_notes import back_light_warning, light_kind, scene_and_notes
 
 @dataclass
 class SolveSettings:

@@ -12,7 +12,7 @@ disk area light, a sun and a uniform world; then a spot scaled (1.8, 1, 1), a po
 casts no shadow (above the block), the sphere light with soft falloff on (Blender's default; the
 core's sphere is the same without it: the difference measured), and a sphere light with colour temperature, exposure and
 Normalize off. Ours reads the lights through the extension
-(``scene_io.read_selection``: ``lights_io``) and solves the same patches (exit point "hit":
+(``read_selection``: ``lights_io``) and solves the same patches (exit point "hit":
 patch averages of the continuous solution, what a bake's pixel blocks average); Cycles bakes
 COMBINED into pixel blocks, one per patch. Reported per scene: the mean of ours / Cycles over
 the lit patches with its standard error, the relative RMS of the difference, and both times.
@@ -164,9 +164,10 @@ def cycles(image, rows, patches, samples, seed=0):
 def ours(paths, seed=0, direct_light="shot", method="walk"):
     import bpy
 
-    from addon import pipeline, scene_io
+    from addon import pipeline
+    from addon.blender_read.selection import read_selection
 
-    objects, notes = scene_io.read_selection(bpy.context)
+    objects, notes = read_selection(bpy.context)
     settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, exit_point="hit", method=method,
                                       seed=seed, threads=2, direct_light=direct_light)
     wall = time.perf_counter()

@@ -76,9 +76,11 @@ def traced_main(argv, out_path):
     marks = Marks()
     import bpy  # noqa: F401
 
-    import addon.__main__ as cli
-    from addon import pipeline, scene_io
+    from addon import pipeline
+    from addon.blender_read import selection
+    from addon.cli import preview, run, scenes
     from addon.core import solver
+    from addon.ui import operators
 
     marks.mark("bpy imported")
 
@@ -96,19 +98,20 @@ def traced_main(argv, out_path):
 
         setattr(owner, name, wrapped)
 
-    wrap(cli, "build_sample_scene", "scene built in bpy")
+    wrap(scenes, "build_sample_scene", "scene built in bpy")
     wrap(pipeline, "estimate", "estimate (meshing, scene, calibration)")
-    wrap(scene_io, "read_selection", "objects read")
+    wrap(selection, "read_selection", "objects read")
+    wrap(operators, "read_selection", "objects read")
     wrap(pipeline, "make_patches", "patches meshed")
     wrap(pipeline, "scene_and_notes", "core scene")
     wrap(solver, "WalkTables", "tables and BVH")
     wrap(pipeline, "solve", "solve")
-    wrap(scene_io, "write_results", "colours written")
-    wrap(cli, "release_solve_memory", "solve's memory released")
-    wrap(cli, "_auto_exposure", "exposure read")
-    wrap(cli, "preview_settings", "preview set up")
-    wrap(cli, "render_preview", "preview rendered")
-    status = cli.main(argv)
+    wrap(operators, "write_results", "colours written")
+    wrap(run, "release_solve_memory", "solve's memory released")
+    wrap(preview, "auto_exposure", "exposure read")
+    wrap(preview, "preview_settings", "preview set up")
+    wrap(preview, "render_preview", "preview rendered")
+    status = run.main(argv)
     marks.mark("saved (main returned)")
     Path(out_path).write_text(json.dumps({"status": status, "marks": marks.entries, "can_reset": marks.can_reset}))
     return status

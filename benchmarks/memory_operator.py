@@ -7,7 +7,7 @@
 Each measurement runs in a fresh process that imports ``bpy`` (Blender as a Python module,
 headless), registers the extension, builds the room in Blender, selects it and runs
 ``bpy.ops.radiosity.solve()``: the operator's synchronous mode (``execute``: ``SolveJob.run`` on
-the calling thread, then ``scene_io.write_results``), with the panel's settings (error target,
+the calling thread, then ``write_results``), with the panel's settings (error target,
 measured stop rule, both colour outputs, threads automatic). The stages are timed by wrapping
 the functions the operator calls (``read_selection``, ``make_patches``, ``scene_and_notes``, the
 solve's ``WalkTables``, which builds the Embree scene, ``solve``, ``run_solve`` and
@@ -140,7 +140,11 @@ def child(layout, n, target_error, method, use_tracemalloc):
     import bpy
 
     import addon
-    from addon import live_view, operators, pipeline, scene_io, worker
+    from addon import pipeline
+    from addon.blender_read.selection import read_selection
+    from addon.blender_write.results import is_result_object, write_results
+    from addon.bpy_free import worker
+    from addon.ui import live_view, operators
     from addon.core import solver
 
     mark("bpy imported")
@@ -163,7 +167,7 @@ def child(layout, n, target_error, method, use_tracemalloc):
             return result
         return wrapped
 
-    operators.scene_io.read_selection = after("objects read", scene_io.read_selection)
+    operators.read_selection = after("objects read", read_selection)
     pipeline.make_patches = after("patches meshed", pipeline.make_patches)
     pipeline.scene_and_notes = after("scene arrays", pipeline.scene_and_notes)
     solver.WalkTables = after("tables and BVH", solver.WalkTables)
@@ -172,13 +176,11 @@ def child(layout, n, target_error, method, use_tracemalloc):
     worker.SolveJob.run = after("colours computed", worker.SolveJob.run)
     live = {"version": None, "arrays": None, "bytes": 0}
 
-    write = scene_io.write_results
-
-    def write_results(*args, **kwargs):
+    def write_without_live_view(*args, **kwargs):
         live["arrays"] = None  # the modal run removes its live view before writing (operators._cleanup)
-        return write(*args, **kwargs)
+        return write_results(*args, **kwargs)
 
-    operators.scene_io.write_results = after("colours written", write_results)
+    operators.write_results = after("colours written", write_without_live_view)
 
     def draw_live(job):
         """What the live view's draw handler makes, after every batch (a window-less stand-in)."""
@@ -200,12 +202,12 @@ def child(layout, n, target_error, method, use_tracemalloc):
     out["patches"] = int(radiosity.last_patches)
     out["paths"] = int(radiosity.last_paths)
     out["rays"] = int(radiosity.last_rays)
-    out["source_faces"] = sum(len(o.data.polygons) for o in bpy.data.objects if not scene_io.is_result_object(o))
-    out["result_corners"] = sum(len(o.data.loops) for o in bpy.data.objects if scene_io.is_result_object(o))
+    out["source_faces"] = sum(len(o.data.polygons) for o in bpy.data.objects if not is_result_object(o))
+    out["result_corners"] = sum(len(o.data.loops) for o in bpy.data.objects if is_result_object(o))
     # Release every array of ours: the live view's, the geometry cache, the operator's job
     # (Blender keeps the last operator, and so its job, for the redo panel).
     live["arrays"] = None
-    from addon import patches
+    from addon.bpy_free import patches
 
     patches._GEOMETRY_CACHE.clear()
     pipeline.RAY_RATES.clear()

@@ -90,11 +90,12 @@ def settings_for(error, patch_size, seed=0):
 def estimates(case):
     import bpy
 
-    from addon import pipeline, scene_io
+    from addon import pipeline
+    from addon.blender_read.selection import read_selection
 
     name, scene, error, patch_size = case
     build(scene)
-    objects, _ = scene_io.read_selection(bpy.context)
+    objects, _ = read_selection(bpy.context)
     out = []
     for seed in SEEDS:
         started = time.perf_counter()

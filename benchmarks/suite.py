@@ -203,9 +203,10 @@ def ours(paths, side, seed=0):
     """(B (P,3) in face order, its variance, wall seconds, sources) from the operator's pipeline."""
     import bpy
 
-    from addon import pipeline, scene_io
+    from addon import pipeline
+    from addon.blender_read.selection import read_selection
 
-    objects, _ = scene_io.read_selection(bpy.context)
+    objects, _ = read_selection(bpy.context)
     settings = pipeline.SolveSettings(paths=paths, patch_size=1e6, seed=seed, threads=2, exit_point="hit", **SIDES[side])
     wall = time.perf_counter()
     out = pipeline.run_solve(objects, settings)
@@ -224,16 +225,17 @@ def direct_only(paths, chunks=32):
     import bpy
     from concurrent.futures import ThreadPoolExecutor
 
-    from addon import patches as patch_making
-    from addon import scene_io
+    from addon.bpy_free import patches as patch_making
+    from addon.bpy_free.scene_notes import scene_and_notes
+    from addon.blender_read.selection import read_selection
     from addon.core.first_shot import Gathering, gather_direct, pilot_irradiance
     from addon.core.tables import WalkTables
     from addon.core.two_way import direct_samples
     from addon.core.walk import FreeTurn
 
-    objects, _ = scene_io.read_selection(bpy.context)
+    objects, _ = read_selection(bpy.context)
     patches = patch_making.make_patches(objects, 1e6)
-    scene, _ = patch_making.scene_and_notes(patches)
+    scene, _ = scene_and_notes(patches)
     tables = WalkTables(scene, "finite", 1e-3, "hit").with_turn(FreeTurn())  # (as the two-way iteration gathers: walk.takes_turns)
     gathering = Gathering(scene, direct_samples(math.ceil(paths / chunks), scene))
     with tables.numpy_turn:  # (the samples allotted as a solve allots them: half by a pilot's light)

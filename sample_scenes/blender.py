@@ -8,7 +8,7 @@
 One object per part, one quad per patch (the patch's own corners, same winding, so Blender's
 face normals are the patch normals), and one Principled BSDF material per distinct
 (reflectivity, emission): Base Color = reflectivity, Emission Color x Emission Strength =
-emittance -- how the extension reads materials back (``addon/scene_io.py``). Unlike
+emittance -- how the extension reads materials back (``addon/blender_read/materials.py``). Unlike
 ``python -m addon --scene NAME`` this takes any variant, not only registry names.
 """
 from __future__ import annotations

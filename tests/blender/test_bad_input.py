@@ -12,7 +12,11 @@ import numpy as np
 import pytest
 
 import addon
-from addon import estimate, images, patches, pipeline, scene_io, worker
+from addon import estimate, pipeline
+from addon.blender_read import SceneError, images, objects as object_reading
+from addon.blender_read.materials import material_colours
+from addon.blender_read.selection import MAX_REFLECTIVITY, read_selection
+from addon.bpy_free import patches, worker
 
 from .conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
 from .test_extension import _drive, _modal_operator, _snapshot, configure
@@ -112,16 +116,16 @@ def test_white_base_colour_is_refused_with_the_reason_or_clamped_on_request(blen
         r"random walk end in a closed room.*'Clamp bright colours'")
     # Opt in: clamped to 0.99, solved, and said so.
     blender.scene.radiosity.clamp_reflectivity = True
-    objects, notes = scene_io.read_selection(blender)
+    objects, notes = read_selection(blender)
     room = next(o for o in objects if o.name == "Room")
-    assert room.face_reflectivity.max() == scene_io.MAX_REFLECTIVITY
+    assert room.face_reflectivity.max() == MAX_REFLECTIVITY
     state, reports = _run_sync(blender)
     assert state == {"FINISHED"}
     assert any(kind == "WARNING" and "'White' above 0.99 were clamped to 0.99" in text for kind, text in reports)
     # Below 1 nothing is changed, clamp or not: 0.995 stays 0.995 (slow, but what was asked).
     blender.scene.radiosity.clamp_reflectivity = False
     white.default_value = (0.995, 0.995, 0.995, 1.0)
-    objects, notes = scene_io.read_selection(blender)
+    objects, notes = read_selection(blender)
     room = next(o for o in objects if o.name == "Room")
     np.testing.assert_allclose(room.face_reflectivity.max(), 0.995, rtol=1e-6)
     assert not any("clamp" in n for n in notes)
@@ -146,14 +150,14 @@ def test_image_texture_uses_the_average_linear_colour_and_says_so(blender):
     tex = tree.nodes.new("ShaderNodeTexImage")
     tex.image = image
     tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
-    R, E, notes = scene_io.material_colours(m)
+    R, E, notes = material_colours(m)
     np.testing.assert_allclose(R, expected, rtol=1e-9)
     assert 0.2 < R[0] < 0.4  # linear, not the sRGB mean 0.5
     assert any("image 'Paint'" in n and "average colour" in n for n in notes)
     # A procedural texture has no known average: the socket's own colour, and a note saying so.
     noise = tree.nodes.new("ShaderNodeTexNoise")
     tree.links.new(noise.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
-    R, E, notes = scene_io.material_colours(m)
+    R, E, notes = material_colours(m)
     np.testing.assert_allclose(R, 0.1, rtol=1e-6)
     assert any("driven by 'Noise Texture'" in n and "socket's own colour" in n for n in notes)
     # An image without pixels (missing file): the socket's colour, said so.
@@ -163,18 +167,18 @@ def test_image_texture_uses_the_average_linear_colour_and_says_so(blender):
     missing.reload()
     tex.image = missing
     tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
-    R, E, notes = scene_io.material_colours(m)
+    R, E, notes = material_colours(m)
     np.testing.assert_allclose(R, 0.1, rtol=1e-6)
     assert any("no pixels" in n for n in notes)
     # The same image driving the emission colour: the light is unknown, refused by name (a
     # white emitter of the socket's colour was solved). At strength 0 it gives no light: no error.
     tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Emission Color"])
     tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 0.0
-    scene_io.material_colours(m)
+    material_colours(m)
     tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 5.0
-    with pytest.raises(scene_io.SceneError, match=r"^material 'Painted': its 'Emission Color' comes from image 'Gone', "
+    with pytest.raises(SceneError, match=r"^material 'Painted': its 'Emission Color' comes from image 'Gone', "
                                                   r"which has no pixels \(file not found: .*no_such_file.png\)"):
-        scene_io.material_colours(m)
+        material_colours(m)
     glow = bpy.data.materials.new("Glow")
     glow.node_tree.nodes.clear()
     emission = glow.node_tree.nodes.new("ShaderNodeEmission")
@@ -183,8 +187,8 @@ def test_image_texture_uses_the_average_linear_colour_and_says_so(blender):
     glow_image = glow.node_tree.nodes.new("ShaderNodeTexImage")
     glow_image.image = missing
     glow.node_tree.links.new(glow_image.outputs["Color"], emission.inputs["Color"])
-    with pytest.raises(scene_io.SceneError, match=r"^material 'Glow': its 'Color' comes from image 'Gone'"):
-        scene_io.material_colours(glow)
+    with pytest.raises(SceneError, match=r"^material 'Glow': its 'Color' comes from image 'Gone'"):
+        material_colours(glow)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -226,7 +230,7 @@ def test_a_target_not_reached_at_the_path_cap_is_said(blender):
     """A run whose measured error is still above the target when it reaches its path cap says so
     in a warning with the error it reached (the operator's reports after writing, from the
     run's statistics); a run that met its target does not."""
-    from addon import operators
+    from addon.ui import operators
 
     build_test_scene()
     configure(blender)
@@ -299,7 +303,7 @@ def test_new_file_while_solving_stops_the_worker_and_writes_nothing(blender, ble
     bpy.ops.wm.read_homefile(use_empty=True)  # load_pre: the worker is stopped
     assert not job.alive and job.cancelled and worker.running_job() is None
     if blender_cancels_the_modal:  # what Blender does to running modal operators on a load
-        from addon.operators import RADIOSITY_OT_solve
+        from addon.ui.operators import RADIOSITY_OT_solve
 
         RADIOSITY_OT_solve.cancel(op, bpy.context)
     else:  # a last timer tick reaches the operator: it must not write into the new file
@@ -338,7 +342,9 @@ def test_quitting_while_solving_stops_the_worker(tmp_path, hook):
         "    print('worker alive after the hooks:', job.alive, flush=True)\n"
         "atexit.register(report)  # registered first: runs last\n"
         "import bpy, addon, threading\n"
-        "from addon import patches, pipeline, scene_io, worker\n"
+        "from addon import pipeline\n"
+        "from addon.blender_read.selection import read_selection\n"
+        "from addon.bpy_free import patches, worker\n"
         f"if not {hook}:\n"
         "    threading._threading_atexits[:] = [f for f in threading._threading_atexits\n"
         "                                       if getattr(f, 'func', f) is not worker._stop_at_exit]\n"
@@ -348,7 +354,7 @@ def test_quitting_while_solving_stops_the_worker(tmp_path, hook):
         "v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)\n"
         "room = make_object('Room', v, f, [principled('Glow', (0.99999,) * 3, (1, 1, 1), 1.0)])\n"
         "room.select_set(True)\n"
-        "objects, _ = scene_io.read_selection(bpy.context)\n"
+        "objects, _ = read_selection(bpy.context)\n"
         "settings = bpy.context.scene.radiosity.solve_settings()\n"
         "settings.paths = 10**6\n"
         "settings.threads = 2\n"
@@ -423,7 +429,7 @@ def test_furnace_through_blender_with_ngons_modifiers_mirror_and_linked_duplicat
     _select("Room", "Block", "Block Twin")
     configure(blender)
     blender.scene.radiosity.patch_size = 0.5
-    objects, notes = scene_io.read_selection(blender)
+    objects, notes = read_selection(blender)
     settings = blender.scene.radiosity.solve_settings()
     settings.paths = 200_000
     settings.threads = 2
@@ -527,7 +533,7 @@ def test_switching_scene_while_solving_writes_into_the_scene_solved(blender):
 
 def test_the_load_handler_comes_and_goes_with_the_extension():
     import addon
-    from addon.operators import _on_load_pre
+    from addon.ui.operators import _on_load_pre
 
     addon.register()
     assert _on_load_pre in bpy.app.handlers.load_pre
@@ -563,7 +569,7 @@ def test_an_unforeseen_error_while_reading_is_a_report(blender, monkeypatch):
     def broken(*args, **kwargs):
         raise AttributeError("'NoneType' object has no attribute 'vertices'")
 
-    monkeypatch.setattr(scene_io, "read_object", broken)
+    monkeypatch.setattr(object_reading, "read_object", broken)
     _unchanged_after_error(blender, r"Reading the selection failed \(AttributeError: .*\); the scene is unchanged")
 
 
@@ -599,7 +605,7 @@ def test_collection_and_geometry_node_instances_are_realised(blender):
     scatter.modifiers.new("Scatter", "NODES").node_group = tree
     _select("Room", "Lamp", "Block", "Instancer", "Scatter")
     configure(blender)
-    objects, notes = scene_io.read_selection(blender)
+    objects, notes = read_selection(blender)
     names = sorted(o.name for o in objects)
     assert names == ["Block", "Instancer [0]", "Lamp", "Room", "Scatter [0]", "Scatter [1]", "Scatter [2]",
                      "Scatter [3]"], names
@@ -714,7 +720,7 @@ def test_path_and_ray_counts_beyond_32_bits_are_stored_exactly(blender, monkeypa
 def test_a_failure_after_writing_keeps_the_results_and_finishes(blender, monkeypatch):
     """Whatever goes wrong once the results are written (statistics, reports), the operator
     finishes -- with its undo step -- and says so, instead of raising over a changed scene."""
-    from addon import operators
+    from addon.ui import operators
 
     build_test_scene()
     configure(blender)
@@ -744,7 +750,7 @@ def _mixed_objects(context):
     for o in bpy.data.objects:
         o.select_set(True)
     assert concave.select_get()
-    objects, _ = scene_io.read_selection(context)
+    objects, _ = read_selection(context)
     assert {len(o.face_sizes) for o in objects} >= {1, 9}
     return objects
 

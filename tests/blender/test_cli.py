@@ -180,14 +180,14 @@ def test_cli_names_and_defaults_are_the_panels():
 
     import addon
     from addon import options
-    from addon.__main__ import _checked, _parser
+    from addon.cli.arguments import checked, parser
 
-    args = _checked(_parser().parse_args(["--colours", "vertex", "--sampling", "STRATIFIED"]))
+    args = checked(parser().parse_args(["--colours", "vertex", "--sampling", "STRATIFIED"]))
     assert args.output == "VERTEX" and args.sampling == "stratified"
-    defaults = _parser().parse_args([])
+    defaults = parser().parse_args([])
     addon.register()
     try:
-        from addon.properties import RadiositySettings
+        from addon.ui.properties import RadiositySettings
 
         props = RadiositySettings.bl_rna.properties
         for option in options.SETTINGS:
@@ -311,7 +311,8 @@ def test_progress_line_and_summary_speak_of_the_target():
     the summary the error reached as a share of the target."""
     from types import SimpleNamespace
 
-    from addon.__main__ import progress_text, summary
+    from addon.cli.progress import progress_text
+    from addon.cli.run import summary
 
     class Job:
         prediction = SimpleNamespace(paths=1_000_000, mean_reflected_radiosity=2.0)
@@ -366,7 +367,8 @@ def _curvy_scene():
 def test_cli_reads_curves_text_surfaces_metaballs_and_modifiers(blender, tmp_path):
     import bpy
 
-    from addon.__main__ import main, world_bounds
+    from addon.__main__ import main
+    from addon.cli.preview import world_bounds
 
     lo, hi = _curvy_scene()
     sources = [o for o in bpy.data.objects if o.name not in ("Sky", "Floor")]

@@ -69,7 +69,7 @@ def test_a_truncated_save_keeps_the_earlier_file_and_says_so(tmp_path):
 def test_a_preview_cut_short_is_not_taken_for_an_image(tmp_path):
     import zlib
 
-    from addon.__main__ import check_png
+    from addon.cli.saving import check_png
 
     def chunk(kind, data):
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))

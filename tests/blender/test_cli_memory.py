@@ -61,7 +61,7 @@ def _solve(blender, output="BOTH"):
 
 
 def test_the_preview_renders_the_results_without_emission_sampling_and_restores_it(blender):
-    from addon.__main__ import preview_settings
+    from addon.cli.preview import preview_settings
 
     _solve(blender)
     materials = {slot.material for o in result_objects() for slot in o.material_slots}
@@ -76,8 +76,8 @@ def test_the_preview_renders_the_results_without_emission_sampling_and_restores_
 
 @pytest.mark.parametrize("output", ["BOTH", "FACE", "VERTEX"])
 def test_the_preview_exposure_from_the_arrays_is_the_one_read_back(blender, output):
-    from addon import operators, scene_io
-    from addon.__main__ import _auto_exposure, preview_exposure
+    from addon.ui import operators
+    from addon.cli.preview import auto_exposure, preview_exposure
 
     exposures = []
     operators.OUTPUT_LISTENER = lambda out: exposures.append(preview_exposure(out, output))
@@ -86,11 +86,11 @@ def test_the_preview_exposure_from_the_arrays_is_the_one_read_back(blender, outp
     finally:
         operators.OUTPUT_LISTENER = None
     assert len(exposures) == 1 and exposures[0] != 0.0
-    assert exposures[0] == _auto_exposure(scene_io)  # exactly: the same float32 values, the same median
+    assert exposures[0] == auto_exposure()  # exactly: the same float32 values, the same median
 
 
 def test_the_command_line_lets_go_of_the_solve_before_saving(blender, tmp_path):
-    from addon import patches
+    from addon.bpy_free import patches
     from addon.__main__ import main
 
     build_test_scene()

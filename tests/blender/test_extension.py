@@ -8,7 +8,11 @@ import pytest
 
 import addon
 from addon.options import METHOD, STOP_RULE
-from addon import estimate, panel, patches, pipeline, scene_io, worker
+from addon import estimate, pipeline
+from addon.blender_read.materials import material_colours
+from addon.blender_read.selection import read_selection
+from addon.bpy_free import patches, worker
+from addon.ui import panel
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
 from addon.core.meshing import concatenate, mesh_patches, point_average, triangle_areas
 
@@ -42,7 +46,7 @@ def _trace():
             ops.append(op)
         except KeyError:
             pass
-    from addon import operators, properties
+    from addon.ui import operators, properties
 
     registered = [c.__name__ for c in (*properties.classes, *operators.classes, *panel.classes) if c.is_registered]
     return {
@@ -191,7 +195,7 @@ def test_two_way_iteration_reaches_the_core_and_the_estimate_plans_for_it(blende
         expected = np.maximum(ref.radiosity[combined.patch_slice(k)], 0).astype(np.float32)  # written at least 0
         np.testing.assert_array_equal(colours[:, :3], np.repeat(expected, meshes[k].face_sizes, axis=0))
     # "Automatic" is the core's method="auto": the estimate names what it takes here, and says so.
-    from addon.panel import estimate_lines
+    from addon.ui.panel import estimate_lines
 
     s.method = "auto"
     value = estimate.compute(blender)
@@ -310,7 +314,7 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     tree.links.new(tex.outputs["Color"], node.inputs["Base Color"])
     tex.inputs["Color1"].default_value = (0.9, 0.5, 0.1, 1)
     tex.inputs["Color2"].default_value = (0.1, 0.3, 0.5, 1)
-    R, E, notes = scene_io.material_colours(m)
+    R, E, notes = material_colours(m)
     np.testing.assert_allclose(R, [0.5, 0.4, 0.3], rtol=1e-6)  # the checker's average
     assert any("Base Color" in n and "average" in n for n in notes)
     d = bpy.data.materials.new("Diffuse")
@@ -318,7 +322,7 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     diffuse = d.node_tree.nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = (0.1, 0.5, 0.2, 1)
     d.node_tree.links.new(diffuse.outputs["BSDF"], d.node_tree.nodes["Material Output"].inputs["Surface"])
-    R, E, notes = scene_io.material_colours(d)
+    R, E, notes = material_colours(d)
     np.testing.assert_allclose(R, [0.1, 0.5, 0.2], rtol=1e-6)
     np.testing.assert_array_equal(E, 0)
     e = bpy.data.materials.new("Lamp")
@@ -327,16 +331,16 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     em.inputs["Color"].default_value = (1, 0.5, 0.25, 1)
     em.inputs["Strength"].default_value = 8.0
     e.node_tree.links.new(em.outputs["Emission"], e.node_tree.nodes["Material Output"].inputs["Surface"])
-    R, E, _ = scene_io.material_colours(e)
+    R, E, _ = material_colours(e)
     np.testing.assert_allclose(E, [8, 4, 2])
     np.testing.assert_array_equal(R, 0)
-    R, E, _ = scene_io.material_colours(None)
+    R, E, _ = material_colours(None)
     np.testing.assert_allclose(R, 0.8)
     # No shader the reader knows (here: nothing linked to the output): the viewport colour.
     v = bpy.data.materials.new("Viewport only")
     v.node_tree.nodes.remove(v.node_tree.nodes["Principled BSDF"])
     v.diffuse_color = (0.3, 0.6, 0.1, 1)
-    R, E, notes = scene_io.material_colours(v)
+    R, E, notes = material_colours(v)
     np.testing.assert_allclose(R, [0.3, 0.6, 0.1], rtol=1e-6)
     np.testing.assert_array_equal(E, 0)
     assert any("viewport colour" in n for n in notes)
@@ -545,7 +549,7 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
     objects, _ = (None, None)
     for name in ("Room", "Lamp", "Block"):
         bpy.data.objects[name].select_set(True)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     job = worker.SolveJob(objects, blender.scene.radiosity.solve_settings())
     scene = patches.make_patches(objects, PATCH_SIZE).patch_scene()
     prediction, _ = pipeline.prediction_for(scene, job.settings)
@@ -576,7 +580,7 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
 def test_worker_thread_cancels_between_batches(blender):
     build_test_scene()
     configure(blender)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     settings = blender.scene.radiosity.solve_settings()
     settings.paths = 50_000_000  # far more than the test waits for
     job = worker.SolveJob(objects, settings).start()
@@ -597,7 +601,7 @@ def test_worker_thread_cancels_between_batches(blender):
 def test_worker_reports_core_errors_as_messages(blender):
     build_test_scene()
     configure(blender)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     settings = blender.scene.radiosity.solve_settings()
     settings.estimator = "biased_infinite"
     settings.threshold = 2.0  # outside (0, 1): the core refuses
@@ -618,7 +622,7 @@ class FakeEvent:
 
 
 def _modal_operator():
-    from addon.operators import RADIOSITY_OT_solve as Op
+    from addon.ui.operators import RADIOSITY_OT_solve as Op
 
     class ModalStandIn:
         _job = None
@@ -736,8 +740,8 @@ def test_estimate_predicts_time_from_this_machines_ray_rate_and_warns_when_slow(
     """The estimate's time is the expected rays over a ray rate measured on this scene (a pilot of
     the run), with the fixed costs; past a minute it warns, naming the patch size and the target;
     every line of the panel's estimate has a tooltip."""
-    from addon import operators
-    from addon.panel import estimate_lines
+    from addon.ui import operators
+    from addon.ui.panel import estimate_lines
 
     build_test_scene()
     configure(blender)
@@ -758,11 +762,11 @@ def test_live_view_data_refines_while_solving_and_writes_nothing(blender):
     """Headless: a job with the live view on keeps its result so far (the
     data the 3D view draws), refreshed while it solves and ending near the final result; the
     triangles and colours drawn cover every patch; nothing is written into the scene."""
-    from addon import live_view
+    from addon.ui import live_view
 
     build_test_scene()
     configure(blender)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     settings = blender.scene.radiosity.solve_settings()
     settings.relative_rms = 0.02
     job = worker.SolveJob(objects, settings)

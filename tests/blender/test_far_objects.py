@@ -29,8 +29,9 @@ def test_a_far_cube_leaves_a_lamp_lit_room_as_it_is(blender, distance):
     (Before, rays left the room's surfaces 1e-5 of the scene's diagonal off them, 10 cm at
     10 km: the room differed by 3.6% RMS; at 1,000 km float32 positions 6 cm apart were all the
     room had, and a note said so.)"""
-    from addon import patches as patch_making
-    from addon import scene_io
+    from addon.bpy_free import patches as patch_making
+    from addon.blender_read.selection import read_selection
+    from addon.bpy_free.scene_notes import scene_and_notes
 
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
     make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
@@ -43,8 +44,8 @@ def test_a_far_cube_leaves_a_lamp_lit_room_as_it_is(blender, distance):
     beside = _room_colours(blender)
     rms = np.sqrt(np.mean((beside / alone - 1) ** 2))
     assert rms < BAND
-    objects, _ = scene_io.read_selection(blender)
-    _, notes = patch_making.scene_and_notes(patch_making.make_patches(objects, 0.25))
+    objects, _ = read_selection(blender)
+    _, notes = scene_and_notes(patch_making.make_patches(objects, 0.25))
     assert not any("small beside" in n for n in notes), notes
 
 
@@ -54,8 +55,9 @@ def test_a_room_joined_to_a_1000_km_strip_says_so_and_does_not_blame_its_lamp(bl
     float32 positions (6 cm apart there), and none says the lamp's light reaches no face.
     (Before offsets of the patches' own size, the lamp's rays started 10 m off it, all of its
     light escaped, and the only note blamed the lamp.)"""
-    from addon import patches as patch_making
-    from addon import scene_io
+    from addon.bpy_free import patches as patch_making
+    from addon.bpy_free.scene_notes import scene_and_notes
+    from addon.blender_read.selection import read_selection
 
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
     make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
@@ -65,7 +67,7 @@ def test_a_room_joined_to_a_1000_km_strip_says_so_and_does_not_blame_its_lamp(bl
     strip_f = [[k, k + 1, 1002 + k, 1001 + k] for k in range(1000)]
     make_object("Strip", strip_v, strip_f).select_set(False)
     _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.97), energy=40.0)
-    objects, _ = scene_io.read_selection(blender)
-    _, notes = patch_making.scene_and_notes(patch_making.make_patches(objects, 0.25))
+    objects, _ = read_selection(blender)
+    _, notes = scene_and_notes(patch_making.make_patches(objects, 0.25))
     assert any("patches are small beside the scene's extent (1e+06 across)" in n for n in notes), notes
     assert not any(n.startswith("light 'Bulb'") for n in notes), notes

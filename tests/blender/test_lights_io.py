@@ -6,7 +6,8 @@ import bpy
 import numpy as np
 import pytest
 
-from addon import lights_io, scene_io
+from addon.blender_read import SceneError, lights as lights_io
+from addon.blender_read.selection import read_selection
 from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
 
 from .conftest import box_arrays, build_test_scene, make_object, principled, result_objects
@@ -118,7 +119,7 @@ def test_a_lamp_that_casts_no_shadow_lights_through_and_says_how(blender):
         faces = np.array([p.center for p in room.data.polygons])
         centre = (np.abs(faces[:, 2]) < 1e-6) & (np.abs(faces[:, 0] - 0.5) < 0.25) & (np.abs(faces[:, 1] - 0.5) < 0.25)
         face_colours = colours.reshape(-1, 4)[[p.loop_start for p in room.data.polygons], 0]
-        objects, _ = scene_io.read_selection(blender)
+        objects, _ = read_selection(blender)
         return face_colours[centre].mean(), pipeline.estimate(objects, s.solve_settings())["notes"]
 
     shadowed, _ = floor_centre()
@@ -204,7 +205,7 @@ def test_a_room_lit_by_a_lamp_alone_solves_and_a_bad_lamp_changes_nothing(blende
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
     make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
     _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.5), energy=40.0)
-    objects, notes = scene_io.read_selection(blender)
+    objects, notes = read_selection(blender)
     assert [type(light).__name__ for light in objects.lights] == ["PointLight"]
     s = blender.scene.radiosity
     s.target_error, s.patch_size, s.threads = 10.0, 0.25, 1
@@ -229,7 +230,7 @@ def test_the_sources_and_their_shares_are_listed(blender):
     build_test_scene()
     _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.5), energy=4.0)
     blender.scene.radiosity.patch_size, blender.scene.radiosity.threads = 0.25, 1
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     value = pipeline.estimate(objects, blender.scene.radiosity.solve_settings())
     # the lamp quad: 0.09 m^2 x mean(4, 3.5, 3) = 0.315; the bulb 4 x 4 pi / (4 pi^2) = 1.27
     bulb = 4.0 / math.pi
@@ -268,12 +269,12 @@ def test_the_rest_of_the_scene_blocks_and_reflects_without_results(blender):
         under = (points[:, 2] < 1e-3) & (points[:, 0] > 0.25) & (points[:, 0] < 0.45) & (points[:, 1] > 0.25) & (points[:, 1] < 0.45)
         return colours.reshape(-1, 4)[under, :3].mean()
 
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     value = pipeline.estimate(objects, s.solve_settings())
     assert value["objects"] == 2 and value["others"] == 1
     shadowed = floor_under_block()
     s.use_scene_objects = False
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     assert pipeline.estimate(objects, s.solve_settings())["others"] == 0
     lit = floor_under_block()
     assert shadowed < 0.5 * lit
@@ -313,7 +314,8 @@ def test_light_and_indirect_outputs_beside_the_radiosity(blender):
 def test_lights_that_cannot_light_the_selection_are_named(blender):
     """A lamp inside a closed box of its own, and a sun over a closed room: the estimate names
     them (nothing of their light reaches the front of a face)."""
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
+    from addon.bpy_free.scene_notes import scene_and_notes
 
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
     make_object("Room", room_v, room_f, [principled("White", (0.6, 0.6, 0.6))]).select_set(True)
@@ -321,9 +323,9 @@ def test_lights_that_cannot_light_the_selection_are_named(blender):
     make_object("Shell", shell_v, shell_f, [principled("Grey", (0.5, 0.5, 0.5))]).select_set(True)
     _lamp("POINT", "Trapped", location=(0.5, 0.5, 0.5), energy=10.0)
     _lamp("SUN", "Sun", location=(0, 0, 3), energy=2.0)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     made = patch_making.make_patches(objects, 0.25)
-    _, notes = patch_making.scene_and_notes(made)
+    _, notes = scene_and_notes(made)
     assert any(n.startswith("light 'Trapped': 100% of its light meets the back of faces; it sits inside") for n in notes), notes
     assert any(n.startswith("light 'Sun'") and "no light entered" in n for n in notes), notes
 
@@ -363,10 +365,10 @@ def test_an_image_texture_colours_each_patch_by_its_own_uv_footprint(blender):
     """Base colour from an image through the UV map: each patch takes the image's mean over
     its own part of UV space (left patches red, right ones blue), not one average for the whole
     material; a Mapping node's scale of 2 repeats the image, so every patch is half and half."""
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
 
     _textured_wall(blender)
-    objects, notes = scene_io.read_selection(blender)
+    objects, notes = read_selection(blender)
     wall = next(o for o in objects if o.name == "Wall")
     made = patch_making.make_patches([wall], 0.25)
     x = made.combined.vertices[made.combined.triangles].mean(axis=1)[:, 0]
@@ -384,7 +386,7 @@ def test_an_image_texture_colours_each_patch_by_its_own_uv_footprint(blender):
 
     addon.register()
     _textured_wall(bpy.context, mapping_scale=2.0)
-    objects, _ = scene_io.read_selection(bpy.context)
+    objects, _ = read_selection(bpy.context)
     wall = next(o for o in objects if o.name == "Wall")
     R2 = patch_making.make_patches([wall], 0.5).reflectivity
     np.testing.assert_allclose(R2, [[0.4, 0.0, 0.4]] * len(R2), atol=0.03)
@@ -392,10 +394,10 @@ def test_an_image_texture_colours_each_patch_by_its_own_uv_footprint(blender):
 
 def test_a_texture_too_bright_is_refused_or_clamped(blender):
     _textured_wall(blender, clamp_white=True)
-    with pytest.raises(scene_io.SceneError, match="image texture of material 'Painted' has pixels of 1"):
-        scene_io.read_selection(blender)
+    with pytest.raises(SceneError, match="image texture of material 'Painted' has pixels of 1"):
+        read_selection(blender)
     blender.scene.radiosity.clamp_reflectivity = True
-    objects, notes = scene_io.read_selection(blender)
+    objects, notes = read_selection(blender)
     assert any("pixels above 0.99 were clamped" in n for n in notes)
 
 
@@ -403,7 +405,7 @@ def test_a_colour_attribute_feeding_the_base_colour_is_averaged_per_patch(blende
     """A point colour attribute, red at x = 0 and blue at x = 1, drives the base colour: each
     patch takes the mean over its own footprint, the linear interpolation's value at its
     centre (red fading into blue across the wall), not one colour for the material."""
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
 
     material = principled("Painted", (0.5, 0.5, 0.5))
     tree = material.node_tree
@@ -418,7 +420,7 @@ def test_a_colour_attribute_feeding_the_base_colour_is_averaged_per_patch(blende
                         [principled("Glow", (0.5, 0.5, 0.5), (1, 1, 1), 2.0)])
     for o in (wall, panel):
         o.select_set(True)
-    objects, notes = scene_io.read_selection(blender)
+    objects, notes = read_selection(blender)
     made = patch_making.make_patches([next(o for o in objects if o.name == "Wall")], 0.25)
     x = made.combined.vertices[made.combined.triangles].mean(axis=1)[:, 0]
     centre_x = np.bincount(made.combined.triangle_patch, weights=x) / np.bincount(made.combined.triangle_patch)
@@ -430,7 +432,7 @@ def test_a_colour_attribute_feeding_the_base_colour_is_averaged_per_patch(blende
 def test_an_emission_texture_is_averaged_per_patch_times_its_strength(blender):
     """Emission colour from an image (left half white, right half black) at strength 3: the
     left patches emit 3, the right ones nothing (up to the half texel blended at the seam)."""
-    from addon import patches as patch_making
+    from addon.bpy_free import patches as patch_making
 
     image = bpy.data.images.new("Sign", 64, 4, float_buffer=True)
     pixels = np.zeros((4, 64, 4), np.float32)
@@ -446,7 +448,7 @@ def test_an_emission_texture_is_averaged_per_patch_times_its_strength(blender):
     sign.data.uv_layers.new(name="UVMap").data.foreach_set(
         "uv", np.array([(0, 0), (1, 0), (1, 1), (0, 1)], np.float32).ravel())
     sign.select_set(True)
-    objects, notes = scene_io.read_selection(blender)
+    objects, notes = read_selection(blender)
     made = patch_making.make_patches(objects, 0.25)
     x = made.combined.vertices[made.combined.triangles].mean(axis=1)[:, 0]
     centre_x = np.bincount(made.combined.triangle_patch, weights=x) / np.bincount(made.combined.triangle_patch)

@@ -5,7 +5,10 @@ their results are written patch by patch onto the right source faces."""
 import bpy
 import numpy as np
 
-from addon import patches, pipeline, scene_io, worker
+from addon import pipeline
+from addon.blender_read.selection import read_selection
+from addon.bpy_free import patches, worker
+from addon.bpy_free.cleaning import degenerate_area
 from addon.core import meshing
 
 from .conftest import make_object, mesh_arrays, read_colours, result_objects
@@ -29,7 +32,7 @@ def _nonplanar_scene(context):
     make_object("Bumpy", v, quads)  # facing up, towards the lamp
     for o in bpy.data.objects:
         o.select_set(True)
-    objects, _ = scene_io.read_selection(context)
+    objects, _ = read_selection(context)
     return {o.name: o for o in objects}
 
 
@@ -90,7 +93,7 @@ def test_nurbs_sphere_and_displaced_grid_solve_and_write_results(blender):
 
 def test_patch_count_follows_the_non_planar_rule(blender):
     objects = list(_nonplanar_scene(blender).values())
-    min_area = patches.degenerate_area(objects)
+    min_area = degenerate_area(objects)
     for size in (10.0, 0.2, 0.05):
         meshed = sum(
             meshing.mesh_patches(o.vertices, o.face_sizes, o.corner_verts, size, face_triangles=o.triangles,

@@ -8,8 +8,11 @@ import bpy
 import numpy as np
 import pytest
 
-from addon import patches, pipeline, scene_io, worker
-from addon.operators import RADIOSITY_OT_solve
+from addon import pipeline
+from addon.blender_write.results import MATERIAL_NAME, MATERIAL_PROPERTY, result_collection, write_colours
+from addon.blender_write import results as result_writing
+from addon.bpy_free import patches, worker
+from addon.ui.operators import RADIOSITY_OT_solve
 
 from .conftest import build_test_scene, read_colours, result_objects
 from .test_extension import _drive, _modal_operator, _snapshot, configure
@@ -20,7 +23,7 @@ def _results():
 
 
 def _ours(material):
-    return scene_io.MATERIAL_PROPERTY in material.keys()
+    return MATERIAL_PROPERTY in material.keys()
 
 
 def test_reload_then_rerun_replaces_only_the_results(blender, tmp_path):
@@ -86,7 +89,7 @@ def test_a_failed_write_leaves_the_previous_results_whole(blender, monkeypatch):
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     old = _results()
     objects, meshes = len(bpy.data.objects), len(bpy.data.meshes)
-    real = scene_io.write_colours
+    real = write_colours
     calls = {"n": 0}
 
     def fail_on_the_second(*args, **kwargs):
@@ -95,7 +98,7 @@ def test_a_failed_write_leaves_the_previous_results_whole(blender, monkeypatch):
             raise MemoryError("out of memory (simulated)")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(scene_io, "write_colours", fail_on_the_second)
+    monkeypatch.setattr(result_writing, "write_colours", fail_on_the_second)
     configure(blender, seed=42)
     with pytest.raises(RuntimeError, match=r"Writing the result failed, the scene is unchanged"):
         bpy.ops.radiosity.solve()
@@ -160,7 +163,7 @@ def test_undo_removes_the_results_and_redo_brings_them_back(blender):
     assert _results() == results and bpy.context.scene.radiosity.last_paths > 0
     objects, materials = _snapshot()
     assert objects == before[0]
-    assert {k: v for k, v in materials.items() if k != scene_io.MATERIAL_NAME} == before[1]
+    assert {k: v for k, v in materials.items() if k != MATERIAL_NAME} == before[1]
 
 
 def _collection_colours(collection):
@@ -172,7 +175,7 @@ def test_each_scene_keeps_its_own_results(blender):
     configure(blender)
     first = blender.scene
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
-    first_results = scene_io.result_collection(first, create=False)
+    first_results = result_collection(first, create=False)
     assert first_results.name == "Radiosity"
     kept = _collection_colours(first_results)
     # A second scene of the same file with objects of its own, solved there.
@@ -181,7 +184,7 @@ def test_each_scene_keeps_its_own_results(blender):
     build_test_scene()
     configure(bpy.context, seed=11)
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
-    second_results = scene_io.result_collection(second, create=False)
+    second_results = result_collection(second, create=False)
     assert second_results is not None and second_results != first_results
     assert len(second_results.objects) == 3
     assert first_results.name not in second.collection.children

@@ -6,7 +6,9 @@ import math
 import bpy
 import pytest
 
-from addon import estimate, operators, pipeline, scene_io
+from addon import estimate, pipeline
+from addon.blender_read.selection import read_selection
+from addon.ui import operators
 
 from .conftest import box_arrays, build_test_scene, make_object, principled
 
@@ -20,7 +22,7 @@ def test_the_estimate_rays_are_within_2x_of_the_runs(blender, patch_size, error)
     s = blender.scene.radiosity
     s.patch_size, s.target_error, s.threads, s.seed = patch_size, error, 2, 0
     value = estimate.compute(blender)
-    objects, _ = scene_io.read_selection(blender)
+    objects, _ = read_selection(blender)
     out = pipeline.run_solve(objects, s.solve_settings())
     assert value["method"] == out.result.method == "two_way" and out.result.stopped == "target"
     assert 0.5 <= value["rays"] / out.result.rays <= 2.0, (value["rays"], out.result.rays)

@@ -1,9 +1,10 @@
 """The extension's patch making reuses meshing, geometry tables and the Embree scene when only the
 materials (or estimator, target, seed) change: the panel's estimate and a re-run neither
-re-mesh nor rebuild. (addon.patches imports no bpy.)"""
+re-mesh nor rebuild. (addon.bpy_free.patches imports no bpy.)"""
 import numpy as np
 
-from addon import patches
+from addon.bpy_free import patches
+from addon.bpy_free.scene_notes import scene_and_notes
 
 
 def box_object(name="Box", size=1.0, reflectivity=0.5):
@@ -74,8 +75,8 @@ def test_an_emitter_facing_away_from_everything_is_named():
     """An emissive plane facing up above the other objects sends all its
     light out of the scene: a note names it; facing down, no note."""
     up = patches.make_patches(_plane_over_box(normal_up=True), patch_size=0.25)
-    _, notes = patches.scene_and_notes(up)
+    _, notes = scene_and_notes(up)
     assert any(n.startswith("'Lamp' sends 100% of its light out of the scene") for n in notes), notes
     down = patches.make_patches(_plane_over_box(normal_up=False), patch_size=0.25)
-    _, notes = patches.scene_and_notes(down)
+    _, notes = scene_and_notes(down)
     assert not any("out of the scene" in n for n in notes), notes

@@ -100,9 +100,9 @@ LIVE_VIEW_BYTES = 48     # a triangle's three corners: float32 positions, 8-bit 
 
 def _room_objects(n, side=4.0):
     """Six walls of n x n quads facing into a room, and an emitting quad under the ceiling, as
-    scene_io reads them (ObjectArrays: int32 indices, one material a broadcast row; one face,
+    blender_read reads them (ObjectArrays: int32 indices, one material a broadcast row; one face,
     one patch)."""
-    from addon.patches import ObjectArrays
+    from addon.bpy_free.patches import ObjectArrays
 
     L = side
     walls = [((0, 0, 0), (L, 0, 0), (0, L, 0)), ((0, 0, L), (0, L, 0), (L, 0, 0)), ((0, 0, 0), (0, L, 0), (0, 0, L)),
@@ -163,7 +163,9 @@ def test_the_operator_arrays_stay_within_a_per_patch_budget(scaled_blocks):
     """Meshing, the core's scene (with the diagnostics' rays) and the walk's tables of a room of
     98,788 patches, each within its budget per patch (tracemalloc), and the live view's arrays
     48 bytes a triangle."""
-    from addon import live_view, patches
+    from addon.bpy_free import patches
+    from addon.bpy_free.scene_notes import scene_and_notes
+    from addon.ui import live_view
     from addon.core import solve
     from addon.core.tables import WalkTables
 
@@ -172,7 +174,7 @@ def test_the_operator_arrays_stay_within_a_per_patch_budget(scaled_blocks):
     try:
         made, mesh_held, mesh_peak = _traced(lambda: patches.make_patches(objects, patch_size))
         del objects
-        (scene, _), scene_held, scene_peak = _traced(lambda: patches.scene_and_notes(made))
+        (scene, _), scene_held, scene_peak = _traced(lambda: scene_and_notes(made))
         _, _, tables_peak = _traced(lambda: WalkTables(scene, "finite", 1e-3, "random"))
         P = scene.patch_count
         assert P == PATCHES

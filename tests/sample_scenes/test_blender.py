@@ -47,12 +47,12 @@ def test_to_blender_round_trip(empty_scene, sample):
 
 def test_extension_reads_back_the_same_scene(empty_scene):
     """Through the extension's own reader and patch meshing: same patches, areas and materials."""
-    scene_io = pytest.importorskip("addon.scene_io")
-    patch_making = pytest.importorskip("addon.patches")
+    read_selection = pytest.importorskip("addon.blender_read.selection").read_selection
+    patch_making = pytest.importorskip("addon.bpy_free.patches")
     sample = cornell_box.build(divisions=10)
     for obj in to_blender(sample):
         obj.select_set(True)
-    objects, notes = scene_io.read_selection(bpy.context)
+    objects, notes = read_selection(bpy.context)
     patches = patch_making.make_patches(objects, patch_size=10.0)  # larger than any face: no subdivision
     scene = patches.patch_scene()
     assert scene.patch_count == sample.patch_count

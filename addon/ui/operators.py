@@ -6,7 +6,11 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import live_view, pipeline, scene_io, worker
+from . import live_view
+from .. import pipeline
+from ..blender_read.selection import read_selection
+from ..blender_write.results import write_results
+from ..bpy_free import worker
 
 TIMER_SECONDS = 0.1
 #: The last error of ``radiosity.solve`` (with quiet_errors, its only record).
@@ -142,7 +146,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
     def _start_job(self, context, threaded):
         """Read the scene and start the job; returns a result set on failure."""
         try:
-            objects, notes = scene_io.read_selection(context)
+            objects, notes = read_selection(context)
         except ValueError as exc:
             self._error(str(exc))
             return {"CANCELLED"}
@@ -219,7 +223,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             stats = _run_stats(output)
             if OUTPUT_LISTENER is not None:
                 OUTPUT_LISTENER(output)
-            scene_io.write_results(context, output, job.settings.output, scene=scene)
+            write_results(context, output, job.settings.output, scene=scene)
         except Exception as exc:  # noqa: BLE001 - report, never a traceback
             import traceback
 

@@ -1,6 +1,6 @@
 """The solve on a thread: a running job the main thread polls, cancel, and the exit hooks.
 
-The main thread reads the Blender scene into arrays (``scene_io``), a :class:`SolveJob` runs
+The main thread reads the Blender scene into arrays (``blender_read``), a :class:`SolveJob` runs
 ``pipeline.run_solve`` on a thread, and the main thread writes the result. No bpy here.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import traceback
 import numpy as np
 
 from . import trim
-from .pipeline import SolveOutput, SolveSettings, run_solve
+from ..pipeline import SolveOutput, SolveSettings, run_solve
 
 
 class SolveJob:

@@ -6,10 +6,11 @@ import math
 
 import bpy
 
-from . import estimate, worker
-from .pipeline import duration_text
+from .. import estimate
+from ..bpy_free import worker
+from ..pipeline import duration_text
 
-from .options import METHOD
+from ..options import METHOD
 
 METHOD_LABELS = {identifier: label for identifier, label, _ in METHOD.items}
 

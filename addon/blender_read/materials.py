@@ -1,0 +1,279 @@
+"""Materials read into colours: a surface shader's base colour and emission, and the image
+textures and colour attributes read per patch instead of a material's one value (bpy).
+
+Units: emission = emission colour x strength, reflectivity = base colour, so the radiosity
+written is what Cycles' COMBINED bake gives for the same Lambertian scene (a closed box emitting
+S with albedo R gives S / (1 - R)).
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from . import SceneError
+from .images import image_average, linear_pixels
+
+DEFAULT_GREY = (0.8, 0.8, 0.8)  # an object without a material
+
+
+def _text(colour):
+    return "(" + ", ".join(f"{c:.3g}" for c in colour) + ")"
+
+
+def _linked_colour(socket, node, name, notes, what, emitting=False):
+    """The colour of a socket driven by a link: an image's or a checker's average when that is
+    known, else the socket's own default; always with a note saying which. An emission colour
+    (``emitting``) from an image without pixels is a SceneError: no made-up light is solved."""
+    default = np.array(socket.default_value[:3], dtype=np.float64)
+    source = socket.links[0].from_node
+    while source.bl_idname == "NodeReroute" and source.inputs[0].is_linked:
+        source = source.inputs[0].links[0].from_node
+    if source.bl_idname == "ShaderNodeTexImage" and source.image is not None:
+        average = image_average(source.image)
+        if average is not None:
+            notes.append(f"{what}: '{name}' comes from image '{source.image.name}'; "
+                         f"its average colour {_text(average)} was used")
+            return average
+        if emitting:
+            path = bpy.path.abspath(source.image.filepath) if source.image.filepath else ""
+            raise SceneError(f"{what}: its '{name}' comes from image '{source.image.name}', which has no pixels "
+                             f"({f'file not found: {path}' if path else 'no file'}); its light is unknown: find the "
+                             "file (File > External Data) or unlink the image")
+        notes.append(f"{what}: '{name}' comes from image '{source.image.name}', which has no pixels "
+                     f"(missing file?); the socket's colour {_text(default)} was used")
+        return default
+    if source.bl_idname == "ShaderNodeTexChecker":
+        a, b = source.inputs["Color1"], source.inputs["Color2"]
+        if not a.is_linked and not b.is_linked:
+            average = 0.5 * (np.array(a.default_value[:3]) + np.array(b.default_value[:3]))
+            notes.append(f"{what}: '{name}' comes from checker texture '{source.name}'; "
+                         f"the average of its two colours {_text(average)} was used")
+            return average
+    if source.bl_idname == "ShaderNodeRGB":
+        return np.array(source.outputs[0].default_value[:3], dtype=np.float64)
+    notes.append(f"{what}: '{name}' of '{node.name}' is driven by '{source.name}', whose average "
+                 f"is not known here; the socket's own colour {_text(default)} was used")
+    return default
+
+
+def texture_of(socket):
+    """(pixels, affine (2,3), UV map name or '') of an image texture driving ``socket`` through
+    a UV map and at most one affine Mapping node, or None where it is anything else."""
+    if not socket.is_linked:
+        return None
+    node = socket.links[0].from_node
+    while node.bl_idname == "NodeReroute" and node.inputs[0].is_linked:
+        node = node.inputs[0].links[0].from_node
+    if node.bl_idname != "ShaderNodeTexImage" or node.image is None or node.projection != "FLAT":
+        return None
+    affine, uv_name = np.eye(2, 3), ""
+    vector = node.inputs["Vector"]
+    if vector.is_linked:
+        link = vector.links[0]
+        if link.from_node.bl_idname == "ShaderNodeMapping":
+            affine = _mapping_affine(link.from_node)
+            if affine is None or not link.from_node.inputs["Vector"].is_linked:
+                return None
+            link = link.from_node.inputs["Vector"].links[0]
+        if link.from_node.bl_idname == "ShaderNodeUVMap":
+            uv_name = link.from_node.uv_map
+        elif not (link.from_node.bl_idname == "ShaderNodeTexCoord" and link.from_socket.name == "UV"):
+            return None
+    pixels = linear_pixels(node.image)
+    if pixels is None:
+        return None
+    return pixels, affine, uv_name
+
+
+def _mapping_affine(node):
+    """The 2D affine map of a Mapping node (Point or Texture type, rotation about Z only, no
+    linked inputs), or None."""
+    if node.vector_type not in ("POINT", "TEXTURE"):
+        return None
+    inputs = {name: node.inputs[name] for name in ("Location", "Rotation", "Scale")}
+    if any(socket.is_linked for socket in inputs.values()):
+        return None
+    location = np.array(inputs["Location"].default_value[:2], dtype=np.float64)
+    rx, ry, rz = inputs["Rotation"].default_value[:3]
+    if abs(rx) > 1e-9 or abs(ry) > 1e-9:
+        return None
+    scale = np.array(inputs["Scale"].default_value[:2], dtype=np.float64)
+    rotation = np.array([[np.cos(rz), -np.sin(rz)], [np.sin(rz), np.cos(rz)]])
+    linear = rotation @ np.diag(scale)
+    if node.vector_type == "TEXTURE":  # the inverse of Point
+        if abs(np.linalg.det(linear)) < 1e-12:
+            return None
+        inverse = np.linalg.inv(linear)
+        return np.column_stack([inverse, -inverse @ location])
+    return np.column_stack([linear, location])
+
+
+def _socket_colour(node, name, notes, what, per_patch=(), emitting=False):
+    socket = node.inputs.get(name)
+    if socket is None:
+        return np.zeros(3)
+    if socket.is_linked:  # sockets read per patch need no note about their average
+        return _linked_colour(socket, node, name, [] if name in per_patch else notes, what, emitting)
+    value = socket.default_value
+    return np.array(value[:3], dtype=np.float64)
+
+
+def _socket_float(node, name, notes, what, default=0.0):
+    socket = node.inputs.get(name)
+    if socket is None:
+        return default
+    if socket.is_linked:
+        notes.append(f"{what}: '{name}' of '{node.name}' is connected (texture?); its own value "
+                     f"{float(socket.default_value):.3g} was used")
+    return float(socket.default_value)
+
+
+def _surface_shader(tree):
+    output = None
+    for target in ("CYCLES", "ALL", "EEVEE"):
+        try:
+            output = tree.get_output_node(target)
+        except Exception:  # noqa: BLE001 - older API variants
+            output = None
+        if output is not None:
+            break
+    if output is None:
+        output = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"), None)
+    if output is None:
+        return None
+    socket = output.inputs.get("Surface")
+    node = None
+    while socket is not None and socket.is_linked:
+        node = socket.links[0].from_node
+        if node.bl_idname == "NodeReroute":
+            socket = node.inputs[0]
+            node = None
+            continue
+        break
+    return node
+
+
+_SUPPORTED = ("ShaderNodeBsdfPrincipled", "ShaderNodeBsdfDiffuse", "ShaderNodeEmission")
+
+
+def material_colours(material, per_patch=()):
+    """(reflectivity (3,), emission (3,), notes) of a material; ``per_patch`` names the sockets
+    read per patch (``_per_patch_sockets``), whose averages get no note.
+
+    Principled BSDF: base colour, emission colour x strength.  Diffuse BSDF:
+    colour.  Emission: colour x strength, no reflection.  No node tree: the
+    viewport colour.  No material: grey 0.8.  Linked (textured) inputs use
+    the socket's default and add a note.
+    """
+    notes = []
+    if material is None:
+        return np.array(DEFAULT_GREY), np.zeros(3), notes
+    what = f"material '{material.name}'"
+    tree = material.node_tree
+    uses_nodes = tree is not None
+    if uses_nodes and bpy.app.version < (5, 0, 0):
+        uses_nodes = bool(material.use_nodes)
+    if not uses_nodes:
+        return np.array(material.diffuse_color[:3], dtype=np.float64), np.zeros(3), notes
+    node = _surface_shader(tree)
+    if node is None or node.bl_idname not in _SUPPORTED:
+        found = next((n for n in tree.nodes if n.bl_idname in _SUPPORTED), None)
+        kind = "nothing" if node is None else f"'{node.name}'"
+        if found is None:
+            notes.append(f"{what}: surface is {kind}, no Principled/Diffuse/Emission node; viewport colour used")
+            return np.array(material.diffuse_color[:3], dtype=np.float64), np.zeros(3), notes
+        notes.append(f"{what}: surface is {kind}; used node '{found.name}'")
+        node = found
+    if node.bl_idname == "ShaderNodeBsdfPrincipled":
+        reflectivity = _socket_colour(node, "Base Color", notes, what, per_patch)
+        name = "Emission Color" if "Emission Color" in node.inputs else "Emission"
+        strength = _socket_float(node, "Emission Strength", notes, what, 1.0)
+        emission = _socket_colour(node, name, notes, what, per_patch, emitting=strength != 0) * strength
+    elif node.bl_idname == "ShaderNodeBsdfDiffuse":
+        reflectivity = _socket_colour(node, "Color", notes, what, per_patch)
+        emission = np.zeros(3)
+    else:  # Emission
+        reflectivity = np.zeros(3)
+        strength = _socket_float(node, "Strength", notes, what, 1.0)
+        emission = _socket_colour(node, "Color", notes, what, per_patch, emitting=strength != 0) * strength
+    return reflectivity, emission, notes
+
+
+#: The socket of each shader that gives the base colour, and the emission colour and strength.
+_BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
+_EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
+             "ShaderNodeEmission": ("Color", "Strength")}
+
+
+def _shader_node(material):
+    """The surface shader node of a material that uses nodes, or None."""
+    if material is None or material.node_tree is None:
+        return None
+    if bpy.app.version < (5, 0, 0) and not material.use_nodes:
+        return None
+    return _surface_shader(material.node_tree)
+
+
+def material_attribute(material):
+    """The name of the colour attribute driving a material's base colour ('' for the active
+    one), or None."""
+    node = _shader_node(material)
+    if node is None or node.bl_idname not in _BASE or not node.inputs[_BASE[node.bl_idname]].is_linked:
+        return None
+    link = node.inputs[_BASE[node.bl_idname]].links[0]
+    source = link.from_node
+    if source.bl_idname == "ShaderNodeVertexColor" and link.from_socket.name == "Color":
+        return source.layer_name
+    if source.bl_idname == "ShaderNodeAttribute" and source.attribute_type == "GEOMETRY" \
+            and link.from_socket.name == "Color":
+        return source.attribute_name
+    return None
+
+
+def material_texture(material):
+    """The image texture of a material's base colour, read per patch (``texture_of``), or None."""
+    node = _shader_node(material)
+    if node is None or node.bl_idname not in _BASE:
+        return None
+    return texture_of(node.inputs[_BASE[node.bl_idname]])
+
+
+def material_emission_texture(material):
+    """(pixels, affine, UV map, strength) of an image texture driving a material's emission
+    colour (Principled 'Emission Color', or an Emission node's 'Color'), its strength a plain
+    value; or None."""
+    node = _shader_node(material)
+    if node is None or node.bl_idname not in _EMISSION:
+        return None
+    colour, strength = (node.inputs.get(name) for name in _EMISSION[node.bl_idname])
+    if colour is None or strength is None or strength.is_linked:
+        return None
+    texture = texture_of(colour)
+    return None if texture is None else (*texture, float(strength.default_value))
+
+
+def slot_tables(obj, notes):
+    """Reflectivity, emission, material name, base-colour texture, colour attribute and
+    emission texture (each or None) of each material slot (at least one row)."""
+    materials = [slot.material for slot in obj.material_slots] or [None]
+    R = np.empty((len(materials), 3))
+    E = np.empty((len(materials), 3))
+    textures, attributes, emission_textures = [], [], []
+    for k, material in enumerate(materials):
+        texture, attribute = material_texture(material), material_attribute(material)
+        emission = material_emission_texture(material)
+        node = _shader_node(material)
+        per_patch = set()
+        if texture is not None or attribute is not None:
+            per_patch.add(_BASE[node.bl_idname])
+        if emission is not None:
+            per_patch.add(_EMISSION[node.bl_idname][0])
+        R[k], E[k], more = material_colours(material, per_patch)
+        textures.append(texture)
+        attributes.append(attribute)
+        emission_textures.append(emission)
+        notes.extend(more)
+    names = tuple("(no material)" if m is None else m.name for m in materials)
+    return R, E, names, tuple(textures), tuple(attributes), tuple(emission_textures)
+

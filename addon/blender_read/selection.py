@@ -1,0 +1,168 @@
+"""The selection read and checked: its objects' arrays, the rest of the scene when asked, the
+lamps and the world; bad values in materials refused with a message naming them (bpy)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import SceneError, objects as object_reading
+from .lights import LightError, read_lights, read_world
+
+#: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
+#: need R < 1; without the setting, a base colour of 1 or more is refused).
+MAX_REFLECTIVITY = 0.99
+
+
+def _materials_where(o, bad_faces):
+    """Names of the materials of object arrays ``o`` on the faces flagged in ``bad_faces``."""
+    slots = np.unique(o.face_slot[bad_faces]) if o.face_slot is not None else []
+    return ", ".join(f"'{o.slot_names[k]}'" for k in slots) if len(slots) else "a material"
+
+
+def read_selection(context):
+    """(objects, notes) for the selected meshes; SceneError for bad input.
+
+    Raises, naming the objects and materials, when nothing usable is selected, when no
+    selected face emits, or when materials hold values the solver cannot use: NaN,
+    negative colours or strengths, and reflectivity (base colour) of 1 or more -- unless
+    the scene's "Clamp bright colours" setting is on, which lowers those to
+    MAX_REFLECTIVITY and says so.
+    """
+    notes = []
+    candidates = object_reading.source_objects(context)
+    others = object_reading.skipped_objects(context)
+    if not candidates and not others:
+        raise SceneError("Select one or more mesh objects (result objects in 'Radiosity' do not count)")
+    settings = getattr(context.scene, "radiosity", None)
+    clamp = bool(getattr(settings, "clamp_reflectivity", False))
+    depsgraph = context.evaluated_depsgraph_get()
+    objects = _read_objects(context, depsgraph, candidates, others, settings, notes)
+    for o in objects:
+        _check_materials(o, clamp, notes)
+    lights = _read_lights(context, depsgraph, notes)
+    if not lights and not any(np.any(o.face_emission > 0) for o in objects):
+        raise SceneError(
+            "No emitter among the selected objects (nor the rest of the scene) and no light: give a material "
+            "an emission strength > 0 (Principled BSDF 'Emission Strength' or an Emission shader), add a "
+            "light, or give the world a colour"
+        )
+    # unique notes, in order
+    return Selection(objects, lights), list(dict.fromkeys(notes))
+
+
+def _read_objects(context, depsgraph, candidates, others, settings, notes):
+    """The arrays of the selected objects, their instances and (when asked) the rest of the
+    scene; SceneError when none of the selection has faces."""
+    objects = []
+    for obj in candidates:
+        arrays = object_reading.read_object(obj, depsgraph, notes)
+        if arrays is not None:
+            objects.append(arrays)
+    # Instances (collection instances, geometry nodes, instancing on vertices or faces) are
+    # realised: each instance is read as an object of its own.
+    instances = object_reading.read_instances([*candidates, *others], depsgraph, notes)
+    objects.extend(instances)
+    receivers = len(objects)
+    if getattr(settings, "use_scene_objects", False) and objects:
+        objects.extend(object_reading.read_rest_of_scene(context, depsgraph, notes))
+    instancers = {o.uid for o in instances}
+    skipped = [o for o in others if o.session_uid not in instancers]
+    if not receivers:
+        if skipped and not candidates:
+            raise SceneError("No mesh among the selected objects: "
+                             + "; ".join(object_reading.describe(o) for o in skipped))
+        raise SceneError("The selected mesh objects have no faces")
+    for o in skipped:
+        notes.append(object_reading.describe(o) + ": skipped")
+    return objects
+
+
+def _check_materials(o, clamp, notes):
+    """SceneError for colours the solver cannot use on object arrays ``o``; with ``clamp``,
+    reflectivity above MAX_REFLECTIVITY lowered to it (said so)."""
+    for name, values in (("base colour", o.face_reflectivity), ("emission", o.face_emission)):
+        bad = ~np.isfinite(values).all(axis=1)
+        if bad.any():
+            raise SceneError(f"'{o.name}': the {name} of material {_materials_where(o, bad)} is not a "
+                             "finite number (NaN or infinite, from a driver or a script?)")
+    bad = (o.face_emission < 0).any(axis=1)
+    if bad.any():
+        raise SceneError(f"'{o.name}': material {_materials_where(o, bad)} has a negative emission "
+                         "(colour or strength)")
+    bad = (o.face_reflectivity < 0).any(axis=1)
+    if bad.any():
+        raise SceneError(f"'{o.name}': material {_materials_where(o, bad)} has a negative base colour")
+    bright = (o.face_reflectivity >= 1).any(axis=1)
+    if bright.any() and not clamp:
+        value = float(o.face_reflectivity[bright].max())
+        raise SceneError(
+            f"'{o.name}': material {_materials_where(o, bright)} has a base colour of {value:.3g}. "
+            "Radiosity needs a reflectivity below 1: a surface that reflects all the light it gets "
+            "never lets a random walk end in a closed room (and above 1 it creates light). "
+            f"Lower the base colour below 1, or turn on 'Clamp bright colours' to use {MAX_REFLECTIVITY}"
+        )
+    o.slot_textures = _checked_textures(o, clamp, notes)
+    over = (o.face_reflectivity > MAX_REFLECTIVITY).any(axis=1)
+    if over.any() and clamp:
+        notes.append(f"'{o.name}': base colours of material {_materials_where(o, over)} above "
+                     f"{MAX_REFLECTIVITY} were clamped to {MAX_REFLECTIVITY} ('Clamp bright colours' is on)")
+        o.face_reflectivity = np.minimum(o.face_reflectivity, MAX_REFLECTIVITY)
+
+
+def _read_lights(context, depsgraph, notes):
+    """The core's light sources of the scene's lamps and its world."""
+    try:
+        lights = read_lights(depsgraph, notes)
+        world = read_world(context.scene, notes)
+    except LightError as exc:
+        raise SceneError(str(exc)) from exc
+    if world is not None:
+        lights.append(world)
+    return lights
+
+
+def _checked_textures(o, clamp, notes):
+    """The object's textures with the base colour's rules: finite and not negative, below 1
+    unless 'Clamp bright colours' lowers them to MAX_REFLECTIVITY (said so)."""
+    for slot, colours in enumerate(o.slot_colours):
+        if colours is not None:
+            where = f"'{o.name}': the colour attribute of material '{o.slot_names[slot]}'"
+            if not np.isfinite(colours).all() or (colours < 0).any():
+                raise SceneError(f"{where} has colours that are negative or not finite")
+            if colours.max() >= 1 and not clamp:
+                raise SceneError(f"{where} has colours of {float(colours.max()):.3g}: a reflectivity needs to stay "
+                                 f"below 1. Darken them, or turn on 'Clamp bright colours' to use {MAX_REFLECTIVITY}")
+    if clamp:
+        o.slot_colours = tuple(None if c is None else np.minimum(c, MAX_REFLECTIVITY) for c in o.slot_colours)
+    for slot, texture in enumerate(o.slot_emission_textures):
+        if texture is not None and (not np.isfinite(texture[0]).all() or (texture[0] < 0).any() or texture[3] < 0):
+            raise SceneError(f"'{o.name}': the emission texture of material '{o.slot_names[slot]}' has pixels or a "
+                             "strength that are negative or not finite")
+    checked = []
+    for slot, texture in enumerate(o.slot_textures):
+        if texture is not None:
+            pixels, affine, uv = texture
+            where = f"'{o.name}': the image texture of material '{o.slot_names[slot]}'"
+            if not np.isfinite(pixels).all() or (pixels < 0).any():
+                raise SceneError(f"{where} has pixels that are negative or not finite")
+            if pixels.max() >= 1:
+                if not clamp:
+                    raise SceneError(f"{where} has pixels of {float(pixels.max()):.3g}: a reflectivity needs to "
+                                     "stay below 1. Darken the image, or turn on 'Clamp bright colours' to use "
+                                     f"{MAX_REFLECTIVITY}")
+                notes.append(f"{where}: pixels above {MAX_REFLECTIVITY} were clamped ('Clamp bright colours' is on)")
+                pixels = np.minimum(pixels, MAX_REFLECTIVITY)
+            texture = (pixels, affine, uv)
+        checked.append(texture)
+    return tuple(checked)
+
+
+class Selection(list):
+    """The selected objects' arrays (a list of ObjectArrays), with the lights that light them
+    (``lights``: the core's light sources of the scene's lamps and world)."""
+
+    def __init__(self, objects=(), lights=()):
+        super().__init__(objects)
+        self.lights = tuple(lights)
+
+

@@ -1,0 +1,1 @@
+"""Writing results into Blender: the result objects, their colour attributes and material (bpy)."""

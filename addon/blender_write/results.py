@@ -1,0 +1,204 @@
+"""Results written into Blender: one object per source object in the scene's results collection,
+its colour attributes ('Radiosity', and the extra ones), shown by a material of its own (bpy).
+
+A re-run replaces the previous results only once the new ones are all built."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ..core import meshing
+
+COLLECTION_NAME = "Radiosity"
+ATTRIBUTE_NAME = "Radiosity"
+POINT_ATTRIBUTE_NAME = "Radiosity Vertex"  # the POINT colours when both are written
+MATERIAL_NAME = "Radiosity Result"
+SOURCE_PROPERTY = "radiosity_source"  # custom property marking result objects
+COLLECTION_PROPERTY = "radiosity_results"  # custom property marking a scene's results collection
+RESULT_SUFFIX = " Radiosity"
+MATERIAL_PROPERTY = "radiosity_result_material"  # marks the material we made
+
+
+def is_result_object(obj) -> bool:
+    return obj is not None and SOURCE_PROPERTY in obj.keys()
+
+
+def result_material():
+    """The material that shows the 'Radiosity' attribute as emission (ours, never a user's
+    material that happens to have the same name)."""
+    for material in bpy.data.materials:
+        if MATERIAL_PROPERTY in material.keys() and material.node_tree is not None:
+            return material
+    material = bpy.data.materials.new(MATERIAL_NAME)
+    material[MATERIAL_PROPERTY] = True
+    if bpy.app.version < (5, 0, 0):
+        material.use_nodes = True
+    tree = material.node_tree
+    tree.nodes.clear()
+    attribute = tree.nodes.new("ShaderNodeAttribute")
+    attribute.attribute_type = "GEOMETRY"
+    attribute.attribute_name = ATTRIBUTE_NAME
+    attribute.location = (-400, 0)
+    emission = tree.nodes.new("ShaderNodeEmission")
+    emission.inputs["Strength"].default_value = 1.0
+    emission.location = (-150, 0)
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
+    output.location = (100, 0)
+    tree.links.new(attribute.outputs["Color"], emission.inputs["Color"])
+    tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    material.diffuse_color = (1.0, 1.0, 1.0, 1.0)
+    return material
+
+
+def result_collection(scene, create=True):
+    """The scene's results collection: "Radiosity" for the first scene solved, "Radiosity.001"
+    and so on for others, so that each scene of a file keeps its own results. Found by a
+    marker among the scene's top-level collections (the name may be taken or changed)."""
+    for collection in scene.collection.children:
+        if collection.get(COLLECTION_PROPERTY):
+            return collection
+    if not create:
+        return None
+    collection = bpy.data.collections.new(COLLECTION_NAME)
+    collection[COLLECTION_PROPERTY] = True
+    scene.collection.children.link(collection)
+    return collection
+
+
+def previous_results(scene=None):
+    """The result objects a re-run in ``scene`` (default: the context's) replaces: marked
+    objects in that scene's results collection only. A result the user copied or moved
+    elsewhere is theirs, and other scenes' results are theirs: both are left alone."""
+    collection = result_collection(scene if scene is not None else bpy.context.scene, create=False)
+    if collection is None:
+        return []
+    return [o for o in collection.objects if is_result_object(o)]
+
+
+def _remove_objects(objects):
+    for obj in objects:
+        mesh = obj.data
+        bpy.data.objects.remove(obj, do_unlink=True)
+        if mesh is not None and mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
+
+
+def remove_previous_results(scene=None):
+    _remove_objects(previous_results(scene))
+
+
+def rgba(values):
+    values = np.asarray(values, dtype=np.float32).reshape(-1, 3)
+    out = np.ones((len(values), 4), dtype=np.float32)
+    out[:, :3] = values
+    return out.ravel()
+
+
+def _cornerrgba(patch_mesh, patch_values):
+    """``_rgba`` of per-patch values on every corner of its patch (flat colours), made per patch
+    and then repeated: no per-corner float64 copy."""
+    return np.repeat(rgba(patch_values).reshape(-1, 4), patch_mesh.face_sizes, axis=0).ravel()
+
+
+def build_mesh(name, patch_mesh: meshing.PatchMesh):
+    """A Blender mesh whose faces are the patches (foreach_set only)."""
+    mesh = bpy.data.meshes.new(name)
+    pm = patch_mesh
+    mesh.vertices.add(len(pm.points))
+    mesh.vertices.foreach_set("co", pm.points.astype(np.float32).ravel())
+    mesh.loops.add(len(pm.corner_verts))
+    mesh.loops.foreach_set("vertex_index", pm.corner_verts.astype(np.int32))
+    mesh.polygons.add(pm.patch_count)
+    mesh.polygons.foreach_set("loop_start", pm.face_starts.astype(np.int32))
+    mesh.update()
+    return mesh
+
+
+def write_colours(mesh, patch_mesh, face_colours, point_colours, output):
+    """Add the colour attributes: CORNER (flat per patch) and/or POINT."""
+    names = []
+    if output in ("FACE", "BOTH"):
+        attr = mesh.color_attributes.new(ATTRIBUTE_NAME, "FLOAT_COLOR", "CORNER")
+        attr.data.foreach_set("color", _cornerrgba(patch_mesh, face_colours))
+        names.append(attr.name)
+    if output in ("VERTEX", "BOTH"):
+        name = ATTRIBUTE_NAME if output == "VERTEX" else POINT_ATTRIBUTE_NAME
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "POINT")
+        attr.data.foreach_set("color", rgba(point_colours))
+        names.append(attr.name)
+    main = mesh.color_attributes.get(ATTRIBUTE_NAME)
+    mesh.color_attributes.active_color = main
+    try:
+        mesh.color_attributes.render_color_index = mesh.color_attributes.active_color_index
+    except AttributeError:  # older API
+        pass
+    return names
+
+
+def write_extra(mesh, patch_mesh, name, face_values, output):
+    """One more attribute (the light alone, the indirect light) on the main one's domain."""
+    if output == "VERTEX":
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "POINT")
+        attr.data.foreach_set("color", rgba(meshing.point_average(patch_mesh, face_values)))
+    else:
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
+        attr.data.foreach_set("color", _cornerrgba(patch_mesh, face_values))
+    main = mesh.color_attributes.get(ATTRIBUTE_NAME)
+    if main is not None:
+        mesh.color_attributes.active_color = main
+    return attr.name
+
+
+def show_attribute_in_solid_view():
+    """Let the 3D views' solid shading colour objects by their colour attribute."""
+    for screen in bpy.data.screens:
+        for area in screen.areas:
+            if area.type != "VIEW_3D":
+                continue
+            for space in area.spaces:
+                if space.type == "VIEW_3D":
+                    space.shading.color_type = "VERTEX"
+
+
+def write_results(context, output_data, output_mode, scene=None):
+    """Replace the previous results with one object per source object.
+
+    All new objects are built first and only then swapped in for the old ones, so a failure
+    part-way leaves the previous results as they were (never a half-written set).
+    ``output_data`` is a pipeline.SolveOutput; ``scene`` the scene that was solved (by default
+    the context's).  Returns the new objects.
+    """
+    scene = scene if scene is not None else context.scene
+    created = []
+    try:
+        material = result_material()
+        for index, (arrays, pm, faces, points) in enumerate(zip(
+            output_data.patches.objects,
+            output_data.patches.meshes,
+            output_data.face_colours,
+            output_data.point_colours,
+        )):
+            if faces is None:  # an object of the rest of the scene: it took part, gets no result
+                continue
+            if not (np.isfinite(faces).all() and (points is None or np.isfinite(points).all())):
+                raise ValueError(f"the result for '{arrays.name}' is not finite")
+            name = arrays.name + RESULT_SUFFIX
+            mesh = build_mesh(name, pm)
+            obj = bpy.data.objects.new(name, mesh)  # vertices are in world space
+            created.append(obj)
+            write_colours(mesh, pm, faces, points, output_mode)
+            for extra_name, per_object in getattr(output_data, "extra", {}).items():
+                write_extra(mesh, pm, extra_name, per_object[index], output_mode)
+            mesh.materials.append(material)
+            obj[SOURCE_PROPERTY] = arrays.name
+    except Exception:
+        _remove_objects(created)
+        raise
+    remove_previous_results(scene)
+    collection = result_collection(scene)
+    for obj in created:
+        collection.objects.link(obj)
+        obj.name = obj.data.name = obj[SOURCE_PROPERTY] + RESULT_SUFFIX  # the names the old ones had
+    show_attribute_in_solid_view()
+    return created

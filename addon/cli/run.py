@@ -1,0 +1,253 @@
+"""The command line's run: open or build the scene, check where the files go, solve through the
+panel's operator (``radiosity.solve``, synchronous), then save the .blend and render the preview
+(numpy and bpy are imported where used: Ctrl-C is handled from the start)."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import sys
+import time
+
+from .. import options
+from . import preview, scenes
+from .arguments import checked, parser
+from .interrupt import Interrupt, Interrupted
+from .messages import fail, one_line
+from .progress import ProgressLine
+from .saving import Outputs, check_blend, check_png, output_problem, save_blend
+
+
+class Refused(Exception):
+    """The run cannot go on: the message for the user and the exit status."""
+
+    def __init__(self, message, status=2):
+        super().__init__(message)
+        self.status = status
+
+
+def main(argv=None):
+    args = parser().parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        args = checked(args)
+    except ValueError as exc:
+        return fail(str(exc), 2)
+    names = ["cornell"] + scenes.sample_scene_names()
+    if args.list:
+        print("\n".join(names))
+        return 0
+    with Interrupt() as interrupt:
+        try:
+            return _run(args, names, interrupt)
+        except Interrupted:
+            return interrupt.stopped()
+        except Refused as exc:
+            return fail(str(exc), exc.status)
+
+
+def _run(args, names, interrupt):
+    root = scenes.repo_root()
+    if root not in sys.path:
+        sys.path.insert(0, root)
+    import bpy  # noqa: F401 - loaded here, before the first check for Ctrl-C
+
+    interrupt.check()
+    t0 = time.perf_counter()
+    scene_name, own_scene = _open_scene(args, names)
+    out_blend = os.path.abspath(args.blend_path or os.path.join("out", f"{scene_name}.blend"))
+    png = None if args.no_preview else os.path.abspath(args.preview or os.path.splitext(out_blend)[0] + ".png")
+    for target in (out_blend, png):  # said before the run, not after it
+        problem = target and output_problem(target)
+        if problem:
+            raise Refused(problem)
+    sources = _sources(args)
+    settings = _settings(args, scene_name, own_scene)
+    exposure = []
+    status = _solve(args, settings, interrupt, exposure)
+    if status is not None:
+        return status
+    print(summary(scene_name, settings))
+    print(f"sources: {settings.last_sources}")
+    status = _save(args, interrupt, (out_blend, png), sources, own_scene, exposure)
+    if status is not None:
+        return status
+    if png:
+        print(f"preview: {png}")
+    print(f"saved: {out_blend}  ({time.perf_counter() - t0:.1f} s in all)")
+    return 0
+
+
+def _open_scene(args, names):
+    """(scene name, built here): the .blend opened, the scene already loaded, or a scene built
+    in an empty file; Refused for a file that cannot be opened or an unknown scene."""
+    import bpy
+
+    scene_name = args.scene or "cornell"
+    if args.open:
+        path = os.path.abspath(args.open)
+        if not os.path.isfile(path):
+            raise Refused(f"no such file: {path}")
+        try:
+            bpy.ops.wm.open_mainfile(filepath=path)
+        except RuntimeError as exc:
+            raise Refused(f"cannot open {path}: {one_line(exc)}") from None
+        scene_name = os.path.splitext(os.path.basename(args.open))[0]
+    elif args.current:
+        scene_name = os.path.splitext(os.path.basename(bpy.data.filepath))[0] or "scene"
+    else:
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+    scenes.ensure_registered()
+    own_scene = not (args.open or args.current)  # built here, not the user's
+    if own_scene:
+        if scene_name == "cornell":  # the one Cornell box: sample_scenes/cornell_box.py
+            scenes.build_sample_scene("cornell_box")
+        elif scene_name in scenes.sample_scene_names():
+            scenes.build_sample_scene(scene_name)
+        else:
+            raise Refused(f"unknown scene {scene_name!r}; choose from: {', '.join(names)}")
+    return scene_name, own_scene
+
+
+def _sources(args):
+    """The objects to solve (all meshes with --select-all); Refused when there are none."""
+    import bpy
+
+    from ..blender_read.objects import source_objects
+    from ..blender_write.results import is_result_object
+
+    if args.select_all:
+        for o in bpy.context.view_layer.objects:
+            o.select_set(o.type == "MESH" and not is_result_object(o))
+    sources = source_objects(bpy.context)
+    if not sources:
+        raise Refused("no mesh object selected (use --select-all)")
+    return sources
+
+
+def _settings(args, scene_name, own_scene):
+    """The scene's settings (``scene.radiosity``), set from the arguments."""
+    import bpy
+
+    settings = bpy.context.scene.radiosity
+    if own_scene and scene_name in scenes.sample_scene_names() and not args.patch_size:
+        args.patch_size = 1e6  # sample scenes come meshed as in the paper: keep their patches
+    for option in options.SETTINGS:
+        setattr(settings, option.name, getattr(args, option.name))
+    return settings
+
+
+def _solve(args, settings, interrupt, exposure):
+    """Solve through the operator, with a warning first for a costly setting and the progress
+    line on a terminal; the status of a failure, else None (the preview's exposure appended to
+    ``exposure`` from the arrays written)."""
+    import bpy
+
+    from ..bpy_free import worker
+    from ..ui import operators
+
+    _warn_before(settings, interrupt)
+    operators.LAST_ERROR = ""
+    progress = ProgressLine(sys.stderr) if (not args.quiet and sys.stderr.isatty()) else None
+    interrupt.progress = progress
+    worker.PROGRESS_LISTENER = progress
+
+    def before_writing(output):
+        if not args.no_preview:  # from the arrays written: reading Blender's back would copy them
+            exposure.append(preview.preview_exposure(output, settings.output))
+        release_solve_memory()  # writing the colours needs the patches, not the core's scene
+
+    operators.OUTPUT_LISTENER = before_writing
+    reports = io.StringIO()  # the operator's reports, after the progress line, on lines of their own
+    try:
+        with contextlib.redirect_stdout(reports):
+            result = bpy.ops.radiosity.solve(quiet_errors=True)
+    except RuntimeError as exc:  # an error the operator did not keep quiet
+        return fail(one_line(exc))
+    finally:
+        worker.PROGRESS_LISTENER = None
+        operators.OUTPUT_LISTENER = None
+        if progress is not None:
+            progress.end()
+        interrupt.check()
+        sys.stdout.write(reports.getvalue())
+    release_solve_memory()
+    if "FINISHED" not in result:
+        return fail(operators.LAST_ERROR or "the solve did not finish")
+    return None
+
+
+def _warn_before(settings, interrupt):
+    """A costly setting is said before the run, as the panel says it."""
+    import bpy
+
+    from .. import pipeline
+    from ..blender_read import selection
+
+    try:
+        warning = pipeline.estimate(selection.read_selection(bpy.context)[0], settings.solve_settings())["warning"]
+    except ValueError:
+        warning = None  # bad input: the solve says what is wrong
+    interrupt.check()
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
+
+
+def _save(args, interrupt, targets, sources, own_scene, exposure):
+    """Write the .blend and the preview, all in place or none; the status of a failure, else None."""
+    out_blend, png = targets
+    outputs = interrupt.outputs = Outputs()
+    try:
+        for target in (out_blend, png):
+            if target:
+                os.makedirs(os.path.dirname(target), exist_ok=True)
+        outputs.add(out_blend, check_blend)
+        if png:
+            outputs.add(png, check_png)
+        if png and own_scene:
+            # a scene built here: saved with the preview's settings, so F12 renders the same
+            preview.render_preview(png, sources, args.resolution, args.samples,
+                                   exposure[-1] if exposure else preview.auto_exposure(),
+                                   keep_settings=True, write_to=outputs.writing(png))
+            interrupt.check()
+        # the user's scene is saved as it is, plus the results (a copy: the open file stays the same)
+        save_blend(outputs.writing(out_blend))
+        interrupt.check()
+        if png and not own_scene:
+            # then the preview, with temporary settings undone afterwards
+            preview.render_preview(png, sources, args.resolution, args.samples,
+                                   exposure[-1] if exposure else preview.auto_exposure(), write_to=outputs.writing(png))
+        outputs.check()
+        with interrupt.lock:  # all files in place, or none
+            interrupt.check()
+            outputs.commit()
+            interrupt.committed = True
+    except (RuntimeError, OSError) as exc:
+        outputs.discard()
+        return fail(outputs.failure(exc))
+    return None
+
+
+def release_solve_memory():
+    """Let go of what the solve kept for the panel (the meshed geometry and the core's scene with
+    its ray tracer, kept for a re-run) and give it back to the system: the command line saves and
+    renders next, and Cycles' copy of the results needs the room."""
+    import gc
+
+    from ..bpy_free import patches, trim
+
+    patches._GEOMETRY_CACHE.clear()
+    gc.collect()
+    trim.give_back()
+
+
+def summary(scene_name, settings) -> str:
+    """The run in one line, with the error reached against the target (both relative RMS)."""
+    error = settings.last_relative_error
+    target = settings.last_target_error
+    reached = "error unknown" if error < 0 else f"error {error:.2f}%"
+    if target > 0 and error >= 0:
+        reached += f" of a {target:g}% target ({error / target * 100:.0f}% of it)"
+    return (f"{scene_name}: {settings.last_patches:,} patches, {settings.last_paths:,} paths, "
+            f"{settings.last_rays:,} rays, {settings.last_seconds:.2f} s ({settings.last_estimator}), mean path length "
+            f"{settings.last_mean_path_length:.2f}, {reached}, stopped by {settings.last_stopped}")

@@ -1,0 +1,2 @@
+"""The user interface in Blender: the settings (properties), the operators, the sidebar panel
+and the live view (bpy)."""
