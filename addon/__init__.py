@@ -22,7 +22,7 @@ _registered_modules = []
 
 
 def _glue_modules():
-    from . import estimate
+    from .ui import estimate
     from .ui import operators, panel, properties
 
     return [properties, operators, panel, estimate]

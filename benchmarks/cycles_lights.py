@@ -164,7 +164,7 @@ def cycles(image, rows, patches, samples, seed=0):
 def ours(paths, seed=0, direct_light="shot", method="walk"):
     import bpy
 
-    from addon import pipeline
+    from addon.bpy_free import pipeline
     from addon.blender_read.selection import read_selection
 
     objects, notes = read_selection(bpy.context)

@@ -76,7 +76,7 @@ def traced_main(argv, out_path):
     marks = Marks()
     import bpy  # noqa: F401
 
-    from addon import pipeline
+    from addon.bpy_free import pipeline
     from addon.blender_read import selection
     from addon.cli import preview, run, scenes
     from addon.core import solver

@@ -43,7 +43,7 @@ import sys
 import time
 from pathlib import Path
 
-from addon import options
+from addon.bpy_free import options
 from addon.core import names
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -140,7 +140,7 @@ def child(layout, n, target_error, method, use_tracemalloc):
     import bpy
 
     import addon
-    from addon import pipeline
+    from addon.bpy_free import pipeline
     from addon.blender_read.selection import read_selection
     from addon.blender_write.results import is_result_object, write_results
     from addon.bpy_free import worker

@@ -82,7 +82,7 @@ def build(scene):
 
 
 def settings_for(error, patch_size, seed=0):
-    from addon import pipeline
+    from addon.bpy_free import pipeline
 
     return pipeline.SolveSettings(relative_rms=error / 100, patch_size=patch_size, threads=2, seed=seed)
 
@@ -90,7 +90,7 @@ def settings_for(error, patch_size, seed=0):
 def estimates(case):
     import bpy
 
-    from addon import pipeline
+    from addon.bpy_free import pipeline
     from addon.blender_read.selection import read_selection
 
     name, scene, error, patch_size = case
@@ -106,7 +106,7 @@ def estimates(case):
 
 
 def measure(case):
-    from addon import pipeline
+    from addon.bpy_free import pipeline
 
     objects, predicted = estimates(case)
     seen = []

@@ -203,7 +203,7 @@ def ours(paths, side, seed=0):
     """(B (P,3) in face order, its variance, wall seconds, sources) from the operator's pipeline."""
     import bpy
 
-    from addon import pipeline
+    from addon.bpy_free import pipeline
     from addon.blender_read.selection import read_selection
 
     objects, _ = read_selection(bpy.context)

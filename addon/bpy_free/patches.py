@@ -16,7 +16,7 @@ import numpy as np
 
 from ..core import PatchScene, meshing
 from ..core.textures import patch_attribute_average, patch_texture_average
-from ..options import AUTOMATIC_PATCH_DIVISIONS
+from .options import AUTOMATIC_PATCH_DIVISIONS
 from .cleaning import check_finite_vertices, degenerate_area, drop_zero_area_faces
 
 #: A patch size that would make more patches than this is refused before meshing (memory and

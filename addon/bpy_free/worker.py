@@ -13,7 +13,7 @@ import traceback
 import numpy as np
 
 from . import trim
-from ..pipeline import SolveOutput, SolveSettings, run_solve
+from .pipeline import SolveOutput, SolveSettings, run_solve
 
 
 class SolveJob:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from .. import options
+from ..bpy_free import options
 
 DESCRIPTION = "Command line: build or open a scene, solve, save the .blend, render a preview."
 

@@ -10,7 +10,7 @@ import os
 import sys
 import time
 
-from .. import options
+from ..bpy_free import options
 from . import preview, scenes
 from .arguments import checked, parser
 from .interrupt import Interrupt, Interrupted
@@ -181,7 +181,7 @@ def _warn_before(settings, interrupt):
     """A costly setting is said before the run, as the panel says it."""
     import bpy
 
-    from .. import pipeline
+    from ..bpy_free import pipeline
     from ..blender_read import selection
 
     try:

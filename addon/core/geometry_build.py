@@ -66,9 +66,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     first = np.concatenate(([0], np.cumsum(count)[:-1]))
     fraction = _area_fractions(area[order], tp_sorted, first, count, patch_area)
     del area
-    used = np.unique(T)
-    largest = np.abs((V[used] - centre) / diagonal).max()
-    del used
+    largest = np.abs((V[np.unique(T)] - centre) / diagonal).max()
     side = np.sqrt(patch_area)
     patch_ray_offset, patch_edge_inset = local_offsets(side, largest)
     regions = None

@@ -7,7 +7,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from . import live_view
-from .. import pipeline
+from ..bpy_free import pipeline
 from ..blender_read.selection import read_selection
 from ..blender_write.results import write_results
 from ..bpy_free import worker

@@ -6,11 +6,11 @@ import math
 
 import bpy
 
-from .. import estimate
+from . import estimate
 from ..bpy_free import worker
-from ..pipeline import duration_text
+from ..bpy_free.pipeline import duration_text
 
-from ..options import METHOD
+from ..bpy_free.options import METHOD
 
 METHOD_LABELS = {identifier: label for identifier, label, _ in METHOD.items}
 

@@ -5,12 +5,12 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from .. import options
-from ..pipeline import SolveSettings
+from ..bpy_free import options
+from ..bpy_free.pipeline import SolveSettings
 
 
 def _changed(self, context):
-    from .. import estimate
+    from . import estimate
 
     estimate.invalidate()
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import addon
-from addon import estimate, pipeline
+from addon.ui import estimate
+from addon.bpy_free import pipeline
 from addon.blender_read import SceneError, images, objects as object_reading
 from addon.blender_read.materials import material_colours
 from addon.blender_read.selection import MAX_REFLECTIVITY, read_selection
@@ -342,7 +343,7 @@ def test_quitting_while_solving_stops_the_worker(tmp_path, hook):
         "    print('worker alive after the hooks:', job.alive, flush=True)\n"
         "atexit.register(report)  # registered first: runs last\n"
         "import bpy, addon, threading\n"
-        "from addon import pipeline\n"
+        "from addon.bpy_free import pipeline\n"
         "from addon.blender_read.selection import read_selection\n"
         "from addon.bpy_free import patches, worker\n"
         f"if not {hook}:\n"

@@ -166,7 +166,7 @@ def test_cli_refuses_values_out_of_range_in_one_line(tmp_path, args, expected):
 
 def test_help_lists_every_option(tmp_path):
     out = run(["--help"], cwd=str(tmp_path))
-    from addon import options
+    from addon.bpy_free import options
 
     for option in options.SETTINGS:
         assert option.flag in out
@@ -174,12 +174,12 @@ def test_help_lists_every_option(tmp_path):
 
 
 def test_cli_names_and_defaults_are_the_panels():
-    """One set of defaults and names (addon/options.py): the parser's defaults are the
+    """One set of defaults and names (addon/bpy_free/options.py): the parser's defaults are the
     properties' defaults, and choices are taken in any case."""
     import bpy
 
     import addon
-    from addon import options
+    from addon.bpy_free import options
     from addon.cli.arguments import checked, parser
 
     args = checked(parser().parse_args(["--colours", "vertex", "--sampling", "STRATIFIED"]))

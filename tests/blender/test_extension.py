@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 import addon
-from addon.options import METHOD, STOP_RULE
-from addon import estimate, pipeline
+from addon.bpy_free.options import METHOD, STOP_RULE
+from addon.ui import estimate
+from addon.bpy_free import pipeline
 from addon.blender_read.materials import material_colours
 from addon.blender_read.selection import read_selection
 from addon.bpy_free import patches, worker

@@ -101,7 +101,7 @@ def test_a_lamp_that_casts_no_shadow_lights_through_and_says_how(blender):
     """A closed room with a point light above a board: Cast Shadow off lights the floor under
     the board as if the board were not there (the solve gathers the direct light and says so);
     on, the floor there is darker."""
-    from addon import pipeline
+    from addon.bpy_free import pipeline
 
     room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
     make_object("Room", room_v, room_f, [principled("White", (0.5, 0.5, 0.5))]).select_set(True)
@@ -225,7 +225,7 @@ def test_a_room_lit_by_a_lamp_alone_solves_and_a_bad_lamp_changes_nothing(blende
 def test_the_sources_and_their_shares_are_listed(blender):
     """The estimate, the last run and the command line list the sources that took part with
     each kind's share of the power."""
-    from addon import pipeline
+    from addon.bpy_free import pipeline
 
     build_test_scene()
     _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.5), energy=4.0)
@@ -247,7 +247,7 @@ def test_the_rest_of_the_scene_blocks_and_reflects_without_results(blender):
     """Selected objects get results; the other visible objects block and reflect light (meshed
     coarser) and get none; the option leaves them out. The floor under an unselected block is in
     its shadow only while the block takes part."""
-    from addon import pipeline
+    from addon.bpy_free import pipeline
 
     build_test_scene()
     for name in ("Block",):

@@ -5,7 +5,7 @@ their results are written patch by patch onto the right source faces."""
 import bpy
 import numpy as np
 
-from addon import pipeline
+from addon.bpy_free import pipeline
 from addon.blender_read.selection import read_selection
 from addon.bpy_free import patches, worker
 from addon.bpy_free.cleaning import degenerate_area

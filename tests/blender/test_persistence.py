@@ -8,7 +8,7 @@ import bpy
 import numpy as np
 import pytest
 
-from addon import pipeline
+from addon.bpy_free import pipeline
 from addon.blender_write.results import MATERIAL_NAME, MATERIAL_PROPERTY, result_collection, write_colours
 from addon.blender_write import results as result_writing
 from addon.bpy_free import patches, worker

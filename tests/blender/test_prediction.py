@@ -6,7 +6,8 @@ import math
 import bpy
 import pytest
 
-from addon import estimate, pipeline
+from addon.ui import estimate
+from addon.bpy_free import pipeline
 from addon.blender_read.selection import read_selection
 from addon.ui import operators
 

@@ -11,8 +11,8 @@ from boxes import box_scene, small_source_box
 from addon.core import plan, predict, relative_rms_to_mse, solve
 from addon.core.batches import Batches
 from addon.core.reference import area_weighted_mse, solve_radiosity_system
-from addon.options import STOP_RULE
-from addon.pipeline import SolveSettings
+from addon.bpy_free.options import STOP_RULE
+from addon.bpy_free.pipeline import SolveSettings
 
 R_FACES = [(0.9, 0.9, 0.9), (0.2, 0.2, 0.2), (0.8, 0.3, 0.1), (0.1, 0.7, 0.3), (0.85, 0.85, 0.85), (0.3, 0.3, 0.6)]
 E_FACES = [(0, 0, 0), (1, 1, 1), (0, 0, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0)]

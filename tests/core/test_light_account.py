@@ -7,7 +7,7 @@ import numpy as np
 from boxes import box_scene, open_box_with_card
 
 from addon.core import solve
-from addon.pipeline import light_account_text
+from addon.bpy_free.pipeline import light_account_text
 
 
 def _shares(text):
@@ -47,7 +47,7 @@ def test_no_account_without_light():
 
 
 def test_a_target_missed_at_the_path_cap_is_said():
-    from addon.pipeline import target_missed_text
+    from addon.bpy_free.pipeline import target_missed_text
 
     text = target_missed_text("paths", 9.5, 5.0)
     assert "5% error target was not reached" in text and "9.50%" in text and "1.9x" in text, text

@@ -113,7 +113,7 @@ def test_bad_method_arguments_are_one_line_before_anything_runs(scene):
 
 def test_the_automatic_tooltip_quotes_the_bound_automatic_keeps(monkeypatch):
     """The panel's words for Automatic are made from AUTO_MAX_PATCHES, not a copy of it."""
-    from addon import options
+    from addon.bpy_free import options
     from addon.core.methods import automatic
 
     assert "about 390,000 patches" in options.METHOD.items[0][2]

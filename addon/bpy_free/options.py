@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .core.methods import automatic
+from ..core.methods import automatic
 
 
 @dataclass(frozen=True)

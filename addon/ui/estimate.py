@@ -14,10 +14,10 @@ import threading
 
 import bpy
 
-from . import pipeline
-from .blender_read.objects import skipped_objects, source_objects
-from .blender_read.selection import read_selection
-from .bpy_free import worker
+from ..bpy_free import pipeline
+from ..blender_read.objects import skipped_objects, source_objects
+from ..blender_read.selection import read_selection
+from ..bpy_free import worker
 
 DELAY_SECONDS = 0.3
 POLL_SECONDS = 0.1

@@ -11,16 +11,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .core import meshing, predict, relative_rms_to_mse, solve
-from .core.diagnostics import MAX_BOUNCES, check_bounces
-from .core.first_shot import direct_irradiance
-from .core.forecast import forecast
-from .core import methods
-from .core.names import AUTO
+from ..core import meshing, predict, relative_rms_to_mse, solve
+from ..core.diagnostics import MAX_BOUNCES, check_bounces
+from ..core.first_shot import direct_irradiance
+from ..core.forecast import forecast
+from ..core import methods
+from ..core.names import AUTO
 from . import options
-from .bpy_free import trim
-from .bpy_free.patches import Patches, make_patches
-from .bpy_free.scene_notes import back_light_warning, light_kind, scene_and_notes
+from . import trim
+from .patches import Patches, make_patches
+from .scene_notes import back_light_warning, light_kind, scene_and_notes
 
 @dataclass
 class SolveSettings:
