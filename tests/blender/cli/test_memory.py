@@ -14,9 +14,9 @@ import sys
 import bpy
 import pytest
 
-from .conftest import build_test_scene, result_objects
+from ..conftest import build_test_scene, result_objects
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 MIB = 1 << 20
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 PAGES = [README, ROOT / "benchmarks" / "README.md", ROOT / "sample_scenes" / "README.md",
          *sorted((ROOT / "docs").glob("*.md"))]

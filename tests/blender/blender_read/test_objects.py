@@ -11,13 +11,13 @@ from addon.bpy_free import patches, worker
 from addon.bpy_free.cleaning import degenerate_area
 from addon.core import meshing
 
-from .conftest import make_object, mesh_arrays, read_colours, result_objects
-from .test_extension import configure
+from ..conftest import make_object, mesh_arrays, read_colours, result_objects
+from ..test_extension import configure
 
 
 def _nonplanar_scene(context):
     """The closed test room with its lamp, a NURBS sphere and a displaced grid inside."""
-    from .conftest import build_test_scene
+    from ..conftest import build_test_scene
 
     build_test_scene()
     bpy.ops.surface.primitive_nurbs_surface_sphere_add(radius=0.15, location=(0.72, 0.7, 0.3))

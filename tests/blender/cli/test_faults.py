@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 ENV = {**os.environ, "PYTHONPATH": ROOT}
 INTERRUPTED = "interrupted: stopped by Ctrl-C; nothing was saved"
 

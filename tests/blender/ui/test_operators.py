@@ -14,8 +14,8 @@ from addon.blender_write import results as result_writing
 from addon.bpy_free import patches, worker
 from addon.ui.operators import RADIOSITY_OT_solve
 
-from .conftest import build_test_scene, read_colours, result_objects
-from .test_extension import _drive, _modal_operator, _snapshot, configure
+from ..conftest import build_test_scene, read_colours, result_objects
+from ..test_extension import _drive, _modal_operator, _snapshot, configure
 
 
 def _results():

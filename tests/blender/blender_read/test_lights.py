@@ -10,7 +10,7 @@ from addon.blender_read import SceneError, lights as lights_io
 from addon.blender_read.selection import read_selection
 from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
 
-from .conftest import box_arrays, build_test_scene, make_object, principled, result_objects
+from ..conftest import box_arrays, build_test_scene, make_object, principled, result_objects
 
 
 def _lamp(kind, name="L", location=(0.5, 0.5, 0.8), rotation=(0, 0, 0), scale=(1, 1, 1), **settings):

@@ -3,8 +3,8 @@ import bpy
 import numpy as np
 import pytest
 
-from .conftest import box_arrays, make_object, principled, result_objects
-from .test_lights_io import _lamp
+from ..conftest import box_arrays, make_object, principled, result_objects
+from ..blender_read.test_lights import _lamp
 
 
 # Each run's relative RMS error is held near the target (1%): the two runs differ by about

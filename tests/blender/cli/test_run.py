@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
 
 def run(args, cwd, timeout=300):
@@ -106,7 +106,7 @@ def _save_scene(path, build):
 def test_cli_failures_are_one_line_and_a_non_zero_status(tmp_path):
     import bpy
 
-    from .conftest import box_arrays, build_test_scene, make_object, principled
+    from ..conftest import box_arrays, build_test_scene, make_object, principled
 
     def no_emitter():
         build_test_scene()
@@ -206,7 +206,7 @@ def test_an_operator_error_prints_once(tmp_path):
     """The operator's error reaches the command line once, not as Blender's report and again."""
     import bpy
 
-    from .conftest import build_test_scene
+    from ..conftest import build_test_scene
 
     def no_emitter():
         build_test_scene()
@@ -344,7 +344,7 @@ def _curvy_scene():
     an emitter above them, all selected. Returns the expected world bounds."""
     import bpy
 
-    from .conftest import make_object, principled
+    from ..conftest import make_object, principled
 
     bpy.ops.object.text_add(location=(0, 0, 0))
     bpy.context.active_object.data.extrude = 0.05
@@ -399,7 +399,7 @@ def _user_settings(with_camera):
     """A scene with render settings of its own (none of them the preview's)."""
     import bpy
 
-    from .conftest import build_test_scene
+    from ..conftest import build_test_scene
 
     build_test_scene()
     scene = bpy.context.scene
@@ -455,7 +455,7 @@ def test_cli_open_saves_the_users_settings_unchanged(tmp_path):
     plus the results; the preview's temporary camera (for a scene with none) is not kept."""
     import bpy
 
-    from .conftest import result_objects
+    from ..conftest import result_objects
 
     for with_camera in (True, False):
         source = tmp_path / f"user_{with_camera}.blend"
@@ -481,13 +481,13 @@ def test_cli_current_solves_the_loaded_file(blender, tmp_path):
 
     from addon.__main__ import main
 
-    from .conftest import read_colours, result_objects
+    from ..conftest import read_colours, result_objects
 
     source = tmp_path / "room.blend"
     _save_scene(source, lambda: _user_settings(with_camera=True))
     # an unselected mesh takes no part
     bpy.ops.wm.open_mainfile(filepath=str(source))
-    from .conftest import make_object
+    from ..conftest import make_object
 
     make_object("Bystander", [(0, 0, 2), (1, 0, 2), (1, 1, 2)], [(0, 1, 2)]).select_set(False)
     bpy.ops.wm.save_mainfile()

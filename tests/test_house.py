@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ADDON = Path(__file__).resolve().parents[2] / "addon"
+ADDON = Path(__file__).resolve().parents[1] / "addon"
 MAX_MODULE_LINES = 400
 MAX_CORE_MODULE_LINES = 420  # (about 400: lights of every kind and the grids' tables stay whole)
 MAX_FUNCTION_LINES = 60
@@ -115,3 +115,30 @@ def test_the_core_never_imports_the_glue():
         _, relative = _imports(path)
         outside = {t for t in relative if not t.startswith("core")}
         assert outside == set(), f"{_name(path)} imports the glue"
+
+
+TESTS = Path(__file__).resolve().parent
+
+
+def test_the_tests_mirror_the_code():
+    """Each folder of tests is named for the part of the code it tests (addon/core, a glue layer,
+    the benchmarks), the Blender tests for the glue layer they drive; the solver, the pipeline
+    and the reading of the selection each have a test file of their name."""
+    code = {"core", "bpy_free", "benchmarks", "blender", "sample_scenes"}
+    folders = {p.name for p in TESTS.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))}
+    assert folders <= code, folders - code
+    blender = {p.name for p in (TESTS / "blender").iterdir() if p.is_dir() and not p.name.startswith("_")}
+    assert blender <= set(LAYERS), blender - set(LAYERS)
+    for part in ("core", "bpy_free"):
+        modules = {p.stem for p in (ADDON / part).rglob("*.py")} | {p.name for p in (ADDON / part).iterdir() if p.is_dir()}
+        for test in (TESTS / part).glob("test_*.py"):
+            assert test.stem[5:] in modules or test.stem[5:] in CROSS_CUTTING, f"{part}/{test.name} names no module of addon/{part}"
+    for named in ("core/test_solver.py", "bpy_free/test_pipeline.py", "blender/blender_read/test_selection.py"):
+        assert (TESTS / named).exists(), named
+
+
+# Tests of the whole solve against references, named for what they check, not for a module.
+CROSS_CUTTING = {
+    "energy", "error_model", "exact_reference", "furnace", "stress", "two_way_stress", "variance", "pinned",
+    "properties", "stratified", "economy", "groups", "memory", "error_promise",
+}

@@ -11,7 +11,7 @@ from addon.bpy_free import pipeline
 from addon.blender_read.selection import read_selection
 from addon.ui import operators
 
-from .conftest import box_arrays, build_test_scene, make_object, principled
+from ..conftest import box_arrays, build_test_scene, make_object, principled
 
 
 @pytest.mark.parametrize("patch_size, error", [(0.05, 5.0), (0.1, 2.0)])

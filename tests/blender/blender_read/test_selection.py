@@ -19,8 +19,8 @@ from addon.blender_read.materials import material_colours
 from addon.blender_read.selection import MAX_REFLECTIVITY, read_selection
 from addon.bpy_free import patches, worker
 
-from .conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
-from .test_extension import _drive, _modal_operator, _snapshot, configure
+from ..conftest import ROOT, box_arrays, build_test_scene, make_object, principled, read_colours, result_objects
+from ..test_extension import _drive, _modal_operator, _snapshot, configure
 
 
 def _unchanged_after_error(context, match):
@@ -554,7 +554,7 @@ def test_escape_stops_a_batch_of_endless_paths_promptly(blender):
     time.sleep(0.3)
     assert op._job.snapshot()["paths"] == 0 and op._job.alive
     t0 = time.perf_counter()
-    from .test_extension import FakeEvent
+    from ..test_extension import FakeEvent
 
     assert op.modal(blender, FakeEvent("ESC", "PRESS")) == {"RUNNING_MODAL"}
     assert _drive(op, blender, seconds=10) == {"CANCELLED"}
@@ -701,7 +701,7 @@ def _with_huge_counts(monkeypatch, paths=3_000_000_017, rays=9_876_543_210_123):
 
 
 def test_path_and_ray_counts_beyond_32_bits_are_stored_exactly(blender, monkeypatch):
-    from .test_extension import draw_panel
+    from ..test_extension import draw_panel
 
     build_test_scene()
     configure(blender)
