@@ -12,7 +12,7 @@ from ..core import meshing
 
 COLLECTION_NAME = "Radiosity"
 ATTRIBUTE_NAME = "Radiosity"
-POINT_ATTRIBUTE_NAME = "Radiosity Vertex"  # the POINT colours when both are written
+POINT_ATTRIBUTE_NAME = "Radiosity Vertex"  # the smooth colours when both are written
 MATERIAL_NAME = "Radiosity Result"
 SOURCE_PROPERTY = "radiosity_source"  # custom property marking result objects
 COLLECTION_PROPERTY = "radiosity_results"  # custom property marking a scene's results collection
@@ -115,8 +115,9 @@ def build_mesh(name, patch_mesh: meshing.PatchMesh):
     return mesh
 
 
-def write_colours(mesh, patch_mesh, face_colours, point_colours, output):
-    """Add the colour attributes: CORNER (flat per patch) and/or POINT."""
+def write_colours(mesh, patch_mesh, face_colours, smooth_colours, output):
+    """Add the colour attributes, both on the CORNER domain: flat per patch, and/or the smooth
+    light (one value a polygon corner: creases keep a value on each side)."""
     names = []
     if output in ("FACE", "BOTH"):
         attr = mesh.color_attributes.new(ATTRIBUTE_NAME, "FLOAT_COLOR", "CORNER")
@@ -124,8 +125,8 @@ def write_colours(mesh, patch_mesh, face_colours, point_colours, output):
         names.append(attr.name)
     if output in ("VERTEX", "BOTH"):
         name = ATTRIBUTE_NAME if output == "VERTEX" else POINT_ATTRIBUTE_NAME
-        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "POINT")
-        attr.data.foreach_set("color", rgba(point_colours))
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
+        attr.data.foreach_set("color", rgba(smooth_colours))
         names.append(attr.name)
     main = mesh.color_attributes.get(ATTRIBUTE_NAME)
     mesh.color_attributes.active_color = main
@@ -177,7 +178,7 @@ def write_results(context, output_data, output_mode, scene=None):
             output_data.patches.objects,
             output_data.patches.meshes,
             output_data.face_colours,
-            output_data.point_colours,
+            output_data.smooth_colours,
         )):
             if faces is None:  # an object of the rest of the scene: it took part, gets no result
                 continue

@@ -144,8 +144,9 @@ STOP_RULE = Choice("stop_rule", "--stop-rule", "measured", (
 ), "Stop at")
 OUTPUT = Choice("output", "--colours", "BOTH", (
     ("FACE", "Face colours", "Flat colour per patch on the CORNER domain"),
-    ("VERTEX", "Vertex colours", "Area-weighted average of the adjacent patches on the POINT domain"),
-    ("BOTH", "Both", "Face colours as 'Radiosity', vertex colours as 'Radiosity Vertex'"),
+    ("VERTEX", "Smooth colours", "Smooth light on every face corner: joined across objects that touch, kept apart "
+     "at creases, each patch's light kept, tile noise filtered within its measured error"),
+    ("BOTH", "Both", "Face colours as 'Radiosity', smooth colours as 'Radiosity Vertex'"),
 ), "Colours")
 SEED = Number("seed", "--seed", 0, 0, 2**31 - 1, "Seed", "Random seed (same seed, same result)", integer=True)
 TIME_LIMIT = Number("time_limit", "--time-limit", 0.0, 0.0, None, "Time limit",

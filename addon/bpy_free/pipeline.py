@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core import meshing, predict, relative_rms_to_mse, solve
+from ..core import meshing, predict, relative_rms_to_mse, smoothing, solve
 from ..core.diagnostics import MAX_BOUNCES, check_bounces
 from ..core.first_shot import direct_irradiance
 from ..core.forecast import forecast
@@ -52,7 +52,8 @@ class SolveOutput:
     prediction: object  # core Prediction for the run's settings
     target_mse: float | None
     face_colours: list = field(default_factory=list)  # (P_k,3) per object
-    point_colours: list = field(default_factory=list)  # (N_k,3) per object, or None
+    # (C_k,3) per object, one a polygon corner: the smooth light (core smoothing), or None
+    smooth_colours: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)  # attribute name -> [(P_k,3) per object], light and indirect
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
@@ -305,13 +306,26 @@ def _write_colours(out, scene, result, settings):
     for name, values in extras.items():
         out.extra[name] = [None if not o.receives else np.asarray(values[patches.combined.patch_slice(k)])
                            for k, o in enumerate(patches.objects)]
+    smooth = _smooth_light(scene, result) if settings.output in ("VERTEX", "BOTH") else None
+    point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
     for k, mesh in enumerate(patches.meshes):
         if not patches.objects[k].receives:  # the rest of the scene: no results
             out.face_colours.append(None)
-            out.point_colours.append(None)
+            out.smooth_colours.append(None)
             continue
         B = radiosity[patches.combined.patch_slice(k)]
         out.face_colours.append(B)
-        out.point_colours.append(
-            meshing.point_average(mesh, B) if settings.output in ("VERTEX", "BOTH") else None
-        )
+        out.smooth_colours.append(None if smooth is None else smoothing.polygon_corner_values(
+            smooth, scene.triangles, scene.triangle_patch,
+            mesh.corner_patch + patches.combined.patch_offsets[k], mesh.corner_verts + point_start[k]))
+
+
+def _smooth_light(scene, result):
+    """(T,3,3) the smooth light at every corner of the scene's triangles: the reflected light,
+    its tile noise filtered within its measured variance, joined across objects and kept apart
+    at creases (core smoothing), plus each patch's own emission, flat."""
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    reflected = surface.filter_noise(np.maximum(result.reflected, 0.0), result.reflected_variance)
+    corners = surface.corner_values(reflected)
+    corners += scene.emission[scene.triangle_patch][:, None, :]
+    return corners

@@ -218,16 +218,16 @@ def auto_exposure():
 def preview_exposure(output, mode) -> float:
     """``auto_exposure`` of the results a solve's ``output`` (pipeline.SolveOutput) writes in
     colour mode ``mode``, from its arrays: the 'Radiosity' attribute's values (per patch on every
-    corner, or per point with VERTEX), as the float32 colours written."""
+    corner, or the smooth light per polygon corner with VERTEX), as the float32 colours written."""
     import numpy as np
 
     from ..blender_write.results import rgba
 
     values = []
-    for mesh, faces, points in zip(output.patches.meshes, output.face_colours, output.point_colours):
+    for mesh, faces, smooth in zip(output.patches.meshes, output.face_colours, output.smooth_colours):
         if faces is None:  # the rest of the scene: no results
             continue
-        shown = points if mode == "VERTEX" else faces
+        shown = smooth if mode == "VERTEX" else faces
         grey = rgba(shown).reshape(-1, 4)[:, :3].mean(axis=1)
         values.append(grey if mode == "VERTEX" else np.repeat(grey, mesh.face_sizes))
     return _exposure_of(values)

@@ -390,3 +390,21 @@ def filter_noise(vertices, triangles, triangle_patch, patch_values, patch_varian
     """Noise-filtered per-patch values (P,k) (``Surface.filter_noise``)."""
     surface = Surface.of(vertices, triangles, triangle_patch, len(patch_values), crease_angle)
     return surface.filter_noise(patch_values, patch_variances, cutoff)
+
+
+def polygon_corner_values(corners, triangles, triangle_patch, corner_patch, corner_point):
+    """(n,3) the value at each polygon corner (its patch ``corner_patch`` (n,), its point
+    ``corner_point`` (n,), indices of the same arrays as ``triangles``), read from ``corners``
+    (T,3,3) at a corner of one of the patch's triangles at that point (every such corner holds the
+    same value: the patch's triangles share its normal, so one crease group at each point).
+    ValueError where a polygon corner is no corner of its patch's triangles."""
+    points = int(max(triangles.max(initial=0), np.max(corner_point, initial=0))) + 1
+    key = (np.asarray(triangle_patch, np.int64)[:, None] * points + triangles).ravel()
+    order = np.argsort(key, kind="stable")
+    wanted = np.asarray(corner_patch, np.int64) * points + corner_point
+    at = np.minimum(np.searchsorted(key, wanted, sorter=order), key.size - 1)
+    found = order[at]
+    if not np.array_equal(key[found], wanted):
+        raise ValueError("a polygon corner is not a corner of its patch's triangles")
+    return np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])[found]
+

@@ -15,7 +15,7 @@ from addon.blender_read.selection import read_selection
 from addon.bpy_free import patches, worker
 from addon.ui import panel
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
-from addon.core.meshing import concatenate, mesh_patches, point_average, triangle_areas
+from addon.core.meshing import concatenate, mesh_patches, triangle_areas
 
 from .conftest import build_test_scene, mesh_arrays, read_colours, result_objects
 
@@ -206,35 +206,29 @@ def test_two_way_iteration_reaches_the_core_and_the_estimate_plans_for_it(blende
     assert method_line.endswith("(automatic)") and ("two-way" in method_line) == (chosen == "two_way")
 
 
-def test_vertex_colours_are_area_weighted_averages(blender):
+def test_smooth_colours_are_finite_on_every_corner_and_never_below_the_emission(blender):
+    """The smooth light ('Radiosity Vertex' beside the flat one) is written on the CORNER domain,
+    one value a polygon corner (a crease keeps a value on each side), finite and at least each
+    patch's own emission (reflected light is never below 0)."""
     build_test_scene()
     configure(blender, output="BOTH")
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     for obj in result_objects():
         mesh = obj.data
-        co, sizes, corners = mesh_arrays(mesh)
+        _, sizes, _ = mesh_arrays(mesh)
         _, flat = read_colours(mesh, "Radiosity")
         domain, smooth = read_colours(mesh, "Radiosity Vertex")
-        assert domain == "POINT" and len(smooth) == len(mesh.vertices)
-        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        num = np.zeros((len(co), 3))
-        den = np.zeros(len(co))
-        for s, n in zip(starts, sizes):  # plain loop: an independent check
-            p = co[corners[s:s + n]].astype(float)
-            area = 0.5 * np.linalg.norm(np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0))
-            for v in set(corners[s:s + n]):
-                num[v] += area * flat[s, :3]
-                den[v] += area
-        np.testing.assert_allclose(smooth[:, :3], num / den[:, None], rtol=2e-5, atol=1e-7)
+        assert domain == "CORNER" and len(smooth) == len(mesh.loops) == sizes.sum()
+        assert np.isfinite(smooth).all() and (smooth[:, :3] >= 0).all()
 
 
-def test_vertex_only_output_writes_point_attribute_named_radiosity(blender):
+def test_vertex_only_output_writes_the_smooth_light_named_radiosity(blender):
     build_test_scene()
     configure(blender, output="VERTEX")
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     for obj in result_objects():
         assert [a.name for a in obj.data.color_attributes] == ["Radiosity"]
-        assert obj.data.color_attributes["Radiosity"].domain == "POINT"
+        assert obj.data.color_attributes["Radiosity"].domain == "CORNER"
 
 
 def _snapshot():

@@ -340,3 +340,24 @@ def test_patches_no_path_reached_are_filtered_not_kept_black():
     ratios = np.array(ratios)
     assert ratios.mean() + Z * ratios.std(ddof=1) / np.sqrt(SEEDS) < 1.0, ratios
     assert min(speckles) > 0.3, speckles
+
+
+def test_polygon_corners_read_the_value_of_their_patchs_triangle_corner():
+    """Quads fanned into two triangles each: every polygon corner reads the value its patch's
+    triangles hold at that point; a corner that is no corner of its patch's triangles is refused."""
+    from addon.core.smoothing import polygon_corner_values
+
+    rng = np.random.default_rng(5)
+    quads = rng.permutation(40).reshape(10, 4)  # (10 patches, their 4 points)
+    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    patch = np.concatenate([np.arange(10), np.arange(10)])
+    corners = rng.random((20, 3, 3))
+    point_value = {}
+    for t in range(20):  # make the corners of one patch at one point agree, as smoothing's do
+        for k in range(3):
+            corners[t, k] = point_value.setdefault((patch[t], triangles[t, k]), corners[t, k])
+    got = polygon_corner_values(corners, triangles, patch, np.repeat(np.arange(10), 4), quads.ravel())
+    expected = np.array([point_value[(p, v)] for p, v in zip(np.repeat(np.arange(10), 4), quads.ravel())])
+    np.testing.assert_array_equal(got, expected)
+    with pytest.raises(ValueError, match="not a corner of its patch"):
+        polygon_corner_values(corners, triangles, patch, np.array([0]), np.array([quads[1, 0]]))

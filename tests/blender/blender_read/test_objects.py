@@ -60,8 +60,8 @@ def test_nurbs_sphere_and_displaced_grid_solve_and_write_results(blender):
         assert domain == "CORNER"
         np.testing.assert_array_equal(flat[:, :3], np.repeat(output.face_colours[k], sizes, axis=0).astype(np.float32))
         domain, smooth = read_colours(results[obj.name].data, "Radiosity Vertex")
-        assert domain == "POINT"
-        np.testing.assert_allclose(smooth[:, :3], output.point_colours[k], rtol=1e-6, atol=1e-7)
+        assert domain == "CORNER"
+        np.testing.assert_allclose(smooth[:, :3], output.smooth_colours[k], rtol=1e-6, atol=1e-7)
         assert np.isfinite(flat).all() and (flat[:, :3] >= 0).all()
         # every patch lies on its source face (patch_face maps results back to the right face):
         # its centroid is over one of the face's triangles, and near its plane (grid cells of
