@@ -16,6 +16,8 @@ All choices are ours (sample_scenes/README.md):
 """
 from __future__ import annotations
 
+import math
+
 from .geometry import MeshBuilder
 
 WHITE = (0.73, 0.73, 0.73)
@@ -48,4 +50,8 @@ def build(divisions=20, closed=False, emittance=LIGHT_EMITTANCE):
         "cornell_box" + ("_closed" if closed else ""),
         "Coloured Cornell-style box: red/green side walls, ceiling light, two axis-aligned blocks",
         divisions=n, closed=closed, emittance=tuple(emittance),
+        # The classic view, from outside the open front: the whole box, both blocks and the light
+        # (a square frame, 35 mm: the front opening just fills it). Closed, the box has none.
+        camera=None if closed else {"location": (0.5, -1.06, 0.5), "rotation": (math.pi / 2, 0.0, 0.0),
+                                    "lens": 35.0, "resolution": (512, 512)},
     )

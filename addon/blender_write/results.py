@@ -12,7 +12,7 @@ from ..core import meshing
 
 COLLECTION_NAME = "Radiosity"
 ATTRIBUTE_NAME = "Radiosity"
-POINT_ATTRIBUTE_NAME = "Radiosity Vertex"  # the smooth colours when both are written
+PATCH_ATTRIBUTE_NAME = "Radiosity Patches"  # the flat per-patch colours when both are written
 MATERIAL_NAME = "Radiosity Result"
 SOURCE_PROPERTY = "radiosity_source"  # custom property marking result objects
 COLLECTION_PROPERTY = "radiosity_results"  # custom property marking a scene's results collection
@@ -119,14 +119,14 @@ def write_colours(mesh, patch_mesh, face_colours, smooth_colours, output):
     """Add the colour attributes, both on the CORNER domain: flat per patch, and/or the smooth
     light (one value a polygon corner: creases keep a value on each side)."""
     names = []
-    if output in ("FACE", "BOTH"):
+    if output in ("VERTEX", "BOTH"):  # the smooth light is what is shown where it is written
         attr = mesh.color_attributes.new(ATTRIBUTE_NAME, "FLOAT_COLOR", "CORNER")
-        attr.data.foreach_set("color", _cornerrgba(patch_mesh, face_colours))
-        names.append(attr.name)
-    if output in ("VERTEX", "BOTH"):
-        name = ATTRIBUTE_NAME if output == "VERTEX" else POINT_ATTRIBUTE_NAME
-        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
         attr.data.foreach_set("color", rgba(smooth_colours))
+        names.append(attr.name)
+    if output in ("FACE", "BOTH"):
+        name = ATTRIBUTE_NAME if output == "FACE" else PATCH_ATTRIBUTE_NAME
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
+        attr.data.foreach_set("color", _cornerrgba(patch_mesh, face_colours))
         names.append(attr.name)
     main = mesh.color_attributes.get(ATTRIBUTE_NAME)
     mesh.color_attributes.active_color = main

@@ -146,7 +146,7 @@ OUTPUT = Choice("output", "--colours", "BOTH", (
     ("FACE", "Face colours", "Flat colour per patch on the CORNER domain"),
     ("VERTEX", "Smooth colours", "Smooth light on every face corner: joined across objects that touch, kept apart "
      "at creases, each patch's light kept, tile noise filtered within its measured error"),
-    ("BOTH", "Both", "Face colours as 'Radiosity', smooth colours as 'Radiosity Vertex'"),
+    ("BOTH", "Both", "Smooth colours as 'Radiosity' (shown), the flat per-patch colours as 'Radiosity Patches'"),
 ), "Colours")
 SEED = Number("seed", "--seed", 0, 0, 2**31 - 1, "Seed", "Random seed (same seed, same result)", integer=True)
 TIME_LIMIT = Number("time_limit", "--time-limit", 0.0, 0.0, None, "Time limit",

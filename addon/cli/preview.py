@@ -218,7 +218,7 @@ def auto_exposure():
 def preview_exposure(output, mode) -> float:
     """``auto_exposure`` of the results a solve's ``output`` (pipeline.SolveOutput) writes in
     colour mode ``mode``, from its arrays: the 'Radiosity' attribute's values (per patch on every
-    corner, or the smooth light per polygon corner with VERTEX), as the float32 colours written."""
+    corner, or the smooth light per polygon corner with VERTEX and BOTH), as the float32 colours written."""
     import numpy as np
 
     from ..blender_write.results import rgba
@@ -227,9 +227,9 @@ def preview_exposure(output, mode) -> float:
     for mesh, faces, smooth in zip(output.patches.meshes, output.face_colours, output.smooth_colours):
         if faces is None:  # the rest of the scene: no results
             continue
-        shown = smooth if mode == "VERTEX" else faces
-        grey = rgba(shown).reshape(-1, 4)[:, :3].mean(axis=1)
-        values.append(grey if mode == "VERTEX" else np.repeat(grey, mesh.face_sizes))
+        smooth_shown = mode in ("VERTEX", "BOTH")  # (both: the smooth light is 'Radiosity')
+        grey = rgba(smooth if smooth_shown else faces).reshape(-1, 4)[:, :3].mean(axis=1)
+        values.append(grey if smooth_shown else np.repeat(grey, mesh.face_sizes))
     return _exposure_of(values)
 
 

@@ -34,7 +34,17 @@ def build_sample_scene(name):
     import sample_scenes
     from sample_scenes.blender import to_blender
 
-    objects = to_blender(sample_scenes.build(name))
+    sample = sample_scenes.build(name)
+    objects = to_blender(sample)
+    view = sample.metadata.get("camera")
+    if view is not None:  # the scene's own view, which the preview renders from
+        data = bpy.data.cameras.new(f"{name} camera")
+        data.lens = view["lens"]
+        camera = bpy.data.objects.new(f"{name} camera", data)
+        camera.location, camera.rotation_euler = view["location"], view["rotation"]
+        bpy.context.scene.collection.objects.link(camera)
+        bpy.context.scene.camera = camera
+        bpy.context.scene.render.resolution_x, bpy.context.scene.render.resolution_y = view["resolution"]
     for obj in bpy.context.view_layer.objects:
         obj.select_set(False)
     for obj in objects:

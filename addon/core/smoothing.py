@@ -46,6 +46,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .welding import run_starts, weld_points
+
 CREASE_ANGLE = 30.0  # degrees, as Blender's auto smooth
 WELD_FRACTION = 1e-4  # of the median patch's side
 NOISE_CUTOFF = 3.0  # standard errors beyond which a neighbour is real detail, not noise
@@ -53,51 +55,9 @@ ITERATIONS = 10
 RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
 
 
-def _starts(sorted_keys):
-    """Start of each run of equal values in a sorted 1-D array."""
-    return np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
-
-
-def _cells(points, cell, shift):
-    """Cell number (V,) of every point in a grid of ``cell`` shifted by ``shift`` cells per axis."""
-    q = np.floor(points / cell + shift).astype(np.int64)
-    order = np.lexsort(q.T[::-1])
-    qs = q[order]
-    new = np.r_[True, (qs[1:] != qs[:-1]).any(axis=1)]
-    del qs
-    cells = np.empty(len(points), _index_type(len(points)))
-    cells[order] = np.cumsum(new) - 1
-    return cells
-
-
-def weld_points(points, weld):
-    """Point label (V,) of every vertex: equal for vertices within ``weld`` of each other on every
-    axis (transitively), labels 0..n-1."""
-    points = np.asarray(points, np.float64)
-    V = len(points)
-    if V == 0:
-        return np.zeros(0, np.int64)
-    shifts = [(a, b, c) for a in (0, 0.5) for b in (0, 0.5) for c in (0, 0.5)]
-    grids = []
-    for s in shifts:
-        cells = _cells(points, 2.0 * weld, np.asarray(s))
-        if np.bincount(cells).max() > 1:  # a grid joining nothing adds nothing
-            order = np.argsort(cells, kind="stable").astype(cells.dtype)
-            grids.append((cells, order, _starts(cells[order]).astype(cells.dtype)))
-    labels = np.arange(V, dtype=_index_type(V))
-    while grids:
-        before = labels
-        for cells, order, starts in grids:
-            labels = np.minimum(labels, np.minimum.reduceat(labels[order], starts)[cells])
-        labels = labels[labels]  # pointer jumping: chains shorten geometrically
-        if np.array_equal(labels, before):
-            break
-    return np.unique(labels, return_inverse=True)[1].astype(_index_type(V))
-
-
-def _index_type(n):
-    """The smallest of int32 and int64 that numbers n things: half the memory of index arrays."""
-    return np.int32 if n < 2 ** 31 - 1 else np.int64
+# A corner's value never falls below this share of the darkest patch meeting at it (a valley may
+# dip below its patches, as a smooth surface through their means must; black it may not).
+LOWEST_SHARE = 0.5
 
 
 @dataclass
@@ -186,6 +146,18 @@ class Surface:
         out *= inverse
         return out
 
+    def _corner_lowest(self, x, averaging):
+        """(T*3,) the lowest of the compatible corners' values ``x`` at each corner's point."""
+        point, _, _, crease, local, o = averaging
+        around = np.full(len(self.smooth_point), np.inf)
+        np.minimum.at(around, point, x)
+        lowest = around[point]
+        if len(crease):
+            pairs = np.full(len(crease), np.inf)
+            np.minimum.at(pairs, local, x[o])
+            lowest[crease] = pairs
+        return lowest
+
     def _patch_means(self, x):
         """Area-weighted mean (P,) of the linear interpolation of corner values (T*3,)."""
         tri = x.reshape(-1, 3).sum(axis=1) * (self.triangle_area / 3.0)
@@ -208,11 +180,14 @@ class Surface:
 
     def _corner_channel(self, values, corner_patch, averaging, iterations):
         x = self._average_corners(values[corner_patch], averaging)
+        floor = LOWEST_SHARE * self._corner_lowest(values[corner_patch], averaging)
         for _ in range(int(iterations)):
             # each patch's missing light, spread continuously over the corners around it
             missing = (values - self._patch_means(x))[corner_patch]
             x += RELAXATION * self._average_corners(missing, averaging)
-            np.maximum(x, 0.0, out=x)
+            # a bright patch beside dim ones would push its neighbours' far corners down to black:
+            # never below a share of the darkest patch meeting there (the last scale keeps means)
+            np.maximum(x, floor, out=x)
         means = self._patch_means(x)
         # exact at last: a patch whose corners all came to zero keeps its own value, flat
         scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
@@ -230,7 +205,7 @@ class Surface:
         code = np.unique(self.point.ravel().astype(np.int64) * P + np.repeat(self.triangle_patch, 3))
         point, patch = code // P, code % P
         del code
-        starts = _starts(point)
+        starts = run_starts(point)
         sizes = np.diff(np.r_[starts, len(point)])
         ends = np.cumsum(sizes * sizes)
         found = []
@@ -270,7 +245,7 @@ class Surface:
         p, q, k = p[used], q[used], k[used]
         limit = np.zeros_like(values)
         if len(p):
-            runs = _starts(p)
+            runs = run_starts(p)
             for c in range(values.shape[1]):
                 limit[p[runs], c] = cutoff * np.sqrt(np.maximum.reduceat(var[p, c] + var[q, c], runs))
         fitted = self._local_fit(values, var, known, p, q, k)
@@ -368,7 +343,7 @@ def _crease_pairs(point, triangle_patch, patch_normal, cos_crease):
     if len(corners) == 0:
         return smooth, (np.zeros(0, np.int64), np.zeros(0, np.int64))
     corners = corners[np.argsort(p[corners], kind="stable")]
-    starts = _starts(p[corners])
+    starts = run_starts(p[corners])
     sizes = np.diff(np.r_[starts, len(corners)])
     square = sizes * sizes
     first = np.repeat(starts, square)

@@ -207,7 +207,7 @@ def test_two_way_iteration_reaches_the_core_and_the_estimate_plans_for_it(blende
 
 
 def test_smooth_colours_are_finite_on_every_corner_and_never_below_the_emission(blender):
-    """The smooth light ('Radiosity Vertex' beside the flat one) is written on the CORNER domain,
+    """The smooth light ('Radiosity', shown; the flat one beside it) is written on the CORNER domain,
     one value a polygon corner (a crease keeps a value on each side), finite and at least each
     patch's own emission (reflected light is never below 0)."""
     build_test_scene()
@@ -216,8 +216,8 @@ def test_smooth_colours_are_finite_on_every_corner_and_never_below_the_emission(
     for obj in result_objects():
         mesh = obj.data
         _, sizes, _ = mesh_arrays(mesh)
-        _, flat = read_colours(mesh, "Radiosity")
-        domain, smooth = read_colours(mesh, "Radiosity Vertex")
+        _, flat = read_colours(mesh, "Radiosity Patches")
+        domain, smooth = read_colours(mesh, "Radiosity")
         assert domain == "CORNER" and len(smooth) == len(mesh.loops) == sizes.sum()
         assert np.isfinite(smooth).all() and (smooth[:, :3] >= 0).all()
 
@@ -432,7 +432,7 @@ def test_saved_blend_reloads_with_the_attribute(blender, tmp_path):
     build_test_scene()
     configure(blender, output="BOTH")
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
-    saved = {o.name: (read_colours(o.data, "Radiosity")[1].copy(), read_colours(o.data, "Radiosity Vertex")[1].copy())
+    saved = {o.name: (read_colours(o.data, "Radiosity")[1].copy(), read_colours(o.data, "Radiosity Patches")[1].copy())
              for o in result_objects()}
     path = str(tmp_path / "result.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
@@ -445,7 +445,7 @@ def test_saved_blend_reloads_with_the_attribute(blender, tmp_path):
         domain, flat = read_colours(o.data, "Radiosity")
         assert domain == "CORNER" and o.data.color_attributes["Radiosity"].data_type == "FLOAT_COLOR"
         np.testing.assert_array_equal(flat, saved[o.name][0])
-        np.testing.assert_array_equal(read_colours(o.data, "Radiosity Vertex")[1], saved[o.name][1])
+        np.testing.assert_array_equal(read_colours(o.data, "Radiosity Patches")[1], saved[o.name][1])
     assert bpy.context.scene.radiosity.last_paths > 0
 
 

@@ -56,10 +56,10 @@ def test_nurbs_sphere_and_displaced_grid_solve_and_write_results(blender):
         np.testing.assert_array_equal(sizes, mesh.face_sizes)
         np.testing.assert_array_equal(corners, mesh.corner_verts)
         np.testing.assert_allclose(co, mesh.points, atol=1e-6)
-        domain, flat = read_colours(results[obj.name].data, "Radiosity")
+        domain, flat = read_colours(results[obj.name].data, "Radiosity Patches")
         assert domain == "CORNER"
         np.testing.assert_array_equal(flat[:, :3], np.repeat(output.face_colours[k], sizes, axis=0).astype(np.float32))
-        domain, smooth = read_colours(results[obj.name].data, "Radiosity Vertex")
+        domain, smooth = read_colours(results[obj.name].data, "Radiosity")
         assert domain == "CORNER"
         np.testing.assert_allclose(smooth[:, :3], output.smooth_colours[k], rtol=1e-6, atol=1e-7)
         assert np.isfinite(flat).all() and (flat[:, :3] >= 0).all()

@@ -17,8 +17,8 @@ def _room_colours(blender):
     """The room's radiosity at its face corners (n,3), after a solve."""
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     (room,) = [o for o in result_objects() if o["radiosity_source"] == "Room"]
-    colours = np.empty(len(room.data.color_attributes["Radiosity"].data) * 4, np.float32)
-    room.data.color_attributes["Radiosity"].data.foreach_get("color", colours)
+    colours = np.empty(len(room.data.color_attributes["Radiosity Patches"].data) * 4, np.float32)
+    room.data.color_attributes["Radiosity Patches"].data.foreach_get("color", colours)
     return colours.reshape(-1, 4)[:, :3].astype(np.float64)
 
 
