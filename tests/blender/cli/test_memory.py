@@ -20,15 +20,28 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.a
 MIB = 1 << 20
 
 
+# Linux hands a process's peak resident set (ru_maxrss) on to the children it starts: a command
+# started from pytest itself reports at least the test process's own peak (1.5 GB late in the
+# suite). So a small fresh launcher starts it and reports its os.wait4 peak.
+LAUNCHER = (
+    "import os, subprocess, sys\n"
+    "p = subprocess.Popen(sys.argv[1:])\n"
+    "_, status, usage = os.wait4(p.pid, 0)\n"
+    "sys.stderr.write(f'\\nlauncher: {os.waitstatus_to_exitcode(status)} {usage.ru_maxrss}\\n')\n"
+)
+
+
 def _peak_of(cmd, cwd):
-    """(exit status, output, the process's peak resident set in bytes), from os.wait4."""
+    """(exit status, output, the process's peak resident set in bytes), from os.wait4 in a
+    fresh launcher."""
     log = os.path.join(cwd, "log.txt")
     with open(log, "w") as f:
-        process = subprocess.Popen(cmd, cwd=cwd, stdout=f, stderr=subprocess.STDOUT,
-                                   env={**os.environ, "PYTHONPATH": ROOT})
-        _, status, usage = os.wait4(process.pid, 0)
+        subprocess.run([sys.executable, "-c", LAUNCHER, *cmd], cwd=cwd, stdout=f, stderr=subprocess.STDOUT,
+                       env={**os.environ, "PYTHONPATH": ROOT})
     with open(log) as f:
-        return os.waitstatus_to_exitcode(status), f.read(), usage.ru_maxrss * 1024
+        text = f.read()
+    status, kib = text.rstrip().rsplit("launcher: ", 1)[1].split()
+    return int(status), text, int(kib) * 1024
 
 
 # The command line's growth above Blender with the extension registered, per patch, at 162,560
