@@ -119,12 +119,13 @@ def write_colours(mesh, patch_mesh, face_colours, smooth_colours, output):
     """Add the colour attributes, both on the CORNER domain: flat per patch, and/or the smooth
     light (one value a polygon corner: creases keep a value on each side)."""
     names = []
-    if output in ("VERTEX", "BOTH"):  # the smooth light is what is shown where it is written
+    smooth = output == "VERTEX" or (output == "BOTH" and smooth_colours is not None)
+    if smooth:  # the smooth light is what is shown where it is written
         attr = mesh.color_attributes.new(ATTRIBUTE_NAME, "FLOAT_COLOR", "CORNER")
         attr.data.foreach_set("color", rgba(smooth_colours))
         names.append(attr.name)
     if output in ("FACE", "BOTH"):
-        name = ATTRIBUTE_NAME if output == "FACE" else PATCH_ATTRIBUTE_NAME
+        name = PATCH_ATTRIBUTE_NAME if smooth else ATTRIBUTE_NAME
         attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
         attr.data.foreach_set("color", _cornerrgba(patch_mesh, face_colours))
         names.append(attr.name)

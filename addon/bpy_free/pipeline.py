@@ -306,7 +306,13 @@ def _write_colours(out, scene, result, settings):
     for name, values in extras.items():
         out.extra[name] = [None if not o.receives else np.asarray(values[patches.combined.patch_slice(k)])
                            for k, o in enumerate(patches.objects)]
-    smooth = _smooth_light(scene, result) if settings.output in ("VERTEX", "BOTH") else None
+    smooth = None
+    if settings.output == "VERTEX" or (settings.output == "BOTH" and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
+        smooth = _smooth_light(scene, result)
+    elif settings.output == "BOTH":
+        out.notes.append(f"smooth colours left out at {scene.patch_count:,} patches (Both makes them up to "
+                         f"{options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory of the run); "
+                         "the flat colours are shown: choose Smooth colours to make them")
     point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
     for k, mesh in enumerate(patches.meshes):
         if not patches.objects[k].receives:  # the rest of the scene: no results

@@ -227,7 +227,7 @@ def preview_exposure(output, mode) -> float:
     for mesh, faces, smooth in zip(output.patches.meshes, output.face_colours, output.smooth_colours):
         if faces is None:  # the rest of the scene: no results
             continue
-        smooth_shown = mode in ("VERTEX", "BOTH")  # (both: the smooth light is 'Radiosity')
+        smooth_shown = smooth is not None  # (written: it is 'Radiosity')
         grey = rgba(smooth if smooth_shown else faces).reshape(-1, 4)[:, :3].mean(axis=1)
         values.append(grey if smooth_shown else np.repeat(grey, mesh.face_sizes))
     return _exposure_of(values)

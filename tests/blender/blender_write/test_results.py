@@ -58,3 +58,31 @@ def test_wall_pieces_of_separate_objects_share_their_light_and_corners_keep_crea
         assert wall_values
         differ += not np.allclose(floor_value, wall_values[0], rtol=1e-3)
     assert differ >= len(edge) // 2  # (the lamp lights the floor and the walls unlike)
+
+
+def test_both_leaves_the_smooth_light_out_above_its_patch_bound_and_says_so(blender, monkeypatch):
+    """Above SMOOTH_MAX_PATCHES (at a million patches smoothing doubled the run's time and memory)
+    Both writes the flat colours alone, as 'Radiosity', and a note says why; below it, both."""
+    from addon.bpy_free import options, pipeline
+
+    room_v, room_f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    make_object("Room", room_v, room_f, [principled("White", (0.7, 0.7, 0.7))]).select_set(True)
+    _lamp("POINT", "Bulb", location=(0.5, 0.5, 0.8), energy=30.0, shadow_soft_size=0.0)
+    s = blender.scene.radiosity
+    s.output, s.patch_size, s.target_error, s.threads = "BOTH", 0.25, 5.0, 2
+    notes = []
+    real = pipeline._write_colours
+    monkeypatch.setattr(pipeline, "_write_colours", lambda out, *a: (real(out, *a), notes.extend(out.notes))[0])
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    (room,) = result_objects()
+    assert [a.name for a in room.data.color_attributes] == ["Radiosity", "Radiosity Patches"]
+    assert not any("smooth colours left out" in n for n in notes)
+    monkeypatch.setattr(options, "SMOOTH_MAX_PATCHES", 10)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    (room,) = result_objects()
+    assert [a.name for a in room.data.color_attributes] == ["Radiosity"]
+    _, colours = read_colours(room.data, "Radiosity")
+    _, sizes, _ = mesh_arrays(room.data)
+    starts = np.r_[0, np.cumsum(sizes)[:-1]]
+    assert (colours == np.repeat(colours[starts], sizes, axis=0)).all()  # flat per patch
+    assert any("smooth colours left out at 96 patches" in n for n in notes), notes
