@@ -215,10 +215,10 @@ def auto_exposure():
     return _exposure_of(values)
 
 
-def preview_exposure(output, mode) -> float:
-    """``auto_exposure`` of the results a solve's ``output`` (pipeline.SolveOutput) writes in
-    colour mode ``mode``, from its arrays: the 'Radiosity' attribute's values (per patch on every
-    corner, or the smooth light per polygon corner with VERTEX and BOTH), as the float32 colours written."""
+def preview_exposure(output) -> float:
+    """``auto_exposure`` of the results a solve's ``output`` (pipeline.SolveOutput) writes, from
+    its arrays: the 'Radiosity' attribute's values (the smooth light per polygon corner where it
+    was made, else each patch's on every corner), as the float32 colours written."""
     import numpy as np
 
     from ..blender_write.results import rgba

@@ -154,7 +154,7 @@ def _solve(args, settings, interrupt, exposure):
 
     def before_writing(output):
         if not args.no_preview:  # from the arrays written: reading Blender's back would copy them
-            exposure.append(preview.preview_exposure(output, settings.output))
+            exposure.append(preview.preview_exposure(output))
         release_solve_memory()  # writing the colours needs the patches, not the core's scene
 
     operators.OUTPUT_LISTENER = before_writing

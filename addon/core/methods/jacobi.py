@@ -9,11 +9,10 @@ GROUP_PATHS_JACOBI first rays a group.
 from __future__ import annotations
 
 from .. import walk as stages
-from ..first_shot import gather_samples
 from ..jacobi import jacobi_chunk, jacobi_chunks
-from ..names import JACOBI, SHOT
-from .base import Integrator, solve_gathering, spec_gathering
-from .walk import Gathered, Walk, chunks_per_group
+from ..names import JACOBI
+from .base import Integrator
+from .walk import Walk, chunks_per_group
 
 # A group's wavefront is a generation, whose first has a ray a path: chunks go together up to
 # this many first rays in a group.
@@ -29,16 +28,12 @@ class Jacobi(Walk):
     def predicted(self):
         return False
 
-    def create(self, scene, tables, chunk, seed, prediction):
-        if self.direct_light == SHOT:
-            return ShotJacobi(tables)
-        samples = gather_samples(chunk, prediction.expected_path_length, scene)
-        return Gathered(tables, solve_gathering(scene, tables, samples, seed), jacobi_one)
+    def shot(self, tables):
+        return ShotJacobi(tables)
 
-    def rebuild(self, scene, tables, spec):
-        if spec is None:
-            return ShotJacobi(tables)
-        return Gathered(tables, spec_gathering(scene, spec), jacobi_one)
+    @staticmethod
+    def one_chunk(tables, paths, rng, abort):
+        return jacobi_one(tables, paths, rng, abort)
 
 
 class ShotJacobi(Integrator):

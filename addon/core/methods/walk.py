@@ -45,14 +45,23 @@ class Walk(Method):
 
     def create(self, scene, tables, chunk, seed, prediction):
         if self.direct_light == SHOT:
-            return ShotWalk(tables)
+            return self.shot(tables)
         samples = gather_samples(chunk, prediction.expected_path_length, scene)
-        return Gathered(tables, solve_gathering(scene, tables, samples, seed), walk_one)
+        return Gathered(tables, solve_gathering(scene, tables, samples, seed), self.one_chunk)
 
     def rebuild(self, scene, tables, spec):
         if spec is None:
-            return ShotWalk(tables)
-        return Gathered(tables, spec_gathering(scene, spec), walk_one)
+            return self.shot(tables)
+        return Gathered(tables, spec_gathering(scene, spec), self.one_chunk)
+
+    # What a subclass with chunks of its own (Jacobi) replaces: its integrator with the direct
+    # light shot, and one chunk from given sources (what the gathered variant runs).
+    def shot(self, tables):
+        return ShotWalk(tables)
+
+    @staticmethod
+    def one_chunk(tables, paths, rng, abort):
+        return walk_one(tables, paths, rng, abort)
 
 
 class ShotWalk(Integrator):

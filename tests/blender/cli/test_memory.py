@@ -93,7 +93,7 @@ def test_the_preview_exposure_from_the_arrays_is_the_one_read_back(blender, outp
     from addon.cli.preview import auto_exposure, preview_exposure
 
     exposures = []
-    operators.OUTPUT_LISTENER = lambda out: exposures.append(preview_exposure(out, output))
+    operators.OUTPUT_LISTENER = lambda out: exposures.append(preview_exposure(out))
     try:
         _solve(blender, output)
     finally:
