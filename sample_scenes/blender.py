@@ -7,8 +7,9 @@
 
 One object per part, one quad per patch (the patch's own corners, same winding, so Blender's
 face normals are the patch normals), and one Principled BSDF material per distinct
-(reflectivity, emission): Base Color = reflectivity, Emission Color x Emission Strength =
-emittance -- how the extension reads materials back (``addon/blender_read/materials.py``). Unlike
+(reflectivity, emission): Base Color = reflectivity, Specular IOR Level 0 (no specular layer:
+Lambertian, as the sample scenes are), Emission Color x Emission Strength = emittance -- how the
+extension reads materials back (``addon/blender_read/materials.py``). Unlike
 ``python -m addon --scene NAME`` this takes any variant, not only registry names.
 """
 from __future__ import annotations
@@ -26,6 +27,7 @@ def _material(bpy, name, reflectivity, emission):
     colour = np.asarray(emission, float) / strength if strength > 0 else np.zeros(3)
     node.inputs["Emission Color"].default_value = (*map(float, colour), 1.0)
     node.inputs["Emission Strength"].default_value = strength
+    node.inputs["Specular IOR Level"].default_value = 0.0
     m.diffuse_color = (*map(float, reflectivity), 1.0)
     return m
 

@@ -1,9 +1,11 @@
 """Materials read into colours: a surface shader's base colour and emission, and the image
 textures and colour attributes read per patch instead of a material's one value (bpy).
 
-Units: emission = emission colour x strength, reflectivity = base colour, so the radiosity
-written is what Cycles' COMBINED bake gives for the same Lambertian scene (a closed box emitting
-S with albedo R gives S / (1 - R)).
+Units: emission = emission colour x strength, reflectivity = the light a surface returns into
+the room (a closed box emitting S with albedo R gives S / (1 - R), as Cycles). For a Diffuse BSDF
+that is its colour; for a Principled BSDF the base colour plus what its specular, metallic, coat
+and transmission layers reflect, as energy (``surface_terms``, core.principled): reflectivity =
+scale * base colour + offset, per patch where the base colour is read per patch.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
+from ..core import principled
 from . import SceneError
 from .images import image_average, linear_pixels
 
@@ -161,10 +164,10 @@ def material_colours(material, per_patch=()):
     """(reflectivity (3,), emission (3,), notes) of a material; ``per_patch`` names the sockets
     read per patch (``_per_patch_sockets``), whose averages get no note.
 
-    Principled BSDF: base colour, emission colour x strength.  Diffuse BSDF:
-    colour.  Emission: colour x strength, no reflection.  No node tree: the
-    viewport colour.  No material: grey 0.8.  Linked (textured) inputs use
-    the socket's default and add a note.
+    Principled BSDF: its base colour with the light of its other layers (``surface_terms``),
+    emission colour x strength, and a note naming what is not modelled.  Diffuse BSDF: colour.
+    Emission: colour x strength, no reflection.  No node tree: the viewport colour.  No
+    material: grey 0.8.  Linked (textured) inputs use the socket's default and add a note.
     """
     notes = []
     if material is None:
@@ -186,7 +189,11 @@ def material_colours(material, per_patch=()):
         notes.append(f"{what}: surface is {kind}; used node '{found.name}'")
         node = found
     if node.bl_idname == "ShaderNodeBsdfPrincipled":
-        reflectivity = _socket_colour(node, "Base Color", notes, what, per_patch)
+        base = _socket_colour(node, "Base Color", notes, what, per_patch)
+        inputs = _principled_inputs(node, base, notes, what)
+        scale, offset = principled.surface_terms(inputs)
+        reflectivity = scale * base + offset
+        notes.extend(_principled_note(node, inputs, what))
         name = "Emission Color" if "Emission Color" in node.inputs else "Emission"
         strength = _socket_float(node, "Emission Strength", notes, what, 1.0)
         emission = _socket_colour(node, name, notes, what, per_patch, emitting=strength != 0) * strength
@@ -198,6 +205,108 @@ def material_colours(material, per_patch=()):
         strength = _socket_float(node, "Strength", notes, what, 1.0)
         emission = _socket_colour(node, "Color", notes, what, per_patch, emitting=strength != 0) * strength
     return reflectivity, emission, notes
+
+
+def _socket_rgb(node, name, notes, what, default=(1.0, 1.0, 1.0)):
+    socket = node.inputs.get(name)
+    if socket is None:
+        return tuple(default)
+    if socket.is_linked:
+        notes.append(f"{what}: '{name}' of '{node.name}' is connected (texture?); its own value "
+                     f"{_text(socket.default_value[:3])} was used")
+    return tuple(float(v) for v in socket.default_value[:3])
+
+
+def _principled_inputs(node, base, notes, what):
+    """core.principled.PrincipledInputs of a Principled BSDF node, its base colour ``base``."""
+    def value(name, default):
+        return _socket_float(node, name, notes, what, default) if name in node.inputs else default
+
+    return principled.PrincipledInputs(
+        base=tuple(float(v) for v in base),
+        metallic=value("Metallic", 0.0),
+        roughness=value("Roughness", 0.5),
+        ior=value("IOR", 1.5),
+        specular_ior_level=value("Specular IOR Level", 0.5),
+        specular_tint=_socket_rgb(node, "Specular Tint", notes, what),
+        transmission=value("Transmission Weight", 0.0),
+        coat=value("Coat Weight", 0.0),
+        coat_roughness=value("Coat Roughness", 0.03),
+        coat_ior=value("Coat IOR", 1.5),
+        coat_tint=_socket_rgb(node, "Coat Tint", notes, what),
+        multiscatter=getattr(node, "distribution", "MULTI_GGX") == "MULTI_GGX",
+    )
+
+
+def surface_terms(material):
+    """(scale (3,), offset (3,)) of a material: the light it returns into the room is
+    ``scale * base colour + offset`` for the base colour of each point (its image texture or
+    colour attribute); (1, 0) for anything but a Principled BSDF."""
+    node = _shader_node(material)
+    if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
+        return np.ones(3), np.zeros(3)
+    notes = []
+    what = f"material '{material.name}'"
+    base = _socket_colour(node, "Base Color", notes, what)
+    return principled.surface_terms(_principled_inputs(node, base, notes, what))
+
+
+#: The tail shared by Principled notes; notes that differ only in the material merge (``merged_notes``).
+_LAYERS_COUNTED = "reflection counted as diffuse light (its hemispherical albedo)"
+
+
+def _principled_note(node, p, what):
+    """One note naming what a Principled BSDF has that is not modelled, or none."""
+    def used(name, cutoff=1e-5):
+        socket = node.inputs.get(name)
+        return socket is not None and (socket.is_linked or float(socket.default_value) > cutoff)
+
+    eta, _ = principled.specular_eta_f0(p.ior, p.specular_ior_level)
+    counted = [name for name, on in (("coat", used("Coat Weight")), ("metallic", used("Metallic")),
+                                     ("specular", eta != 1.0)) if on]
+    missing = ["view-dependent highlights"] if counted else []
+    if used("Transmission Weight"):
+        missing.append("light through transmission (only its reflection counted)")
+    if used("Subsurface Weight"):
+        missing.append("subsurface scattering (taken as diffuse)")
+    if used("Sheen Weight"):
+        missing.append("sheen")
+    if used("Anisotropic"):
+        missing.append("anisotropy")
+    if used("Thin Film Thickness"):
+        missing.append("thin film")
+    alpha = node.inputs.get("Alpha")
+    if alpha is not None and (alpha.is_linked or float(alpha.default_value) < 1.0):
+        missing.append("alpha (taken as opaque)")
+    if not missing:
+        return []
+    head = f"Principled {' and '.join(counted)} {_LAYERS_COUNTED}; " if counted else "Principled: "
+    return [f"{what}: {head}not modelled: {', '.join(missing)}"]
+
+
+def merged_notes(notes):
+    """The notes with those of several materials that say the same thing about a Principled
+    BSDF joined into one naming them all (in order)."""
+    merged, names = [], {}
+    for note in notes:
+        if note.startswith("material '") and "': Principled " in note:
+            name, tail = note[len("material '"):].split("': Principled ", 1)
+            if tail not in names:
+                names[tail] = []
+                merged.append((tail,))
+            names[tail].append(name)
+        else:
+            merged.append(note)
+    out = []
+    for item in merged:
+        if isinstance(item, tuple):
+            who = names[item[0]]
+            label = "material" if len(who) == 1 else "materials"
+            quoted = ", ".join("'" + n + "'" for n in who)
+            out.append(f"{label} {quoted}: Principled {item[0]}")
+        else:
+            out.append(item)
+    return out
 
 
 #: The socket of each shader that gives the base colour, and the emission colour and strength.
@@ -254,12 +363,14 @@ def material_emission_texture(material):
 
 
 def slot_tables(obj, notes):
-    """Reflectivity, emission, material name, base-colour texture, colour attribute and
-    emission texture (each or None) of each material slot (at least one row)."""
+    """Reflectivity, emission, material name, base-colour texture, colour attribute, emission
+    texture (each or None) and surface terms (scale, offset) of each material slot (at least one
+    row). A base-colour texture's pixels come back as reflectivity (scale * colour + offset); a
+    colour attribute's colours are base colours, for the caller to map by the slot's terms."""
     materials = [slot.material for slot in obj.material_slots] or [None]
     R = np.empty((len(materials), 3))
     E = np.empty((len(materials), 3))
-    textures, attributes, emission_textures = [], [], []
+    textures, attributes, emission_textures, terms = [], [], [], []
     for k, material in enumerate(materials):
         texture, attribute = material_texture(material), material_attribute(material)
         emission = material_emission_texture(material)
@@ -270,10 +381,14 @@ def slot_tables(obj, notes):
         if emission is not None:
             per_patch.add(_EMISSION[node.bl_idname][0])
         R[k], E[k], more = material_colours(material, per_patch)
+        scale, offset = surface_terms(material)
+        if texture is not None and not (np.all(scale == 1) and np.all(offset == 0)):
+            pixels = texture[0]
+            texture = ((pixels * scale + offset).astype(pixels.dtype, copy=False), *texture[1:])
         textures.append(texture)
         attributes.append(attribute)
         emission_textures.append(emission)
+        terms.append((scale, offset))
         notes.extend(more)
     names = tuple("(no material)" if m is None else m.name for m in materials)
-    return R, E, names, tuple(textures), tuple(attributes), tuple(emission_textures)
-
+    return R, E, names, tuple(textures), tuple(attributes), tuple(emission_textures), tuple(terms)

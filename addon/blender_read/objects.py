@@ -117,12 +117,15 @@ def _mesh_materials(evaluated, mesh, triangles, name, notes):
     """The object's material slots (materials.slot_tables), with the UVs and colour attributes
     that their textures read per patch."""
     T = len(triangles)
-    R_slots, E_slots, slot_names, textures, attributes, emission_textures = slot_tables(evaluated, notes)
+    R_slots, E_slots, slot_names, textures, attributes, emission_textures, terms = slot_tables(evaluated, notes)
     triangle_uv = None
     if any(t is not None for t in (*textures, *emission_textures)):
         triangle_uv, kept = _triangle_uv(mesh, T, (*textures, *emission_textures), name, notes)
         textures, emission_textures = kept[: len(textures)], kept[len(textures):]
-    slot_colours = _attribute_colours(mesh, T, triangles, attributes, name, notes)
+    # colour attributes are base colours: the light returned is scale * colour + offset
+    slot_colours = tuple(None if c is None else c * scale + offset
+                         for c, (scale, offset) in zip(_attribute_colours(mesh, T, triangles, attributes, name, notes),
+                                                       terms))
     return {"R_slots": R_slots, "E_slots": E_slots, "slot_names": slot_names, "textures": textures,
             "emission_textures": emission_textures, "triangle_uv": triangle_uv, "slot_colours": slot_colours}
 

@@ -7,10 +7,13 @@ import numpy as np
 
 from . import SceneError, objects as object_reading
 from .lights import LightError, read_lights, read_world
+from .materials import merged_notes
 
 #: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
 #: need R < 1; without the setting, a base colour of 1 or more is refused).
 MAX_REFLECTIVITY = 0.99
+#: Reflectivity counted as 1: a white metal's albedo is 1 up to the rounding of its integral.
+ONE = 1.0 - 1e-9
 
 
 def _materials_where(o, bad_faces):
@@ -46,8 +49,8 @@ def read_selection(context):
             "an emission strength > 0 (Principled BSDF 'Emission Strength' or an Emission shader), add a "
             "light, or give the world a colour"
         )
-    # unique notes, in order
-    return Selection(objects, lights), list(dict.fromkeys(notes))
+    # unique notes, in order; materials' Principled notes that say the same thing as one
+    return Selection(objects, lights), merged_notes(list(dict.fromkeys(notes)))
 
 
 def _read_objects(context, depsgraph, candidates, others, settings, notes):
@@ -92,11 +95,12 @@ def _check_materials(o, clamp, notes):
     bad = (o.face_reflectivity < 0).any(axis=1)
     if bad.any():
         raise SceneError(f"'{o.name}': material {_materials_where(o, bad)} has a negative base colour")
-    bright = (o.face_reflectivity >= 1).any(axis=1)
+    bright = (o.face_reflectivity >= ONE).any(axis=1)
     if bright.any() and not clamp:
         value = float(o.face_reflectivity[bright].max())
         raise SceneError(
-            f"'{o.name}': material {_materials_where(o, bright)} has a base colour of {value:.3g}. "
+            f"'{o.name}': material {_materials_where(o, bright)} has a reflectivity (base colour, with what a "
+            f"Principled BSDF's other layers return) of {value:.3g}. "
             "Radiosity needs a reflectivity below 1: a surface that reflects all the light it gets "
             "never lets a random walk end in a closed room (and above 1 it creates light). "
             f"Lower the base colour below 1, or turn on 'Clamp bright colours' to use {MAX_REFLECTIVITY}"
@@ -104,7 +108,7 @@ def _check_materials(o, clamp, notes):
     o.slot_textures = _checked_textures(o, clamp, notes)
     over = (o.face_reflectivity > MAX_REFLECTIVITY).any(axis=1)
     if over.any() and clamp:
-        notes.append(f"'{o.name}': base colours of material {_materials_where(o, over)} above "
+        notes.append(f"'{o.name}': reflectivities of material {_materials_where(o, over)} above "
                      f"{MAX_REFLECTIVITY} were clamped to {MAX_REFLECTIVITY} ('Clamp bright colours' is on)")
         o.face_reflectivity = np.minimum(o.face_reflectivity, MAX_REFLECTIVITY)
 
@@ -129,7 +133,7 @@ def _checked_textures(o, clamp, notes):
             where = f"'{o.name}': the colour attribute of material '{o.slot_names[slot]}'"
             if not np.isfinite(colours).all() or (colours < 0).any():
                 raise SceneError(f"{where} has colours that are negative or not finite")
-            if colours.max() >= 1 and not clamp:
+            if colours.max() >= ONE and not clamp:
                 raise SceneError(f"{where} has colours of {float(colours.max()):.3g}: a reflectivity needs to stay "
                                  f"below 1. Darken them, or turn on 'Clamp bright colours' to use {MAX_REFLECTIVITY}")
     if clamp:
@@ -145,9 +149,10 @@ def _checked_textures(o, clamp, notes):
             where = f"'{o.name}': the image texture of material '{o.slot_names[slot]}'"
             if not np.isfinite(pixels).all() or (pixels < 0).any():
                 raise SceneError(f"{where} has pixels that are negative or not finite")
-            if pixels.max() >= 1:
+            if pixels.max() >= ONE:
                 if not clamp:
-                    raise SceneError(f"{where} has pixels of {float(pixels.max()):.3g}: a reflectivity needs to "
+                    raise SceneError(f"{where} has pixels of {float(pixels.max()):.3g} (as reflectivity, with what a "
+                                     "Principled BSDF's other layers return): a reflectivity needs to "
                                      "stay below 1. Darken the image, or turn on 'Clamp bright colours' to use "
                                      f"{MAX_REFLECTIVITY}")
                 notes.append(f"{where}: pixels above {MAX_REFLECTIVITY} were clamped ('Clamp bright colours' is on)")

@@ -145,23 +145,30 @@ def ggx(roughness):
     return Ggx(normals, E, float((mu_nodes()[1] * E).sum()))
 
 
-def _compensated(layer, single, fss, multiscatter):
-    """(M,C) directional albedo of a layer whose single-scattering albedo is ``single`` (M,C),
-    with Cycles' multiple-scattering GGX (energy 1/E, darkened by the Fresnel of repeated bounces
-    ``Fms`` from the mean Fresnel ``fss`` (C,))."""
+def _darkening(layer, fss, multiscatter):
+    """(M,C) Cycles' multiple-scattering GGX factor on a layer's weight, ``E + Fms (1 - E)``, the
+    Fresnel of repeated bounces ``Fms`` from the mean Fresnel ``fss`` (C,); the BSDF itself is
+    also scaled by ``1/E``. 1 without multiple scattering."""
     if not multiscatter:
-        return single
+        return np.ones((len(layer.E), len(fss)))
     E = layer.E[:, None]
     fms = fss * layer.E_avg / (1.0 - fss * (1.0 - layer.E_avg))
-    return single / E * (E + fms[None, :] * (1.0 - E))
+    return E + fms[None, :] * (1.0 - E)
+
+
+def _compensated(layer, single, fss, multiscatter):
+    """(M,C) directional albedo of a layer whose single-scattering albedo is ``single`` (M,C)."""
+    darkening = _darkening(layer, fss, multiscatter)
+    return single * darkening / layer.E[:, None] if multiscatter else single
 
 
 def dielectric_layer(roughness, eta, f0, multiscatter=True):
     """(albedo (M,C), estimate (M,C)) of a reflecting dielectric layer as the Principled BSDF's
     specular (or coat) closure: Fresnel from ``eta`` remapped to start at ``f0`` (C,) (its tint
     times the level's F0), as Cycles' generalised Schlick with a negative exponent. ``estimate``
-    is what Cycles takes as the layer's albedo to weight the layers below (single scattering at
-    one bounce, not counting the masking), ``albedo`` what the layer actually reflects."""
+    is what Cycles takes as the layer's albedo to weight the layers below (the Fresnel averaged over
+    visible normals, times the multiple-scattering darkening of the closure's weight, not counting
+    the masking), ``albedo`` what the layer actually reflects."""
     f0 = np.clip(np.atleast_1d(np.asarray(f0, dtype=np.float64)), 0.0, 1.0)
     layer = ggx(roughness)
     n = layer.normals
@@ -179,9 +186,9 @@ def dielectric_layer(roughness, eta, f0, multiscatter=True):
     # Cycles' table of the remap factor averages it over the visible normals whose reflection
     # leaves the surface (unweighted by masking)
     s_estimate = (s * n.valid).mean(axis=1)[:, None]
-    estimate = f0[None, :] + (1.0 - f0[None, :]) * s_estimate
     s_mean = np.clip((fresnel_dielectric_fss(eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
     fss = f0 + (1.0 - f0) * s_mean
+    estimate = (f0[None, :] + (1.0 - f0[None, :]) * s_estimate) * _darkening(layer, fss, multiscatter)
     return _compensated(layer, single, fss, multiscatter), estimate
 
 
@@ -244,8 +251,9 @@ def _layers_out(p: PrincipledInputs, base):
     coat = max(float(p.coat), 0.0)
     if coat > 1e-5:
         coat_ior = max(float(p.coat_ior), 1.0)
+        # (Cycles compensates the coat's multiple scattering whatever the distribution)
         albedo, estimate = dielectric_layer(float(np.clip(p.coat_roughness, 0, 1)), coat_ior,
-                                            np.full(3, float(f0_from_ior(coat_ior))), p.multiscatter)
+                                            np.full(3, float(f0_from_ior(coat_ior))))
         energy += coat * albedo
         weight *= np.clip(1.0 - (coat * estimate).max(axis=1, keepdims=True), 0.0, 1.0)
         tint = np.maximum(np.asarray(p.coat_tint, dtype=np.float64), 0.0)

@@ -40,6 +40,7 @@ def principled(name, base, emission=(0, 0, 0), strength=0.0):
     node.inputs["Base Color"].default_value = (*base, 1.0)
     node.inputs["Emission Color"].default_value = (*emission, 1.0)
     node.inputs["Emission Strength"].default_value = strength
+    node.inputs["Specular IOR Level"].default_value = 0.0  # Lambertian: read back as the base colour
     return m
 
 

@@ -72,7 +72,8 @@ def test_a_smooth_surface_reflects_the_fresnel_reflectance():
 def test_default_principled_returns_its_specular_light_on_top_of_a_scaled_base():
     """Defaults (roughness 0.5, IOR 1.5, level 0.5, Multiscatter GGX): the diffuse base keeps
     1 - the layering estimate, the specular layer adds its own multiple-scattering albedo; both
-    from the brute-force integrals (a 32-node cosine-weighted mean over the view)."""
+    from the brute-force integrals (a 32-node cosine-weighted mean over the view). Cycles' own
+    furnace render of these materials is in benchmarks/results/principled.md."""
     p = pr.PrincipledInputs()
     scale, offset = pr.surface_terms(p)
     mu, w = pr.mu_nodes()
@@ -83,13 +84,14 @@ def test_default_principled_returns_its_specular_light_on_top_of_a_scaled_base()
         single[k], est[k] = brute_force(0.5, m, 1.5, 0.04, 400, 240)
     fss = 0.04 + 0.96 * np.clip((pr.fresnel_dielectric_fss(1.5) - 0.04) / 0.96, 0, 1)
     fms = fss * layer.E_avg / (1 - fss * (1 - layer.E_avg))
-    albedo = single / layer.E * (layer.E + fms * (1 - layer.E))
-    np.testing.assert_allclose(scale, (w * (1 - est)).sum(), atol=1e-3)
+    darkening = layer.E + fms * (1 - layer.E)  # on the closure's weight, so on its estimate too
+    albedo = single / layer.E * darkening
+    np.testing.assert_allclose(scale, (w * (1 - est * darkening)).sum(), atol=1e-3)
     np.testing.assert_allclose(offset, (w * albedo).sum(), atol=1e-3)
     base = np.array([0.8, 0.8, 0.8])
     total = pr.principled_albedo(p)
     np.testing.assert_allclose(total, scale * base + offset, rtol=1e-12)
-    assert 0.05 < offset[0] < 0.07 and 0.92 < scale[0] < 0.94
+    assert 0.05 < offset[0] < 0.07 and 0.93 < scale[0] < 0.95
     # a saturated floor: its blue channel gets more than twice its base colour's light
     brown = pr.principled_albedo(pr.PrincipledInputs(base=(0.3, 0.1, 0.02)))
     assert brown[2] > 2 * 0.02 and brown[0] < 0.3 + offset[0]
@@ -105,9 +107,11 @@ def test_limits_give_the_plain_diffuse_or_all_the_light():
     for roughness in (0.0, 0.3, 1.0):
         np.testing.assert_allclose(pr.principled_albedo(pr.PrincipledInputs(base=(1, 1, 1), metallic=1.0,
                                                                              roughness=roughness)), 1.0, atol=1e-9)
-    # single-scattering GGX loses light as it gets rough; Multiscatter keeps a white dielectric near 1
-    white = pr.principled_albedo(pr.PrincipledInputs(base=(1, 1, 1), roughness=1.0))
-    assert 0.97 < white[0] < 1.0
+    # single-scattering GGX loses light as it gets rough; Multiscatter keeps a white dielectric at 1
+    # within what Cycles' layering by an estimate leaves
+    for roughness in (0.0, 0.5, 1.0):
+        white = pr.principled_albedo(pr.PrincipledInputs(base=(1, 1, 1), roughness=roughness))
+        np.testing.assert_allclose(white, 1.0, atol=3e-3)
     single = pr.principled_albedo(pr.PrincipledInputs(base=(1, 1, 1), metallic=1.0, roughness=1.0,
                                                       multiscatter=False))
     np.testing.assert_allclose(single, pr.ggx(1.0).E_avg, rtol=1e-9)

@@ -113,7 +113,7 @@ def test_white_base_colour_is_refused_with_the_reason_or_clamped_on_request(blen
     white = bpy.data.materials["White"].node_tree.nodes["Principled BSDF"].inputs["Base Color"]
     white.default_value = (1.0, 1.0, 1.0, 1.0)
     _unchanged_after_error(
-        blender, r"'Room': material 'White' has a base colour of 1\. .*reflectivity below 1: .*never lets a "
+        blender, r"'Room': material 'White' has a reflectivity \(base colour, .*\) of 1\. .*reflectivity below 1: .*never lets a "
         r"random walk end in a closed room.*'Clamp bright colours'")
     # Opt in: clamped to 0.99, solved, and said so.
     blender.scene.radiosity.clamp_reflectivity = True

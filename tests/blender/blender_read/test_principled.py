@@ -1,0 +1,145 @@
+"""Principled BSDF materials read as the light they return into the room (base colour plus the
+specular and metallic layers' hemispherical albedo), with one note per material."""
+
+import bpy
+import numpy as np
+import pytest
+
+from addon.blender_read import images
+from addon.blender_read.materials import material_colours, surface_terms
+from addon.blender_read.selection import read_selection
+from addon.bpy_free import pipeline
+from addon.core import principled as core
+
+from ..conftest import box_arrays, make_object, read_colours, result_objects
+from ..test_extension import configure
+from .test_selection import _unchanged_after_error
+
+
+def default_material(name, base, **inputs):
+    """A Principled BSDF at Blender's defaults but for ``base`` and the named inputs."""
+    m = bpy.data.materials.new(name)
+    node = m.node_tree.nodes["Principled BSDF"]
+    node.inputs["Base Color"].default_value = (*base, 1.0)
+    for key, value in inputs.items():
+        node.inputs[key].default_value = value
+    return m
+
+
+def test_a_default_principled_material_returns_more_than_its_base_colour(blender):
+    """Roughness 0.5, IOR 1.5, Specular IOR Level 0.5: the specular layer's light on top of the
+    base colour scaled by what that layer leaves; a saturated floor's weak channel the most."""
+    floor = (0.3, 0.1, 0.02)
+    R, _, _ = material_colours(default_material("Floor", floor))
+    expected = core.principled_albedo(core.PrincipledInputs(base=floor))
+    np.testing.assert_allclose(R, expected, rtol=1e-6)  # (Blender keeps the colour in float32)
+    scale, offset = surface_terms(bpy.data.materials["Floor"])
+    np.testing.assert_allclose(scale, 0.9388, atol=2e-3)  # 1 - the layering estimate, cosine-weighted
+    np.testing.assert_allclose(offset, 0.0598, atol=2e-3)  # the specular layer's multiscatter albedo
+    assert R[2] > 3.5 * floor[2] and R[0] > floor[0]
+    # Specular IOR Level 0 (no specular layer) and the Diffuse BSDF: the base colour itself
+    R, _, notes = material_colours(default_material("Matte", floor, **{"Specular IOR Level": 0.0}))
+    np.testing.assert_allclose(R, floor, rtol=1e-6)
+    assert not notes
+    # metallic: an F82 conductor whose colour is the base colour (white: all the light)
+    R, _, _ = material_colours(default_material("Chrome", (1, 1, 1), Metallic=1.0))
+    np.testing.assert_allclose(R, 1.0, atol=1e-9)
+    gold = (0.9, 0.6, 0.2)
+    R, _, _ = material_colours(default_material("Gold", gold, Metallic=1.0, Roughness=0.3))
+    np.testing.assert_allclose(R, core.principled_albedo(core.PrincipledInputs(base=gold, metallic=1.0,
+                                                                               roughness=0.3)), rtol=1e-6)
+
+
+def test_textures_and_colour_attributes_carry_the_specular_light_per_patch(blender):
+    """An image texture's pixels and a colour attribute's colours are base colours: each patch
+    gets scale * its mean + offset, as the material's own value does."""
+    m = default_material("Painted", (0.1, 0.1, 0.1))
+    tree = m.node_tree
+    image = bpy.data.images.new("Paint", 2, 1, float_buffer=True)
+    image.pixels.foreach_set(np.array([0.6, 0.2, 0.05, 1, 0.2, 0.4, 0.02, 1], np.float32))
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    a = default_material("Tinted", (0.1, 0.1, 0.1))
+    attribute = a.node_tree.nodes.new("ShaderNodeVertexColor")
+    a.node_tree.links.new(attribute.outputs["Color"], a.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    lamp = default_material("Lamp", (0.5, 0.5, 0.5), **{"Emission Strength": 1.0})
+    box = make_object("Box", v, f, [m, a, lamp], face_materials=[0, 1, 2, 1, 1, 1])
+    box.data.uv_layers.new(name="UVMap")
+    colours = box.data.color_attributes.new("Col", "FLOAT_COLOR", "CORNER")
+    colours.data.foreach_set("color", np.tile([0.05, 0.3, 0.6, 1.0], len(colours.data)).astype(np.float32))
+    box.data.color_attributes.active_color = colours
+    box.select_set(True)
+    objects, _ = read_selection(blender)
+    (o,) = objects
+    scale, offset = core.surface_terms(core.PrincipledInputs())  # a dielectric's terms do not depend on its base
+    pixels = images.linear_pixels(image)
+    np.testing.assert_allclose(o.slot_textures[0][0], pixels * scale + offset, rtol=1e-6)
+    expected = np.array([0.05, 0.3, 0.6]) * scale + offset
+    np.testing.assert_allclose(o.slot_colours[1], np.broadcast_to(expected, o.slot_colours[1].shape), rtol=1e-6)
+    assert o.slot_textures[1] is None and o.slot_colours[0] is None
+
+
+def test_one_note_per_material_naming_only_what_it_uses(blender):
+    """Two objects share a default material, a second default material says the same: one note
+    names both; a glass and a matte material: the glass's own note, none for the matte."""
+    shared = default_material("Plaster", (0.7, 0.7, 0.7))
+    other = default_material("Wood", (0.4, 0.2, 0.1))
+    glass = default_material("Glass", (0.9, 0.9, 0.9), **{"Transmission Weight": 1.0})
+    matte = default_material("Matte", (0.5, 0.5, 0.5), **{"Specular IOR Level": 0.0})
+    lamp = default_material("Lamp", (0.5, 0.5, 0.5), **{"Emission Strength": 2.0, "Specular IOR Level": 0.0})
+    for k, materials in enumerate([[shared], [shared], [other, matte], [glass], [lamp]]):
+        v, f = box_arrays((2 * k, 0, 0), (2 * k + 1, 1, 1), inward=False)
+        make_object(f"Box {k}", v, f, materials, face_materials=[0, 0, 0, 0, 0, len(materials) - 1]).select_set(True)
+    _, notes = read_selection(blender)
+    principled_notes = [n for n in notes if "Principled" in n]
+    assert principled_notes == [
+        "materials 'Plaster', 'Wood': Principled specular reflection counted as diffuse light (its hemispherical "
+        "albedo); not modelled: view-dependent highlights",
+        "material 'Glass': Principled specular reflection counted as diffuse light (its hemispherical albedo); "
+        "not modelled: view-dependent highlights, light through transmission (only its reflection counted)",
+    ]
+    assert not any("'Matte'" in n or "'Lamp'" in n for n in notes)
+
+
+def test_a_white_metal_is_refused_as_a_reflectivity_of_one_and_nothing_changes(blender):
+    """A metallic white returns all the light: refused as a base colour of 1 is, with the same
+    reason, the scene unchanged; a white dielectric at roughness 0.5 returns 0.9986 (Cycles' own
+    furnace render: 0.998) and is accepted."""
+    v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    box = make_object("Box", v, f, [default_material("Chrome", (1, 1, 1), Metallic=1.0),
+                                    default_material("Glow", (0.5, 0.5, 0.5), **{"Emission Strength": 1.0})],
+                      face_materials=[0, 1, 0, 0, 0, 0])
+    box.select_set(True)
+    configure(blender)
+    _unchanged_after_error(blender, r"'Box': material 'Chrome' has a reflectivity \(base colour, with what a "
+                                    r"Principled BSDF's other layers return\) of 1\. .*reflectivity below 1")
+    bpy.data.materials["Chrome"].node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 0.0
+    objects, _ = read_selection(blender)
+    assert 0.99 < objects[0].face_reflectivity.max() < 0.9995
+
+
+def test_closed_principled_box_solves_to_emission_over_one_minus_the_albedo(blender):
+    """A closed box emitting S everywhere, every face a default Principled BSDF of base b: the
+    exact radiosity is S / (1 - R) with R the Principled albedo (any patch, any form factors).
+    Each patch's error against it, in units of its own batch-means standard error, stays in a
+    band that 24 independent normal z-scores leave with probability 1e-4 (the colour channels of
+    a patch move together: one z-score a patch, green), and their mean square within the 1e-4
+    tails of a chi-square of 24 degrees of freedom over 24; the base colour alone (what was read
+    before) is many standard errors away."""
+    S, base = 1.0, np.array([0.55, 0.4, 0.15])
+    v, f = box_arrays((0, 0, 0), (1, 1, 1), inward=True)
+    make_object("Closed", v, f, [default_material("Glow", base, **{"Emission Color": (1, 1, 1, 1),
+                                                                   "Emission Strength": S})]).select_set(True)
+    R = core.principled_albedo(core.PrincipledInputs(base=tuple(base)))
+    objects, _ = read_selection(blender)
+    settings = pipeline.SolveSettings(paths=400_000, patch_size=0.5, seed=11, threads=1)
+    out = pipeline.run_solve(objects, settings)
+    B, variance = out.result.radiosity, out.result.reflected_variance
+    assert B.shape == (24, 3)
+    z = ((B - S / (1 - R)) / np.sqrt(variance))[:, 1]
+    assert np.abs(z).max() < 4.6
+    assert 0.26 < np.mean(z ** 2) < 2.45  # the standard errors are of the right size
+    before = (B - S / (1 - base)) / np.sqrt(variance)
+    assert np.abs(before).mean() > 10
