@@ -4,8 +4,10 @@ textures and colour attributes read per patch instead of a material's one value 
 Units: emission = emission colour x strength, reflectivity = the light a surface returns into
 the room (a closed box emitting S with albedo R gives S / (1 - R), as Cycles). For a Diffuse BSDF
 that is its colour; for a Principled BSDF the base colour plus what its specular, metallic, coat
-and transmission layers reflect, as energy (``surface_terms``, core.principled): reflectivity =
-scale * base colour + offset, per patch where the base colour is read per patch.
+and transmission layers reflect, as energy (core.principled): reflectivity = scale * base colour
++ offset, per patch where the base colour is read per patch. Solved with ``transport_terms`` (the
+light passed on from surface to surface, under Cycles' Filter Glossy); ``surface_terms`` is what
+the camera sees of the surface for the same light.
 """
 
 from __future__ import annotations
@@ -164,8 +166,8 @@ def material_colours(material, per_patch=()):
     """(reflectivity (3,), emission (3,), notes) of a material; ``per_patch`` names the sockets
     read per patch (``_per_patch_sockets``), whose averages get no note.
 
-    Principled BSDF: its base colour with the light of its other layers (``surface_terms``),
-    emission colour x strength, and a note naming what is not modelled.  Diffuse BSDF: colour.
+    Principled BSDF: its base colour with the light of its other layers as passed on in the room
+    (``transport_terms``), emission colour x strength, and a note naming what is not modelled.  Diffuse BSDF: colour.
     Emission: colour x strength, no reflection.  No node tree: the viewport colour.  No
     material: grey 0.8.  Linked (textured) inputs use the socket's default and add a note.
     """
@@ -190,7 +192,7 @@ def material_colours(material, per_patch=()):
         node = found
     if node.bl_idname == "ShaderNodeBsdfPrincipled":
         base = _socket_colour(node, "Base Color", notes, what, per_patch)
-        inputs = _principled_inputs(node, base, notes, what)
+        inputs = _principled_inputs(node, base, notes, what, filter_glossy())
         scale, offset = principled.surface_terms(inputs)
         reflectivity = scale * base + offset
         notes.extend(_principled_note(node, inputs, what))
@@ -217,8 +219,16 @@ def _socket_rgb(node, name, notes, what, default=(1.0, 1.0, 1.0)):
     return tuple(float(v) for v in socket.default_value[:3])
 
 
-def _principled_inputs(node, base, notes, what):
-    """core.principled.PrincipledInputs of a Principled BSDF node, its base colour ``base``."""
+def filter_glossy():
+    """The scene's Cycles Filter Glossy (Cycles' default 1 where Cycles is not there): Cycles
+    widens glossy lobes reached by a diffuse bounce, which loses some of their light."""
+    cycles = getattr(bpy.context.scene, "cycles", None)
+    return max(float(getattr(cycles, "blur_glossy", 1.0)), 0.0)
+
+
+def _principled_inputs(node, base, notes, what, blur=0.0):
+    """core.principled.PrincipledInputs of a Principled BSDF node, its base colour ``base``,
+    for light that reaches it by a diffuse bounce under Filter Glossy ``blur``."""
     def value(name, default):
         return _socket_float(node, name, notes, what, default) if name in node.inputs else default
 
@@ -235,20 +245,28 @@ def _principled_inputs(node, base, notes, what):
         coat_ior=value("Coat IOR", 1.5),
         coat_tint=_socket_rgb(node, "Coat Tint", notes, what),
         multiscatter=getattr(node, "distribution", "MULTI_GGX") == "MULTI_GGX",
+        filter_glossy=blur,
     )
 
 
-def surface_terms(material):
-    """(scale (3,), offset (3,)) of a material: the light it returns into the room is
-    ``scale * base colour + offset`` for the base colour of each point (its image texture or
-    colour attribute); (1, 0) for anything but a Principled BSDF."""
+def surface_terms(material, blur=0.0):
+    """(scale (3,), offset (3,)) of a material: the light it returns is ``scale * base colour +
+    offset`` for the base colour of each point (its image texture or colour attribute); (1, 0) for
+    anything but a Principled BSDF. As the camera sees the surface (``blur`` 0); ``transport_terms``
+    for the light it passes on in the room."""
     node = _shader_node(material)
     if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
         return np.ones(3), np.zeros(3)
     notes = []
     what = f"material '{material.name}'"
     base = _socket_colour(node, "Base Color", notes, what)
-    return principled.surface_terms(_principled_inputs(node, base, notes, what))
+    return principled.surface_terms(_principled_inputs(node, base, notes, what, blur))
+
+
+def transport_terms(material):
+    """``surface_terms`` of the light a material passes on from one surface to the next: Cycles
+    reaches it by a diffuse bounce, under the scene's Filter Glossy; the reflectivity solved."""
+    return surface_terms(material, filter_glossy())
 
 
 #: The tail shared by Principled notes; notes that differ only in the material merge (``merged_notes``).
@@ -381,7 +399,7 @@ def slot_tables(obj, notes):
         if emission is not None:
             per_patch.add(_EMISSION[node.bl_idname][0])
         R[k], E[k], more = material_colours(material, per_patch)
-        scale, offset = surface_terms(material)
+        scale, offset = transport_terms(material)
         if texture is not None and not (np.all(scale == 1) and np.all(offset == 0)):
             pixels = texture[0]
             texture = ((pixels * scale + offset).astype(pixels.dtype, copy=False), *texture[1:])

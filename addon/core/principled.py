@@ -99,7 +99,7 @@ class VisibleNormals:
         return (self.weight * fresnel(self.cos_h)).mean(axis=1)
 
 
-@lru_cache(maxsize=64)
+@lru_cache(maxsize=24)  # (2.5 MB each)
 def visible_normals(roughness, mu=None, rows=CAP_ROWS, columns=CAP_COLUMNS):
     """VisibleNormals of GGX (alpha = roughness squared, as the Principled BSDF) at the view
     cosines ``mu`` (a tuple; None: the Gauss-Legendre nodes)."""
@@ -133,16 +133,14 @@ class Ggx:
     """Single-scattering GGX albedo ``E(mu)`` at the Gauss-Legendre nodes and its cosine-weighted
     mean ``E_avg``, for the multiple-scattering compensation."""
 
-    normals: VisibleNormals
     E: np.ndarray
     E_avg: float
 
 
-@lru_cache(maxsize=64)
+@lru_cache(maxsize=256)
 def ggx(roughness):
-    normals = visible_normals(float(roughness))
-    E = np.clip(normals.albedo(), 1e-6, 1.0)
-    return Ggx(normals, E, float((mu_nodes()[1] * E).sum()))
+    E = np.clip(visible_normals(float(roughness)).albedo(), 1e-6, 1.0)
+    return Ggx(E, float((mu_nodes()[1] * E).sum()))
 
 
 def _darkening(layer, fss, multiscatter):
@@ -162,16 +160,43 @@ def _compensated(layer, single, fss, multiscatter):
     return single * darkening / layer.E[:, None] if multiscatter else single
 
 
-def dielectric_layer(roughness, eta, f0, multiscatter=True):
+def blurred_roughness(roughness, filter_glossy, nodes=8):
+    """((K,) roughness, (K,) weights): what Cycles' Filter Glossy makes of a glossy closure reached
+    by a diffuse bounce, averaged over that bounce. Cycles widens the lobe to alpha at least
+    ``0.5 sqrt(1 - filter_glossy x pdf)``, the pdf of the diffuse bounce being cos/pi for the
+    cosine at the surface the light goes on to (cosine-weighted over that surface's hemisphere);
+    its multiple-scattering compensation stays that of the unblurred lobe. ``filter_glossy`` 0:
+    the lobe itself."""
+    roughness = max(float(roughness), ROUGHNESS_FLOOR)
+    if filter_glossy <= 0.0:
+        return np.array([roughness]), np.array([1.0])
+    c, w = mu_nodes(nodes)
+    blur_pdf = filter_glossy * c / np.pi
+    alpha = np.where(blur_pdf < 1.0, 0.5 * np.sqrt(np.maximum(1.0 - blur_pdf, 0.0)), 0.0)
+    return np.sqrt(np.maximum(alpha, roughness * roughness)), w
+
+
+def _single(roughness, filter_glossy, fresnel):
+    """(M,C) single-scattering albedo ``mean(weight * fresnel(cos_h))`` of GGX at ``roughness``,
+    averaged over Filter Glossy's blur (``blurred_roughness``); ``fresnel`` (M,N) -> (M,N,C)."""
+    out = 0.0
+    for r, w in zip(*blurred_roughness(roughness, filter_glossy)):
+        n = visible_normals(float(r))
+        out = out + w * (n.weight[..., None] * fresnel(n.cos_h)).mean(axis=1)
+    return out
+
+
+def dielectric_layer(roughness, eta, f0, multiscatter=True, filter_glossy=0.0):
     """(albedo (M,C), estimate (M,C)) of a reflecting dielectric layer as the Principled BSDF's
     specular (or coat) closure: Fresnel from ``eta`` remapped to start at ``f0`` (C,) (its tint
     times the level's F0), as Cycles' generalised Schlick with a negative exponent. ``estimate``
     is what Cycles takes as the layer's albedo to weight the layers below (the Fresnel averaged over
     visible normals, times the multiple-scattering darkening of the closure's weight, not counting
-    the masking), ``albedo`` what the layer actually reflects."""
+    the masking), ``albedo`` what the layer actually reflects (``filter_glossy``: after a diffuse
+    bounce, with Cycles' Filter Glossy of that value)."""
     f0 = np.clip(np.atleast_1d(np.asarray(f0, dtype=np.float64)), 0.0, 1.0)
     layer = ggx(roughness)
-    n = layer.normals
+    n = visible_normals(float(roughness))
     f0_real = float(f0_from_ior(eta))
     if abs(eta - 1.0) < 1e-12 or f0_real <= 0.0:
         zero = np.zeros((len(n.mu), len(f0)))
@@ -180,32 +205,32 @@ def dielectric_layer(roughness, eta, f0, multiscatter=True):
     def s_of(cos_h):
         return np.clip((fresnel_dielectric(cos_h, eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
 
-    s = s_of(n.cos_h)
-    s_weighted = (n.weight * s).mean(axis=1)[:, None]
-    single = layer.E[:, None] * f0[None, :] + (1.0 - f0[None, :]) * s_weighted
+    single = _single(roughness, filter_glossy,
+                     lambda cos_h: f0 + (1.0 - f0) * s_of(cos_h)[..., None])
     # Cycles' table of the remap factor averages it over the visible normals whose reflection
     # leaves the surface (unweighted by masking)
-    s_estimate = (s * n.valid).mean(axis=1)[:, None]
+    s_estimate = (s_of(n.cos_h) * n.valid).mean(axis=1)[:, None]
     s_mean = np.clip((fresnel_dielectric_fss(eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
     fss = f0 + (1.0 - f0) * s_mean
     estimate = (f0[None, :] + (1.0 - f0[None, :]) * s_estimate) * _darkening(layer, fss, multiscatter)
     return _compensated(layer, single, fss, multiscatter), estimate
 
 
-def metallic_layer(roughness, base, edge_tint=(1.0, 1.0, 1.0), multiscatter=True):
+def metallic_layer(roughness, base, edge_tint=(1.0, 1.0, 1.0), multiscatter=True, filter_glossy=0.0):
     """(M,C) directional albedo of the Principled BSDF's metallic closure: GGX with the F82-tint
     conductor Fresnel, F0 = the base colour (clamped to 1), the 82-degree tint = Specular Tint."""
     f0 = np.clip(np.atleast_1d(np.asarray(base, dtype=np.float64)), 0.0, 1.0)
     tint = np.minimum(np.broadcast_to(np.asarray(edge_tint, dtype=np.float64), f0.shape), 1.0)
     layer = ggx(roughness)
-    n = layer.normals
     f = 6.0 / 7.0
     f5 = f ** 5
     b = (f0 + (1.0 - f0) * f5) * (7.0 / (f5 * f)) * (1.0 - tint)
-    s = 1.0 - n.cos_h
-    fresnel = np.clip(f0[None, None, :] + (1.0 - f0[None, None, :]) * (s ** 5)[..., None]
-                      - b[None, None, :] * (n.cos_h * s ** 6)[..., None], 0.0, 1.0)
-    single = (n.weight[..., None] * fresnel).mean(axis=1)
+
+    def fresnel(cos_h):
+        s = (1.0 - cos_h)[..., None]
+        return np.clip(f0 + (1.0 - f0) * s ** 5 - b * cos_h[..., None] * s ** 6, 0.0, 1.0)
+
+    single = _single(roughness, filter_glossy, fresnel)
     fss = f0 + (1.0 - f0) / 21.0 - b / 126.0
     return _compensated(layer, single, fss, multiscatter)
 
@@ -226,6 +251,7 @@ class PrincipledInputs:
     coat_ior: float = 1.5
     coat_tint: tuple = (1.0, 1.0, 1.0)
     multiscatter: bool = True
+    filter_glossy: float = 0.0  # Cycles' Filter Glossy for light that reaches the surface by a diffuse bounce
 
 
 def specular_eta_f0(ior, level):
@@ -253,7 +279,7 @@ def _layers_out(p: PrincipledInputs, base):
         coat_ior = max(float(p.coat_ior), 1.0)
         # (Cycles compensates the coat's multiple scattering whatever the distribution)
         albedo, estimate = dielectric_layer(float(np.clip(p.coat_roughness, 0, 1)), coat_ior,
-                                            np.full(3, float(f0_from_ior(coat_ior))))
+                                            np.full(3, float(f0_from_ior(coat_ior))), True, p.filter_glossy)
         energy += coat * albedo
         weight *= np.clip(1.0 - (coat * estimate).max(axis=1, keepdims=True), 0.0, 1.0)
         tint = np.maximum(np.asarray(p.coat_tint, dtype=np.float64), 0.0)
@@ -264,19 +290,19 @@ def _layers_out(p: PrincipledInputs, base):
     metallic = float(np.clip(p.metallic, 0.0, 1.0))
     if metallic > 1e-5:
         energy += weight * metallic * metallic_layer(rough, np.minimum(base, 1.0), p.specular_tint,
-                                                     p.multiscatter)
+                                                     p.multiscatter, p.filter_glossy)
         weight = weight * (1.0 - metallic)
     transmission = float(np.clip(p.transmission, 0.0, 1.0))
     if transmission > 1e-5:
         eta = max(float(p.ior), 1e-5)
         f0 = float(f0_from_ior(eta)) * np.maximum(np.asarray(p.specular_tint, dtype=np.float64), 0.0)
-        albedo, _ = dielectric_layer(rough, eta, f0, multiscatter=False)
+        albedo, _ = dielectric_layer(rough, eta, f0, False, p.filter_glossy)
         energy += weight * transmission * albedo
         weight = weight * (1.0 - transmission)
     eta, f0 = specular_eta_f0(p.ior, p.specular_ior_level)
     if eta != 1.0:
         tint = np.maximum(np.asarray(p.specular_tint, dtype=np.float64), 0.0)
-        albedo, estimate = dielectric_layer(rough, eta, f0 * tint, p.multiscatter)
+        albedo, estimate = dielectric_layer(rough, eta, f0 * tint, p.multiscatter, p.filter_glossy)
         energy += weight * albedo
         weight = weight * np.clip(1.0 - estimate.max(axis=1, keepdims=True), 0.0, 1.0)
     return energy, weight

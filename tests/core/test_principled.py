@@ -140,3 +140,22 @@ def test_coat_and_tint_and_transmission_change_the_terms_as_layers():
     red_tint = pr.surface_terms(pr.PrincipledInputs(specular_tint=(1.0, 0.0, 0.0)))
     assert red_tint[1][1] == pytest.approx(red_tint[1][2]) and red_tint[1][0] > red_tint[1][1]
     assert red_tint[0][0] == pytest.approx(plain[0][0])  # the layer below is weighted by its strongest colour
+
+
+def test_filter_glossy_widens_lobes_reached_by_a_diffuse_bounce_and_keeps_their_compensation():
+    """Cycles' Filter Glossy 1: after a diffuse bounce of pdf cos/pi a lobe's alpha is at least
+    0.5 sqrt(1 - cos/pi); its multiple-scattering compensation stays that of the unblurred lobe,
+    so a smooth lobe loses light and a rough one (alpha >= 0.5) is untouched."""
+    r, w = pr.blurred_roughness(0.5, 1.0)
+    np.testing.assert_allclose(w.sum(), 1.0)
+    assert np.all((r ** 2 >= 0.5 * np.sqrt(1 - 1 / np.pi) - 1e-12) & (r ** 2 <= 0.5))
+    np.testing.assert_array_equal(pr.blurred_roughness(0.9, 1.0)[0], 0.9)
+    np.testing.assert_array_equal(pr.blurred_roughness(0.2, 0.0)[0], 0.2)
+    rough = pr.PrincipledInputs(base=(1, 1, 1), metallic=1.0, roughness=0.8, filter_glossy=1.0)
+    np.testing.assert_allclose(pr.principled_albedo(rough), 1.0, atol=1e-9)
+    smooth = pr.PrincipledInputs(base=(1, 1, 1), metallic=1.0, roughness=0.3, filter_glossy=1.0)
+    assert 0.7 < pr.principled_albedo(smooth)[0] < 0.95
+    # the diffuse base keeps the unblurred layer's estimate: only the specular light changes
+    seen, passed = pr.surface_terms(pr.PrincipledInputs()), pr.surface_terms(pr.PrincipledInputs(filter_glossy=1.0))
+    np.testing.assert_allclose(seen[0], passed[0])
+    assert 0.6 * seen[1][0] < passed[1][0] < 0.8 * seen[1][0]
