@@ -167,8 +167,8 @@ def material_colours(material, per_patch=()):
     read per patch (``_per_patch_sockets``), whose averages get no note.
 
     Principled BSDF: its base colour with the light of its other layers as passed on in the room
-    (``transport_terms``), emission colour x strength, and a note naming what is not modelled.  Diffuse BSDF: colour.
-    Emission: colour x strength, no reflection.  No node tree: the viewport colour.  No
+    (``transport_terms``), emission colour x strength, and a note naming what is not modelled.
+    Diffuse BSDF: colour.  Emission: colour x strength, no reflection.  No node tree: the viewport colour.  No
     material: grey 0.8.  Linked (textured) inputs use the socket's default and add a note.
     """
     notes = []

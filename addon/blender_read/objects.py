@@ -123,9 +123,8 @@ def _mesh_materials(evaluated, mesh, triangles, name, notes):
         triangle_uv, kept = _triangle_uv(mesh, T, (*textures, *emission_textures), name, notes)
         textures, emission_textures = kept[: len(textures)], kept[len(textures):]
     # colour attributes are base colours: the light returned is scale * colour + offset
-    slot_colours = tuple(None if c is None else c * scale + offset
-                         for c, (scale, offset) in zip(_attribute_colours(mesh, T, triangles, attributes, name, notes),
-                                                       terms))
+    colours = _attribute_colours(mesh, T, triangles, attributes, name, notes)
+    slot_colours = tuple(None if c is None else c * scale + offset for c, (scale, offset) in zip(colours, terms))
     return {"R_slots": R_slots, "E_slots": E_slots, "slot_names": slot_names, "textures": textures,
             "emission_textures": emission_textures, "triangle_uv": triangle_uv, "slot_colours": slot_colours}
 

@@ -176,14 +176,42 @@ def blurred_roughness(roughness, filter_glossy, nodes=8):
     return np.sqrt(np.maximum(alpha, roughness * roughness)), w
 
 
-def _single(roughness, filter_glossy, fresnel):
-    """(M,C) single-scattering albedo ``mean(weight * fresnel(cos_h))`` of GGX at ``roughness``,
-    averaged over Filter Glossy's blur (``blurred_roughness``); ``fresnel`` (M,N) -> (M,N,C)."""
+def _blurred_means(roughness, filter_glossy, integrands):
+    """(K, M) means over the visible normals of ``integrands(cos_h)`` (K, M, N) times the masking
+    weight, averaged over Filter Glossy's blur (``blurred_roughness``)."""
     out = 0.0
     for r, w in zip(*blurred_roughness(roughness, filter_glossy)):
         n = visible_normals(float(r))
-        out = out + w * (n.weight[..., None] * fresnel(n.cos_h)).mean(axis=1)
+        out = out + w * (n.weight[None] * integrands(n.cos_h)).mean(axis=2)
     return out
+
+
+@lru_cache(maxsize=256)
+def _dielectric_moments(roughness, eta, filter_glossy):
+    """((M,) mean masking weight, (M,) its mean with the remap factor s, blurred; (M,) Cycles'
+    estimate of s, unblurred) of GGX at ``roughness`` under the Fresnel of ``eta``: a layer's
+    albedo is linear in its F0 through these."""
+    f0_real = float(f0_from_ior(eta))
+
+    def s_of(cos_h):
+        return np.clip((fresnel_dielectric(cos_h, eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
+
+    W, S = _blurred_means(roughness, filter_glossy, lambda c: np.stack([np.ones_like(c), s_of(c)]))
+    n = visible_normals(float(roughness))
+    # Cycles' table of s averages it over the visible normals whose reflection leaves the surface
+    # (unweighted by masking)
+    return W, S, (s_of(n.cos_h) * n.valid).mean(axis=1)
+
+
+@lru_cache(maxsize=256)
+def _metallic_moments(roughness, filter_glossy):
+    """(M,) means of the masking weight times 1, (1 - cos)^5 and cos (1 - cos)^6 (blurred): the
+    F82-tint Fresnel is linear in these."""
+    def integrands(c):
+        s = 1.0 - c
+        return np.stack([np.ones_like(c), s ** 5, c * s ** 6])
+
+    return tuple(_blurred_means(roughness, filter_glossy, integrands))
 
 
 def dielectric_layer(roughness, eta, f0, multiscatter=True, filter_glossy=0.0):
@@ -196,41 +224,31 @@ def dielectric_layer(roughness, eta, f0, multiscatter=True, filter_glossy=0.0):
     bounce, with Cycles' Filter Glossy of that value)."""
     f0 = np.clip(np.atleast_1d(np.asarray(f0, dtype=np.float64)), 0.0, 1.0)
     layer = ggx(roughness)
-    n = visible_normals(float(roughness))
     f0_real = float(f0_from_ior(eta))
     if abs(eta - 1.0) < 1e-12 or f0_real <= 0.0:
-        zero = np.zeros((len(n.mu), len(f0)))
+        zero = np.zeros((len(layer.E), len(f0)))
         return zero, zero
-
-    def s_of(cos_h):
-        return np.clip((fresnel_dielectric(cos_h, eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
-
-    single = _single(roughness, filter_glossy,
-                     lambda cos_h: f0 + (1.0 - f0) * s_of(cos_h)[..., None])
-    # Cycles' table of the remap factor averages it over the visible normals whose reflection
-    # leaves the surface (unweighted by masking)
-    s_estimate = (s_of(n.cos_h) * n.valid).mean(axis=1)[:, None]
+    W, S, s_estimate = _dielectric_moments(float(roughness), float(eta), float(filter_glossy))
+    single = W[:, None] * f0[None, :] + (1.0 - f0[None, :]) * S[:, None]
     s_mean = np.clip((fresnel_dielectric_fss(eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
     fss = f0 + (1.0 - f0) * s_mean
-    estimate = (f0[None, :] + (1.0 - f0[None, :]) * s_estimate) * _darkening(layer, fss, multiscatter)
+    estimate = (f0[None, :] + (1.0 - f0[None, :]) * s_estimate[:, None]) * _darkening(layer, fss, multiscatter)
     return _compensated(layer, single, fss, multiscatter), estimate
 
 
 def metallic_layer(roughness, base, edge_tint=(1.0, 1.0, 1.0), multiscatter=True, filter_glossy=0.0):
     """(M,C) directional albedo of the Principled BSDF's metallic closure: GGX with the F82-tint
-    conductor Fresnel, F0 = the base colour (clamped to 1), the 82-degree tint = Specular Tint."""
+    conductor Fresnel, F0 = the base colour (clamped to 1), the 82-degree tint = Specular Tint
+    (Cycles clamps the Fresnel to [0, 1]; with a tint at most 1 it stays there but for a sliver of
+    grazing normals, left unclamped here)."""
     f0 = np.clip(np.atleast_1d(np.asarray(base, dtype=np.float64)), 0.0, 1.0)
     tint = np.minimum(np.broadcast_to(np.asarray(edge_tint, dtype=np.float64), f0.shape), 1.0)
     layer = ggx(roughness)
     f = 6.0 / 7.0
     f5 = f ** 5
     b = (f0 + (1.0 - f0) * f5) * (7.0 / (f5 * f)) * (1.0 - tint)
-
-    def fresnel(cos_h):
-        s = (1.0 - cos_h)[..., None]
-        return np.clip(f0 + (1.0 - f0) * s ** 5 - b * cos_h[..., None] * s ** 6, 0.0, 1.0)
-
-    single = _single(roughness, filter_glossy, fresnel)
+    W, S5, S6 = _metallic_moments(float(roughness), float(filter_glossy))
+    single = W[:, None] * f0 + S5[:, None] * (1.0 - f0) - S6[:, None] * b
     fss = f0 + (1.0 - f0) / 21.0 - b / 126.0
     return _compensated(layer, single, fss, multiscatter)
 
