@@ -500,14 +500,14 @@ def _room_tables(rows, L):
     return worst
 
 
-def report(parts, args, seconds):
+def report(parts, args, minutes):
     import bpy
 
     L = ["# Principled BSDF at its defaults against Cycles", ""]
     L.append(f"`python -m benchmarks.principled{' --quick' if args.quick else ''}` -- Blender {bpy.app.version_string}, "
-             f"Cycles on the CPU with 1 thread under `nice` on a 2-core machine shared with other jobs (this run "
-             f"{seconds / 60:.1f} min; parts not run again are kept from the last run). How each part is measured: "
-             "the module's docstring.")
+             f"Cycles on the CPU with 1 thread under `nice` on a 2-core machine shared with other jobs (minutes a part: "
+             + ", ".join(f"{k} {v:.1f}" for k, v in minutes.items()) + "). How each part is measured: the module's "
+             "docstring.")
     if "furnace" in parts:
         L += ["", "## 1. Furnace: the albedo a surface shows, against Cycles", "",
               f"A sphere in a world of radiance 1, orthographic camera, {args.resolution} x {args.resolution} px, "
@@ -571,26 +571,27 @@ def main(argv=None):
     args.paths = 200_000 if args.quick else 2_000_000
     out = (ROOT / "out") if args.quick else RESULTS
     out.mkdir(exist_ok=True)
-    start = time.perf_counter()
     wanted = args.parts.split(",")
-    parts = {}
-    if "furnace" in wanted:
-        parts["furnace"] = furnace(args.furnace_samples, args.resolution)
-    if "box" in wanted:
-        parts["box"] = closed_box(args.box_samples)
-    if "room" in wanted:
-        parts["room"] = room(args.room_samples, args.paths)
-    if "control" in wanted:
-        parts["control"] = room(args.room_samples, args.paths, lambertian=True)
-    if "walls_matte" in wanted:
-        parts["walls_matte"] = room(args.room_samples, args.paths, matte=[n for n in ROOM if n.startswith("Wall")])
+    runs = {"furnace": lambda: furnace(args.furnace_samples, args.resolution),
+            "box": lambda: closed_box(args.box_samples),
+            "room": lambda: room(args.room_samples, args.paths),
+            "control": lambda: room(args.room_samples, args.paths, lambertian=True),
+            "walls_matte": lambda: room(args.room_samples, args.paths,
+                                        matte=[n for n in ROOM if n.startswith("Wall")])}
+    parts, minutes = {}, {}
+    for name, run in runs.items():
+        if name in wanted:
+            start = time.perf_counter()
+            parts[name] = run()
+            minutes[name] = (time.perf_counter() - start) / 60
     stored = out / "principled.json"
     if not args.quick and stored.exists():
-        parts = {**json.loads(stored.read_text()), **parts}
-    order = ("furnace", "box", "room", "control", "walls_matte")
-    parts = {k: parts[k] for k in order if k in parts}
-    stored.write_text(json.dumps(parts, indent=1))
-    text = report(parts, args, time.perf_counter() - start)
+        old = json.loads(stored.read_text())
+        minutes = {**old.pop("minutes", {}), **minutes}
+        parts = {**old, **parts}
+    parts = {k: parts[k] for k in runs if k in parts}
+    stored.write_text(json.dumps({**parts, "minutes": minutes}, indent=1))
+    text = report(parts, args, minutes)
     (out / "principled.md").write_text(text)
     print(text)
 
