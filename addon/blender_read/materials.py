@@ -1,13 +1,11 @@
 """Materials read into colours: a surface shader's base colour and emission, and the image
 textures and colour attributes read per patch instead of a material's one value (bpy).
 
-Units: emission = emission colour x strength, reflectivity = the light a surface returns into
-the room (a closed box emitting S with albedo R gives S / (1 - R), as Cycles). For a Diffuse BSDF
-that is its colour; for a Principled BSDF the base colour plus what its specular, metallic, coat
-and transmission layers reflect, as energy (core.principled): reflectivity = scale * base colour
-+ offset, per patch where the base colour is read per patch. Solved with ``transport_terms`` (the
-light passed on from surface to surface, under Cycles' Filter Glossy); ``surface_terms`` is what
-the camera sees of the surface for the same light.
+Units: emission = emission colour x strength, reflectivity = the light a surface returns (a
+closed box emitting S with albedo R gives S / (1 - R), as Cycles): a Diffuse BSDF's colour, a
+Principled BSDF's scale * base colour + offset with the light of its other layers as energy
+(core.principled), per patch where the base colour is; solved as passed on from surface to surface
+(``transport_terms``, Cycles' Filter Glossy), shown as the camera sees it (``surface_terms``).
 """
 
 from __future__ import annotations
@@ -209,10 +207,10 @@ def material_colours(material, per_patch=()):
     return reflectivity, emission, notes
 
 
-def _socket_rgb(node, name, notes, what, default=(1.0, 1.0, 1.0)):
+def _socket_rgb(node, name, notes, what):
     socket = node.inputs.get(name)
     if socket is None:
-        return tuple(default)
+        return (1.0, 1.0, 1.0)
     if socket.is_linked:
         notes.append(f"{what}: '{name}' of '{node.name}' is connected (texture?); its own value "
                      f"{_text(socket.default_value[:3])} was used")
@@ -220,8 +218,7 @@ def _socket_rgb(node, name, notes, what, default=(1.0, 1.0, 1.0)):
 
 
 def filter_glossy():
-    """The scene's Cycles Filter Glossy (Cycles' default 1 where Cycles is not there): Cycles
-    widens glossy lobes reached by a diffuse bounce, which loses some of their light."""
+    """The scene's Cycles Filter Glossy (its default 1 without Cycles): it dims lobes after a diffuse bounce."""
     cycles = getattr(bpy.context.scene, "cycles", None)
     return max(float(getattr(cycles, "blur_glossy", 1.0)), 0.0)
 
@@ -264,8 +261,7 @@ def surface_terms(material, blur=0.0):
 
 
 def transport_terms(material):
-    """``surface_terms`` of the light a material passes on from one surface to the next: Cycles
-    reaches it by a diffuse bounce, under the scene's Filter Glossy; the reflectivity solved."""
+    """``surface_terms`` of the light passed on from surface to surface (under Filter Glossy): solved."""
     return surface_terms(material, filter_glossy())
 
 
@@ -304,27 +300,19 @@ def _principled_note(node, p, what):
 
 def merged_notes(notes):
     """The notes with those of several materials that say the same thing about a Principled
-    BSDF joined into one naming them all (in order)."""
-    merged, names = [], {}
+    BSDF joined into one naming them all, at the first one's place."""
+    out, names = [], {}
     for note in notes:
-        if note.startswith("material '") and "': Principled " in note:
-            name, tail = note[len("material '"):].split("': Principled ", 1)
-            if tail not in names:
-                names[tail] = []
-                merged.append((tail,))
-            names[tail].append(name)
+        name, _, tail = note[len("material '"):].partition("': Principled ")
+        if not (note.startswith("material '") and tail):
+            out.append(note)
+        elif tail in names:
+            names[tail].append(f"'{name}'")
         else:
-            merged.append(note)
-    out = []
-    for item in merged:
-        if isinstance(item, tuple):
-            who = names[item[0]]
-            label = "material" if len(who) == 1 else "materials"
-            quoted = ", ".join("'" + n + "'" for n in who)
-            out.append(f"{label} {quoted}: Principled {item[0]}")
-        else:
-            out.append(item)
-    return out
+            names[tail] = [f"'{name}'"]
+            out.append((tail,))
+    return [item if isinstance(item, str) else f"material{'s' * (len(names[item[0]]) > 1)} "
+            f"{', '.join(names[item[0]])}: Principled {item[0]}" for item in out]
 
 
 #: The socket of each shader that gives the base colour, and the emission colour and strength.
