@@ -1,0 +1,277 @@
+"""Buried parts of patches: where a patch runs into another object, the part inside it.
+
+Artists model with overlapping boxes: a wall box runs into the ceiling box, and the ceiling's
+edge patches lie partly inside the wall. Those parts can neither receive light (every ray from
+the room meets the wall first) nor send it (rays from inside the wall meet its back faces).
+A patch's radiosity is then its light over its *visible* area, and the points it emits,
+reflects or gathers from must be drawn from its visible part only.
+
+Each patch's square of point uniforms (u0, u1; and, for patches that are not parallelograms,
+the triangle uniform) is cut into cells, a cell being visible or buried as its centre is.
+A point is buried when every one of a fixed set of probe rays from it (its normal, and
+directions from 45 to 88 degrees off it, spread in azimuth) meets the back of a surface: a
+point inside a closed solid sees back faces in every direction; a point on an open surface, on
+a one-sided plane, under a table top or beside a thin wall, sees a front face or nothing along
+its near-grazing probes. The points of a patch are then drawn uniformly over its visible cells
+(:meth:`Buried.remap`, which maps uniforms onto uniforms), its area becomes the visible cells'
+share of it, and every method, reading areas and drawing points through the same two
+functions, solves the scene of the visible surfaces: the paper's estimators and formulas hold
+for it unchanged, with A_i the visible area.
+
+Only patches that some other surface crosses can be partly buried, and such a crossing meets one
+of the patch's diagonals (any line across a parallelogram separates the ends of one of them) or,
+for other patches, an edge of one of its triangles: a few in-plane rays per patch, just above it
+and short of its edges (surfaces that only touch it at its boundary are not crossings), pick the
+patches worth probing. A patch buried whole (every cell; the sample scenes' floor under a box
+with no bottom) keeps its area: it has no visible part to give its light to, receives nothing,
+and stays as it was.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from .rays import meets_front
+from .sampling import FLOAT32_BELOW_ONE, patch_point_rows
+
+# Cells per side of a patch's (u0, u1) square, and bins of the triangle uniform for patches that
+# are not parallelograms: a buried part's border is placed to within half a cell.
+CELLS = 16
+TRIANGLE_BINS = 4
+# The in-plane rays stop this share of the patch short of its edges (surfaces that touch a patch
+# along its boundary, a wall standing on a floor's patch edge, are not crossings).
+EDGE_SHARE = 1e-3
+# Probe directions (angle from the normal, azimuth), in degrees: the normal first (most points
+# see the room straight ahead), the near-grazing ones last, which escape under a one-sided plane.
+PROBES = ((0.0, 0.0),) + tuple((45.0, 23.0 + 90.0 * k) for k in range(4)) + tuple(
+    (80.0, 68.0 + 90.0 * k) for k in range(4)) + tuple((88.0, 23.0 + 90.0 * k) for k in range(4))
+# Surfaces a probe is traced through at most.
+MAX_CROSSINGS = 64
+# Rays per tracer call.
+BLOCK_RAYS = 1 << 18
+
+
+@dataclass(frozen=True)
+class Buried:
+    """The patches partly buried, and which cells of each are visible.
+
+    slot: (P,) int32, each patch's row here, -1 for patches wholly visible (or wholly buried)
+    patch: (B,) int32 the partly buried patches, ascending
+    bins: (B,) int32 triangle-uniform bins of each (1 for parallelograms)
+    first: (B+1,) int64 where each patch's visible cells start in ``cells``
+    cells: int32 visible cells of each patch, ascending: bin K^2 + i K + j for u0 in cell i, u1 in j
+    fraction: (B,) float64 visible share f_j of each
+    """
+
+    slot: np.ndarray
+    patch: np.ndarray
+    bins: np.ndarray
+    first: np.ndarray
+    cells: np.ndarray
+    fraction: np.ndarray
+
+    def visible_fraction(self, patch_count):
+        """(P,) f_j: 1 for every patch but the partly buried ones."""
+        f = np.ones(patch_count)
+        f[self.patch] = self.fraction
+        return f
+
+    def remap(self, patch, u_triangle, u0, u1):
+        """Moves the point uniforms of paths on partly buried patches onto those patches' visible
+        cells, in place: u0 picks a visible cell (its fraction, still uniform, places the point
+        along the cell), u1 and the triangle uniform are scaled into it. Uniform in, uniform
+        over the visible cells out."""
+        slot = self.slot.take(patch, mode="wrap")
+        rows = np.flatnonzero(slot >= 0)
+        if rows.size == 0:
+            return
+        b = slot.take(rows)
+        count = self.first.take(b + 1) - self.first.take(b)
+        x = u0.take(rows).astype(np.float64) * count
+        k = np.minimum(np.floor(x), count - 1)
+        r = x - k
+        cell = self.cells.take(self.first.take(b) + k.astype(np.int64))
+        per_bin = CELLS * CELLS
+        t, rest = np.divmod(cell, per_bin)
+        i, j = np.divmod(rest, CELLS)
+        u0[rows] = np.minimum(((i + r) / CELLS).astype(np.float32), FLOAT32_BELOW_ONE)
+        u1[rows] = np.minimum(((j + u1.take(rows)) / CELLS).astype(np.float32), FLOAT32_BELOW_ONE)
+        if u_triangle is not None:
+            bins = self.bins.take(b)
+            u_triangle[rows] = np.minimum(((t + u_triangle.take(rows)) / bins).astype(u_triangle.dtype),
+                                          np.nextafter(u_triangle.dtype.type(1), u_triangle.dtype.type(0)))
+
+
+def with_visible_parts(geometry):
+    """``geometry`` itself where no patch is partly buried; else a copy whose ``patch_area`` is
+    each patch's visible area and whose ``buried`` says which cells are visible."""
+    buried = find_buried(geometry)
+    if buried is None:
+        return geometry
+    area = geometry.patch_area * buried.visible_fraction(geometry.patch_count)
+    visible = dataclasses.replace(geometry, patch_area=area, buried=buried)
+    for name, value in geometry.__dict__.items():  # (cached tracers and tables: the same geometry)
+        if name not in visible.__dict__:
+            visible.__dict__[name] = value
+    return visible
+
+
+def find_buried(geometry):
+    """The :class:`Buried` patches of ``geometry``, or None where none is partly buried."""
+    crossed = crossed_patches(geometry)
+    if crossed.size == 0:
+        return None
+    bins = np.where(geometry.patch_parallelogram[crossed], 1, TRIANGLE_BINS).astype(np.int32)
+    per_patch = bins * CELLS * CELLS
+    patch = np.repeat(crossed, per_patch)
+    cell = _ranks(per_patch)
+    buried_cell = buried_points(geometry, patch, *cell_uniforms(cell, np.repeat(bins, per_patch)))
+    visible_count = np.bincount(np.repeat(np.arange(crossed.size), per_patch), weights=~buried_cell,
+                                minlength=crossed.size).astype(np.int64)
+    partly = (visible_count > 0) & (visible_count < per_patch)
+    if not partly.any():
+        return None
+    keep = np.repeat(partly, per_patch) & ~buried_cell
+    slot = np.full(geometry.patch_count, -1, np.int32)
+    slot[crossed[partly]] = np.arange(int(partly.sum()), dtype=np.int32)
+    counts = visible_count[partly]
+    return Buried(
+        slot=slot,
+        patch=crossed[partly].astype(np.int32),
+        bins=bins[partly],
+        first=np.concatenate(([0], np.cumsum(counts))).astype(np.int64),
+        cells=cell[keep].astype(np.int32),
+        fraction=counts / per_patch[partly],
+    )
+
+
+def _ranks(counts):
+    """0..c-1 for each count c, concatenated."""
+    start = np.repeat(np.cumsum(counts) - counts, counts)
+    return np.arange(int(counts.sum()), dtype=np.int64) - start
+
+
+def cell_uniforms(cell, bins):
+    """The uniforms (triangle, u0, u1) of each cell's representative point: its centre, or on the
+    fold of a triangle's square (cells across u0 + u1 = 1 fold onto their own lower half) that
+    half's centroid. float64 (n,) each."""
+    t, rest = np.divmod(cell, CELLS * CELLS)
+    i, j = np.divmod(rest, CELLS)
+    across = (bins > 1) & (i + j == CELLS - 1)
+    at = np.where(across, 1.0 / 3.0, 0.5)
+    return (t + 0.5) / bins, (i + at) / CELLS, (j + at) / CELLS
+
+
+def buried_points(geometry, patch, u_triangle, u0, u1):
+    """(n,) bool: whether each point of ``patch`` at the given uniforms is buried: along every
+    probe, it is inside more solids than it enters (:func:`windings` >= 1). Probes are cast only
+    for points still undecided."""
+    g = geometry
+    origins = patch_point_rows(g, patch, u_triangle.astype(np.float64), u0.astype(np.float32), u1.astype(np.float32))
+    normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
+    tangent, bitangent = _tangents(normal)
+    undecided = np.arange(patch.size)
+    for theta, phi in PROBES:
+        if undecided.size == 0:
+            break
+        s, c = np.sin(np.radians(theta)), np.cos(np.radians(theta))
+        rows = (slice(None), undecided)
+        d = c * normal[rows] + s * (np.cos(np.radians(phi)) * tangent[rows] + np.sin(np.radians(phi)) * bitangent[rows])
+        inside = windings(g, origins[rows].astype(np.float64), d, patch.take(undecided)) >= 1
+        undecided = undecided[inside]
+    out = np.zeros(patch.size, bool)
+    out[undecided] = True
+    return out
+
+
+def windings(g, origins, directions, patch):
+    """(n,) int: for rays (3,n) float64 from points of ``patch``, the surfaces met from behind
+    minus those met in front, all the way out: the number of closed solids (outward normals) a
+    point is inside; 0 or less on open surfaces, in rooms of inward faces, under one-sided
+    planes. Each ray is traced on from just past every hit, at most MAX_CROSSINGS times."""
+    n = origins.shape[1]
+    count = np.zeros(n, np.int64)
+    live = np.arange(n)
+    o, d = origins.copy(), directions / np.linalg.norm(directions, axis=0)
+    region = g.region_of(patch)
+    tracer = g.surface_tracer
+    step = g.ray_offset
+    for _ in range(MAX_CROSSINGS):
+        if live.size == 0:
+            break
+        hit = np.empty(live.size, np.int32)
+        t = np.empty(live.size, np.float64)
+        front = np.empty(live.size, bool)
+        for start in range(0, live.size, BLOCK_RAYS):
+            rows = live[start:start + BLOCK_RAYS]
+            block = slice(start, start + rows.size)
+            d32 = np.ascontiguousarray(d[:, rows].T, dtype=np.float32)
+            h, _, _, tb, normal = tracer.first_hit_barycentric(np.ascontiguousarray(o[:, rows].T, dtype=np.float32), d32,
+                                                               None if region is None else region.take(rows))
+            hit[block], t[block] = h, tb
+            front[block] = meets_front(d32.T, normal)
+        met = hit >= 0
+        count[live[met]] += np.where(front[met], -1, 1)
+        live, t = live[met], t[met]
+        o[:, live] += d[:, live] * (t + step)
+    return count
+
+
+def _tangents(normal):
+    """Two unit tangents (3,n) of each normal (3,n) float64."""
+    axis = np.zeros_like(normal)
+    axis[np.argmin(np.abs(normal), axis=0), np.arange(normal.shape[1])] = 1.0
+    t = np.cross(normal.T, axis.T).T
+    t /= np.linalg.norm(t, axis=0)
+    return t, np.cross(normal.T, t.T).T
+
+
+def _meets_within(g, origins, directions, patch):
+    """(n,) bool for (3,n) float32 rays from points of ``patch``: they meet a surface before
+    t = 1 (the end of the direction vector)."""
+    n = origins.shape[1]
+    out = np.zeros(n, bool)
+    tracer = g.surface_tracer
+    for start in range(0, n, BLOCK_RAYS):
+        block = slice(start, min(n, start + BLOCK_RAYS))
+        o = np.ascontiguousarray(origins[:, block].T, dtype=np.float32)
+        d = np.ascontiguousarray(directions[:, block].T, dtype=np.float32)
+        hit, _, _, t, _ = tracer.first_hit_barycentric(o, d, g.region_of(patch[block]))
+        out[block] = (hit >= 0) & (t < 1.0)
+    return out
+
+
+def crossed_patches(geometry):
+    """(m,) int the patches some surface crosses: an in-plane ray just above each (a parallelogram's
+    two diagonals, each edge of another patch's triangles) meets something short of its edges."""
+    g = geometry
+    P = g.patch_count
+    crossed = np.zeros(P, bool)
+    para = np.flatnonzero(g.patch_parallelogram)
+    e = EDGE_SHARE
+    if para.size:
+        for start in range(0, para.size, BLOCK_RAYS // 2):
+            patch = para[start:start + BLOCK_RAYS // 2]
+            frame = g.parallelogram_frame.take(patch, axis=1).astype(np.float64)
+            corner, a, b = frame[0:3], frame[3:6], frame[6:9]
+            starts = np.hstack([corner + e * (a + b), corner + (1 - e) * a + e * b])
+            ends = np.hstack([corner + (1 - e) * (a + b), corner + e * a + (1 - e) * b])
+            two = np.concatenate([patch, patch])
+            hit = _meets_within(g, starts.astype(np.float32), (ends - starts).astype(np.float32), two)
+            crossed[two[hit]] = True
+    other = np.flatnonzero(~g.patch_parallelogram[g.triangle_patch])
+    for start in range(0, other.size, BLOCK_RAYS // 3):
+        rows = other[start:start + BLOCK_RAYS // 3]
+        frame = g.frames_of(rows).astype(np.float64)
+        p0 = frame[0:3]
+        corners = [p0, p0 + frame[3:6], p0 + frame[6:9]]
+        centroid = sum(corners) / 3
+        corners = [centroid + (1 - e) * (c - centroid) for c in corners]
+        starts = np.hstack(corners)
+        ends = np.hstack(corners[1:] + corners[:1])
+        patch = np.tile(g.triangle_patch.take(rows), 3)
+        hit = _meets_within(g, starts.astype(np.float32), (ends - starts).astype(np.float32), patch)
+        crossed[patch[hit]] = True
+    return np.flatnonzero(crossed)
