@@ -45,8 +45,7 @@ TRIANGLE_BINS = 4
 EDGE_SHARE = 1e-3
 # Probe directions (angle from the normal, azimuth), in degrees: the normal first (most points
 # see the room straight ahead), the near-grazing ones last, which escape under a one-sided plane.
-PROBES = ((0.0, 0.0),) + tuple((45.0, 23.0 + 90.0 * k) for k in range(4)) + tuple(
-    (80.0, 68.0 + 90.0 * k) for k in range(4)) + tuple((88.0, 23.0 + 90.0 * k) for k in range(4))
+PROBES = ((0.0, 0.0),) + tuple((85.0, 23.0 + 90.0 * k) for k in range(4)) + ((50.0, 68.0), (50.0, 248.0))
 # Surfaces a probe is traced through at most.
 MAX_CROSSINGS = 64
 # Rays per tracer call.
@@ -194,28 +193,22 @@ def windings(g, origins, directions, patch):
     n = origins.shape[1]
     count = np.zeros(n, np.int64)
     live = np.arange(n)
-    o, d = origins.copy(), directions / np.linalg.norm(directions, axis=0)
+    o = np.ascontiguousarray(origins.T)  # (n,3) float64, the live rays' only
+    d = np.ascontiguousarray((directions / np.linalg.norm(directions, axis=0)).T)
+    d32 = d.astype(np.float32)
     region = g.region_of(patch)
     tracer = g.surface_tracer
     step = g.ray_offset
     for _ in range(MAX_CROSSINGS):
         if live.size == 0:
             break
-        hit = np.empty(live.size, np.int32)
-        t = np.empty(live.size, np.float64)
-        front = np.empty(live.size, bool)
-        for start in range(0, live.size, BLOCK_RAYS):
-            rows = live[start:start + BLOCK_RAYS]
-            block = slice(start, start + rows.size)
-            d32 = np.ascontiguousarray(d[:, rows].T, dtype=np.float32)
-            h, _, _, tb, normal = tracer.first_hit_barycentric(np.ascontiguousarray(o[:, rows].T, dtype=np.float32), d32,
-                                                               None if region is None else region.take(rows))
-            hit[block], t[block] = h, tb
-            front[block] = meets_front(d32.T, normal)
-        met = hit >= 0
-        count[live[met]] += np.where(front[met], -1, 1)
-        live, t = live[met], t[met]
-        o[:, live] += d[:, live] * (t + step)
+        hit, _, _, t, normal = tracer.first_hit_barycentric(o.astype(np.float32), d32,
+                                                            None if region is None else region.take(live))
+        met = np.flatnonzero(hit >= 0)
+        front = meets_front(d32.T, normal)
+        count[live[met]] += 1 - 2 * front.take(met).astype(np.int64)
+        live, o, d, d32 = live.take(met), o.take(met, axis=0), d.take(met, axis=0), d32.take(met, axis=0)
+        o += d * (t.take(met) + step)[:, None]
     return count
 
 
