@@ -237,23 +237,30 @@ def _meets_within(g, origins, directions, patch):
 
 
 def crossed_patches(geometry):
-    """(m,) int the patches some surface crosses: an in-plane ray just above each (a parallelogram's
-    two diagonals, each edge of another patch's triangles) meets something short of its edges."""
+    """(m,) int the patches some surface crosses: in-plane rays just above each meet something
+    short of its edges. A parallelogram's two diagonals are cut by any line across it; where
+    parallelograms tile a grid (:mod:`.patch_grids`) their diagonals line up into the grid's
+    diagonal lines, one ray each (traced on past every hit), so a wall of n x m patches costs
+    about 2 (n + m) rays instead of 2 n m. Other patches: each edge of their triangles."""
     g = geometry
-    P = g.patch_count
-    crossed = np.zeros(P, bool)
-    para = np.flatnonzero(g.patch_parallelogram)
+    crossed = np.zeros(g.patch_count, bool)
+    grids = g.patch_grids
+    on_grid = np.zeros(g.patch_count, bool)
+    if grids is not None and grids.rectangles:
+        on_grid[grids.cell_patch[:-1][grids.cell_patch[:-1] >= 0]] = True
+        on_grid[grids.cell_patch[_other_cells(grids)]] = False
+        _grid_crossings(g, grids, crossed)
+    para = np.flatnonzero(g.patch_parallelogram & ~on_grid)
     e = EDGE_SHARE
-    if para.size:
-        for start in range(0, para.size, BLOCK_RAYS // 2):
-            patch = para[start:start + BLOCK_RAYS // 2]
-            frame = g.parallelogram_frame.take(patch, axis=1).astype(np.float64)
-            corner, a, b = frame[0:3], frame[3:6], frame[6:9]
-            starts = np.hstack([corner + e * (a + b), corner + (1 - e) * a + e * b])
-            ends = np.hstack([corner + (1 - e) * (a + b), corner + e * a + (1 - e) * b])
-            two = np.concatenate([patch, patch])
-            hit = _meets_within(g, starts.astype(np.float32), (ends - starts).astype(np.float32), two)
-            crossed[two[hit]] = True
+    for start in range(0, para.size, BLOCK_RAYS // 2):
+        patch = para[start:start + BLOCK_RAYS // 2]
+        frame = g.parallelogram_frame.take(patch, axis=1).astype(np.float64)
+        corner, a, b = frame[0:3], frame[3:6], frame[6:9]
+        starts = np.hstack([corner + e * (a + b), corner + (1 - e) * a + e * b])
+        ends = np.hstack([corner + (1 - e) * (a + b), corner + e * a + (1 - e) * b])
+        two = np.concatenate([patch, patch])
+        hit = _meets_within(g, starts.astype(np.float32), (ends - starts).astype(np.float32), two)
+        crossed[two[hit]] = True
     other = np.flatnonzero(~g.patch_parallelogram[g.triangle_patch])
     for start in range(0, other.size, BLOCK_RAYS // 3):
         rows = other[start:start + BLOCK_RAYS // 3]
@@ -268,3 +275,79 @@ def crossed_patches(geometry):
         hit = _meets_within(g, starts.astype(np.float32), (ends - starts).astype(np.float32), patch)
         crossed[patch[hit]] = True
     return np.flatnonzero(crossed)
+
+
+def _other_cells(grids):
+    """The cells of patches traced as their own triangles (one-cell grids after the rectangles)."""
+    first = grids.cell_table[6, 2 * grids.rectangles:-1].astype(np.int64)
+    return np.unique(first)
+
+
+def _grid_crossings(g, grids, crossed):
+    """Marks in ``crossed`` the cells of the grids' rectangles that a surface crosses: rays along
+    every diagonal line of each rectangle's lattice (cells' diagonals end to end), pushed off
+    along its normal and stopping EDGE_SHARE of a cell short of the rectangle's sides, traced on
+    past each hit; a hit marks the cells within EDGE_SHARE of it."""
+    R = grids.rectangles
+    tri = grids.corners[0:2 * R:2].astype(np.float64)  # (c00, end_a, c11) of each rectangle
+    c00, end_a, c11 = tri[:, 0], tri[:, 1], tri[:, 2]
+    A, B = end_a - c00, c11 - end_a
+    n_a = grids.cell_table[2, 0:2 * R:2].astype(np.int64)
+    n_b = grids.cell_table[3, 0:2 * R:2].astype(np.int64)
+    first = grids.cell_table[6, 0:2 * R:2].astype(np.int64)
+    normal = np.cross(A, B)
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    e = EDGE_SHARE
+    # Lines s - t = k (k from -(n_b - 1) to n_a - 1) and s + t = k (1 to n_a + n_b - 1), in
+    # lattice units (s along A in n_a cells, t along B in n_b).
+    lines = n_a + n_b - 1
+    rect = np.repeat(np.arange(R), 2 * lines)
+    k_start = np.concatenate([np.concatenate([-(n_b[r] - 1) + np.arange(lines[r]), 1 + np.arange(lines[r])]) for r in range(R)])
+    anti = np.concatenate([np.repeat([False, True], lines[r]) for r in range(R)])
+    na, nb = n_a[rect].astype(np.float64), n_b[rect].astype(np.float64)
+    k = k_start.astype(np.float64)
+    # Along s - t = k: s from max(k, 0) to min(n_a, n_b + k); along s + t = k: s from max(0, k - n_b) to min(n_a, k).
+    s0 = np.where(anti, np.maximum(0, k - nb), np.maximum(k, 0))
+    s1 = np.where(anti, np.minimum(na, k), np.minimum(na, nb + k))
+    t0 = np.where(anti, k - s0, s0 - k)
+    t1 = np.where(anti, k - s1, s1 - k)
+    # Short of the sides by e of a cell: move both ends in along the line by e (in s and t).
+    sign_t = np.where(anti, -1.0, 1.0)
+    s0, s1 = s0 + e, s1 - e
+    t0, t1 = t0 + sign_t * e, t1 - sign_t * e
+    keep = s1 > s0
+    rect, s0, s1, t0, t1 = rect[keep], s0[keep], s1[keep], t0[keep], t1[keep]
+    offset = g.ray_offset
+    def point(s, t):
+        return (c00[rect] + (s / n_a[rect])[:, None] * A[rect] + (t / n_b[rect])[:, None] * B[rect]
+                + offset * normal[rect])
+    start, end = point(s0, t0), point(s1, t1)
+    span = end - start
+    o = start.copy()
+    live = np.arange(rect.size)
+    done = np.zeros(rect.size)  # the share of each line traced so far
+    tracer = grids.tracer
+    for _ in range(MAX_CROSSINGS):
+        if live.size == 0:
+            break
+        d32 = span[live].astype(np.float32)
+        hit, _, _, t, _ = tracer.first_hit_barycentric(o[live].astype(np.float32), d32)
+        at = done[live] + t  # (the direction is the whole span: t is a share of the line)
+        met = (hit >= 0) & (at < 1.0)
+        live, at = live[met], at[met]
+        if live.size == 0:
+            break
+        r = rect[live]
+        frac = (at - 0.0)
+        s = s0[live] + frac * (s1[live] - s0[live])
+        tt = t0[live] + frac * (t1[live] - t0[live])
+        for ds in (-e, e):
+            for dt in (-e, e):
+                i = np.clip(np.floor(s + ds), 0, n_a[r] - 1).astype(np.int64)
+                j = np.clip(np.floor(tt + dt), 0, n_b[r] - 1).astype(np.int64)
+                patch = grids.cell_patch[first[r] + i * n_b[r] + j]
+                crossed[patch[patch >= 0]] = True
+        step = g.ray_offset / np.linalg.norm(span[live], axis=1)
+        done[live] = at + step
+        o[live] = start[live] + done[live][:, None] * span[live]
+    return crossed
