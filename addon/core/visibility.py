@@ -123,10 +123,7 @@ def find_buried(geometry):
     if crossed.size == 0:
         return None
     bins = np.where(geometry.patch_parallelogram[crossed], 1, TRIANGLE_BINS).astype(np.int32)
-    per_patch = bins * CELLS * CELLS
-    patch = np.repeat(crossed, per_patch)
-    cell = _ranks(per_patch)
-    buried_cell = buried_points(geometry, patch, *cell_uniforms(cell, np.repeat(bins, per_patch)))
+    buried_cell, per_patch, cell = cell_states(geometry, crossed, bins)
     visible_count = np.bincount(np.repeat(np.arange(crossed.size), per_patch), weights=~buried_cell,
                                 minlength=crossed.size).astype(np.int64)
     partly = (visible_count > 0) & (visible_count < per_patch)
@@ -146,21 +143,57 @@ def find_buried(geometry):
     )
 
 
+def cell_states(geometry, patch, bins):
+    """Which cells of each of the given patches are buried, coarse to fine: the centres of a
+    grid half as fine first (CELLS / 2 per side); a patch whose coarse cells all agree is taken
+    whole, and in the others only coarse cells beside one of the other kind (every coarse cell
+    of a patch that is not a parallelogram) are split and their four cells probed, the rest
+    passing their state on. Returns ((n,) bool buried, (m,) cells per patch, (n,) each one's
+    cell: bin K^2 + i K + j), cells patch by patch."""
+    K, K1 = CELLS, CELLS // 2
+    m = patch.size
+    per1 = bins * K1 * K1
+    owner1 = np.repeat(np.arange(m), per1)
+    cell1 = _ranks(per1)
+    state1 = buried_points(geometry, patch[owner1], *cell_uniforms(cell1, bins[owner1], K1))
+    count1 = np.bincount(owner1, weights=state1, minlength=m)
+    mixed = (count1 > 0) & (count1 < per1)
+    rest1 = cell1 % (K1 * K1)
+    I, J = rest1 // K1, rest1 % K1
+    beside = np.zeros(cell1.size, bool)
+    for di, dj in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        inside = (I + di >= 0) & (I + di < K1) & (J + dj >= 0) & (J + dj < K1)
+        index = np.flatnonzero(inside)
+        beside[index] |= state1[index] != state1[index + di * K1 + dj]
+    split1 = mixed[owner1] & (beside | (bins[owner1] > 1))
+    per = bins * K * K
+    owner = np.repeat(np.arange(m), per)
+    cell = _ranks(per)
+    t, rest = np.divmod(cell, K * K)
+    i, j = np.divmod(rest, K)
+    coarse = (np.cumsum(per1) - per1)[owner] + t * K1 * K1 + (i // 2) * K1 + j // 2
+    state = state1[coarse]
+    rows = np.flatnonzero(split1[coarse])
+    if rows.size:
+        state[rows] = buried_points(geometry, patch[owner[rows]], *cell_uniforms(cell[rows], bins[owner[rows]], K))
+    return state, per, cell
+
+
 def _ranks(counts):
     """0..c-1 for each count c, concatenated."""
     start = np.repeat(np.cumsum(counts) - counts, counts)
     return np.arange(int(counts.sum()), dtype=np.int64) - start
 
 
-def cell_uniforms(cell, bins):
+def cell_uniforms(cell, bins, cells=CELLS):
     """The uniforms (triangle, u0, u1) of each cell's representative point: its centre, or on the
     fold of a triangle's square (cells across u0 + u1 = 1 fold onto their own lower half) that
     half's centroid. float64 (n,) each."""
-    t, rest = np.divmod(cell, CELLS * CELLS)
-    i, j = np.divmod(rest, CELLS)
-    across = (bins > 1) & (i + j == CELLS - 1)
+    t, rest = np.divmod(cell, cells * cells)
+    i, j = np.divmod(rest, cells)
+    across = (bins > 1) & (i + j == cells - 1)
     at = np.where(across, 1.0 / 3.0, 0.5)
-    return (t + 0.5) / bins, (i + at) / CELLS, (j + at) / CELLS
+    return (t + 0.5) / bins, (i + at) / cells, (j + at) / cells
 
 
 def buried_points(geometry, patch, u_triangle, u0, u1):
