@@ -320,7 +320,7 @@ def _grid_crossings(g, grids, crossed):
     """Marks in ``crossed`` the cells of the grids' rectangles that a surface crosses: rays along
     every diagonal line of each rectangle's lattice (cells' diagonals end to end), pushed off
     along its normal and stopping EDGE_SHARE of a cell short of the rectangle's sides, traced on
-    past each hit; a hit marks the cells within EDGE_SHARE of it."""
+    past each hit; a hit inside a cell (farther than EDGE_SHARE from its sides) marks it."""
     R = grids.rectangles
     tri = grids.corners[0:2 * R:2].astype(np.float64)  # (c00, end_a, c11) of each rectangle
     c00, end_a, c11 = tri[:, 0], tri[:, 1], tri[:, 2]
@@ -371,15 +371,15 @@ def _grid_crossings(g, grids, crossed):
         if live.size == 0:
             break
         r = rect[live]
-        frac = (at - 0.0)
-        s = s0[live] + frac * (s1[live] - s0[live])
-        tt = t0[live] + frac * (t1[live] - t0[live])
-        for ds in (-e, e):
-            for dt in (-e, e):
-                i = np.clip(np.floor(s + ds), 0, n_a[r] - 1).astype(np.int64)
-                j = np.clip(np.floor(tt + dt), 0, n_b[r] - 1).astype(np.int64)
-                patch = grids.cell_patch[first[r] + i * n_b[r] + j]
-                crossed[patch[patch >= 0]] = True
+        s = s0[live] + at * (s1[live] - s0[live])
+        tt = t0[live] + at * (t1[live] - t0[live])
+        # A hit on a cell's side is a surface touching the cells there (a box standing on the
+        # lattice); one that crosses a cell also crosses its diagonals away from its sides.
+        inner = (np.abs(s - np.round(s)) > e) & (np.abs(tt - np.round(tt)) > e)
+        i = np.clip(np.floor(s), 0, n_a[r] - 1).astype(np.int64)
+        j = np.clip(np.floor(tt), 0, n_b[r] - 1).astype(np.int64)
+        patch = grids.cell_patch[(first[r] + i * n_b[r] + j)[inner]]
+        crossed[patch[patch >= 0]] = True
         step = g.ray_offset / np.linalg.norm(span[live], axis=1)
         done[live] = at + step
         o[live] = start[live] + done[live][:, None] * span[live]
