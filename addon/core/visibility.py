@@ -8,21 +8,24 @@ reflects or gathers from must be drawn from its visible part only.
 
 Each patch's square of point uniforms (u0, u1; and, for patches that are not parallelograms,
 the triangle uniform) is cut into cells, a cell being visible or buried as its centre is.
-A point is buried when every one of a fixed set of probe rays from it (its normal, and
-directions from 45 to 88 degrees off it, spread in azimuth) meets the back of a surface: a
-point inside a closed solid sees back faces in every direction; a point on an open surface, on
-a one-sided plane, under a table top or beside a thin wall, sees a front face or nothing along
-its near-grazing probes. The points of a patch are then drawn uniformly over its visible cells
-(:meth:`Buried.remap`, which maps uniforms onto uniforms), its area becomes the visible cells'
-share of it, and every method, reading areas and drawing points through the same two
-functions, solves the scene of the visible surfaces: the paper's estimators and formulas hold
-for it unchanged, with A_i the visible area.
+A point is buried when, along each of four probe rays from it (its normal, and three directions
+85 degrees off it, 120 degrees apart), it lies inside more closed surfaces than it enters: the
+surfaces met from behind minus those met in front, all the way out (:func:`windings`). A point
+inside a closed solid counts 1 or more along every probe; a point on an open surface, in a room
+of inward faces, beside a thin wall or under a one-sided table top counts 0 along some probe
+(the near-grazing ones leave under the top). The first face met is not enough: inside two
+overlapping boxes, the other box's faces are met from the front. The points of a patch are then
+drawn uniformly over its visible cells (:meth:`Buried.remap`, which maps uniforms onto
+uniforms), its area becomes the visible cells' share of it, and every method, reading areas and
+drawing points through the same two functions, solves the scene of the visible surfaces: the
+paper's estimators and formulas hold for it unchanged, with A_i the visible area.
 
 Only patches that some other surface crosses can be partly buried, and such a crossing meets one
-of the patch's diagonals (any line across a parallelogram separates the ends of one of them) or,
-for other patches, an edge of one of its triangles: a few in-plane rays per patch, just above it
-and short of its edges (surfaces that only touch it at its boundary are not crossings), pick the
-patches worth probing. A patch buried whole (every cell; the sample scenes' floor under a box
+of the patch's diagonals away from its sides (any line across a parallelogram separates the ends
+of one of them) or, for other patches, an edge of one of its triangles: in-plane rays just
+above the patches (one per diagonal line of each grid of patches, :mod:`.patch_grids`) pick the
+patches worth probing, and surfaces that only touch a patch along its sides are not crossings.
+A patch buried whole (every cell; the sample scenes' floor under a box
 with no bottom) keeps its area: it has no visible part to give its light to, receives nothing,
 and stays as it was.
 """
@@ -45,7 +48,7 @@ TRIANGLE_BINS = 4
 EDGE_SHARE = 1e-3
 # Probe directions (angle from the normal, azimuth), in degrees: the normal first (most points
 # see the room straight ahead), the near-grazing ones last, which escape under a one-sided plane.
-PROBES = ((0.0, 0.0),) + tuple((85.0, 23.0 + 90.0 * k) for k in range(4)) + ((50.0, 68.0), (50.0, 248.0))
+PROBES = ((0.0, 0.0),) + tuple((85.0, 23.0 + 120.0 * k) for k in range(3))
 # Surfaces a probe is traced through at most.
 MAX_CROSSINGS = 64
 # Rays per tracer call.
