@@ -65,6 +65,8 @@ class Buried:
     first: (B+1,) int64 where each patch's visible cells start in ``cells``
     cells: int32 visible cells of each patch, ascending: bin K^2 + i K + j for u0 in cell i, u1 in j
     fraction: (B,) float64 visible share f_j of each
+    whole: (W,) int32 the patches buried whole (every cell, or the centre of a patch nothing
+    crosses): they keep their area, and the two-way iteration sends no rays from them
     """
 
     slot: np.ndarray
@@ -73,6 +75,7 @@ class Buried:
     first: np.ndarray
     cells: np.ndarray
     fraction: np.ndarray
+    whole: np.ndarray
 
     def visible_fraction(self, patch_count):
         """(P,) f_j: 1 for every patch but the partly buried ones."""
@@ -98,10 +101,16 @@ class Buried:
         per_bin = CELLS * CELLS
         t, rest = np.divmod(cell, per_bin)
         i, j = np.divmod(rest, CELLS)
-        u0[rows] = np.minimum(((i + r) / CELLS).astype(np.float32), FLOAT32_BELOW_ONE)
-        u1[rows] = np.minimum(((j + u1.take(rows)) / CELLS).astype(np.float32), FLOAT32_BELOW_ONE)
+        a, c = (i + r) / CELLS, (j + u1.take(rows)) / CELLS
         if u_triangle is not None:
             bins = self.bins.take(b)
+            # A triangle's square folds along a + c = 1, which would send the upper half of a cell
+            # across it onto its mirror cell's lower half: reflected within the cell instead.
+            over = np.flatnonzero((bins > 1) & (i + j == CELLS - 1) & (a + c > 1))
+            a[over], c[over] = 1 - c[over], 1 - a[over]
+        u0[rows] = np.minimum(a.astype(np.float32), FLOAT32_BELOW_ONE)
+        u1[rows] = np.minimum(c.astype(np.float32), FLOAT32_BELOW_ONE)
+        if u_triangle is not None:
             u_triangle[rows] = np.minimum(((t + u_triangle.take(rows)) / bins).astype(u_triangle.dtype),
                                           np.nextafter(u_triangle.dtype.type(1), u_triangle.dtype.type(0)))
 
@@ -133,6 +142,13 @@ def find_buried(geometry):
     if not partly.any():
         return None
     keep = np.repeat(partly, per_patch) & ~buried_cell
+    # Where some patch is partly buried, others may lie inside an object whole (nothing crosses
+    # them): their centres, probed.
+    rest = np.ones(geometry.patch_count, bool)
+    rest[crossed] = False
+    rest = np.flatnonzero(rest)
+    half = np.full(rest.size, 0.5)
+    whole = np.concatenate([crossed[visible_count == 0], rest[buried_points(geometry, rest, half, half, half)]])
     slot = np.full(geometry.patch_count, -1, np.int32)
     slot[crossed[partly]] = np.arange(int(partly.sum()), dtype=np.int32)
     counts = visible_count[partly]
@@ -143,6 +159,7 @@ def find_buried(geometry):
         first=np.concatenate(([0], np.cumsum(counts))).astype(np.int64),
         cells=cell[keep].astype(np.int32),
         fraction=counts / per_patch[partly],
+        whole=np.sort(whole).astype(np.int32),
     )
 
 

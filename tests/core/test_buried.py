@@ -235,3 +235,48 @@ def test_no_sample_scene_has_a_buried_patch(name):
         buried = visibility.buried_points(g, patch, *visibility.cell_uniforms(cells, np.repeat(bins, bins * visibility.CELLS**2)))
         share = np.bincount(np.searchsorted(crossed, patch), weights=buried) / (bins * visibility.CELLS**2)
         assert np.all((share == 0) | (share == 1))
+
+
+def _triangle_share(s0, s1, t0, t1, n=200_000):
+    """Share of the triangle a, b >= 0, a + b <= 1 inside [s0, s1] x [t0, t1] (midpoint rule
+    in a over a piecewise linear integrand: exact to about n^-2)."""
+    a = s0 + (np.arange(n) + 0.5) / n * (s1 - s0)
+    return 2 * (np.clip(np.minimum(t1, 1 - a) - t0, 0, None).sum() * (s1 - s0) / n)
+
+
+def test_triangle_patches_of_overlapping_slabs_are_exact():
+    """The same room with every rectangle cut into two right triangles, each a patch of its own
+    (no parallelograms: the triangles' own in-plane rays, cells over each triangle's folded
+    square, whose lines run along its legs): f is the visible share of each triangle, and
+    B = E / (1 - R) on every inner patch for the walk and the two-way iteration. (The
+    triangles buried whole are left dark: an emitter inside another object would shoot from
+    there, and the walk's rays from inside can land on the buried halves of its neighbours.)"""
+    origin, u, v, inner = slab_room()
+    corners, _, _ = rectangles_to_mesh(origin, u, v)  # (o, o + u, o + u + v, o + v) of each
+    base = 4 * np.arange(origin.shape[0])[:, None]
+    T = np.concatenate([base + [0, 1, 3], base + [2, 3, 1]], axis=1).reshape(-1, 3)  # right angles at o, o + u + v
+    P = 2 * origin.shape[0]
+    scene = PatchScene(corners, T, np.arange(P), np.full(P, R), np.full(P, E))
+    assert not scene.geometry.patch_parallelogram.any()
+    vo, vu, vv = visible_rectangles(origin, u, v)
+    uu, vv2 = (u * u).sum(axis=1), (v * v).sum(axis=1)
+    s0 = ((vo - origin) * u).sum(axis=1) / uu
+    s1 = s0 + _area(vu, vv) / np.maximum(_area(vu, vv), 1e-300) * np.linalg.norm(vu, axis=1) / np.sqrt(uu)
+    t0 = ((vo - origin) * v).sum(axis=1) / vv2
+    t1 = t0 + np.linalg.norm(vv, axis=1) / np.sqrt(vv2)
+    rows = np.flatnonzero(inner)
+    analytic = np.ones(P)
+    for k in rows:
+        analytic[2 * k] = _triangle_share(s0[k], s1[k], t0[k], t1[k])
+        analytic[2 * k + 1] = _triangle_share(1 - s1[k], 1 - s0[k], 1 - t1[k], 1 - t0[k])
+    whole = analytic == 0  # (triangles of the corner rectangles wholly inside: they keep their area)
+    inner2 = np.repeat(inner, 2) & ~whole
+    b = scene.geometry.buried
+    f = b.visible_fraction(P)
+    assert np.all(f[whole] == 1) and np.isin(np.flatnonzero(inner2 & whole), b.whole).all()
+    scene = scene.with_materials(np.full(P, R), np.where(np.isin(np.arange(P), b.whole), 0.0, E))
+    np.testing.assert_allclose(f[inner2], analytic[inner2], atol=1e-9)
+    for settings in ({}, {"method": "two_way"}):
+        r = solve(scene, paths=400_000, seed=9, **settings)
+        z = (r.radiosity[inner2, 0] - E / (1 - R)) / np.sqrt(r.reflected_variance[inner2, 0])
+        assert np.abs(z).max() < 6.0, (settings, np.abs(z).max())
