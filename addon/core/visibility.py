@@ -27,7 +27,8 @@ above the patches (one per diagonal line of each grid of patches, :mod:`.patch_g
 patches worth probing, and surfaces that only touch a patch along its sides are not crossings.
 A patch buried whole (every cell; the sample scenes' floor under a box
 with no bottom) keeps its area: it has no visible part to give its light to, receives nothing,
-and stays as it was.
+and stays as it was, except that the two-way iteration sends no rays from it (``Buried.whole``:
+found, where some patch is partly buried, by probing every other patch's centre).
 """
 from __future__ import annotations
 
