@@ -47,9 +47,8 @@ def warn_coarse(offset, side, diagonal):
 
 
 def build_geometry(vertices, triangles, triangle_patch, patch_count, visible_parts=True):
-    """The :class:`Geometry` of a mesh whose triangles make ``patch_count`` patches (checked:
-    ValueError naming what is wrong). With ``visible_parts``, patches partly inside other
-    objects take their visible area and draw their points there (:mod:`.visibility`)."""
+    """The :class:`Geometry` of a mesh whose triangles make ``patch_count`` patches (checked: ValueError naming
+    what is wrong); ``visible_parts``: patches partly inside other objects keep their visible part (.visibility)."""
     V, T, tp, centre, diagonal = validate_mesh(vertices, triangles, triangle_patch, patch_count)
     area, keep = _kept_triangles(UnitCorners(V, T, centre, diagonal))
     kept_patch = tp[keep]

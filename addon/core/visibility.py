@@ -337,11 +337,11 @@ def _other_cells(grids):
     return np.unique(first)
 
 
-def _grid_crossings(g, grids, crossed):
-    """Marks in ``crossed`` the cells of the grids' rectangles that a surface crosses: rays along
-    every diagonal line of each rectangle's lattice (cells' diagonals end to end), pushed off
-    along its normal and stopping EDGE_SHARE of a cell short of the rectangle's sides, traced on
-    past each hit; a hit inside a cell (farther than EDGE_SHARE from its sides) marks it."""
+def _diagonal_lines(grids):
+    """The grids' rectangles (corner c00, edges A and B, cells n_a x n_b, first cell, normal) and
+    their lattices' diagonal lines, each rectangle's s - t = k and s + t = k in lattice units (s
+    along A, t along B), as (rectangle, s0, s1, t0, t1) from end to end, EDGE_SHARE of a cell
+    short of the rectangle's sides."""
     R = grids.rectangles
     tri = grids.corners[0:2 * R:2].astype(np.float64)  # (c00, end_a, c11) of each rectangle
     c00, end_a, c11 = tri[:, 0], tri[:, 1], tri[:, 2]
@@ -352,9 +352,7 @@ def _grid_crossings(g, grids, crossed):
     normal = np.cross(A, B)
     normal /= np.linalg.norm(normal, axis=1)[:, None]
     e = EDGE_SHARE
-    # Lines s - t = k (k from -(n_b - 1) to n_a - 1) and s + t = k (1 to n_a + n_b - 1), in
-    # lattice units (s along A in n_a cells, t along B in n_b).
-    lines = n_a + n_b - 1
+    lines = n_a + n_b - 1  # s - t = k, k from -(n_b - 1) to n_a - 1; s + t = k, k from 1 to n_a + n_b - 1
     rect = np.repeat(np.arange(R), 2 * lines)
     k_start = np.concatenate([np.concatenate([-(n_b[r] - 1) + np.arange(lines[r]), 1 + np.arange(lines[r])]) for r in range(R)])
     anti = np.concatenate([np.repeat([False, True], lines[r]) for r in range(R)])
@@ -365,18 +363,23 @@ def _grid_crossings(g, grids, crossed):
     s1 = np.where(anti, np.minimum(na, k), np.minimum(na, nb + k))
     t0 = np.where(anti, k - s0, s0 - k)
     t1 = np.where(anti, k - s1, s1 - k)
-    # Short of the sides by e of a cell: move both ends in along the line by e (in s and t).
-    sign_t = np.where(anti, -1.0, 1.0)
+    sign_t = np.where(anti, -1.0, 1.0)  # (both ends moved in along the line by e in s and t)
     s0, s1 = s0 + e, s1 - e
     t0, t1 = t0 + sign_t * e, t1 - sign_t * e
     keep = s1 > s0
-    rect, s0, s1, t0, t1 = rect[keep], s0[keep], s1[keep], t0[keep], t1[keep]
-    offset = g.ray_offset
-    def point(s, t):
-        return (c00[rect] + (s / n_a[rect])[:, None] * A[rect] + (t / n_b[rect])[:, None] * B[rect]
-                + offset * normal[rect])
-    start, end = point(s0, t0), point(s1, t1)
-    span = end - start
+    return c00, A, B, n_a, n_b, first, normal, rect[keep], s0[keep], s1[keep], t0[keep], t1[keep]
+
+
+def _grid_crossings(g, grids, crossed):
+    """Marks in ``crossed`` the cells of the grids' rectangles that a surface crosses: rays along
+    every diagonal line of each rectangle's lattice (cells' diagonals end to end), pushed off
+    along its normal and stopping EDGE_SHARE of a cell short of the rectangle's sides, traced on
+    past each hit; a hit inside a cell (farther than EDGE_SHARE from its sides) marks it."""
+    c00, A, B, n_a, n_b, first, normal, rect, s0, s1, t0, t1 = _diagonal_lines(grids)
+    e = EDGE_SHARE
+    a, b = A[rect] / n_a[rect, None], B[rect] / n_b[rect, None]  # (one cell's edges)
+    start = c00[rect] + s0[:, None] * a + t0[:, None] * b + g.ray_offset * normal[rect]
+    span = (s1 - s0)[:, None] * a + (t1 - t0)[:, None] * b
     o = start.copy()
     live = np.arange(rect.size)
     done = np.zeros(rect.size)  # the share of each line traced so far
