@@ -15,6 +15,7 @@ from .frames import LIGHT_OFFSET_SPACINGS, RELATIVE_EDGE_INSET, RELATIVE_HIT_EDG
 from .patch_grids import patch_grids
 from .raytrace import RayTracer, RegionTracer
 from .regions import Regions
+from .visibility import Buried
 from .triangles import BLOCK_PATCHES, BLOCK_TRIANGLES, UnitCorners, leaving_frames, triangle_cross, triangle_normals
 
 # At most this many distinct leaving-frame shapes (edges and normal) are kept as a table of
@@ -64,6 +65,9 @@ class Geometry:
     # Parts of the scene far apart, each with positions in a frame of its own (.regions): then
     # every position above is in its patch's region frame; None where the scene is one frame
     regions: Regions | None = None
+    # Patches partly inside other objects, and the visible cells their points are drawn from
+    # (.visibility); ``patch_area`` is then each patch's visible area. None where none is.
+    buried: Buried | None = None
 
     @property
     def patch_count(self):

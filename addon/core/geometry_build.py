@@ -15,6 +15,7 @@ from .frames import RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET, local_offsets, par
 from .geometry import Geometry
 from .regions import split_regions
 from .triangles import BLOCK_TRIANGLES, UnitCorners, triangle_blocks, triangle_cross, triangle_normals
+from .visibility import with_visible_parts
 from .validation import (
     MIN_PATCH_NORMAL_COSINE,
     RELATIVE_DEGENERATE_AREA,
@@ -45,9 +46,9 @@ def warn_coarse(offset, side, diagonal):
         )
 
 
-def build_geometry(vertices, triangles, triangle_patch, patch_count):
-    """The :class:`Geometry` of a mesh whose triangles make ``patch_count`` patches (checked:
-    ValueError naming what is wrong)."""
+def build_geometry(vertices, triangles, triangle_patch, patch_count, visible_parts=True):
+    """The :class:`Geometry` of a mesh whose triangles make ``patch_count`` patches (checked: ValueError naming
+    what is wrong); ``visible_parts``: patches partly inside other objects keep their visible part (.visibility)."""
     V, T, tp, centre, diagonal = validate_mesh(vertices, triangles, triangle_patch, patch_count)
     area, keep = _kept_triangles(UnitCorners(V, T, centre, diagonal))
     kept_patch = tp[keep]
@@ -85,7 +86,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
     leave_table = np.empty((12, patch_count), np.float32)
     is_parallelogram = parallelogram_frames(sorted_corners, first, count, inset, offset, patch_normal, leave_table[0:9])
     leave_table[9:12] = patch_normal.T
-    return Geometry(
+    geometry = Geometry(
         centre=centre,
         diagonal=diagonal,
         ray_offset=ray_offset,
@@ -104,6 +105,7 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count):
         patch_edge_inset=patch_edge_inset,
         regions=regions,
     )
+    return with_visible_parts(geometry) if visible_parts else geometry
 
 
 def _kept_triangles(corners):

@@ -113,6 +113,8 @@ class InterchangeableWalk:
             if self.tagged:
                 self.chunk = np.repeat(self.chunk_of_pair, self.live.T.ravel())
             frame = np.repeat(t.leave_table, on_patch, axis=1)
+            if t.geometry.buried is not None:  # (points of partly buried patches on their visible part)
+                t.geometry.buried.remap(np.repeat(np.arange(self.P, dtype=np.int32), on_patch), None, u[0], u[1])
             if t.geometry.regions is not None:
                 self.region = np.repeat(t.geometry.regions.patch_region, on_patch)
             return rays.rays_from_frames(frame, u[0], u[1], u[2:4])

@@ -93,7 +93,11 @@ def rays_from_frames(frame, a, b, u_direction):
 def leave_frames(tables, patch, u):
     """The (12,n) frames the given patches' rays leave from (corner, edge a, edge b, normal):
     their parallelograms' or, where a patch is not one, a triangle's of it (chosen with
-    ``u[row_triangle]``, ``u[0]`` and ``u[1]`` folded onto it in place: leave_columns)."""
+    ``u[row_triangle]``, ``u[0]`` and ``u[1]`` folded onto it in place: leave_columns). Points
+    of partly buried patches are drawn on their visible part (their uniforms remapped in place)."""
+    g = tables.geometry
+    if g.buried is not None:
+        g.buried.remap(patch, u[tables.row_triangle] if tables.row_triangle is not None else None, u[0], u[1])
     if tables.patch_class is not None:
         frame = np.empty((12, patch.size), dtype=np.float32)
         tables.leave_corners.take(patch, axis=1, mode="wrap", out=frame[0:3])

@@ -284,7 +284,10 @@ def points_on_patches(geometry, patch, u_triangle, u1, u2):
 
 
 def patch_point_rows(geometry, patch, u_triangle, u1, u2):
-    """:func:`points_on_patches` as (3,n) rows."""
+    """:func:`points_on_patches` as (3,n) rows (points of partly buried patches drawn on their
+    visible part: the uniforms are remapped in place, :meth:`.visibility.Buried.remap`)."""
+    if geometry.buried is not None:
+        geometry.buried.remap(patch, u_triangle, u1, u2)
     if geometry.all_parallelograms:
         return frame_points(np.take(geometry.parallelogram_frame, patch, axis=1), u1, u2)
     points = triangle_point_rows(geometry, choose_triangles(geometry, patch, u_triangle), u1, u2)

@@ -92,13 +92,16 @@ class Chunk:
     correction: np.ndarray | float = 0.0  # (C,P) irradiance the first generation adds (reflect_first)
 
 
-def allotment_weight(area, reflectivity):
+def allotment_weight(area, reflectivity, geometry=None):
     """(P,) what rays are allotted to patches in proportion to: sqrt(A_j) R_j, R_j one number a
     patch (a patch's error in B is R_j times its error in H; sqrt(A) sits between the
     area-weighted error, which wants rays as A, and the per-patch one, which wants them alike).
     The direct light's samples take R_bar_j; the generations R_j of the strongest channel, as
     they are counted (a red wall, R_bar 0.25 but R_red 0.63, carries most of the late red light)."""
-    return np.sqrt(area) * np.maximum(reflectivity, 1e-3)
+    weight = np.sqrt(area) * np.maximum(reflectivity, 1e-3)
+    if geometry is not None and geometry.buried is not None:
+        weight[geometry.buried.whole] = 0.0  # (inside another object: no ray from there meets the room)
+    return weight
 
 
 def rays_per_path(expected_path_length):
@@ -116,7 +119,7 @@ def direct_samples(chunk_paths, scene, irradiance=None):
     patches' variances, sum_j w_j^2 E[X_j^2] / n_j: where a small source sends much of its
     light to a few patches, they need many more samples than their area's), the rest by the
     weight alone (no patch gets less than that part of its share: none is starved)."""
-    weight = allotment_weight(scene.patch_area, scene.grey_reflectivity)
+    weight = allotment_weight(scene.patch_area, scene.grey_reflectivity, scene.geometry)
     share = weight / weight.sum()
     if irradiance is not None:
         received = weight * np.maximum(np.nan_to_num(np.asarray(irradiance, dtype=np.float64)), 0.0)
@@ -145,7 +148,7 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
         reflect_first(tables, gathering, state, samples, paths, rng)
     first_power = reflected_power(area, state.reflected)
     budget = GENERATION_RAYS * paths / max(first_power, 1e-300)  # rays per unit of reflected power
-    weight = allotment_weight(area, tables.reflectivity.max(axis=0))
+    weight = allotment_weight(area, tables.reflectivity.max(axis=0), tables.geometry)
     least = int(np.ceil(LEAST_RAYS * weight.size))
     while True:
         if check is not None:
@@ -251,8 +254,11 @@ def generation(tables, area, state, weight, count, rng):
             u = np.vstack([u, triangle_u[:, rows]])
         _score_two_ways(tables, patch[rows], u, value, density, H, lost)
     H /= area
+    sends = expected > 0  # (patches inside another object send no rays: none of beta reaches them)
+    if not sends.all():
+        expected = np.where(sends, expected, np.inf)
     # A ray from i that escaped or met a back side saw 0 - beta: what i's rays kept of beta.
-    H += beta[:, None] * (1.0 - lost.sum(axis=0) / expected)
+    H += beta[:, None] * (1.0 - lost.sum(axis=0) / expected) * sends
     H += state.correction
     state.correction = 0.0
     # What the rays from i that found nothing, or a back side, estimate of i's reflected power.
