@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .lights import WorldLight
 from .sampling import channel_sum, draw_sources
 from .tallies import ChunkTally
 
@@ -98,6 +99,7 @@ def check_per_source(scene, groups):
         raise ValueError(f"groups must be SourceGroups (source_groups(scene, ...)); got {groups!r}")
     if groups.source_group.size != scene.patch_count + scene.lights.emitter_count:
         raise ValueError("groups were made for another scene (its patches or lights differ)")
+    world_group(scene, groups)
     if groups.count > MAX_GROUPS:
         raise ValueError(f"per-source results take at most {MAX_GROUPS:,} sources; got {groups.count:,}: "
                          "put sources in light groups")
@@ -145,6 +147,7 @@ class WalkGroups:
     source_group: np.ndarray | None = None
     mix: Mix | None = None
     whole: SourceGroups | None = None  # (the scene's, with their names)
+    world: int = -1  # the world's group (-1: no world)
 
     def with_mix(self, mix):
         return replace(self, source_group=None, mix=mix)
@@ -207,3 +210,45 @@ def _group_sum(groups):
 def with_groups(tally, groups):
     """``tally`` with its incident power (S,C,P) ``groups`` by group, its total their sum."""
     return replace(tally, incident=_group_sum(groups), incident_groups=groups)
+
+
+class SampleParts:
+    """Each gathering sample's estimate (first_shot.gather_direct) as two parts, its shadow
+    ray's and its cosine ray's, each of one source group: ``value`` (2,3,n), ``group`` (2,n)
+    (-1 where the part found nothing)."""
+
+    def __init__(self, tables, patch):
+        n, whole, P = patch.size, tables.groups.whole, tables.patch_count
+        self.patch = patch
+        self.value = np.zeros((2, 3, n))
+        self.group = np.full((2, n), -1, dtype=np.int32)
+        # The group of each source a shadow ray looks at: emitting patches, then the lights.
+        self.shadow_group = np.concatenate([whole.patch_group(P), whole.light_group])
+
+    def block(self, rows):
+        """The parts of samples ``rows`` (a slice): (value, group, the shadow sources' groups)."""
+        return self.value[:, :, rows], self.group[:, rows], self.shadow_group
+
+    def irradiance(self, count, P, samples):
+        """(S,3,P) each group's part of the direct irradiance (as gather_direct sums H)."""
+        H = np.zeros((count, 3, P))
+        for m in range(2):
+            key = np.maximum(self.group[m], 0) * np.int64(P) + self.patch  # (a part that found nothing is 0)
+            for c in range(3):
+                H[:, c] += np.bincount(key, weights=self.value[m, c], minlength=count * P).reshape(count, P)
+        H /= samples
+        return H
+
+    def mix(self, factor, offset):
+        """The samples as a walk's sources of ids from ``offset`` on, each a Mix of its two
+        parts times ``factor`` (3,n)."""
+        return Mix(offset, np.maximum(self.group, 0), np.ascontiguousarray((self.value * factor).transpose(0, 2, 1)))
+
+
+def world_group(scene, groups):
+    """The group of the scene's world light (-1: none); ValueError where worlds are in several
+    (a gathering sample's cosine ray finds them all at once)."""
+    found = {int(g) for light, g in zip(scene.lights.lights, groups.light_group) if isinstance(light, WorldLight)}
+    if len(found) > 1:
+        raise ValueError("per-source results take the world lights in one group; they are in several")
+    return found.pop() if found else -1

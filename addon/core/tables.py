@@ -14,7 +14,7 @@ import numpy as np
 
 from .names import EXIT_RANDOM, FINITE, INDEPENDENT, STRATIFIED
 from .sampling import SourceTable, channel_sum, source_weights
-from .source_groups import WalkGroups
+from .source_groups import WalkGroups, world_group
 from .speedups import Speedups
 
 # At most this many patch classes (2^12 classes take 200 kB); more, and the classes are the
@@ -40,7 +40,7 @@ class WalkTables:
         self.sources = SourceTable(source_weights(scene.patch_area, scene.emission, scene.lights.power))
         # Source ids from the patch count on are the lights' emitters (None: no lights).
         # Per-source results: the group of each source (source_groups.WalkGroups), or None.
-        self.groups = None if groups is None else WalkGroups(groups.count, groups.source_group, whole=groups)
+        self.groups = None if groups is None else WalkGroups(groups.count, groups.source_group, whole=groups, world=world_group(scene, groups))
         self.lights = scene.lights if len(scene.lights) else None
         self.grey_reflectivity = scene.grey_reflectivity  # R_bar (P,)
         # Grey scenes carry one channel; colour scenes three.
