@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from .relight import GroupBatches
+from .relighting import GroupBatches
 
 # measured_mse sums this many patches at a time.
 MSE_BLOCK = 1 << 16
@@ -29,7 +29,7 @@ class Batches:
 
     def __init__(self, scene, tables, increments=False):
         C, P = tables.channels, scene.patch_count
-        # Per source: each group's sums too (relight.GroupBatches), or None.
+        # Per source: each group's sums too (relighting.GroupBatches), or None.
         self.groups = None if tables.groups is None else GroupBatches(scene, tables, tables.groups.whole)
         self.scene = scene
         self.channels = C

@@ -37,7 +37,7 @@ from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front, region_of
 from .sampling import SourceTable, add_sphere_points, patch_point_rows, source_weights, stratified_by_patch
-from .source_groups import SampleParts
+from .grouping import SampleParts
 from .tables import WalkTables
 
 # A chunk's gathering aims at about this share of the rays its walk traces.
@@ -151,7 +151,7 @@ def gather_direct(tables, gathering, rng, grouped=False):
     own (points, sources, their points and directions evenly spread; each sample uniform, so
     the estimate stays unbiased, and chunks and patches independent, so batch means hold).
     ``grouped`` (per-source results): each sample's estimate is also kept as its shadow ray's
-    and its cosine ray's parts, each of one source group (source_groups.SampleParts), a fourth item."""
+    and its cosine ray's parts, each of one source group (grouping.SampleParts), a fourth item."""
     P = tables.patch_count
     patch, scale = gathering.draw(rng)
     x = np.empty((3, patch.size), dtype=np.float32)  # unit space (ReflectedPoints keeps them)
@@ -332,7 +332,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, 
     if escaped.size and gathering.worlds:
         for world in gathering.worlds:
             value[:, escaped] += world.radiance_times_pi(towards[:, escaped])
-    if groups is not None:  # (escaped: the world's group; every world is in one, source_groups)
+    if groups is not None:  # (escaped: the world's group; every world is in one, grouping)
         groups[:] = np.where(hit < 0, tables.groups.world, tables.groups.whole.source_group.take(source))
     return patch.size
 

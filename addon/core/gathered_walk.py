@@ -12,7 +12,7 @@ import numpy as np
 
 from .first_shot import gather_direct
 from .sampling import SourceTable, add_sphere_points, channel_sum, source_weights
-from .source_groups import Mix, with_groups
+from .grouping import Mix, with_groups
 from .tallies import ChunkTally
 
 
@@ -48,7 +48,7 @@ def reflected_sources(tables, gathering, emission, samples, groups=None):
     (everything else shared): ``emission`` (P,3) E' from uniform points of each patch (random
     exit), or, leaving from hit points, the gathering ``samples`` (gather_direct's) as
     ReflectedPoints. Per source, ``groups`` is (E' of each group (S,3,P), the samples'
-    source_groups.SampleParts): each source a mix of groups (source_groups.Mix)."""
+    grouping.SampleParts): each source a mix of groups (grouping.Mix)."""
     area = tables.geometry.patch_area
     if tables.exit_random:
         mix = None

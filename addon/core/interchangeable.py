@@ -30,7 +30,7 @@ from . import rays
 from .estimators import finite_survives
 from .path_walk import WAVEFRONT_PATHS
 from .sampling import SourceRuns, draw_sources
-from .source_groups import draw_walk_sources, fold
+from .grouping import draw_walk_sources, fold
 from .tallies import ChunkTally, Scores
 
 
@@ -41,7 +41,7 @@ class InterchangeableWalk:
         self.tables = t = tables
         g = t.geometry
         self.chunk_sizes = sizes
-        if t.groups is not None:  # (each chunk's paths of each group a chunk of their own: source_groups)
+        if t.groups is not None:  # (each chunk's paths of each group a chunk of their own: grouping)
             drawn = draw_walk_sources(t, sizes, rng)
             sizes = drawn[-1]
         self.sizes = sizes

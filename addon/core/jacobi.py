@@ -30,7 +30,7 @@ import numpy as np
 from . import rays
 from .faces import ranks_in_runs
 from .sampling import GrowingTable, draw_sources, halton, shifted_float32
-from .source_groups import with_groups
+from .grouping import with_groups
 from .tallies import ChunkTally, chunk_counts, chunk_sums
 
 # Halton points 0..n-1 in bases 2, 3, 5, 7, (4, n) float64.

@@ -16,7 +16,7 @@ import numpy as np
 from . import rays
 from .estimators import biased_carry, biased_cut, finite_survives
 from .sampling import add_sphere_points, frame_points
-from .source_groups import draw_walk_sources, fold
+from .grouping import draw_walk_sources, fold
 from .tallies import Accounts, Scores, chunk_counts, chunk_sums, total_weight, weight_sum
 
 # Rays per step while the chunk still has paths to start: big enough that numpy's per-call
@@ -58,7 +58,7 @@ class PathWalk:
         self.tables = t = tables
         self.chunk_sizes = sizes
         # Every path's source, drawn at once for each chunk; paths start as places free up.
-        # (Per source, each chunk's paths of each group are a chunk of their own: source_groups.)
+        # (Per source, each chunk's paths of each group are a chunk of their own: grouping)
         self.source, self.source_chunk, self.first_uniforms, self.source_part, sizes = draw_walk_sources(t, sizes, rng)
         self.sizes = sizes
         self.G, C, P = len(sizes), t.channels, t.patch_count

@@ -44,7 +44,7 @@ from .names import (
 )
 from .plan import chunk_plan, meets_target, paths_to_target, target_bound
 from .runners import ThreadRunner
-from .source_groups import check_per_source, source_groups
+from .grouping import check_per_source, source_groups
 from .speedups import Speedups
 from .tables import WalkTables
 
@@ -78,7 +78,7 @@ class SolveResult:
     direct_light: str = SHOT
     method: str = WALK
     gather_rays: int = 0  # per chunk, with the direct light gathered
-    per_source: object = None  # relight.PerSource (per_source=True), else None
+    per_source: object = None  # relighting.PerSource (per_source=True), else None
 
     @property
     def rays_per_second(self):
@@ -113,8 +113,8 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     bounds the wall time. A stopped run returns the complete chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
     ``chunk_paths`` replaces the plan's chunk size (the estimate's pilot: ``forecast``).
     ``per_source=True`` also gives each source group's own result from the same rays
-    (``SolveResult.per_source``, a relight.PerSource; ``groups``: source_groups.source_groups's,
-    default each light, and the patches of each emittance): what relight.relight recombines.
+    (``SolveResult.per_source``, a relighting.PerSource; ``groups``: grouping.source_groups's,
+    default each light, and the patches of each emittance): what relighting.relight recombines.
     """
     _check_amounts(estimator, threshold, paths, target_mse, max_seconds, threads, chunk_paths)
     method = _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds)

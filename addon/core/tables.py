@@ -14,7 +14,7 @@ import numpy as np
 
 from .names import EXIT_RANDOM, FINITE, INDEPENDENT, STRATIFIED
 from .sampling import SourceTable, channel_sum, source_weights
-from .source_groups import WalkGroups, world_group
+from .grouping import WalkGroups, world_group
 from .speedups import Speedups
 
 # At most this many patch classes (2^12 classes take 200 kB); more, and the classes are the
@@ -39,7 +39,7 @@ class WalkTables:
         self.patch_count = scene.patch_count
         self.sources = SourceTable(source_weights(scene.patch_area, scene.emission, scene.lights.power))
         # Source ids from the patch count on are the lights' emitters (None: no lights).
-        # Per-source results: the group of each source (source_groups.WalkGroups), or None.
+        # Per-source results: the group of each source (grouping.WalkGroups), or None.
         self.groups = None if groups is None else WalkGroups(groups.count, groups.source_group, whole=groups, world=world_group(scene, groups))
         self.lights = scene.lights if len(scene.lights) else None
         self.grey_reflectivity = scene.grey_reflectivity  # R_bar (P,)
@@ -116,7 +116,7 @@ class WalkTables:
 
     def with_sources(self, sources, emission, lights, mix=None):
         """These tables with other sources (a SourceTable, (P,3) emission, lights or None, and
-        their groups' source_groups.Mix where results are per source), everything else shared:
+        their groups' grouping.Mix where results are per source), everything else shared:
         a walk of the light the patches reflect (first_shot)."""
         tables = copy.copy(self)
         tables.sources, tables.emission, tables.lights = sources, emission, lights
@@ -136,7 +136,7 @@ class WalkTables:
     def start_weight(self, source, part=None):
         """E_ic / E_bar_i (C,n): the starting weights of paths from the given sources, patches
         (index < P) or a light's emitters (P + its index) (colour walks); with ``part``, of the
-        parts of a mix of groups the paths drew (source_groups.Mix). Made for the sources
+        parts of a mix of groups the paths drew (grouping.Mix). Made for the sources
         asked: a (C,S) table would cost as much as the scene's emission, for the few sources."""
         if part is not None:
             return self.groups.mix.start_weight(source, part, self.channels)

@@ -56,7 +56,7 @@ from .first_shot import MAX_GATHER_SAMPLES, gather_direct
 from .gathered_walk import ReflectedPoints, split_lost
 from .jacobi import HALTON, systematic_counts
 from .sampling import SOBOL, shifted_float32, unit_floats
-from .source_groups import with_groups
+from .grouping import with_groups
 from .tallies import ChunkTally
 
 # Rays of a chunk of n paths: n FIRST_REFLECTION_RAYS from the gathering samples (hit exit),

@@ -4,7 +4,7 @@ Radiosity is linear in emission, channel by channel: the result for any strength
 of the sources is sum_s w_s B_s, B_s the result of group s alone at the solve's strengths and
 w_s (S,3) the new strength and colour over the solved ones. A per-source solve
 (``solve(..., per_source=True)``) tallies each group's incident power apart from the same rays
-(``source_groups``); :class:`GroupBatches` sums them chunk by chunk, with what the error of any
+(``grouping``); :class:`GroupBatches` sums them chunk by chunk, with what the error of any
 recombination needs, and :func:`relight` recombines without tracing a ray.
 
 The error of a recombination: the chunks are the batches (``batches``), and the groups' batch

@@ -3,7 +3,7 @@
 A group is what relighting scales as one: each light (the world is one), each set of emitting
 patches of one label (a material; by default patches of one emittance), or a light group the
 caller names, which patches and lights share. A solve with per-source results (``per_source``)
-tallies every group's light apart from the same rays (``relight``): a walk's path carries the
+tallies every group's light apart from the same rays (``relighting``): a walk's path carries the
 group of the source it left (``grouped_draw``); where a source's light is itself a mix of groups
 (the reflected direct light a gathered walk starts from), the path draws one group in
 proportion to its share (``Mix``), which keeps the estimate unbiased and the group sums the total.
