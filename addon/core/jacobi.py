@@ -154,10 +154,11 @@ def _arrived(weights, front, cell, cells, group, S):
     """(S C, cells) the weight arriving at each chunk's patches (``cell``) from the rays that
     met a front (``front``): by their ``group`` (the first generation's, per source), else by
     the rows of ``weights`` (C or S C)."""
+    every = front.size == weights.shape[1]  # (every ray met a front, as in a closed room: no copies)
     if group is None:
-        return np.stack([np.bincount(cell, weights=w.take(front), minlength=cells) for w in weights])
+        return np.stack([np.bincount(cell, weights=w if every else w.take(front), minlength=cells) for w in weights])
     key = group.take(front) * np.int64(cells) + cell
-    by_group = np.stack([np.bincount(key, weights=w.take(front), minlength=S * cells) for w in weights])
+    by_group = np.stack([np.bincount(key, weights=w if every else w.take(front), minlength=S * cells) for w in weights])
     return by_group.reshape(len(weights), S, cells).transpose(1, 0, 2).reshape(S * len(weights), cells)
 
 

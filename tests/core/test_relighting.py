@@ -110,7 +110,8 @@ def test_the_groups_add_up_to_the_solve_and_their_covariance_to_its_error(case):
     scale = np.abs(r.radiosity).max()
     np.testing.assert_allclose(ps.radiosity.sum(axis=0), r.radiosity, rtol=0, atol=1e-13 * scale)
     np.testing.assert_allclose(ps.irradiance.sum(axis=0), r.irradiance, rtol=0, atol=1e-13 * np.abs(r.irradiance).max())
-    same = relight(ps, np.ones((6, 3)))
+    same = relight(ps, np.ones((6, 3)), irradiance=True)
+    np.testing.assert_allclose(same.irradiance, r.irradiance, rtol=0, atol=1e-13 * np.abs(r.irradiance).max())
     np.testing.assert_allclose(same.radiosity, r.radiosity, rtol=0, atol=1e-13 * scale)
     assert same.mse == pytest.approx(r.measured_mse, rel=1e-9)
 
@@ -156,7 +157,7 @@ def test_the_error_of_a_recombination_follows_the_spread_over_seeds(case):
     relit, reported = [], []
     for seed in range(16):
         ps = _solve(scene, case, paths=20_000, seed=100 + seed, per_source=True).per_source
-        r = relight(ps, WEIGHTS, irradiance=False)
+        r = relight(ps, WEIGHTS)
         relit.append(r.radiosity)
         reported.append(r.mse)
     terms = weight[:, None] * np.var(relit, axis=0, ddof=1)
