@@ -111,23 +111,22 @@ def check_per_source(scene, groups):
             f"({PER_SOURCE_MAX * 24 / 2**20:,.0f} MiB a result); put sources in light groups or use fewer patches")
 
 
-@dataclass(frozen=True, eq=False)
 class Mix:
     """Sources (ids from ``offset`` on) whose light is a mix of groups: ``group`` (M,n) the
     group of each of a source's M parts, ``power`` (M,n,3) each part's power."""
 
-    offset: int
-    group: np.ndarray
-    power: np.ndarray
+    def __init__(self, offset, group, power):
+        self.offset, self.group, self.power = offset, group, power
+        # Each source's parts' power summed over the channels, cumulated over its parts (M,n).
+        self.cumulative = np.cumsum(np.stack([channel_sum(p) for p in power]), axis=0)
 
     def draw(self, source, u):
         """(group, part) (n,) each for sources ``source`` (n,) and uniforms ``u`` (n,): a part
         chosen in proportion to its power summed over the channels, as sources are chosen."""
         column = source - self.offset
-        grey = np.stack([channel_sum(self.power[m].take(column, axis=0)) for m in range(self.power.shape[0])])
-        cumulative = np.cumsum(grey, axis=0)
+        cumulative = self.cumulative.take(column, axis=1)
         part = np.count_nonzero(cumulative <= u * cumulative[-1], axis=0)
-        part = np.minimum(part, grey.shape[0] - 1)
+        part = np.minimum(part, cumulative.shape[0] - 1)
         return self.group[part, column], part
 
     def start_weight(self, source, part, channels):
