@@ -75,9 +75,11 @@ def source_groups(scene, patch_labels=None, light_labels=None):
         light_labels = [None] * len(lights)
     if len(light_labels) != len(lights):
         raise ValueError(f"light_labels must have one label a light ({len(lights)}); got {len(light_labels)}")
-    names = {}
-    light_names = [str(label) if label is not None else _own_name(light.name, names, k)
+    # Labels name shared groups; a light without one gets a group of its own, named after it.
+    taken = set(labels) | {str(label) for label in light_labels if label is not None}
+    light_names = [str(label) if label is not None else _own_name(light.name, taken, k)
                    for k, (light, label) in enumerate(zip(lights.lights, light_labels))]
+    names = {}
     for name in list(dict.fromkeys(labels)) + light_names:
         names.setdefault(name, len(names))
     source_group = np.full(P + lights.emitter_count, -1, dtype=np.int32)
@@ -88,8 +90,11 @@ def source_groups(scene, patch_labels=None, light_labels=None):
 
 
 def _own_name(name, taken, k):
-    """A light's own group name: its name, or its name and place where that is taken."""
-    return name if name not in taken else f"{name} ({k})"
+    """A light's own group name (added to ``taken``): its name, or its name and place where a
+    label or another light has it."""
+    name = name if name not in taken else f"{name} ({k})"
+    taken.add(name)
+    return name
 
 
 def check_per_source(scene, groups):

@@ -97,6 +97,11 @@ def test_source_groups_name_every_light_and_emission_and_merge_what_the_caller_l
     merged = source_groups(scene, patch_labels=labels, light_labels=["lamps", "lamps", None, None, None])
     assert merged.names == ("wall", "lamps", "area", "sun", "world")
     assert merged.patch_group(P)[5] == 0 and merged.patch_group(P)[6] == 1 and list(merged.light_group) == [1, 1, 2, 3, 4]
+    # Lights of one name, or of a label's name, still get groups of their own unless labelled.
+    twins = scene.with_materials(scene.reflectivity, scene.emission, [PointLight(np.full(3, 0.5), np.ones(3), name="lamp"),
+                                                                        PointLight(np.full(3, 0.4), np.ones(3), name="lamp")])
+    assert source_groups(twins, patch_labels=np.where(np.arange(P) == 5, "lamp", "wall")).names == (
+        "lamp", "wall", "lamp (0)", "lamp (1)")
 
 
 @pytest.mark.parametrize("case", METHODS, ids=IDS)
