@@ -324,15 +324,26 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
     s = density.take(i)
     s += density.take(j)
     np.reciprocal(s, out=s)
-    gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
-    gathered *= s
-    shot *= s
-    for c in range(value.shape[0]):
-        H[c] += np.bincount(i, weights=gathered[c], minlength=P)
-        H[c] += np.bincount(j, weights=shot[c], minlength=P)
+    if value.shape[0] > tables.channels:  # (per source, many rows: both ends in one count a row)
+        _score_rows(np.concatenate((i, j)), np.concatenate((j, i)), np.concatenate((s, s)), value, H)
+    else:
+        gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
+        gathered *= s
+        shot *= s
+        for c in range(value.shape[0]):
+            H[c] += np.bincount(i, weights=gathered[c], minlength=P)
+            H[c] += np.bincount(j, weights=shot[c], minlength=P)
     if not met.all():
         lost[0] += np.bincount(patch.compress(hits.hit < 0), minlength=P)
         lost[1] += np.bincount(patch.compress((hits.hit >= 0) & ~met), minlength=P)
+
+
+def _score_rows(to, source, s, value, H):
+    """Adds s value[:, source] to H[:, to] for every row of ``value`` (per-source rows)."""
+    carried = value.take(source, axis=1)
+    carried *= s
+    for row, weights in zip(H, carried):
+        row += np.bincount(to, weights=weights, minlength=row.size)
 
 
 def _paired_ranks(ray_patch, negative, P, rng):
