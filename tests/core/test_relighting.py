@@ -203,3 +203,12 @@ def test_too_many_patches_x_sources_is_refused_in_one_line(monkeypatch):
 
 def _box_of_two():
     return box_scene([(0.5,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, n=2)[0]
+
+
+def test_a_per_source_solve_cancelled_before_its_first_chunk_keeps_the_emission_and_says_its_error_is_unknown():
+    scene = _open_box()
+    r = solve(scene, paths=100_000_000, seed=1, per_source=True, threads=2, should_stop=lambda: True)  # (chunks of seconds)
+    assert r.stopped == "cancelled" and r.paths == 0
+    np.testing.assert_array_equal(r.per_source.radiosity.sum(axis=0), scene.emission)
+    relit = relight(r.per_source, WEIGHTS)
+    assert math.isnan(relit.mse) and math.isnan(relit.relative_rms) and not relit.past_target
