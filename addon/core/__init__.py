@@ -10,6 +10,8 @@ the biased infinite one, with the paper's heuristic MSE formulas (2), (3) and th
 efficiency (4).
 """
 from .error_model import Prediction, mse_to_relative_rms, predict, relative_rms_to_mse
+from .relighting import PerSource, Relit, relight
+from .grouping import SourceGroups, source_groups
 from .names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE, GATHERED, SHOT
 from .scene import PatchScene
 from .solver import SolveResult, solve
@@ -23,6 +25,11 @@ __all__ = [
     "predict",
     "Prediction",
     "SolveResult",
+    "relight",
+    "Relit",
+    "PerSource",
+    "source_groups",
+    "SourceGroups",
     "relative_rms_to_mse",
     "mse_to_relative_rms",
     "Speedups",

@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from .relighting import GroupBatches
 
 # measured_mse sums this many patches at a time.
 MSE_BLOCK = 1 << 16
@@ -28,6 +29,8 @@ class Batches:
 
     def __init__(self, scene, tables, increments=False):
         C, P = tables.channels, scene.patch_count
+        # Per source: each group's sums too (relighting.GroupBatches), or None.
+        self.groups = None if tables.groups is None else GroupBatches(scene, tables, tables.groups.whole)
         self.scene = scene
         self.channels = C
         self.incident = np.zeros((C, P))
@@ -54,6 +57,8 @@ class Batches:
         if self.increments is not None and self.paths > 0:
             self.increments.append(self._increment(tally))
         self.incident += tally.incident
+        if self.groups is not None:
+            self.groups.add(tally)
         for c, row in enumerate(tally.incident):  # a channel at a time: a (P,) temporary, not (C,P)
             square = np.square(row)
             square /= tally.paths

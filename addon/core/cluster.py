@@ -47,6 +47,7 @@ class WalkParameters:
     # alone). A gathering's split of what it finds on no front is a solve's own, no part of the
     # key: solves of other seeds reuse the state.
     spec: object = None
+    groups: object = None  # the SourceGroups of a per-source solve (None: none)
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,7 +129,7 @@ def _cached_state(payload, parameters):
     scene = PatchScene(*payload.arrays, lights=payload.lights, aim=payload.aim, _geometry=geometry)
     _worker_geometries[payload.geometry_key] = scene.geometry
     p = parameters
-    tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups)
+    tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups, groups=p.groups)
     state = _worker_states[key] = methods.create(p.method, p.direct_light).rebuild(scene, tables, p.spec)
     for cache in (_worker_states, _worker_geometries):
         while len(cache) > WORKER_TABLES:

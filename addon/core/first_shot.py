@@ -37,6 +37,7 @@ from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front, region_of
 from .sampling import SourceTable, add_sphere_points, patch_point_rows, source_weights, stratified_by_patch
+from .grouping import SampleParts
 from .tables import WalkTables
 
 # A chunk's gathering aims at about this share of the rays its walk traces.
@@ -139,7 +140,7 @@ class Gathering:
         return patch, scale.take(patch)
 
 
-def gather_direct(tables, gathering, rng):
+def gather_direct(tables, gathering, rng, grouped=False):
     """(3,P) an unbiased estimate of each patch's direct irradiance H (scene units), the rays
     it traced, and the samples it is made of (patch (n,), unit-space point (3,n), estimate of
     the irradiance there (3,n)): per patch j, ``gathering.samples[j]`` points on average, each with a shadow ray to a
@@ -148,24 +149,32 @@ def gather_direct(tables, gathering, rng):
     shadow rays are good at small and far sources, cosine rays at near and large ones). A
     patch's samples are stratified: Sobol' points with a random digital shift of the patch's
     own (points, sources, their points and directions evenly spread; each sample uniform, so
-    the estimate stays unbiased, and chunks and patches independent, so batch means hold)."""
+    the estimate stays unbiased, and chunks and patches independent, so batch means hold).
+    ``grouped`` (per-source results): each sample's estimate is also kept as its shadow ray's
+    and its cosine ray's parts, each of one source group (grouping.SampleParts), a fourth item."""
     P = tables.patch_count
     patch, scale = gathering.draw(rng)
     x = np.empty((3, patch.size), dtype=np.float32)  # unit space (ReflectedPoints keeps them)
     value = np.zeros((3, patch.size))
+    parts = SampleParts(tables, patch) if grouped else None
     rays = 0
     for rows in _blocks(patch, SAMPLE_BLOCK):  # (a large chunk's memory stays that of a block)
-        rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng)
+        rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng,
+                              None if parts is None else parts.block(rows))
     value *= scale
     # (float64 even for a chunk that drew no sample: bincount of nothing gives integers)
     H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)]).astype(np.float64, copy=False)
     H /= gathering.samples
+    if parts is not None:
+        parts.value *= scale
+        return H, rays, (patch, x, value), parts
     return H, rays, (patch, x, value)
 
 
-def _gather_block(tables, gathering, patch, x32, value, rng):
+def _gather_block(tables, gathering, patch, x32, value, rng, parts=None):
     """The samples of a run of whole patches: their points into ``x32`` (3,n), their estimates
-    added to ``value`` (3,n); returns the rays traced."""
+    added to ``value`` (3,n) (and, given the block's ``parts``, (value (2,3,n), group (2,n),
+    group of each shadow source), kept as its shadow and its cosine part); returns the rays traced."""
     g = tables.geometry
     if gathering.stratified:
         u = stratified_by_patch(patch, tables.patch_count, GATHER_SOBOL_DIMENSIONS, rng, dtype=np.float32)
@@ -175,10 +184,16 @@ def _gather_block(tables, gathering, patch, x32, value, rng):
     x = x32.astype(np.float64)
     normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
     rays = 0
+    shadow, cosine = (value, value) if parts is None else parts[0]
     if gathering.table is not None:
-        rays += _shadow_rays(tables, gathering, patch, x, normal, u, value)
+        rays += _shadow_rays(tables, gathering, patch, x, normal, u, shadow)
+        if parts is not None:
+            parts[1][0] = parts[2].take(gathering.table.choose(u[2]))
     if gathering.cosine_share > 0:
-        rays += _cosine_rays(tables, gathering, patch, x, normal, u, value)
+        rays += _cosine_rays(tables, gathering, patch, x, normal, u, cosine, groups=None if parts is None else parts[1][1])
+    if parts is not None:
+        value += shadow
+        value += cosine
     return rays
 
 
@@ -288,16 +303,20 @@ def _towards_emitters(tables, gathering, patch, source, surface, normal, u):
     return e, length, np.where(ok, w, 0.0)
 
 
-def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
+def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, groups=None):
     """Adds each sample's cosine-ray estimate to ``value``: the emitting patch it meets (weighted
     against the shadow rays), or the sky where it escapes. A sample casts one with probability
-    ``gathering.cosine_share`` (u[9]), which the balance heuristic counts. Returns the rays traced."""
+    ``gathering.cosine_share`` (u[9]), which the balance heuristic counts. Returns the rays
+    traced. ``groups`` (n,), where given, takes the source group of what each ray found."""
     g = tables.geometry
     if gathering.cosine_share < 1 and not cast_all:
         cast = np.flatnonzero(u[9] < gathering.cosine_share)
         part = np.zeros((3, cast.size))
-        rays = _cosine_rays(tables, gathering, patch[cast], x[:, cast], normal[:, cast], u[:, cast], part, cast_all=True)
+        found = None if groups is None else groups[cast]
+        rays = _cosine_rays(tables, gathering, patch[cast], x[:, cast], normal[:, cast], u[:, cast], part, True, found)
         value[:, cast] += part
+        if groups is not None:
+            groups[cast] = found
         return rays
     towards = add_sphere_points(g.patch_normal_rows.take(patch, axis=1), u[5], u[6])
     towards = towards.astype(np.float64)
@@ -313,6 +332,8 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False):
     if escaped.size and gathering.worlds:
         for world in gathering.worlds:
             value[:, escaped] += world.radiance_times_pi(towards[:, escaped])
+    if groups is not None:  # (escaped: the world's group; every world is in one, grouping)
+        groups[:] = np.where(hit < 0, tables.groups.world, tables.groups.whole.source_group.take(source))
     return patch.size
 
 

@@ -12,6 +12,7 @@ import numpy as np
 
 from .first_shot import gather_direct
 from .sampling import SourceTable, add_sphere_points, channel_sum, source_weights
+from .grouping import Mix, with_groups
 from .tallies import ChunkTally
 
 
@@ -42,17 +43,26 @@ class ReflectedPoints:
         return geometry.region_of(self.patch.take(rows))
 
 
-def reflected_sources(tables, gathering, emission, samples):
+def reflected_sources(tables, gathering, emission, samples, groups=None):
     """The walk's tables with the patches' reflected direct light as its only sources
     (everything else shared): ``emission`` (P,3) E' from uniform points of each patch (random
     exit), or, leaving from hit points, the gathering ``samples`` (gather_direct's) as
-    ReflectedPoints."""
+    ReflectedPoints. Per source, ``groups`` is (E' of each group (S,3,P), the samples'
+    grouping.SampleParts): each source a mix of groups (grouping.Mix)."""
     area = tables.geometry.patch_area
     if tables.exit_random:
-        return tables.with_sources(SourceTable(source_weights(area, emission)), emission, None)
+        mix = None
+        if groups is not None:
+            S, P = groups[0].shape[0], area.size
+            mix = Mix(0, np.broadcast_to(np.arange(S, dtype=np.int32)[:, None], (S, P)),
+                      np.ascontiguousarray((groups[0] * area).transpose(0, 2, 1)))
+        return tables.with_sources(SourceTable(source_weights(area, emission)), emission, None, mix)
     points = ReflectedPoints(gathering, tables.geometry, samples)
     none = np.zeros_like(emission)
-    return tables.with_sources(SourceTable(source_weights(area, none, points.power)), none, points)
+    mix = None
+    if groups is not None:
+        mix = groups[1].mix((gathering.reflectivity * gathering.area_per_sample).take(samples[0], axis=1), area.size)
+    return tables.with_sources(SourceTable(source_weights(area, none, points.power)), none, points, mix)
 
 
 def split_lost(gathering, lost):
@@ -66,7 +76,9 @@ def gathered_chunk(tables, gathering, paths, rng, walk):
     """One chunk of the gathered estimate: the direct light of every patch, then ``paths``
     walks from its reflection (``walk(tables, paths, rng)`` gives their ChunkTally). Returns
     a ChunkTally in the solve's relative weights (times Phi_T / N)."""
-    H, gather_rays, samples = gather_direct(tables, gathering, rng)
+    grouped = tables.groups is not None
+    gathered = gather_direct(tables, gathering, rng, grouped)
+    H, gather_rays, samples = gathered[:3]
     C = tables.channels
     direct = H * gathering.patch_area  # (3,P) power incident on each patch's front
     reflected = gathering.reflectivity * H  # (3,P) E'
@@ -78,17 +90,25 @@ def gathered_chunk(tables, gathering, paths, rng, walk):
     walked = np.zeros(C)  # what the walk started with
     blocked, undistributed, walk_absorbed, walk_escaped = (np.zeros(C) for _ in range(4))
     rays, ended = gather_rays, {}
+    if grouped:  # (each group's direct light, and its reflection as the walk's sources)
+        H_groups = gathered[3].irradiance(tables.groups.count, tables.patch_count, gathering.samples)
+        incident_groups = H_groups[:, :C] * (gathering.patch_area * scale)
+        grouped = (gathering.reflectivity * H_groups, gathered[3])
     if walk_power > 0:
-        tally = walk(reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples), paths, rng)
+        tally = walk(reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples, grouped or None),
+                     paths, rng)
         w = walk_power / gathering.total_power
         incident = incident + tally.incident * w
         walked, walk_absorbed, walk_escaped = tally.emitted * w, tally.absorbed * w, tally.escaped * w
         blocked, undistributed = tally.blocked * w, tally.undistributed * w
         rays += tally.rays
         ended = tally.ended
+        if grouped:
+            incident_groups = incident_groups + tally.incident_groups * w
     # What the direct light brought no patch (in expectation, what escaped or met a back side
     # on its first flight), so that the accounts balance exactly; below zero where a light that
     # casts no shadow reaches, through objects, more than it emits.
     lost_escaped, lost_blocked = split_lost(gathering, emitted - absorbed - walked)
-    return ChunkTally(paths, rays, incident, emitted, absorbed + walk_absorbed, lost_escaped + walk_escaped,
-                      blocked + lost_blocked, undistributed, ended)
+    tally = ChunkTally(paths, rays, incident, emitted, absorbed + walk_absorbed, lost_escaped + walk_escaped,
+                       blocked + lost_blocked, undistributed, ended)
+    return with_groups(tally, incident_groups) if grouped else tally

@@ -30,6 +30,7 @@ from . import rays
 from .estimators import finite_survives
 from .path_walk import WAVEFRONT_PATHS
 from .sampling import SourceRuns, draw_sources
+from .grouping import draw_walk_sources, fold
 from .tallies import ChunkTally, Scores
 
 
@@ -39,6 +40,10 @@ class InterchangeableWalk:
     def __init__(self, tables, sizes, rng):
         self.tables = t = tables
         g = t.geometry
+        self.chunk_sizes = sizes
+        if t.groups is not None:  # (each chunk's paths of each group a chunk of their own: grouping)
+            drawn = draw_walk_sources(t, sizes, rng)
+            sizes = drawn[-1]
         self.sizes = sizes
         self.P = P = t.patch_count
         self.G = G = len(sizes)
@@ -54,11 +59,13 @@ class InterchangeableWalk:
         self.live = self.runs = None
         if self.counted and g.all_parallelograms and not t.stratified and t.lights is None:
             self.live = np.zeros((G, P), dtype=np.int64)
-            if all(t.sources.draws_counts(n) for n in sizes):
+            if t.groups is None and all(t.sources.draws_counts(n) for n in sizes):
                 self.runs = SourceRuns(t.sources, sizes, rng)
         self.first_uniforms = None
         if self.runs is None:
-            source, self.source_chunk, self.first_uniforms = draw_sources(t.sources, sizes, rng, t.stratified)
+            if t.groups is None:
+                drawn = draw_sources(t.sources, sizes, rng, t.stratified)
+            source, self.source_chunk, self.first_uniforms = drawn[:3]
             self.source = source.astype(np.int32)
             self.patch = self.source[:0]
             self.chunk = self.source_chunk[:0] if self.tagged else None
@@ -195,4 +202,4 @@ class InterchangeableWalk:
                 undistributed=one(0),
                 ended={"escaped": escaped, "blocked": blocked, "absorbed": absorbed, "threshold": 0},
             ))
-        return tallies
+        return tallies if self.tables.groups is None else fold(tallies, self.chunk_sizes, self.tables.groups.count)

@@ -30,6 +30,7 @@ import numpy as np
 from . import rays
 from .faces import ranks_in_runs
 from .sampling import GrowingTable, draw_sources, halton, shifted_float32
+from .grouping import with_groups
 from .tallies import ChunkTally, chunk_counts, chunk_sums
 
 # Halton points 0..n-1 in bases 2, 3, 5, 7, (4, n) float64.
@@ -47,15 +48,16 @@ def systematic_counts(power, rays, shift):
     return np.diff(edges, prepend=0)
 
 
-def shoot_from_patches(tables, unshot, rng):
+def shoot_from_patches(tables, unshot, rng, groups=1):
     """A generation's rays from the patches, for a group of G chunks: ``unshot`` (C,G,P)
-    relative power. Each chunk with more than one ray's weight of it shoots about that many
-    rays of equal weight; one with less plays Russian roulette (one ray of weight 1 with
-    probability its unshot power, else its end). Returns (patch, chunk, weights (C,m),
-    leaving (G,C), origins, directions), the rays in chunk order, or None once every chunk
-    has ended."""
+    relative power (per source, (S C,G,P): each of ``groups`` groups' channels). Each chunk
+    with more than one ray's weight of it shoots about that many rays of equal weight; one with
+    less plays Russian roulette (one ray of weight 1 with probability its unshot power, else its
+    end). Returns (patch, chunk, weights (C,m), leaving (G,C), origins, directions), the rays
+    in chunk order, or None once every chunk has ended."""
     C, G, P = unshot.shape
-    power = unshot[0] if C == 1 else unshot.mean(axis=0)  # (G,P) what a ray's weight counts
+    whole = unshot if groups == 1 else unshot.reshape(groups, C // groups, G, P).sum(axis=0)  # (the groups' sum)
+    power = whole[0] if whole.shape[0] == 1 else whole.mean(axis=0)  # (G,P) what a ray's weight counts
     total = power.sum(axis=1)
     roulette, shift, corner = rng.random(G), rng.random(G), rng.random((G, 4))  # drawn alike, always
     rays_of = np.where(total >= 1.0, np.rint(total), (total > 0) & (roulette < total)).astype(np.int64)
@@ -81,7 +83,7 @@ def shoot_from_patches(tables, unshot, rng):
     weights = scale.take(chunk)[None]
     if C > 1:
         with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = np.where(power > 0, unshot / power, 0.0)  # (C,G,P) U_jc / U_bar_j
+            ratio = np.where(power > 0, unshot / power, 0.0)  # (C,G,P) U_jc / U_bar_j (a group's)
         weights = ratio.reshape(C, G * P).take(cell, axis=1) * weights
     return patch, chunk, weights, chunk_sums(weights, chunk, G), origins, directions
 
@@ -90,21 +92,24 @@ def jacobi_chunks(tables, sizes, rng, check=None):
     """Chunks of stochastic Jacobi iteration from ``sizes`` first rays each, traced together
     (each generation's rays of every chunk in one wavefront); returns each chunk's ChunkTally
     in the walk's relative weights (times Phi_T / N). ``check()`` is called every generation
-    (it raises to stop)."""
+    (it raises to stop). Per source, each first ray carries its source's group, and every
+    later ray each group's share of what it carries (S C weights: the light passes on linearly)."""
     C, P, G = tables.channels, tables.patch_count, len(sizes)
+    S = 1 if tables.groups is None else tables.groups.count
     source, chunk, first = draw_sources(tables.sources, sizes, rng, tables.stratified)
+    group, part = _first_groups(tables, source, rng)
     u = rng.random((tables.uniforms_per_ray, source.size), dtype=np.float32)
     if first is not None:
         u[:4] = first
     origins, directions = rays.leave_sources(tables, source, u)
     region = rays.region_of(tables, source)
     chunk = np.zeros(source.size, dtype=np.int32) if chunk is None else chunk
-    weights = np.ones((1, source.size)) if C == 1 else tables.start_weight(source)
+    weights = np.ones((1, source.size)) if C == 1 else tables.start_weight(source, part)
     emitted = chunk_sums(weights, chunk, G)
-    incident = np.zeros((C, G * P))
+    incident = np.zeros((S * C, G * P))
     absorbed, escaped, blocked = (np.zeros((G, C)) for _ in range(3))
     ray_count, generations = np.zeros(G, dtype=np.int64), np.zeros(G, dtype=np.int64)
-    R = tables.reflectivity[:, None, :]
+    R = np.tile(tables.reflectivity, (S, 1))[:, None, :]
     while True:
         if check is not None:
             check()
@@ -114,29 +119,62 @@ def jacobi_chunks(tables, sizes, rng, check=None):
         generations += traced > 0
         front = np.flatnonzero(hits.front)
         cell = chunk.take(front) * np.int64(P) + hits.patch.take(front)
-        arrived = np.stack([np.bincount(cell, weights=weights[c].take(front), minlength=G * P) for c in range(C)])
+        arrived = _arrived(weights, front, cell, G * P, group, S)
+        group = None  # (from the second generation on, every ray carries every group)
         incident += arrived
         missed = hits.hit < 0
         back = ~missed & ~hits.front
-        escaped += chunk_sums(weights.compress(missed, axis=1), chunk.compress(missed), G)
-        blocked += chunk_sums(weights.compress(back, axis=1), chunk.compress(back), G)
-        arrived = arrived.reshape(C, G, P)
+        escaped += _by_channel(chunk_sums(weights.compress(missed, axis=1), chunk.compress(missed), G), C)
+        blocked += _by_channel(chunk_sums(weights.compress(back, axis=1), chunk.compress(back), G), C)
+        arrived = arrived.reshape(S * C, G, P)
         unshot = arrived * R
         reflected = unshot.sum(axis=2).T  # (G,C)
-        absorbed += arrived.sum(axis=2).T - reflected
-        shot = shoot_from_patches(tables, unshot, rng)
+        absorbed += _by_channel(arrived.sum(axis=2).T - reflected, C)
+        shot = shoot_from_patches(tables, unshot, rng, S)
         if shot is None:
-            absorbed += reflected  # (the roulette's end: nothing leaves)
+            absorbed += _by_channel(reflected, C)  # (the roulette's end: nothing leaves)
             break
         patch, chunk, weights, leaving, origins, directions = shot
         region = tables.geometry.region_of(patch)
-        absorbed += reflected - leaving  # what leaves beyond what was reflected: the roulette's, either sign
-    incident = incident.reshape(C, G, P)
-    return [
-        ChunkTally(n, int(ray_count[g]), incident[:, g].copy(), emitted[g], absorbed[g], escaped[g], blocked[g],
-                   np.zeros(C), {"generations": int(generations[g])})
-        for g, n in enumerate(sizes)
-    ]
+        absorbed += _by_channel(reflected - leaving, C)  # what leaves beyond what was reflected: the roulette's, either sign
+    return _tallies(sizes, incident.reshape(S, C, G, P), ray_count, emitted, absorbed, escaped, blocked, generations,
+                    tables.groups is not None)
+
+
+def _first_groups(tables, source, rng):
+    """(group, part) of each first ray's source (None, None without per-source results)."""
+    if tables.groups is None:
+        return None, None
+    if tables.groups.mix is None:
+        return tables.groups.source_group.take(source), None
+    return tables.groups.mix.draw(source, rng.random(source.size))
+
+
+def _arrived(weights, front, cell, cells, group, S):
+    """(S C, cells) the weight arriving at each chunk's patches (``cell``) from the rays that
+    met a front (``front``): by their ``group`` (the first generation's, per source), else by
+    the rows of ``weights`` (C or S C)."""
+    every = front.size == weights.shape[1]  # (every ray met a front, as in a closed room: no copies)
+    if group is None:
+        return np.stack([np.bincount(cell, weights=w if every else w.take(front), minlength=cells) for w in weights])
+    key = group.take(front) * np.int64(cells) + cell
+    by_group = np.stack([np.bincount(key, weights=w if every else w.take(front), minlength=S * cells) for w in weights])
+    return by_group.reshape(len(weights), S, cells).transpose(1, 0, 2).reshape(S * len(weights), cells)
+
+
+def _by_channel(values, C):
+    """(G,C) of (G, S C) per-group accounts: their sum over the groups."""
+    return values if values.shape[1] == C else values.reshape(values.shape[0], -1, C).sum(axis=1)
+
+
+def _tallies(sizes, incident, ray_count, emitted, absorbed, escaped, blocked, generations, grouped):
+    """Each chunk's ChunkTally from (S,C,G,P) ``incident`` and the (G,...) accounts."""
+    tallies = []
+    for g, n in enumerate(sizes):
+        tally = ChunkTally(n, int(ray_count[g]), incident[0, :, g].copy(), emitted[g], absorbed[g], escaped[g],
+                           blocked[g], np.zeros(incident.shape[1]), {"generations": int(generations[g])})
+        tallies.append(with_groups(tally, incident[:, :, g].copy()) if grouped else tally)
+    return tallies
 
 
 def jacobi_chunk(tables, paths, rng, check=None):

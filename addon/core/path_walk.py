@@ -15,7 +15,8 @@ import numpy as np
 
 from . import rays
 from .estimators import biased_carry, biased_cut, finite_survives
-from .sampling import add_sphere_points, draw_sources, frame_points
+from .sampling import add_sphere_points, frame_points
+from .grouping import draw_walk_sources, fold
 from .tallies import Accounts, Scores, chunk_counts, chunk_sums, total_weight, weight_sum
 
 # Rays per step while the chunk still has paths to start: big enough that numpy's per-call
@@ -55,14 +56,16 @@ class PathWalk:
 
     def __init__(self, tables, sizes, rng):
         self.tables = t = tables
+        self.chunk_sizes = sizes
+        # Every path's source, drawn at once for each chunk; paths start as places free up.
+        # (Per source, each chunk's paths of each group are a chunk of their own: grouping)
+        self.source, self.source_chunk, self.first_uniforms, self.source_part, sizes = draw_walk_sources(t, sizes, rng)
         self.sizes = sizes
         self.G, C, P = len(sizes), t.channels, t.patch_count
         self.grouped = self.G > 1
         self.total_paths = sum(sizes)
         self.scores = Scores(C, self.G * P)
         self.accounts = Accounts(self.G, C)
-        # Every path's source, drawn at once for each chunk; paths start as places free up.
-        self.source, self.source_chunk, self.first_uniforms = draw_sources(t.sources, sizes, rng, t.stratified)
         self.started = 0
         self.chunk_key_bits = int(self.G - 1).bit_length()  # in the sort key by patch
         self.paths = LivePaths(
@@ -112,7 +115,8 @@ class PathWalk:
         if t.weight_is_accumulated:
             p.weights = p.accumulated[None]
         elif p.weights is not None:
-            p.weights = np.concatenate((p.weights, t.start_weight(new_patch)), axis=1)
+            part = None if self.source_part is None else self.source_part[self.started : self.started + new]
+            p.weights = np.concatenate((p.weights, t.start_weight(new_patch, part)), axis=1)
         w = None if p.weights is None else p.weights[:, n_live:]
         self.accounts.emitted += total_weight(w, new)[None] if new_chunk is None else chunk_sums(w, new_chunk, self.G)
         return True
@@ -232,8 +236,9 @@ class PathWalk:
             a.absorbed += self.arriving - self.per_chunk(p.weights)
 
     def tallies(self):
-        C, P = self.tables.channels, self.tables.patch_count
-        return self.accounts.tallies(self.sizes, self.scores.total().reshape(C, self.G, P))
+        t = self.tables
+        tallies = self.accounts.tallies(self.sizes, self.scores.total().reshape(t.channels, self.G, t.patch_count))
+        return tallies if t.groups is None else fold(tallies, self.chunk_sizes, t.groups.count)
 
 
 def patch_order(patch, selected, shift, chunk=None, chunk_bits=0):

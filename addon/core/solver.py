@@ -44,6 +44,7 @@ from .names import (
 )
 from .plan import chunk_plan, meets_target, paths_to_target, target_bound
 from .runners import ThreadRunner
+from .grouping import check_per_source, source_groups
 from .speedups import Speedups
 from .tables import WalkTables
 
@@ -77,6 +78,7 @@ class SolveResult:
     direct_light: str = SHOT
     method: str = WALK
     gather_rays: int = 0  # per chunk, with the direct light gathered
+    per_source: object = None  # relighting.PerSource (per_source=True), else None
 
     @property
     def rays_per_second(self):
@@ -85,7 +87,7 @@ class SolveResult:
 
 def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3, seed=0, exit_point=EXIT_RANDOM,
           stop_rule=PREDICTED, progress=None, should_stop=None, max_seconds=None, threads=None, sampling=INDEPENDENT,
-          speedups=None, direct_light=None, cluster=None, method=WALK, chunk_paths=None):
+          speedups=None, direct_light=None, cluster=None, method=WALK, chunk_paths=None, per_source=False, groups=None):
     """Radiosity of ``scene`` by its method's chunks (the paper's shooting random walks unless
     ``method`` says otherwise).
 
@@ -110,24 +112,27 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     between chunks (``stats["radiosity"](dtype)`` gives the result so far); ``max_seconds``
     bounds the wall time. A stopped run returns the complete chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
     ``chunk_paths`` replaces the plan's chunk size (the estimate's pilot: ``forecast``).
+    ``per_source=True`` also gives each source group's own result from the same rays
+    (``SolveResult.per_source``, a relighting.PerSource; ``groups``: grouping.source_groups's,
+    default each light, and the patches of each emittance): what relighting.relight recombines.
     """
     _check_amounts(estimator, threshold, paths, target_mse, max_seconds, threads, chunk_paths)
     method = _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds)
     _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method)
+    groups = _groups(scene, per_source, groups)
     cluster = cluster_address(cluster) if isinstance(cluster, str) else cluster  # (its form; connecting comes later)
-    paths = None if paths is None else int(paths)  # numpy integers welcome
-    start = time.perf_counter()
+    paths, start = None if paths is None else int(paths), time.perf_counter()  # (numpy integers welcome)
     plan = chunk_plan(scene, method, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
                       stop_rule=stop_rule, max_seconds=max_seconds)
     chunk = plan.chunk if chunk_paths is None else int(chunk_paths)
-    tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups)
+    tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups, groups=groups)
     state = method.create(scene, tables, chunk, int(seed), plan.prediction)
-    runner = _runner(scene, cluster, threads, method, state, estimator, threshold, exit_point, sampling)
+    runner = _runner(scene, cluster, threads, method, state, estimator, threshold, exit_point, sampling, groups)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
     done_rule = STOP_TARGET if (paths is None and not plan.measured_rule) else STOP_PATHS
     run = _Run(plan, chunk, target_mse if plan.measured_rule else None, done_rule, start)
     total, stopped = run.chunks(scene, state, runner, int(seed), progress, should_stop, max_seconds)
-    return _result(scene, total, stopped, run, method, state, estimator=estimator, exit_point=exit_point,
+    return _result(scene, total, stopped, run, method, state, target_mse, estimator=estimator, exit_point=exit_point,
                    threshold=threshold if estimator != FINITE else None, sampling=sampling, seed=int(seed),
                    threads=runner.threads)
 
@@ -173,13 +178,25 @@ def _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule,
     check_bounces(scene, estimator, threshold)
 
 
-def _runner(scene, cluster, threads, method, state, estimator, threshold, exit_point, sampling):
+def _groups(scene, per_source, groups):
+    """The SourceGroups a per-source solve tallies (None: no per-source results); ValueError in
+    one line where they cannot be."""
+    if not per_source:
+        if groups is not None:
+            raise ValueError("groups are for per-source results: give per_source=True with them")
+        return None
+    groups = source_groups(scene) if groups is None else groups
+    check_per_source(scene, groups)
+    return groups
+
+
+def _runner(scene, cluster, threads, method, state, estimator, threshold, exit_point, sampling, groups=None):
     """Where the chunks run: this machine's threads, or the cluster's workers, which rebuild
     the method's state from what it is made of."""
     if cluster is None:
         return ThreadRunner(int(threads or min(os.cpu_count() or 1, 8)))
     parameters = WalkParameters(estimator, float(threshold), exit_point, sampling, state.tables.speedups, method.name,
-                                method.direct_light, state.spec)
+                                method.direct_light, state.spec, groups)
     return ClusterRunner(cluster, scene, parameters)
 
 
@@ -236,10 +253,11 @@ class _Run:
         return _interrupted(should_stop, max_seconds, self.start)
 
 
-def _result(scene, total, stopped, run, method, state, **settings):
+def _result(scene, total, stopped, run, method, state, target_mse, **settings):
     """The SolveResult of a run's batches: one (P,3) result at a time, the sums of squares let
     go of once the error is estimated."""
     n = total.paths
+    per_source = None if total.groups is None else total.groups.results(scene, total, target_mse)
     reflected_variance = total.reflected_variance()
     measured_mse = total.let_go_of_squares()
     reflected = total.reflected()
@@ -264,6 +282,7 @@ def _result(scene, total, stopped, run, method, state, **settings):
         direct_light=method.direct_light,
         method=method.name,
         gather_rays=state.gather_rays,
+        per_source=per_source,
         **settings,
     )
 

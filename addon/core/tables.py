@@ -14,6 +14,7 @@ import numpy as np
 
 from .names import EXIT_RANDOM, FINITE, INDEPENDENT, STRATIFIED
 from .sampling import SourceTable, channel_sum, source_weights
+from .grouping import WalkGroups, world_group
 from .speedups import Speedups
 
 # At most this many patch classes (2^12 classes take 200 kB); more, and the classes are the
@@ -27,7 +28,8 @@ class WalkTables:
     (``speedups``). Every attribute is always there (None where the scene or the exit point
     has no use for it); a variant is a copy (``with_turn``, ``with_sources``)."""
 
-    def __init__(self, scene, estimator, threshold, exit_point, sampling=INDEPENDENT, speedups=None, max_classes=PATCH_CLASSES_MAX):
+    def __init__(self, scene, estimator, threshold, exit_point, sampling=INDEPENDENT, speedups=None, max_classes=PATCH_CLASSES_MAX,
+                 groups=None):
         g = self.geometry = scene.geometry
         self.estimator = estimator
         self.finite = estimator == FINITE
@@ -37,6 +39,8 @@ class WalkTables:
         self.patch_count = scene.patch_count
         self.sources = SourceTable(source_weights(scene.patch_area, scene.emission, scene.lights.power))
         # Source ids from the patch count on are the lights' emitters (None: no lights).
+        # Per-source results: the group of each source (grouping.WalkGroups), or None.
+        self.groups = None if groups is None else WalkGroups(groups.count, groups.source_group, whole=groups, world=world_group(scene, groups))
         self.lights = scene.lights if len(scene.lights) else None
         self.grey_reflectivity = scene.grey_reflectivity  # R_bar (P,)
         # Grey scenes carry one channel; colour scenes three.
@@ -110,11 +114,14 @@ class WalkTables:
         tables.numpy_turn = turn
         return tables
 
-    def with_sources(self, sources, emission, lights):
-        """These tables with other sources (a SourceTable, (P,3) emission, lights or None),
-        everything else shared: a walk of the light the patches reflect (first_shot)."""
+    def with_sources(self, sources, emission, lights, mix=None):
+        """These tables with other sources (a SourceTable, (P,3) emission, lights or None, and
+        their groups' grouping.Mix where results are per source), everything else shared:
+        a walk of the light the patches reflect (first_shot)."""
         tables = copy.copy(self)
         tables.sources, tables.emission, tables.lights = sources, emission, lights
+        if mix is not None:
+            tables.groups = tables.groups.with_mix(mix)
         return tables
 
     def survivor_weight(self, patch):
@@ -126,10 +133,13 @@ class WalkTables:
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(grey > 0, R / grey, 0.0)
 
-    def start_weight(self, source):
+    def start_weight(self, source, part=None):
         """E_ic / E_bar_i (C,n): the starting weights of paths from the given sources, patches
-        (index < P) or a light's emitters (P + its index) (colour walks). Made for the sources
+        (index < P) or a light's emitters (P + its index) (colour walks); with ``part``, of the
+        parts of a mix of groups the paths drew (grouping.Mix). Made for the sources
         asked: a (C,S) table would cost as much as the scene's emission, for the few sources."""
+        if part is not None:
+            return self.groups.mix.start_weight(source, part, self.channels)
         P = self.patch_count
         E = self.emission.take(source if self.lights is None else np.minimum(source, P - 1), axis=0, mode="wrap")
         if self.lights is not None:

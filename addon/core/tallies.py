@@ -40,6 +40,7 @@ class ChunkTally:
     blocked: np.ndarray                  # (C,) carried by rays that hit a back side
     undistributed: np.ndarray            # (C,) left on paths cut by the threshold
     ended: dict = field(default_factory=dict)  # path counts by how they ended
+    incident_groups: np.ndarray | None = None  # (S,C,P) incident by source group (per-source solves)
 
 
 class Accounts:

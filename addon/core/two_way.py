@@ -56,6 +56,7 @@ from .first_shot import MAX_GATHER_SAMPLES, gather_direct
 from .gathered_walk import ReflectedPoints, split_lost
 from .jacobi import HALTON, systematic_counts
 from .sampling import SOBOL, shifted_float32, unit_floats
+from .grouping import with_groups
 from .tallies import ChunkTally
 
 # Rays of a chunk of n paths: n FIRST_REFLECTION_RAYS from the gathering samples (hit exit),
@@ -90,6 +91,10 @@ class Chunk:
     rays: int
     generations: int = 0
     correction: np.ndarray | float = 0.0  # (C,P) irradiance the first generation adds (reflect_first)
+    # Per source, every (C,P) array above is (S C,P), each group's channels: the light passes on
+    # linearly, each ray carrying every group's share; ``reflectivity`` is R for those rows.
+    reflectivity: np.ndarray | None = None
+    groups: int = 1
 
 
 def allotment_weight(area, reflectivity, geometry=None):
@@ -134,26 +139,29 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
     relative weights (times Phi_T / N). ``check()`` is called every generation (it raises to
     stop)."""
     C, area = tables.channels, gathering.patch_area
-    H, gather_rays, samples = gather_direct(tables, gathering, rng)
+    gathered = gather_direct(tables, gathering, rng, tables.groups is not None)
+    H, gather_rays, samples = gathered[:3]
     H = H[:C]
     direct = H * gathering.patch_area  # (C,P) power arriving straight from the sources
     emitted = gathering.channel_power[:C]
     # What the direct light brought no patch's front escaped or met a back side (split_lost).
     escaped, blocked = split_lost(gathering, emitted - direct.sum(axis=1))
-    state = Chunk(np.zeros_like(H), H.copy(), np.zeros(C), escaped, blocked, gather_rays)
-    R = tables.reflectivity
+    state = Chunk(np.zeros_like(H), H.copy(), np.zeros(C), escaped, blocked, gather_rays, reflectivity=tables.reflectivity)
+    if tables.groups is not None:
+        state = grouped_chunk(tables, gathering, gathered[3], gather_rays)
+    R = state.reflectivity
     if tables.exit_random:
-        state.reflected = R * H
+        state.reflected = R * state.irradiance
     else:
-        reflect_first(tables, gathering, state, samples, paths, rng)
-    first_power = reflected_power(area, state.reflected)
+        reflect_first(tables, gathering, state, samples, paths, rng, None if tables.groups is None else gathered[3])
+    first_power = reflected_power(area, state.reflected, state.groups)
     budget = GENERATION_RAYS * paths / max(first_power, 1e-300)  # rays per unit of reflected power
     weight = allotment_weight(area, tables.reflectivity.max(axis=0), tables.geometry)
     least = int(np.ceil(LEAST_RAYS * weight.size))
     while True:
         if check is not None:
             check()
-        count = budget * reflected_power(area, state.reflected)
+        count = budget * reflected_power(area, state.reflected, state.groups)
         if count <= 0:
             break
         if count < least:
@@ -168,16 +176,44 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
     incident = state.irradiance * area
     absorbed = state.absorbed + ((1.0 - R) * incident).sum(axis=1)
     scale = paths / gathering.total_power  # relative weight per unit of power
+    if tables.groups is not None:
+        return grouped_tally(state, paths, scale, incident, emitted, absorbed, (escaped, blocked))
     return ChunkTally(paths, state.rays, incident * scale, emitted * scale, absorbed * scale, state.escaped * scale,
                       state.blocked * scale, np.zeros(C), {"generations": state.generations})
 
 
-def reflected_power(area, reflected):
+def grouped_chunk(tables, gathering, parts, gather_rays):
+    """A chunk's state per source: each group's direct irradiance (from the gathering's
+    ``parts``) as its rows, every account from zero (the direct light's lost part is the
+    total's, added at the end: grouped_tally)."""
+    C, S, P = tables.channels, tables.groups.count, tables.patch_count
+    H = parts.irradiance(S, P, gathering.samples)[:, :C].reshape(S * C, P)
+    zeros = lambda: np.zeros(S * C)  # noqa: E731
+    return Chunk(np.zeros_like(H), H, zeros(), zeros(), zeros(), gather_rays,
+                 reflectivity=np.tile(tables.reflectivity, (S, 1)), groups=S)
+
+
+def grouped_tally(state, paths, scale, incident, emitted, absorbed, lost):
+    """The ChunkTally of a per-source chunk: (S C,...) rows summed over the groups, each group's
+    incident power its ``incident_groups``."""
+    S = state.groups
+    C = incident.shape[0] // S
+    by_channel = lambda a: a.reshape(S, C).sum(axis=0)  # noqa: E731
+    tally = ChunkTally(paths, state.rays, None, emitted * scale, by_channel(absorbed) * scale,
+                       (by_channel(state.escaped) + lost[0]) * scale, (by_channel(state.blocked) + lost[1]) * scale,
+                       np.zeros(C), {"generations": state.generations})
+    return with_groups(tally, (incident * scale).reshape(S, C, -1))
+
+
+def reflected_power(area, reflected, groups=1):
     """What a generation's rays are counted by: the power it reflects, sum_j A_j |dB_j| (an
-    estimate about a control variate can be below zero in places), in its strongest channel.
+    estimate about a control variate can be below zero in places), in its strongest channel
+    (per source, of the groups' sum).
     (Counted by the channels' mean, a saturated channel outlives the others between red walls
     and the roulette's 1/chance lifted it generation after generation: in the closed Cornell
     box one run in four had a chunk that put half the variance on five patches.)"""
+    if groups > 1:
+        reflected = reflected.reshape(groups, -1, reflected.shape[1]).sum(axis=0)
     return float(_sums(np.abs(reflected), area).max())
 
 
@@ -186,7 +222,7 @@ def leaving(area, reflected):
     return _sums(reflected, area)
 
 
-def reflect_first(tables, gathering, state, samples, paths, rng):
+def reflect_first(tables, gathering, state, samples, paths, rng, parts=None):
     """The first reflection as uneven over each patch as the light that landed on it (hit exit).
 
     Each sample k of patch j is a point source of what it found (power p_k,
@@ -197,10 +233,10 @@ def reflect_first(tables, gathering, state, samples, paths, rng):
     allotted in proportion to |c_k|, each carrying an equal share of sum |c| with c_k's sign,
     a patch's positive and negative rays in pairs of one direction (_paired_ranks). It is small
     where the direct light is even over a patch; its irradiance (``state.correction``) joins
-    the first generation's."""
+    the first generation's. Per source (the samples' ``parts``), a ray carries each group's c_k."""
     C, P = tables.channels, tables.patch_count
     patch = samples[0]
-    state.reflected = tables.reflectivity * state.irradiance
+    state.reflected = state.reflectivity * state.irradiance
     points = ReflectedPoints(gathering, tables.geometry, samples)
     power = points.power[:, :C].T  # (C,K)
     spread = np.bincount(patch, minlength=P)  # m_j
@@ -214,7 +250,8 @@ def reflect_first(tables, gathering, state, samples, paths, rng):
     count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / max(float(power.sum()) / C, 1e-300))))
     sample = np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
     state.rays += count
-    correction = np.zeros((C, P))
+    rows_left = left if parts is None else _group_left(parts, gathering, patch, spread, C, state.groups)
+    correction = np.zeros((rows_left.shape[0], P))
     ray_patch = patch.take(sample)
     rank, shift = _paired_ranks(ray_patch, (left.sum(axis=0) < 0).take(sample), P, rng)
     table = SOBOL.rows(int(rank.max(initial=0)) + 1)[:2]
@@ -225,11 +262,24 @@ def reflect_first(tables, gathering, state, samples, paths, rng):
         u[2:4] = _shifted_points(table, rank[rows], shift.take(ray_patch[rows], axis=1))
         origins, directions = points.unit_rays(k, u, tables.geometry)
         hits = rays.cast(tables, origins, directions, points.regions(k, tables.geometry))
-        carried = left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
+        carried = rows_left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
         correction += _bincount(hits.patch, hits.front, carried, P)
         state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
         state.blocked += carried.compress((hits.hit >= 0) & ~hits.front, axis=1).sum(axis=1)
     state.correction = correction / gathering.patch_area
+
+
+def _group_left(parts, gathering, patch, spread, C, S):
+    """(S C,K) c_k of each group: a sample's part of each group's power, less its patch's mean."""
+    P = spread.size
+    factor = (gathering.reflectivity * gathering.area_per_sample).take(patch, axis=1)[:C]  # (C,K)
+    power = np.zeros((S, C, patch.size))
+    for m in range(2):
+        found = parts.group[m] >= 0
+        power[parts.group[m][found], :, np.flatnonzero(found)] += (parts.value[m][:C] * factor)[:, found].T
+    power = power.reshape(S * C, -1)
+    mean = np.stack([np.bincount(patch, weights=p, minlength=P) for p in power]) / np.maximum(spread, 1)
+    return power - mean.take(patch, axis=1)
 
 
 def generation(tables, area, state, weight, count, rng):
@@ -265,7 +315,7 @@ def generation(tables, area, state, weight, count, rng):
     state.escaped += _sums(dB * area, lost[0] / expected)
     state.blocked += _sums(dB * area, lost[1] / expected)
     state.irradiance += H
-    state.reflected = tables.reflectivity * H
+    state.reflected = state.reflectivity * H
 
 
 def _score_two_ways(tables, patch, u, value, density, H, lost):
@@ -280,15 +330,26 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
     s = density.take(i)
     s += density.take(j)
     np.reciprocal(s, out=s)
-    gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
-    gathered *= s
-    shot *= s
-    for c in range(value.shape[0]):
-        H[c] += np.bincount(i, weights=gathered[c], minlength=P)
-        H[c] += np.bincount(j, weights=shot[c], minlength=P)
+    if value.shape[0] > tables.channels:  # (per source, many rows: both ends in one count a row)
+        _score_rows(np.concatenate((i, j)), np.concatenate((j, i)), np.concatenate((s, s)), value, H)
+    else:
+        gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
+        gathered *= s
+        shot *= s
+        for c in range(value.shape[0]):
+            H[c] += np.bincount(i, weights=gathered[c], minlength=P)
+            H[c] += np.bincount(j, weights=shot[c], minlength=P)
     if not met.all():
         lost[0] += np.bincount(patch.compress(hits.hit < 0), minlength=P)
         lost[1] += np.bincount(patch.compress((hits.hit >= 0) & ~met), minlength=P)
+
+
+def _score_rows(to, source, s, value, H):
+    """Adds s value[:, source] to H[:, to] for every row of ``value`` (per-source rows)."""
+    carried = value.take(source, axis=1)
+    carried *= s
+    for row, weights in zip(H, carried):
+        row += np.bincount(to, weights=weights, minlength=row.size)
 
 
 def _paired_ranks(ray_patch, negative, P, rng):

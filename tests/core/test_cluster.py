@@ -78,6 +78,21 @@ def _worker_table_ids():
     return sorted(id(state.tables) for state in cluster._worker_states.values())
 
 
+@pytest.mark.parametrize("method, direct_light, exit_point", [("walk", "shot", EXIT_RANDOM), ("walk", GATHERED, EXIT_HIT),
+                                                               ("jacobi", "shot", EXIT_RANDOM), ("two_way", None, EXIT_HIT)])
+def test_per_source_results_on_a_cluster_are_bitwise_the_local_ones(client, scene, method, direct_light, exit_point):
+    """The groups travel with the solve's parameters: every group's result, and its covariance,
+    bit for bit the local solve's."""
+    from addon.core.lights import PointLight
+
+    lit = scene.with_materials(scene.reflectivity, scene.emission, [PointLight(np.array([0.3, 0.5, 0.4]), np.full(3, 0.05))])
+    kw = dict(paths=40_000, seed=5, method=method, direct_light=direct_light, exit_point=exit_point, per_source=True)
+    local, remote = solve(lit, threads=2, **kw).per_source, solve(lit, cluster=client, **kw).per_source
+    assert local.count == 2
+    assert np.array_equal(local.radiosity, remote.radiosity) and np.array_equal(local.irradiance, remote.irradiance)
+    assert np.array_equal(local.covariance, remote.covariance)
+
+
 def test_each_solve_s_light_fates_reach_the_workers_and_the_tables_are_kept_across_seeds(client):
     """An emitter under a card that faces away: the light found on no front is split between
     escaped and blocked by each solve's own fate_shares. On the cluster the accounts are bitwise

@@ -187,8 +187,11 @@ def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_po
     # A group's scores stay small in big colour scenes: 3 channels x 500,000 patches a chunk.
     from types import SimpleNamespace
 
-    big = SimpleNamespace(speedups=tables.speedups, channels=3, patch_count=500_000)
+    big = SimpleNamespace(speedups=tables.speedups, channels=3, patch_count=500_000, groups=None)
     assert walk_method.ShotWalk(big).group(100, 2.0) == 2
+    # ... and per source, whose chunks score every group apart, as small: two groups, one chunk a task.
+    per_source = SimpleNamespace(speedups=tables.speedups, channels=3, patch_count=500_000, groups=SimpleNamespace(count=2))
+    assert walk_method.ShotWalk(per_source).group(100, 2.0) == 1
     fractions = []
     kw = dict(paths=20_000, seed=3, exit_point=exit_point)
     a = solve(scene, estimator, threads=1, progress=lambda f, s: fractions.append(f), **kw)

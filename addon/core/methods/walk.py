@@ -107,6 +107,7 @@ def chunks_per_group(tables, chunk_rays, group_rays):
     reproducible."""
     if not tables.speedups.grouped_chunks:
         return 1
-    by_scores = GROUP_SCORES // (tables.channels * tables.patch_count)
+    sources = 1 if tables.groups is None else tables.groups.count  # (per source: a chunk's scores S times over)
+    by_scores = GROUP_SCORES // (tables.channels * tables.patch_count * sources)
     most = int(min(GROUP_MAX_CHUNKS, group_rays // chunk_rays, by_scores))
     return 1 << (most.bit_length() - 1) if most > 1 else 1

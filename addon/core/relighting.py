@@ -1,0 +1,169 @@
+"""Per-source results and relighting: every source group's light from one solve, recombined.
+
+Radiosity is linear in emission, channel by channel: the result for any strengths and colours
+of the sources is sum_s w_s B_s, B_s the result of group s alone at the solve's strengths and
+w_s (S,3) the new strength and colour over the solved ones. A per-source solve
+(``solve(..., per_source=True)``) tallies each group's incident power apart from the same rays
+(``grouping``); :class:`GroupBatches` sums them chunk by chunk, with what the error of any
+recombination needs, and :func:`relight` recombines without tracing a ray.
+
+The error of a recombination: the chunks are the batches (``batches``), and the groups' batch
+means share paths, so the batch variance of sum_s w_s b_s is w^T V w, V the groups' batch
+covariance. Its area-weighted mean over patches (the measured MSE) needs only, per channel,
+M_st = sum_j W_j (sum_k I_sj^(k) I_tj^(k) / n_k - I_sj I_tj / N), W_j = (R_j Phi_T / A_j)^2 A_j / A_T:
+(3,S,S) numbers, kept as the chunks come in. With every w_s = 1 it is the solve's own measured
+MSE (to rounding).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .error_model import mean_reflected_radiosity
+
+
+class GroupBatches:
+    """The groups' incident power summed over chunks (S,C,P), with the cross sums of their batch
+    covariance (C,S,S), weighted as the measured MSE weights patches."""
+
+    def __init__(self, scene, tables, groups):
+        C, P, S = tables.channels, scene.patch_count, groups.count
+        self.groups, self.channels = groups, C
+        self.incident = np.zeros((S, C, P))
+        self.cross = np.zeros((C, S, S))  # sum_k sum_j W_j I_sj^(k) I_tj^(k) / n_k
+        score = tables.reflectivity * (scene.total_power / scene.patch_area)  # (C,P)
+        self.root_weight = score * np.sqrt(scene.patch_area / scene.total_area)  # sqrt(W_j)
+
+    def add(self, tally):
+        """Adds a chunk's ``incident_groups`` (S,C,P) of ``tally.paths`` paths."""
+        self.incident += tally.incident_groups
+        for c in range(self.channels):
+            x = tally.incident_groups[:, c] * self.root_weight[c]
+            # (einsum, not a BLAS product: OpenBLAS's threads would spin beside the walks' threads)
+            self.cross[c] += np.einsum("sp,tp->st", x, x) / tally.paths
+
+    def spread(self, paths):
+        """(C,S,S) M: the cross sums less those of the means, N (chunks - 1) times the batch
+        covariance's area-weighted mean over patches."""
+        spread = self.cross.copy()
+        for c in range(self.channels):
+            x = self.incident[:, c] * self.root_weight[c]
+            spread[c] -= np.einsum("sp,tp->st", x, x) / paths
+        return spread
+
+    def results(self, scene, total, target_mse):
+        """The PerSource of the run ``total`` (batches.Batches) made."""
+        S, N = self.groups.count, total.paths
+        radiosity = np.empty((S, scene.patch_count, 3))
+        irradiance = np.empty((S, scene.patch_count, 3))
+        patch_group = self.groups.patch_group(scene.patch_count)
+        for s in range(S):
+            for c in range(3):
+                k = c if self.channels == 3 else 0
+                h = self.incident[s, k] * (scene.total_power / scene.patch_area) / N if N else np.zeros(scene.patch_count)
+                irradiance[s, :, c] = h
+                radiosity[s, :, c] = scene.reflectivity[:, c] * h
+            radiosity[s] += np.where((patch_group == s)[:, None], scene.emission, 0.0)
+        covariance = self.spread(N) / ((total.chunks - 1) * N) if total.chunks > 1 else np.full((self.channels, S, S), math.nan)
+        return PerSource(self.groups.names, radiosity, irradiance, group_power(scene, self.groups), covariance,
+                         scene_scale(scene), target_mse)
+
+
+def group_power(scene, groups):
+    """(S,3) the power of each group at the solve's strengths: its patches' A_i E_i and its
+    lights' emitters'."""
+    power = np.zeros((groups.count, 3))
+    source_power = scene.source_power
+    emitting = groups.source_group >= 0
+    np.add.at(power, groups.source_group[emitting], source_power[emitting])
+    return power
+
+
+def scene_scale(scene):
+    """b_ave per unit of Phi_T: what the relative RMS error is relative to, for any power."""
+    R_ave = scene.average_reflectivity
+    return mean_reflected_radiosity(1.0, scene.total_area, R_ave)
+
+
+@dataclass
+class PerSource:
+    """A per-source solve's results: ``names`` (S,) of the groups; ``radiosity`` and
+    ``irradiance`` (S,P,3) of each group alone at the solve's strengths (its emitting patches'
+    E in its radiosity), summing to the solve's own over groups; ``power`` (S,3) each group's
+    power; ``covariance`` (C,S,S) the area-weighted mean over patches of the groups' batch
+    covariance of the reflected radiosity (C = 1 for a grey scene, whose channels are alike;
+    NaN below 2 chunks); ``scale`` b_ave per unit of power; the solve's ``target_mse`` or None."""
+
+    names: tuple
+    radiosity: np.ndarray
+    irradiance: np.ndarray
+    power: np.ndarray
+    covariance: np.ndarray
+    scale: float
+    target_mse: float | None = None
+
+    @property
+    def count(self):
+        return len(self.names)
+
+    def mse(self, weights):
+        """The measured MSE of the reflected radiosity recombined with ``weights`` (S,3)."""
+        weights = np.asarray(weights, np.float64)
+        C = self.covariance.shape[0]
+        return float(np.mean([weights[:, c] @ self.covariance[c if C == 3 else 0] @ weights[:, c] for c in range(3)]))
+
+    def mean_reflected(self, weights):
+        """b_ave at the powers ``weights`` give (what the relative RMS error is relative to)."""
+        return self.scale * float((np.asarray(weights, np.float64) * self.power).sum(axis=0).mean())
+
+
+@dataclass
+class Relit:
+    """A recombination: ``radiosity`` (P,3), ``irradiance`` (P,3) or None, the measured MSE
+    ``mse`` of its reflected radiosity and the ``relative_rms`` error (over b_ave at the new
+    powers), ``target_relative_rms`` the solve's target in the same terms (None without one),
+    and ``past_target``: whether the new weights move the error past it."""
+
+    radiosity: np.ndarray
+    irradiance: np.ndarray | None
+    mse: float
+    relative_rms: float
+    target_relative_rms: float | None
+    past_target: bool
+
+
+def check_weights(per_source, weights):
+    """``weights`` as (S,3) float64; ValueError in one line where they cannot be."""
+    w = np.asarray(weights, dtype=np.float64)
+    S = per_source.count
+    if w.ndim == 1 and w.shape == (S,):
+        w = np.repeat(w[:, None], 3, axis=1)
+    if w.shape != (S, 3):
+        raise ValueError(f"weights must have shape ({S}, 3) (or ({S},)): one RGB factor a source; got {w.shape}")
+    if not np.isfinite(w).all() or (w < 0).any():
+        raise ValueError("weights must be finite and at least 0 (0 switches a source off)")
+    return w
+
+
+def relight(per_source, weights, irradiance=False):
+    """The solve's result with each source group's light times ``weights`` (S,3) (or (S,): the
+    same in every channel), new strength times colour over the solved ones (0: off), and its
+    error estimate at those weights: a Relit (its irradiance too with ``irradiance``). Traces no
+    ray; the results keep the stored results' dtype (float32 results take half the time)."""
+    w = check_weights(per_source, weights)
+    radiosity = _combine(per_source.radiosity, w)
+    light = _combine(per_source.irradiance, w) if irradiance else None
+    mse = per_source.mse(w)
+    scale = per_source.mean_reflected(w)
+    relative = math.sqrt(mse) / scale if scale > 0 else (0.0 if mse == 0 else math.inf)
+    target = None
+    if per_source.target_mse is not None:
+        target = math.sqrt(per_source.target_mse) / per_source.mean_reflected(np.ones_like(w))
+    return Relit(radiosity, light, mse, relative, target, target is not None and relative > target)
+
+
+def _combine(values, w):
+    """(P,3) sum_s w_s values_s of (S,P,3) ``values`` (one pass over them: it is memory-bound)."""
+    return np.einsum("spc,sc->pc", values, w.astype(values.dtype, copy=False))

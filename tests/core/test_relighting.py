@@ -1,0 +1,214 @@
+"""Per-source results and relighting (addon/core/grouping.py, relighting.py): each source
+group's result from one solve, for every method, adds up to the solve's own; recombined with new
+strengths and colours it agrees with a fresh solve of the relit scene within their joint noise,
+for every source kind, tints and a source switched off; the error it reports from the groups'
+batch covariances follows the empirical spread over seeds; too many patches x sources is refused
+in one line.
+
+The joint-noise test: with d_j the difference of two independent estimates of patch j (the relit
+result and a fresh solve), T = sum_j A_j |d_j|^2 / (A_T (mse_relit + mse_fresh)) has expectation
+1 (the measured MSEs are each estimate's area-weighted mean variance), and, were the patches'
+errors independent and Gaussian, variance 2 / n_eff, n_eff = (sum_j t_j)^2 / sum_j t_j^2 over
+the terms t_j = A_j v_j (v_j from the fresh solve's batch variances). A bias of the size of the
+noise doubles T. The band is 5 of those standard errors, widened by 2 for the correlations between
+patches that share paths (over 20 seeds, (T - 1) / sqrt(2 / n_eff) had mean -0.08 and standard
+deviation 1.86 for the shot walk, -0.57 and 1.43 for the two-way iteration)."""
+import math
+
+import numpy as np
+import pytest
+from boxes import CEILING, box_rectangles, box_scene, rectangles_to_mesh
+
+from addon.core import PatchScene, relight, solve, source_groups
+from addon.core import grouping
+from addon.core.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
+
+R_FACES = np.array([(0.7, 0.7, 0.7), (0.5, 0.5, 0.5), (0.8, 0.3, 0.2), (0.2, 0.7, 0.3), (0.6, 0.6, 0.6), (0.4, 0.4, 0.8)])
+# Every method and exit point: (method, direct_light, exit_point, estimator)
+METHODS = [
+    ("walk", "shot", "random", "finite"),
+    ("walk", "shot", "hit", "finite"),
+    ("walk", "shot", "random", "biased_infinite"),
+    ("walk", "gathered", "random", "finite"),
+    ("walk", "gathered", "hit", "finite"),
+    ("jacobi", "shot", "random", "finite"),
+    ("jacobi", "gathered", "hit", "finite"),
+    ("two_way", None, "random", "finite"),
+    ("two_way", None, "hit", "finite"),
+]
+IDS = ["-".join(str(x) for x in m) for m in METHODS]
+# The relit weights of the six groups (emissive patches, point, spot, area, sun, world): tints,
+# strengths up and down, and the point lamp off.
+WEIGHTS = np.array([(1.5, 1.0, 0.5), (0.0, 0.0, 0.0), (0.3, 0.6, 1.2), (2.0, 2.0, 2.0), (1.0, 0.9, 0.7), (0.5, 0.5, 0.5)])
+Z = 5.0
+CORRELATION_ALLOWANCE = 2.0
+
+
+def _lights(scale=np.ones((5, 3))):
+    """Every kind of light, each times its row of ``scale`` (point, spot, area, sun, world)."""
+    down = np.array([0.0, 0.0, -1.0])
+    sun = np.array([0.3, 0.1, -1.0]) / np.linalg.norm([0.3, 0.1, -1.0])
+    return [
+        PointLight(np.array([0.5, 0.5, 0.4]), np.array([0.10, 0.08, 0.06]) * scale[0], radius=0.05, name="point"),
+        PointLight(np.array([0.3, 0.6, 0.7]), np.full(3, 1.0) * scale[1], spot=Spot(down, 0.8, 0.9), name="spot"),
+        AreaLight(np.array([0.7, 0.3, 0.9]), np.array([0.1, 0, 0]), np.array([0, 0.1, 0]), down, np.full(3, 24.0) * scale[2],
+                  name="area"),
+        SunLight(sun, np.full(3, 0.84) * scale[3], angle=0.1, name="sun"),
+        WorldLight(irradiance=np.array([0.21, 0.315, 0.42]) * scale[4], name="world"),
+    ]
+
+
+def _open_box(weights=None, n=4):
+    """A colour box open at the top, two floor patches emitting, lit by a light of every kind
+    (and the sun and the sky through the top); with ``weights`` (6,3), every source's strength
+    and colour times its row (the relit scene)."""
+    origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=n)
+    keep = face != CEILING
+    origin, u, v, face = origin[keep], u[keep], v[keep], face[keep]
+    V, T, TP = rectangles_to_mesh(origin, u, v)
+    emission = np.zeros((len(origin), 3))
+    emission[[5, 6]] = (8.0, 7.2, 6.4)
+    w = np.ones((6, 3)) if weights is None else np.asarray(weights)
+    return PatchScene(V, T, TP, R_FACES[face], emission * w[0], lights=_lights(w[1:]))
+
+
+def _solve(scene, case, **kw):
+    method, direct_light, exit_point, estimator = case
+    return solve(scene, estimator, method=method, direct_light=direct_light, exit_point=exit_point, threads=2, **kw)
+
+
+def _joint_noise_z(a, b, mse_a, mse_b, variance_b, area):
+    """(T - 1) over T's standard error (module docstring), for (P,3) estimates a and b."""
+    weight = area / area.sum()
+    T = float((weight[:, None] * (a - b) ** 2).sum() / 3) / (mse_a + mse_b)
+    terms = (weight[:, None] * 2 * variance_b).ravel()
+    n_eff = terms.sum() ** 2 / (terms**2).sum()
+    return (T - 1.0) / (math.sqrt(2.0 / n_eff) * CORRELATION_ALLOWANCE)
+
+
+def test_source_groups_name_every_light_and_emission_and_merge_what_the_caller_labels():
+    scene = _open_box()
+    default = source_groups(scene)
+    assert default.names == ("emission (8.0, 7.2, 6.4)", "point", "spot", "area", "sun", "world")
+    P = scene.patch_count
+    assert set(default.patch_group(P)[[5, 6]]) == {0} and (np.delete(default.patch_group(P), [5, 6]) == -1).all()
+    assert list(default.light_group) == [1, 2, 3, 4, 5]
+    labels = np.array(["wall"] * P, dtype=object)
+    labels[6] = "lamps"
+    merged = source_groups(scene, patch_labels=labels, light_labels=["lamps", "lamps", None, None, None])
+    assert merged.names == ("wall", "lamps", "area", "sun", "world")
+    assert merged.patch_group(P)[5] == 0 and merged.patch_group(P)[6] == 1 and list(merged.light_group) == [1, 1, 2, 3, 4]
+    # Lights of one name, or of a label's name, still get groups of their own unless labelled.
+    twins = scene.with_materials(scene.reflectivity, scene.emission, [PointLight(np.full(3, 0.5), np.ones(3), name="lamp"),
+                                                                        PointLight(np.full(3, 0.4), np.ones(3), name="lamp")])
+    assert source_groups(twins, patch_labels=np.where(np.arange(P) == 5, "lamp", "wall")).names == (
+        "lamp", "wall", "lamp (0)", "lamp (1)")
+
+
+@pytest.mark.parametrize("case", METHODS, ids=IDS)
+def test_the_groups_add_up_to_the_solve_and_their_covariance_to_its_error(case):
+    """Every method: the groups' radiosity and irradiance sum to the total to float error, and
+    the error of the recombination at the solve's own strengths is the solve's measured MSE."""
+    scene = _open_box()
+    r = _solve(scene, case, paths=40_000, seed=3, per_source=True)
+    ps = r.per_source
+    assert ps.radiosity.shape == (6, scene.patch_count, 3) and ps.count == 6
+    scale = np.abs(r.radiosity).max()
+    np.testing.assert_allclose(ps.radiosity.sum(axis=0), r.radiosity, rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(ps.irradiance.sum(axis=0), r.irradiance, rtol=0, atol=1e-13 * np.abs(r.irradiance).max())
+    same = relight(ps, np.ones((6, 3)), irradiance=True)
+    np.testing.assert_allclose(same.irradiance, r.irradiance, rtol=0, atol=1e-13 * np.abs(r.irradiance).max())
+    np.testing.assert_allclose(same.radiosity, r.radiosity, rtol=0, atol=1e-13 * scale)
+    assert same.mse == pytest.approx(r.measured_mse, rel=1e-9)
+
+
+def test_a_grey_walk_of_interchangeable_paths_adds_up_too():
+    """The plain grey walk (paths as counts, speedups.interchangeable) keeps each group apart."""
+    scene, _, face = box_scene([(0.6,) * 3] * 6, [(0, 0, 0), (1, 1, 1), (0, 0, 0), (0, 0, 0), (0.5, 0.5, 0.5), (0, 0, 0)], n=4)
+    r = solve(scene, paths=200_000, seed=5, threads=2, per_source=True)
+    assert r.speedups.interchangeable and r.per_source.count == 2
+    np.testing.assert_allclose(r.per_source.radiosity.sum(axis=0), r.radiosity, rtol=0, atol=1e-14 * r.radiosity.max())
+    ceiling_light = r.per_source.radiosity[0] - np.where((face == 1)[:, None], 1.0, 0.0)
+    assert (r.per_source.radiosity[1][face == 1] > 0).all() and (ceiling_light[face == 4] > 0).all()
+
+
+@pytest.mark.parametrize("case", METHODS, ids=IDS)
+def test_a_relit_solve_is_a_fresh_solve_of_the_relit_scene_within_their_joint_noise(case):
+    """Every source kind (emissive patches, point, spot, area, sun, world) relit with tints,
+    strengths up and down and the point lamp off, against a fresh solve of the relit scene."""
+    r = _solve(_open_box(), case, paths=150_000, seed=7, per_source=True)
+    relit = relight(r.per_source, WEIGHTS)
+    fresh_scene = _open_box(WEIGHTS)
+    fresh = _solve(fresh_scene, case, paths=150_000, seed=8)
+    z = _joint_noise_z(relit.radiosity, fresh.radiosity, relit.mse, fresh.measured_mse, fresh.reflected_variance,
+                       fresh_scene.patch_area)
+    assert abs(z) < Z, z
+    # (and the area light's a fifth too strong is outside it)
+    wrong = WEIGHTS.copy()
+    wrong[3] *= 1.2
+    z_wrong = _joint_noise_z(relight(r.per_source, wrong).radiosity, fresh.radiosity, relit.mse, fresh.measured_mse,
+                             fresh.reflected_variance, fresh_scene.patch_area)
+    assert z_wrong > Z, z_wrong
+
+
+@pytest.mark.parametrize("case", [METHODS[0], METHODS[4], METHODS[7]], ids=[IDS[0], IDS[4], IDS[7]])
+def test_the_error_of_a_recombination_follows_the_spread_over_seeds(case):
+    """The MSE relight reports (from the groups' batch covariances) against the area-weighted
+    variance of the relit result over 16 seeds: their ratio within 1 +- 5 standard errors of the
+    empirical variance (each patch's variance over 16 seeds has relative error sqrt(2/15); a mean
+    over n_eff independent patches sqrt(2 / (15 n_eff)), widened as the joint-noise test is for
+    correlated patches)."""
+    scene = _open_box()
+    weight = scene.patch_area / scene.patch_area.sum()
+    relit, reported = [], []
+    for seed in range(16):
+        ps = _solve(scene, case, paths=20_000, seed=100 + seed, per_source=True).per_source
+        r = relight(ps, WEIGHTS)
+        relit.append(r.radiosity)
+        reported.append(r.mse)
+    terms = weight[:, None] * np.var(relit, axis=0, ddof=1)
+    empirical = float(terms.sum() / 3)
+    n_eff = terms.sum() ** 2 / (terms**2).sum()
+    band = Z * math.sqrt(2 / (15 * n_eff)) * CORRELATION_ALLOWANCE
+    assert abs(np.mean(reported) / empirical - 1) < band, (np.mean(reported), empirical)
+
+
+def test_weights_of_the_wrong_shape_or_below_zero_are_refused_and_the_target_is_reported():
+    r = solve(_open_box(), paths=40_000, seed=1, per_source=True, threads=2)
+    with pytest.raises(ValueError, match=r"weights must have shape \(6, 3\)"):
+        relight(r.per_source, np.ones((5, 3)))
+    with pytest.raises(ValueError, match="at least 0"):
+        relight(r.per_source, -np.ones(6))
+    assert relight(r.per_source, np.ones(6)).target_relative_rms is None
+    target = solve(_open_box(), target_mse=2 * r.measured_mse, seed=1, per_source=True, threads=2,
+                   stop_rule="measured").per_source
+    same = relight(target, np.ones(6))
+    assert not same.past_target and same.relative_rms <= same.target_relative_rms
+    # The dimmest source alone at full strength, the rest off: its relative error is far larger.
+    alone = np.zeros(6)
+    alone[np.argmin(target.power.mean(axis=1))] = 1.0
+    assert relight(target, alone).past_target
+
+
+def test_too_many_patches_x_sources_is_refused_in_one_line(monkeypatch):
+    scene = _open_box()
+    monkeypatch.setattr(grouping, "PER_SOURCE_MAX", 6 * scene.patch_count - 1)
+    with pytest.raises(ValueError, match=r"80 patches x 6 sources = 480, over the cap of 479 .*light groups"):
+        solve(scene, paths=1000, per_source=True)
+    with pytest.raises(ValueError, match="give per_source=True"):
+        solve(scene, paths=1000, groups=source_groups(scene))
+    with pytest.raises(ValueError, match="another scene"):
+        solve(scene, paths=1000, per_source=True, groups=source_groups(_box_of_two()))
+
+
+def _box_of_two():
+    return box_scene([(0.5,) * 3] * 6, [(0, 0, 0), (1, 1, 1)] + [(0, 0, 0)] * 4, n=2)[0]
+
+
+def test_a_per_source_solve_cancelled_before_its_first_chunk_keeps_the_emission_and_says_its_error_is_unknown():
+    scene = _open_box()
+    r = solve(scene, paths=100_000_000, seed=1, per_source=True, threads=2, should_stop=lambda: True)  # (chunks of seconds)
+    assert r.stopped == "cancelled" and r.paths == 0
+    np.testing.assert_array_equal(r.per_source.radiosity.sum(axis=0), scene.emission)
+    relit = relight(r.per_source, WEIGHTS)
+    assert math.isnan(relit.mse) and math.isnan(relit.relative_rms) and not relit.past_target
