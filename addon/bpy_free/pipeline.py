@@ -54,6 +54,13 @@ class SolveOutput:
     face_colours: list = field(default_factory=list)  # (P_k,3) per object
     # (C_k,3) per object, one a polygon corner: the smooth light (core smoothing), or None
     smooth_colours: list = field(default_factory=list)
+    # the textured output's light arriving (H, without the surface's colour) per object: (C_k,3)
+    # smooth, a polygon corner each (light_domain "CORNER"), or (P_k,3) a patch each ("FACE"); or None
+    light_colours: list = field(default_factory=list)
+    light_domain: str = "CORNER"
+    # material name -> (scale (3,), offset (3,)): the result material shows colour * scale + offset
+    # times the light (default (1, 0): the base colour is the reflectivity)
+    material_terms: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)  # attribute name -> [(P_k,3) per object], light and indirect
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
@@ -253,7 +260,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     are known, before the first path.
     """
     trim.fix_mmap_threshold()
-    patches = make_patches(objects, settings.patch_size)
+    patches = make_patches(objects, settings.patch_size, layers=True)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
     scene, notes = scene_and_notes(patches)
@@ -290,14 +297,15 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
 
 
 def _write_colours(out, scene, result, settings):
-    """The colours ``out`` carries to the objects: per patch and per point, and the extra
-    outputs (light only, indirect), per object that receives."""
+    """The colours ``out`` carries to the objects: per patch and per point, the light arriving
+    (textured output), and the extra outputs (light only, indirect), per object that receives."""
     patches = out.patches
     # Light is written as at least 0: an estimate below it is noise about a value near 0 (the two-way
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
     radiosity = np.maximum(result.radiosity, 0.0)
+    textured = settings.output == "TEXTURED"
     extras = {}
-    if settings.light_output:
+    if settings.light_output and not textured:  # (the textured output writes the light smooth)
         extras[LIGHT_ATTRIBUTE] = np.maximum(result.irradiance, 0.0)
     if settings.indirect_output:
         # the light arriving minus a gathered estimate of the direct light alone (noise of both)
@@ -306,32 +314,57 @@ def _write_colours(out, scene, result, settings):
     for name, values in extras.items():
         out.extra[name] = [None if not o.receives else np.asarray(values[patches.combined.patch_slice(k)])
                            for k, o in enumerate(patches.objects)]
-    smooth = None
-    if settings.output == "VERTEX" or (settings.output == "BOTH" and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
-        smooth = _smooth_light(scene, result)
-    elif settings.output == "BOTH":
-        out.notes.append(f"smooth colours left out at {scene.patch_count:,} patches (Both makes them up to "
-                         f"{options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory of the run); "
-                         "the flat colours are shown: choose Smooth colours to make them")
+    smooth = light = None
+    both = settings.output in ("BOTH", "TEXTURED")
+    if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
+        smooth, light = _smooth_light(scene, result, light=textured)
+    elif both:
+        shown = "the textures times each patch's own light are shown" if textured else "the flat colours are shown"
+        out.notes.append(f"smooth colours left out at {scene.patch_count:,} patches ({options.OUTPUT.item_label(settings.output)} "
+                         f"makes them up to {options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory "
+                         f"of the run); {shown}: choose Smooth colours to make them")
+    out.light_domain = "CORNER" if light is not None else "FACE"
+    flat_light = np.maximum(result.irradiance, 0.0) if textured and light is None else None
     point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
     for k, mesh in enumerate(patches.meshes):
         if not patches.objects[k].receives:  # the rest of the scene: no results
             out.face_colours.append(None)
             out.smooth_colours.append(None)
+            out.light_colours.append(None)
             continue
         B = radiosity[patches.combined.patch_slice(k)]
         out.face_colours.append(B)
-        out.smooth_colours.append(None if smooth is None else smoothing.polygon_corner_values(
-            smooth, scene.triangles, scene.triangle_patch,
-            mesh.corner_patch + patches.combined.patch_offsets[k], mesh.corner_verts + point_start[k]))
+
+        def at_corners(corners):
+            return smoothing.polygon_corner_values(
+                corners, scene.triangles, scene.triangle_patch,
+                mesh.corner_patch + patches.combined.patch_offsets[k], mesh.corner_verts + point_start[k])
+
+        out.smooth_colours.append(None if smooth is None else at_corners(smooth))
+        if light is not None:
+            out.light_colours.append(at_corners(light))
+        else:
+            out.light_colours.append(None if flat_light is None else flat_light[patches.combined.patch_slice(k)])
 
 
-def _smooth_light(scene, result):
+def _smooth_light(scene, result, light=False):
     """(T,3,3) the smooth light at every corner of the scene's triangles: the reflected light,
     its tile noise filtered within its measured variance, joined across objects and kept apart
-    at creases (core smoothing), plus each patch's own emission, flat."""
+    at creases (core smoothing), plus each patch's own emission, flat; and with ``light``, the
+    light arriving (``arriving_light``) smoothed the same way (else None)."""
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
     reflected = surface.filter_noise(np.maximum(result.reflected, 0.0), result.reflected_variance)
     corners = surface.corner_values(reflected)
     corners += scene.emission[scene.triangle_patch][:, None, :]
-    return corners
+    if not light:
+        return corners, None
+    return corners, surface.corner_values(arriving_light(surface, result.irradiance, result.irradiance_variance))
+
+
+def arriving_light(surface, irradiance, variance):
+    """(P,3) the light arriving at each patch (H: B = E + rho H), its noise filtered as the
+    reflected light's is, from its own batch-means variance: measured also on black patches
+    (rho = 0), whose light shows nowhere but joins their neighbours' corners; gathered there
+    with few samples, it is noisy, so it is mostly replaced by the neighbours' fit and weighs
+    little in theirs."""
+    return surface.filter_noise(np.maximum(irradiance, 0.0), variance)

@@ -1,0 +1,166 @@
+"""Result materials that show each original material's own surface colour times the light the
+solve found arriving, plus its emission (bpy).
+
+A copy of the original material keeps only what drives its base colour and emission (image
+textures with their Mapping, UV Map and Texture Coordinate nodes, colour attributes, checkers,
+node groups), and shows
+
+    (base colour * scale + offset) * light + emission colour * strength
+
+through an Emission shader, ``light`` being a colour attribute of the result mesh (the smooth
+light arriving, H in B = E + rho H). The texture stays at its own resolution whatever the patch
+size; the patch's reflected radiosity is the area mean of (base colour x light) over it, up to
+how much the texture and the light vary together inside it. The user's material is never
+changed: a copy is made and cut down.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from ..blender_read.materials import _shader_node
+
+TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
+TEXTURED_SUFFIX = " Radiosity"
+IDENTITY = ((1.0, 1.0, 1.0), (0.0, 0.0, 0.0))  # (scale, offset): the base colour is the reflectivity
+
+# The shader's base colour socket, and its emission colour and strength sockets.
+_BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
+_EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
+             "ShaderNodeEmission": ("Color", "Strength")}
+
+
+def is_textured_material(material) -> bool:
+    return material is not None and TEXTURED_PROPERTY in material.keys()
+
+
+def can_copy(material):
+    """(True, None) where ``textured_material`` can show ``material``; (False, note) where it
+    cannot (a surface shader it does not know: the note says so); (False, None) for no
+    material or one without nodes, which the flat result material shows as they are."""
+    if material is None or material.node_tree is None:
+        return False, None
+    if bpy.app.version < (5, 0, 0) and not material.use_nodes:
+        return False, None
+    node = _shader_node(material)
+    if node is None or (node.bl_idname not in _BASE and node.bl_idname not in _EMISSION):
+        kind = "nothing" if node is None else f"'{node.name}' ({node.bl_idname})"
+        return False, (f"material '{material.name}': its surface is {kind}, not a Principled, Diffuse or Emission "
+                       "shader; its result shows the baked 'Radiosity' colours, without its textures")
+    return True, None
+
+
+def textured_material(source, light_attribute, terms=IDENTITY):
+    """A new material showing ``source``'s base colour * scale + offset (``terms``, RGB each)
+    times the colour attribute ``light_attribute``, plus its emission; ``can_copy(source)``
+    must hold. The copy is cut down to what drives that, and marked as ours."""
+    material = source.copy()
+    material.name = source.name + TEXTURED_SUFFIX
+    for key in list(material.keys()):  # (a copy carries the source's custom properties)
+        del material[key]
+    material[TEXTURED_PROPERTY] = source.name
+    if material.animation_data is not None:
+        material.animation_data_clear()
+    tree = material.node_tree
+    shader = tree.nodes[_shader_node(source).name]
+    nodes, links = tree.nodes, tree.links
+    x, y = shader.location.x + 300, shader.location.y
+    scale, offset = terms
+
+    surface = nodes.new("ShaderNodeVectorMath")  # base colour * scale + offset
+    surface.operation = "MULTIPLY_ADD"
+    surface.label = "Reflectivity"
+    surface.location = (x, y)
+    _feed(links, shader, _BASE.get(shader.bl_idname), surface.inputs[0], default=(0.0, 0.0, 0.0))
+    surface.inputs[1].default_value = tuple(float(v) for v in scale)
+    surface.inputs[2].default_value = tuple(float(v) for v in offset)
+
+    light = nodes.new("ShaderNodeAttribute")
+    light.attribute_type = "GEOMETRY"
+    light.attribute_name = light_attribute
+    light.location = (x, y - 250)
+    lit = nodes.new("ShaderNodeVectorMath")
+    lit.operation = "MULTIPLY"
+    lit.location = (x + 200, y)
+    links.new(surface.outputs[0], lit.inputs[0])
+    links.new(light.outputs["Color"], lit.inputs[1])
+    total = lit.outputs[0]
+
+    if shader.bl_idname in _EMISSION:
+        colour, strength = (shader.inputs[name] for name in _EMISSION[shader.bl_idname])
+        if strength.is_linked or strength.default_value != 0:
+            emitted = nodes.new("ShaderNodeVectorMath")  # emission colour * strength
+            emitted.operation = "SCALE"
+            emitted.label = "Emission"
+            emitted.location = (x, y - 450)
+            _feed(links, shader, colour.name, emitted.inputs[0], default=(0.0, 0.0, 0.0))
+            if strength.is_linked:
+                links.new(strength.links[0].from_socket, emitted.inputs["Scale"])
+            else:
+                emitted.inputs["Scale"].default_value = float(strength.default_value)
+            added = nodes.new("ShaderNodeVectorMath")
+            added.operation = "ADD"
+            added.location = (x + 400, y)
+            links.new(total, added.inputs[0])
+            links.new(emitted.outputs[0], added.inputs[1])
+            total = added.outputs[0]
+
+    emission = nodes.new("ShaderNodeEmission")
+    emission.location = (x + 600, y)
+    emission.inputs["Strength"].default_value = 1.0
+    links.new(total, emission.inputs["Color"])
+    output = nodes.new("ShaderNodeOutputMaterial")
+    output.location = (x + 800, y)
+    output.target = "ALL"
+    links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    _keep_only_upstream(tree, output)
+    output.is_active_output = True
+    return material
+
+
+def _feed(links, shader, socket_name, target, default):
+    """Link what drives the shader's ``socket_name`` into ``target``, or set its value."""
+    socket = shader.inputs.get(socket_name) if socket_name else None
+    if socket is not None and socket.is_linked:
+        links.new(socket.links[0].from_socket, target)
+    else:
+        value = tuple(socket.default_value)[:3] if socket is not None else default
+        target.default_value = tuple(float(v) for v in value)
+
+
+def _keep_only_upstream(tree, output):
+    """Remove every node that does not feed ``output`` (the original shaders, other outputs)."""
+    keep = {output.name}
+    stack = [output]
+    while stack:
+        node = stack.pop()
+        for socket in node.inputs:
+            for link in socket.links:
+                source = link.from_node
+                if source.name not in keep:
+                    keep.add(source.name)
+                    stack.append(source)
+    for node in [n for n in tree.nodes if n.name not in keep]:
+        tree.nodes.remove(node)
+
+
+def result_materials(slot_names, light_attribute, terms, fallback, notes, made):
+    """The result material of each source slot: the textured copy of the named material
+    (made once a run, kept in ``made`` by name), or ``fallback`` where there is none or it
+    cannot be copied (``notes`` get a line for the latter, once)."""
+    out = []
+    for name in slot_names:
+        source = bpy.data.materials.get(name)
+        if name not in made:
+            ok, note = can_copy(source) if source is not None and not is_textured_material(source) else (False, None)
+            if note:
+                notes.append(note)
+            made[name] = textured_material(source, light_attribute, terms.get(name, IDENTITY)) if ok else None
+        out.append(made[name] or fallback)
+    return out
+
+
+def remove_unused_textured():
+    """Our textured copies that no object uses any more (a previous run's)."""
+    for material in [m for m in bpy.data.materials if is_textured_material(m) and m.users == 0]:
+        bpy.data.materials.remove(material)
