@@ -1,0 +1,199 @@
+"""The textured output (the default): result meshes keep the sources' UV maps and colour
+attributes, and a copy of each material shows its own surface colour times the smooth light
+arriving, plus its emission; the flat per-patch view stays beside it."""
+import bpy
+import numpy as np
+import pytest
+
+from addon.bpy_free import options
+from addon.cli.preview import render_preview
+
+from ..blender_read.test_lights import _lamp
+from ..conftest import make_object, mesh_arrays, principled, read_colours, result_objects
+
+SQUARES = 16  # checker squares a metre: four a 0.25 m patch's side
+
+
+def _checker_image(name="Checker", size=128, light=(0.8, 0.8, 0.8), dark=(0.1, 0.1, 0.1)):
+    image = bpy.data.images.new(name, size, size, float_buffer=True)
+    cell = size // SQUARES
+    squares = (np.arange(size)[:, None] // cell + np.arange(size)[None, :] // cell) % 2
+    pixels = np.ones((size, size, 4), np.float32)
+    pixels[..., :3] = np.where(squares[..., None] == 1, light, dark)
+    image.pixels.foreach_set(pixels.ravel())
+    return image
+
+
+def _checker_floor(uv_maps=(("UVMap", (1.0, 1.0, 0.0, 0.0)),), active=None, render=None):
+    """A 1 x 1 m floor whose Principled base colour is a checker image read through its UV map
+    (each map: u = a x + c, v = b y + d), lit by a point lamp above."""
+    material = principled("Floor", (0.5, 0.5, 0.5))
+    tree = material.node_tree
+    texture = tree.nodes.new("ShaderNodeTexImage")
+    texture.image = _checker_image()
+    uv_node = tree.nodes.new("ShaderNodeUVMap")
+    uv_node.uv_map = uv_maps[0][0]
+    tree.links.new(uv_node.outputs["UV"], texture.inputs["Vector"])
+    tree.links.new(texture.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    floor = make_object("Floor", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)], [material])
+    corners = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], float)
+    for name, (a, b, c, d) in uv_maps:
+        layer = floor.data.uv_layers.new(name=name)
+        layer.data.foreach_set("uv", (corners * [a, b] + [c, d]).astype(np.float32).ravel())
+    if active:
+        floor.data.uv_layers.active = floor.data.uv_layers[active]
+    if render:
+        floor.data.uv_layers[render].active_render = True
+    floor.select_set(True)
+    _lamp("POINT", "Bulb", location=(0.5, 0.5, 1.0), energy=20.0, shadow_soft_size=0.0)
+    return floor, material
+
+
+def _solve(blender, patch_size=0.25, **settings):
+    s = blender.scene.radiosity
+    s.patch_size, s.target_error, s.threads = patch_size, 5.0, 1
+    for key, value in settings.items():
+        setattr(s, key, value)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    return {o["radiosity_source"]: o for o in result_objects()}
+
+
+def _material_state(material):
+    tree = material.node_tree
+    return (sorted((n.name, n.bl_idname) for n in tree.nodes),
+            sorted((l.from_node.name, l.from_socket.identifier, l.to_node.name, l.to_socket.identifier)
+                   for l in tree.links), material.name)
+
+
+def test_the_result_keeps_every_uv_map_and_colour_attribute_at_the_same_surface_points(blender):
+    """Two UV maps (the second active for editing, the first for render) and a colour attribute
+    on points, all affine in position: at every corner of the result (16 patches, 64 corners)
+    each map and the colours equal the source's at that point, under the same names, with the
+    same maps active."""
+    floor, _ = _checker_floor((("UVMap", (0.5, 0.5, 0.1, 0.2)), ("Detail", (3.0, 2.0, 0.0, 0.5))),
+                              active="Detail", render="UVMap")
+    paint = floor.data.color_attributes.new("Paint", "FLOAT_COLOR", "POINT")
+    co = np.array([v.co[:] for v in floor.data.vertices])
+    paint.data.foreach_set("color", np.column_stack([co[:, 0], co[:, 1], 0.5 + 0 * co[:, 0],
+                                                     np.ones(len(co))]).astype(np.float32).ravel())
+    mesh = _solve(blender)["Floor"].data
+    assert [l.name for l in mesh.uv_layers] == ["UVMap", "Detail"]
+    assert mesh.uv_layers.active.name == "Detail"
+    assert [l.name for l in mesh.uv_layers if l.active_render] == ["UVMap"]
+    points, _, corners = mesh_arrays(mesh)
+    xy = points[corners, :2].astype(np.float64)
+    assert len(corners) == 64
+    for name, (a, b, c, d) in (("UVMap", (0.5, 0.5, 0.1, 0.2)), ("Detail", (3.0, 2.0, 0.0, 0.5))):
+        uv = np.empty(len(corners) * 2, np.float32)
+        mesh.uv_layers[name].uv.foreach_get("vector", uv)
+        np.testing.assert_allclose(uv.reshape(-1, 2), xy * [a, b] + [c, d], atol=1e-5)
+    domain, colours = read_colours(mesh, "Paint")
+    assert domain == "CORNER"
+    np.testing.assert_allclose(colours[:, :3], np.column_stack([xy, np.full(len(xy), 0.5)]), atol=1e-5)
+    # what the solid view shows, and the render's default colours: the source's
+    assert mesh.color_attributes.active_color.name == "Radiosity"
+    assert mesh.color_attributes[mesh.color_attributes.render_color_index].name == "Paint"
+
+
+def test_a_checker_floor_s_result_material_reads_the_same_image_through_the_uv_map(blender):
+    """The result material is a copy of the floor's, cut down to what drives its base colour
+    (the same image through the same UV Map node), times the 'Radiosity Light' attribute, into an
+    Emission shader; the user's material is unchanged; a second run replaces our material
+    rather than piling another beside it, and the flat per-patch view stays as 'Radiosity
+    Patches'."""
+    floor, material = _checker_floor()
+    before = _material_state(material)
+    result = _solve(blender)["Floor"]
+    (ours,) = result.data.materials
+    assert ours.name == "Floor Radiosity" and ours is not material
+    tree = ours.node_tree
+    (texture,) = [n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage"]
+    assert texture.image == floor.data.materials[0].node_tree.nodes["Image Texture"].image
+    uv_node = texture.inputs["Vector"].links[0].from_node
+    assert uv_node.bl_idname == "ShaderNodeUVMap" and uv_node.uv_map == "UVMap" and "UVMap" in result.data.uv_layers
+    (light,) = [n for n in tree.nodes if n.bl_idname == "ShaderNodeAttribute"]
+    assert light.attribute_name == "Radiosity Light"
+    output = tree.get_output_node("CYCLES")
+    assert output.inputs["Surface"].links[0].from_node.bl_idname == "ShaderNodeEmission"
+    assert not [n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"]
+    assert _material_state(material) == before
+    assert {"Radiosity", "Radiosity Patches", "Radiosity Light"} <= {a.name for a in result.data.color_attributes}
+    _solve(blender)
+    ours = [m for m in bpy.data.materials if "radiosity_textured_from" in m.keys()]
+    assert [m.name for m in ours] == ["Floor Radiosity"]
+    assert _material_state(material) == before
+
+
+def test_a_material_without_a_known_surface_shader_falls_back_with_a_note(blender, monkeypatch):
+    """A Glossy BSDF's result shows the baked colours ('Radiosity Result'), and a note says why."""
+    floor, _ = _checker_floor()
+    glossy = bpy.data.materials.new("Shiny")
+    tree = glossy.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    node = tree.nodes.new("ShaderNodeBsdfGlossy")
+    tree.links.new(node.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    block = make_object("Block", [(0.2, 0.2, 0.1), (0.4, 0.2, 0.1), (0.4, 0.4, 0.1), (0.2, 0.4, 0.1)],
+                        [(0, 1, 2, 3)], [glossy])
+    block.select_set(True)
+    outputs = []
+    from addon.ui import operators
+
+    monkeypatch.setattr(operators, "OUTPUT_LISTENER", outputs.append)
+    results = _solve(blender)
+    reports = outputs[0].notes  # (what the operator reports once the results are written)
+    assert [m.name for m in results["Block"].data.materials] == ["Radiosity Result"]
+    assert [m.name for m in results["Floor"].data.materials] == ["Floor Radiosity"]
+    assert any("'Shiny'" in r and "not a Principled" in r for r in reports), reports
+
+
+def test_above_the_smooth_limit_the_textures_take_each_patch_s_own_light(blender, monkeypatch):
+    """Past SMOOTH_MAX_PATCHES the light is written flat, one value a patch on the FACE domain
+    (16 bytes a patch), and the material still reads the texture: a note says so."""
+    monkeypatch.setattr(options, "SMOOTH_MAX_PATCHES", 4)
+    _checker_floor()
+    mesh = _solve(blender)["Floor"].data
+    light = mesh.attributes["Radiosity Light"]
+    assert light.domain == "FACE" and len(light.data) == len(mesh.polygons) == 16
+    assert mesh.materials[0].name == "Floor Radiosity"
+    assert mesh.color_attributes["Radiosity"].domain == "CORNER"
+
+
+def _linear(srgb):
+    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+
+
+def test_the_preview_shows_the_texture_at_pixel_resolution(blender, tmp_path):
+    """A checker floor (light 0.8, dark 0.1; four squares a patch's side) under a point lamp,
+    solved with the default output and previewed from above at 8 pixels a square: neighbouring
+    squares' centre pixels differ by the texture's 8:1 (the light changes by a few percent
+    over a square's width, the 8-bit picture by under 1%: within 15%); a flat or smooth patch
+    colour cannot show squares smaller than the patch (ratio near 1)."""
+    floor, _ = _checker_floor()
+    _solve(blender)
+    scene = blender.scene
+    data = bpy.data.cameras.new("Top")
+    data.type, data.ortho_scale = "ORTHO", 1.0
+    camera = bpy.data.objects.new("Top", data)
+    camera.location = (0.5, 0.5, 2.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    scene.render.resolution_x = scene.render.resolution_y = 8 * SQUARES
+    scene.render.threads_mode, scene.render.threads = "FIXED", 1
+    light = np.empty(0)
+    for obj in result_objects():
+        attr = obj.data.attributes.get("Radiosity Light") or obj.data.color_attributes.get("Radiosity")
+        values = np.empty(len(attr.data) * 4, np.float32)
+        attr.data.foreach_get("color", values)
+        light = np.concatenate([light, values.reshape(-1, 4)[:, :3].ravel()])
+    exposure = float(np.log2(0.9 / (0.8 * light.max())))  # the brightest square just below white
+    path = str(tmp_path / "preview.png")
+    render_preview(path, [floor], width=8 * SQUARES, samples=4, exposure=exposure)
+    image = bpy.data.images.load(path)
+    pixels = np.empty(len(image.pixels), np.float32)
+    image.pixels.foreach_get(pixels)
+    grey = _linear(pixels.reshape(8 * SQUARES, 8 * SQUARES, 4)[..., :3].mean(axis=2))
+    centres = grey[4::8, 4::8]  # (the centre pixel of each square)
+    ratios = np.concatenate([(np.maximum(centres[:, 1:], centres[:, :-1]) / np.minimum(centres[:, 1:], centres[:, :-1])).ravel(),
+                             (np.maximum(centres[1:], centres[:-1]) / np.minimum(centres[1:], centres[:-1])).ravel()])
+    assert centres.min() > 0
+    assert 8 / 1.15 < np.median(ratios) < 8 * 1.15, np.median(ratios)
