@@ -23,6 +23,9 @@ from ..blender_read.materials import _shader_node
 TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
 TEXTURED_SUFFIX = " Radiosity"
 IDENTITY = ((1.0, 1.0, 1.0), (0.0, 0.0, 0.0))  # (scale, offset): the base colour is the reflectivity
+# The panel's switch to the flat per-patch colours, read by every result material from the scene
+# (a View Layer attribute: looked up in the view layer, then the scene).
+FLAT_SWITCH = "radiosity.show_patches"
 
 # The shader's base colour socket, and its emission colour and strength sockets.
 _BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
@@ -50,10 +53,11 @@ def can_copy(material):
     return True, None
 
 
-def textured_material(source, light_attribute, terms=IDENTITY):
+def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY):
     """A new material showing ``source``'s base colour * scale + offset (``terms``, RGB each)
-    times the colour attribute ``light_attribute``, plus its emission; ``can_copy(source)``
-    must hold. The copy is cut down to what drives that, and marked as ours."""
+    times the colour attribute ``light_attribute``, plus its emission, or, where the panel's
+    flat switch is on, the colour attribute ``flat_attribute``; ``can_copy(source)`` must
+    hold. The copy is cut down to what drives that, and marked as ours."""
     material = source.copy()
     material.name = source.name + TEXTURED_SUFFIX
     for key in list(material.keys()):  # (a copy carries the source's custom properties)
@@ -105,17 +109,42 @@ def textured_material(source, light_attribute, terms=IDENTITY):
             links.new(emitted.outputs[0], added.inputs[1])
             total = added.outputs[0]
 
-    emission = nodes.new("ShaderNodeEmission")
-    emission.location = (x + 600, y)
-    emission.inputs["Strength"].default_value = 1.0
-    links.new(total, emission.inputs["Color"])
+    emission = emission_output(tree, total, flat_attribute, (x + 600, y))
     output = nodes.new("ShaderNodeOutputMaterial")
-    output.location = (x + 800, y)
+    output.location = (x + 1000, y)
     output.target = "ALL"
     links.new(emission.outputs["Emission"], output.inputs["Surface"])
     _keep_only_upstream(tree, output)
     output.is_active_output = True
     return material
+
+
+def emission_output(tree, colour, flat_attribute, location):
+    """An Emission shader of ``colour`` (a socket), or of the colour attribute ``flat_attribute``
+    where the scene's FLAT_SWITCH is on."""
+    nodes, links = tree.nodes, tree.links
+    x, y = location
+    switch = nodes.new("ShaderNodeAttribute")
+    switch.attribute_type = "VIEW_LAYER"
+    switch.attribute_name = FLAT_SWITCH
+    switch.label = "Flat patches (paper)"
+    switch.location = (x - 200, y + 250)
+    flat = nodes.new("ShaderNodeAttribute")
+    flat.attribute_type = "GEOMETRY"
+    flat.attribute_name = flat_attribute
+    flat.location = (x - 200, y - 250)
+    mix = nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.clamp_factor = True
+    mix.location = (x, y)
+    links.new(switch.outputs["Fac"], mix.inputs["Factor"])
+    links.new(colour, mix.inputs[6])  # (A, the colour inputs of the RGBA mode)
+    links.new(flat.outputs["Color"], mix.inputs[7])
+    emission = nodes.new("ShaderNodeEmission")
+    emission.location = (x + 200, y)
+    emission.inputs["Strength"].default_value = 1.0
+    links.new(mix.outputs[2], emission.inputs["Color"])
+    return emission
 
 
 def _feed(links, shader, socket_name, target, default):
@@ -144,7 +173,7 @@ def _keep_only_upstream(tree, output):
         tree.nodes.remove(node)
 
 
-def result_materials(slot_names, light_attribute, terms, fallback, notes, made):
+def result_materials(slot_names, light_attribute, flat_attribute, terms, fallback, notes, made):
     """The result material of each source slot: the textured copy of the named material
     (made once a run, kept in ``made`` by name), or ``fallback`` where there is none or it
     cannot be copied (``notes`` get a line for the latter, once)."""
@@ -155,7 +184,7 @@ def result_materials(slot_names, light_attribute, terms, fallback, notes, made):
             ok, note = can_copy(source) if source is not None and not is_textured_material(source) else (False, None)
             if note:
                 notes.append(note)
-            made[name] = textured_material(source, light_attribute, terms.get(name, IDENTITY)) if ok else None
+            made[name] = textured_material(source, light_attribute, flat_attribute, terms.get(name, IDENTITY)) if ok else None
         out.append(made[name] or fallback)
     return out
 

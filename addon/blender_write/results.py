@@ -27,28 +27,26 @@ def is_result_object(obj) -> bool:
     return obj is not None and SOURCE_PROPERTY in obj.keys()
 
 
-def result_material():
-    """The material that shows the 'Radiosity' attribute as emission (ours, never a user's
-    material that happens to have the same name)."""
-    for material in bpy.data.materials:
-        if MATERIAL_PROPERTY in material.keys() and material.node_tree is not None:
-            return material
-    material = bpy.data.materials.new(MATERIAL_NAME)
-    material[MATERIAL_PROPERTY] = True
-    if bpy.app.version < (5, 0, 0):
-        material.use_nodes = True
+def result_material(flat_attribute=ATTRIBUTE_NAME):
+    """The material that shows the 'Radiosity' attribute as emission, or ``flat_attribute``
+    where the panel's flat switch is on (ours, never a user's material that happens to have the
+    same name; rebuilt each run, for the run's attribute names)."""
+    material = next((m for m in bpy.data.materials if MATERIAL_PROPERTY in m.keys() and m.node_tree is not None),
+                    None)
+    if material is None:
+        material = bpy.data.materials.new(MATERIAL_NAME)
+        material[MATERIAL_PROPERTY] = True
+        if bpy.app.version < (5, 0, 0):
+            material.use_nodes = True
     tree = material.node_tree
     tree.nodes.clear()
     attribute = tree.nodes.new("ShaderNodeAttribute")
     attribute.attribute_type = "GEOMETRY"
     attribute.attribute_name = ATTRIBUTE_NAME
     attribute.location = (-400, 0)
-    emission = tree.nodes.new("ShaderNodeEmission")
-    emission.inputs["Strength"].default_value = 1.0
-    emission.location = (-150, 0)
+    emission = textured.emission_output(tree, attribute.outputs["Color"], flat_attribute, (-150, 0))
     output = tree.nodes.new("ShaderNodeOutputMaterial")
-    output.location = (100, 0)
-    tree.links.new(attribute.outputs["Color"], emission.inputs["Color"])
+    output.location = (300, 0)
     tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
     material.diffuse_color = (1.0, 1.0, 1.0, 1.0)
     return material
@@ -228,8 +226,11 @@ def write_results(context, output_data, output_mode, scene=None):
     layers_of = getattr(output_data, "patches").layers or [None] * len(output_data.patches.objects)
     light_of = getattr(output_data, "light_colours", None) or [None] * len(layers_of)
     terms = getattr(output_data, "material_terms", {})
+    smooth_written = output_mode in ("VERTEX", "BOTH", "TEXTURED") and any(
+        p is not None for p in output_data.smooth_colours)
+    flat_name = PATCH_ATTRIBUTE_NAME if smooth_written and output_mode != "VERTEX" else ATTRIBUTE_NAME
     try:
-        material = result_material()
+        material = result_material(flat_name)
         for index, (arrays, pm, faces, points) in enumerate(zip(
             output_data.patches.objects,
             output_data.patches.meshes,
@@ -256,8 +257,8 @@ def write_results(context, output_data, output_mode, scene=None):
                 write_light(mesh, light, output_data.light_domain)
             _show_colours(mesh, layers.render_colour if layers is not None else "")
             if is_textured and light is not None and layers is not None:
-                for slot_material in textured.result_materials(layers.slot_names, LIGHT_ATTRIBUTE_NAME, terms,
-                                                               material, notes, made):
+                for slot_material in textured.result_materials(layers.slot_names, LIGHT_ATTRIBUTE_NAME, flat_name,
+                                                               terms, material, notes, made):
                     mesh.materials.append(slot_material)
                 mesh.polygons.foreach_set("material_index", layers.patch_slot.astype(np.int32))
             else:

@@ -111,8 +111,9 @@ def test_a_checker_floor_s_result_material_reads_the_same_image_through_the_uv_m
     assert texture.image == floor.data.materials[0].node_tree.nodes["Image Texture"].image
     uv_node = texture.inputs["Vector"].links[0].from_node
     assert uv_node.bl_idname == "ShaderNodeUVMap" and uv_node.uv_map == "UVMap" and "UVMap" in result.data.uv_layers
-    (light,) = [n for n in tree.nodes if n.bl_idname == "ShaderNodeAttribute"]
-    assert light.attribute_name == "Radiosity Light"
+    attributes = {(n.attribute_type, n.attribute_name) for n in tree.nodes if n.bl_idname == "ShaderNodeAttribute"}
+    assert attributes == {("GEOMETRY", "Radiosity Light"), ("GEOMETRY", "Radiosity Patches"),
+                          ("VIEW_LAYER", "radiosity.show_patches")}
     output = tree.get_output_node("CYCLES")
     assert output.inputs["Surface"].links[0].from_node.bl_idname == "ShaderNodeEmission"
     assert not [n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"]
@@ -162,21 +163,21 @@ def _linear(srgb):
     return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
 
 
-def test_the_preview_shows_the_texture_at_pixel_resolution(blender, tmp_path):
-    """A checker floor (light 0.8, dark 0.1; four squares a patch's side) under a point lamp,
-    solved with the default output and previewed from above at 8 pixels a square: neighbouring
-    squares' centre pixels differ by the texture's 8:1 (the light changes by a few percent
-    over a square's width, the 8-bit picture by under 1%: within 15%); a flat or smooth patch
-    colour cannot show squares smaller than the patch (ratio near 1)."""
-    floor, _ = _checker_floor()
-    _solve(blender)
+def _srgb(linear):
+    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+
+
+def _preview_centres(blender, tmp_path, name="preview.png"):
+    """The linear grey of the centre pixel of each checker square, (SQUARES, SQUARES), from the
+    preview rendered from above at 8 pixels a square."""
     scene = blender.scene
-    data = bpy.data.cameras.new("Top")
-    data.type, data.ortho_scale = "ORTHO", 1.0
-    camera = bpy.data.objects.new("Top", data)
-    camera.location = (0.5, 0.5, 2.0)
-    scene.collection.objects.link(camera)
-    scene.camera = camera
+    if scene.camera is None:
+        data = bpy.data.cameras.new("Top")
+        data.type, data.ortho_scale = "ORTHO", 1.0
+        camera = bpy.data.objects.new("Top", data)
+        camera.location = (0.5, 0.5, 2.0)
+        scene.collection.objects.link(camera)
+        scene.camera = camera
     scene.render.resolution_x = scene.render.resolution_y = 8 * SQUARES
     scene.render.threads_mode, scene.render.threads = "FIXED", 1
     light = np.empty(0)
@@ -186,14 +187,46 @@ def test_the_preview_shows_the_texture_at_pixel_resolution(blender, tmp_path):
         attr.data.foreach_get("color", values)
         light = np.concatenate([light, values.reshape(-1, 4)[:, :3].ravel()])
     exposure = float(np.log2(0.9 / (0.8 * light.max())))  # the brightest square just below white
-    path = str(tmp_path / "preview.png")
-    render_preview(path, [floor], width=8 * SQUARES, samples=4, exposure=exposure)
+    path = str(tmp_path / name)
+    render_preview(path, [o for o in bpy.data.objects if o.name == "Floor"], width=8 * SQUARES, samples=4,
+                   exposure=exposure)
     image = bpy.data.images.load(path)
     pixels = np.empty(len(image.pixels), np.float32)
     image.pixels.foreach_get(pixels)
     grey = _linear(pixels.reshape(8 * SQUARES, 8 * SQUARES, 4)[..., :3].mean(axis=2))
-    centres = grey[4::8, 4::8]  # (the centre pixel of each square)
-    ratios = np.concatenate([(np.maximum(centres[:, 1:], centres[:, :-1]) / np.minimum(centres[:, 1:], centres[:, :-1])).ravel(),
-                             (np.maximum(centres[1:], centres[:-1]) / np.minimum(centres[1:], centres[:-1])).ravel()])
+    return grey[4::8, 4::8]
+
+
+def _neighbour_ratios(centres):
+    """Brighter over darker of every two neighbouring squares."""
+    pairs = [(centres[:, 1:], centres[:, :-1]), (centres[1:], centres[:-1])]
+    return np.concatenate([(np.maximum(a, b) / np.minimum(a, b)).ravel() for a, b in pairs])
+
+
+def test_the_preview_shows_the_texture_at_pixel_resolution(blender, tmp_path):
+    """A checker floor (light 0.8, dark 0.1; four squares a patch's side) under a point lamp,
+    solved with the default output and previewed from above at 8 pixels a square: neighbouring
+    squares' centre pixels differ by the texture's 8:1 (the light changes by a few percent
+    over a square's width, the 8-bit picture by under 1%: within 15%); a flat or smooth patch
+    colour cannot show squares smaller than the patch (ratio near 1)."""
+    _checker_floor()
+    _solve(blender)
+    centres = _preview_centres(blender, tmp_path)
     assert centres.min() > 0
-    assert 8 / 1.15 < np.median(ratios) < 8 * 1.15, np.median(ratios)
+    assert 8 / 1.15 < np.median(_neighbour_ratios(centres)) < 8 * 1.15, np.median(_neighbour_ratios(centres))
+
+
+def test_the_flat_switch_shows_the_paper_s_patches_without_a_new_run(blender, tmp_path):
+    """The panel's 'Flat patches (paper)' switches every result material to the flat per-patch
+    colours: the 4 x 4 squares inside each 0.25 m patch come out equal (within the 8-bit
+    picture's dithered rounding: two steps), and the checker shows again once it is off."""
+    _checker_floor()
+    _solve(blender)
+    blender.scene.radiosity.show_patches = True
+    flat = _preview_centres(blender, tmp_path, "flat.png")
+    codes = np.round(255 * _srgb(flat))  # (the 8-bit picture's own steps, dithered by one each way)
+    per_patch = codes.reshape(4, 4, 4, 4).transpose(0, 2, 1, 3).reshape(16, 16)
+    assert (np.ptp(per_patch, axis=1) <= 2).all()
+    blender.scene.radiosity.show_patches = False
+    textured = _preview_centres(blender, tmp_path, "textured.png")
+    assert np.median(_neighbour_ratios(textured)) > 8 / 1.15
