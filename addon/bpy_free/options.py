@@ -174,7 +174,8 @@ SCENE_OBJECTS = Flag("use_scene_objects", "--scene-objects", True, "Rest of the 
 
 LIGHT_OUTPUT = Flag("light_output", "--light-output", False, "Light only",
                     "Also write the light arriving at each patch, without the surface's colour ('Radiosity Light': "
-                    "Cycles' Diffuse bake without Color), to multiply with textures in a material")
+                    "Cycles' Diffuse bake without Color), to multiply with textures in a material (Textured "
+                    "writes it smooth and does so)")
 INDIRECT_OUTPUT = Flag("indirect_output", "--indirect-output", False, "Indirect light",
                        "Also write the light arriving after at least one bounce, without the surface's colour "
                        "('Radiosity Indirect')")
