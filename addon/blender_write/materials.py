@@ -90,24 +90,14 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY):
     links.new(light.outputs["Color"], lit.inputs[1])
     total = lit.outputs[0]
 
-    if shader.bl_idname in _EMISSION:
-        colour, strength = (shader.inputs[name] for name in _EMISSION[shader.bl_idname])
-        if strength.is_linked or strength.default_value != 0:
-            emitted = nodes.new("ShaderNodeVectorMath")  # emission colour * strength
-            emitted.operation = "SCALE"
-            emitted.label = "Emission"
-            emitted.location = (x, y - 450)
-            _feed(links, shader, colour.name, emitted.inputs[0], default=(0.0, 0.0, 0.0))
-            if strength.is_linked:
-                links.new(strength.links[0].from_socket, emitted.inputs["Scale"])
-            else:
-                emitted.inputs["Scale"].default_value = float(strength.default_value)
-            added = nodes.new("ShaderNodeVectorMath")
-            added.operation = "ADD"
-            added.location = (x + 400, y)
-            links.new(total, added.inputs[0])
-            links.new(emitted.outputs[0], added.inputs[1])
-            total = added.outputs[0]
+    emitted = _emitted(tree, shader, (x, y - 450))
+    if emitted is not None:
+        added = nodes.new("ShaderNodeVectorMath")
+        added.operation = "ADD"
+        added.location = (x + 400, y)
+        links.new(total, added.inputs[0])
+        links.new(emitted, added.inputs[1])
+        total = added.outputs[0]
 
     emission = emission_output(tree, total, flat_attribute, (x + 600, y))
     output = nodes.new("ShaderNodeOutputMaterial")
@@ -117,6 +107,26 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY):
     _keep_only_upstream(tree, output)
     output.is_active_output = True
     return material
+
+
+def _emitted(tree, shader, location):
+    """The shader's emission colour x strength (a socket: its own subtree where linked), or None
+    where it emits nothing."""
+    if shader.bl_idname not in _EMISSION:
+        return None
+    colour, strength = (shader.inputs[name] for name in _EMISSION[shader.bl_idname])
+    if not strength.is_linked and strength.default_value == 0:
+        return None
+    emitted = tree.nodes.new("ShaderNodeVectorMath")
+    emitted.operation = "SCALE"
+    emitted.label = "Emission"
+    emitted.location = location
+    _feed(tree.links, shader, colour.name, emitted.inputs[0], default=(0.0, 0.0, 0.0))
+    if strength.is_linked:
+        tree.links.new(strength.links[0].from_socket, emitted.inputs["Scale"])
+    else:
+        emitted.inputs["Scale"].default_value = float(strength.default_value)
+    return emitted.outputs[0]
 
 
 def emission_output(tree, colour, flat_attribute, location):

@@ -210,6 +210,47 @@ def show_attribute_in_solid_view():
                     space.shading.color_type = "VERTEX"
 
 
+def _result_object(output_data, index, output_mode, layers, light, notes, materials_for, material):
+    """The result object of source ``index``: its mesh, the source's UV maps and colour
+    attributes, the colours, and its materials (``materials_for(slot names)`` for the textured
+    output, else ``material``)."""
+    arrays, pm = output_data.patches.objects[index], output_data.patches.meshes[index]
+    faces, points = output_data.face_colours[index], output_data.smooth_colours[index]
+    if not (np.isfinite(faces).all() and (points is None or np.isfinite(points).all())
+            and (light is None or np.isfinite(light).all())):
+        raise ValueError(f"the result for '{arrays.name}' is not finite")
+    name = arrays.name + RESULT_SUFFIX
+    mesh = build_mesh(name, pm)
+    obj = bpy.data.objects.new(name, mesh)  # vertices are in world space
+    try:
+        _fill_result(obj, output_data, index, output_mode, layers, light, notes, materials_for, material)
+    except Exception:
+        _remove_objects([obj])
+        raise
+    return obj
+
+
+def _fill_result(obj, output_data, index, output_mode, layers, light, notes, materials_for, material):
+    """What ``_result_object`` writes on its new object ``obj``."""
+    arrays, pm, mesh = output_data.patches.objects[index], output_data.patches.meshes[index], obj.data
+    faces, points = output_data.face_colours[index], output_data.smooth_colours[index]
+    if layers is not None:
+        write_layers(mesh, layers, notes, arrays.name)
+    write_colours(mesh, pm, faces, points, output_mode)
+    for extra_name, per_object in getattr(output_data, "extra", {}).items():
+        write_extra(mesh, pm, extra_name, per_object[index], output_mode)
+    textured_output = output_mode == "TEXTURED" and light is not None and layers is not None
+    if textured_output:
+        write_light(mesh, light, output_data.light_domain)
+    _show_colours(mesh, layers.render_colour if layers is not None else "")
+    if textured_output:
+        for slot_material in materials_for(layers.slot_names):
+            mesh.materials.append(slot_material)
+        mesh.polygons.foreach_set("material_index", layers.patch_slot.astype(np.int32))
+    else:
+        mesh.materials.append(material)
+
+
 def write_results(context, output_data, output_mode, scene=None):
     """Replace the previous results with one object per source object.
 
@@ -222,8 +263,7 @@ def write_results(context, output_data, output_mode, scene=None):
     created = []
     made = {}  # source material name -> its textured copy (or None), made once a run
     notes = getattr(output_data, "notes", [])
-    is_textured = output_mode == "TEXTURED"
-    layers_of = getattr(output_data, "patches").layers or [None] * len(output_data.patches.objects)
+    layers_of = output_data.patches.layers or [None] * len(output_data.patches.objects)
     light_of = getattr(output_data, "light_colours", None) or [None] * len(layers_of)
     terms = getattr(output_data, "material_terms", {})
     smooth_written = output_mode in ("VERTEX", "BOTH", "TEXTURED") and any(
@@ -231,38 +271,13 @@ def write_results(context, output_data, output_mode, scene=None):
     flat_name = PATCH_ATTRIBUTE_NAME if smooth_written and output_mode != "VERTEX" else ATTRIBUTE_NAME
     try:
         material = result_material(flat_name)
-        for index, (arrays, pm, faces, points) in enumerate(zip(
-            output_data.patches.objects,
-            output_data.patches.meshes,
-            output_data.face_colours,
-            output_data.smooth_colours,
-        )):
+        for index, (arrays, faces) in enumerate(zip(output_data.patches.objects, output_data.face_colours)):
             if faces is None:  # an object of the rest of the scene: it took part, gets no result
                 continue
-            light = light_of[index]
-            if not (np.isfinite(faces).all() and (points is None or np.isfinite(points).all())
-                    and (light is None or np.isfinite(light).all())):
-                raise ValueError(f"the result for '{arrays.name}' is not finite")
-            name = arrays.name + RESULT_SUFFIX
-            mesh = build_mesh(name, pm)
-            obj = bpy.data.objects.new(name, mesh)  # vertices are in world space
+            obj = _result_object(output_data, index, output_mode, layers_of[index], light_of[index], notes,
+                                 lambda slots: textured.result_materials(slots, LIGHT_ATTRIBUTE_NAME, flat_name, terms,
+                                                                         material, notes, made), material)
             created.append(obj)
-            layers = layers_of[index]
-            if layers is not None:
-                write_layers(mesh, layers, notes, arrays.name)
-            write_colours(mesh, pm, faces, points, output_mode)
-            for extra_name, per_object in getattr(output_data, "extra", {}).items():
-                write_extra(mesh, pm, extra_name, per_object[index], output_mode)
-            if is_textured and light is not None:
-                write_light(mesh, light, output_data.light_domain)
-            _show_colours(mesh, layers.render_colour if layers is not None else "")
-            if is_textured and light is not None and layers is not None:
-                for slot_material in textured.result_materials(layers.slot_names, LIGHT_ATTRIBUTE_NAME, flat_name,
-                                                               terms, material, notes, made):
-                    mesh.materials.append(slot_material)
-                mesh.polygons.foreach_set("material_index", layers.patch_slot.astype(np.int32))
-            else:
-                mesh.materials.append(material)
             obj[SOURCE_PROPERTY] = arrays.name
     except Exception:
         _remove_objects(created)

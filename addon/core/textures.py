@@ -89,7 +89,7 @@ def locate(points, face, source_corners, triangle_face):
         rows = np.flatnonzero(count > j)  # only the points whose face has a j-th triangle
         t = first[rows] + j
         w = _barycentric(points[rows], source_corners[t])
-        inside = w.min(axis=1)
+        inside = np.minimum(np.minimum(w[:, 0], w[:, 1]), w[:, 2])
         better = inside > best[rows]
         rows, t, w = rows[better], t[better], w[better]
         best[rows] = inside[better]
@@ -121,10 +121,10 @@ def corner_layers(points, corner_verts, corner_face, source_corners, triangle_fa
 def _barycentric(p, triangle):
     """(n,3) barycentric coordinates of points p (n,3) in triangles (n,3,3), projected onto
     each triangle's plane."""
-    a, b, c = triangle[:, 0], triangle[:, 1], triangle[:, 2]
-    v0, v1, v2 = b - a, c - a, p - a
-    d00, d01, d11 = (v0 * v0).sum(1), (v0 * v1).sum(1), (v1 * v1).sum(1)
-    d20, d21 = (v2 * v0).sum(1), (v2 * v1).sum(1)
+    a = triangle[:, 0]
+    v0, v1, v2 = triangle[:, 1] - a, triangle[:, 2] - a, p - a
+    dot = lambda x, y: np.einsum("ij,ij->i", x, y)  # noqa: E731 - (a sum over 3 columns: sum(axis=1) is slow)
+    d00, d01, d11, d20, d21 = dot(v0, v0), dot(v0, v1), dot(v1, v1), dot(v2, v0), dot(v2, v1)
     denominator = d00 * d11 - d01 * d01
     denominator = np.where(np.abs(denominator) > 0, denominator, 1.0)
     w1 = (d11 * d20 - d01 * d21) / denominator

@@ -44,7 +44,7 @@ def test_the_walks_light_on_black_patches_errs_by_its_measured_variance():
     z, widened by the batch estimate's own spread, 2/(K-1) in relative variance for K chunks).
     (The two-way iteration gathers a black patch's direct light with a thousandth of the
     samples, a heavy-tailed estimate: the textured output does not lean on it, see
-    tests/bpy_free/test_textured_light.py.)"""
+    tests/bpy_free/test_pipeline.py.)"""
     scene, F, face = _black_floor_box()
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)
     H_exact = F @ B
