@@ -251,7 +251,10 @@ class Surface:
         values = _checked(patch_values, self.patch_count, "patch values")
         var = np.asarray(patch_variances, np.float64).reshape(values.shape)
         known = np.isfinite(var).all(axis=1) & (var >= 0).all(axis=1)
-        floor = 1e-12 * max(float(np.abs(values).max()) if values.size else 0.0, 1e-300) ** 2
+        largest = float(np.abs(values).max()) if values.size else 0.0
+        if not largest > 0:  # no light anywhere (nothing reached a reflecting patch): nothing to filter
+            return (values.copy(), np.zeros_like(values)) if bound else values.copy()
+        floor = 1e-12 * largest ** 2
         p, q = self.neighbours()
         var = _unmeasured_from_neighbours(np.where(known[:, None], var, np.nan), p, q)
         var = np.where(known[:, None], np.maximum(var, floor), np.inf)

@@ -230,3 +230,33 @@ def test_the_flat_switch_shows_the_paper_s_patches_without_a_new_run(blender, tm
     blender.scene.radiosity.show_patches = False
     textured = _preview_centres(blender, tmp_path, "textured.png")
     assert np.median(_neighbour_ratios(textured)) > 8 / 1.15
+
+
+def test_an_emitter_s_result_shows_its_emission_colour_times_strength(blender, tmp_path):
+    """A black glowing floor (Principled, base 0, emission (0.5, 0.25, 0.1) x 2): its result
+    material adds emission colour x strength to the (black) surface times the light, so the
+    preview shows (1.0, 0.5, 0.2) (the 8-bit picture: within 1.5% and one dithered step). The
+    wall beside it faces away, so no patch reflects any light (before, filtering that noise-free
+    zero light divided 0 by 0 and the run failed)."""
+    material = principled("Glow", (0.0, 0.0, 0.0), (0.5, 0.25, 0.1), 2.0)
+    floor = make_object("Floor", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)], [material])
+    floor.select_set(True)
+    make_object("Wall", [(0, 1, 0), (1, 1, 0), (1, 1, 1), (0, 1, 1)], [(0, 3, 2, 1)],
+                [principled("White", (0.7, 0.7, 0.7))]).select_set(True)
+    _solve(blender)
+    scene = blender.scene
+    data = bpy.data.cameras.new("Top")
+    data.type, data.ortho_scale = "ORTHO", 0.5
+    camera = bpy.data.objects.new("Top", data)
+    camera.location = (0.5, 0.4, 2.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    scene.render.threads_mode, scene.render.threads = "FIXED", 1
+    path = str(tmp_path / "glow.png")
+    render_preview(path, [o for o in bpy.data.objects if o.name in ("Floor", "Wall")], width=16, samples=4)
+    image = bpy.data.images.load(path)
+    pixels = np.empty(len(image.pixels), np.float32)
+    image.pixels.foreach_get(pixels)
+    rgb = _linear(pixels.reshape(-1, 4)[:, :3]).mean(axis=0)
+    np.testing.assert_allclose(rgb, [1.0, 0.5, 0.2], rtol=0.015, atol=2e-3)
