@@ -194,7 +194,8 @@ def result_materials(slot_names, light_attribute, flat_attribute, terms, fallbac
             ok, note = can_copy(source) if source is not None and not is_textured_material(source) else (False, None)
             if note:
                 notes.append(note)
-            made[name] = textured_material(source, light_attribute, flat_attribute, terms.get(name, IDENTITY)) if ok else None
+            made[name] = (textured_material(source, light_attribute, flat_attribute, terms.get(name, IDENTITY))
+                          if ok else None)
         out.append(made[name] or fallback)
     return out
 

@@ -166,9 +166,13 @@ def write_light(mesh, values, domain):
 
 def write_layers(mesh, layers, notes, name):
     """The source's UV maps and colour attributes (``patches.ResultLayers``) on the result
-    mesh, under their own names, the same ones active; a colour attribute named as one of ours
-    is left out (said so)."""
+    mesh, under their own names, the same ones active; a UV map or colour attribute named as one
+    of ours is left out (said so)."""
     for uv_name, values in layers.uv:
+        if uv_name in OUR_ATTRIBUTES:
+            notes.append(f"'{name}': its UV map '{uv_name}' has the name of a result's colours; "
+                         "its result leaves it out")
+            continue
         layer = mesh.uv_layers.new(name=uv_name, do_init=False)
         layer.uv.foreach_set("vector", values.ravel())
     if layers.active_uv in mesh.uv_layers:

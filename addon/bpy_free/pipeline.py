@@ -320,9 +320,10 @@ def _write_colours(out, scene, result, settings):
         smooth, light = _smooth_light(scene, result, light=textured)
     elif both:
         shown = "the textures times each patch's own light are shown" if textured else "the flat colours are shown"
-        out.notes.append(f"smooth colours left out at {scene.patch_count:,} patches ({options.OUTPUT.item_label(settings.output)} "
-                         f"makes them up to {options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory "
-                         f"of the run); {shown}: choose Smooth colours to make them")
+        label = options.OUTPUT.item_label(settings.output)
+        out.notes.append(f"smooth colours left out at {scene.patch_count:,} patches ({label} makes them up to "
+                         f"{options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory of the run); "
+                         f"{shown}: choose Smooth colours to make them")
     out.light_domain = "CORNER" if light is not None else "FACE"
     flat_light = np.maximum(result.irradiance, 0.0) if textured and light is None else None
     point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])

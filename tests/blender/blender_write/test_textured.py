@@ -151,8 +151,14 @@ def test_above_the_smooth_limit_the_textures_take_each_patch_s_own_light(blender
     """Past SMOOTH_MAX_PATCHES the light is written flat, one value a patch on the FACE domain
     (16 bytes a patch), and the material still reads the texture: a note says so."""
     monkeypatch.setattr(options, "SMOOTH_MAX_PATCHES", 4)
+    from addon.ui import operators
+
+    outputs = []
+    monkeypatch.setattr(operators, "OUTPUT_LISTENER", outputs.append)
     _checker_floor()
     mesh = _solve(blender)["Floor"].data
+    assert any(n.startswith("smooth colours left out at 16 patches (Textured makes them up to 4")
+               and "each patch's own light" in n for n in outputs[0].notes), outputs[0].notes
     light = mesh.attributes["Radiosity Light"]
     assert light.domain == "FACE" and len(light.data) == len(mesh.polygons) == 16
     assert mesh.materials[0].name == "Floor Radiosity"
