@@ -314,53 +314,67 @@ def _write_colours(out, scene, result, settings):
     for name, values in extras.items():
         out.extra[name] = [None if not o.receives else np.asarray(values[patches.combined.patch_slice(k)])
                            for k, o in enumerate(patches.objects)]
-    smooth = light = None
+    made = {}  # "smooth", "light" -> per object (C_k,3) at its polygon corners (None: not receiving)
     both = settings.output in ("BOTH", "TEXTURED")
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
-        smooth, light = _smooth_light(scene, result, light=textured)
+        for name, corners in _smooth_corners(scene, result, light=textured):
+            made[name] = _at_polygon_corners(patches, scene, corners)
+            del corners  # (let go of before the next is made)
     elif both:
         shown = "the textures times each patch's own light are shown" if textured else "the flat colours are shown"
         label = options.OUTPUT.item_label(settings.output)
         out.notes.append(f"smooth colours left out at {scene.patch_count:,} patches ({label} makes them up to "
                          f"{options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory of the run); "
                          f"{shown}: choose Smooth colours to make them")
-    out.light_domain = "CORNER" if light is not None else "FACE"
-    flat_light = np.maximum(result.irradiance, 0.0) if textured and light is None else None
+    out.light_domain = "CORNER" if "light" in made else "FACE"
+    flat_light = np.maximum(result.irradiance, 0.0) if textured and "light" not in made else None
+    for k, o in enumerate(patches.objects):
+        rows = patches.combined.patch_slice(k)
+        out.face_colours.append(radiosity[rows] if o.receives else None)
+        out.smooth_colours.append(made["smooth"][k] if "smooth" in made else None)
+        if "light" in made:
+            out.light_colours.append(made["light"][k])
+        else:
+            out.light_colours.append(flat_light[rows] if flat_light is not None and o.receives else None)
+
+
+def _at_polygon_corners(patches, scene, corners):
+    """Per object, the values (C_k,3) at its result mesh's polygon corners, read from the
+    scene's triangle corners (T,3,3), as float32 (as they are written); None for an object
+    that receives no result."""
     point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
+    out = []
     for k, mesh in enumerate(patches.meshes):
         if not patches.objects[k].receives:  # the rest of the scene: no results
-            out.face_colours.append(None)
-            out.smooth_colours.append(None)
-            out.light_colours.append(None)
+            out.append(None)
             continue
-        B = radiosity[patches.combined.patch_slice(k)]
-        out.face_colours.append(B)
+        out.append(smoothing.polygon_corner_values(
+            corners, scene.triangles, scene.triangle_patch, mesh.corner_patch + patches.combined.patch_offsets[k],
+            mesh.corner_verts + point_start[k]).astype(np.float32))
+    return out
 
-        def at_corners(corners):
-            return smoothing.polygon_corner_values(
-                corners, scene.triangles, scene.triangle_patch,
-                mesh.corner_patch + patches.combined.patch_offsets[k], mesh.corner_verts + point_start[k])
 
-        out.smooth_colours.append(None if smooth is None else at_corners(smooth))
-        if light is not None:
-            out.light_colours.append(at_corners(light))
-        else:
-            out.light_colours.append(None if flat_light is None else flat_light[patches.combined.patch_slice(k)])
+def _smooth_corners(scene, result, light=False):
+    """("light", (T,3,3)) with ``light`` first: the light arriving (``arriving_light``) at every
+    corner of the scene's triangles, smooth; then ("smooth", (T,3,3)): the reflected light, its
+    tile noise filtered within its measured variance, joined across objects and kept apart at
+    creases (core smoothing), plus each patch's own emission, flat. Made one at a time (a
+    generator), so that the caller lets go of one before the next is made."""
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    if light:
+        yield "light", surface.corner_values(arriving_light(surface, result.irradiance, result.irradiance_variance,
+                                                            scene.reflectivity))
+    reflected = surface.filter_noise(np.maximum(result.reflected, 0.0), result.reflected_variance)
+    corners = surface.corner_values(reflected)
+    del reflected
+    corners += scene.emission[scene.triangle_patch][:, None, :]
+    yield "smooth", corners
 
 
 def _smooth_light(scene, result, light=False):
-    """(T,3,3) the smooth light at every corner of the scene's triangles: the reflected light,
-    its tile noise filtered within its measured variance, joined across objects and kept apart
-    at creases (core smoothing), plus each patch's own emission, flat; and with ``light``, the
-    light arriving (``arriving_light``) smoothed the same way (else None)."""
-    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
-    reflected = surface.filter_noise(np.maximum(result.reflected, 0.0), result.reflected_variance)
-    corners = surface.corner_values(reflected)
-    corners += scene.emission[scene.triangle_patch][:, None, :]
-    if not light:
-        return corners, None
-    return corners, surface.corner_values(arriving_light(surface, result.irradiance, result.irradiance_variance,
-                                                         scene.reflectivity))
+    """(smooth radiosity, smooth light arriving or None), each (T,3,3) (``_smooth_corners``)."""
+    made = dict(_smooth_corners(scene, result, light))
+    return made["smooth"], made.get("light")
 
 
 def arriving_light(surface, irradiance, variance, reflectivity):
