@@ -266,3 +266,21 @@ def test_an_emitter_s_result_shows_its_emission_colour_times_strength(blender, t
     image.pixels.foreach_get(pixels)
     rgb = _linear(pixels.reshape(-1, 4)[:, :3]).mean(axis=0)
     np.testing.assert_allclose(rgb, [1.0, 0.5, 0.2], rtol=0.015, atol=2e-3)
+
+
+def test_a_source_attribute_named_as_ours_is_left_out_with_a_note(blender, monkeypatch):
+    """A floor carrying its own colour attribute 'Radiosity' (a copy of an old result, say): the
+    result's 'Radiosity' is the solve's light, not the copy, and a note says the source's was
+    left out."""
+    from addon.ui import operators
+
+    floor, _ = _checker_floor()
+    paint = floor.data.color_attributes.new("Radiosity", "FLOAT_COLOR", "POINT")
+    paint.data.foreach_set("color", np.tile([0.0, 1.0, 0.0, 1.0], len(floor.data.vertices)).astype(np.float32))
+    outputs = []
+    monkeypatch.setattr(operators, "OUTPUT_LISTENER", outputs.append)
+    mesh = _solve(blender)["Floor"].data
+    assert [a.name for a in mesh.color_attributes].count("Radiosity") == 1
+    _, values = read_colours(mesh, "Radiosity")
+    assert not np.allclose(values[:, :3], [0.0, 1.0, 0.0])  # (the grey floor's light, not the green copy)
+    assert any("'Floor': its colour attribute 'Radiosity'" in n for n in outputs[0].notes), outputs[0].notes
