@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..blender_write.results import is_result_object
-from ..bpy_free.patches import ObjectArrays
+from ..bpy_free.patches import ObjectArrays, SourceLayers
 from ..core import meshing
 from . import SceneError
 from .materials import slot_tables
@@ -43,9 +43,10 @@ def _per_face(table, slot):
     return table[slot]
 
 
-def read_object(obj, depsgraph, notes) -> ObjectArrays | None:
-    """Arrays of one object: evaluated (modifiers), world space, outward winding."""
-    return _read_evaluated(obj.evaluated_get(depsgraph), obj.matrix_world, obj.name, obj.session_uid, notes)
+def read_object(obj, depsgraph, notes, layers=True) -> ObjectArrays | None:
+    """Arrays of one object: evaluated (modifiers), world space, outward winding; with
+    ``layers``, its UV maps and colour attributes for its result (``source_layers``)."""
+    return _read_evaluated(obj.evaluated_get(depsgraph), obj.matrix_world, obj.name, obj.session_uid, notes, layers)
 
 
 def read_instances(parents, depsgraph, notes):
@@ -77,7 +78,7 @@ def read_instances(parents, depsgraph, notes):
     return out
 
 
-def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays | None:
+def _read_evaluated(evaluated, matrix_world, name, uid, notes, layers=True) -> ObjectArrays | None:
     mesh = evaluated.to_mesh()
     try:
         if len(mesh.polygons) == 0:
@@ -86,6 +87,7 @@ def _read_evaluated(evaluated, matrix_world, name, uid, notes) -> ObjectArrays |
             return None
         arrays = _mesh_arrays(mesh, name)
         arrays.update(_mesh_materials(evaluated, mesh, arrays["triangles"], name, notes))
+        arrays["layers"] = source_layers(mesh, arrays["triangles"]) if layers else None
     finally:
         evaluated.to_mesh_clear()
     return _in_world_space(arrays, matrix_world, name, uid)
@@ -141,6 +143,8 @@ def _in_world_space(a, matrix_world, name, uid) -> ObjectArrays:
         if triangle_uv is not None:
             triangle_uv = triangle_uv[:, ::-1].copy()
         slot_colours = tuple(None if c is None else c[:, ::-1].copy() for c in slot_colours)
+        if a["layers"] is not None:
+            a["layers"] = a["layers"].reversed()
     slot = np.clip(a["material_index"], 0, len(a["R_slots"]) - 1)
     return ObjectArrays(
         name=name,
@@ -158,7 +162,37 @@ def _in_world_space(a, matrix_world, name, uid) -> ObjectArrays:
         slot_textures=a["textures"] if triangle_uv is not None else (),
         slot_emission_textures=a["emission_textures"] if triangle_uv is not None else (),
         slot_colours=slot_colours if any(c is not None for c in slot_colours) else (),
+        layers=a["layers"],
     )
+
+
+def source_layers(mesh, triangles) -> SourceLayers:
+    """Every UV map and colour attribute of an evaluated mesh at its loop triangles' corners
+    (float32), with the names its materials read by default."""
+    T = len(triangles)
+    if not len(mesh.uv_layers) and not len(mesh.color_attributes):
+        return SourceLayers()
+    loops = _get(mesh.loop_triangles, "loops", T, np.int32, 3)
+    uv = []
+    for layer in mesh.uv_layers:
+        values = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+        layer.uv.foreach_get("vector", values)
+        uv.append((layer.name, values.reshape(-1, 2)[loops]))
+    colours = []
+    for layer in mesh.color_attributes:
+        if layer.domain not in ("CORNER", "POINT"):
+            continue
+        values = np.empty(len(layer.data) * 4, dtype=np.float32)
+        layer.data.foreach_get("color", values)  # (scene linear, for byte colours too)
+        colours.append((layer.name, values.reshape(-1, 4)[loops if layer.domain == "CORNER" else triangles]))
+    active = mesh.uv_layers.active
+    render = next((layer for layer in mesh.uv_layers if layer.active_render), active)
+    render_colour = ""
+    index = getattr(mesh.color_attributes, "render_color_index", -1)
+    if 0 <= index < len(mesh.color_attributes):
+        render_colour = mesh.color_attributes[index].name
+    return SourceLayers(tuple(uv), tuple(colours), active.name if active else "", render.name if render else "",
+                        render_colour)
 
 
 def _attribute_colours(mesh, T, triangles, attributes, name, notes):
@@ -235,7 +269,7 @@ def read_rest_of_scene(context, depsgraph, notes):
     for obj in sorted(context.view_layer.objects, key=lambda o: o.name):
         if obj.type not in SOURCE_TYPES or obj.session_uid in selected or is_result_object(obj) or obj.hide_render:
             continue
-        arrays = read_object(obj, depsgraph, [])
+        arrays = read_object(obj, depsgraph, [], layers=False)
         if arrays is not None:
             arrays.receives = False
             rest.append(arrays)

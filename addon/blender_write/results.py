@@ -9,10 +9,13 @@ import bpy
 import numpy as np
 
 from ..core import meshing
+from . import materials as textured
 
 COLLECTION_NAME = "Radiosity"
 ATTRIBUTE_NAME = "Radiosity"
 PATCH_ATTRIBUTE_NAME = "Radiosity Patches"  # the flat per-patch colours when both are written
+LIGHT_ATTRIBUTE_NAME = "Radiosity Light"  # the light arriving, which the textured materials multiply
+OUR_ATTRIBUTES = (ATTRIBUTE_NAME, PATCH_ATTRIBUTE_NAME, LIGHT_ATTRIBUTE_NAME, "Radiosity Indirect")
 MATERIAL_NAME = "Radiosity Result"
 SOURCE_PROPERTY = "radiosity_source"  # custom property marking result objects
 COLLECTION_PROPERTY = "radiosity_results"  # custom property marking a scene's results collection
@@ -24,28 +27,26 @@ def is_result_object(obj) -> bool:
     return obj is not None and SOURCE_PROPERTY in obj.keys()
 
 
-def result_material():
-    """The material that shows the 'Radiosity' attribute as emission (ours, never a user's
-    material that happens to have the same name)."""
-    for material in bpy.data.materials:
-        if MATERIAL_PROPERTY in material.keys() and material.node_tree is not None:
-            return material
-    material = bpy.data.materials.new(MATERIAL_NAME)
-    material[MATERIAL_PROPERTY] = True
-    if bpy.app.version < (5, 0, 0):
-        material.use_nodes = True
+def result_material(flat_attribute=ATTRIBUTE_NAME):
+    """The material that shows the 'Radiosity' attribute as emission, or ``flat_attribute``
+    where the panel's flat switch is on (ours, never a user's material that happens to have the
+    same name; rebuilt each run, for the run's attribute names)."""
+    material = next((m for m in bpy.data.materials if MATERIAL_PROPERTY in m.keys() and m.node_tree is not None),
+                    None)
+    if material is None:
+        material = bpy.data.materials.new(MATERIAL_NAME)
+        material[MATERIAL_PROPERTY] = True
+        if bpy.app.version < (5, 0, 0):
+            material.use_nodes = True
     tree = material.node_tree
     tree.nodes.clear()
     attribute = tree.nodes.new("ShaderNodeAttribute")
     attribute.attribute_type = "GEOMETRY"
     attribute.attribute_name = ATTRIBUTE_NAME
     attribute.location = (-400, 0)
-    emission = tree.nodes.new("ShaderNodeEmission")
-    emission.inputs["Strength"].default_value = 1.0
-    emission.location = (-150, 0)
+    emission = textured.emission_output(tree, attribute.outputs["Color"], flat_attribute, (-150, 0))
     output = tree.nodes.new("ShaderNodeOutputMaterial")
-    output.location = (100, 0)
-    tree.links.new(attribute.outputs["Color"], emission.inputs["Color"])
+    output.location = (300, 0)
     tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
     material.diffuse_color = (1.0, 1.0, 1.0, 1.0)
     return material
@@ -119,6 +120,7 @@ def write_colours(mesh, patch_mesh, face_colours, smooth_colours, output):
     """Add the colour attributes, both on the CORNER domain: flat per patch, and/or the smooth
     light (one value a polygon corner: creases keep a value on each side)."""
     names = []
+    output = "BOTH" if output == "TEXTURED" else output  # (its materials read the light besides)
     smooth = output == "VERTEX" or (output == "BOTH" and smooth_colours is not None)
     if smooth:  # the smooth light is what is shown where it is written
         attr = mesh.color_attributes.new(ATTRIBUTE_NAME, "FLOAT_COLOR", "CORNER")
@@ -152,6 +154,55 @@ def write_extra(mesh, patch_mesh, name, face_values, output):
     return attr.name
 
 
+def write_light(mesh, values, domain):
+    """The light arriving, which the textured materials read: (C,3) a polygon corner each on
+    the CORNER domain, or (P,3) a patch each on the FACE domain (16 bytes a patch)."""
+    if domain == "CORNER":
+        attr = mesh.color_attributes.new(LIGHT_ATTRIBUTE_NAME, "FLOAT_COLOR", "CORNER")
+    else:
+        attr = mesh.attributes.new(LIGHT_ATTRIBUTE_NAME, "FLOAT_COLOR", "FACE")
+    attr.data.foreach_set("color", rgba(values))
+
+
+def write_layers(mesh, layers, notes, name):
+    """The source's UV maps and colour attributes (``patches.ResultLayers``) on the result
+    mesh, under their own names, the same ones active; a UV map or colour attribute named as one
+    of ours is left out (said so)."""
+    for uv_name, values in layers.uv:
+        if uv_name in OUR_ATTRIBUTES:
+            notes.append(f"'{name}': its UV map '{uv_name}' has the name of a result's colours; "
+                         "its result leaves it out")
+            continue
+        layer = mesh.uv_layers.new(name=uv_name, do_init=False)
+        layer.uv.foreach_set("vector", values.ravel())
+    if layers.active_uv in mesh.uv_layers:
+        mesh.uv_layers.active = mesh.uv_layers[layers.active_uv]
+    if layers.render_uv in mesh.uv_layers:
+        mesh.uv_layers[layers.render_uv].active_render = True
+    for colour_name, values in layers.colours:
+        if colour_name in OUR_ATTRIBUTES:
+            notes.append(f"'{name}': its colour attribute '{colour_name}' has the name of a result's; "
+                         "its result leaves it out")
+            continue
+        attr = mesh.color_attributes.new(colour_name, "FLOAT_COLOR", "CORNER")
+        attr.data.foreach_set("color", values.ravel())
+
+
+def _show_colours(mesh, render_colour):
+    """'Radiosity' active (what the solid view shows); the source's default colour attribute
+    the render's (what a Color Attribute node without a name reads in a copied material)."""
+    colours = mesh.color_attributes
+    main = colours.get(ATTRIBUTE_NAME)
+    if main is not None:
+        colours.active_color = main
+    render = colours.get(render_colour) if render_colour and render_colour not in OUR_ATTRIBUTES else main
+    if render is not None:
+        try:
+            colours.render_color_index = next(i for i, a in enumerate(colours) if a.name == render.name)
+        except (AttributeError, StopIteration):  # older API
+            pass
+
+
 def show_attribute_in_solid_view():
     """Let the 3D views' solid shading colour objects by their colour attribute."""
     for screen in bpy.data.screens:
@@ -161,6 +212,47 @@ def show_attribute_in_solid_view():
             for space in area.spaces:
                 if space.type == "VIEW_3D":
                     space.shading.color_type = "VERTEX"
+
+
+def _result_object(output_data, index, output_mode, layers, light, notes, materials_for, material):
+    """The result object of source ``index``: its mesh, the source's UV maps and colour
+    attributes, the colours, and its materials (``materials_for(slot names)`` for the textured
+    output, else ``material``)."""
+    arrays, pm = output_data.patches.objects[index], output_data.patches.meshes[index]
+    faces, points = output_data.face_colours[index], output_data.smooth_colours[index]
+    if not (np.isfinite(faces).all() and (points is None or np.isfinite(points).all())
+            and (light is None or np.isfinite(light).all())):
+        raise ValueError(f"the result for '{arrays.name}' is not finite")
+    name = arrays.name + RESULT_SUFFIX
+    mesh = build_mesh(name, pm)
+    obj = bpy.data.objects.new(name, mesh)  # vertices are in world space
+    try:
+        _fill_result(obj, output_data, index, output_mode, layers, light, notes, materials_for, material)
+    except Exception:
+        _remove_objects([obj])
+        raise
+    return obj
+
+
+def _fill_result(obj, output_data, index, output_mode, layers, light, notes, materials_for, material):
+    """What ``_result_object`` writes on its new object ``obj``."""
+    arrays, pm, mesh = output_data.patches.objects[index], output_data.patches.meshes[index], obj.data
+    faces, points = output_data.face_colours[index], output_data.smooth_colours[index]
+    if layers is not None:
+        write_layers(mesh, layers, notes, arrays.name)
+    write_colours(mesh, pm, faces, points, output_mode)
+    for extra_name, per_object in getattr(output_data, "extra", {}).items():
+        write_extra(mesh, pm, extra_name, per_object[index], output_mode)
+    textured_output = output_mode == "TEXTURED" and light is not None and layers is not None
+    if textured_output:
+        write_light(mesh, light, output_data.light_domain)
+    _show_colours(mesh, layers.render_colour if layers is not None else "")
+    if textured_output:
+        for slot_material in materials_for(layers.slot_names):
+            mesh.materials.append(slot_material)
+        mesh.polygons.foreach_set("material_index", layers.patch_slot.astype(np.int32))
+    else:
+        mesh.materials.append(material)
 
 
 def write_results(context, output_data, output_mode, scene=None):
@@ -173,31 +265,35 @@ def write_results(context, output_data, output_mode, scene=None):
     """
     scene = scene if scene is not None else context.scene
     created = []
+    made = {}  # source material name -> its textured copy (or None), made once a run
+    notes = getattr(output_data, "notes", [])
+    layers_of = output_data.patches.layers or [None] * len(output_data.patches.objects)
+    light_of = getattr(output_data, "light_colours", None) or [None] * len(layers_of)
+    terms = getattr(output_data, "material_terms", {})
+    smooth_written = output_mode in ("VERTEX", "BOTH", "TEXTURED") and any(
+        p is not None for p in output_data.smooth_colours)
+    flat_name = PATCH_ATTRIBUTE_NAME if smooth_written and output_mode != "VERTEX" else ATTRIBUTE_NAME
     try:
-        material = result_material()
-        for index, (arrays, pm, faces, points) in enumerate(zip(
-            output_data.patches.objects,
-            output_data.patches.meshes,
-            output_data.face_colours,
-            output_data.smooth_colours,
-        )):
+        material = result_material(flat_name)
+        for index, (arrays, faces) in enumerate(zip(output_data.patches.objects, output_data.face_colours)):
             if faces is None:  # an object of the rest of the scene: it took part, gets no result
                 continue
-            if not (np.isfinite(faces).all() and (points is None or np.isfinite(points).all())):
-                raise ValueError(f"the result for '{arrays.name}' is not finite")
-            name = arrays.name + RESULT_SUFFIX
-            mesh = build_mesh(name, pm)
-            obj = bpy.data.objects.new(name, mesh)  # vertices are in world space
+            obj = _result_object(output_data, index, output_mode, layers_of[index], light_of[index], notes,
+                                 lambda slots: textured.result_materials(slots, LIGHT_ATTRIBUTE_NAME, flat_name, terms,
+                                                                         material, notes, made), material)
             created.append(obj)
-            write_colours(mesh, pm, faces, points, output_mode)
-            for extra_name, per_object in getattr(output_data, "extra", {}).items():
-                write_extra(mesh, pm, extra_name, per_object[index], output_mode)
-            mesh.materials.append(material)
             obj[SOURCE_PROPERTY] = arrays.name
     except Exception:
         _remove_objects(created)
+        for copy in made.values():
+            if copy is not None and copy.users == 0:
+                bpy.data.materials.remove(copy)
         raise
     remove_previous_results(scene)
+    textured.remove_unused_textured()
+    for source_name, copy in made.items():  # the names the old ones had
+        if copy is not None:
+            copy.name = source_name + textured.TEXTURED_SUFFIX
     collection = result_collection(scene)
     for obj in created:
         collection.objects.link(obj)

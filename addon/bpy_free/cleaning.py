@@ -94,6 +94,7 @@ def drop_zero_area_faces(objects):
             triangle_uv=None if o.triangle_uv is None else o.triangle_uv[keep_triangle],
             slot_colours=tuple(None if c is None else c[keep_triangle] for c in o.slot_colours),
             face_slot=None if o.face_slot is None else o.face_slot[keep],
+            layers=None if o.layers is None else o.layers.taken(keep_triangle),
         ))
     if lost:
         raise ValueError(f"{', '.join(repr(name) for name in lost)}: every face is too small to trace beside "

@@ -57,6 +57,10 @@ class Choice:
                 return i
         raise ValueError(f"{self.flag} must be one of {', '.join(ids)}; got {value!r}")
 
+    def item_label(self, value):
+        """The label of item ``value`` (as the panel shows it)."""
+        return next((label for i, label, _ in self.items if i == value), value)
+
 
 @dataclass(frozen=True)
 class Flag:
@@ -146,8 +150,12 @@ STOP_RULE = Choice("stop_rule", "--stop-rule", "measured", (
 # solve and 0.8 GB more: the command line's peak went from 916 to 1,706 MiB without its preview).
 SMOOTH_MAX_PATCHES = 300_000
 
-OUTPUT = Choice("output", "--colours", "BOTH", (
-    ("FACE", "Face colours", "Flat colour per patch on the CORNER domain"),
+OUTPUT = Choice("output", "--colours", "TEXTURED", (
+    ("TEXTURED", "Textured", "Each material's own surface colour (its image textures and colour attributes, through "
+     "the result's copy of the UV maps) times the smooth light arriving ('Radiosity Light'), plus its emission, in a "
+     "copy of the material; also Both's attributes. Above "
+     f"{SMOOTH_MAX_PATCHES:,} patches, each patch's light, flat"),
+    ("FACE", "Face colours", "Flat colour per patch on the CORNER domain (the paper's view)"),
     ("VERTEX", "Smooth colours", "Smooth light on every face corner: joined across objects that touch, kept apart "
      "at creases, each patch's light kept, tile noise filtered within its measured error"),
     ("BOTH", "Both", f"Smooth colours as 'Radiosity' (shown), the flat per-patch colours as 'Radiosity Patches'; "
@@ -166,7 +174,8 @@ SCENE_OBJECTS = Flag("use_scene_objects", "--scene-objects", True, "Rest of the 
 
 LIGHT_OUTPUT = Flag("light_output", "--light-output", False, "Light only",
                     "Also write the light arriving at each patch, without the surface's colour ('Radiosity Light': "
-                    "Cycles' Diffuse bake without Color), to multiply with textures in a material")
+                    "Cycles' Diffuse bake without Color), to multiply with textures in a material (Textured "
+                    "writes it smooth and does so)")
 INDIRECT_OUTPUT = Flag("indirect_output", "--indirect-output", False, "Indirect light",
                        "Also write the light arriving after at least one bounce, without the surface's colour "
                        "('Radiosity Indirect')")

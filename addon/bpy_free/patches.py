@@ -10,12 +10,12 @@ import hashlib
 import threading
 import warnings
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..core import PatchScene, meshing
-from ..core.textures import patch_attribute_average, patch_texture_average
+from ..core.textures import corner_layers, patch_attribute_average, patch_texture_average
 from .options import AUTOMATIC_PATCH_DIVISIONS
 from .cleaning import check_finite_vertices, degenerate_area, drop_zero_area_faces
 
@@ -31,6 +31,42 @@ OTHERS_COARSER = 4.0
 def object_patch_size(o, patch_size) -> float:
     """The patch size an object is meshed at: the selection's, or coarser for the rest of the scene."""
     return patch_size if o.receives else patch_size * OTHERS_COARSER
+
+
+@dataclass
+class SourceLayers:
+    """What a result mesh keeps of its source's surface: every UV map and colour attribute, at
+    the source's loop triangles' corners (world-independent: UVs and linear colours)."""
+
+    uv: tuple = ()       # (name, (T,3,2) float32) per UV map, in the source's order
+    colours: tuple = ()  # (name, (T,3,4) float32) per colour attribute, scene linear RGBA
+    active_uv: str = ""  # the UV map shown for editing
+    render_uv: str = ""  # the UV map a texture without a UV Map node reads
+    render_colour: str = ""  # the colour attribute a Color Attribute node without a name reads
+
+    def taken(self, rows):
+        """The layers of the loop triangles ``rows`` (a mask or indices) only."""
+        return replace(self, uv=tuple((n, a[rows]) for n, a in self.uv),
+                       colours=tuple((n, a[rows]) for n, a in self.colours))
+
+    def reversed(self):
+        """The layers of the triangles with their corners reversed (a mirrored object)."""
+        return replace(self, uv=tuple((n, a[:, ::-1].copy()) for n, a in self.uv),
+                       colours=tuple((n, a[:, ::-1].copy()) for n, a in self.colours))
+
+
+@dataclass
+class ResultLayers:
+    """A result mesh's share of its source's surface: its UV maps and colour attributes at
+    every polygon corner (float32 (C,k)), and each patch's material slot."""
+
+    uv: tuple              # (name, (C,2) float32)
+    colours: tuple         # (name, (C,4) float32)
+    active_uv: str
+    render_uv: str
+    render_colour: str
+    patch_slot: np.ndarray  # (P,) int32
+    slot_names: tuple       # the source's material of each slot
 
 
 @dataclass
@@ -53,6 +89,7 @@ class ObjectArrays:
     slot_textures: tuple = ()  # per slot: (pixels (H,W,3) linear, affine (2,3), UV map) or None
     slot_colours: tuple = ()   # per slot: (T,3,3) colour attribute at the loop triangles' corners, or None
     slot_emission_textures: tuple = ()  # per slot: (pixels, affine, UV map, strength) or None
+    layers: SourceLayers | None = None  # UV maps and colour attributes the result keeps (selected objects)
 
 
 @dataclass(frozen=True)
@@ -81,6 +118,8 @@ class Patches:
     notes: list = field(default_factory=list)  # what reading the geometry left out, for the user
     patch_size: float = 0.0  # the size meshed with (an automatic size resolved)
     lights: tuple = ()  # the core's light sources (blender_read.selection.Selection.lights)
+    # per object, ResultLayers of a receiving object (make_patches(..., layers=True)), else None
+    layers: list = field(default_factory=list)
 
     def patch_scene(self):
         """The core scene; geometry, sampling tables and the Embree scene are built once per
@@ -217,11 +256,12 @@ def automatic_patch_size(objects) -> float:
     return extent / AUTOMATIC_PATCH_DIVISIONS if extent > 0 else 1.0
 
 
-def make_patches(objects, patch_size) -> Patches:
+def make_patches(objects, patch_size, layers=False) -> Patches:
     """Mesh every object into patches and gather per-patch materials (the meshing of an
     unchanged geometry comes from the cache). Faces of zero area are left out first, and a
     patch size that would make more than MAX_PATCHES patches is refused before any meshing.
-    A patch size of 0 is automatic (:func:`automatic_patch_size`)."""
+    A patch size of 0 is automatic (:func:`automatic_patch_size`). With ``layers``, also the
+    receiving objects' UV maps and colour attributes at the patch corners (``result_layers``)."""
     lights = tuple(getattr(objects, "lights", ()))  # (a blender_read.selection.Selection carries them)
     check_finite_vertices(objects)
     objects, notes = drop_zero_area_faces(objects)
@@ -231,6 +271,8 @@ def make_patches(objects, patch_size) -> Patches:
         patch_size = automatic_patch_size(objects)
     count = check_patch_count(objects, patch_size)
     patches = _make_patches(objects, patch_size, count)
+    if layers:
+        patches.layers = [result_layers(o, m) if o.receives else None for o, m in zip(objects, patches.meshes)]
     patches.lights = lights
     patches.notes = notes
     patches.patch_size = float(patch_size)
@@ -304,3 +346,20 @@ def patch_materials(o, mesh):
     return reflectivity, emission
 
 
+
+
+def result_layers(o, mesh) -> ResultLayers:
+    """The ResultLayers of object ``o`` meshed as ``mesh``: its UV maps and colour attributes
+    interpolated at every patch corner from the source face the patch lies on (core.textures)."""
+    slot = (np.zeros(mesh.patch_count, np.int32) if o.face_slot is None
+            else np.asarray(o.face_slot, np.int32)[mesh.patch_face])
+    source = o.layers or SourceLayers()
+    named = [*source.uv, *source.colours]
+    values = []
+    if named:
+        corner_face = np.repeat(mesh.patch_face, mesh.face_sizes)
+        values = corner_layers(mesh.points, mesh.corner_verts, corner_face, o.vertices[o.triangles], o.triangle_face,
+                               [layer for _, layer in named])
+    pairs = [(name, value) for (name, _), value in zip(named, values)]
+    return ResultLayers(tuple(pairs[: len(source.uv)]), tuple(pairs[len(source.uv):]), source.active_uv,
+                        source.render_uv, source.render_colour, slot, tuple(o.slot_names) or ("(no material)",))

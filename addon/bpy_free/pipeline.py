@@ -54,6 +54,13 @@ class SolveOutput:
     face_colours: list = field(default_factory=list)  # (P_k,3) per object
     # (C_k,3) per object, one a polygon corner: the smooth light (core smoothing), or None
     smooth_colours: list = field(default_factory=list)
+    # the textured output's light arriving (H, without the surface's colour) per object: (C_k,3)
+    # smooth, a polygon corner each (light_domain "CORNER"), or (P_k,3) a patch each ("FACE"); or None
+    light_colours: list = field(default_factory=list)
+    light_domain: str = "CORNER"
+    # material name -> (scale (3,), offset (3,)): the result material shows colour * scale + offset
+    # times the light (default (1, 0): the base colour is the reflectivity)
+    material_terms: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)  # attribute name -> [(P_k,3) per object], light and indirect
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
@@ -253,7 +260,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     are known, before the first path.
     """
     trim.fix_mmap_threshold()
-    patches = make_patches(objects, settings.patch_size)
+    patches = make_patches(objects, settings.patch_size, layers=True)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
     scene, notes = scene_and_notes(patches)
@@ -290,14 +297,15 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
 
 
 def _write_colours(out, scene, result, settings):
-    """The colours ``out`` carries to the objects: per patch and per point, and the extra
-    outputs (light only, indirect), per object that receives."""
+    """The colours ``out`` carries to the objects: per patch and per point, the light arriving
+    (textured output), and the extra outputs (light only, indirect), per object that receives."""
     patches = out.patches
     # Light is written as at least 0: an estimate below it is noise about a value near 0 (the two-way
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
     radiosity = np.maximum(result.radiosity, 0.0)
+    textured = settings.output == "TEXTURED"
     extras = {}
-    if settings.light_output:
+    if settings.light_output and not textured:  # (the textured output writes the light smooth)
         extras[LIGHT_ATTRIBUTE] = np.maximum(result.irradiance, 0.0)
     if settings.indirect_output:
         # the light arriving minus a gathered estimate of the direct light alone (noise of both)
@@ -306,32 +314,82 @@ def _write_colours(out, scene, result, settings):
     for name, values in extras.items():
         out.extra[name] = [None if not o.receives else np.asarray(values[patches.combined.patch_slice(k)])
                            for k, o in enumerate(patches.objects)]
-    smooth = None
-    if settings.output == "VERTEX" or (settings.output == "BOTH" and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
-        smooth = _smooth_light(scene, result)
-    elif settings.output == "BOTH":
-        out.notes.append(f"smooth colours left out at {scene.patch_count:,} patches (Both makes them up to "
+    made = {}  # "smooth", "light" -> per object (C_k,3) at its polygon corners (None: not receiving)
+    both = settings.output in ("BOTH", "TEXTURED")
+    if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
+        for name, corners in _smooth_corners(scene, result, light=textured):
+            made[name] = _at_polygon_corners(patches, scene, corners)
+            del corners  # (let go of before the next is made)
+    elif both:
+        shown = "the textures times each patch's own light are shown" if textured else "the flat colours are shown"
+        label = options.OUTPUT.item_label(settings.output)
+        out.notes.append(f"smooth colours left out at {scene.patch_count:,} patches ({label} makes them up to "
                          f"{options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory of the run); "
-                         "the flat colours are shown: choose Smooth colours to make them")
+                         f"{shown}: choose Smooth colours to make them")
+    out.light_domain = "CORNER" if "light" in made else "FACE"
+    flat_light = np.maximum(result.irradiance, 0.0) if textured and "light" not in made else None
+    for k, o in enumerate(patches.objects):
+        rows = patches.combined.patch_slice(k)
+        out.face_colours.append(radiosity[rows] if o.receives else None)
+        out.smooth_colours.append(made["smooth"][k] if "smooth" in made else None)
+        if "light" in made:
+            out.light_colours.append(made["light"][k])
+        else:
+            out.light_colours.append(flat_light[rows] if flat_light is not None and o.receives else None)
+
+
+def _at_polygon_corners(patches, scene, corners):
+    """Per object, the values (C_k,3) at its result mesh's polygon corners, read from the
+    scene's triangle corners (T,3,3), as float32 (as they are written); None for an object
+    that receives no result."""
     point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
+    out = []
     for k, mesh in enumerate(patches.meshes):
         if not patches.objects[k].receives:  # the rest of the scene: no results
-            out.face_colours.append(None)
-            out.smooth_colours.append(None)
+            out.append(None)
             continue
-        B = radiosity[patches.combined.patch_slice(k)]
-        out.face_colours.append(B)
-        out.smooth_colours.append(None if smooth is None else smoothing.polygon_corner_values(
-            smooth, scene.triangles, scene.triangle_patch,
-            mesh.corner_patch + patches.combined.patch_offsets[k], mesh.corner_verts + point_start[k]))
+        out.append(smoothing.polygon_corner_values(
+            corners, scene.triangles, scene.triangle_patch, mesh.corner_patch + patches.combined.patch_offsets[k],
+            mesh.corner_verts + point_start[k]).astype(np.float32))
+    return out
 
 
-def _smooth_light(scene, result):
-    """(T,3,3) the smooth light at every corner of the scene's triangles: the reflected light,
-    its tile noise filtered within its measured variance, joined across objects and kept apart
-    at creases (core smoothing), plus each patch's own emission, flat."""
+def _smooth_corners(scene, result, light=False):
+    """("light", (T,3,3)) with ``light`` first: the light arriving (``arriving_light``) at every
+    corner of the scene's triangles, smooth; then ("smooth", (T,3,3)): the reflected light, its
+    tile noise filtered within its measured variance, joined across objects and kept apart at
+    creases (core smoothing), plus each patch's own emission, flat. Made one at a time (a
+    generator), so that the caller lets go of one before the next is made."""
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    if light:
+        yield "light", surface.corner_values(arriving_light(surface, result.irradiance, result.irradiance_variance,
+                                                            scene.reflectivity))
     reflected = surface.filter_noise(np.maximum(result.reflected, 0.0), result.reflected_variance)
     corners = surface.corner_values(reflected)
+    del reflected
     corners += scene.emission[scene.triangle_patch][:, None, :]
-    return corners
+    yield "smooth", corners
+
+
+def _smooth_light(scene, result, light=False):
+    """(smooth radiosity, smooth light arriving or None), each (T,3,3) (``_smooth_corners``)."""
+    made = dict(_smooth_corners(scene, result, light))
+    return made["smooth"], made.get("light")
+
+
+def arriving_light(surface, irradiance, variance, reflectivity):
+    """(P,3) the light arriving at each patch (H: B = E + rho H), its noise filtered as the
+    reflected light's is, from its own batch-means variance. Where a channel's reflectivity is
+    0 the light shows nowhere (the surface is black there) but joins the neighbours' corners,
+    and the two-way iteration gathers it with a thousandth of the samples (a heavy-tailed
+    estimate): there it is the neighbours' (core smoothing ``fill_from_neighbours``)."""
+    black = np.asarray(reflectivity) <= 0
+    light = np.maximum(irradiance, 0.0)
+    variance = np.asarray(variance, np.float64)
+    if black.any():
+        light = surface.fill_from_neighbours(light, black)
+        # as noisy as the neighbours it came from: never an anchor for them
+        measured = np.isfinite(variance)
+        filled = surface.fill_from_neighbours(np.where(measured, variance, 0.0), black | ~measured)
+        variance = np.where(black & measured, filled, variance)
+    return surface.filter_noise(light, variance)

@@ -137,6 +137,21 @@ class Batches:
             return np.full((self.scene.patch_count, 3), math.nan)
         return self._columns(self._variance)
 
+    def irradiance_variance(self, dtype=np.float32):
+        """(P,3) batch-means estimate of Var(H_j), the arriving light's, per patch and channel
+        (also where the reflectivity is 0, which reflected_variance cannot say); NaN below 2
+        chunks. Float32 by default: a variance is known to a few digits, and it is a (P,3) more."""
+        if self.chunks < 2:
+            return np.full((self.scene.patch_count, 3), math.nan, dtype)
+
+        def column(k):
+            variance = self._spread(k)
+            variance *= np.square(self.scene.total_power / self.scene.patch_area)
+            variance /= (self.chunks - 1) * self.paths
+            return variance
+
+        return self._columns(column, dtype)
+
     def _spread(self, k, rows=slice(None)):
         """sum_k I_k^2 / n_k - I^2 / N of channel k at patches ``rows`` (all of them: (P,)), at
         least 0: N (chunks - 1) times the batch variance of I / N. (A new array, computed in place.)"""

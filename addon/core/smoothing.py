@@ -225,6 +225,25 @@ class Surface:
         small = np.int32 if P < 2 ** 31 else np.int64
         return (pair // P).astype(small), (pair % P).astype(small)
 
+    def fill_from_neighbours(self, patch_values, missing):
+        """Per-patch values (P,k) with those flagged ``missing`` (P,k) replaced, per channel, by
+        the area-weighted mean of the neighbours' (``neighbours``) that are not; a patch with no
+        such neighbour keeps its own. (For values that show nowhere,
+        such as the light arriving at a black patch, but join their neighbours' corners.)"""
+        values = _checked(patch_values, self.patch_count, "patch values")
+        missing = np.asarray(missing, bool).reshape(values.shape)
+        if not missing.any():
+            return values
+        p, q = self.neighbours()
+        out = values.copy()
+        for c in range(values.shape[1]):  # over channels, not elements
+            give = missing[p, c] & ~missing[q, c]
+            weight = _sum(p[give], self.patch_area[q[give]], self.patch_count)
+            total = _sum(p[give], self.patch_area[q[give]] * values[q[give], c], self.patch_count)
+            fill = missing[:, c] & (weight > 0)
+            out[fill, c] = total[fill] / weight[fill]
+        return out
+
     def filter_noise(self, patch_values, patch_variances, cutoff=NOISE_CUTOFF, bound=False):
         """Noise-filtered per-patch values (P,k) from values and the variances of their estimates
         (P,k); patches with a NaN or infinite variance are left as they are and not used. With
@@ -232,7 +251,10 @@ class Surface:
         values = _checked(patch_values, self.patch_count, "patch values")
         var = np.asarray(patch_variances, np.float64).reshape(values.shape)
         known = np.isfinite(var).all(axis=1) & (var >= 0).all(axis=1)
-        floor = 1e-12 * max(float(np.abs(values).max()) if values.size else 0.0, 1e-300) ** 2
+        largest = float(np.abs(values).max()) if values.size else 0.0
+        if not largest > 0:  # no light anywhere (nothing reached a reflecting patch): nothing to filter
+            return (values.copy(), np.zeros_like(values)) if bound else values.copy()
+        floor = 1e-12 * largest ** 2
         p, q = self.neighbours()
         var = _unmeasured_from_neighbours(np.where(known[:, None], var, np.nan), p, q)
         var = np.where(known[:, None], np.maximum(var, floor), np.inf)

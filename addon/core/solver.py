@@ -57,6 +57,7 @@ class SolveResult:
     reflected: np.ndarray          # (P,3) b
     reflected_variance: np.ndarray  # (P,3) batch-means estimate of Var(b), NaN below 2 chunks
     irradiance: np.ndarray         # (P,3) H, the light arriving (B = E + R H): Cycles' DIFFUSE bake without colour
+    irradiance_variance: np.ndarray  # (P,3) float32 batch-means estimate of Var(H), NaN below 2 chunks
     paths: int
     rays: int
     seconds: float
@@ -259,6 +260,7 @@ def _result(scene, total, stopped, run, method, state, target_mse, **settings):
     n = total.paths
     per_source = None if total.groups is None else total.groups.results(scene, total, target_mse)
     reflected_variance = total.reflected_variance()
+    irradiance_variance = total.irradiance_variance()
     measured_mse = total.let_go_of_squares()
     reflected = total.reflected()
     prediction = run.plan.prediction
@@ -267,6 +269,7 @@ def _result(scene, total, stopped, run, method, state, target_mse, **settings):
         reflected=reflected,
         reflected_variance=reflected_variance,
         irradiance=total.irradiance(),
+        irradiance_variance=irradiance_variance,
         paths=n,
         rays=total.rays,
         seconds=time.perf_counter() - run.start,

@@ -70,29 +70,61 @@ def _patch_means(patch_mesh, patches, colour):
 
 def _interpolated(points, face, source_corners, corner_values, triangle_face):
     """Values (n,k) at each point (n,3) of face ``face`` (n,) of a quantity given at the loop
-    triangles' corners (T,3,k): from the face's loop triangle the point lies in most (the
-    largest smallest barycentric), linear inside it."""
+    triangles' corners (T,3,k), linear inside the triangle the point lies in (``locate``)."""
+    return interpolate(*locate(points, face, source_corners, triangle_face), corner_values)
+
+
+def locate(points, face, source_corners, triangle_face):
+    """(triangle (n,), barycentric weights (n,3)) of each point (n,3) of face ``face`` (n,) among
+    that face's loop triangles (``source_corners`` (T,3,3), ``triangle_face`` (T,) in face order):
+    the one it lies in most (the largest smallest barycentric), so that a point on an edge
+    between two of them takes either, which agree there."""
     first = np.searchsorted(triangle_face, face, side="left")
     count = np.searchsorted(triangle_face, face, side="right") - first
     best = np.full(len(points), -np.inf)
-    values = np.zeros((len(points), corner_values.shape[2]))
+    triangle = np.minimum(first, max(len(triangle_face) - 1, 0))
+    weights = np.zeros((len(points), 3))
+    weights[:, 0] = 1.0
     for j in range(int(count.max()) if len(count) else 0):
-        t = first + np.minimum(j, count - 1)
-        w = _barycentric(points, source_corners[t])
-        inside = w.min(axis=1)
-        better = inside > best
-        best = np.where(better, inside, best)
-        values[better] = np.einsum("ni,nij->nj", w[better], corner_values[t[better]])
-    return values
+        rows = np.flatnonzero(count > j)  # only the points whose face has a j-th triangle
+        t = first[rows] + j
+        w = _barycentric(points[rows], source_corners[t])
+        inside = np.minimum(np.minimum(w[:, 0], w[:, 1]), w[:, 2])
+        better = inside > best[rows]
+        rows, t, w = rows[better], t[better], w[better]
+        best[rows] = inside[better]
+        triangle[rows] = t
+        weights[rows] = w
+    return triangle, weights
+
+
+def interpolate(triangle, weights, corner_values):
+    """(n,k) values at points located by ``locate``: linear in their triangle's corner values
+    (T,3,k), as Blender interpolates UVs and colour attributes."""
+    return np.einsum("ni,nij->nj", weights, corner_values[triangle])
+
+
+def corner_layers(points, corner_verts, corner_face, source_corners, triangle_face, layers, block=1 << 18):
+    """Each layer (T,3,k) of the source's loop-triangle corner values (UV maps, colour
+    attributes) at every corner of a patch mesh, as float32 (C,k): ``points`` (N,3) and
+    ``corner_verts`` (C,) the patch mesh's, ``corner_face`` (C,) the source face each corner's
+    patch lies on. A block of corners at a time: temporaries stay a few MB whatever the mesh."""
+    out = [np.empty((len(corner_verts), layer.shape[2]), np.float32) for layer in layers]
+    for start in range(0, len(corner_verts), block):
+        rows = slice(start, start + block)
+        located = locate(points[corner_verts[rows]], corner_face[rows], source_corners, triangle_face)
+        for target, layer in zip(out, layers):
+            target[rows] = interpolate(*located, layer)
+    return out
 
 
 def _barycentric(p, triangle):
     """(n,3) barycentric coordinates of points p (n,3) in triangles (n,3,3), projected onto
     each triangle's plane."""
-    a, b, c = triangle[:, 0], triangle[:, 1], triangle[:, 2]
-    v0, v1, v2 = b - a, c - a, p - a
-    d00, d01, d11 = (v0 * v0).sum(1), (v0 * v1).sum(1), (v1 * v1).sum(1)
-    d20, d21 = (v2 * v0).sum(1), (v2 * v1).sum(1)
+    a = triangle[:, 0]
+    v0, v1, v2 = triangle[:, 1] - a, triangle[:, 2] - a, p - a
+    dot = lambda x, y: np.einsum("ij,ij->i", x, y)  # noqa: E731 - (a sum over 3 columns: sum(axis=1) is slow)
+    d00, d01, d11, d20, d21 = dot(v0, v0), dot(v0, v1), dot(v1, v1), dot(v2, v0), dot(v2, v1)
     denominator = d00 * d11 - d01 * d01
     denominator = np.where(np.abs(denominator) > 0, denominator, 1.0)
     w1 = (d11 * d20 - d01 * d21) / denominator

@@ -54,6 +54,12 @@ class RadiositySettings(bpy.types.PropertyGroup):
     direct_light: _enum(options.DIRECT_LIGHT, _changed)
     stop_rule: _enum(options.STOP_RULE, _changed)
     output: _enum(options.OUTPUT)
+    show_patches: BoolProperty(
+        name="Flat patches (paper)",
+        description="Show each patch's own flat colour, the paper's view, instead of the textured or smooth picture: "
+        "the result materials switch at once, no new run (the solid view shows the active colour attribute)",
+        default=False,
+    )
     clamp_reflectivity: BoolProperty(
         name="Clamp bright colours",
         description="Use 0.99 for base colours above it (white is 1.0) instead of refusing colours of "

@@ -2,12 +2,15 @@
 (on the back of faces among them), left the scene and left undistributed, from the run's own
 power accounts (pipeline.light_account_text, shown after a run by the panel and the command line)."""
 import re
+from types import SimpleNamespace
 
 import numpy as np
 from boxes import box_scene, open_box_with_card
 
 from addon.core import solve
-from addon.bpy_free.pipeline import light_account_text
+from addon.bpy_free.pipeline import _smooth_light, light_account_text
+from addon.core.meshing import mesh_patches
+from addon.core.textures import patch_texture_average, sample_bilinear
 
 
 def _shares(text):
@@ -57,3 +60,110 @@ def test_a_target_missed_at_the_path_cap_is_said():
     assert target_missed_text("time_limit", 9.5, 5.0) == ""  # (the time limit has its own warning)
     assert target_missed_text("paths", 9.5, 0.0) == ""
     assert target_missed_text("paths", -1.0, 5.0) == ""
+
+
+# The textured output's light: what the result materials multiply the surface's own colour by
+# (_smooth_light(..., light=True), arriving_light), fed known arrays (no Monte Carlo).
+
+SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+SQUARE_TRIANGLES = np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def _plane(patch_size=0.25):
+    """A 1 x 1 m quad meshed into patches, as the pipeline's scene and the patch mesh."""
+    mesh = mesh_patches(SQUARE, np.array([4]), np.array([0, 1, 2, 3]), patch_size,
+                        face_triangles=SQUARE_TRIANGLES, triangle_face=np.zeros(2, int))
+    scene = SimpleNamespace(vertices=mesh.points, triangles=mesh.triangles, triangle_patch=mesh.triangle_patch,
+                            patch_count=mesh.patch_count, emission=np.zeros((mesh.patch_count, 3)))
+    return mesh, scene
+
+
+def _centres(mesh):
+    corners = mesh.points[mesh.triangles]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    centre = np.stack([np.bincount(mesh.triangle_patch, weights=corners[:, :, k].mean(axis=1) * area)
+                       for k in range(3)], axis=1)
+    return centre / np.bincount(mesh.triangle_patch, weights=area)[:, None]
+
+
+def _result(H, variance, reflectivity):
+    return SimpleNamespace(reflected=reflectivity * H, reflected_variance=reflectivity ** 2 * variance,
+                           irradiance=H, irradiance_variance=variance)
+
+
+def _fine_samples(n=32):
+    """Barycentric centres of the n x n sub-triangles of a triangle (equal areas)."""
+    points = []
+    for i in range(n):
+        for j in range(n - i):
+            points.append(((i + 1 / 3) / n, (j + 1 / 3) / n))
+            if i + j < n - 1:
+                points.append(((i + 2 / 3) / n, (j + 2 / 3) / n))
+    b = np.array(points)
+    return np.column_stack([1 - b.sum(axis=1), b])
+
+
+def test_texture_times_light_averages_to_each_patch_s_reflected_radiosity():
+    """A checker image (8 squares a metre, two a patch's side) on a floor of 0.25 m patches, the
+    light arriving a gradient with a bump: each patch's reflectivity is the texture's mean over
+    it (core.textures), its reflected radiosity b = rho H. The picture shows texture(x) x
+    light(x); over each patch its area mean is b within the texture-averaging error: the light's
+    mean over the patch is H to float error (the smoothing moves no light), so what is left is
+    the covariance of texture and light inside the patch, at most std(texture) x std(light)
+    (Cauchy-Schwarz), plus the 16-sample texture average's own error."""
+    mesh, scene = _plane()
+    c = _centres(mesh)
+    H = (1.0 + c[:, 0] + 0.5 * c[:, 1] + 2.0 * np.exp(-((c[:, 0] - 0.6) ** 2 + (c[:, 1] - 0.4) ** 2) / 0.05))[:, None]
+    H = H * np.array([1.0, 0.9, 0.8])
+    squares = (np.arange(64)[:, None] // 8 + np.arange(64)[None, :] // 8) % 2
+    image = np.where(squares[..., None] == 1, [0.8, 0.7, 0.6], [0.1, 0.1, 0.2])
+    corners = SQUARE[SQUARE_TRIANGLES]
+    uv = corners[:, :, :2]
+    identity = np.array([[1.0, 0, 0], [0, 1.0, 0]])
+    rho = patch_texture_average(mesh, np.arange(mesh.patch_count), corners, uv, np.zeros(2, int), image, identity)
+    variance = np.full_like(H, 1e-12)  # (known exactly: the noise filter keeps every patch's value)
+    scene.reflectivity = rho
+    _, light = _smooth_light(scene, _result(H, variance, rho), light=True)
+    w = _fine_samples()
+    points = np.einsum("si,tij->tsj", w, mesh.points[mesh.triangles])  # (T,S,3)
+    light_at = np.einsum("si,tic->tsc", w, light)
+    texture_at = sample_bilinear(image, points[..., :2].reshape(-1, 2)).reshape(light_at.shape)
+    area = 0.5 * np.linalg.norm(np.cross(*(mesh.points[mesh.triangles][:, k] - mesh.points[mesh.triangles][:, 0]
+                                           for k in (1, 2))), axis=1)
+    P = mesh.patch_count
+
+    def patch_mean(values):  # (T,S,3) -> (P,3), area-weighted
+        per_triangle = values.mean(axis=1) * area[:, None]
+        return np.stack([np.bincount(mesh.triangle_patch, weights=per_triangle[:, k], minlength=P)
+                         for k in range(3)], axis=1) / np.bincount(mesh.triangle_patch, weights=area)[:, None]
+
+    mean_light, mean_texture = patch_mean(light_at), patch_mean(texture_at)
+    shown = patch_mean(texture_at * light_at)
+    np.testing.assert_allclose(mean_light, H * np.ones(3), rtol=1e-9)  # the smoothing moves no light
+    spread = np.sqrt(patch_mean(texture_at ** 2) - mean_texture ** 2) * np.sqrt(
+        np.maximum(patch_mean(light_at ** 2) - mean_light ** 2, 0))
+    b = rho * H
+    error = np.abs(shown - b)
+    assert (error <= spread + np.abs(mean_texture - rho) * H + 1e-12).all()
+    # the light is not flat: the smooth light carries the gradient inside the patches
+    assert (np.ptp(light.reshape(-1, 3), axis=0) > 0.5).all()
+
+
+def test_black_patches_take_their_neighbours_light_and_leave_no_dark_rim():
+    """A white floor with a black stripe (rho = 0) across it, lit evenly (H = 1): the stripe's own
+    light estimate is 0 with a small variance (as where the two-way iteration's gathering gave a
+    black patch no sample of its direct light). The light shows nowhere on black, but its
+    corners are shared with the white patches beside it: it takes the neighbours' light, so the
+    white patches keep their even light up to the stripe (taken as it came, their corners there
+    fell to half the light)."""
+    mesh, scene = _plane()
+    c = _centres(mesh)
+    black = (c[:, 0] > 0.5) & (c[:, 0] < 0.75)
+    rho = np.where(black[:, None], 0.0, 0.7) * np.ones(3)
+    H = np.where(black[:, None], 0.0, 1.0) * np.ones(3)
+    variance = np.where(black[:, None], 1e-8, 1e-6) * np.ones(3)
+    scene.reflectivity = rho
+    _, light = _smooth_light(scene, _result(H, variance, rho), light=True)
+    white_triangles = ~black[mesh.triangle_patch]
+    np.testing.assert_allclose(light[white_triangles], 1.0, rtol=1e-6)
+    np.testing.assert_allclose(light[~white_triangles], 1.0, rtol=1e-6)

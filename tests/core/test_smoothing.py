@@ -386,3 +386,13 @@ def test_a_bright_patch_beside_dim_ones_never_pushes_a_corner_to_black():
     means = (corners.sum(axis=1) / 3 * surface.triangle_area[:, None])
     np.testing.assert_allclose(np.stack([np.bincount(TP, weights=means[:, c], minlength=P) for c in range(3)], 1)
                                / surface.patch_area[:, None], values, rtol=1e-9)
+
+
+def test_no_light_anywhere_filters_to_no_light():
+    """Every patch 0 with a zero variance (a scene whose light reaches no reflecting patch, such as a
+    glowing black floor beside a wall facing away): the filter gives 0s, not NaN (before, the
+    variance floor was 1e-12 of the largest value squared, 0 here, and 0 / 0 stopped the run)."""
+    points, quads, triangles, patch = _grid(4, 4, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    zeros = np.zeros((len(quads), 3))
+    out = smoothing.filter_noise(points, triangles, patch, zeros, zeros)
+    assert np.array_equal(out, zeros)

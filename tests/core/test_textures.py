@@ -2,7 +2,7 @@
 import numpy as np
 
 from addon.core.meshing import mesh_patches
-from addon.core.textures import SAMPLES, patch_texture_average, sample_bilinear
+from addon.core.textures import SAMPLES, corner_layers, patch_texture_average, sample_bilinear
 
 
 def _square(uv_scale=1.0):
@@ -63,3 +63,54 @@ def test_two_halves_of_an_image_colour_their_patches_and_repeat():
     assert (got[left, 0] > 0.7).all() and (got[left, 2] < 0.1).all()
     assert (got[~left, 2] > 0.7).all() and (got[~left, 0] < 0.1).all()
     assert sample_bilinear(image, np.array([[0.25, 0.5]]))[0, 0] == 0.8
+
+
+def test_corner_layers_carry_the_source_uv_and_colours_to_every_patch_corner():
+    """A quad whose two loop triangles carry UVs that no single affine map fits (the fourth
+    corner's UV is pulled in), and a colour attribute: every corner of the patch mesh takes,
+    from the triangle it lies in, the linear interpolation of that triangle's corners, so that
+    the result mesh shows the same texture at the same surface point as the source."""
+    vertices = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]], float)
+    triangles = np.array([[0, 1, 2], [0, 2, 3]])
+    corners = vertices[triangles]
+    uv_at = np.array([[0.1, 0.2], [0.9, 0.1], [0.7, 0.8], [0.3, 0.95]])  # (not affine in position)
+    colour_at = np.array([[1, 0, 0, 1], [0, 1, 0, 1], [0, 0, 1, 1], [1, 1, 1, 0.5]], np.float32)
+    mesh = mesh_patches(vertices, np.array([4]), np.array([0, 1, 2, 3]), 0.3,
+                        face_triangles=triangles, triangle_face=np.zeros(2, int))
+    corner_face = np.repeat(mesh.patch_face, mesh.face_sizes)
+    uv, colours = corner_layers(mesh.points, mesh.corner_verts, corner_face, corners, np.zeros(2, int),
+                                [uv_at[triangles].astype(np.float32), colour_at[triangles]], block=7)
+    assert uv.dtype == np.float32 and uv.shape == (len(mesh.corner_verts), 2) and colours.shape[1] == 4
+    p = mesh.points[mesh.corner_verts]
+    # the triangle each point lies in: (0,1,2) below the diagonal y = x / 2, (0,2,3) above it
+    upper = p[:, 1] > p[:, 0] / 2 + 1e-12
+    for inside, tri in ((~upper, triangles[0]), (upper, triangles[1])):
+        a, b, c = vertices[tri]
+        # barycentric weights of the points in that triangle, solved in the plane z = 0
+        M = np.column_stack([(b - a)[:2], (c - a)[:2]])
+        w12 = np.linalg.solve(M, (p[inside, :2] - a[:2]).T).T
+        w = np.column_stack([1 - w12.sum(axis=1), w12])
+        np.testing.assert_allclose(uv[inside], w @ uv_at[tri], atol=2e-6)
+        np.testing.assert_allclose(colours[inside], w @ colour_at[tri], atol=2e-6)
+    assert upper.any() and (~upper).any() and len(mesh.corner_verts) > 40
+
+
+def test_a_corner_on_a_face_edge_takes_that_face_s_uv_not_its_neighbour_s():
+    """Two faces sharing an edge with a UV seam between them (each its own island): the patch
+    corners on the shared edge take the UV of the face their patch lies on."""
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0]], float)
+    corner_verts = np.array([0, 1, 2, 3, 1, 4, 5, 2])
+    triangles = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]])
+    triangle_face = np.array([0, 0, 1, 1])
+    loop_uv = np.array([[0, 0], [0.5, 0], [0.5, 0.5], [0, 0.5], [0.6, 0.6], [1.1, 0.6], [1.1, 1.1], [0.6, 1.1]])
+    triangle_loops = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    mesh = mesh_patches(vertices, np.array([4, 4]), corner_verts, 0.5, face_triangles=triangles,
+                        triangle_face=triangle_face)
+    corner_face = np.repeat(mesh.patch_face, mesh.face_sizes)
+    (uv,) = corner_layers(mesh.points, mesh.corner_verts, corner_face, vertices[triangles], triangle_face,
+                          [loop_uv[triangle_loops].astype(np.float32)])
+    p = mesh.points[mesh.corner_verts]
+    on_edge = np.abs(p[:, 0] - 1.0) < 1e-12
+    expected = np.where(corner_face[:, None] == 0, 0.5 * p[:, :2], 0.6 + 0.5 * (p[:, :2] - [1, 0]))
+    np.testing.assert_allclose(uv, expected, atol=2e-6)
+    assert set(corner_face[on_edge]) == {0, 1}

@@ -149,7 +149,7 @@ def test_cli_failures_are_one_line_and_a_non_zero_status(tmp_path):
     (["--seed", "-5"], "--seed must be between 0 and 2.14748e+09; got -5"),
     (["--threads", "-1"], "--threads must be between 0 and 64; got -1"),
     (["--resolution", "0"], "--resolution must be between 16 and 16384 pixels; got 0"),
-    (["--colours", "stripes"], "--colours must be one of FACE, VERTEX, BOTH; got 'stripes'"),
+    (["--colours", "stripes"], "--colours must be one of TEXTURED, FACE, VERTEX, BOTH; got 'stripes'"),
     (["--no-such-option"], "unrecognized arguments: --no-such-option"),
     (["--error", "lots"], "argument --error: invalid float value: 'lots'"),
 ])

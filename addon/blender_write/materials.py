@@ -1,0 +1,206 @@
+"""Result materials that show each original material's own surface colour times the light the
+solve found arriving, plus its emission (bpy).
+
+A copy of the original material keeps only what drives its base colour and emission (image
+textures with their Mapping, UV Map and Texture Coordinate nodes, colour attributes, checkers,
+node groups), and shows
+
+    (base colour * scale + offset) * light + emission colour * strength
+
+through an Emission shader, ``light`` being a colour attribute of the result mesh (the smooth
+light arriving, H in B = E + rho H). The texture stays at its own resolution whatever the patch
+size; the patch's reflected radiosity is the area mean of (base colour x light) over it, up to
+how much the texture and the light vary together inside it. The user's material is never
+changed: a copy is made and cut down.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from ..blender_read.materials import _shader_node
+
+TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
+TEXTURED_SUFFIX = " Radiosity"
+IDENTITY = ((1.0, 1.0, 1.0), (0.0, 0.0, 0.0))  # (scale, offset): the base colour is the reflectivity
+# The panel's switch to the flat per-patch colours, read by every result material from the scene
+# (a View Layer attribute: looked up in the view layer, then the scene).
+FLAT_SWITCH = "radiosity.show_patches"
+
+# The shader's base colour socket, and its emission colour and strength sockets.
+_BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
+_EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
+             "ShaderNodeEmission": ("Color", "Strength")}
+
+
+def is_textured_material(material) -> bool:
+    return material is not None and TEXTURED_PROPERTY in material.keys()
+
+
+def can_copy(material):
+    """(True, None) where ``textured_material`` can show ``material``; (False, note) where it
+    cannot (a surface shader it does not know: the note says so); (False, None) for no
+    material or one without nodes, which the flat result material shows as they are."""
+    if material is None or material.node_tree is None:
+        return False, None
+    if bpy.app.version < (5, 0, 0) and not material.use_nodes:
+        return False, None
+    node = _shader_node(material)
+    if node is None or (node.bl_idname not in _BASE and node.bl_idname not in _EMISSION):
+        kind = "nothing" if node is None else f"'{node.name}' ({node.bl_idname})"
+        return False, (f"material '{material.name}': its surface is {kind}, not a Principled, Diffuse or Emission "
+                       "shader; its result shows the baked 'Radiosity' colours, without its textures")
+    return True, None
+
+
+def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY):
+    """A new material showing ``source``'s base colour * scale + offset (``terms``, RGB each)
+    times the colour attribute ``light_attribute``, plus its emission, or, where the panel's
+    flat switch is on, the colour attribute ``flat_attribute``; ``can_copy(source)`` must
+    hold. The copy is cut down to what drives that, and marked as ours."""
+    material = source.copy()
+    material.name = source.name + TEXTURED_SUFFIX
+    for key in list(material.keys()):  # (a copy carries the source's custom properties)
+        del material[key]
+    material[TEXTURED_PROPERTY] = source.name
+    if material.animation_data is not None:
+        material.animation_data_clear()
+    tree = material.node_tree
+    shader = tree.nodes[_shader_node(source).name]
+    nodes, links = tree.nodes, tree.links
+    x, y = shader.location.x + 300, shader.location.y
+    scale, offset = terms
+
+    surface = nodes.new("ShaderNodeVectorMath")  # base colour * scale + offset
+    surface.operation = "MULTIPLY_ADD"
+    surface.label = "Reflectivity"
+    surface.location = (x, y)
+    _feed(links, shader, _BASE.get(shader.bl_idname), surface.inputs[0], default=(0.0, 0.0, 0.0))
+    surface.inputs[1].default_value = tuple(float(v) for v in scale)
+    surface.inputs[2].default_value = tuple(float(v) for v in offset)
+
+    light = nodes.new("ShaderNodeAttribute")
+    light.attribute_type = "GEOMETRY"
+    light.attribute_name = light_attribute
+    light.location = (x, y - 250)
+    lit = nodes.new("ShaderNodeVectorMath")
+    lit.operation = "MULTIPLY"
+    lit.location = (x + 200, y)
+    links.new(surface.outputs[0], lit.inputs[0])
+    links.new(light.outputs["Color"], lit.inputs[1])
+    total = lit.outputs[0]
+
+    emitted = _emitted(tree, shader, (x, y - 450))
+    if emitted is not None:
+        added = nodes.new("ShaderNodeVectorMath")
+        added.operation = "ADD"
+        added.location = (x + 400, y)
+        links.new(total, added.inputs[0])
+        links.new(emitted, added.inputs[1])
+        total = added.outputs[0]
+
+    emission = emission_output(tree, total, flat_attribute, (x + 600, y))
+    output = nodes.new("ShaderNodeOutputMaterial")
+    output.location = (x + 1000, y)
+    output.target = "ALL"
+    links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    _keep_only_upstream(tree, output)
+    output.is_active_output = True
+    return material
+
+
+def _emitted(tree, shader, location):
+    """The shader's emission colour x strength (a socket: its own subtree where linked), or None
+    where it emits nothing."""
+    if shader.bl_idname not in _EMISSION:
+        return None
+    colour, strength = (shader.inputs[name] for name in _EMISSION[shader.bl_idname])
+    if not strength.is_linked and strength.default_value == 0:
+        return None
+    emitted = tree.nodes.new("ShaderNodeVectorMath")
+    emitted.operation = "SCALE"
+    emitted.label = "Emission"
+    emitted.location = location
+    _feed(tree.links, shader, colour.name, emitted.inputs[0], default=(0.0, 0.0, 0.0))
+    if strength.is_linked:
+        tree.links.new(strength.links[0].from_socket, emitted.inputs["Scale"])
+    else:
+        emitted.inputs["Scale"].default_value = float(strength.default_value)
+    return emitted.outputs[0]
+
+
+def emission_output(tree, colour, flat_attribute, location):
+    """An Emission shader of ``colour`` (a socket), or of the colour attribute ``flat_attribute``
+    where the scene's FLAT_SWITCH is on."""
+    nodes, links = tree.nodes, tree.links
+    x, y = location
+    switch = nodes.new("ShaderNodeAttribute")
+    switch.attribute_type = "VIEW_LAYER"
+    switch.attribute_name = FLAT_SWITCH
+    switch.label = "Flat patches (paper)"
+    switch.location = (x - 200, y + 250)
+    flat = nodes.new("ShaderNodeAttribute")
+    flat.attribute_type = "GEOMETRY"
+    flat.attribute_name = flat_attribute
+    flat.location = (x - 200, y - 250)
+    mix = nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.clamp_factor = True
+    mix.location = (x, y)
+    links.new(switch.outputs["Fac"], mix.inputs["Factor"])
+    links.new(colour, mix.inputs[6])  # (A, the colour inputs of the RGBA mode)
+    links.new(flat.outputs["Color"], mix.inputs[7])
+    emission = nodes.new("ShaderNodeEmission")
+    emission.location = (x + 200, y)
+    emission.inputs["Strength"].default_value = 1.0
+    links.new(mix.outputs[2], emission.inputs["Color"])
+    return emission
+
+
+def _feed(links, shader, socket_name, target, default):
+    """Link what drives the shader's ``socket_name`` into ``target``, or set its value."""
+    socket = shader.inputs.get(socket_name) if socket_name else None
+    if socket is not None and socket.is_linked:
+        links.new(socket.links[0].from_socket, target)
+    else:
+        value = tuple(socket.default_value)[:3] if socket is not None else default
+        target.default_value = tuple(float(v) for v in value)
+
+
+def _keep_only_upstream(tree, output):
+    """Remove every node that does not feed ``output`` (the original shaders, other outputs)."""
+    keep = {output.name}
+    stack = [output]
+    while stack:
+        node = stack.pop()
+        for socket in node.inputs:
+            for link in socket.links:
+                source = link.from_node
+                if source.name not in keep:
+                    keep.add(source.name)
+                    stack.append(source)
+    for node in [n for n in tree.nodes if n.name not in keep]:
+        tree.nodes.remove(node)
+
+
+def result_materials(slot_names, light_attribute, flat_attribute, terms, fallback, notes, made):
+    """The result material of each source slot: the textured copy of the named material
+    (made once a run, kept in ``made`` by name), or ``fallback`` where there is none or it
+    cannot be copied (``notes`` get a line for the latter, once)."""
+    out = []
+    for name in slot_names:
+        source = bpy.data.materials.get(name)
+        if name not in made:
+            ok, note = can_copy(source) if source is not None and not is_textured_material(source) else (False, None)
+            if note:
+                notes.append(note)
+            made[name] = (textured_material(source, light_attribute, flat_attribute, terms.get(name, IDENTITY))
+                          if ok else None)
+        out.append(made[name] or fallback)
+    return out
+
+
+def remove_unused_textured():
+    """Our textured copies that no object uses any more (a previous run's)."""
+    for material in [m for m in bpy.data.materials if is_textured_material(m) and m.users == 0]:
+        bpy.data.materials.remove(material)

@@ -1,0 +1,286 @@
+"""The textured output (the default): result meshes keep the sources' UV maps and colour
+attributes, and a copy of each material shows its own surface colour times the smooth light
+arriving, plus its emission; the flat per-patch view stays beside it."""
+import bpy
+import numpy as np
+import pytest
+
+from addon.bpy_free import options
+from addon.cli.preview import render_preview
+
+from ..blender_read.test_lights import _lamp
+from ..conftest import make_object, mesh_arrays, principled, read_colours, result_objects
+
+SQUARES = 16  # checker squares a metre: four a 0.25 m patch's side
+
+
+def _checker_image(name="Checker", size=128, light=(0.8, 0.8, 0.8), dark=(0.1, 0.1, 0.1)):
+    image = bpy.data.images.new(name, size, size, float_buffer=True)
+    cell = size // SQUARES
+    squares = (np.arange(size)[:, None] // cell + np.arange(size)[None, :] // cell) % 2
+    pixels = np.ones((size, size, 4), np.float32)
+    pixels[..., :3] = np.where(squares[..., None] == 1, light, dark)
+    image.pixels.foreach_set(pixels.ravel())
+    return image
+
+
+def _checker_floor(uv_maps=(("UVMap", (1.0, 1.0, 0.0, 0.0)),), active=None, render=None):
+    """A 1 x 1 m floor whose Principled base colour is a checker image read through its UV map
+    (each map: u = a x + c, v = b y + d), lit by a point lamp above."""
+    material = principled("Floor", (0.5, 0.5, 0.5))
+    tree = material.node_tree
+    texture = tree.nodes.new("ShaderNodeTexImage")
+    texture.image = _checker_image()
+    uv_node = tree.nodes.new("ShaderNodeUVMap")
+    uv_node.uv_map = uv_maps[0][0]
+    tree.links.new(uv_node.outputs["UV"], texture.inputs["Vector"])
+    tree.links.new(texture.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    floor = make_object("Floor", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)], [material])
+    corners = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], float)
+    for name, (a, b, c, d) in uv_maps:
+        layer = floor.data.uv_layers.new(name=name)
+        layer.data.foreach_set("uv", (corners * [a, b] + [c, d]).astype(np.float32).ravel())
+    if active:
+        floor.data.uv_layers.active = floor.data.uv_layers[active]
+    if render:
+        floor.data.uv_layers[render].active_render = True
+    floor.select_set(True)
+    _lamp("POINT", "Bulb", location=(0.5, 0.5, 1.0), energy=20.0, shadow_soft_size=0.0)
+    return floor, material
+
+
+def _solve(blender, patch_size=0.25, **settings):
+    s = blender.scene.radiosity
+    s.patch_size, s.target_error, s.threads = patch_size, 5.0, 1
+    for key, value in settings.items():
+        setattr(s, key, value)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    return {o["radiosity_source"]: o for o in result_objects()}
+
+
+def _material_state(material):
+    tree = material.node_tree
+    return (sorted((n.name, n.bl_idname) for n in tree.nodes),
+            sorted((l.from_node.name, l.from_socket.identifier, l.to_node.name, l.to_socket.identifier)
+                   for l in tree.links), material.name)
+
+
+def test_the_result_keeps_every_uv_map_and_colour_attribute_at_the_same_surface_points(blender):
+    """Two UV maps (the second active for editing, the first for render) and a colour attribute
+    on points, all affine in position: at every corner of the result (16 patches, 64 corners)
+    each map and the colours equal the source's at that point, under the same names, with the
+    same maps active."""
+    floor, _ = _checker_floor((("UVMap", (0.5, 0.5, 0.1, 0.2)), ("Detail", (3.0, 2.0, 0.0, 0.5))),
+                              active="Detail", render="UVMap")
+    paint = floor.data.color_attributes.new("Paint", "FLOAT_COLOR", "POINT")
+    co = np.array([v.co[:] for v in floor.data.vertices])
+    paint.data.foreach_set("color", np.column_stack([co[:, 0], co[:, 1], 0.5 + 0 * co[:, 0],
+                                                     np.ones(len(co))]).astype(np.float32).ravel())
+    mesh = _solve(blender)["Floor"].data
+    assert [l.name for l in mesh.uv_layers] == ["UVMap", "Detail"]
+    assert mesh.uv_layers.active.name == "Detail"
+    assert [l.name for l in mesh.uv_layers if l.active_render] == ["UVMap"]
+    points, _, corners = mesh_arrays(mesh)
+    xy = points[corners, :2].astype(np.float64)
+    assert len(corners) == 64
+    for name, (a, b, c, d) in (("UVMap", (0.5, 0.5, 0.1, 0.2)), ("Detail", (3.0, 2.0, 0.0, 0.5))):
+        uv = np.empty(len(corners) * 2, np.float32)
+        mesh.uv_layers[name].uv.foreach_get("vector", uv)
+        np.testing.assert_allclose(uv.reshape(-1, 2), xy * [a, b] + [c, d], atol=1e-5)
+    domain, colours = read_colours(mesh, "Paint")
+    assert domain == "CORNER"
+    np.testing.assert_allclose(colours[:, :3], np.column_stack([xy, np.full(len(xy), 0.5)]), atol=1e-5)
+    # what the solid view shows, and the render's default colours: the source's
+    assert mesh.color_attributes.active_color.name == "Radiosity"
+    assert mesh.color_attributes[mesh.color_attributes.render_color_index].name == "Paint"
+
+
+def test_a_checker_floor_s_result_material_reads_the_same_image_through_the_uv_map(blender):
+    """The result material is a copy of the floor's, cut down to what drives its base colour
+    (the same image through the same UV Map node), times the 'Radiosity Light' attribute, into an
+    Emission shader; the user's material is unchanged; a second run replaces our material
+    rather than piling another beside it, and the flat per-patch view stays as 'Radiosity
+    Patches'."""
+    floor, material = _checker_floor()
+    before = _material_state(material)
+    result = _solve(blender)["Floor"]
+    (ours,) = result.data.materials
+    assert ours.name == "Floor Radiosity" and ours is not material
+    tree = ours.node_tree
+    (texture,) = [n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage"]
+    assert texture.image == floor.data.materials[0].node_tree.nodes["Image Texture"].image
+    uv_node = texture.inputs["Vector"].links[0].from_node
+    assert uv_node.bl_idname == "ShaderNodeUVMap" and uv_node.uv_map == "UVMap" and "UVMap" in result.data.uv_layers
+    attributes = {(n.attribute_type, n.attribute_name) for n in tree.nodes if n.bl_idname == "ShaderNodeAttribute"}
+    assert attributes == {("GEOMETRY", "Radiosity Light"), ("GEOMETRY", "Radiosity Patches"),
+                          ("VIEW_LAYER", "radiosity.show_patches")}
+    output = tree.get_output_node("CYCLES")
+    assert output.inputs["Surface"].links[0].from_node.bl_idname == "ShaderNodeEmission"
+    assert not [n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"]
+    assert _material_state(material) == before
+    assert {"Radiosity", "Radiosity Patches", "Radiosity Light"} <= {a.name for a in result.data.color_attributes}
+    _solve(blender)
+    ours = [m for m in bpy.data.materials if "radiosity_textured_from" in m.keys()]
+    assert [m.name for m in ours] == ["Floor Radiosity"]
+    assert _material_state(material) == before
+
+
+def test_a_material_without_a_known_surface_shader_falls_back_with_a_note(blender, monkeypatch):
+    """A Glossy BSDF's result shows the baked colours ('Radiosity Result'), and a note says why."""
+    floor, _ = _checker_floor()
+    glossy = bpy.data.materials.new("Shiny")
+    tree = glossy.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    node = tree.nodes.new("ShaderNodeBsdfGlossy")
+    tree.links.new(node.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    block = make_object("Block", [(0.2, 0.2, 0.1), (0.4, 0.2, 0.1), (0.4, 0.4, 0.1), (0.2, 0.4, 0.1)],
+                        [(0, 1, 2, 3)], [glossy])
+    block.select_set(True)
+    outputs = []
+    from addon.ui import operators
+
+    monkeypatch.setattr(operators, "OUTPUT_LISTENER", outputs.append)
+    results = _solve(blender)
+    reports = outputs[0].notes  # (what the operator reports once the results are written)
+    assert [m.name for m in results["Block"].data.materials] == ["Radiosity Result"]
+    assert [m.name for m in results["Floor"].data.materials] == ["Floor Radiosity"]
+    assert any("'Shiny'" in r and "not a Principled" in r for r in reports), reports
+
+
+def test_above_the_smooth_limit_the_textures_take_each_patch_s_own_light(blender, monkeypatch):
+    """Past SMOOTH_MAX_PATCHES the light is written flat, one value a patch on the FACE domain
+    (16 bytes a patch), and the material still reads the texture: a note says so."""
+    monkeypatch.setattr(options, "SMOOTH_MAX_PATCHES", 4)
+    from addon.ui import operators
+
+    outputs = []
+    monkeypatch.setattr(operators, "OUTPUT_LISTENER", outputs.append)
+    _checker_floor()
+    mesh = _solve(blender)["Floor"].data
+    assert any(n.startswith("smooth colours left out at 16 patches (Textured makes them up to 4")
+               and "each patch's own light" in n for n in outputs[0].notes), outputs[0].notes
+    light = mesh.attributes["Radiosity Light"]
+    assert light.domain == "FACE" and len(light.data) == len(mesh.polygons) == 16
+    assert mesh.materials[0].name == "Floor Radiosity"
+    assert mesh.color_attributes["Radiosity"].domain == "CORNER"
+
+
+def _linear(srgb):
+    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+
+
+def _srgb(linear):
+    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+
+
+def _preview_centres(blender, tmp_path, name="preview.png"):
+    """The linear grey of the centre pixel of each checker square, (SQUARES, SQUARES), from the
+    preview rendered from above at 8 pixels a square."""
+    scene = blender.scene
+    if scene.camera is None:
+        data = bpy.data.cameras.new("Top")
+        data.type, data.ortho_scale = "ORTHO", 1.0
+        camera = bpy.data.objects.new("Top", data)
+        camera.location = (0.5, 0.5, 2.0)
+        scene.collection.objects.link(camera)
+        scene.camera = camera
+    scene.render.resolution_x = scene.render.resolution_y = 8 * SQUARES
+    scene.render.threads_mode, scene.render.threads = "FIXED", 1
+    light = np.empty(0)
+    for obj in result_objects():
+        attr = obj.data.attributes.get("Radiosity Light") or obj.data.color_attributes.get("Radiosity")
+        values = np.empty(len(attr.data) * 4, np.float32)
+        attr.data.foreach_get("color", values)
+        light = np.concatenate([light, values.reshape(-1, 4)[:, :3].ravel()])
+    exposure = float(np.log2(0.9 / (0.8 * light.max())))  # the brightest square just below white
+    path = str(tmp_path / name)
+    render_preview(path, [o for o in bpy.data.objects if o.name == "Floor"], width=8 * SQUARES, samples=4,
+                   exposure=exposure)
+    image = bpy.data.images.load(path)
+    pixels = np.empty(len(image.pixels), np.float32)
+    image.pixels.foreach_get(pixels)
+    grey = _linear(pixels.reshape(8 * SQUARES, 8 * SQUARES, 4)[..., :3].mean(axis=2))
+    return grey[4::8, 4::8]
+
+
+def _neighbour_ratios(centres):
+    """Brighter over darker of every two neighbouring squares."""
+    pairs = [(centres[:, 1:], centres[:, :-1]), (centres[1:], centres[:-1])]
+    return np.concatenate([(np.maximum(a, b) / np.minimum(a, b)).ravel() for a, b in pairs])
+
+
+def test_the_preview_shows_the_texture_at_pixel_resolution(blender, tmp_path):
+    """A checker floor (light 0.8, dark 0.1; four squares a patch's side) under a point lamp,
+    solved with the default output and previewed from above at 8 pixels a square: neighbouring
+    squares' centre pixels differ by the texture's 8:1 (the light changes by a few percent
+    over a square's width, the 8-bit picture by under 1%: within 15%); a flat or smooth patch
+    colour cannot show squares smaller than the patch (ratio near 1)."""
+    _checker_floor()
+    _solve(blender)
+    centres = _preview_centres(blender, tmp_path)
+    assert centres.min() > 0
+    assert 8 / 1.15 < np.median(_neighbour_ratios(centres)) < 8 * 1.15, np.median(_neighbour_ratios(centres))
+
+
+def test_the_flat_switch_shows_the_paper_s_patches_without_a_new_run(blender, tmp_path):
+    """The panel's 'Flat patches (paper)' switches every result material to the flat per-patch
+    colours: the 4 x 4 squares inside each 0.25 m patch come out equal (within the 8-bit
+    picture's dithered rounding: two steps), and the checker shows again once it is off."""
+    _checker_floor()
+    _solve(blender)
+    blender.scene.radiosity.show_patches = True
+    flat = _preview_centres(blender, tmp_path, "flat.png")
+    codes = np.round(255 * _srgb(flat))  # (the 8-bit picture's own steps, dithered by one each way)
+    per_patch = codes.reshape(4, 4, 4, 4).transpose(0, 2, 1, 3).reshape(16, 16)
+    assert (np.ptp(per_patch, axis=1) <= 2).all()
+    blender.scene.radiosity.show_patches = False
+    textured = _preview_centres(blender, tmp_path, "textured.png")
+    assert np.median(_neighbour_ratios(textured)) > 8 / 1.15
+
+
+def test_an_emitter_s_result_shows_its_emission_colour_times_strength(blender, tmp_path):
+    """A black glowing floor (Principled, base 0, emission (0.5, 0.25, 0.1) x 2): its result
+    material adds emission colour x strength to the (black) surface times the light, so the
+    preview shows (1.0, 0.5, 0.2) (the 8-bit picture: within 1.5% and one dithered step). The
+    wall beside it faces away, so no patch reflects any light (before, filtering that noise-free
+    zero light divided 0 by 0 and the run failed)."""
+    material = principled("Glow", (0.0, 0.0, 0.0), (0.5, 0.25, 0.1), 2.0)
+    floor = make_object("Floor", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)], [material])
+    floor.select_set(True)
+    make_object("Wall", [(0, 1, 0), (1, 1, 0), (1, 1, 1), (0, 1, 1)], [(0, 3, 2, 1)],
+                [principled("White", (0.7, 0.7, 0.7))]).select_set(True)
+    _solve(blender)
+    scene = blender.scene
+    data = bpy.data.cameras.new("Top")
+    data.type, data.ortho_scale = "ORTHO", 0.5
+    camera = bpy.data.objects.new("Top", data)
+    camera.location = (0.5, 0.4, 2.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    scene.render.threads_mode, scene.render.threads = "FIXED", 1
+    path = str(tmp_path / "glow.png")
+    render_preview(path, [o for o in bpy.data.objects if o.name in ("Floor", "Wall")], width=16, samples=4)
+    image = bpy.data.images.load(path)
+    pixels = np.empty(len(image.pixels), np.float32)
+    image.pixels.foreach_get(pixels)
+    rgb = _linear(pixels.reshape(-1, 4)[:, :3]).mean(axis=0)
+    np.testing.assert_allclose(rgb, [1.0, 0.5, 0.2], rtol=0.015, atol=2e-3)
+
+
+def test_a_source_attribute_named_as_ours_is_left_out_with_a_note(blender, monkeypatch):
+    """A floor carrying its own colour attribute 'Radiosity' (a copy of an old result, say): the
+    result's 'Radiosity' is the solve's light, not the copy, and a note says the source's was
+    left out."""
+    from addon.ui import operators
+
+    floor, _ = _checker_floor()
+    paint = floor.data.color_attributes.new("Radiosity", "FLOAT_COLOR", "POINT")
+    paint.data.foreach_set("color", np.tile([0.0, 1.0, 0.0, 1.0], len(floor.data.vertices)).astype(np.float32))
+    outputs = []
+    monkeypatch.setattr(operators, "OUTPUT_LISTENER", outputs.append)
+    mesh = _solve(blender)["Floor"].data
+    assert [a.name for a in mesh.color_attributes].count("Radiosity") == 1
+    _, values = read_colours(mesh, "Radiosity")
+    assert not np.allclose(values[:, :3], [0.0, 1.0, 0.0])  # (the grey floor's light, not the green copy)
+    assert any("'Floor': its colour attribute 'Radiosity'" in n for n in outputs[0].notes), outputs[0].notes
