@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..blender_read.materials import _shader_node
+from ..blender_read.materials import _shader_node, surface_terms
 
 TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
 TEXTURED_SUFFIX = " Radiosity"
@@ -194,8 +194,9 @@ def result_materials(slot_names, light_attribute, flat_attribute, terms, fallbac
             ok, note = can_copy(source) if source is not None and not is_textured_material(source) else (False, None)
             if note:
                 notes.append(note)
-            made[name] = (textured_material(source, light_attribute, flat_attribute, terms.get(name, IDENTITY))
-                          if ok else None)
+            # the surface as the camera sees it (a Principled BSDF's specular layer beside its base colour)
+            made[name] = (textured_material(source, light_attribute, flat_attribute,
+                                            terms.get(name) or surface_terms(source)) if ok else None)
         out.append(made[name] or fallback)
     return out
 

@@ -284,3 +284,19 @@ def test_a_source_attribute_named_as_ours_is_left_out_with_a_note(blender, monke
     _, values = read_colours(mesh, "Radiosity")
     assert not np.allclose(values[:, :3], [0.0, 1.0, 0.0])  # (the grey floor's light, not the green copy)
     assert any("'Floor': its colour attribute 'Radiosity'" in n for n in outputs[0].notes), outputs[0].notes
+
+
+def test_a_principled_floor_s_copy_shows_its_specular_light_beside_its_base_colour(blender):
+    """A Principled BSDF at its default specular level returns more than its base colour (its
+    specular layer's light): the copy's reflectivity node carries the material's own terms as
+    the camera sees them, not the identity (which showed the floor darker than its render)."""
+    from addon.blender_read.materials import surface_terms
+
+    floor, material = _checker_floor()
+    material.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.5
+    copy = _solve(blender)["Floor"].data.materials[0]
+    node = next(n for n in copy.node_tree.nodes if n.label == "Reflectivity")
+    scale, offset = surface_terms(material)
+    assert np.allclose(node.inputs[1].default_value[:], scale, atol=1e-6)
+    assert np.allclose(node.inputs[2].default_value[:], offset, atol=1e-6)
+    assert min(offset) > 0.01 and max(scale) < 1.0
