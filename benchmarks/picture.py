@@ -127,6 +127,15 @@ def cycles_image(samples, denoise=False, seed=0, unbiased=True):
 
 # --------------------------------------------------------------------------- the reference
 
+LIGHT_SETTINGS = ("type", "energy", "color", "shadow_soft_size", "use_soft_falloff", "use_shadow", "normalize", "exposure",
+                  "use_temperature", "temperature", "spot_size", "spot_blend", "shape", "size", "size_y", "spread", "angle")
+CAMERA_SETTINGS = ("type", "lens", "sensor_width", "sensor_height", "sensor_fit", "shift_x", "shift_y", "clip_start", "clip_end")
+
+
+def _plain(value):
+    return tuple(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
+
+
 def scene_fingerprint():
     """A hash of what the render sees: every object's evaluated vertices and transform, its
     materials' input values, lamps' and camera's settings, the world and the packed images."""
@@ -148,19 +157,16 @@ def scene_fingerprint():
                     for socket in node.inputs:
                         value = getattr(socket, "default_value", None)
                         h.update(repr(tuple(value) if hasattr(value, "__len__") else value).encode())
-        elif obj.type in ("LIGHT", "CAMERA"):
-            data = obj.data
-            h.update(repr([(p.identifier, getattr(data, p.identifier)) for p in data.bl_rna.properties
-                           if p.type in ("FLOAT", "INT", "BOOLEAN", "ENUM") and not getattr(p, "is_array", False)]).encode())
-            if obj.type == "LIGHT":
-                h.update(repr(tuple(data.color)).encode())
+        elif obj.type in ("LIGHT", "CAMERA"):  # (settings by name: an ID's own numbers, session_uid, change per run)
+            names = LIGHT_SETTINGS if obj.type == "LIGHT" else CAMERA_SETTINGS
+            h.update(repr([_plain(getattr(obj.data, n, None)) for n in names]).encode())
     world = bpy.context.scene.world
     if world is not None:
         for node in world.node_tree.nodes:
             for socket in node.inputs:
                 value = getattr(socket, "default_value", None)
                 h.update(repr(tuple(value) if hasattr(value, "__len__") else value).encode())
-    for image in bpy.data.images:
+    for image in sorted((i for i in bpy.data.images if i.packed_file is not None), key=lambda i: i.name):
         pixels = np.empty(len(image.pixels), np.float32)
         image.pixels.foreach_get(pixels)
         h.update(pixels.tobytes())
@@ -197,6 +203,7 @@ def source_objects():
 
     from addon.blender_write.results import is_result_object
 
+    bpy.context.view_layer.update()  # (a view layer lists its objects once updated)
     objects = []
     for obj in bpy.context.view_layer.objects:
         take = obj.type == "MESH" and not is_result_object(obj)
@@ -207,7 +214,7 @@ def source_objects():
     return sorted(objects, key=lambda o: o.name)
 
 
-def product(colours, seed=0):
+def product(colours, seed=0, width=interior_scene.RESOLUTION[0]):
     """The product as the command line runs it: the panel's settings at their defaults but the
     error target (2%), the output mode ``colours`` and the seed; the operator, then the preview
     (its settings, rendered to EXR). (image, solve seconds, preview seconds, statistics)."""
@@ -232,7 +239,7 @@ def product(colours, seed=0):
     if "FINISHED" not in result:
         raise RuntimeError(f"the solve failed: {operators.LAST_ERROR}")
     show_results(True)
-    changes = preview.preview_settings(scene, sources, interior_scene.RESOLUTION[0], PREVIEW_SAMPLES, 0.0)
+    changes = preview.preview_settings(scene, sources, width, PREVIEW_SAMPLES, 0.0)
     hidden = [(o, o.hide_render) for o in sources]
     try:
         for o, _ in hidden:
@@ -586,7 +593,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--colours", default=options.OUTPUT.default, help="the product's output mode (the panel's Colours)")
     parser.add_argument("--scenes", nargs="+", default=list(interior_scene.SCENES), choices=list(interior_scene.SCENES))
-    parser.add_argument("--reference-samples", type=int, default=1024)
+    parser.add_argument("--reference-samples", type=int, default=256)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=RESULTS / "picture.md", help="the report; its PNGs beside it")
     parser.add_argument("--diffuse", action="store_true", help="Specular IOR Level 0 on every material (a Lambertian "

@@ -136,3 +136,12 @@ def test_the_pixel_map_sees_the_objects_cycles_renders(interior):
     assert np.allclose(image[..., 0], np.rint(image[..., 0]), atol=1e-3)  # linear values, as emitted
     assert (rendered == cast).mean() > 0.97
     assert len(np.unique(cast)) >= 5
+
+
+def test_the_reference_cache_key_is_the_scenes_content_not_the_session():
+    first = (interior_scene.build("window_room"), picture.scene_fingerprint())[1]
+    bpy.data.objects.new("unrelated", None)  # other IDs made before the build shift their session numbers
+    again = (interior_scene.build("window_room"), picture.scene_fingerprint())[1]
+    assert again == first
+    bpy.data.objects["Ceiling Lamp"].data.energy *= 1.01
+    assert picture.scene_fingerprint() != first
