@@ -405,40 +405,48 @@ LABELS = {"product": "the product's preview", "cycles_denoised": "Cycles, same w
           "cycles_default_denoised": "Cycles' default light paths (4 diffuse bounces, clamp 10), same time, OpenImageDenoise"}
 
 
-def samples_for(seconds, kind, log=print):
-    """The sample count whose render takes ``seconds``: a line through renders of 1 and 4
-    samples (kind's settings, timed now), at least 1."""
-    denoise, unbiased = CYCLES_KINDS[kind]
-    walls = [cycles_image(n, denoise, 7, unbiased)[1] for n in (1, 4)]
-    per_sample = max((walls[1] - walls[0]) / 3, 1e-3)
-    n = max(1, int(round(1 + (seconds - walls[0]) / per_sample)))
-    log(f"  {kind}: 1 sample {walls[0]:.2f} s, 4 samples {walls[1]:.2f} s -> {n} samples for {seconds:.2f} s")
-    return n
+def time_lines(log=print):
+    """Each Cycles kind's render time as a line through renders of 1 and 4 samples, timed now:
+    kind -> (seconds of 1 sample, seconds a further sample)."""
+    lines = {}
+    for kind, (denoise, unbiased) in CYCLES_KINDS.items():
+        walls = [cycles_image(n, denoise, 7, unbiased)[1] for n in (1, 4)]
+        lines[kind] = (walls[0], max((walls[1] - walls[0]) / 3, 1e-3))
+        log(f"  {kind}: 1 sample {walls[0]:.2f} s, 4 samples {walls[1]:.2f} s")
+    return lines
 
 
-def measure(name, colours, reference_samples, rounds, diffuse=False, log=print):
-    """One room: the reference, the product and Cycles at its wall time in alternating rounds,
-    the pixel map; a dict of images, times and statistics. ``diffuse``: every material's
-    Specular IOR Level set to 0 first (Lambertian surfaces, the product's own model)."""
+def samples_for(seconds, line, most):
+    """The sample count whose render takes ``seconds`` on a time line, at least 1, at most ``most``."""
+    first, per_sample = line
+    return int(min(max(1, round(1 + (seconds - first) / per_sample)), most))
+
+
+def measure(name, colours, reference_samples, rounds, diffuse=False, warm_up=True, most=1 << 16, log=print):
+    """One room: the reference, then rounds alternating the product and Cycles at its wall time
+    (the sample counts from the first round's product time on lines timed before; at most
+    ``most``), and the pixel map; a dict of images, times and statistics. ``diffuse``: every
+    material's Specular IOR Level set to 0 first (Lambertian surfaces, the product's own model)."""
     info = interior_scene.build(name)
     if diffuse:
         interior_scene.make_diffuse()
     first, second, reference_seconds = reference(name, reference_samples, log)
-    log(f"{name}: warming up (a solve and a render, not counted)")
-    product(colours, seed=99)
+    if warm_up:
+        log(f"{name}: warming up (a solve and a render, not counted)")
+        product(colours, seed=99)
     cycles_image(1)
-    image, solve, shown, stats = product(colours, seed=98)
-    target = solve + shown
-    samples = {kind: samples_for(target, kind, log) for kind in CYCLES_KINDS}
+    lines = time_lines(log)
+    samples = {}
     runs = {"product": [], **{kind: [] for kind in CYCLES_KINDS}}
     for k in range(rounds):  # alternating, so that a busy moment of the machine hits every side
         image, solve, shown, stats = product(colours, seed=k)
         runs["product"].append({"image": image, "seconds": solve + shown, "solve": solve, "preview": shown, "stats": stats})
+        samples = samples or {kind: samples_for(solve + shown, line, most) for kind, line in lines.items()}
         for kind, (denoise, unbiased) in CYCLES_KINDS.items():
             image, wall = cycles_image(samples[kind], denoise, k, unbiased)
             runs[kind].append({"image": image, "seconds": wall})
         log(f"{name}: round {k}: product {solve:.2f} + {shown:.2f} s, " + ", ".join(
-            f"{kind} {runs[kind][-1]['seconds']:.2f} s" for kind in CYCLES_KINDS))
+            f"{kind} {samples[kind]} samples {runs[kind][-1]['seconds']:.2f} s" for kind in CYCLES_KINDS))
     from addon.blender_write.results import previous_results
 
     pixels = pixel_map(info, previous_results())  # the last round's patches (same patch layout every round)
@@ -529,7 +537,7 @@ def room_section(name, a, colours, png):
              f"{100 * a['reference_error']:.1f}% mean absolute, {100 * a['reference_rms']:.1f}% RMS. "
              f"{a['surface_pixels']:,} surface pixels of 320 x 240. The product: {stats['patches']:,} patches of "
              f"{stats['patch_size']:.3g} m, {stats['method']}, its error estimate {stats['error']:.2f}% (target 2%), "
-             f"output `{colours}`.", "",
+             f"output `{colours}`. {len(p['errors'])} round(s), seeds 0-{len(p['errors']) - 1}.", "",
              "| image | mean abs. error (rounds: mean; range) | RMS error, the reference's noise taken out | wall time (median) | samples |",
              "|---|---|---|---|---|"]
     for kind, label in LABELS.items():
@@ -568,7 +576,6 @@ def room_section(name, a, colours, png):
 
 
 def report(rooms, colours, command, loads, out):
-    rounds = len(next(iter(rooms.values()))[0]["kinds"]["product"]["errors"])
     lines = ["# The picture: the product's preview against Cycles, pixel by pixel", "",
              f"`{command}`: two interiors built by `benchmarks/interior_scene.py` (default Principled materials, walls "
              "of overlapping boxes, packed image textures on the floors, furniture, a subdivided ball or stool), the "
@@ -578,7 +585,7 @@ def report(rooms, colours, command, loads, out):
              "reference's mean luminance there: the mean absolute error against the reference as it is (its own noise "
              "included), and the RMS error with the reference's own variance (from its two halves) subtracted: an "
              "estimate of the error against the truth. Cycles at the product's wall time: sample counts from a timing "
-             f"line fitted in the same run, then {rounds} rounds (seeds 0-{rounds - 1}) alternating with the product. "
+             "line fitted in the same run (capped where the product takes minutes), then rounds alternating with the product. "
              f"Cycles and the product on {THREADS} threads each, under `nice`, on a 2-core machine shared with other "
              f"work (load average {loads[0]:.1f} at the start, {loads[1]:.1f} at the end): times compare within a "
              "room's rounds, not across runs.", ""]
@@ -599,7 +606,17 @@ def main(argv=None):
     parser.add_argument("--diffuse", action="store_true", help="Specular IOR Level 0 on every material (a Lambertian "
                         "control: what is left of the brightness gap is not the specular layer)")
     parser.add_argument("--quick", action="store_true", help="64 reference samples, one round, into out/picture_quick/")
+    parser.add_argument("--no-warm-up", dest="warm_up", action="store_false", help="no solve before the measured ones "
+                        "(where a solve takes minutes its start-up is noise)")
+    parser.add_argument("--max-samples", type=int, default=1 << 16, help="cap on Cycles' samples at the product's time "
+                        "(where the product takes minutes; the report gives the times measured)")
+    parser.add_argument("--replot", action="store_true", help="rewrite the report from its .json (rooms measured so far)")
     args = parser.parse_args(argv)
+    if args.replot:
+        saved = json.loads((args.out.parent / f"{args.out.stem}.json").read_text())
+        rooms = {name: (a, f"{args.out.stem}_{name}.png") for name, a in saved.items() if name != "run"}
+        report(rooms, saved["run"]["colours"], saved["run"]["command"], saved["run"]["loads"], args.out)
+        return
     try:
         colours = options.OUTPUT.check(args.colours)
     except ValueError as exc:
@@ -611,12 +628,13 @@ def main(argv=None):
     loads = [os.getloadavg()[0]]
     rooms = {}
     for name in args.scenes:
-        m = measure(name, colours, args.reference_samples, args.rounds, args.diffuse)
+        m = measure(name, colours, args.reference_samples, args.rounds, args.diffuse, args.warm_up, args.max_samples)
         a, ref, mask = analyse(m)
         png = f"{args.out.stem}_{name}.png"
         side_by_side(m, ref, mask, a["exposure"], args.out.parent / png)
         rooms[name] = (a, png)
-        (args.out.parent / f"{args.out.stem}.json").write_text(json.dumps({n: r[0] for n, r in rooms.items()}, indent=1))
+        run = {"colours": colours, "command": command.strip(), "loads": [loads[0], os.getloadavg()[0]]}
+        (args.out.parent / f"{args.out.stem}.json").write_text(json.dumps({"run": run, **{n: r[0] for n, r in rooms.items()}}, indent=1))
     loads.append(os.getloadavg()[0])
     report(rooms, colours, command.strip(), loads, args.out)
     print(args.out.read_text())
