@@ -30,9 +30,10 @@ values (a signed estimator's noise) count as 0, non-finite ones are refused.
 Noise (``filter_noise``). Each patch's value is re-estimated from itself and its neighbours
 (patches sharing a welded point, normals within the crease angle) by a weighted least-squares
 plane in the patch's tangent plane (value = a + gradient . offset of the neighbour's centroid;
-the estimate is a). Weights are precision times k = max(0, 1 - d^2 / c^2), d^2 the largest over
-channels of (v_p - v_q)^2 / (s_p^2 + s_q^2), s^2 the measured (batch-means) variances: neighbours
-within their noise of the patch are used, neighbours more than c standard errors away (real
+the estimate is a). Weights are k over the neighbourhood's mean variance (where hits are sparse
+a patch's own grows with its value: weighting by it took light away), k = max(0, 1 - d^2 /
+c^2), d^2 the largest over channels of (v_p - v_q)^2 / (s_p^2 + s_q^2), s^2 the measured
+(batch-means) variances: neighbours within their noise of the patch are used, neighbours more than c standard errors away (real
 detail: a shadow edge, a hot spot) are not used at all, and a linear gradient across the
 neighbourhood (light falling off along a wall) is fitted, not averaged away. Bias bound: the
 result is clipped to v_p +- c * max over used neighbours of sqrt(s_p^2 + s_q^2), per channel, so
@@ -264,13 +265,14 @@ class Surface:
         k = np.where(known[p] & known[q], np.clip(1.0 - d2 / cutoff ** 2, 0.0, None), 0.0)
         del d2
         used = k > 0
+        pooled = _pooled(var, known, p, q)
         p, q, k = p[used], q[used], k[used]
         limit = np.zeros_like(values)
         if len(p):
             runs = run_starts(p)
             for c in range(values.shape[1]):
                 limit[p[runs], c] = cutoff * np.sqrt(np.maximum.reduceat(var[p, c] + var[q, c], runs))
-        fitted = self._local_fit(values, var, known, p, q, k)
+        fitted = self._local_fit(values, pooled, known, p, q, k)
         out = np.clip(fitted, values - limit, values + limit)
         out = np.where(values >= 0, np.maximum(out, 0.0), out)
         return (out, limit) if bound else out
@@ -311,6 +313,16 @@ class Surface:
             fit = np.linalg.solve(np.where(solvable[:, None, None], M, np.eye(3)), rhs[:, :, None])[:, 0, 0]
             out[:, c] = np.where(solvable, fit, values[:, c])
         return out
+
+
+def _pooled(var, known, p, q):
+    """Each patch's variance as the mean of its own and its known neighbours', for the fit's weights
+    (a patch's own grows with its value where hits are sparse: weighting by it lost light)."""
+    P = len(var)
+    finite = np.where(known[:, None], var, 0.0)
+    count = np.bincount(p, weights=known[q].astype(np.float64), minlength=P) + known
+    pooled = np.stack([np.bincount(p, weights=finite[q, c], minlength=P) + finite[:, c] for c in range(var.shape[1])], axis=1)
+    return np.where(known[:, None], pooled / np.maximum(count, 1)[:, None], var)
 
 
 def _unmeasured_from_neighbours(var, p, q):

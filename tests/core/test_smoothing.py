@@ -396,3 +396,26 @@ def test_no_light_anywhere_filters_to_no_light():
     zeros = np.zeros((len(quads), 3))
     out = smoothing.filter_noise(points, triangles, patch, zeros, zeros)
     assert np.array_equal(out, zeros)
+
+
+@pytest.mark.parametrize("hits", [0.3, 1.0])
+def test_the_noise_filter_moves_no_light_where_hits_are_sparse(hits):
+    """Patches of equal light, each estimated from 8 batches of Poisson hits (``hits`` a batch on
+    average) with the batch-means variance, as a solve measures it (it grows with the value):
+    over seeds the filtered patches' mean equals the raw estimates' mean (both unbiased) within
+    Z standard errors of the paired difference."""
+    a = _grid(30, 30, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    V, T, TP = _combine(a)
+    surface = smoothing.Surface.of(V, T, TP)
+    shift, raw_error, filtered_error = [], [], []
+    for seed in range(SEEDS):
+        batches = np.random.default_rng(400 + seed).poisson(hits, (900, 8)) / hits
+        x = batches.mean(axis=1)[:, None] * [1.0, 1.0, 1.0]
+        var = (batches.var(axis=1, ddof=1) / 8)[:, None] * [1.0, 1.0, 1.0]
+        out = surface.filter_noise(x, var)
+        shift.append(out.mean() - x.mean())
+        raw_error.append(((x - 1.0) ** 2).mean())
+        filtered_error.append(((out - 1.0) ** 2).mean())
+    shift = np.array(shift)
+    assert abs(shift.mean()) < Z * shift.std(ddof=1) / np.sqrt(SEEDS), shift
+    assert np.mean(filtered_error) < np.mean(raw_error)
