@@ -50,6 +50,9 @@ EDGE_SHARE = 1e-3
 # Probe directions (angle from the normal, azimuth), in degrees: the normal first (most points
 # see the room straight ahead), the near-grazing ones last, which escape under a one-sided plane.
 PROBES = ((0.0, 0.0),) + tuple((85.0, 23.0 + 120.0 * k) for k in range(3))
+# A point is buried when this many probes find it inside: one probe may cross two coincident faces
+# (flush boxes: a wall's bottom on the floor slab's) where only one of them is counted.
+VOTES = len(PROBES) - 1
 # Surfaces a probe is traced through at most.
 MAX_CROSSINGS = 64
 # Rays per tracer call.
@@ -218,13 +221,14 @@ def cell_uniforms(cell, bins, cells=CELLS):
 
 
 def buried_points(geometry, patch, u_triangle, u0, u1):
-    """(n,) bool: whether each point of ``patch`` at the given uniforms is buried: along every
-    probe, it is inside more solids than it enters (:func:`windings` >= 1). Probes are cast only
-    for points still undecided."""
+    """(n,) bool: whether each point of ``patch`` at the given uniforms is buried: along VOTES of
+    the probes it is inside more solids than it enters (:func:`windings` >= 1). Probes are cast
+    only for points still undecided."""
     g = geometry
     origins = patch_point_rows(g, patch, u_triangle.astype(np.float64), u0.astype(np.float32), u1.astype(np.float32))
     normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
     tangent, bitangent = _tangents(normal)
+    inside, outside = np.zeros(patch.size, np.int32), np.zeros(patch.size, np.int32)
     undecided = np.arange(patch.size)
     for theta, phi in PROBES:
         if undecided.size == 0:
@@ -232,11 +236,11 @@ def buried_points(geometry, patch, u_triangle, u0, u1):
         s, c = np.sin(np.radians(theta)), np.cos(np.radians(theta))
         rows = (slice(None), undecided)
         d = c * normal[rows] + s * (np.cos(np.radians(phi)) * tangent[rows] + np.sin(np.radians(phi)) * bitangent[rows])
-        inside = windings(g, origins[rows].astype(np.float64), d, patch.take(undecided)) >= 1
-        undecided = undecided[inside]
-    out = np.zeros(patch.size, bool)
-    out[undecided] = True
-    return out
+        says = windings(g, origins[rows].astype(np.float64), d, patch.take(undecided)) >= 1
+        inside[undecided[says]] += 1
+        outside[undecided[~says]] += 1
+        undecided = undecided[(inside[undecided] < VOTES) & (outside[undecided] <= len(PROBES) - VOTES)]
+    return inside >= VOTES
 
 
 def windings(g, origins, directions, patch):

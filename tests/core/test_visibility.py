@@ -280,3 +280,25 @@ def test_triangle_patches_of_overlapping_slabs_are_exact():
         r = solve(scene, paths=400_000, seed=9, **settings)
         z = (r.radiosity[inner2, 0] - E / (1 - R)) / np.sqrt(r.reflected_variance[inner2, 0])
         assert np.abs(z).max() < 6.0, (settings, np.abs(z).max())
+
+
+def test_a_patch_inside_a_box_flush_with_another_is_still_buried():
+    """Artists' boxes are often flush: a wall box standing on the floor slab shares the slab's
+    bottom plane, and a probe that leaves through both coincident faces counts only one of them.
+    A one-sided strip (normal down, like a ceiling's edge) runs 0.25 into the wall box
+    [0,1] x [0,1] x [0,1], whose bottom is flush with the slab [0,3] x [0,1] x [0,0.2]: its first
+    patch is half buried (f = 1/2 exactly, on a cell line), the others whole. Before, the normal
+    probe (down, out through the flush bottoms) said 'outside' and the patch kept its buried half."""
+    wall = solid_box((0, 0, 0), (1, 1, 1), (2, 2, 2))
+    slab = solid_box((0, 0, 0), (3, 1, 0.2), (6, 2, 1))
+    n = 4  # the strip: x from 0.75 to 2.75 in patches of 0.5, facing down at z = 0.8
+    strip = (np.column_stack([0.75 + 0.5 * np.arange(n), np.full(n, 0.25), np.full(n, 0.8)]),
+             np.tile([0.0, 0.5, 0.0], (n, 1)), np.tile([0.5, 0.0, 0.0], (n, 1)))
+    origin = np.concatenate([wall[0], slab[0], strip[0]])
+    u = np.concatenate([wall[1], slab[1], strip[1]])
+    v = np.concatenate([wall[2], slab[2], strip[2]])
+    assert np.allclose(np.cross(strip[1], strip[2]), [0, 0, -0.25])
+    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
+    g = build_geometry(vertices, triangles, triangle_patch, origin.shape[0])
+    f = g.buried.visible_fraction(origin.shape[0])
+    np.testing.assert_array_equal(f[-n:], [0.5, 1.0, 1.0, 1.0])
