@@ -19,12 +19,13 @@ panel's automatic size, fine):
   continuous reference of ``cycles_comparison`` (a direct solve on 4x finer patches,
   extrapolated), which checks the Cycles reference;
 - ``lamp_room``: the closed Cornell box lit only by a point light and a 0.3 m area light
-  (suite.py's), patches 0.1, 0.05 (automatic) and 0.025 m;
+  (suite.py's), patches 0.1 and 0.05 m (automatic; the finest here: a 0.025 m reference would take
+  Cycles over an hour on a shared machine);
 - ``open_sun_world``: suite.py's open floor, red wall and block under a sun and a uniform sky,
   patches 0.25, 0.125 and 0.0625 m (automatic: 0.1 m).
 
-Reference: Cycles' COMBINED bake of the fine patches (1 thread, 16 or 64 pixels a patch, two
-seeds), averaged onto the coarser patches that contain them. Its own noise (a patch's variance of
+Reference: Cycles' COMBINED bake of the finest patches (1 thread, 16 pixels a patch, two
+seeds of 128 samples a pixel, 96 in the lamp room and the open scene), averaged onto the coarser patches that contain them. Its own noise (a patch's variance of
 the two bakes' mean is a quarter of their squared difference) is subtracted from each measured
 mean square and stated.
 
@@ -71,6 +72,7 @@ FINE_TARGET = 2.0  # the fine patches' target, times TARGET (the walk's time gro
 SEEDS = (1,)
 LEVEL = 0.01
 SAMPLES = 128  # a reference bake's samples a pixel (two bakes)
+REFERENCE_SAMPLES = {"lamp_room": 96, "open_sun_world": 96}  # where fewer (the machine's time)
 # (method, estimator) configurations; Jacobi takes no exit point
 CONFIGS = {"walk_finite": ("walk", "finite"), "walk_biased": ("walk", "biased_infinite"),
            "two_way": ("two_way", "finite"), "auto": ("auto", "finite"), "jacobi": ("jacobi", "finite")}
@@ -126,13 +128,14 @@ def open_quads(k):
 def open_sun_world(k):
     corners, R = open_quads(k)
     lights = [("SUN", {"energy": 3.0, "angle": math.radians(8)}, (0, 0, 3), (math.radians(35), 0, math.radians(20)))]
-    return Spec(corners, R, np.zeros_like(R), lights=lights, world=((0.3, 0.35, 0.4), 1.0), block=8)
+    return Spec(corners, R, np.zeros_like(R), lights=lights, world=((0.3, 0.35, 0.4), 1.0), block=4)
 
 
 # scene: (spec maker, [(label, argument, patch edge m)] coarse to fine; the last is the reference's)
 SCENES = {
     "empty_room": (empty_room, [("coarse", 10, 0.1), ("automatic", 20, 0.05), ("fine", 40, 0.025)]),
-    "lamp_room": (lamp_room, [("coarse", 10, 0.1), ("automatic", 20, 0.05), ("fine", 40, 0.025)]),
+    # (its 0.025 m reference, 11,616 patches, would take Cycles over an hour on a shared machine)
+    "lamp_room": (lamp_room, [("coarse", 10, 0.1), ("automatic", 20, 0.05)]),
     "open_sun_world": (open_sun_world, [("coarse", 1, 0.25), ("automatic", 2, 0.125), ("fine", 4, 0.0625)]),
 }
 
@@ -196,12 +199,15 @@ def bake_reference(name, samples, log=print):
 def references(names, samples=SAMPLES, recompute=False, log=print):
     stored = dict(np.load(REFERENCE_FILE)) if REFERENCE_FILE.exists() else {}
     for name in names:
-        if f"{name}_a" in stored and not recompute and int(stored[f"{name}_samples"]) == samples:
+        n = min(samples, REFERENCE_SAMPLES.get(name, samples))
+        if f"{name}_a" in stored and not recompute and int(stored[f"{name}_samples"]) == n:
             continue
-        a, b, seconds = bake_reference(name, samples, log)
-        stored.update({f"{name}_a": a, f"{name}_b": b, f"{name}_samples": np.array(samples), f"{name}_seconds": np.array(seconds)})
-        RESULTS.mkdir(parents=True, exist_ok=True)
-        np.savez(REFERENCE_FILE, **stored)
+        a, b, seconds = bake_reference(name, n, log)
+        made = {f"{name}_a": a, f"{name}_b": b, f"{name}_samples": np.array(n), f"{name}_seconds": np.array(seconds)}
+        stored.update(made)
+        REFERENCE_FILE.parent.mkdir(parents=True, exist_ok=True)
+        # (read again first: another run may have stored another scene meanwhile)
+        np.savez(REFERENCE_FILE, **({**dict(np.load(REFERENCE_FILE)), **made} if REFERENCE_FILE.exists() else stored))
     return stored
 
 
@@ -219,12 +225,38 @@ def ours(config, exit_point, target, seed):
     objects, _ = read_selection(bpy.context)
     settings = pipeline.SolveSettings(relative_rms=target, patch_size=1e6, seed=seed, threads=2,
                                       exit_point=exit_point, method=method, estimator=estimator, output="FACE")
+    cpu = time.process_time()
     out = pipeline.run_solve(objects, settings)
+    cpu = time.process_time() - cpu
     face = out.patches.meshes[0].patch_face
     B, variance = np.zeros_like(out.result.radiosity), np.zeros_like(out.result.radiosity)
     B[face], variance[face] = out.result.radiosity, out.result.reflected_variance
     r = out.result
-    return B, variance, r.seconds, int(r.paths), r.method, float(r.measured_mse / r.predicted_mse)
+    return B, variance, r.seconds, int(r.paths), r.method, float(r.measured_mse / r.predicted_mse), cpu
+
+
+# Configurations left out at a patch size (the walk's time to a target grows with the patches;
+# the biased estimator's exits behave as the finite one's at the coarser sizes), and whether
+# Automatic shares the two-way iteration's runs where it takes it (set for the later scenes).
+SKIPPED = {}
+CPU_CLOCK = False  # time the runs by the process's CPU seconds (steadier on a shared machine) instead of wall
+SHARE_AUTOMATIC = False
+
+
+def automatic_choice(target):
+    """The method Automatic takes for the selected scene at this target (pipeline.method_for)."""
+    import bpy
+
+    from addon.blender_read.selection import read_selection
+    from addon.bpy_free import pipeline
+    from addon.bpy_free.patches import make_patches
+    from addon.bpy_free.scene_notes import scene_and_notes
+
+    objects, _ = read_selection(bpy.context)
+    scene, _ = scene_and_notes(make_patches(objects, 1e6))
+    settings = pipeline.SolveSettings(relative_rms=target, patch_size=1e6, method="auto")
+    _, mse = pipeline.prediction_for(scene, settings)
+    return pipeline.method_for(scene, settings, mse).method
 
 
 def measure_level(name, label, argument, edge, stored, target, seeds, log=print):
@@ -241,6 +273,7 @@ def measure_level(name, label, argument, edge, stored, target, seeds, log=print)
     lit = measured & (ref > LIT * ref[measured].max())
     ref_noise = float(np.mean(0.25 * (a - b)[lit] ** 2 / ref[lit] ** 2))
     row = {"scene": name, "level": label, "edge": edge, "patches": P, "lit": int(lit.sum()), "target": target,
+           "clock": "cpu" if CPU_CLOCK else "wall",
            "reference_noise": math.sqrt(ref_noise), "runs": {}}
     if name == "empty_room" and argument == 10:
         from benchmarks.cycles_comparison import references as exact
@@ -249,17 +282,25 @@ def measure_level(name, label, argument, edge, stored, target, seeds, log=print)
         row["cycles_vs_exact"] = float(np.sqrt(np.mean(((ref - continuous) / continuous)[lit] ** 2)))
         row["cycles_vs_exact_noise"] = math.sqrt(ref_noise)
     build(spec)
+    chosen = automatic_choice(target)
     for c, config in enumerate(CONFIGS):
+        if config in SKIPPED.get(label, ()):
+            continue
+        if config == "auto" and SHARE_AUTOMATIC and chosen == "two_way" and "two_way/hit" in row["runs"]:
+            # Automatic runs the two-way iteration here: its runs are that one's (same settings and seed)
+            row["runs"].update({f"auto/{e}": dict(row["runs"][f"two_way/{e}"], config="auto", shared=True) for e in EXITS})
+            continue
         exits = ("random",) if config == "jacobi" else EXITS
         runs = {e: [] for e in exits}
         for seed in seeds:
             order = exits if (seed + c) % 2 else exits[::-1]  # alternate which exit runs first
             for exit_point in order:
-                B, variance, t, paths, ran, formula = ours(config, exit_point, target, seed)
+                B, variance, t, paths, ran, formula, cpu = ours(config, exit_point, target, seed)
                 grey = B.mean(axis=1)
                 square = float(np.mean(((grey - ref) / ref)[lit] ** 2))
                 noise = float(np.mean(variance.mean(axis=1)[lit] / ref[lit] ** 2))
-                runs[exit_point].append({"seed": seed, "seconds": t, "paths": paths, "method": ran, "formula": formula,
+                runs[exit_point].append({"seed": seed, "wall": t, "seconds": cpu if CPU_CLOCK else t, "paths": paths,
+                                         "method": ran, "formula": formula,
                                          "square": square, "noise": noise,
                                          "ratio": float(grey[lit].sum() / ref[lit].sum())})
         for exit_point, rs in runs.items():
@@ -303,11 +344,13 @@ def plot(rows, path):
             colour = f"C{c}"
             for exit_point, style in (("random", "--"), ("hit", "-")):
                 key = f"{config}/{exit_point}"
-                if not all(key in r["runs"] for r in these):
+                have = [r for r in these if key in r["runs"]]
+                if not have:
                     continue
-                axes[0][k].plot(edges, [100 * r["runs"][key]["at_equal"] for r in these], style, marker="o", color=colour,
+                x = [r["edge"] for r in have]
+                axes[0][k].plot(x, [100 * r["runs"][key]["at_equal"] for r in have], style, marker="o", color=colour,
                                 label=f"{LABELS[config]}, {exit_point}")
-                axes[1][k].plot(edges, [100 * r["runs"][key]["bias"] for r in these], style, marker="o", color=colour)
+                axes[1][k].plot(x, [100 * r["runs"][key]["bias"] for r in have], style, marker="o", color=colour)
         axes[0][k].set_title(f"{name}: error against Cycles at equal time", fontsize=9)
         axes[1][k].set_title(f"{name}: bias (what the noise does not explain)", fontsize=9)
         for ax in (axes[0][k], axes[1][k]):
@@ -345,14 +388,15 @@ def crossing(random, hit):
 def report(rows, meta, out):
     lines = ["# Exit points against Cycles at equal time", "", f"`{meta['command']}`", "",
              f"Machine: 2 cores shared with other work (other helpers' runs), under `nice`; {meta['when']}; "
-             f"run took {meta['minutes']:.1f} min. Our runs to a {meta['target']:.0%} error target ({FINE_TARGET * meta['target']:.0%} on the fine patches), seed {meta['seeds']}.", "",
+             f"run took {meta['minutes']:.1f} min. Our runs to the error target of each row (the panel's measure), seed {meta['seeds']}.", "",
              (__doc__.split("\n\n", 2)[2]).strip(), ""]
     for r in rows:
         if "cycles_vs_exact" in r:
             lines += [f"Check of the Cycles reference: in `empty_room` at 0.1 m it differs from the exact continuous "
                       f"solution by {r['cycles_vs_exact']:.3%} per patch, its own noise being {r['cycles_vs_exact_noise']:.3%}.", ""]
     lines += ["## Error against Cycles at equal time (per-patch relative RMS, reference noise subtracted)", "",
-              "Each cell: random exit / hit exit, at the median run time T of the row; **bold** the smaller. "
+              "Each cell: random exit / hit exit, at the median run time T of the row (wall seconds of the solve, or "
+              "CPU seconds of the whole pipeline run, steadier on a shared machine); **bold** the smaller. "
               "Jacobi takes no exit point (random only).", "",
               "| scene | patches | edge m | target | T s | ref. noise | " + " | ".join(LABELS[c] for c in CONFIGS) + " |",
               "|---|---:|---:|---:|---:|---:|" + "---|" * len(CONFIGS)]
@@ -360,13 +404,16 @@ def report(rows, meta, out):
         cells = []
         for c in CONFIGS:
             ra, hi = r["runs"].get(f"{c}/random"), r["runs"].get(f"{c}/hit")
+            if ra is None:
+                cells.append("-")
+                continue
             if hi is None:
                 cells.append(f"{ra['at_equal']:.2%}")
                 continue
             x, y = f"{ra['at_equal']:.2%}", f"{hi['at_equal']:.2%}"
             cells.append(f"**{x}** / {y}" if ra["at_equal"] < hi["at_equal"] else f"{x} / **{y}**")
         lines.append(f"| {r['scene']} | {r['patches']:,} | {r['edge']:g} ({r['level']}) | {r.get('target', meta['target']):.0%} | "
-                     f"{r['equal_seconds']:.2f} | "
+                     f"{r['equal_seconds']:.2f} {r.get('clock', 'wall')} | "
                      f"{r['reference_noise']:.2%} | "
                      + " | ".join(cells) + " |")
     lines += ["", "## Split, at each run's own time: noise of ours (batch means) and bias (random / hit)", "",
@@ -377,6 +424,9 @@ def report(rows, meta, out):
         for c in CONFIGS:
             ra, hi = r["runs"].get(f"{c}/random"), r["runs"].get(f"{c}/hit")
             pair = [x for x in (ra, hi) if x is not None]
+            if not pair:
+                cells.append("- | -")
+                continue
             cells.append(" / ".join(f"{x['noise']:.2%}" for x in pair) + " | " + " / ".join(f"{x['bias']:.2%}" for x in pair))
         lines.append(f"| {r['scene']} | {r['edge']:g} | " + " | ".join(cells) + " |")
     lines += ["", "## Where the random exit is ahead", "",
@@ -393,6 +443,9 @@ def report(rows, meta, out):
         for c in CONFIGS:
             if c == "jacobi":
                 continue
+            if f"{c}/hit" not in r["runs"]:
+                cells.append("-")
+                continue
             cross, loose = crossing(r["runs"][f"{c}/random"], r["runs"][f"{c}/hit"])
             cells.append(f"{cross} ({loose:.2f})")
         lines.append(f"| {r['scene']} | {r['edge']:g} | " + " | ".join(cells) + " |")
@@ -404,10 +457,14 @@ def report(rows, meta, out):
     for r in rows:
         cells = []
         for c in ("walk_finite", "walk_biased"):
+            if f"{c}/hit" not in r["runs"]:
+                cells.append("-")
+                continue
             ra, hi = r["runs"][f"{c}/random"], r["runs"][f"{c}/hit"]
             cells.append(f"{hi['noise'] ** 2 * hi['paths'] / (ra['noise'] ** 2 * ra['paths']):.3f}")
         for c in ("walk_finite", "walk_biased"):
-            cells.append(", ".join(f"{r['runs'][f'{c}/{e}'].get('formula', math.nan):.2f}" for e in EXITS))
+            cells.append(", ".join(f"{r['runs'][f'{c}/{e}'].get('formula', math.nan):.2f}" for e in EXITS
+                                   if f"{c}/{e}" in r["runs"]) or "-")
         lines.append(f"| {r['scene']} | {r['edge']:g} | " + " | ".join(cells) + " |")
     lines += ["", f"## Seconds to {LEVEL:.0%} per patch against Cycles (random / hit; never: the bias alone is above it)", "",
               "| scene | edge m | " + " | ".join(LABELS[c] for c in CONFIGS) + " |", "|---|---:|" + "---:|" * len(CONFIGS)]
@@ -417,7 +474,8 @@ def report(rows, meta, out):
         return "never" if not math.isfinite(t) else f"{t:.2f}"
 
     for r in rows:
-        cells = [" / ".join(secs(r["runs"][k]) for k in (f"{c}/random", f"{c}/hit") if k in r["runs"]) for c in CONFIGS]
+        cells = [" / ".join(secs(r["runs"][k]) for k in (f"{c}/random", f"{c}/hit") if k in r["runs"]) or "-"
+                 for c in CONFIGS]
         lines.append(f"| {r['scene']} | {r['edge']:g} | " + " | ".join(cells) + " |")
     lines += ["", "## Runs", "", "| scene | edge m | configuration | exit | method ran | solve s | paths | error | ours / Cycles (lit sum) |",
               "|---|---:|---|---|---|---:|---:|---:|---:|"]
@@ -438,6 +496,8 @@ def main(argv=None):
     p.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     p.add_argument("--target", type=float, default=TARGET, help="error target of our runs (fraction)")
     p.add_argument("--replot", type=Path)
+    p.add_argument("--lean", action="store_true", help="Automatic shares the two-way runs where it takes them; "
+                   "no biased walk or Jacobi on the fine patches; runs timed by CPU seconds")
     args = p.parse_args(argv)
     if args.replot:
         data = json.loads(args.replot.read_text())
@@ -450,6 +510,12 @@ def main(argv=None):
     if args.quick:
         REFERENCE_FILE = ROOT / "out" / "exits_reference.npz"
         REFERENCE_FILE.parent.mkdir(exist_ok=True)
+    if args.lean:
+        global SHARE_AUTOMATIC
+        SHARE_AUTOMATIC = True
+        SKIPPED["fine"] = ("walk_biased", "jacobi")
+        global CPU_CLOCK
+        CPU_CLOCK = True
     stored = references(args.scenes, samples, args.recompute_references)
     if args.references:
         return
@@ -467,6 +533,8 @@ def main(argv=None):
             meta = {"command": "python -m benchmarks.exits" + (" --quick" if args.quick else ""),
                     "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "target": target, "seeds": list(seeds),
                     "minutes": minutes + (time.perf_counter() - started) / 60}
+            if out.with_suffix(".json").exists():  # (read again: another run may have stored other scenes)
+                earlier = [r for r in json.loads(out.with_suffix(".json").read_text())["rows"] if r["scene"] not in args.scenes]
             every = sorted(earlier + rows, key=lambda r: list(SCENES).index(r["scene"]))
             out.with_suffix(".json").write_text(json.dumps({"rows": every, "meta": meta}, indent=1))
     rows = every

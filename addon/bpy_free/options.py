@@ -125,11 +125,11 @@ PATCH_SIZE = Number("patch_size", "--patch-size", 0.0, 1e-4, None, "Patch size",
                     "selection's largest extent)", zero_means="automatic")
 EXIT_POINT = Choice("exit_point", "--exit-point", "hit", (
     ("hit", "Hit point", "The next ray leaves from the point that was hit: each patch converges to the continuous "
-     "light averaged over it, what a render shows; closer to Cycles at equal time for every method measured"),
+     "light averaged over it, what a render shows; as close to Cycles or closer at equal time for every method measured"),
     ("random", "Random (paper)", "The next ray leaves from a random point of the hit patch (the paper's discrete "
      "method): each patch converges to the radiosity system of flat patches, which differs from the continuous "
-     "light by a discretization error the error estimate does not show (about 1% a patch at the automatic size "
-     "in the rooms measured)"),
+     "light by a discretization error the error estimate does not show (up to about 2% a patch in the scenes "
+     "measured, less on smaller patches)"),
 ), "Exit point", "Where a ray leaves the patch it hit: the hit point converges to the continuous light "
    "averaged over each patch, the random point (the paper's) to the flat-patch system")
 SAMPLING = Choice("sampling", "--sampling", "independent", (
