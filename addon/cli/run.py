@@ -241,13 +241,17 @@ def release_solve_memory():
     trim.give_back()
 
 
+# What the error reached and the target are: the noise of the patch values, not their discretization.
+ERROR_COVERS = "the patch values' noise, not the flat patches' discretization"
+
+
 def summary(scene_name, settings) -> str:
     """The run in one line, with the error reached against the target (both relative RMS)."""
     error = settings.last_relative_error
     target = settings.last_target_error
     reached = "error unknown" if error < 0 else f"error {error:.2f}%"
     if target > 0 and error >= 0:
-        reached += f" of a {target:g}% target ({error / target * 100:.0f}% of it)"
+        reached += f" of a {target:g}% target ({error / target * 100:.0f}% of it; {ERROR_COVERS})"
     return (f"{scene_name}: {settings.last_patches:,} patches, {settings.last_paths:,} paths, "
             f"{settings.last_rays:,} rays, {settings.last_seconds:.2f} s ({settings.last_estimator}), mean path length "
             f"{settings.last_mean_path_length:.2f}, {reached}, stopped by {settings.last_stopped}")

@@ -330,7 +330,9 @@ EXPLANATIONS = {
             "it will end at; meshing included. During the run the time left follows its measured error",
     "paths": "The paths (and the rays they trace) the run is expected to end at: with 'Stop at: Measured error', "
              "where its error estimate meets the target (in whole batches, at least 8); else the paper's formula "
-             "(2) (finite) or (3) (biased infinite) for the target, or the paths given",
+             "(2) (finite) or (3) (biased infinite) for the target, or the paths given. The paper derives the "
+             "formulas for its discrete method (exit point Random); with the hit point the same paths give about "
+             "the same noise (benchmarks/results/exits.md)",
     "method": "How the light is carried: the paper's random walks, or the two-way iteration (beyond the paper). "
               "Automatic takes the two-way iteration where each patch gets enough of its rays to pay, else the walks",
     "patches": "Selected objects get results; the other visible objects (Rest of the scene) block and "
@@ -345,7 +347,9 @@ EXPLANATIONS = {
     "sources": "The light sources that take part and each one's share of the emitted power (Phi_T): "
                "emissive faces of the selection, lights that render (selected or not) and the world",
     "target": "The error target as the paper's mean square error: the relative RMS error times the "
-              "scene's mean reflected radiosity, squared",
+              "scene's mean reflected radiosity, squared. It is the noise of the patch values; how a flat patch "
+              "differs from the continuous light across it (and, with exit point Random, the discrete method's "
+              "own error) is not in it",
 }
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import addon
-from addon.bpy_free.options import METHOD, STOP_RULE
+from addon.bpy_free.options import EXIT_POINT, METHOD, STOP_RULE
 from addon.ui import estimate
 from addon.bpy_free import pipeline
 from addon.blender_read.materials import material_colours, transport_terms
@@ -94,6 +94,7 @@ def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1, **solve_options
     target = relative_rms_to_mse(predict(scene), relative_rms)
     solve_options.setdefault("stop_rule", STOP_RULE.default)  # the extension's defaults
     solve_options.setdefault("method", METHOD.default)
+    solve_options.setdefault("exit_point", EXIT_POINT.default)
     result = solve(scene, "finite", target_mse=target, seed=seed, threads=threads, **solve_options)
     return names, meshes, c, result
 

@@ -332,7 +332,9 @@ def test_progress_line_and_summary_speak_of_the_target():
                                last_rays=300, last_seconds=1.0, last_mean_path_length=3.0, last_stopped="target",
                                last_estimator="two-way iteration, direct light gathered")
     line = summary("box", settings)
-    assert "error 4.50% of a 5% target (90% of it)" in line and "(two-way iteration, direct light gathered)" in line
+    assert "error 4.50% of a 5% target (90% of it; " in line and "(two-way iteration, direct light gathered)" in line
+    # what the error covers, said where it is read
+    assert "the patch values' noise, not the flat patches' discretization" in line
 
 
 # ---------------------------------------------------------------------------------------------
