@@ -50,6 +50,13 @@ def parser():
     return p
 
 
+def given_options(argv):
+    """The names of the settings the command line gives (``--error 2``, ``--error=2``, ``--no-x``)."""
+    flags = {a.split("=", 1)[0] for a in argv if a.startswith("--")}
+    return {o.name for o in options.SETTINGS
+            if o.flag in flags or (isinstance(o, options.Flag) and "--no-" + o.flag[2:] in flags)}
+
+
 def _literal(text):
     """A help text as argparse prints it: its own % signs doubled (argparse %-formats help)."""
     return text.replace("%", "%%")

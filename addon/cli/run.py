@@ -12,7 +12,7 @@ import time
 
 from ..bpy_free import options
 from . import preview, scenes
-from .arguments import checked, parser
+from .arguments import checked, given_options, parser
 from .interrupt import Interrupt, Interrupted
 from .messages import fail, one_line
 from .progress import ProgressLine
@@ -28,7 +28,9 @@ class Refused(Exception):
 
 
 def main(argv=None):
-    args = parser().parse_args(sys.argv[1:] if argv is None else argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parser().parse_args(argv)
+    args.given = given_options(argv)
     try:
         args = checked(args)
     except ValueError as exc:
@@ -101,9 +103,9 @@ def _open_scene(args, names):
     own_scene = not (args.open or args.current)  # built here, not the user's
     if own_scene:
         if scene_name == "cornell":  # the one Cornell box: sample_scenes/cornell_box.py
-            scenes.build_sample_scene("cornell_box")
+            _, args.scene_settings = scenes.build_sample_scene("cornell_box")
         elif scene_name in scenes.sample_scene_names():
-            scenes.build_sample_scene(scene_name)
+            _, args.scene_settings = scenes.build_sample_scene(scene_name)
         else:
             raise Refused(f"unknown scene {scene_name!r}; choose from: {', '.join(names)}")
     return scene_name, own_scene
@@ -132,6 +134,9 @@ def _settings(args, scene_name, own_scene):
     settings = bpy.context.scene.radiosity
     if own_scene and scene_name in scenes.sample_scene_names() and not args.patch_size:
         args.patch_size = 1e6  # sample scenes come meshed as in the paper: keep their patches
+    for name, value in getattr(args, "scene_settings", {}).items():  # a sample's own, where no option says otherwise
+        if name not in args.given:
+            setattr(args, name, value)
     for option in options.SETTINGS:
         setattr(settings, option.name, getattr(args, option.name))
     return settings

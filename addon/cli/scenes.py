@@ -29,7 +29,8 @@ def ensure_registered():
 
 
 def build_sample_scene(name):
-    """Objects for a sample_scenes scene (one object per part, one quad per patch), selected."""
+    """Objects for a sample_scenes scene (one object per part, one quad per patch), selected, and
+    the settings the scene brings for its own picture ({option name: value})."""
     import bpy
     import sample_scenes
     from sample_scenes.blender import to_blender
@@ -50,5 +51,5 @@ def build_sample_scene(name):
     for obj in objects:
         obj.select_set(True)
     bpy.context.view_layer.objects.active = objects[0]
-    return objects
+    return objects, dict(sample.metadata.get("settings") or {})
 
