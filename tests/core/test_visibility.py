@@ -302,3 +302,25 @@ def test_a_patch_inside_a_box_flush_with_another_is_still_buried():
     g = build_geometry(vertices, triangles, triangle_patch, origin.shape[0])
     f = g.buried.visible_fraction(origin.shape[0])
     np.testing.assert_array_equal(f[-n:], [0.5, 1.0, 1.0, 1.0])
+
+
+@pytest.mark.parametrize("method", ["walk", "two_way"])
+def test_per_source_results_of_an_overlapping_room_add_up_to_its_solve(method):
+    """Buried parts and per-source results together: two groups of emitting inner patches (two
+    emittances) in the slab room: the groups' results add up to the solve's total, and that total
+    agrees with a solve without per-source results within their joint measured noise."""
+    def emission(inner):
+        e = np.where(inner, E, 0.0)
+        e[np.flatnonzero(inner)[::2]] = 2 * E
+        return e
+
+    scene = slab_scene(R, emission)[0]
+    plain = solve(scene, paths=40_000, seed=3, method=method, exit_point="hit")
+    split = solve(scene, paths=40_000, seed=3, method=method, exit_point="hit", per_source=True)
+    assert split.per_source.count == 2
+    np.testing.assert_allclose(split.per_source.radiosity.sum(axis=0), split.radiosity, rtol=1e-9, atol=1e-12)
+    joint = np.sqrt(split.reflected_variance + plain.reflected_variance)
+    lit = joint > 0
+    z = (split.radiosity - plain.radiosity)[lit] / joint[lit]
+    assert min(split.chunks, plain.chunks) >= 16  # t with >= 15 degrees of freedom: P(max |t| > 6) small
+    assert np.abs(z).max() < 6, np.abs(z).max()
