@@ -65,7 +65,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 REFERENCE_FILE = RESULTS / "exits_reference.npz"
 
 from benchmarks.cycles_comparison import quads as rectangle_quads, room_rectangles  # noqa: E402
-from benchmarks.suite import LIT, Spec  # noqa: E402
+from benchmarks.suite import LIT, Spec, face_values  # noqa: E402
 
 TARGET = 0.01
 FINE_TARGET = 2.0  # the fine patches' target, times TARGET (the walk's time grows with the patches)
@@ -228,9 +228,7 @@ def ours(config, exit_point, target, seed):
     cpu = time.process_time()
     out = pipeline.run_solve(objects, settings)
     cpu = time.process_time() - cpu
-    face = out.patches.meshes[0].patch_face
-    B, variance = np.zeros_like(out.result.radiosity), np.zeros_like(out.result.radiosity)
-    B[face], variance[face] = out.result.radiosity, out.result.reflected_variance
+    B, variance = face_values(out)
     r = out.result
     return B, variance, r.seconds, int(r.paths), r.method, float(r.measured_mse / r.predicted_mse), cpu
 

@@ -211,10 +211,16 @@ def ours(paths, side, seed=0):
     wall = time.perf_counter()
     out = pipeline.run_solve(objects, settings)
     wall = time.perf_counter() - wall
+    B, variance = face_values(out)
+    return B, variance, wall, out.sources
+
+
+def face_values(out):
+    """(B, variance) (P,3) of a one-object solve, in its polygons' order (the reference's)."""
     face = out.patches.meshes[0].patch_face
     B, variance = np.zeros_like(out.result.radiosity), np.zeros_like(out.result.radiosity)
     B[face], variance[face] = out.result.radiosity, out.result.reflected_variance
-    return B, variance, wall, out.sources
+    return B, variance
 
 
 def direct_only(paths, chunks=32):

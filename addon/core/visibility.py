@@ -8,12 +8,13 @@ reflects or gathers from must be drawn from its visible part only.
 
 Each patch's square of point uniforms (u0, u1; and, for patches that are not parallelograms,
 the triangle uniform) is cut into cells, a cell being visible or buried as its centre is.
-A point is buried when, along each of four probe rays from it (its normal, and three directions
+A point is buried when, along three of four probe rays from it (its normal, and three directions
 85 degrees off it, 120 degrees apart), it lies inside more closed surfaces than it enters: the
 surfaces met from behind minus those met in front, all the way out (:func:`windings`). A point
-inside a closed solid counts 1 or more along every probe; a point on an open surface, in a room
-of inward faces, beside a thin wall or under a one-sided table top counts 0 along some probe
-(the near-grazing ones leave under the top). The first face met is not enough: inside two
+inside a closed solid counts 1 or more along every probe but one that leaves through two
+coincident faces (flush boxes), of which only one is met; a point on an open surface, in a room
+of inward faces, beside a thin wall or under a one-sided table top counts 0 along the
+near-grazing probes, which leave under the top. The first face met is not enough: inside two
 overlapping boxes, the other box's faces are met from the front. The points of a patch are then
 drawn uniformly over its visible cells (:meth:`Buried.remap`, which maps uniforms onto
 uniforms), its area becomes the visible cells' share of it, and every method, reading areas and

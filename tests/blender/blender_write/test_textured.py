@@ -173,19 +173,26 @@ def _srgb(linear):
     return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
 
 
+
+def _top_camera(scene, location, ortho_scale, pixels):
+    """An orthographic camera looking down from ``location`` as the scene's, a square image of
+    ``pixels`` a side rendered on one thread."""
+    data = bpy.data.cameras.new("Top")
+    data.type, data.ortho_scale = "ORTHO", ortho_scale
+    camera = bpy.data.objects.new("Top", data)
+    camera.location = location
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    scene.render.resolution_x = scene.render.resolution_y = pixels
+    scene.render.threads_mode, scene.render.threads = "FIXED", 1
+
+
 def _preview_centres(blender, tmp_path, name="preview.png"):
     """The linear grey of the centre pixel of each checker square, (SQUARES, SQUARES), from the
     preview rendered from above at 8 pixels a square."""
     scene = blender.scene
     if scene.camera is None:
-        data = bpy.data.cameras.new("Top")
-        data.type, data.ortho_scale = "ORTHO", 1.0
-        camera = bpy.data.objects.new("Top", data)
-        camera.location = (0.5, 0.5, 2.0)
-        scene.collection.objects.link(camera)
-        scene.camera = camera
-    scene.render.resolution_x = scene.render.resolution_y = 8 * SQUARES
-    scene.render.threads_mode, scene.render.threads = "FIXED", 1
+        _top_camera(scene, (0.5, 0.5, 2.0), 1.0, 8 * SQUARES)
     light = np.empty(0)
     for obj in result_objects():
         attr = obj.data.attributes.get("Radiosity Light") or obj.data.color_attributes.get("Radiosity")
@@ -251,14 +258,7 @@ def test_an_emitter_s_result_shows_its_emission_colour_times_strength(blender, t
                 [principled("White", (0.7, 0.7, 0.7))]).select_set(True)
     _solve(blender)
     scene = blender.scene
-    data = bpy.data.cameras.new("Top")
-    data.type, data.ortho_scale = "ORTHO", 0.5
-    camera = bpy.data.objects.new("Top", data)
-    camera.location = (0.5, 0.4, 2.0)
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    scene.render.resolution_x = scene.render.resolution_y = 16
-    scene.render.threads_mode, scene.render.threads = "FIXED", 1
+    _top_camera(scene, (0.5, 0.4, 2.0), 0.5, 16)
     path = str(tmp_path / "glow.png")
     render_preview(path, [o for o in bpy.data.objects if o.name in ("Floor", "Wall")], width=16, samples=4)
     image = bpy.data.images.load(path)
