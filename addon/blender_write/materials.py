@@ -183,7 +183,7 @@ def _keep_only_upstream(tree, output):
         tree.nodes.remove(node)
 
 
-def result_materials(slot_names, light_attribute, flat_attribute, terms, fallback, notes, made):
+def result_materials(slot_names, light_attribute, flat_attribute, fallback, notes, made):
     """The result material of each source slot: the textured copy of the named material
     (made once a run, kept in ``made`` by name), or ``fallback`` where there is none or it
     cannot be copied (``notes`` get a line for the latter, once)."""
@@ -196,7 +196,7 @@ def result_materials(slot_names, light_attribute, flat_attribute, terms, fallbac
                 notes.append(note)
             # the surface as the camera sees it (a Principled BSDF's specular layer beside its base colour)
             made[name] = (textured_material(source, light_attribute, flat_attribute,
-                                            terms.get(name) or surface_terms(source)) if ok else None)
+                                            surface_terms(source)) if ok else None)
         out.append(made[name] or fallback)
     return out
 

@@ -269,7 +269,6 @@ def write_results(context, output_data, output_mode, scene=None):
     notes = getattr(output_data, "notes", [])
     layers_of = output_data.patches.layers or [None] * len(output_data.patches.objects)
     light_of = getattr(output_data, "light_colours", None) or [None] * len(layers_of)
-    terms = getattr(output_data, "material_terms", {})
     smooth_written = output_mode in ("VERTEX", "BOTH", "TEXTURED") and any(
         p is not None for p in output_data.smooth_colours)
     flat_name = PATCH_ATTRIBUTE_NAME if smooth_written and output_mode != "VERTEX" else ATTRIBUTE_NAME
@@ -279,7 +278,7 @@ def write_results(context, output_data, output_mode, scene=None):
             if faces is None:  # an object of the rest of the scene: it took part, gets no result
                 continue
             obj = _result_object(output_data, index, output_mode, layers_of[index], light_of[index], notes,
-                                 lambda slots: textured.result_materials(slots, LIGHT_ATTRIBUTE_NAME, flat_name, terms,
+                                 lambda slots: textured.result_materials(slots, LIGHT_ATTRIBUTE_NAME, flat_name,
                                                                          material, notes, made), material)
             created.append(obj)
             obj[SOURCE_PROPERTY] = arrays.name

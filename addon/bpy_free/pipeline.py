@@ -58,9 +58,6 @@ class SolveOutput:
     # smooth, a polygon corner each (light_domain "CORNER"), or (P_k,3) a patch each ("FACE"); or None
     light_colours: list = field(default_factory=list)
     light_domain: str = "CORNER"
-    # material name -> (scale (3,), offset (3,)): the result material shows colour * scale + offset
-    # times the light (default (1, 0): the base colour is the reflectivity)
-    material_terms: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)  # attribute name -> [(P_k,3) per object], light and indirect
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
