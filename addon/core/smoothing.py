@@ -165,27 +165,44 @@ class Surface:
         sums = _sum(self.triangle_patch, tri, self.patch_count)
         return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
 
-    def corner_values(self, patch_values, iterations=ITERATIONS):
+    def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
         compatible corners, the area-weighted mean of each patch's linear interpolation equal to
-        its value (negative values taken as 0), non-negative."""
+        its value (negative values taken as 0), non-negative. With ``return_filter``, also
+        ``apply`` (``LinearCorners``): the same steps with these values' clips, floors and final
+        scales held fixed, a linear map of (P,k) or (S,P,k) values to (T,3,k) or (S,T,3,k) corners
+        whose value at ``patch_values`` is these corners (float error), so that parts of the
+        values (each source's) give corners that add up to these."""
         # a signed estimator's slightly negative patches show as black: light is never negative
-        values = np.maximum(_checked(patch_values, self.patch_count, "patch values"), 0.0)
+        checked = _checked(patch_values, self.patch_count, "patch values")
+        values = np.maximum(checked, 0.0)
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
         out = np.empty((len(self.triangle_patch), 3, values.shape[1]))
+        records = []
         for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
             channel = np.ascontiguousarray(values[:, k])
-            out[:, :, k] = self._corner_channel(channel, corner_patch, averaging, iterations).reshape(-1, 3)
-        return out
+            record = {} if return_filter else None
+            out[:, :, k] = self._corner_channel(channel, corner_patch, averaging, iterations, record).reshape(-1, 3)
+            records.append(record)
+        if not return_filter:
+            return out
+        return out, LinearCorners(self, checked > 0, corner_patch, averaging, int(iterations), records)
 
-    def _corner_channel(self, values, corner_patch, averaging, iterations):
+    def _corner_channel(self, values, corner_patch, averaging, iterations, record=None):
+        """One channel's corners (T*3,); ``record`` (a dict), where given, keeps the floored
+        corners of each step, the floors' patches, the final scales and the flat corners."""
         x = self._average_corners(values[corner_patch], averaging)
         floor = LOWEST_SHARE * self._corner_lowest(values[corner_patch], averaging)
+        if record is not None:
+            record["lowest"] = self._corner_lowest_patch(values, corner_patch, averaging)
+            record["floored"] = []
         for _ in range(int(iterations)):
             # each patch's missing light, spread continuously over the corners around it
             missing = (values - self._patch_means(x))[corner_patch]
             x += RELAXATION * self._average_corners(missing, averaging)
+            if record is not None:
+                record["floored"].append(np.flatnonzero(x < floor))
             # a bright patch beside dim ones would push its neighbours' far corners down to black:
             # never below a share of the darkest patch meeting there (the last scale keeps means)
             np.maximum(x, floor, out=x)
@@ -195,7 +212,25 @@ class Surface:
         x *= scale[corner_patch]
         flat = np.flatnonzero((means <= 0)[corner_patch])
         x[flat] = values[corner_patch[flat]]
+        if record is not None:
+            record["scale"], record["flat"] = scale, flat
         return x
+
+    def _corner_lowest_patch(self, values, corner_patch, averaging):
+        """(T*3,) the patch of the lowest of the compatible corners' values at each corner's
+        point (``_corner_lowest``'s, as a patch: what the floor is a share of)."""
+        point, _, _, crease, local, o = averaging
+        x = values[corner_patch]
+        order = np.lexsort((x, point))
+        first = order[run_starts(point[order])]
+        lowest_corner = np.empty(len(self.smooth_point), np.int64)
+        lowest_corner[point[first]] = first
+        lowest = lowest_corner[point]
+        if len(crease):
+            order = np.lexsort((x[o], local))
+            first = order[run_starts(local[order])]
+            lowest[crease[local[first]]] = o[first]
+        return corner_patch[lowest]
 
     # -- noise ---------------------------------------------------------------------------------
     def neighbours(self, block=1 << 18):
@@ -226,35 +261,80 @@ class Surface:
         small = np.int32 if P < 2 ** 31 else np.int64
         return (pair // P).astype(small), (pair % P).astype(small)
 
-    def fill_from_neighbours(self, patch_values, missing):
+    def fill_from_neighbours(self, patch_values, missing, return_filter=False):
         """Per-patch values (P,k) with those flagged ``missing`` (P,k) replaced, per channel, by
         the area-weighted mean of the neighbours' (``neighbours``) that are not; a patch with no
         such neighbour keeps its own. (For values that show nowhere,
-        such as the light arriving at a black patch, but join their neighbours' corners.)"""
+        such as the light arriving at a black patch, but join their neighbours' corners.) With
+        ``return_filter``, also the fill as a linear map of (P,k) or (S,P,k) (``LinearFilter``)."""
         values = _checked(patch_values, self.patch_count, "patch values")
         missing = np.asarray(missing, bool).reshape(values.shape)
         if not missing.any():
-            return values
+            return (values, LinearFilter.identity(values.shape)) if return_filter else values
         p, q = self.neighbours()
         out = values.copy()
+        own, pair = np.ones_like(values), np.zeros((len(p), values.shape[1]))
         for c in range(values.shape[1]):  # over channels, not elements
             give = missing[p, c] & ~missing[q, c]
             weight = _sum(p[give], self.patch_area[q[give]], self.patch_count)
             total = _sum(p[give], self.patch_area[q[give]] * values[q[give], c], self.patch_count)
             fill = missing[:, c] & (weight > 0)
             out[fill, c] = total[fill] / weight[fill]
-        return out
+            if return_filter:
+                own[fill, c] = 0.0
+                pair[give, c] = np.where(fill[p[give]], self.patch_area[q[give]] / np.maximum(weight[p[give]], 1e-300), 0.0)
+        return (out, LinearFilter(p, q, own, pair, np.ones_like(values))) if return_filter else out
 
-    def filter_noise(self, patch_values, patch_variances, cutoff=NOISE_CUTOFF, bound=False):
+    def filter_light(self, patch_values, patch_variances, return_filter=False):
+        """``filter_noise`` of the values taken as at least 0 (light is never negative: a signed
+        estimator's noise about 0). With ``return_filter``, also ``apply`` (``Chain``): linear,
+        the whole's negative patches 0 in every part, so that parts add up to the whole's
+        filtered values."""
+        values = _checked(patch_values, self.patch_count, "patch values")
+        filtered = self.filter_noise(np.maximum(values, 0.0), patch_variances, return_filter=return_filter)
+        if not return_filter:
+            return filtered
+        return filtered[0], Chain(values > 0, filtered[1])
+
+    def arriving_light(self, irradiance, variance, reflectivity, return_filter=False):
+        """(P,3) the light arriving at each patch (H: B = E + rho H), at least 0, its noise
+        filtered as the reflected light's is, from its own batch-means variance. Where a
+        channel's reflectivity is 0 the light shows nowhere (the surface is black there) but joins
+        the neighbours' corners, and the two-way iteration gathers it with a thousandth of the
+        samples (a heavy-tailed estimate): there it is the neighbours' (``fill_from_neighbours``).
+        With ``return_filter``, also ``apply`` (``Chain``): the same steps as a linear map, the
+        fill's and the filter's weights those of these values."""
+        irradiance = _checked(irradiance, self.patch_count, "irradiance")
+        black = np.asarray(reflectivity) <= 0
+        light = np.maximum(irradiance, 0.0)
+        variance = np.asarray(variance, np.float64)
+        fill = None
+        if black.any():
+            light, fill = self.fill_from_neighbours(light, black, return_filter=True)
+            # as noisy as the neighbours it came from: never an anchor for them
+            measured = np.isfinite(variance)
+            filled = self.fill_from_neighbours(np.where(measured, variance, 0.0), black | ~measured)
+            variance = np.where(black & measured, filled, variance)
+        filtered = self.filter_noise(light, variance, return_filter=return_filter)
+        if not return_filter:
+            return filtered
+        return filtered[0], Chain(irradiance > 0, *([fill] if fill is not None else []), filtered[1])
+
+    def filter_noise(self, patch_values, patch_variances, cutoff=NOISE_CUTOFF, bound=False, return_filter=False):
         """Noise-filtered per-patch values (P,k) from values and the variances of their estimates
         (P,k); patches with a NaN or infinite variance are left as they are and not used. With
-        ``bound``, also the largest change each patch may have been given (P,k)."""
+        ``bound``, also the largest change each patch may have been given (P,k). With
+        ``return_filter``, also ``apply``: the filter with these values' weights and clips held
+        fixed, a linear map of (P,k) or (S,P,k) arrays (``LinearFilter``) whose value at
+        ``patch_values`` is the filtered values (float error), so that parts of the values
+        (each source's) filter to parts that add up to the filtered whole."""
         values = _checked(patch_values, self.patch_count, "patch values")
         var = np.asarray(patch_variances, np.float64).reshape(values.shape)
         known = np.isfinite(var).all(axis=1) & (var >= 0).all(axis=1)
         largest = float(np.abs(values).max()) if values.size else 0.0
         if not largest > 0:  # no light anywhere (nothing reached a reflecting patch): nothing to filter
-            return (values.copy(), np.zeros_like(values)) if bound else values.copy()
+            out = (values.copy(), np.zeros_like(values)) if bound else (values.copy(),)
+            return _with_filter(out, LinearFilter.identity(values.shape), return_filter, bound)
         floor = 1e-12 * largest ** 2
         p, q = self.neighbours()
         var = _unmeasured_from_neighbours(np.where(known[:, None], var, np.nan), p, q)
@@ -272,15 +352,23 @@ class Surface:
             runs = run_starts(p)
             for c in range(values.shape[1]):
                 limit[p[runs], c] = cutoff * np.sqrt(np.maximum.reduceat(var[p, c] + var[q, c], runs))
-        fitted = self._local_fit(values, pooled, known, p, q, k)
+        fitted, weights = self._local_fit(values, pooled, known, p, q, k, operator=return_filter)
         out = np.clip(fitted, values - limit, values + limit)
         out = np.where(values >= 0, np.maximum(out, 0.0), out)
-        return (out, limit) if bound else out
+        if not return_filter:
+            return (out, limit) if bound else out
+        # the clips as a fixed share of the fit's change: out = v + share (fit - v)
+        change = fitted - values
+        share = np.divide(out - values, change, out=np.ones_like(change), where=change != 0)
+        apply = LinearFilter(p, q, weights[0], weights[1], share)
+        return _with_filter((out, limit) if bound else (out,), apply, True, bound)
 
-    def _local_fit(self, values, var, known, p, q, k):
+    def _local_fit(self, values, var, known, p, q, k, operator=False):
         """Each patch's value from a weighted least-squares plane (value = a + gradient . offset,
         in the patch's tangent plane) through itself and its neighbours q, weights k / var:
-        a gradient across the neighbourhood moves no patch."""
+        a gradient across the neighbourhood moves no patch. Returns (fit, weights): with
+        ``operator``, weights = (own (P,k), pair (n,k)), the fit as a sum over values (fit_p =
+        own_p v_p + sum_q pair_pq v_q); else None."""
         n = self.patch_normal
         axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
         t1 = np.cross(n, axis)
@@ -297,6 +385,8 @@ class Surface:
         ridge = 1e-3 * self.patch_area
         out = values.copy()
         P = len(values)
+        if operator:
+            own_weight, pair_weight = np.empty_like(values), np.empty((len(p), values.shape[1]))
         for c in range(values.shape[1]):  # over colour channels, not elements
             own = np.where(known, 1.0 / var[:, c], 0.0)
             w = k / var[q, c]
@@ -310,9 +400,92 @@ class Surface:
             M[:, 1, 1] += ridge * M[:, 0, 0]
             M[:, 2, 2] += ridge * M[:, 0, 0]
             solvable = known & (M[:, 0, 0] > 0)
-            fit = np.linalg.solve(np.where(solvable[:, None, None], M, np.eye(3)), rhs[:, :, None])[:, 0, 0]
+            M = np.where(solvable[:, None, None], M, np.eye(3))
+            fit = np.linalg.solve(M, rhs[:, :, None])[:, 0, 0]
             out[:, c] = np.where(solvable, fit, values[:, c])
+            if operator:
+                # a = g . rhs, g the first row of M's inverse (M is symmetric)
+                g = np.linalg.solve(M, np.broadcast_to(np.eye(3)[:, :1], (P, 3, 1)))[:, :, 0]
+                g[~solvable] = 0.0
+                own_weight[:, c] = np.where(solvable, g[:, 0] * own, 1.0)
+                pair_weight[:, c] = w * (g[p, 0] * design[0] + g[p, 1] * design[1] + g[p, 2] * design[2])
+        return out, ((own_weight, pair_weight) if operator else None)
+
+
+class LinearFilter:
+    """The noise filter with its weights held fixed: ``apply(x)`` = x + share (own x + sum over
+    neighbour pairs (p, q) of pair x_q - x), per patch and channel, for x (P,k) or (S,P,k) (each of
+    S parts alike); linear in x. ``share`` (P,k) is what the clips left of each patch's change."""
+
+    def __init__(self, p, q, own, pair, share):
+        self.p, self.q, self.own, self.pair, self.share = p, q, own, pair, share
+
+    @classmethod
+    def identity(cls, shape):
+        empty = np.zeros(0, np.int32)
+        return cls(empty, empty, np.ones(shape), np.zeros((0, shape[1])), np.zeros(shape))
+
+    def __call__(self, x):
+        x = np.asarray(x, np.float64)
+        if x.shape[-2:] != self.own.shape:
+            raise ValueError(f"the filter takes values of shape (P, k) = {self.own.shape} (or (S, P, k)); got {x.shape}")
+        if x.ndim == 3:
+            return np.stack([self(part) for part in x])
+        P = len(x)
+        out = x.copy()
+        for c in range(x.shape[1]):  # over colour channels, not elements
+            fit = self.own[:, c] * x[:, c] + _sum(self.p, self.pair[:, c] * x[self.q, c], P)
+            out[:, c] += self.share[:, c] * (fit - x[:, c])
         return out
+
+
+class LinearCorners:
+    """``Surface.corner_values`` with the clips, floors and scales of one set of values held
+    fixed: ``apply(x)``, x (P,k) or (S,P,k), gives (T,3,k) or (S,T,3,k) corners, linear in x."""
+
+    def __init__(self, surface, positive, corner_patch, averaging, iterations, records):
+        self.surface, self.positive, self.corner_patch = surface, positive, corner_patch
+        self.averaging, self.iterations, self.records = averaging, iterations, records
+
+    def __call__(self, x):
+        x = np.asarray(x, np.float64)
+        if x.shape[-2:] != self.positive.shape:
+            raise ValueError(f"the corners take values of shape (P, k) = {self.positive.shape} (or (S, P, k)); got {x.shape}")
+        if x.ndim == 3:
+            return np.stack([self(part) for part in x])
+        surface, cp = self.surface, self.corner_patch
+        values = np.where(self.positive, x, 0.0)  # (the whole's negative patches count as 0)
+        out = np.empty((len(surface.triangle_patch), 3, values.shape[1]))
+        for k, record in enumerate(self.records):  # over colour channels, not elements
+            v = np.ascontiguousarray(values[:, k])
+            corner = surface._average_corners(v[cp], self.averaging)
+            for floored in record["floored"]:
+                corner += RELAXATION * surface._average_corners((v - surface._patch_means(corner))[cp], self.averaging)
+                corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
+            corner *= record["scale"][cp]
+            corner[record["flat"]] = v[cp[record["flat"]]]
+            out[:, :, k] = corner.reshape(-1, 3)
+        return out
+
+
+class Chain:
+    """Linear maps one after the other, after zeroing where ``keep`` (P,k) is False: a whole's
+    steps (at least 0, a fill, a filter) applied to each of its parts (P,k) or (S,P,k)."""
+
+    def __init__(self, keep, *steps):
+        self.keep, self.steps = keep, steps
+
+    def __call__(self, x):
+        x = np.where(self.keep, np.asarray(x, np.float64), 0.0)
+        for step in self.steps:
+            x = step(x)
+        return x
+
+
+def _with_filter(out, apply, return_filter, bound):
+    """filter_noise's return: the filtered values, then the bound with ``bound``, then ``apply``."""
+    out = out + ((apply,) if return_filter else ())
+    return out if len(out) > 1 else out[0]
 
 
 def _pooled(var, known, p, q):
