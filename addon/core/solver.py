@@ -118,9 +118,11 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     default each light, and the patches of each emittance): what relighting.relight recombines.
     """
     _check_amounts(estimator, threshold, paths, target_mse, max_seconds, threads, chunk_paths)
-    method = _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds)
-    _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method)
     groups = _groups(scene, per_source, groups)
+    method = _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds,
+                     dict(per_source=per_source, groups=groups, exit_point=exit_point, sampling=sampling, threads=threads,
+                          seed=seed, stop_rule=stop_rule))
+    _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method)
     cluster = cluster_address(cluster) if isinstance(cluster, str) else cluster  # (its form; connecting comes later)
     paths, start = None if paths is None else int(paths), time.perf_counter()  # (numpy integers welcome)
     plan = chunk_plan(scene, method, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
@@ -138,12 +140,13 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
                    threads=runner.threads)
 
 
-def _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds):
-    """The Method the solve runs: Automatic's choice (``methods.automatic``) where it is asked
-    for, with the direct light asked (None: the method's own)."""
+def _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds, pilot):
+    """The Method the solve runs: Automatic's choice (``methods.automatic``; with per-source
+    results, measured by ``pilot``'s arguments) where it is asked for, with the direct light
+    asked (None: the method's own)."""
     if method == AUTO:
         method = methods.choose(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
-                                max_seconds=max_seconds)
+                                max_seconds=max_seconds, direct_light=direct_light, **pilot)
     return methods.create(method, direct_light)
 
 
