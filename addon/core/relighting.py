@@ -171,6 +171,18 @@ def _combine(values, w):
     return np.einsum("spc,sc->pc", values, w.astype(values.dtype, copy=False))
 
 
+def combine(per_source, parts, weights):
+    """sum_s w_s parts_s (...,3) of any per-source ``parts`` (S,...,3) (smooth corners of
+    ``smooth_sources``, an object's polygon corners), with ``weights`` as ``relight`` takes them;
+    in the parts' dtype."""
+    w = check_weights(per_source, weights)
+    parts = np.asarray(parts)
+    if parts.shape[:1] != (per_source.count,) or parts.shape[-1] != 3:
+        raise ValueError(f"parts must have shape ({per_source.count}, ..., 3): one a source; got {parts.shape}")
+    flat = parts.reshape(per_source.count, -1, 3)
+    return _combine(flat, w).reshape(parts.shape[1:])
+
+
 def smooth_sources(surface, scene, result, light=False):
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
