@@ -195,12 +195,10 @@ def smooth_sources(surface, scene, result, light=False):
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
     if light:
-        _, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
-                                         return_filter=True)
-        filled = fill(per_source.irradiance)
-        _, corners = surface.corner_values(fill(result.irradiance), return_filter=True)
-        yield "light", corners(filled)
-        del filled
+        light, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
+                                             return_filter=True)
+        _, corners = surface.corner_values(light, return_filter=True)
+        yield "light", corners(fill(per_source.irradiance))
     filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
     _, corners = surface.corner_values(filtered, return_filter=True)
     smooth = corners(noise(per_source.irradiance * scene.reflectivity))
