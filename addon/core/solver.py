@@ -108,7 +108,8 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     its direct light always gathered (``direct_light`` None: the method's own, gathered for it,
     shot for the walks); its error, too, is measured, never predicted. ``method="auto"`` runs
     it where its chunks give every patch enough rays, else the walk (:func:`.methods.choose`;
-    ``SolveResult.method`` says which ran).
+    with ``per_source``, where it would run the two-way iteration, pilots of both measure which
+    is cheaper on this machine; ``SolveResult.method`` says which ran).
     ``progress(fraction, stats)`` and ``should_stop()`` are called from the calling thread
     between chunks (``stats["radiosity"](dtype)`` gives the result so far); ``max_seconds``
     bounds the wall time. A stopped run returns the complete chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
