@@ -183,14 +183,16 @@ def combine(per_source, parts, weights):
     return _combine(flat, w).reshape(parts.shape[1:])
 
 
-def smooth_sources(surface, scene, result, light=False):
+def smooth_sources(surface, scene, result, light=False, dtype=np.float64):
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
     they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
     ("light", (S,T,3,3)) first with ``light``, the light arriving (``Surface.arriving_light``);
     then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``) and
     smooth, plus each group's own emission, flat. ``surface`` is ``smoothing.Surface.of`` the
-    scene's triangles; ``result`` a per-source solve's SolveResult."""
+    scene's triangles; ``result`` a per-source solve's SolveResult. Made in float64, given as
+    ``dtype`` (float32: half the memory, as they are written; their sum then the whole's to
+    float32 rounding)."""
     per_source = result.per_source
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
@@ -198,12 +200,13 @@ def smooth_sources(surface, scene, result, light=False):
         light, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
                                              return_filter=True)
         _, corners = surface.corner_values(light, return_filter=True)
-        yield "light", corners(fill(per_source.irradiance))
+        yield "light", corners(fill(per_source.irradiance), dtype)
     filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
     _, corners = surface.corner_values(filtered, return_filter=True)
-    smooth = corners(noise(per_source.irradiance * scene.reflectivity))
+    smooth = corners(noise(per_source.irradiance * scene.reflectivity), dtype)
     emitting = per_source_emission(scene, per_source)
-    smooth += emitting[:, surface.triangle_patch][:, :, None, :]
+    for s in range(per_source.count):  # (a part at a time: no (S,T,3) copy)
+        smooth[s] += emitting[s, surface.triangle_patch][:, None, :]
     yield "smooth", smooth
 
 
