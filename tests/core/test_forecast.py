@@ -165,8 +165,11 @@ def test_automatic_with_per_source_results_runs_what_the_pilots_measure_cheaper(
     monkeypatch.setattr(fc, "forecast", _fake_forecast({"two_way": None, "walk": (4.0, 1e-5)}, calls))
     assert choose_method(scene, paths=400_000, per_source=True, groups=groups) == "walk"
     assert [c["budget"] for c in calls] == [fc.PILOT_RAYS, fc.PILOT_RAYS // 8, fc.PILOT_RAYS]
-    # a scene where the rule picks the walk measures nothing
+    # one group is the total: nothing to measure
     calls.clear()
+    one = _lamp_box(1)
+    assert choose_method(one, paths=400_000, per_source=True, groups=source_groups(one)) == "two_way" and calls == []
+    # a scene where the rule picks the walk measures nothing
     assert choose_method(scene, paths=2_000, per_source=True, groups=groups) == "walk" and calls == []
 
 

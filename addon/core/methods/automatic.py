@@ -14,6 +14,7 @@ cheaper runs.
 from __future__ import annotations
 
 from ..error_model import predict
+from ..grouping import source_groups
 from ..names import FINITE, TWO_WAY, WALK
 from .two_way import TwoWay
 
@@ -37,8 +38,9 @@ def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e
     chunk = two_way.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
     if not two_way.pays(scene.patch_count, chunk):
         return WALK
-    if not per_source:
-        return TWO_WAY
+    groups = pilot.get("groups")
+    if not per_source or (groups if groups is not None else source_groups(scene)).count <= 1:
+        return TWO_WAY  # (one group is the total: nothing more to carry)
     from ..forecast import measured_choice  # (the forecast runs solves)
 
     return measured_choice(scene, estimator, (TWO_WAY, WALK), paths=paths, target_mse=target_mse, threshold=threshold,
