@@ -106,7 +106,8 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
         began, finished = time.perf_counter(), []
         r = solve(scene, estimator, paths=chunk * chunks, threshold=threshold, seed=seed, exit_point=exit_point,
                   sampling=sampling, threads=threads, direct_light=chosen.direct_light, method=method, chunk_paths=chunk,
-                  per_source=per_source, groups=groups, progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
+                  per_source=per_source, groups=groups,
+                  progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
                   should_stop=lambda: time.perf_counter() - began > limit or bool(should_stop and should_stop()))
         everything = time.perf_counter() - began
         return r, finished[-1] if finished and r.chunks < chunks else everything
@@ -155,9 +156,9 @@ def measured_choice(scene, estimator, candidates, *, paths=None, target_mse=None
     stop_rule = stop_rule or ("measured" if target_mse is not None else "predicted")
 
     def pilot(name, rays):
-        return forecast(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold, max_seconds=max_seconds,
-                        method=name, stop_rule=stop_rule, direct_light=methods.direct_light_for(name, direct_light, scene.lights),
-                        budget=rays, **kwargs)
+        return forecast(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
+                        max_seconds=max_seconds, method=name, stop_rule=stop_rule, budget=rays,
+                        direct_light=methods.direct_light_for(name, direct_light, scene.lights), **kwargs)
 
     forecasts = {}
     for name in candidates:
