@@ -165,6 +165,10 @@ def test_automatic_with_per_source_results_runs_what_the_pilots_measure_cheaper(
     monkeypatch.setattr(fc, "forecast", _fake_forecast({"two_way": None, "walk": (4.0, 1e-5)}, calls))
     assert choose_method(scene, paths=400_000, per_source=True, groups=groups) == "walk"
     assert [c["budget"] for c in calls] == [fc.PILOT_RAYS, fc.PILOT_RAYS // 8, fc.PILOT_RAYS]
+    # under a short time limit the pilots would take it: the rule's choice, nothing measured
+    calls.clear()
+    assert choose_method(scene, paths=400_000, per_source=True, groups=groups, max_seconds=30.0) == "two_way"
+    assert calls == []
     # one group is the total: nothing to measure
     calls.clear()
     one = _lamp_box(1)
