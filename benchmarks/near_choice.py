@@ -4,14 +4,15 @@
 
 Per scene and method: the measured (batch-means) MSE of a fixed path count, its mean over four
 seeds, and the rays traced: the speed-up to a given error is the MSE ratio over the rays ratio
-(rays, not seconds: on a shared machine seconds were noisier than the effect). The two choices
-alternate in one process run. "By power" sets
+(rays, not seconds: on a shared machine seconds were noisier than the effect; their median
+ratio is the last column). The two choices alternate in one process run. "By power" sets
 near_choice.MAX_TABLE to 0 (fewer than two clusters: the choice and cosine share of before).
 The rooms are built with bpy (benchmarks/interior_scene.py) at a 0.32 m patch size.
 """
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -53,8 +54,9 @@ def scenes():
 
 
 def measure(scene, paths, seed, options):
+    t = time.perf_counter()
     r = solve(scene, "finite", paths=paths, seed=seed, exit_point="hit", **options)
-    return r.measured_mse, r.rays + r.gather_rays
+    return r.measured_mse, r.rays + r.gather_rays, time.perf_counter() - t
 
 
 def main():
@@ -69,16 +71,16 @@ def main():
                     near_choice.MAX_TABLE = table if choice == "near" else 0
                     found[choice].append(measure(scene, paths, k, options))
             near_choice.MAX_TABLE = table
-            near = np.mean([m for m, _ in found["near"]])
-            power = np.mean([m for m, _ in found["power"]])
-            rays = np.mean([r for _, r in found["near"]]) / np.mean([r for _, r in found["power"]])
+            near, power = (np.mean([m[0] for m in found[c]]) for c in ("near", "power"))
+            rays = np.mean([m[1] for m in found["near"]]) / np.mean([m[1] for m in found["power"]])
+            seconds = np.median([m[2] for m in found["near"]]) / np.median([m[2] for m in found["power"]])
             rows.append(f"| {name} | {scene.patch_count:,} | {label} | {paths:,} | {power:.3g} | {near:.3g} | "
-                        f"{rays:.2f} | {power / near / rays:.2f}x |")
+                        f"{rays:.2f} | {power / near / rays:.2f}x | {seconds:.2f} |")
             print(rows[-1], flush=True)
     OUT.write_text(
         "# Emitting patches chosen by nearness\n\n" + (__doc__.split("\n\n", 2)[2]).strip() + "\n\n"
-        "| scene | patches | method | paths | MSE, by power | MSE, by nearness | rays, nearness / power | speed-up to equal error |\n"
-        "|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
+        "| scene | patches | method | paths | MSE, by power | MSE, by nearness | rays, nearness / power | speed-up to equal error | seconds, nearness / power |\n"
+        "|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
 
 
 if __name__ == "__main__":

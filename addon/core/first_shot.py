@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from .lights import WorldLight
-from .near_choice import NearChoice
+from .near_choice import near_choice
 from .names import EXIT_RANDOM, FINITE
 from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front, region_of
 from .sampling import SourceTable, add_sphere_points, patch_point_rows, source_weights, stratified_by_patch
@@ -119,7 +119,7 @@ class Gathering:
         weights = source_weights(scene.patch_area, scene.emission, light_power * looked_at[:, None])
         self.table = SourceTable(weights) if weights.any() else None
         self.choice = weights / weights.sum() if weights.any() else weights  # P_s
-        self.near = NearChoice(scene, self.choice) if self.table is not None else None
+        self.near = near_choice(scene, self.choice) if self.table is not None else None
         self.emission = scene.emission.T  # (3,P)
         self.reflectivity = scene.reflectivity.T  # (3,P)
         self.patch_area = scene.patch_area

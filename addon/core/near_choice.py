@@ -21,17 +21,32 @@ power's alone where K < 2.
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 # The mixture's weight on nearness; the rest is by power.
 NEAR_SHARE = 0.5
 # The most receiver x cluster entries kept (two float64 tables of this many).
-MAX_TABLE = 1 << 21
+MAX_TABLE = 1 << 19
 # A receiver chooses by nearness where that makes some cluster this many times likelier than by
 # power; elsewhere the choice by power stands (it costs less).
 NEAR_GAIN = 1.5
 # Morton curve resolution per axis, for clustering emitting patches beyond MAX_TABLE / P.
 MORTON_BITS = 10
+
+
+_made = weakref.WeakKeyDictionary()  # scene -> (choice, table, NearChoice): a solve's gatherings share one
+
+
+def near_choice(scene, choice):
+    """The NearChoice of ``scene`` for the sources' ``choice`` (P_s), made once a scene."""
+    known = _made.get(scene)
+    if known is not None and known[1] == MAX_TABLE and np.array_equal(known[0], choice):
+        return known[2]
+    made = NearChoice(scene, choice)
+    _made[scene] = (choice.copy(), MAX_TABLE, made)
+    return made
 
 
 def patch_centres(scene):
