@@ -1,0 +1,265 @@
+"""Per-source results on the Blender side: the groups a solve keeps apart (Blender's light
+groups where the scene uses them, else each lamp, the world and each emissive material), each
+group's outputs per result object, and their recombination with new strengths and colours.
+
+A result object keeps, per group, the values its outputs are made of ("flat": each patch's
+radiosity, "irradiance": each patch's light arriving, "smooth" and "light": the smooth
+radiosity and light arriving at every polygon corner); an output is the sum of its groups'
+values times their weights, so relighting is one pass over them and traces no ray. No bpy.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core import smoothing
+from ..core.grouping import PER_SOURCE_MAX, source_groups
+from ..core.lights import WorldLight
+from ..core.relighting import PerSource, relight
+
+# Automatic keeps per-source results up to this many sources: the walks' solves then cost
+# 1.13-1.3x, the two-way iteration's 1.3x (benchmarks/results/relight.md); more cost more.
+AUTO_MAX_SOURCES = 8
+AUTO_MAX_SIZE = PER_SOURCE_MAX // 4  # patches x sources: the .blend keeps them too
+
+
+def groups_for(scene, patches, choice, notes):
+    """The SourceGroups for the setting ``choice`` (AUTO, ON, OFF), or None (Automatic says why
+    in ``notes``): emissive patches by their object's light group, else their material; lights
+    by theirs, else each its own."""
+    if choice == "OFF":
+        return None
+    labels = None  # (patches made without their materials' names: by emittance)
+    if patches.patch_material is not None:
+        labels = np.where(patches.patch_lightgroup != "", patches.patch_lightgroup, patches.patch_material)
+    light_labels = list(patches.light_labels) if patches.light_labels else None
+    groups = source_groups(scene, labels, light_labels)
+    size = scene.patch_count * groups.count
+    if choice == "AUTO" and (groups.count > AUTO_MAX_SOURCES or size > AUTO_MAX_SIZE):
+        notes.append(f"per-light results left out: {groups.count} sources x {scene.patch_count:,} patches (Automatic "
+                     f"keeps them up to {AUTO_MAX_SOURCES} sources and {AUTO_MAX_SIZE:,} patches x sources); "
+                     "put lamps in light groups or set Per-light results to On")
+        return None
+    return groups
+
+
+def members_of(scene, groups):
+    """Each group's members [(kind, name), ...] (kind: light, world, material) and each member's
+    power (3,) at the solve's strengths, as lists a group."""
+    members = [dict() for _ in range(groups.count)]
+    power = scene.source_power
+    P = scene.patch_count
+    lights = scene.lights
+    light_power = np.zeros((len(lights), 3))
+    if len(lights):
+        np.add.at(light_power, lights.light_of, power[P:])
+    for k, light in enumerate(lights.lights):
+        kind = "world" if isinstance(light, WorldLight) else "light"
+        members[groups.light_group[k]][(kind, light.name)] = light_power[k]
+    return members, light_power
+
+
+def _material_members(members, groups, scene, patch_material):
+    """Adds each group's emissive materials and their power (A E summed over their patches)."""
+    patch_group = groups.patch_group(scene.patch_count)
+    emitting = np.flatnonzero(patch_group >= 0)
+    power = scene.source_power[: scene.patch_count]
+    for group, material in set(zip(patch_group[emitting].tolist(), patch_material[emitting].tolist())):
+        rows = emitting[(patch_group[emitting] == group) & (patch_material[emitting] == material)]
+        members[group][("material", str(material))] = power[rows].sum(axis=0)
+
+
+@dataclass
+class SourceResults:
+    """What a per-source solve leaves for relighting: the groups' names and ``members`` (per group
+    [(kind, name, power (3,))]), the core's PerSource (the error's covariance), and per object
+    {kind: (S,n,3) float32} (None for an object that gets no result)."""
+
+    per_source: PerSource
+    groups: object
+    members: list
+    arrays: list = field(default_factory=list)
+    targets: list = field(default_factory=list)
+    smooth: dict = field(default_factory=dict)  # (while the outputs are made) kind -> per object (S,C_k,3)
+
+    @property
+    def names(self):
+        return self.per_source.names
+
+    def meta(self):
+        """The numbers relighting needs besides the arrays, as JSON-ready values."""
+        ps = self.per_source
+        return {"names": list(ps.names),
+                "members": [[[kind, name, [float(x) for x in p]] for kind, name, p in group] for group in self.members],
+                "power": ps.power.tolist(), "covariance": np.nan_to_num(ps.covariance, nan=-1.0).tolist(),
+                "scale": float(ps.scale), "target_mse": ps.target_mse}
+
+
+def source_results(scene, patches, result, groups):
+    """The SourceResults of a per-source ``result`` (its arrays filled by ``add_object_values``)."""
+    members, _ = members_of(scene, groups)
+    if patches.patch_material is not None:
+        _material_members(members, groups, scene, patches.patch_material)
+    listed = [[(kind, name, power) for (kind, name), power in group.items()] for group in members]
+    return SourceResults(result.per_source, groups, listed)
+
+
+def source_corners(scene, result, groups, light=False):
+    """Like pipeline._smooth_corners for a per-source ``result``: ("light", (S,T,3,3)) with
+    ``light``, then ("smooth", (S,T,3,3)): each group's smooth values, which add up to the
+    smoothed total (its noise filter's weights, the total's, applied to every group)."""
+    ps = result.per_source
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    own = own_emission(scene, groups)
+    if light:
+        from .pipeline import arriving_light
+
+        total = arriving_light(surface, result.irradiance, result.irradiance_variance, scene.reflectivity)
+        yield "light", _corners(surface, _shares(ps.irradiance, np.maximum(result.irradiance, 0.0), total))
+    total_reflected = np.maximum(result.reflected, 0.0)
+    filtered = surface.filter_noise(total_reflected, result.reflected_variance)
+    corners = _corners(surface, _shares(ps.radiosity - own, total_reflected, filtered))
+    corners += own[:, scene.triangle_patch][:, :, None, :]
+    yield "smooth", corners
+
+
+def own_emission(scene, groups):
+    """(S,P,3) each group's own emitting patches' E."""
+    own = np.zeros((groups.count, scene.patch_count, 3))
+    patch_group = groups.patch_group(scene.patch_count)
+    rows = np.flatnonzero(patch_group >= 0)
+    own[patch_group[rows], rows] = scene.emission[rows]
+    return own
+
+
+def _shares(values, total, filtered):
+    """(S,P,3) each group's part of ``filtered`` (the total's smoothed values): its share of the
+    unfiltered ``total`` (the filter's weights held; by its mean share where the total is 0)."""
+    values = np.maximum(values, 0.0)
+    summed = values.sum(axis=0)
+    mean_share = summed.sum(axis=0) / max(float(summed.sum()), 1e-300)
+    share = np.divide(values, summed, out=np.broadcast_to(mean_share / 3, values.shape).copy(), where=summed > 0)
+    return share * filtered
+
+
+def _corners(surface, values):
+    """(S,T,3,3): each group's (P,3) values at the triangle corners."""
+    return np.stack([surface.corner_values(v) for v in values])
+
+
+def weights(meta, current):
+    """(S,3) each group's weight: its members' current emission over their solved one, per
+    channel, their solved powers weighting them; ``current`` maps (kind, name) -> (emission now
+    (3,), emission solved (3,)) (a member missing: 0). Also the channels that cannot be relit
+    (a channel solved at 0 and lit now) as a set of group names."""
+    out = np.zeros((len(meta["names"]), 3))
+    unsolved = set()
+    for s, group in enumerate(meta["members"]):
+        total = np.zeros(3)
+        for kind, name, power, *_ in group:
+            now, solved = current.get((kind, name), (np.zeros(3), np.ones(3)))
+            now, solved, power = (np.asarray(x, np.float64) for x in (now, solved, power))
+            ratio = np.divide(now, solved, out=np.zeros(3), where=solved > 0)
+            if ((solved <= 0) & (now > 0)).any():
+                unsolved.add(meta["names"][s])
+            out[s] += power * ratio
+            total += power
+        out[s] = np.divide(out[s], total, out=np.zeros(3), where=total > 0)
+    return out, unsolved
+
+
+def relit_error(meta, w):
+    """The core's Relit of no patches (its error numbers) for weights ``w`` (S,3)."""
+    S = len(meta["names"])
+    covariance = np.asarray(meta["covariance"], np.float64)
+    covariance = np.where(covariance == -1.0, np.nan, covariance)
+    empty = np.zeros((S, 0, 3))
+    ps = PerSource(tuple(meta["names"]), empty, empty, np.asarray(meta["power"], np.float64), covariance,
+                   float(meta["scale"]), meta["target_mse"])
+    return relight(ps, w)
+
+
+def error_text(relit):
+    """The relit error line, e.g. "relit: error 1.3% (the solve's target 1% applies to the solved
+    strengths)"; past the target it says so."""
+    if not math.isfinite(relit.relative_rms):
+        return "relit: error unknown (the solve had fewer than 2 batches)"
+    text = f"relit: error {relit.relative_rms * 100:.3g}%"
+    if relit.target_relative_rms is None:
+        return text
+    target = relit.target_relative_rms * 100
+    if relit.past_target:
+        return text + f", past the solve's {target:.2g}% target (it applies to the solved strengths): Update or solve again"
+    return text + f" (the solve's target {target:.2g}% applies to the solved strengths)"
+
+
+def combine(values, w):
+    """(n,3) float32: sum_s w_s values_s of (S,n,3) float32 ``values``, at least 0."""
+    out = np.einsum("snc,sc->nc", values, w.astype(np.float32), optimize=False)
+    np.maximum(out, 0.0, out=out)
+    return out
+
+
+class SmoothSources:
+    """The smooth outputs of a per-source solve: ``corners`` yields the totals as
+    pipeline._smooth_corners does (the groups' sum, so that relighting at the solved strengths
+    gives the picture the solve wrote) and keeps each group's at the objects' polygon corners."""
+
+    def __init__(self, out, at_polygon_corners):
+        self.out, self.at_polygon_corners = out, at_polygon_corners
+
+    def corners(self, scene, result, light=False):
+        results = self.out.sources_out
+        for name, per_group in source_corners(scene, result, results.groups, light):
+            per_object = [self.at_polygon_corners(self.out.patches, scene, corners) for corners in per_group]
+            results.smooth[name] = [None if parts[0] is None else np.stack(parts) for parts in zip(*per_object)]
+            yield name, per_group.sum(axis=0)
+            del per_group
+
+
+def add_object_values(out, settings):
+    """Fills ``out.sources_out.arrays``: per receiving object {kind: (S,n,3) float32} for the
+    outputs ``out`` writes, and ``targets``: (attribute, kind, domain) each output is made of."""
+    results = out.sources_out
+    if results is None:
+        return
+    ps, patches = results.per_source, out.patches
+    results.targets = output_targets(settings, out)
+    kinds = {kind for _, kind, _ in results.targets}
+    for k, o in enumerate(patches.objects):
+        if not o.receives:
+            results.arrays.append(None)
+            continue
+        rows = patches.combined.patch_slice(k)
+        values = {"flat": ps.radiosity[:, rows].astype(np.float32)}
+        if "irradiance" in kinds or "irradiance_point" in kinds:
+            values["irradiance"] = ps.irradiance[:, rows].astype(np.float32)
+        if "irradiance_point" in kinds:
+            from ..core import meshing
+
+            values["irradiance_point"] = np.stack([meshing.point_average(patches.meshes[k], h).astype(np.float32)
+                                                   for h in values.pop("irradiance")])
+        for name, per_object in results.smooth.items():
+            values[name] = per_object[k]
+        results.arrays.append(values)
+    results.smooth = {}
+
+
+def output_targets(settings, out):
+    """[(attribute, kind, domain)]: which stored values make each output the run writes
+    (domain FACE_CORNERS: a patch's value on its polygon's corners)."""
+    smooth_made = any(c is not None for c in out.smooth_colours)
+    output = settings.output
+    smooth = output == "VERTEX" or (output in ("BOTH", "TEXTURED") and smooth_made)
+    targets = [("Radiosity", "smooth", "CORNER")] if smooth else []
+    if output in ("FACE", "BOTH", "TEXTURED"):
+        targets.append(("Radiosity Patches" if smooth else "Radiosity", "flat", "FACE_CORNERS"))
+    if output == "TEXTURED":
+        corner = out.light_domain == "CORNER"
+        targets.append(("Radiosity Light", "light" if corner else "irradiance", "CORNER" if corner else "FACE"))
+    elif settings.light_output:
+        targets.append(("Radiosity Light", "irradiance_point" if output == "VERTEX" else "irradiance",
+                        "POINT" if output == "VERTEX" else "FACE_CORNERS"))
+    return targets
