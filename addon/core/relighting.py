@@ -68,7 +68,7 @@ class GroupBatches:
             radiosity[s] += np.where((patch_group == s)[:, None], scene.emission, 0.0)
         covariance = self.spread(N) / ((total.chunks - 1) * N) if total.chunks > 1 else np.full((self.channels, S, S), math.nan)
         return PerSource(self.groups.names, radiosity, irradiance, group_power(scene, self.groups), covariance,
-                         scene_scale(scene), target_mse)
+                         scene_scale(scene), target_mse, patch_group)
 
 
 def group_power(scene, groups):
@@ -94,7 +94,8 @@ class PerSource:
     E in its radiosity), summing to the solve's own over groups; ``power`` (S,3) each group's
     power; ``covariance`` (C,S,S) the area-weighted mean over patches of the groups' batch
     covariance of the reflected radiosity (C = 1 for a grey scene, whose channels are alike;
-    NaN below 2 chunks); ``scale`` b_ave per unit of power; the solve's ``target_mse`` or None."""
+    NaN below 2 chunks); ``scale`` b_ave per unit of power; the solve's ``target_mse`` or None;
+    ``patch_group`` (P,) int32 the group of each patch's own emission (-1: none), or None."""
 
     names: tuple
     radiosity: np.ndarray
@@ -103,6 +104,7 @@ class PerSource:
     covariance: np.ndarray
     scale: float
     target_mse: float | None = None
+    patch_group: np.ndarray | None = None
 
     @property
     def count(self):
@@ -167,3 +169,40 @@ def relight(per_source, weights, irradiance=False):
 def _combine(values, w):
     """(P,3) sum_s w_s values_s of (S,P,3) ``values`` (one pass over them: it is memory-bound)."""
     return np.einsum("spc,sc->pc", values, w.astype(values.dtype, copy=False))
+
+
+def smooth_sources(surface, scene, result, light=False):
+    """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
+    output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
+    they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
+    ("light", (S,T,3,3)) first with ``light``, the light arriving (``Surface.arriving_light``);
+    then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``) and
+    smooth, plus each group's own emission, flat. ``surface`` is ``smoothing.Surface.of`` the
+    scene's triangles; ``result`` a per-source solve's SolveResult."""
+    per_source = result.per_source
+    if per_source is None:
+        raise ValueError("the solve has no per-source results: solve with per_source=True")
+    if light:
+        _, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
+                                         return_filter=True)
+        filled = fill(per_source.irradiance)
+        _, corners = surface.corner_values(fill(result.irradiance), return_filter=True)
+        yield "light", corners(filled)
+        del filled
+    filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
+    _, corners = surface.corner_values(filtered, return_filter=True)
+    smooth = corners(noise(per_source.irradiance * scene.reflectivity))
+    emitting = per_source_emission(scene, per_source)
+    smooth += emitting[:, surface.triangle_patch][:, :, None, :]
+    yield "smooth", smooth
+
+
+def per_source_emission(scene, per_source):
+    """(S,P,3) each group's own emitting patches' E (0 elsewhere)."""
+    if per_source.patch_group is None:
+        raise ValueError("the per-source results do not say which group each emitting patch is in (patch_group)")
+    emission = np.zeros((per_source.count, scene.patch_count, 3))
+    group = per_source.patch_group
+    for s in range(per_source.count):
+        emission[s] = np.where((group == s)[:, None], scene.emission, 0.0)
+    return emission

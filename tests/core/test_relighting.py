@@ -212,3 +212,27 @@ def test_a_per_source_solve_cancelled_before_its_first_chunk_keeps_the_emission_
     np.testing.assert_array_equal(r.per_source.radiosity.sum(axis=0), scene.emission)
     relit = relight(r.per_source, WEIGHTS)
     assert math.isnan(relit.mse) and math.isnan(relit.relative_rms) and not relit.past_target
+
+
+@pytest.mark.parametrize("case", [METHODS[0], METHODS[7]], ids=[IDS[0], IDS[7]])
+def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_flat_ones(case):
+    """smooth_sources: each group's smooth radiosity and light arriving, made with the whole's
+    noise-filter weights, clips and corner scales, add up to what the pipeline shows for the solve
+    (float error); recombined with new weights they are the same linear map of the relit values."""
+    from addon.bpy_free import pipeline
+    from addon.core import smoothing
+    from addon.core.relighting import per_source_emission, smooth_sources
+
+    scene = _open_box()
+    r = _solve(scene, case, paths=40_000, seed=3, per_source=True)
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    parts = dict(smooth_sources(surface, scene, r, light=True))
+    whole = dict(pipeline._smooth_corners(scene, r, light=True))
+    for name in ("light", "smooth"):
+        assert parts[name].shape == (6,) + whole[name].shape
+        np.testing.assert_allclose(parts[name].sum(axis=0), whole[name], rtol=0, atol=1e-13 * whole[name].max())
+    # the emitting patches' own E is in their group's colours only
+    emission = per_source_emission(scene, r.per_source)
+    assert np.array_equal(emission.sum(axis=0), scene.emission) and not emission[1:].any()
+    with pytest.raises(ValueError, match="per_source=True"):
+        next(smooth_sources(surface, scene, _solve(scene, case, paths=2_000, seed=3)))
