@@ -55,7 +55,7 @@ def store(scene, created, results, snapshot, solved):
     meta.update(token=token, objects=objects, targets=[list(t) for t in results.targets],
                 kinds=sorted({k for v in receiving for k in v}), selected=list(solved[0]), solved=list(solved[1]),
                 geometry=solved[2],
-                relit=[1.0] * len(members))
+                relit=[[1.0] * 3 for _ in members])
     collection[META_PROPERTY] = json.dumps(meta)
     _CACHE.clear()
     _CACHE[token] = Stored(meta, {obj: values for obj, values in zip(objects, receiving)})

@@ -17,7 +17,7 @@ import numpy as np
 from ..core import smoothing
 from ..core.grouping import PER_SOURCE_MAX, source_groups
 from ..core.lights import WorldLight
-from ..core.relighting import PerSource, relight
+from ..core.relighting import PerSource, relight, smooth_sources
 
 # Automatic keeps per-source results up to this many sources: the walks' solves then cost
 # 1.13-1.3x, the two-way iteration's 1.3x (benchmarks/results/relight.md); more cost more.
@@ -106,47 +106,13 @@ def source_results(scene, patches, result, groups):
     return SourceResults(result.per_source, groups, listed)
 
 
-def source_corners(scene, result, groups, light=False):
+def source_corners(scene, result, light=False):
     """Like pipeline._smooth_corners for a per-source ``result``: ("light", (S,T,3,3)) with
-    ``light``, then ("smooth", (S,T,3,3)): each group's smooth values, which add up to the
-    smoothed total (its noise filter's weights, the total's, applied to every group)."""
-    ps = result.per_source
+    ``light``, then ("smooth", (S,T,3,3)): each group's smooth values, the total's noise-filter
+    weights, clips and corner scales held (core relighting.smooth_sources), adding up to the
+    total's."""
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
-    own = own_emission(scene, groups)
-    if light:
-        from .pipeline import arriving_light
-
-        total = arriving_light(surface, result.irradiance, result.irradiance_variance, scene.reflectivity)
-        yield "light", _corners(surface, _shares(ps.irradiance, np.maximum(result.irradiance, 0.0), total))
-    total_reflected = np.maximum(result.reflected, 0.0)
-    filtered = surface.filter_noise(total_reflected, result.reflected_variance)
-    corners = _corners(surface, _shares(ps.radiosity - own, total_reflected, filtered))
-    corners += own[:, scene.triangle_patch][:, :, None, :]
-    yield "smooth", corners
-
-
-def own_emission(scene, groups):
-    """(S,P,3) each group's own emitting patches' E."""
-    own = np.zeros((groups.count, scene.patch_count, 3))
-    patch_group = groups.patch_group(scene.patch_count)
-    rows = np.flatnonzero(patch_group >= 0)
-    own[patch_group[rows], rows] = scene.emission[rows]
-    return own
-
-
-def _shares(values, total, filtered):
-    """(S,P,3) each group's part of ``filtered`` (the total's smoothed values): its share of the
-    unfiltered ``total`` (the filter's weights held; by its mean share where the total is 0)."""
-    values = np.maximum(values, 0.0)
-    summed = values.sum(axis=0)
-    mean_share = summed.sum(axis=0) / max(float(summed.sum()), 1e-300)
-    share = np.divide(values, summed, out=np.broadcast_to(mean_share / 3, values.shape).copy(), where=summed > 0)
-    return share * filtered
-
-
-def _corners(surface, values):
-    """(S,T,3,3): each group's (P,3) values at the triangle corners."""
-    return np.stack([surface.corner_values(v) for v in values])
+    yield from smooth_sources(surface, scene, result, light)
 
 
 def weights(meta, current):
@@ -212,7 +178,7 @@ class SmoothSources:
 
     def corners(self, scene, result, light=False):
         results = self.out.sources_out
-        for name, per_group in source_corners(scene, result, results.groups, light):
+        for name, per_group in source_corners(scene, result, light):
             per_object = [self.at_polygon_corners(self.out.patches, scene, corners) for corners in per_group]
             results.smooth[name] = [None if parts[0] is None else np.stack(parts) for parts in zip(*per_object)]
             yield name, per_group.sum(axis=0)

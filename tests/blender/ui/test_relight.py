@@ -1,0 +1,233 @@
+"""Relighting in Blender (addon/ui/relight.py, bpy_free/relit.py, blender_write/relight_store.py):
+a solve with per-light results, the sources' strengths and colours changed, and
+``radiosity.relight`` gives within noise what a fresh solve of the changed scene gives, for every
+source kind (a point lamp off, an area lamp hidden, the sun, the sky and an emissive material
+tinted), traces no ray, rewrites every output the run wrote, survives save and reopen and undo,
+and refuses in one line, changing nothing, where there is nothing to relight.
+
+The joint-noise statistic is the core's (tests/core/test_relighting.py): with d_j the difference
+of the relit and the fresh patch values, T = sum_j A_j |d_j|^2 / (A_T (mse_relit + mse_fresh)) has
+expectation 1; z = (T - 1) over its standard error sqrt(2 / n_eff), widened 2x for the patches'
+shared paths; |z| < 5 passes, and the solve's own picture, not relit, must fail it (the test can
+see the change)."""
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+from addon.blender_write import relight_store
+from addon.ui import operators, relight as relight_ui
+
+from . import relight_scene as rs
+
+Z = 5.0
+CORRELATION_ALLOWANCE = 2.0
+
+
+def _z(a, b, mse_a, mse_b, variance_b, area):
+    weight = area / area.sum()
+    T = float((weight[:, None] * (a - b) ** 2).sum() / 3) / (mse_a + mse_b)
+    terms = (weight[:, None] * 2 * variance_b).ravel()
+    n_eff = terms.sum() ** 2 / (terms**2).sum()
+    return (T - 1.0) / (math.sqrt(2.0 / n_eff) * CORRELATION_ALLOWANCE)
+
+
+def _solve(monkeypatch, seed):
+    """Solves (FACE colours, 2% target) and returns the run's output (its variances)."""
+    kept = []
+    monkeypatch.setattr(operators, "OUTPUT_LISTENER", kept.append)
+    bpy.context.scene.radiosity.seed = seed
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    return kept[-1]
+
+
+def _only(kind):
+    """Changes one source kind (relight_scene.change's change of it)."""
+    def bulb():
+        bpy.data.objects["Bulb"].data.energy = 0.0
+
+    def panel():
+        bpy.data.objects["Panel"].hide_render = True
+
+    def sun():
+        sun = bpy.data.objects["Sun"].data
+        sun.energy, sun.color = 6.0, (1.0, 0.7, 0.4)
+
+    def world():
+        node = next(n for n in bpy.context.scene.world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+        node.inputs["Color"].default_value = (0.1, 0.3, 1.0, 1.0)
+        node.inputs["Strength"].default_value = 4.0
+
+    def glow():
+        node = bpy.data.materials["Glow"].node_tree.nodes["Principled BSDF"]
+        node.inputs["Emission Color"].default_value = (1.0, 0.3, 0.2, 1.0)
+        node.inputs["Emission Strength"].default_value = 8.0
+
+    def everything():
+        rs.change(bpy.context)
+
+    return locals()[kind]
+
+
+@pytest.mark.parametrize("kind", ["bulb", "panel", "sun", "world", "glow", "everything"])
+def test_a_relit_scene_is_a_fresh_solve_of_it_within_their_joint_noise(blender, monkeypatch, kind):
+    settings = rs.build(blender)
+    settings.target_error = 2.0
+    _solve(monkeypatch, seed=7)
+    solved, area = rs.patch_values()
+    _only(kind)()
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    relit, _ = rs.patch_values()
+    relit_mse = relight_ui.assess(bpy.context.scene).error.mse
+    fresh_output = _solve(monkeypatch, seed=8)
+    fresh, _ = rs.patch_values()
+    result = fresh_output.result
+    z = _z(relit, fresh, relit_mse, result.measured_mse, result.reflected_variance, area)
+    assert abs(z) < Z, z
+    # the picture before relighting is not the changed scene's: the statistic sees the change
+    z_before = _z(solved, fresh, relit_mse, result.measured_mse, result.reflected_variance, area)
+    assert z_before > Z, z_before
+
+
+def _attributes(kind="color"):
+    out = {}
+    for obj in relight_store.result_collection(bpy.context.scene, create=False).objects:
+        for a in obj.data.attributes:
+            if a.name.startswith("Radiosity"):
+                data = np.empty(len(a.data) * 4, np.float32)
+                a.data.foreach_get("color", data)
+                out[(obj.name, a.name)] = data
+    return out
+
+
+@pytest.mark.parametrize("output,light", [("TEXTURED", False), ("BOTH", True), ("VERTEX", True), ("FACE", False)])
+def test_relight_traces_no_ray_and_rewrites_every_output_the_run_wrote(blender, monkeypatch, output, light):
+    from addon.core import raytrace
+
+    settings = rs.build(blender, output)
+    settings.light_output = light
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    before = _attributes()
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}  # at the solved strengths: the solve's own picture
+    for key, values in _attributes().items():
+        np.testing.assert_allclose(values, before[key], rtol=1e-5, atol=1e-6, err_msg=str(key))
+
+    def no_rays(*args, **kwargs):
+        raise AssertionError("relight traced a ray")
+
+    for name in ("first_hit", "first_hit_barycentric"):
+        monkeypatch.setattr(raytrace.RayTracer, name, no_rays)
+        monkeypatch.setattr(raytrace.RegionTracer, name, no_rays)
+    rs.change(blender)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    after = _attributes()
+    assert set(after) == set(before)
+    targets = {t[0] for t in relight_store.meta_of(bpy.context.scene)["targets"]}
+    expected = {"FACE": {"Radiosity"}, "TEXTURED": {"Radiosity", "Radiosity Patches", "Radiosity Light"},
+                "BOTH": {"Radiosity", "Radiosity Patches", "Radiosity Light"},
+                "VERTEX": {"Radiosity", "Radiosity Light"}}[output]
+    assert targets == expected
+    for key in after:
+        if key[1] in targets:
+            assert not np.allclose(after[key], before[key]), key  # every output the run wrote moved
+
+
+def test_relight_follows_each_weight_exactly(blender):
+    """Doubling one lamp adds exactly its stored values once more: the recombination is linear."""
+    rs.build(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    meta = relight_store.meta_of(bpy.context.scene)
+    stored, _ = relight_store.load(bpy.context.scene, meta)
+    before = _attributes()
+    bpy.data.objects["Bulb"].data.energy *= 2.0
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    bulb = meta["names"].index("Bulb")
+    for name in meta["objects"]:
+        flat = stored.arrays[name]["flat"]
+        expected = np.maximum(flat.sum(axis=0) + flat[bulb], 0)
+        got = np.repeat(expected, stored.sizes[name], axis=0)
+        values = _attributes()[(name, "Radiosity")].reshape(-1, 4)[:, :3]
+        np.testing.assert_allclose(values, got, rtol=1e-5, atol=1e-6)
+        assert not np.allclose(values, before[(name, "Radiosity")].reshape(-1, 4)[:, :3])
+
+
+def test_save_reopen_relight_is_the_same_and_undo_takes_a_relight_back(blender, tmp_path):
+    rs.build(blender, "TEXTURED")
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    rs.change(blender)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    relit = _attributes()
+    path = str(tmp_path / "relit.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    relight_store.forget()  # as a new session: the arrays come from the file
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    after = _attributes()
+    assert set(after) == set(relit)
+    for key in after:
+        np.testing.assert_array_equal(after[key], relit[key])
+    # undo: a relight is one undo step
+    bpy.ops.ed.undo_push(message="relit")
+    bpy.data.objects["Sun"].data.energy = 10.0
+    bpy.ops.ed.undo_push(message="sun")
+    assert bpy.ops.radiosity.relight("EXEC_DEFAULT", True) == {"FINISHED"}
+    brighter = _attributes()
+    assert any(not np.array_equal(brighter[k], relit[k]) for k in relit)
+    assert bpy.ops.ed.undo() == {"FINISHED"}
+    undone = _attributes()
+    for key in undone:
+        np.testing.assert_array_equal(undone[key], relit[key])
+
+
+def _scene_state():
+    return ({o.name: tuple(o.location) for o in bpy.data.objects},
+            {k: v.tobytes() for k, v in _attributes().items()} if relight_store.result_collection(
+                bpy.context.scene, create=False) else {})
+
+
+def test_relight_without_per_light_results_or_after_they_were_deleted_says_so_and_changes_nothing(blender):
+    rs.build(blender)
+    state = _scene_state()
+    with pytest.raises(RuntimeError, match=r"^Error: Radiosity: no per-light results to relight: solve with "
+                                           r"Per-light results On or Automatic first\n?$"):
+        bpy.ops.radiosity.relight()
+    assert _scene_state() == state
+    bpy.context.scene.radiosity.per_source = "OFF"
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    state = _scene_state()
+    with pytest.raises(RuntimeError, match="no per-light results to relight"):
+        bpy.ops.radiosity.relight()
+    assert _scene_state() == state
+    bpy.context.scene.radiosity.per_source = "ON"
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    relight_store.forget()
+    room = bpy.data.objects["Room Radiosity"]
+    room.data.attributes.remove(room.data.attributes[relight_store.attribute_name("flat", 0)])
+    rs.change(blender)
+    state = _scene_state()
+    with pytest.raises(RuntimeError, match=r"'Room Radiosity' lost its per-source values \(flat\): solve again"):
+        bpy.ops.radiosity.relight()
+    assert _scene_state() == state
+    bpy.data.objects.remove(bpy.data.objects["Strip Radiosity"])
+    state = _scene_state()
+    with pytest.raises(RuntimeError, match="the result object 'Strip Radiosity' is gone: solve again to relight"):
+        bpy.ops.radiosity.relight()
+    assert _scene_state() == state
+
+
+def test_live_a_lamp_turned_relights_at_once_and_only_then(blender):
+    rs.build(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    before = _attributes()
+    bpy.data.objects["Bulb"].data.energy = 60.0
+    relight_ui._STATE["pending"] = False
+    bpy.context.view_layer.update()  # the depsgraph handler runs
+    assert relight_ui._STATE["pending"]  # a relight is due
+    relight_ui.live_tick()
+    assert not relight_ui._STATE["pending"]
+    after = _attributes()
+    assert any(not np.array_equal(after[k], before[k]) for k in before)
+    bpy.data.objects["Room"].location.x += 0.0  # nothing of a source: no relight due
+    bpy.context.view_layer.update()
+    assert not relight_ui._STATE["pending"]
