@@ -226,7 +226,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             if OUTPUT_LISTENER is not None:
                 OUTPUT_LISTENER(output)
             relight_keep.keep(scene, write_results(context, output, job.settings.output, scene=scene), output,
-                              getattr(self, "_sources", {}))
+                              getattr(self, "_sources", {}), job.settings)
         except Exception as exc:  # noqa: BLE001 - report, never a traceback
             import traceback
 

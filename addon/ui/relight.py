@@ -121,6 +121,7 @@ class RADIOSITY_OT_relight(bpy.types.Operator):
 
     def execute(self, context):
         started = time.perf_counter()
+        context.evaluated_depsgraph_get()  # (moved lamps' matrices up to date)
         try:
             outcome = relight(context.scene)
         except ValueError as exc:
@@ -143,8 +144,9 @@ class RADIOSITY_OT_update(bpy.types.Operator):
     def execute(self, context):
         from . import relight_update
 
+        context.evaluated_depsgraph_get()
         try:
-            message = relight_update.update(self, context)
+            message = relight_update.update(context)
         except ValueError as exc:
             self.report({"ERROR"}, f"Radiosity: {exc}")
             return {"CANCELLED"}

@@ -12,13 +12,19 @@ def snapshot(scene):
     return sources.snapshot(scene)
 
 
-def keep(scene, created, output, snapshot):
+# The last solve's result, settings and patch size (by its results' token), for Update.
+LAST = {}
+
+
+def keep(scene, created, output, snapshot, settings):
     """Stores ``output``'s per-source results (or forgets earlier ones where it has none)."""
     results = getattr(output, "sources_out", None)
     objects = output.patches.objects
     selected = [o.name for o in objects if o.receives]
     solved = [o.name for o in objects]
     geometry = sources.geometry_signature(scene, solved) if results is not None else None
-    relight_store.store(scene, created, results, snapshot, (selected, solved, geometry))
+    meta = relight_store.store(scene, created, results, snapshot, (selected, solved, geometry))
+    LAST.clear()
     if results is not None:
         scene.radiosity.last_relit = ""
+        LAST[meta["token"]] = (output.result, settings, output.patches.patch_size)

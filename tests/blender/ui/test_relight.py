@@ -231,3 +231,67 @@ def test_live_a_lamp_turned_relights_at_once_and_only_then(blender):
     bpy.data.objects["Room"].location.x += 0.0  # nothing of a source: no relight due
     bpy.context.view_layer.update()
     assert not relight_ui._STATE["pending"]
+
+
+def _spy_solves(monkeypatch):
+    """The group names of every core solve from here on."""
+    from addon.core import solver
+
+    calls = []
+    original = solver.solve
+
+    def spy(scene, *args, **kwargs):
+        groups = kwargs.get("groups")
+        calls.append(tuple(groups.names) if groups is not None else None)
+        return original(scene, *args, **kwargs)
+
+    monkeypatch.setattr(solver, "solve", spy)
+    monkeypatch.setattr("addon.bpy_free.pipeline.solve", spy)
+    return calls
+
+
+def test_a_moved_lamp_is_stale_and_update_solves_only_its_light(blender, monkeypatch):
+    settings = rs.build(blender)
+    settings.target_error = 2.0
+    _solve(monkeypatch, seed=7)
+    scene = bpy.context.scene
+    assert relight_ui.assess(scene).stale == set()
+    bpy.data.objects["Bulb"].location = (0.3, 0.6, 0.4)
+    bpy.context.view_layer.update()  # (as the interface does after an edit)
+    outcome = relight_ui.assess(scene)
+    assert outcome.stale == {"Bulb"}
+    assert outcome.state(outcome.meta["names"].index("Bulb")) == "stale"
+    assert "stale: Bulb (Update)" in outcome.text()
+    bpy.data.objects["Sun"].data.energy = 4.0  # and a strength changed: relit, not stale
+    calls = _spy_solves(monkeypatch)
+    assert bpy.ops.radiosity.update() == {"FINISHED"}
+    assert calls == [("Bulb",)]
+    assert relight_ui.assess(scene).stale == set()
+    updated, area = rs.patch_values()
+    updated_mse = relight_ui.assess(scene).error.mse
+    monkeypatch.undo()
+    fresh_output = _solve(monkeypatch, seed=9)
+    fresh, _ = rs.patch_values()
+    result = fresh_output.result
+    assert abs(_z(updated, fresh, updated_mse, result.measured_mse, result.reflected_variance, area)) < Z
+
+
+def test_a_geometry_change_or_an_added_lamp_makes_update_solve_everything(blender, monkeypatch):
+    rs.build(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    scene = bpy.context.scene
+    names = tuple(relight_store.meta_of(scene)["names"])
+    bpy.data.objects["Strip"].location.z += 0.1
+    bpy.context.view_layer.update()
+    assert relight_ui.assess(scene).stale == set(names)
+    calls = _spy_solves(monkeypatch)
+    assert bpy.ops.radiosity.update() == {"FINISHED"}
+    assert calls == [names]
+    rs.lamp("POINT", "Extra", (0.5, 0.2, 0.5), 10.0)
+    bpy.context.view_layer.update()
+    outcome = relight_ui.assess(scene)
+    assert outcome.added == ["Extra"] and "Extra added since the solve" in outcome.text()
+    assert bpy.ops.radiosity.update() == {"FINISHED"}
+    assert "Extra" in calls[-1]
+    assert bpy.ops.radiosity.update() == {"FINISHED"}  # nothing stale: no solve
+    assert len(calls) == 2
