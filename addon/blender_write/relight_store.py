@@ -81,8 +81,49 @@ class Stored:
     """The arrays of one set of per-source results: per result object {kind: (S,n,3) float32},
     and each object's polygon sizes (for FACE_CORNERS outputs)."""
 
+    # Full recombinations between two of the updates by the changed sources alone (float error
+    # accumulates in those updates; a full one starts afresh).
+    FULL_EVERY = 64
+
     def __init__(self, meta, arrays):
         self.meta, self.arrays, self.sizes = meta, arrays, {}
+        self.last = {}  # (object, kind) -> (weights (S,3), the unclipped sum (n,3) float32, updates since full)
+        self.buffers, self.corner_patch = {}, {}
+
+    def combined(self, name, kind, w):
+        """(n,3) float32 (not to be changed): the object's ``kind`` values recombined with ``w`` (S,3): by
+        the sources whose weights changed since the last recombination alone where they are
+        few (a lamp turned: one source's values read, not S)."""
+        values = self.arrays[name][kind]
+        last = self.last.get((name, kind))
+        changed = None if last is None else np.flatnonzero((w != last[0]).any(axis=1))
+        if changed is not None and len(changed) <= len(w) // 2 and last[2] < self.FULL_EVERY:
+            total = last[1]
+            delta = (w[changed] - last[0][changed]).astype(np.float32)
+            for s, d in zip(changed, delta):  # (no copy of the changed sources' values)
+                total += values[s] * d
+            count = last[2] + 1
+        else:
+            total = np.einsum("snc,sc->nc", values, w.astype(np.float32))
+            count = 0
+        self.last[(name, kind)] = (w.copy(), total, count)
+        return total
+
+    def write(self, name, attribute, kind, domain, w):
+        """Writes the recombination of ``kind`` into the colour ``attribute`` of object ``name``
+        (at least 0; FACE_CORNERS: each patch's value on its polygon's corners), through an RGBA
+        buffer kept for the next time."""
+        total = self.combined(name, kind, w)
+        key = (name, attribute.name)
+        buffer = self.buffers.get(key)
+        if buffer is None or len(buffer) != len(attribute.data):
+            buffer = self.buffers[key] = np.ones((len(attribute.data), 4), np.float32)
+        if domain == "FACE_CORNERS":
+            if name not in self.corner_patch:
+                self.corner_patch[name] = np.repeat(np.arange(len(self.sizes[name])), self.sizes[name])
+            total = total[self.corner_patch[name]]
+        np.maximum(total, 0.0, out=buffer[:, :3])
+        attribute.data.foreach_set("color", buffer.ravel())
 
 
 def load(scene, meta):

@@ -13,7 +13,6 @@ from bpy.app.handlers import persistent
 from ..blender_read import sources
 from ..blender_write import relight_store
 from ..blender_write.materials import TEXTURED_PROPERTY, is_textured_material
-from ..blender_write.results import rgba
 from ..bpy_free import relit
 
 LIVE_DELAY = 0.02  # seconds: changes that come together (a slider drag) relight once
@@ -81,10 +80,7 @@ def relight(scene):
             attribute = mesh.attributes.get(attribute_name)
             if attribute is None:
                 raise ValueError(f"'{name}' lost its '{attribute_name}' colours: solve again to relight")
-            values = relit.combine(stored.arrays[name][kind], w)
-            if domain == "FACE_CORNERS":
-                values = np.repeat(values, stored.sizes[name], axis=0)
-            attribute.data.foreach_set("color", rgba(values))
+            stored.write(name, attribute, kind, domain, w)
         mesh.update_tag()
     _textured_emission()
     meta["relit"] = w.tolist()
