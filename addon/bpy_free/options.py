@@ -171,8 +171,8 @@ OUTPUT = Choice("output", "--colours", "TEXTURED", (
      f"above {SMOOTH_MAX_PATCHES:,} patches the flat ones alone, as 'Radiosity'"),
 ), "Colours")
 PER_SOURCE = Choice("per_source", "--per-light", "AUTO", (
-    ("AUTO", "Automatic", "On where the scene has at most 8 sources (lamps, the world, emissive materials, or "
-     "Blender's light groups) and patches x sources stay within 2 million: the walks' solves then take about "
+    ("AUTO", "Automatic", "On where the scene has 2 to 8 sources (lamps, the world, emissive materials, or "
+     "Blender's light groups) and patches x sources stay within a million: the walks' solves then take about "
      "1.1-1.3x the time; more sources cost more (up to 2.8x with the two-way iteration at 17)"),
     ("ON", "On", "Keep every source's own result, from the same rays, in the .blend, so that Relight recombines "
      "them with new strengths and colours without tracing a ray; refused beyond patches x sources of 8 million"),

@@ -268,6 +268,7 @@ def make_patches(objects, patch_size, layers=False) -> Patches:
     A patch size of 0 is automatic (:func:`automatic_patch_size`). With ``layers``, also the
     receiving objects' UV maps and colour attributes at the patch corners (``result_layers``)."""
     lights = tuple(getattr(objects, "lights", ()))  # (a blender_read.selection.Selection carries them)
+    light_labels = tuple(getattr(objects, "light_labels", None) or (None,) * len(lights))
     check_finite_vertices(objects)
     objects, notes = drop_zero_area_faces(objects)
     if not objects:
@@ -279,7 +280,7 @@ def make_patches(objects, patch_size, layers=False) -> Patches:
     if layers:
         patches.layers = [result_layers(o, m) if o.receives else None for o, m in zip(objects, patches.meshes)]
     patches.lights = lights
-    patches.light_labels = tuple(getattr(objects, "light_labels", None) or (None,) * len(lights))
+    patches.light_labels = light_labels
     patches.notes = notes
     patches.patch_size = float(patch_size)
     return patches

@@ -19,10 +19,11 @@ from ..core.grouping import PER_SOURCE_MAX, source_groups
 from ..core.lights import WorldLight
 from ..core.relighting import PerSource, relight, smooth_sources
 
-# Automatic keeps per-source results up to this many sources: the walks' solves then cost
-# 1.13-1.3x, the two-way iteration's 1.3x (benchmarks/results/relight.md); more cost more.
+# Automatic keeps per-source results from 2 up to this many sources: the walks' solves then cost
+# 1.13-1.3x, the two-way iteration's 1.3x at 4 (benchmarks/results/relight.md); more cost more.
+# (One source: the solve's memory alone; On keeps them.)
 AUTO_MAX_SOURCES = 8
-AUTO_MAX_SIZE = PER_SOURCE_MAX // 4  # patches x sources: the .blend keeps them too
+AUTO_MAX_SIZE = PER_SOURCE_MAX // 8  # patches x sources: the .blend and the relight's memory keep them too
 
 
 def groups_for(scene, patches, choice, notes):
@@ -37,6 +38,8 @@ def groups_for(scene, patches, choice, notes):
     light_labels = list(patches.light_labels) if patches.light_labels else None
     groups = source_groups(scene, labels, light_labels)
     size = scene.patch_count * groups.count
+    if choice == "AUTO" and groups.count < 2:
+        return None
     if choice == "AUTO" and (groups.count > AUTO_MAX_SOURCES or size > AUTO_MAX_SIZE):
         notes.append(f"per-light results left out: {groups.count} sources x {scene.patch_count:,} patches (Automatic "
                      f"keeps them up to {AUTO_MAX_SOURCES} sources and {AUTO_MAX_SIZE:,} patches x sources); "

@@ -16,7 +16,7 @@ from ..blender_write.materials import TEXTURED_PROPERTY, is_textured_material
 from ..bpy_free import relit
 
 LIVE_DELAY = 0.02  # seconds: changes that come together (a slider drag) relight once
-_STATE = {"pending": False, "seconds": 0.0}
+_STATE = {"pending": False, "seconds": 0.0, "generation": 0, "panel": (None, None)}
 
 
 class Relit:
@@ -168,6 +168,7 @@ def _source_changed(depsgraph):
 def on_depsgraph_update(scene, depsgraph):
     """A source's data changed and the scene has per-source results: relight soon (once for a
     burst of changes)."""
+    _STATE["generation"] += 1  # (the panel's list is made again)
     settings = getattr(scene, "radiosity", None)
     if _STATE["pending"] or settings is None or not settings.live_relight or not _source_changed(depsgraph):
         return
@@ -221,11 +222,13 @@ class VIEW3D_PT_radiosity_relight(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         scene = context.scene
+        key = (_STATE["generation"], scene.session_uid, scene.radiosity.last_relit)
         try:
-            outcome = assess(scene)
+            outcome = _STATE["panel"][1] if _STATE["panel"][0] == key else assess(scene)
         except ValueError as exc:
             layout.label(text=str(exc))
             return
+        _STATE["panel"] = (key, outcome)
         col = layout.column(align=True)
         icons = {"current": "CHECKMARK", "relit": "LIGHT", "stale": "ERROR"}
         for s, name in enumerate(outcome.meta["names"]):

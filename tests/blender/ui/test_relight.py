@@ -295,3 +295,57 @@ def test_a_geometry_change_or_an_added_lamp_makes_update_solve_everything(blende
     assert "Extra" in calls[-1]
     assert bpy.ops.radiosity.update() == {"FINISHED"}  # nothing stale: no solve
     assert len(calls) == 2
+
+
+def _groups(context, choice):
+    from addon.blender_read.selection import read_selection
+    from addon.bpy_free import relit
+    from addon.bpy_free.patches import make_patches
+    from addon.bpy_free.scene_notes import scene_and_notes
+
+    objects, _ = read_selection(context)
+    patches = make_patches(objects, 0.25)
+    scene, _ = scene_and_notes(patches)
+    notes = []
+    return relit.groups_for(scene, patches, choice, notes), notes
+
+
+def test_automatic_keeps_per_light_results_from_2_to_8_sources_and_light_groups_join_sources(blender):
+    rs.build(blender)
+    groups, notes = _groups(blender, "AUTO")
+    assert set(groups.names) == {"Bulb", "Panel", "Sun", "World", "Glow"} and notes == []
+    for k in range(4):
+        rs.lamp("POINT", f"Extra {k}", (0.2 + 0.2 * k, 0.5, 0.5), 5.0)
+    groups, notes = _groups(blender, "AUTO")
+    assert groups is None and notes[0].startswith("per-light results left out: 9 sources x ")
+    assert len(_groups(blender, "ON")[0].names) == 9
+    assert _groups(blender, "OFF")[0] is None
+    # Blender's light groups: the artist's own grouping, shared by lamps, the world and emitting objects
+    for k in range(4):
+        bpy.data.objects[f"Extra {k}"].lightgroup = "Extras"
+    bpy.data.objects["Strip"].lightgroup = "Extras"
+    bpy.context.scene.world.lightgroup = "Sky"
+    groups, notes = _groups(blender, "AUTO")
+    assert set(groups.names) == {"Bulb", "Panel", "Sun", "Sky", "Extras"} and notes == []
+    # one source: nothing to recombine that the solve's own result does not hold
+    for name in ["Bulb", "Panel", "Sun"] + [f"Extra {k}" for k in range(4)]:
+        bpy.data.objects.remove(bpy.data.objects[name])
+    bpy.context.scene.world = None
+    bpy.data.materials["Glow"].node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 3.0
+    assert _groups(blender, "AUTO")[0] is None and len(_groups(blender, "ON")[0].names) == 1
+
+
+def test_a_light_group_relights_as_one(blender):
+    """Two lamps of one light group scale together: both doubled doubles the group's light."""
+    rs.build(blender)
+    bpy.data.objects["Bulb"].lightgroup = "Lamps"
+    bpy.data.objects["Panel"].lightgroup = "Lamps"
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    meta = relight_store.meta_of(bpy.context.scene)
+    assert "Lamps" in meta["names"] and "Bulb" not in meta["names"]
+    bpy.data.objects["Bulb"].data.energy *= 2
+    bpy.data.objects["Panel"].data.energy *= 2
+    outcome = relight_ui.assess(bpy.context.scene)
+    w = outcome.weights[meta["names"].index("Lamps")]
+    np.testing.assert_allclose(w, 2.0)
+    assert outcome.state(meta["names"].index("Lamps")) == "relit"
