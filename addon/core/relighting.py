@@ -171,6 +171,18 @@ def _combine(values, w):
     return np.einsum("spc,sc->pc", values, w.astype(values.dtype, copy=False))
 
 
+def combine(per_source, parts, weights):
+    """sum_s w_s parts_s (...,3) of any per-source ``parts`` (S,...,3) (smooth corners of
+    ``smooth_sources``, an object's polygon corners), with ``weights`` as ``relight`` takes them;
+    in the parts' dtype."""
+    w = check_weights(per_source, weights)
+    parts = np.asarray(parts)
+    if parts.shape[:1] != (per_source.count,) or parts.shape[-1] != 3:
+        raise ValueError(f"parts must have shape ({per_source.count}, ..., 3): one a source; got {parts.shape}")
+    flat = parts.reshape(per_source.count, -1, 3)
+    return _combine(flat, w).reshape(parts.shape[1:])
+
+
 def smooth_sources(surface, scene, result, light=False):
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
@@ -183,12 +195,10 @@ def smooth_sources(surface, scene, result, light=False):
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
     if light:
-        _, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
-                                         return_filter=True)
-        filled = fill(per_source.irradiance)
-        _, corners = surface.corner_values(fill(result.irradiance), return_filter=True)
-        yield "light", corners(filled)
-        del filled
+        light, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
+                                             return_filter=True)
+        _, corners = surface.corner_values(light, return_filter=True)
+        yield "light", corners(fill(per_source.irradiance))
     filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
     _, corners = surface.corner_values(filtered, return_filter=True)
     smooth = corners(noise(per_source.irradiance * scene.reflectivity))

@@ -222,7 +222,7 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     (float error); recombined with new weights they are the same linear map of the relit values."""
     from addon.bpy_free import pipeline
     from addon.core import smoothing
-    from addon.core.relighting import per_source_emission, smooth_sources
+    from addon.core.relighting import combine, per_source_emission, smooth_sources
 
     scene = _open_box()
     r = _solve(scene, case, paths=40_000, seed=3, per_source=True)
@@ -232,6 +232,17 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     for name in ("light", "smooth"):
         assert parts[name].shape == (6,) + whole[name].shape
         np.testing.assert_allclose(parts[name].sum(axis=0), whole[name], rtol=0, atol=1e-13 * whole[name].max())
+    # recombined with new weights, the smooth parts are the whole's smoothing applied to the relit parts
+    relit = combine(r.per_source, parts["smooth"], WEIGHTS)
+    assert relit.shape == whole["smooth"].shape
+    filtered, noise = surface.filter_light(r.reflected, r.reflected_variance, return_filter=True)
+    corners = surface.corner_values(filtered, return_filter=True)[1]
+    reflected = np.einsum("spc,sc->pc", r.per_source.irradiance, WEIGHTS) * scene.reflectivity
+    emission = np.einsum("spc,sc->pc", per_source_emission(scene, r.per_source), WEIGHTS)
+    expected = corners(noise(reflected)) + emission[scene.triangle_patch][:, None, :]
+    np.testing.assert_allclose(relit, expected, rtol=0, atol=1e-12 * expected.max())
+    with pytest.raises(ValueError, match=r"parts must have shape \(6, \.\.\., 3\)"):
+        combine(r.per_source, parts["smooth"][:5], WEIGHTS)
     # the emitting patches' own E is in their group's colours only
     emission = per_source_emission(scene, r.per_source)
     assert np.array_equal(emission.sum(axis=0), scene.emission) and not emission[1:].any()
