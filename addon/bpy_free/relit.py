@@ -164,13 +164,6 @@ def error_text(relit):
     return text + f" (the solve's target {target:.2g}% applies to the solved strengths)"
 
 
-def combine(values, w):
-    """(n,3) float32: sum_s w_s values_s of (S,n,3) float32 ``values``, at least 0."""
-    out = np.einsum("snc,sc->nc", values, w.astype(np.float32), optimize=False)
-    np.maximum(out, 0.0, out=out)
-    return out
-
-
 class SmoothSources:
     """The smooth outputs of a per-source solve: ``corners`` yields the totals as
     pipeline._smooth_corners does (the groups' sum, so that relighting at the solved strengths

@@ -349,3 +349,18 @@ def test_a_light_group_relights_as_one(blender):
     w = outcome.weights[meta["names"].index("Lamps")]
     np.testing.assert_allclose(w, 2.0)
     assert outcome.state(meta["names"].index("Lamps")) == "relit"
+
+
+def test_a_colour_channel_solved_dark_cannot_be_relit_and_is_stale(blender):
+    """A red lamp turned white: its green and blue light was never solved (0 x anything is 0), so
+    its source is stale rather than wrongly relit; Relight says so."""
+    rs.build(blender)
+    bpy.data.objects["Bulb"].data.color = (1.0, 0.0, 0.0)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    bpy.data.objects["Bulb"].data.color = (1.0, 0.5, 0.5)
+    outcome = relight_ui.assess(bpy.context.scene)
+    bulb = outcome.meta["names"].index("Bulb")
+    assert outcome.state(bulb) == "stale" and "stale: Bulb (Update)" in outcome.text()
+    bpy.data.objects["Bulb"].data.color = (0.5, 0.0, 0.0)  # within what was solved: relit
+    outcome = relight_ui.assess(bpy.context.scene)
+    assert outcome.state(bulb) == "relit" and outcome.stale == set() and outcome.unsolved == set()
