@@ -120,9 +120,10 @@ class Patches:
     patch_size: float = 0.0  # the size meshed with (an automatic size resolved)
     lights: tuple = ()  # the core's light sources (blender_read.selection.Selection.lights)
     light_labels: tuple = ()  # each light's light group, or None (Selection.light_labels)
-    # (P,) object: the material of each patch's face, and its object's light group ("": none)
+    # (P,) int32: each patch's face's material in ``material_names``; each object's light group ("": none)
     patch_material: np.ndarray | None = None
-    patch_lightgroup: np.ndarray | None = None
+    material_names: tuple = ()
+    object_lightgroups: tuple = ()
     # per object, ResultLayers of a receiving object (make_patches(..., layers=True)), else None
     layers: list = field(default_factory=list)
 
@@ -318,18 +319,19 @@ def _with_materials(objects, meshes, combined, key) -> Patches:
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
     emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
     out = Patches([ObjectInfo.of(o) for o in objects], meshes, combined, reflectivity, emission, key)
-    out.patch_material = np.concatenate([_patch_material(o, m) for o, m in zip(objects, meshes)])
-    out.patch_lightgroup = np.concatenate([np.full(m.patch_count, o.lightgroup, dtype=object)
-                                           for o, m in zip(objects, meshes)])
+    names = {}
+    out.patch_material = np.concatenate([_patch_material(o, m, names) for o, m in zip(objects, meshes)])
+    out.material_names, out.object_lightgroups = tuple(names), tuple(o.lightgroup for o in objects)
     return out
 
 
-def _patch_material(o, mesh):
-    """(P,) object: the material name of each patch of ``o`` (its object's name without one)."""
+def _patch_material(o, mesh, names):
+    """(P,) int32: the material of each patch of ``o`` (its object's name without one) as its
+    place in ``names`` (a dict, added to)."""
     if o.face_slot is None or not len(o.slot_names):
-        return np.full(mesh.patch_count, o.name, dtype=object)
-    names = np.array([n or o.name for n in o.slot_names], dtype=object)
-    return names[np.asarray(o.face_slot)[mesh.patch_face]]
+        return np.full(mesh.patch_count, names.setdefault(o.name, len(names)), np.int32)
+    ids = np.array([names.setdefault(n or o.name, len(names)) for n in o.slot_names], dtype=np.int32)
+    return ids[np.asarray(o.face_slot)[mesh.patch_face]]
 
 
 def patch_materials(o, mesh):

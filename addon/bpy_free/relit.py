@@ -32,9 +32,7 @@ def groups_for(scene, patches, choice, notes):
     by theirs, else each its own."""
     if choice == "OFF":
         return None
-    labels = None  # (patches made without their materials' names: by emittance)
-    if patches.patch_material is not None:
-        labels = np.where(patches.patch_lightgroup != "", patches.patch_lightgroup, patches.patch_material)
+    labels = patch_labels(patches)
     light_labels = list(patches.light_labels) if patches.light_labels else None
     groups = source_groups(scene, labels, light_labels)
     size = scene.patch_count * groups.count
@@ -48,9 +46,21 @@ def groups_for(scene, patches, choice, notes):
     return groups
 
 
+def patch_labels(patches):
+    """(P,) object: each patch's group label, its object's light group or else its material
+    (None for patches made without their materials' names: by emittance)."""
+    if patches.patch_material is None:
+        return None
+    labels = np.array(patches.material_names, dtype=object)[patches.patch_material]
+    for k, group in enumerate(patches.object_lightgroups):
+        if group:
+            labels[patches.combined.patch_slice(k)] = group
+    return labels
+
+
 def members_of(scene, groups):
-    """Each group's members [(kind, name), ...] (kind: light, world, material) and each member's
-    power (3,) at the solve's strengths, as lists a group."""
+    """Each group's lights {(kind, name): power (3,) at the solve's strengths} (kind: light or
+    world); ``_material_members`` adds the emissive materials."""
     members = [dict() for _ in range(groups.count)]
     power = scene.source_power
     P = scene.patch_count
@@ -61,7 +71,7 @@ def members_of(scene, groups):
     for k, light in enumerate(lights.lights):
         kind = "world" if isinstance(light, WorldLight) else "light"
         members[groups.light_group[k]][(kind, light.name)] = light_power[k]
-    return members, light_power
+    return members
 
 
 def _material_members(members, groups, scene, patch_material):
@@ -96,15 +106,15 @@ class SourceResults:
         ps = self.per_source
         return {"names": list(ps.names),
                 "members": [[[kind, name, [float(x) for x in p]] for kind, name, p in group] for group in self.members],
-                "power": ps.power.tolist(), "covariance": np.nan_to_num(ps.covariance, nan=-1.0).tolist(),
+                "power": ps.power.tolist(), "covariance": ps.covariance.tolist(),  # (NaN below 2 chunks: JSON's NaN)
                 "scale": float(ps.scale), "target_mse": ps.target_mse}
 
 
 def source_results(scene, patches, result, groups):
     """The SourceResults of a per-source ``result`` (its arrays filled by ``add_object_values``)."""
-    members, _ = members_of(scene, groups)
+    members = members_of(scene, groups)
     if patches.patch_material is not None:
-        _material_members(members, groups, scene, patches.patch_material)
+        _material_members(members, groups, scene, np.array(patches.material_names, dtype=object)[patches.patch_material])
     listed = [[(kind, name, power) for (kind, name), power in group.items()] for group in members]
     return SourceResults(result.per_source, groups, listed)
 
@@ -143,7 +153,6 @@ def relit_error(meta, w):
     """The core's Relit of no patches (its error numbers) for weights ``w`` (S,3)."""
     S = len(meta["names"])
     covariance = np.asarray(meta["covariance"], np.float64)
-    covariance = np.where(covariance == -1.0, np.nan, covariance)
     empty = np.zeros((S, 0, 3))
     ps = PerSource(tuple(meta["names"]), empty, empty, np.asarray(meta["power"], np.float64), covariance,
                    float(meta["scale"]), meta["target_mse"])
