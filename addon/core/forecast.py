@@ -106,7 +106,8 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
         began, finished = time.perf_counter(), []
         r = solve(scene, estimator, paths=chunk * chunks, threshold=threshold, seed=seed, exit_point=exit_point,
                   sampling=sampling, threads=threads, direct_light=chosen.direct_light, method=method, chunk_paths=chunk,
-                  per_source=per_source, groups=groups, progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
+                  per_source=per_source, groups=groups,
+                  progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
                   should_stop=lambda: time.perf_counter() - began > limit or bool(should_stop and should_stop()))
         everything = time.perf_counter() - began
         return r, finished[-1] if finished and r.chunks < chunks else everything
@@ -145,19 +146,20 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
 
 
 def measured_choice(scene, estimator, candidates, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None,
-                    direct_light=None, stop_rule=None, budget=PILOT_RAYS, **kwargs):
-    """(the cheaper of ``candidates`` (method names), {name: Forecast}): a pilot of each
+                    direct_light=None, stop_rule=None, budget=PILOT_RAYS, margin=1.0, **kwargs):
+    """(the cheapest of ``candidates`` (method names), {name: Forecast}): a pilot of each
     (``forecast``, ``kwargs`` its other arguments) measures its time to the same error on this
     machine: the forecast seconds to ``target_mse``, else the variance per path times the
-    seconds per path. A pilot that measured no error (not two chunks in PILOT_SECONDS: per
-    source, rays cost more than the budget assumes) is run again on an eighth of the budget;
-    a candidate that still measured none is dearer than one that did; none measured: the first."""
+    seconds per path; the first candidate unless another costs less than 1 / ``margin`` of it.
+    A pilot that measured no error (not two chunks in PILOT_SECONDS: per source, rays cost
+    more than the budget assumes) is run again on an eighth of the budget; a candidate that
+    still measured none is dearer than one that did; none measured: the first."""
     stop_rule = stop_rule or ("measured" if target_mse is not None else "predicted")
 
     def pilot(name, rays):
-        return forecast(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold, max_seconds=max_seconds,
-                        method=name, stop_rule=stop_rule, direct_light=methods.direct_light_for(name, direct_light, scene.lights),
-                        budget=rays, **kwargs)
+        return forecast(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
+                        max_seconds=max_seconds, method=name, stop_rule=stop_rule, budget=rays,
+                        direct_light=methods.direct_light_for(name, direct_light, scene.lights), **kwargs)
 
     forecasts = {}
     for name in candidates:
@@ -167,7 +169,12 @@ def measured_choice(scene, estimator, candidates, *, paths=None, target_mse=None
     measured = [name for name in candidates if forecasts[name].measured]
     if not measured:
         return candidates[0], forecasts
-    return min(measured, key=lambda name: cost_at_same_error(forecasts[name], target_mse)), forecasts
+    cost = {name: cost_at_same_error(forecasts[name], target_mse) for name in measured}
+    cheapest = min(measured, key=cost.get)
+    first = candidates[0]
+    if first in cost and cost[first] <= margin * cost[cheapest]:
+        return first, forecasts
+    return cheapest, forecasts
 
 
 def cost_at_same_error(f, target_mse=None):

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .error_model import mean_reflected_radiosity
+from .grouping import SourceGroups, check_per_source, source_groups
 
 
 class GroupBatches:
@@ -183,14 +184,16 @@ def combine(per_source, parts, weights):
     return _combine(flat, w).reshape(parts.shape[1:])
 
 
-def smooth_sources(surface, scene, result, light=False):
+def smooth_sources(surface, scene, result, light=False, dtype=np.float64):
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
     they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
     ("light", (S,T,3,3)) first with ``light``, the light arriving (``Surface.arriving_light``);
     then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``) and
     smooth, plus each group's own emission, flat. ``surface`` is ``smoothing.Surface.of`` the
-    scene's triangles; ``result`` a per-source solve's SolveResult."""
+    scene's triangles; ``result`` a per-source solve's SolveResult. Made in float64, given as
+    ``dtype`` (float32: half the memory, as they are written; their sum then the whole's to
+    float32 rounding)."""
     per_source = result.per_source
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
@@ -198,12 +201,13 @@ def smooth_sources(surface, scene, result, light=False):
         light, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
                                              return_filter=True)
         _, corners = surface.corner_values(light, return_filter=True)
-        yield "light", corners(fill(per_source.irradiance))
+        yield "light", corners(fill(per_source.irradiance), dtype)
     filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
     _, corners = surface.corner_values(filtered, return_filter=True)
-    smooth = corners(noise(per_source.irradiance * scene.reflectivity))
+    smooth = corners(noise(per_source.irradiance * scene.reflectivity), dtype)
     emitting = per_source_emission(scene, per_source)
-    smooth += emitting[:, surface.triangle_patch][:, :, None, :]
+    for s in range(per_source.count):  # (a part at a time: no (S,T,3) copy)
+        smooth[s] += emitting[s, surface.triangle_patch][:, None, :]
     yield "smooth", smooth
 
 
@@ -225,11 +229,11 @@ def resolve(scene, per_source, names, **solve_kwargs):
     ``source_groups(scene)``), in their order. The re-solve traces only the named groups' sources
     (every other light and emitting patch left out) with ``solve_kwargs`` (paths or target_mse,
     method, seed, ...; a target applies to the named groups' light alone); it is independent of
-    the kept groups' run (give it a seed of its own), so their covariance is 0. A group of the solve the scene no longer has
-    (a lamp deleted) is left out. ValueError in one line for a name the scene's groups do not
-    have, kept groups the solve did not have, or other patches (geometry changed: solve again)."""
-    from .grouping import SourceGroups, check_per_source, source_groups
-    from . import solver
+    the kept groups' run (give it a seed of its own), so their covariance is 0. A group of the
+    solve the scene no longer has (a lamp deleted) is left out. ValueError in one line for a
+    name the scene's groups do not have, a group the solve did not have that is not named, or
+    other patches (geometry changed: solve again)."""
+    from . import solver  # (the solver's batches use this module)
 
     groups = solve_kwargs.pop("groups", None)
     groups = source_groups(scene) if groups is None else groups
@@ -237,7 +241,8 @@ def resolve(scene, per_source, names, **solve_kwargs):
     names = (names,) if isinstance(names, str) else tuple(names)
     unknown = [n for n in names if n not in groups.names]
     if unknown:
-        raise ValueError(f"no source group named {', '.join(map(repr, unknown))}; the groups are {', '.join(map(repr, groups.names))}")
+        raise ValueError(f"no source group named {', '.join(map(repr, unknown))}; "
+                         f"the groups are {', '.join(map(repr, groups.names))}")
     if per_source.radiosity.shape[1] != scene.patch_count:
         raise ValueError(f"the per-source results are of {per_source.radiosity.shape[1]:,} patches, the scene has "
                          f"{scene.patch_count:,}: the geometry changed, solve again")
@@ -272,12 +277,13 @@ def _named_sources(scene, groups, new):
         return None
     sub = scene.with_materials(scene.reflectivity, emission, lights)
     kept = light_group[light_group >= 0]
-    source_group = np.concatenate([patch_group, kept.take(sub.lights.light_of) if len(kept) else np.zeros(0, np.int32)])
+    light_sources = kept.take(sub.lights.light_of) if len(kept) else np.zeros(0, np.int32)
+    source_group = np.concatenate([patch_group, light_sources])
     return sub, (tuple(groups.names[g] for g in new), source_group.astype(np.int32), kept.astype(np.int32))
 
 
 def _light_powers(scene):
-    """(L,) each light's emitters' power summed (3,)."""
+    """(L,3) each light's emitters' power summed."""
     out = np.zeros((len(scene.lights), 3))
     if len(scene.lights):
         np.add.at(out, scene.lights.light_of, scene.lights.power)

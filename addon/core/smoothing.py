@@ -229,15 +229,19 @@ class LinearCorners:
         self.surface, self.positive, self.corner_patch = surface, positive, corner_patch
         self.averaging, self.iterations, self.records = averaging, iterations, records
 
-    def __call__(self, x):
+    def __call__(self, x, dtype=np.float64):
+        """The corners of ``x`` (P,k) or (S,P,k), made in float64, given as ``dtype``."""
         x = np.asarray(x, np.float64)
         if x.shape[-2:] != self.positive.shape:
             raise ValueError(f"the corners take values of shape (P, k) = {self.positive.shape} (or (S, P, k)); got {x.shape}")
         if x.ndim == 3:
-            return np.stack([self(part) for part in x])
+            out = np.empty((len(x), len(self.surface.triangle_patch), 3, x.shape[2]), dtype)
+            for s, part in enumerate(x):  # (one part's float64 steps at a time)
+                out[s] = self(part)
+            return out
         surface, cp = self.surface, self.corner_patch
         values = np.where(self.positive, x, 0.0)  # (the whole's negative patches count as 0)
-        out = np.empty((len(surface.triangle_patch), 3, values.shape[1]))
+        out = np.empty((len(surface.triangle_patch), 3, values.shape[1]), dtype)
         for k, record in enumerate(self.records):  # over colour channels, not elements
             v = np.ascontiguousarray(values[:, k])
             corner = surface._average_corners(v[cp], self.averaging)

@@ -118,6 +118,7 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     (``SolveResult.per_source``, a relighting.PerSource; ``groups``: grouping.source_groups's,
     default each light, and the patches of each emittance): what relighting.relight recombines.
     """
+    start = time.perf_counter()  # (Automatic's pilots, with per-source results, count in the time)
     _check_amounts(estimator, threshold, paths, target_mse, max_seconds, threads, chunk_paths)
     groups = _groups(scene, per_source, groups)
     method = _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds,
@@ -125,7 +126,7 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
                           seed=seed, stop_rule=stop_rule))
     _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method)
     cluster = cluster_address(cluster) if isinstance(cluster, str) else cluster  # (its form; connecting comes later)
-    paths, start = None if paths is None else int(paths), time.perf_counter()  # (numpy integers welcome)
+    paths = None if paths is None else int(paths)  # (numpy integers welcome)
     plan = chunk_plan(scene, method, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
                       stop_rule=stop_rule, max_seconds=max_seconds)
     chunk = plan.chunk if chunk_paths is None else int(chunk_paths)

@@ -243,6 +243,11 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     np.testing.assert_allclose(relit, expected, rtol=0, atol=1e-12 * expected.max())
     with pytest.raises(ValueError, match=r"parts must have shape \(6, \.\.\., 3\)"):
         combine(r.per_source, parts["smooth"][:5], WEIGHTS)
+    # as float32 (as they are written): half the memory, the whole's to float32 rounding
+    single = dict(smooth_sources(surface, scene, r, light=True, dtype=np.float32))
+    for name in ("light", "smooth"):
+        assert single[name].dtype == np.float32
+        np.testing.assert_allclose(single[name], parts[name], rtol=1e-6, atol=1e-6 * whole[name].max())
     # the emitting patches' own E is in their group's colours only
     emission = per_source_emission(scene, r.per_source)
     assert np.array_equal(emission.sum(axis=0), scene.emission) and not emission[1:].any()

@@ -9,11 +9,12 @@ With per-source results the two-way iteration carries every group's share on eve
 cost grows with the groups while the walk's hardly does (benchmarks/results/relight.md): where
 the rule above picks the two-way iteration, a pilot of each with per-source results
 (``forecast.measured_choice``) measures their time to the same error on this machine, and the
-cheaper runs.
+cheaper runs (not under a time limit below MEASURED_MIN_SECONDS, which the pilots would eat).
 """
 from __future__ import annotations
 
 from ..error_model import predict
+from ..grouping import source_groups
 from ..names import FINITE, TWO_WAY, WALK
 from .two_way import TwoWay
 
@@ -22,6 +23,13 @@ from .two_way import TwoWay
 # keeps a million patches (docs/performance.md, memory_two_way_sizes.md); the rule was measured
 # up to 535,815 patches (benchmarks/results/auto_method.md).
 AUTO_MAX_PATCHES = 3 << 17
+# With per-source results, the pilots that measure the choice run only under no time limit or one
+# of at least this many seconds: they take a few seconds (at most about 18), all of a short limit.
+MEASURED_MIN_SECONDS = 60.0
+# ... and the walk runs where its measured cost is below the two-way iteration's by this factor:
+# the pilots' cost ratio spread by about a quarter over seeds in the Cornell box (the rule's
+# choice stays where the two are close).
+MEASURED_MARGIN = 1.3
 
 
 def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None, per_source=False,
@@ -37,12 +45,15 @@ def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e
     chunk = two_way.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
     if not two_way.pays(scene.patch_count, chunk):
         return WALK
-    if not per_source:
+    groups = pilot.get("groups")
+    if not per_source or (groups if groups is not None else source_groups(scene)).count <= 1:
+        return TWO_WAY  # (one group is the total: nothing more to carry)
+    if max_seconds is not None and max_seconds < MEASURED_MIN_SECONDS:
         return TWO_WAY
     from ..forecast import measured_choice  # (the forecast runs solves)
 
     return measured_choice(scene, estimator, (TWO_WAY, WALK), paths=paths, target_mse=target_mse, threshold=threshold,
-                           max_seconds=max_seconds, per_source=True, **pilot)[0]
+                           max_seconds=max_seconds, per_source=True, margin=MEASURED_MARGIN, **pilot)[0]
 
 
 def patches_text():
