@@ -84,14 +84,17 @@ def prediction_for(scene, settings: SolveSettings):
     return predict(scene, settings.estimator, threshold=settings.threshold, target_mse=target), target
 
 
-def method_for(scene, settings: SolveSettings, target) -> SolveSettings:
+def method_for(scene, settings: SolveSettings, target, groups=None) -> SolveSettings:
     """The settings with the method "auto" replaced by what it runs on this scene (the core's
-    methods.choose: the two-way iteration where its chunks give every patch enough rays);
-    ``target``: prediction_for's, which the method does not change."""
+    methods.choose: the two-way iteration where its chunks give every patch enough rays; with
+    per-source ``groups``, where its measured cost with them pays); ``target``: prediction_for's."""
     if settings.method != AUTO:
         return settings
+    pilot = {} if groups is None else dict(per_source=True, groups=groups, exit_point=settings.exit_point, seed=int(
+        settings.seed), sampling=settings.sampling, threads=settings.threads or None)
     chosen = methods.choose(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
-                           target_mse=target, threshold=settings.threshold, max_seconds=settings.max_seconds or None)
+                            target_mse=target, threshold=settings.threshold, max_seconds=settings.max_seconds or None,
+                            **pilot)
     return replace(settings, method=chosen)
 
 
@@ -265,10 +268,10 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     scene, notes = scene_and_notes(patches)
     trim.give_back()
     prediction, target = prediction_for(scene, settings)
-    settings = method_for(scene, settings, target)
+    groups = relit.groups_for(scene, patches, settings.per_source, notes)
+    settings = method_for(scene, settings, target, groups)
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
-    groups = relit.groups_for(scene, patches, settings.per_source, notes)
     result = solve(
         scene,
         settings.estimator,
