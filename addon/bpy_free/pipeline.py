@@ -269,7 +269,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     trim.give_back()
     prediction, target = prediction_for(scene, settings)
     groups = relit.groups_for(scene, patches, settings.per_source, notes)
-    settings = method_for(scene, settings, target, groups)
+    settings = method_for(scene, settings, target, relit.measured_choice_groups(groups))
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
     result = solve(
