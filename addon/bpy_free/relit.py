@@ -49,9 +49,7 @@ def groups_for(scene, patches, choice, notes):
 def measured_choice_groups(groups):
     """The groups Automatic's method choice measures with (the core's pilots of both methods), or
     None: only beyond AUTO_MAX_SOURCES, where the two-way iteration's per-source cost grows past
-    the walk's (2.8x against 1.13x at 17 sources); within it the pilots took more than they saved
-    (a 4-source room of 2,960-11,820 patches: per-light results 1.6x the time without, 2.2x with
-    the pilots: benchmarks/results/relight_blender.md)."""
+    the walk's; within it the pilots took more time than they saved (docs/relighting.md)."""
     return groups if groups is not None and groups.count > AUTO_MAX_SOURCES else None
 
 
