@@ -23,9 +23,9 @@ _registered_modules = []
 
 def _glue_modules():
     from .ui import estimate
-    from .ui import operators, panel, properties
+    from .ui import operators, panel, properties, relight
 
-    return [properties, operators, panel, estimate]
+    return [properties, operators, panel, estimate, relight]
 
 
 def register():

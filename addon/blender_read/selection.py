@@ -43,6 +43,9 @@ def read_selection(context):
     for o in objects:
         _check_materials(o, clamp, notes)
     lights = _read_lights(context, depsgraph, notes)
+    groups = {o.session_uid: o.lightgroup for o in context.view_layer.objects}
+    for o in objects:  # (an instance takes its parent's light group)
+        o.lightgroup = groups.get(o.uid, "") or ""
     if not lights and not any(np.any(o.face_emission > 0) for o in objects):
         raise SceneError(
             "No emitter among the selected objects (nor the rest of the scene) and no light: give a material "
@@ -50,7 +53,7 @@ def read_selection(context):
             "light, or give the world a colour"
         )
     # unique notes, in order; materials' Principled notes that say the same thing as one
-    return Selection(objects, lights), merged_notes(list(dict.fromkeys(notes)))
+    return Selection(objects, lights, light_labels(context, lights)), merged_notes(list(dict.fromkeys(notes)))
 
 
 def _read_objects(context, depsgraph, candidates, others, settings, notes):
@@ -162,12 +165,25 @@ def _checked_textures(o, clamp, notes):
     return tuple(checked)
 
 
+def light_labels(context, lights):
+    """Each light's Blender light group (the world's for the world), None where it has none."""
+    from ..core.lights import WorldLight
+
+    def group(light):
+        owner = context.scene.world if isinstance(light, WorldLight) else context.scene.objects.get(light.name)
+        return getattr(owner, "lightgroup", "") or None
+
+    return tuple(group(light) for light in lights)
+
+
 class Selection(list):
     """The selected objects' arrays (a list of ObjectArrays), with the lights that light them
-    (``lights``: the core's light sources of the scene's lamps and world)."""
+    (``lights``: the core's light sources of the scene's lamps and world) and their light groups
+    (``light_labels``, None where a light has none)."""
 
-    def __init__(self, objects=(), lights=()):
+    def __init__(self, objects=(), lights=(), light_labels=None):
         super().__init__(objects)
         self.lights = tuple(lights)
+        self.light_labels = tuple(light_labels) if light_labels is not None else (None,) * len(self.lights)
 
 

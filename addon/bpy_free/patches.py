@@ -90,6 +90,7 @@ class ObjectArrays:
     slot_colours: tuple = ()   # per slot: (T,3,3) colour attribute at the loop triangles' corners, or None
     slot_emission_textures: tuple = ()  # per slot: (pixels, affine, UV map, strength) or None
     layers: SourceLayers | None = None  # UV maps and colour attributes the result keeps (selected objects)
+    lightgroup: str = ""  # the object's Blender light group ("": none)
 
 
 @dataclass(frozen=True)
@@ -118,6 +119,11 @@ class Patches:
     notes: list = field(default_factory=list)  # what reading the geometry left out, for the user
     patch_size: float = 0.0  # the size meshed with (an automatic size resolved)
     lights: tuple = ()  # the core's light sources (blender_read.selection.Selection.lights)
+    light_labels: tuple = ()  # each light's light group, or None (Selection.light_labels)
+    # (P,) int32: each patch's face's material in ``material_names``; each object's light group ("": none)
+    patch_material: np.ndarray | None = None
+    material_names: tuple = ()
+    object_lightgroups: tuple = ()
     # per object, ResultLayers of a receiving object (make_patches(..., layers=True)), else None
     layers: list = field(default_factory=list)
 
@@ -263,6 +269,7 @@ def make_patches(objects, patch_size, layers=False) -> Patches:
     A patch size of 0 is automatic (:func:`automatic_patch_size`). With ``layers``, also the
     receiving objects' UV maps and colour attributes at the patch corners (``result_layers``)."""
     lights = tuple(getattr(objects, "lights", ()))  # (a blender_read.selection.Selection carries them)
+    light_labels = tuple(getattr(objects, "light_labels", None) or (None,) * len(lights))
     check_finite_vertices(objects)
     objects, notes = drop_zero_area_faces(objects)
     if not objects:
@@ -274,6 +281,7 @@ def make_patches(objects, patch_size, layers=False) -> Patches:
     if layers:
         patches.layers = [result_layers(o, m) if o.receives else None for o, m in zip(objects, patches.meshes)]
     patches.lights = lights
+    patches.light_labels = light_labels
     patches.notes = notes
     patches.patch_size = float(patch_size)
     return patches
@@ -310,7 +318,20 @@ def _with_materials(objects, meshes, combined, key) -> Patches:
     materials = [patch_materials(o, m) for o, m in zip(objects, meshes)]
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
     emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
-    return Patches([ObjectInfo.of(o) for o in objects], meshes, combined, reflectivity, emission, key)
+    out = Patches([ObjectInfo.of(o) for o in objects], meshes, combined, reflectivity, emission, key)
+    names = {}
+    out.patch_material = np.concatenate([_patch_material(o, m, names) for o, m in zip(objects, meshes)])
+    out.material_names, out.object_lightgroups = tuple(names), tuple(o.lightgroup for o in objects)
+    return out
+
+
+def _patch_material(o, mesh, names):
+    """(P,) int32: the material of each patch of ``o`` (its object's name without one) as its
+    place in ``names`` (a dict, added to)."""
+    if o.face_slot is None or not len(o.slot_names):
+        return np.full(mesh.patch_count, names.setdefault(o.name, len(names)), np.int32)
+    ids = np.array([names.setdefault(n or o.name, len(names)) for n in o.slot_names], dtype=np.int32)
+    return ids[np.asarray(o.face_slot)[mesh.patch_face]]
 
 
 def patch_materials(o, mesh):

@@ -17,7 +17,7 @@ from ..core.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core import methods
 from ..core.names import AUTO
-from . import options
+from . import options, relit
 from . import trim
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
@@ -43,6 +43,7 @@ class SolveSettings:
     cluster: str = options.CLUSTER.default  # a Dask scheduler address; empty: this machine's threads
     direct_light: str = options.DIRECT_LIGHT.default  # "gathered": the first bounce by shadow rays (core first_shot)
     method: str = options.METHOD.default  # "two_way": the core's two-way iteration (it gathers its direct light)
+    per_source: str = options.PER_SOURCE.default  # per-light results for relighting (relit.groups_for)
 
 
 @dataclass
@@ -63,6 +64,7 @@ class SolveOutput:
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
     sources: str = ""  # the sources that took part (sources_text)
     back_warning: str | None = None  # light absorbed on back sides in view of the selection (back_light_warning)
+    sources_out: object = None  # relit.SourceResults of a per-source solve, else None
 
     def blocked_fraction(self):
         """Share of the emitted power absorbed on the back side of faces."""
@@ -82,14 +84,17 @@ def prediction_for(scene, settings: SolveSettings):
     return predict(scene, settings.estimator, threshold=settings.threshold, target_mse=target), target
 
 
-def method_for(scene, settings: SolveSettings, target) -> SolveSettings:
+def method_for(scene, settings: SolveSettings, target, groups=None) -> SolveSettings:
     """The settings with the method "auto" replaced by what it runs on this scene (the core's
-    methods.choose: the two-way iteration where its chunks give every patch enough rays);
-    ``target``: prediction_for's, which the method does not change."""
+    methods.choose: the two-way iteration where its chunks give every patch enough rays; with
+    per-source ``groups``, where its measured cost with them pays); ``target``: prediction_for's."""
     if settings.method != AUTO:
         return settings
+    pilot = {} if groups is None else dict(per_source=True, groups=groups, exit_point=settings.exit_point, seed=int(
+        settings.seed), sampling=settings.sampling, threads=settings.threads or None)
     chosen = methods.choose(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
-                           target_mse=target, threshold=settings.threshold, max_seconds=settings.max_seconds or None)
+                            target_mse=target, threshold=settings.threshold, max_seconds=settings.max_seconds or None,
+                            **pilot)
     return replace(settings, method=chosen)
 
 
@@ -263,7 +268,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     scene, notes = scene_and_notes(patches)
     trim.give_back()
     prediction, target = prediction_for(scene, settings)
-    settings = method_for(scene, settings, target)
+    groups = relit.groups_for(scene, patches, settings.per_source, notes)
+    settings = method_for(scene, settings, target, relit.measured_choice_groups(groups))
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
     result = solve(
@@ -283,13 +289,17 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         cluster=settings.cluster or None,
         direct_light=direct_light_for(scene, settings),
         method=settings.method,
+        per_source=groups is not None,
+        groups=groups,
     )
     trim.give_back()
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
     out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
+    out.sources_out = relit.source_results(scene, patches, result, groups) if groups is not None else None
     _write_colours(out, scene, result, settings)
+    relit.add_object_values(out, settings)
     return out
 
 
@@ -314,7 +324,8 @@ def _write_colours(out, scene, result, settings):
     made = {}  # "smooth", "light" -> per object (C_k,3) at its polygon corners (None: not receiving)
     both = settings.output in ("BOTH", "TEXTURED")
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
-        for name, corners in _smooth_corners(scene, result, light=textured):
+        smooth = _smooth_corners if out.sources_out is None else relit.SmoothSources(out, _at_polygon_corners).corners
+        for name, corners in smooth(scene, result, light=textured):
             made[name] = _at_polygon_corners(patches, scene, corners)
             del corners  # (let go of before the next is made)
     elif both:

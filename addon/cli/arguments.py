@@ -29,6 +29,11 @@ def parser():
     p.add_argument("--preview", metavar="FILE.png", help="preview image (default: next to the .blend)")
     p.add_argument("--no-preview", action="store_true", help="skip the preview render")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.add_argument("--relight", action="store_true", help="no solve: recombine the opened file's per-light results "
+                   "with the strengths and colours given (no ray traced), then save")
+    p.add_argument("--strength", action="append", metavar="NAME=VALUE",
+                   help="with --relight: a lamp's power, the world's or an emissive material's strength")
+    p.add_argument("--colour", action="append", metavar="NAME=R,G,B", help="with --relight: its colour")
     for option in options.SETTINGS:  # the panel's settings: same names, defaults and ranges
         if isinstance(option, options.Text):
             p.add_argument(option.flag, dest=option.name, default=option.default, metavar="ADDRESS",

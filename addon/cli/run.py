@@ -63,6 +63,8 @@ def _run(args, names, interrupt):
         problem = target and output_problem(target)
         if problem:
             raise Refused(problem)
+    if args.relight:
+        return _relight(args, interrupt, (out_blend, png))
     sources = _sources(args)
     settings = _settings(args, scene_name, own_scene)
     exposure = []
@@ -78,6 +80,22 @@ def _run(args, names, interrupt):
         print(f"preview: {png}")
     print(f"saved: {out_blend}  ({time.perf_counter() - t0:.1f} s in all)")
     return 0
+
+
+def _relight(args, interrupt, targets):
+    """--relight: the opened file's per-light results recombined, no solve, then saved."""
+    from . import relight
+
+    if not (args.open or args.current):
+        raise Refused("--relight needs a saved file with per-light results: --open FILE.blend")
+    try:
+        print(relight.run(args))
+    except ValueError as exc:
+        raise Refused(str(exc)) from None
+    status = _save(args, interrupt, targets, relight.solved_objects(), False, [])
+    if status is None:
+        print(f"saved: {targets[0]}")
+    return status or 0
 
 
 def _open_scene(args, names):

@@ -11,6 +11,7 @@ from ..bpy_free import pipeline
 from ..blender_read.selection import read_selection
 from ..blender_write.results import write_results
 from ..bpy_free import worker
+from . import relight_keep
 
 TIMER_SECONDS = 0.1
 #: The last error of ``radiosity.solve`` (with quiet_errors, its only record).
@@ -160,6 +161,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
         settings = context.scene.radiosity.solve_settings()
         self._notes = notes
         self._scene_uid = context.scene.session_uid  # results go to the scene solved
+        self._sources = relight_keep.snapshot(context.scene)  # the strengths solved with
         self._placements = _placements({o.uid for o in objects if o.uid is not None})
         self._job = worker.SolveJob(objects, settings)
         del objects  # the job's now: it lets go of the arrays once they are meshed
@@ -223,7 +225,8 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             stats = _run_stats(output)
             if OUTPUT_LISTENER is not None:
                 OUTPUT_LISTENER(output)
-            write_results(context, output, job.settings.output, scene=scene)
+            relight_keep.keep(scene, write_results(context, output, job.settings.output, scene=scene), output,
+                              getattr(self, "_sources", {}), job.settings)
         except Exception as exc:  # noqa: BLE001 - report, never a traceback
             import traceback
 

@@ -49,6 +49,7 @@ def draw_settings(layout, settings):
     row.prop(settings, "direct_light")
     col.prop(settings, "stop_rule")
     layout.prop(settings, "output")
+    layout.prop(settings, "per_source")
     layout.prop(settings, "show_patches")
     row = layout.row(align=True)
     row.prop(settings, "light_output", toggle=True)

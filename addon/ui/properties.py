@@ -54,6 +54,12 @@ class RadiositySettings(bpy.types.PropertyGroup):
     direct_light: _enum(options.DIRECT_LIGHT, _changed)
     stop_rule: _enum(options.STOP_RULE, _changed)
     output: _enum(options.OUTPUT)
+    per_source: _enum(options.PER_SOURCE, _changed)
+    live_relight: BoolProperty(
+        name="Live", default=True,
+        description="Relight at once when a lamp's, the world's or an emissive material's strength or colour changes, "
+        "or a lamp is hidden (needs the last solve's per-light results)")
+    last_relit: StringProperty(name="Relit", default="", description="The last relight: its error and what is stale")
     show_patches: BoolProperty(
         name="Flat patches (paper)",
         description="Show each patch's own flat colour, the paper's view, instead of the textured or smooth picture: "
@@ -118,6 +124,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
             light_output=bool(self.light_output),
             indirect_output=bool(self.indirect_output),
             cluster=self.cluster.strip(),
+            per_source=self.per_source,
         )
 
 

@@ -41,22 +41,23 @@ def _trace():
     """Everything the extension could leave behind."""
     names = {n for n in dir(bpy.types) if "radiosity" in n.lower()}
     ops = []
-    for op in ("solve", "cancel"):
+    for op in ("solve", "cancel", "relight", "update"):
         try:
             getattr(bpy.ops.radiosity, op).get_rna_type()
             ops.append(op)
         except KeyError:
             pass
-    from addon.ui import operators, properties
+    from addon.ui import operators, properties, relight
 
-    registered = [c.__name__ for c in (*properties.classes, *operators.classes, *panel.classes) if c.is_registered]
+    registered = [c.__name__ for c in (*properties.classes, *operators.classes, *panel.classes, *relight.classes)
+                  if c.is_registered]
     return {
         "types": names,
         "registered": registered,
         "scene_prop": hasattr(bpy.types.Scene, "radiosity"),
         "ops": ops,
         "depsgraph_handlers": len(bpy.app.handlers.depsgraph_update_post),
-        "timers": bpy.app.timers.is_registered(estimate._start),
+        "timers": bpy.app.timers.is_registered(estimate._start) or bpy.app.timers.is_registered(relight.live_tick),
     }
 
 
@@ -71,9 +72,11 @@ def test_register_and_unregister_leave_no_trace():
         assert "VIEW3D_PT_radiosity" in during["types"]
         assert "RADIOSITY_OT_solve" in during["types"]
         assert during["registered"] == ["RadiositySettings", "RADIOSITY_OT_solve", "RADIOSITY_OT_cancel", "RADIOSITY_OT_explain",
-                                        "VIEW3D_PT_radiosity"]
-        assert during["scene_prop"] and during["ops"] == ["solve", "cancel"]
-        assert during["depsgraph_handlers"] == before["depsgraph_handlers"] + 1
+                                        "VIEW3D_PT_radiosity", "RADIOSITY_OT_relight", "RADIOSITY_OT_update",
+                                        "VIEW3D_PT_radiosity_relight"]
+        assert during["scene_prop"] and during["ops"] == ["solve", "cancel", "relight", "update"]
+        # the estimate's and the live relight's
+        assert during["depsgraph_handlers"] == before["depsgraph_handlers"] + 2
         addon.unregister()
         assert _trace() == before
 

@@ -1,0 +1,115 @@
+"""``radiosity.update``'s work (bpy): the stale sources' results solved again, and only theirs,
+where a lamp moved, was reshaped or re-angled (core relighting.resolve, on the same patches, the
+other sources' results kept as they are); a full solve where the geometry changed, a lamp was
+added or the solve's results are not in memory (a reopened file)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import bpy
+import numpy as np
+
+from ..blender_read import sources
+from ..blender_read.selection import read_selection
+from ..blender_write import relight_store
+from ..blender_write.results import write_results
+from ..bpy_free import pipeline, relit
+from ..bpy_free.patches import make_patches
+from ..bpy_free.scene_notes import scene_and_notes
+from ..core import relighting
+from . import relight as relight_ui
+from . import relight_keep
+
+
+def update(context):
+    """Solves again what is stale; returns what it did, or ValueError in one line."""
+    scene = context.scene
+    meta = relight_store.meta_of(scene)
+    outcome = relight_ui.assess(scene, meta)
+    stale = sorted(outcome.stale | outcome.unsolved)
+    if not stale and not outcome.added:
+        return "nothing is stale: Relight follows strengths and colours without a solve"
+    last = relight_keep.LAST.get(meta["token"])
+    if sources.geometry_signature(scene, meta["solved"]) != meta["geometry"]:
+        return _full(context, meta, "the geometry changed")
+    if outcome.added:
+        return _full(context, meta, f"{', '.join(outcome.added)} added")
+    if last is None:
+        return _full(context, meta, "the solve's results are not in memory (the file was reopened)")
+    return _partial(context, meta, stale, last)
+
+
+def _select(context, meta):
+    """The solved selection's objects (those still there), selected alone."""
+    objects = [context.scene.objects[name] for name in meta["selected"] if name in context.scene.objects]
+    if not objects:
+        raise ValueError("the solved objects are gone: select objects and solve")
+    for obj in context.view_layer.objects:
+        obj.select_set(obj in objects)
+    return objects
+
+
+def _full(context, meta, why):
+    from . import operators
+
+    _select(context, meta)
+    operators.LAST_ERROR = ""
+    if bpy.ops.radiosity.solve("EXEC_DEFAULT", quiet_errors=True) != {"FINISHED"}:
+        raise ValueError(operators.LAST_ERROR or "the solve did not finish")
+    return f"solved again ({why})"
+
+
+def _partial(context, meta, stale, last):
+    """Re-solves the groups ``stale`` alone on the scene as it is, keeps the others, writes."""
+    scene = context.scene
+    result, settings, patch_size = last
+    _select(context, meta)
+    objects, notes = read_selection(context)
+    patches = make_patches(objects, patch_size, layers=True)
+    del objects
+    core_scene, more = scene_and_notes(patches)
+    groups = relit.groups_for(core_scene, patches, "ON", [])
+    if list(groups.names) != list(meta["names"]):
+        return _full(context, meta, "the sources changed")
+    prediction, target = pipeline.prediction_for(core_scene, settings)
+    settings = pipeline.method_for(core_scene, settings, target)
+    per_source = relighting.resolve(core_scene, result.per_source, stale, groups=groups,
+                                    **solve_kwargs(core_scene, settings, target))
+    total = per_source.radiosity.sum(axis=0)
+    # (the smoothing's filter weights come from the solve's variances: the re-solved light's own are not kept)
+    result = replace(result, per_source=per_source, radiosity=total, irradiance=per_source.irradiance.sum(axis=0),
+                     reflected=total - core_scene.emission)
+    out = pipeline.SolveOutput(patches, result, prediction, target, notes=notes + more,
+                               settings_relative_rms=None if settings.paths else settings.relative_rms,
+                               sources=pipeline.sources_text(core_scene))
+    out.sources_out = relit.source_results(core_scene, patches, result, groups)
+    pipeline._write_colours(out, core_scene, result, settings)
+    relit.add_object_values(out, settings)
+    created = write_results(context, out, settings.output, scene=scene)
+    relight_keep.keep(scene, created, out, _snapshot(scene, meta, stale), settings)
+    relight_ui.relight(scene)
+    return f"{', '.join(stale)} solved again, the other sources' results kept"
+
+
+def solve_kwargs(scene, settings, target):
+    """The core solve's arguments of ``settings`` (as pipeline.run_solve gives them), with a
+    seed of its own (the re-solve is independent of the solve)."""
+    return dict(estimator=settings.estimator, paths=int(settings.paths) if settings.paths else None,
+                target_mse=target, threshold=settings.threshold, seed=int(settings.seed) + 1,
+                exit_point=settings.exit_point, sampling=settings.sampling,
+                stop_rule=settings.stop_rule if target is not None else "predicted",
+                max_seconds=settings.max_seconds or None, threads=settings.threads or None,
+                cluster=settings.cluster or None, direct_light=pipeline.direct_light_for(scene, settings),
+                method=settings.method)
+
+
+def _snapshot(scene, meta, stale):
+    """The strengths each group's results now hold: the solve's for the kept groups, today's
+    for the re-solved ones."""
+    now = sources.current(scene, [(m[0], m[1]) for group in meta["members"] for m in group])
+    out = {}
+    for name, group in zip(meta["names"], meta["members"]):
+        for kind, member, _power, solved, signature in group:
+            out[(kind, member)] = now[(kind, member)] if name in stale else (np.asarray(solved), signature)
+    return out
