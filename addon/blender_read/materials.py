@@ -265,8 +265,6 @@ def transport_terms(material):
     return surface_terms(material, filter_glossy())
 
 
-#: What the picture of a specular layer leaves out.
-HIGHLIGHTS = "view-dependent highlights (shown as their average over view directions)"
 #: The tail shared by Principled notes; notes that differ only in the material merge (``merged_notes``).
 _LAYERS_COUNTED = "reflection counted as diffuse light (its hemispherical albedo)"
 
@@ -280,8 +278,7 @@ def _principled_note(node, p, what):
     eta, _ = principled.specular_eta_f0(p.ior, p.specular_ior_level)
     counted = [name for name, on in (("coat", used("Coat Weight")), ("metallic", used("Metallic")),
                                      ("specular", eta != 1.0)) if on]
-    # (the result material shows the specular light as its mean over view directions: right on average, not per view)
-    missing = [HIGHLIGHTS] if counted else []
+    missing = ["view-dependent highlights (shown as their average over view directions)"] if counted else []
     if used("Transmission Weight"):
         missing.append("light through transmission (only its reflection counted)")
     if used("Subsurface Weight"):
