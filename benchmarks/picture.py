@@ -96,6 +96,16 @@ def configure_cycles(scene, samples, denoise=False, seed=0, unbiased=True):
     c.use_denoising = denoise
     c.denoiser = "OPENIMAGEDENOISE"
     c.seed = seed
+    light_paths(scene, unbiased)
+    scene.render.film_transparent = False
+    linear_view(scene)
+
+
+def light_paths(scene, unbiased=True):
+    """Cycles' light paths: the reference's (``unbiased``: 64 bounces, no clamping, Filter Glossy
+    0) or Cycles' defaults. Filter Glossy changes what a Principled surface passes on in the
+    solve too (``blender_read.materials.transport_terms``)."""
+    c = scene.cycles
     if unbiased:
         c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = 64
         c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
@@ -103,8 +113,6 @@ def configure_cycles(scene, samples, denoise=False, seed=0, unbiased=True):
     else:
         c.max_bounces, c.diffuse_bounces, c.glossy_bounces, c.transmission_bounces = 12, 4, 4, 12
         c.sample_clamp_direct, c.sample_clamp_indirect, c.blur_glossy = 0.0, 10.0, 1.0
-    scene.render.film_transparent = False
-    linear_view(scene)
 
 
 def show_results(visible):
@@ -214,23 +222,34 @@ def source_objects():
     return sorted(objects, key=lambda o: o.name)
 
 
+def prepare_product(scene, colours, seed=0):
+    """The panel's settings at their defaults but the error target, ``colours`` and ``seed``, and
+    the reference's light paths: the product solves the scene the reference renders (a Cycles
+    render at default light paths before it leaves Filter Glossy 1, and the solve passes on less
+    specular light). The scene's radiosity settings."""
+    from addon.bpy_free import options
+
+    settings = scene.radiosity
+    for option in options.SETTINGS:
+        setattr(settings, option.name, option.default)
+    settings.target_error, settings.output, settings.seed = TARGET_ERROR, colours, seed
+    light_paths(scene, unbiased=True)
+    return settings
+
+
 def product(colours, seed=0, width=interior_scene.RESOLUTION[0]):
     """The product as the command line runs it: the panel's settings at their defaults but the
     error target (2%), the output mode ``colours`` and the seed; the operator, then the preview
     (its settings, rendered to EXR). (image, solve seconds, preview seconds, statistics)."""
     import bpy
 
-    from addon.bpy_free import options
     from addon.cli import preview
     from addon.cli.run import release_solve_memory
     from addon.ui import operators
 
     scene = bpy.context.scene
     sources = source_objects()
-    settings = scene.radiosity
-    for option in options.SETTINGS:
-        setattr(settings, option.name, option.default)
-    settings.target_error, settings.output, settings.seed = TARGET_ERROR, colours, seed
+    settings = prepare_product(scene, colours, seed)
     operators.LAST_ERROR = ""
     wall = time.perf_counter()
     result = bpy.ops.radiosity.solve(quiet_errors=True)

@@ -278,7 +278,7 @@ def _principled_note(node, p, what):
     eta, _ = principled.specular_eta_f0(p.ior, p.specular_ior_level)
     counted = [name for name, on in (("coat", used("Coat Weight")), ("metallic", used("Metallic")),
                                      ("specular", eta != 1.0)) if on]
-    missing = ["view-dependent highlights"] if counted else []
+    missing = ["view-dependent highlights (shown as their average over view directions)"] if counted else []
     if used("Transmission Weight"):
         missing.append("light through transmission (only its reflection counted)")
     if used("Subsurface Weight"):

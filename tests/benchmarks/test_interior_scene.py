@@ -145,3 +145,20 @@ def test_the_reference_cache_key_is_the_scenes_content_not_the_session():
     assert again == first
     bpy.data.objects["Ceiling Lamp"].data.energy *= 1.01
     assert picture.scene_fingerprint() != first
+
+
+def test_the_product_solves_the_light_paths_the_reference_renders():
+    # Cycles at default light paths (Filter Glossy 1) rendered last must not change what the
+    # solve passes on: a default Principled wall passes on what the reference (Filter Glossy 0) shows.
+    from addon.blender_read.materials import surface_terms, transport_terms
+
+    interior_scene.build("window_room")
+    scene = bpy.context.scene
+    picture.configure_cycles(scene, 1, unbiased=False)
+    wall = bpy.data.materials["Wall Paint"]
+    assert not np.allclose(transport_terms(wall)[1], surface_terms(wall)[1], rtol=0.05)
+    settings = picture.prepare_product(scene, "TEXTURED", seed=3)
+    assert scene.cycles.blur_glossy == 0.0
+    assert np.allclose(transport_terms(wall)[1], surface_terms(wall)[1], rtol=1e-12)
+    assert (settings.seed, settings.output, settings.target_error) == (3, "TEXTURED", picture.TARGET_ERROR)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
