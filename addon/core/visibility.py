@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .coincident import contacts_of
 from .rays import meets_front
 from .sampling import FLOAT32_BELOW_ONE, patch_point_rows
 
@@ -257,6 +258,7 @@ def windings(g, origins, directions, patch):
     d32 = d.astype(np.float32)
     region = g.region_of(patch)
     tracer = g.surface_tracer
+    contacts = contacts_of(g)
     step = g.ray_offset
     for _ in range(MAX_CROSSINGS):
         if live.size == 0:
@@ -265,7 +267,10 @@ def windings(g, origins, directions, patch):
                                                             None if region is None else region.take(live))
         met = np.flatnonzero(hit >= 0)
         front = meets_front(d32.T, normal)
-        count[live[met]] += 1 - 2 * front.take(met).astype(np.int64)
+        sign = 1 - 2 * front.take(met).astype(np.int64)
+        if contacts.any:  # (flush boxes: coincident faces, met as one, each counted: core coincident)
+            sign *= contacts.faces_at(hit.take(met), o.take(met, axis=0) + d.take(met, axis=0) * t.take(met)[:, None])
+        count[live[met]] += sign
         live, o, d, d32 = live.take(met), o.take(met, axis=0), d.take(met, axis=0), d32.take(met, axis=0)
         o += d * (t.take(met) + step)[:, None]
     return count

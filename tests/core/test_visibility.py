@@ -324,3 +324,28 @@ def test_per_source_results_of_an_overlapping_room_add_up_to_its_solve(method):
     z = (split.radiosity - plain.radiosity)[lit] / joint[lit]
     assert min(split.chunks, plain.chunks) >= 16  # t with >= 15 degrees of freedom: P(max |t| > 6) small
     assert np.abs(z).max() < 6, np.abs(z).max()
+
+
+def test_probes_count_every_coincident_face_of_flush_boxes():
+    """Where flush boxes leave faces on each other, a probe meets them at one distance and the
+    tracer returns one of them. A wall of three boxes end to end (a left and a right wall sunk to
+    the floor slab's bottom, a lintel between them: the window room's south wall), the ceiling's
+    edge strip facing down into it (y from 0.1 to 0.3, the wall's face at y = 0.2): every strip
+    patch is half buried. Before, probes out through the coincident bottoms (both face down: 2)
+    and the boxes' touching ends (facing each other: 0) counted one face, and patches came out
+    0.56, 0.85 and 0.57 visible: the two-way iteration's rays then left from inside the wall. Now
+    every face at a hit point counts (core coincident): 1/2 exactly; and a box wholly inside
+    another (a sofa's seat pushed into its back) is buried whole."""
+    left, lintel = solid_box((0, 0, 0), (1, 0.2, 1), (2, 1, 2)), solid_box((1, 0, 0.5), (2, 0.2, 1), (2, 1, 1))
+    right, slab = solid_box((2, 0, 0), (3, 0.2, 1), (2, 1, 2)), solid_box((0, 0, 0), (3, 1, 0.1), (6, 2, 1))
+    seat = solid_box((2.3, 0.05, 0.3), (2.6, 0.15, 0.5), (1, 1, 1))  # wholly inside the right wall
+    n = 6
+    strip = (np.column_stack([0.5 * np.arange(n), np.full(n, 0.1), np.full(n, 0.9)]),
+             np.tile([0.0, 0.2, 0.0], (n, 1)), np.tile([0.5, 0.0, 0.0], (n, 1)))
+    parts = [left, lintel, right, slab, seat, strip]
+    origin, u, v = (np.concatenate([p[k] for p in parts]) for k in range(3))
+    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
+    g = build_geometry(vertices, triangles, triangle_patch, origin.shape[0])
+    np.testing.assert_array_equal(g.buried.visible_fraction(origin.shape[0])[-n:], np.full(n, 0.5))
+    first_seat = sum(p[0].shape[0] for p in parts[:4])
+    assert set(range(first_seat, first_seat + seat[0].shape[0])) <= set(g.buried.whole.tolist())
