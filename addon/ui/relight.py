@@ -252,6 +252,19 @@ def _lines(text, width):
     return lines
 
 
+@persistent
+def on_load(_):
+    """A file with per-source results opened: their arrays read now, so that its first relight
+    is as quick as the next (reading every source's attributes took up to a second)."""
+    scene = bpy.context.scene
+    meta = relight_store.meta_of(scene) if scene is not None else None
+    if meta is not None:
+        try:
+            relight_store.load(scene, meta)
+        except ValueError:  # (damaged results: the relight says so when asked)
+            pass
+
+
 classes = (RADIOSITY_OT_relight, RADIOSITY_OT_update, VIEW3D_PT_radiosity_relight)
 
 
@@ -260,11 +273,15 @@ def register():
         bpy.utils.register_class(cls)
     if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+    if on_load not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(on_load)
 
 
 def unregister():
     if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    if on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(on_load)
     if bpy.app.timers.is_registered(live_tick):
         bpy.app.timers.unregister(live_tick)
     _STATE["pending"] = False

@@ -57,6 +57,7 @@ def _trace():
         "scene_prop": hasattr(bpy.types.Scene, "radiosity"),
         "ops": ops,
         "depsgraph_handlers": len(bpy.app.handlers.depsgraph_update_post),
+        "load_handlers": len(bpy.app.handlers.load_post),
         "timers": bpy.app.timers.is_registered(estimate._start) or bpy.app.timers.is_registered(relight.live_tick),
     }
 
@@ -77,6 +78,7 @@ def test_register_and_unregister_leave_no_trace():
         assert during["scene_prop"] and during["ops"] == ["solve", "cancel", "relight", "update"]
         # the estimate's and the live relight's
         assert during["depsgraph_handlers"] == before["depsgraph_handlers"] + 2
+        assert during["load_handlers"] == before["load_handlers"] + 1  # (relight's arrays read on open)
         addon.unregister()
         assert _trace() == before
 

@@ -162,6 +162,8 @@ def test_save_reopen_relight_is_the_same_and_undo_takes_a_relight_back(blender, 
     bpy.ops.wm.save_as_mainfile(filepath=path)
     relight_store.forget()  # as a new session: the arrays come from the file
     bpy.ops.wm.open_mainfile(filepath=path)
+    # read as the file opened (the first relight then reads no attribute)
+    assert relight_store.meta_of(bpy.context.scene)["token"] in relight_store._CACHE
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     after = _attributes()
     assert set(after) == set(relit)
