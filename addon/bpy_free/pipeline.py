@@ -18,7 +18,7 @@ from ..core.forecast import forecast
 from ..core import methods
 from ..core.names import AUTO
 from . import options
-from . import trim
+from . import adaptive_patches, trim
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
 
@@ -43,6 +43,7 @@ class SolveSettings:
     cluster: str = options.CLUSTER.default  # a Dask scheduler address; empty: this machine's threads
     direct_light: str = options.DIRECT_LIGHT.default  # "gathered": the first bounce by shadow rays (core first_shot)
     method: str = options.METHOD.default  # "two_way": the core's two-way iteration (it gathers its direct light)
+    detail: str = options.DETAIL.default  # adaptive patches (adaptive_patches): OFF, LOW, MEDIUM, HIGH
 
 
 @dataclass
@@ -205,7 +206,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     paper's predictions beside them; a ValueError where the solve would refuse the scene.
     ``should_stop()`` cuts the pilot short (the panel's, when a run starts)."""
     started = time.perf_counter()
-    patches = make_patches(objects, settings.patch_size)
+    patches = adaptive_patches.refined(objects, make_patches(objects, settings.patch_size), settings.detail,
+                                       settings.seed, should_stop=should_stop)
     scene, notes = scene_and_notes(patches)
     building = time.perf_counter() - started  # (a run meshes again)
     automatic = settings.method == AUTO
@@ -222,6 +224,7 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
         "others": sum(not o.receives for o in patches.objects),
         "patches": int(scene.patch_count),
         "patch_size": float(patches.patch_size),
+        "refinement": adaptive_patches.refinement_text(patches),
         "paths": int(math.ceil(f.paths)),
         "rays": float(f.rays),
         "paper_paths": int(p.paths),  # formula (2)/(3) for the target or the paths given
@@ -258,6 +261,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     """
     trim.fix_mmap_threshold()
     patches = make_patches(objects, settings.patch_size, layers=True)
+    patches = adaptive_patches.refined(objects, patches, settings.detail, settings.seed, layers=True,
+                                       should_stop=should_stop)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
     scene, notes = scene_and_notes(patches)

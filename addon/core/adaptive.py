@@ -1,0 +1,611 @@
+"""Adaptive patches: splitting chosen patches of a patch mesh where the light changes.
+
+A patch mesh's quads and triangles are *cells*: a cell splits into four (a quad 2 x 2 at its
+edges' midpoints and its centre, a triangle at its edges' midpoints), its children split again,
+and so on. Cells that meet along an edge differ by at most one split (a balanced, or
+restricted, quadtree: splitting a cell first splits its coarser neighbours), so that an unsplit
+cell has at most one extra point on each edge: the midpoint its finer neighbour made. That
+point becomes one of its polygon's corners (a planar n-gon, collinear corner included), so the
+written mesh has no T-junction: every edge inside a surface has two polygons, and smooth colours
+are continuous across it. A patch stays coplanar triangles: each polygon with extra points is
+triangulated by a fixed pattern of its own (:func:`_pattern`), no triangle of zero area.
+
+Faces kept whole as n-gons (more than four corners) never split, and neither do the cells
+that share an edge with them (their midpoints would land on the n-gon's edge). Cells of
+different objects are never joined: where two objects' patches touch, refinement on one side
+leaves the other's edge as it was (the smoothing joins them by position as before).
+
+Where to split (:func:`refine_by_direct_light`): before any walk, the direct light of each
+candidate's children is estimated by shadow rays to every source (each lamp and the sun at
+every sample point, no choice by power; emitting patches and the sky by their own samples),
+twice independently; a cell splits when its children differ by more than a visible share of
+the local light (and of a floor relative to the scene's mean, so dark corners do not eat the
+budget) and by more than the two estimates' own noise. The splits repeat down to a smallest
+size (``levels`` splits of the first patches) or a patch budget.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+
+import numpy as np
+
+from .faces import ranks_in_runs, starts_of, triangle_areas
+from .meshing import PatchMesh
+
+KEY = np.int64(1) << np.int64(31)  # edge key: smaller point * KEY + larger point
+
+
+def edge_keys(a, b):
+    a = np.asarray(a, np.int64)
+    b = np.asarray(b, np.int64)
+    return np.minimum(a, b) * KEY + np.maximum(a, b)
+
+
+@dataclass
+class Cells:
+    """One object's patches as cells of a refinement.
+
+    points   (N,3) float64  the mesh's points, the new midpoints and centres appended
+    corners  (L,4) int64    each cell's own corners (a triangle's fourth is -1)
+    level    (L,)  int32    splits from the first patch
+    origin   (L,)  int64    the first mesh's patch each cell lies in
+    face     (L,)  int64    its source face
+    frozen   (L,)  bool     never split (an n-gon, or a cell beside one)
+    mid_keys, mid_points    sorted edge keys that have a midpoint, and its point
+    half_keys, half_parent  sorted keys of edges made by halving, and the edge each halves
+    base                    the first PatchMesh (its patches' polygons and triangles)
+    """
+
+    points: np.ndarray
+    corners: np.ndarray
+    level: np.ndarray
+    origin: np.ndarray
+    face: np.ndarray
+    frozen: np.ndarray
+    base: PatchMesh
+    mid_keys: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    mid_points: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    half_keys: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    half_parent: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    @property
+    def count(self):
+        return len(self.level)
+
+    @property
+    def is_quad(self):
+        return self.corners[:, 3] >= 0
+
+    def edges(self):
+        """(cell (E,), edge key (E,), first point, second point, edge number): every cell's own
+        edges, n-gons (frozen, no corners) left out."""
+        quad = self.is_quad
+        valid = self.corners[:, 0] >= 0
+        cells, number, a, b = [], [], [], []
+        for k in range(4):
+            idx = np.flatnonzero(valid & quad) if k == 3 else np.flatnonzero(valid)
+            if k < 2:
+                second = self.corners[idx, k + 1]
+            elif k == 2:
+                second = np.where(quad[idx], self.corners[idx, 3], self.corners[idx, 0])
+            else:
+                second = self.corners[idx, 0]
+            cells.append(idx)
+            number.append(np.full(idx.size, k))
+            a.append(self.corners[idx, k])
+            b.append(second)
+        cells, number, a, b = (np.concatenate(x) for x in (cells, number, a, b))
+        return cells, edge_keys(a, b), a, b, number
+
+
+def cells_of(mesh: PatchMesh) -> Cells:
+    """The patches of ``mesh`` as unsplit cells (level 0): quads and triangles; n-gons and the
+    cells sharing an edge with one frozen."""
+    sizes = np.asarray(mesh.face_sizes, np.int64)
+    starts = starts_of(sizes)
+    P = len(sizes)
+    corners = np.full((P, 4), -1, np.int64)
+    verts = np.asarray(mesh.corner_verts, np.int64)
+    small = np.flatnonzero(sizes <= 4)
+    for k in range(4):
+        has = small[sizes[small] > k]
+        corners[has, k] = verts[starts[has] + k]
+    frozen = sizes > 4
+    if frozen.any():
+        # every edge of an n-gon: the cells with that edge are frozen too
+        big = np.flatnonzero(frozen)
+        rank = ranks_in_runs(sizes[big])
+        first = np.repeat(starts[big], sizes[big])
+        size = np.repeat(sizes[big], sizes[big])
+        a = verts[first + rank]
+        b = verts[first + (rank + 1) % size]
+        ngon_keys = np.unique(edge_keys(a, b))
+        probe = Cells(np.asarray(mesh.points), corners, np.zeros(P, np.int32), np.arange(P), np.asarray(mesh.patch_face, np.int64),
+                      frozen, mesh)
+        cell, key, *_ = probe.edges()
+        hit = np.isin(key, ngon_keys)
+        frozen[cell[hit]] = True
+    return Cells(np.array(mesh.points, np.float64), corners, np.zeros(P, np.int32), np.arange(P, dtype=np.int64),
+                 np.asarray(mesh.patch_face, np.int64), frozen, mesh)
+
+
+def _lookup(sorted_keys, keys):
+    """(index of each of ``keys`` in ``sorted_keys``, found (bool))."""
+    at = np.searchsorted(sorted_keys, keys)
+    at = np.minimum(at, max(len(sorted_keys) - 1, 0))
+    found = (sorted_keys[at] == keys) if len(sorted_keys) else np.zeros(len(keys), bool)
+    return at, found
+
+
+def coarser_neighbours(cells: Cells, chosen):
+    """(L,) bool: the cells across an edge of a chosen cell that are one split coarser (the
+    chosen cell's edge halves theirs)."""
+    cell, key, *_ = cells.edges()
+    mine = chosen[cell]
+    at, halved = _lookup(cells.half_keys, key[mine])
+    parents = cells.half_parent[at[halved]]
+    out = np.zeros(cells.count, bool)
+    if parents.size:
+        has = np.isin(key, parents)
+        out[cell[has]] = True
+    return out
+
+
+def finer_neighbours(cells: Cells, chosen):
+    """(L,) bool: the cells whose edge halves an edge of a chosen cell."""
+    cell, key, *_ = cells.edges()
+    at, halved = _lookup(cells.half_keys, key)
+    out = np.zeros(cells.count, bool)
+    chosen_keys = key[chosen[cell]]
+    if chosen_keys.size and halved.any():
+        parent = cells.half_parent[at[halved]]
+        has = np.isin(parent, chosen_keys)
+        out[cell[np.flatnonzero(halved)[has]]] = True
+    return out
+
+
+def balanced(cells: Cells, marked):
+    """The cells to split so that ``marked`` ones split and neighbours still differ by at most
+    one split: marked cells' coarser neighbours too (repeatedly); marks that would need a
+    frozen cell split are dropped."""
+    marked = np.asarray(marked, bool) & ~cells.frozen
+    while True:
+        closed = marked.copy()
+        while True:
+            more = coarser_neighbours(cells, closed) & ~closed
+            if not more.any():
+                break
+            closed |= more
+        bad = closed & cells.frozen
+        if not bad.any():
+            return closed
+        # drop every mark that leads to a frozen cell: the finer cells around it, repeatedly
+        drop = bad.copy()
+        while True:
+            more = finer_neighbours(cells, drop) & ~drop
+            if not more.any():
+                break
+            drop |= more
+        marked &= ~drop
+
+
+def _midpoints(cells: Cells, a, b):
+    """(n,) the midpoint of each edge (a, b), made where it is new: (cells with the points and
+    maps grown, the midpoints)."""
+    key = edge_keys(a, b)
+    at, found = _lookup(cells.mid_keys, key)
+    out = np.empty(len(key), np.int64)
+    out[found] = cells.mid_points[at[found]]
+    new_keys, first, inverse = np.unique(key[~found], return_index=True, return_inverse=True)
+    if new_keys.size:
+        na = np.asarray(a, np.int64)[~found][first]
+        nb = np.asarray(b, np.int64)[~found][first]
+        lo, hi = np.minimum(na, nb), np.maximum(na, nb)
+        start = len(cells.points)
+        new_points = start + np.arange(new_keys.size, dtype=np.int64)
+        points = np.vstack([cells.points, 0.5 * (cells.points[lo] + cells.points[hi])])
+        out[~found] = new_points[inverse]
+        mid_keys = np.concatenate([cells.mid_keys, new_keys])
+        mid_points = np.concatenate([cells.mid_points, new_points])
+        order = np.argsort(mid_keys, kind="stable")
+        halves = np.concatenate([edge_keys(lo, new_points), edge_keys(new_points, hi)])
+        half_keys = np.concatenate([cells.half_keys, halves])
+        half_parent = np.concatenate([cells.half_parent, new_keys, new_keys])
+        horder = np.argsort(half_keys, kind="stable")
+        cells = replace(cells, points=points, mid_keys=mid_keys[order], mid_points=mid_points[order],
+                        half_keys=half_keys[horder], half_parent=half_parent[horder])
+    return cells, out
+
+
+def split(cells: Cells, marked, balance=True):
+    """Split the marked cells (with ``balance``, also what :func:`balanced` adds): (the new
+    cells, the old cell each new cell lies in (L',))."""
+    marked = balanced(cells, marked) if balance else (np.asarray(marked, bool) & ~cells.frozen)
+    chosen = np.flatnonzero(marked)
+    if chosen.size == 0:
+        return cells, np.arange(cells.count)
+    c = cells.corners[chosen]
+    quad = c[:, 3] >= 0
+    q, t = chosen[quad], chosen[~quad]
+    cq, ct = c[quad], c[~quad]
+    # every edge's midpoint at once: quads' four edges, then triangles' three
+    a = np.concatenate([cq[:, 0], cq[:, 1], cq[:, 2], cq[:, 3], ct[:, 0], ct[:, 1], ct[:, 2]])
+    b = np.concatenate([cq[:, 1], cq[:, 2], cq[:, 3], cq[:, 0], ct[:, 1], ct[:, 2], ct[:, 0]])
+    cells, mids = _midpoints(cells, a, b)
+    nq, nt = len(q), len(t)
+    mq = mids[: 4 * nq].reshape(4, nq).T
+    mt = mids[4 * nq:].reshape(3, nt).T
+    centre = len(cells.points) + np.arange(nq, dtype=np.int64)
+    points = np.vstack([cells.points, cells.points[cq].mean(axis=1)]) if nq else cells.points
+    no = np.full(nt, -1, np.int64)
+    children = [
+        np.stack([cq[:, 0], mq[:, 0], centre, mq[:, 3]], axis=1),
+        np.stack([mq[:, 0], cq[:, 1], mq[:, 1], centre], axis=1),
+        np.stack([centre, mq[:, 1], cq[:, 2], mq[:, 2]], axis=1),
+        np.stack([mq[:, 3], centre, mq[:, 2], cq[:, 3]], axis=1),
+        np.stack([ct[:, 0], mt[:, 0], mt[:, 2], no], axis=1),
+        np.stack([mt[:, 0], ct[:, 1], mt[:, 1], no], axis=1),
+        np.stack([mt[:, 2], mt[:, 1], ct[:, 2], no], axis=1),
+        np.stack([mt[:, 0], mt[:, 1], mt[:, 2], no], axis=1),
+    ]
+    parent_of_child = np.concatenate([q, q, q, q, t, t, t, t])
+    keep = np.flatnonzero(~marked)
+    parent = np.concatenate([keep, parent_of_child])
+    corners = np.concatenate([cells.corners[keep], *children])
+    # cells in the first mesh's patch order, each patch's cells in the order made
+    order = np.argsort(cells.origin[parent], kind="stable")
+    parent = parent[order]
+    out = replace(
+        cells, points=points, corners=corners[order],
+        level=(cells.level[parent] + np.isin(parent, chosen)).astype(np.int32),
+        origin=cells.origin[parent], face=cells.face[parent], frozen=cells.frozen[parent],
+    )
+    return out, parent
+
+
+@lru_cache(maxsize=None)
+def _pattern(corner_count, mask):
+    """(polygon, triangles) of a cell of ``corner_count`` corners whose edges numbered in the
+    bits of ``mask`` carry a midpoint: the polygon's corners as local indices (2k: corner k,
+    2k+1: the midpoint of edge k), and its triangles (t,3) as positions in the polygon, made by
+    clipping corners whose triangle has an area (greedy, largest smallest angle first)."""
+    if corner_count == 4:
+        ideal = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    else:
+        ideal = np.array([[0, 0], [1, 0], [0.5, 0.8660254037844386]], float)
+    polygon, xy = [], []
+    for k in range(corner_count):
+        polygon.append(2 * k)
+        xy.append(ideal[k])
+        if mask >> k & 1:
+            polygon.append(2 * k + 1)
+            xy.append(0.5 * (ideal[k] + ideal[(k + 1) % corner_count]))
+    xy = np.array(xy)
+    alive = list(range(len(polygon)))
+    triangles = []
+    if mask == 0:
+        triangles = [(0, k + 1, k + 2) for k in range(corner_count - 2)]  # the meshing's own fan
+        return tuple(polygon), np.array(triangles, np.int64)
+    while len(alive) > 3:
+        best, best_angle = None, -1.0
+        for i in range(len(alive)):
+            p, v, n = alive[i - 1], alive[i], alive[(i + 1) % len(alive)]
+            e1, e2 = xy[p] - xy[v], xy[n] - xy[v]
+            area = e1[0] * e2[1] - e1[1] * e2[0]
+            if abs(area) < 1e-9:
+                continue
+            rest = [xy[j] for j in alive if j != v]
+            if _collinear(rest):
+                continue
+            angle = _smallest_angle(xy[p], xy[v], xy[n])
+            if angle > best_angle + 1e-12:
+                best, best_angle = i, angle
+        v = alive[best]
+        triangles.append((alive[best - 1], v, alive[(best + 1) % len(alive)]))
+        alive.pop(best)
+    triangles.append(tuple(alive))
+    return tuple(polygon), np.array(triangles, np.int64)
+
+
+def _collinear(points):
+    a = points[0]
+    return all(abs((p[0] - a[0]) * (q[1] - a[1]) - (p[1] - a[1]) * (q[0] - a[0])) < 1e-9
+               for p in points[1:] for q in points[1:])
+
+
+def _smallest_angle(a, b, c):
+    def angle(p, q, r):
+        u, v = q - p, r - p
+        return np.arccos(np.clip(u @ v / (np.linalg.norm(u) * np.linalg.norm(v)), -1, 1))
+    return min(angle(a, b, c), angle(b, c, a), angle(c, a, b))
+
+
+def patch_mesh(cells: Cells, conforming=True):
+    """(PatchMesh of the cells, the first mesh's patch of each patch): one patch a cell, in cell
+    order. ``conforming``: a cell takes its neighbours' midpoints on its edges as corners (no
+    T-junction); else each cell is its own corners (for estimates that need no welded mesh).
+    Unsplit cells of the first mesh without such points keep its polygon and triangles."""
+    L = cells.count
+    cell, key, a, b, number = cells.edges()
+    mask = np.zeros(L, np.int64)
+    mid = np.full((L, 4), -1, np.int64)
+    if conforming and len(cells.mid_keys):
+        at, found = _lookup(cells.mid_keys, key)
+        mask_bits = np.zeros(L, np.int64)
+        np.bitwise_or.at(mask_bits, cell[found], np.left_shift(1, number[found]))
+        mask = mask_bits
+        mid[cell[found], number[found]] = cells.mid_points[at[found]]
+    base = cells.base
+    original = (cells.level == 0) & (mask == 0)
+    sizes = np.zeros(L, np.int64)
+    parts = []  # (cells, (n,k) corners, (n,t,3) triangles as points)
+    base_sizes = np.asarray(base.face_sizes, np.int64)
+    base_starts = starts_of(base_sizes)
+    base_verts = np.asarray(base.corner_verts, np.int64)
+    kept = np.flatnonzero(original)
+    sizes[kept] = base_sizes[cells.origin[kept]]
+    groups = {}
+    quad = cells.is_quad
+    rest = np.flatnonzero(~original)
+    kinds = np.where(quad[rest], 4, 3) * 16 + mask[rest]
+    for kind in np.unique(kinds):
+        members = rest[kinds == kind]
+        groups[int(kind)] = members
+    polygon_of = {}
+    for kind, members in groups.items():
+        count, m = divmod(kind, 16)
+        polygon, triangles = _pattern(count, m)
+        local = np.empty((len(members), 8), np.int64)
+        local[:, 0::2] = cells.corners[members]
+        local[:, 1::2] = mid[members]
+        corners = local[:, list(polygon)]
+        sizes[members] = len(polygon)
+        polygon_of[kind] = (members, corners, corners[:, triangles])
+    starts = starts_of(sizes)
+    corner_verts = np.empty(int(sizes.sum()), np.int64)
+    if kept.size:
+        rank = ranks_in_runs(sizes[kept])
+        corner_verts[np.repeat(starts[kept], sizes[kept]) + rank] = base_verts[
+            np.repeat(base_starts[cells.origin[kept]], sizes[kept]) + rank]
+    tri_parts, patch_parts = [], []
+    if kept.size:
+        base_tp = np.asarray(base.triangle_patch, np.int64)
+        patch_of_base = np.full(base.patch_count, -1, np.int64)
+        patch_of_base[cells.origin[kept]] = kept
+        rows = np.flatnonzero(patch_of_base[base_tp] >= 0)
+        tri_parts.append(np.asarray(base.triangles, np.int64)[rows])
+        patch_parts.append(patch_of_base[base_tp[rows]])
+    for members, corners, tris in polygon_of.values():
+        k = corners.shape[1]
+        corner_verts[(starts[members][:, None] + np.arange(k)).ravel()] = corners.ravel()
+        tri_parts.append(tris.reshape(-1, 3))
+        patch_parts.append(np.repeat(members, tris.shape[1]))
+    triangles = np.concatenate(tri_parts) if tri_parts else np.zeros((0, 3), np.int64)
+    triangle_patch = np.concatenate(patch_parts) if patch_parts else np.zeros(0, np.int64)
+    order = np.argsort(triangle_patch, kind="stable")
+    triangles, triangle_patch = triangles[order], triangle_patch[order]
+    points = cells.points
+    area = np.bincount(triangle_patch, weights=triangle_areas(points, triangles), minlength=L)
+    mesh = PatchMesh(points, sizes.astype(np.int32), corner_verts.astype(np.int32), cells.face.astype(np.int32),
+                     triangles.astype(np.int32), triangle_patch.astype(np.int32), area)
+    return mesh, cells.origin.copy()
+
+
+def refine(mesh: PatchMesh, marked, cells: Cells | None = None):
+    """Split the ``marked`` patches of ``mesh`` (quads 2 x 2, triangles into 4; their coarser
+    neighbours too where balance needs it): (the refined PatchMesh, the first mesh's patch of
+    each refined patch, its Cells for further splits)."""
+    cells = cells_of(mesh) if cells is None else cells
+    cells, _ = split(cells, marked)
+    refined, origin = patch_mesh(cells)
+    return refined, origin, cells
+
+
+# --- where to split: the direct light of the candidates' children --------------------------
+
+# Sobol' dimensions of a sample: its point on the patch (2) and triangle (1), a point of a light
+# or a direction of the sky (2), an emitting patch (1) and its point (3).
+SAMPLE_DIMENSIONS = (0, 1, 7, 2, 3, 4, 5, 6, 8)
+NOISE_Z = 3.0  # standard errors a difference must pass to be light, not the estimate's noise
+
+
+@dataclass(frozen=True)
+class Detail:
+    """How far refinement goes: ``levels`` splits of the first patches at most, a cell splits
+    when its children's direct light differs by ``contrast`` of the local light (or of ``floor``
+    times the scene's mean), the patches at most ``budget`` times the first count."""
+
+    levels: int
+    contrast: float
+    floor: float = 0.2
+    budget: float = 3.0
+    samples: int = 4  # points per child and estimate (two estimates)
+
+
+DETAILS = {
+    "LOW": Detail(levels=1, contrast=0.5, budget=1.5),
+    "MEDIUM": Detail(levels=2, contrast=0.25, budget=2.5),
+    "HIGH": Detail(levels=3, contrast=0.12, budget=4.0),
+}
+
+
+def direct_estimates(scene, patches, samples, seed, replicas=2):
+    """(replicas, n, 3): independent estimates of the direct irradiance of ``patches`` (n,)
+    of ``scene``, each the mean of ``samples`` stratified points of the patch, every point
+    looking at every lamp and the sun by a shadow ray (their light needs no choice among
+    them), at the sky by a cosine ray and at an emitting patch chosen by power."""
+    from .first_shot import SEEN_BEFORE, _trace
+    from .lights import WorldLight
+    from .names import EXIT_RANDOM, FINITE
+    from .sampling import SourceTable, patch_point_rows, stratified_by_patch
+    from .tables import WalkTables
+
+    patches = np.asarray(patches, np.int64)
+    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
+    g = tables.geometry
+    P = scene.patch_count
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 29,))))
+    lamps = [light for light in scene.lights.lights if not isinstance(light, WorldLight)]
+    worlds = [light for light in scene.lights.lights if isinstance(light, WorldLight)]
+    power = scene.patch_area * scene.emission.mean(axis=1)
+    emitters = SourceTable(power) if (power > 0).any() else None
+    out = np.zeros((replicas, len(patches), 3))
+    order = np.argsort(patches, kind="stable")
+    rows_sorted = np.repeat(patches[order], samples)
+    with tables.numpy_turn:
+        for r in range(replicas):
+            for block in range(0, len(rows_sorted), 1 << 18):
+                rows = rows_sorted[block:block + (1 << 18)]
+                u = stratified_by_patch(rows, P, SAMPLE_DIMENSIONS, rng, dtype=np.float32)
+                x = patch_point_rows(g, rows, u[2], u[0].copy(), u[1].copy()).astype(np.float64)
+                normal = g.patch_normal_rows.take(rows, axis=1).astype(np.float64)
+                offset = g.ray_offsets(rows, np.float64)
+                surface = x - normal * offset
+                world_x = g.to_world(surface.T, rows).T
+                value = np.zeros((3, rows.size))
+
+                for light in lamps:
+                    towards, distance, v = light.gather(world_x, normal, u[3:5])
+                    if getattr(light, "casts_shadow", True):
+                        live = np.flatnonzero(v.any(axis=0))
+                        ok = np.zeros(rows.size, bool)
+                        if live.size:
+                            hit, _, _, t = _trace(tables, x[:, live], towards[:, live],
+                                                  None if g.regions is None else g.region_of(rows[live]))
+                            off = offset[live] if np.ndim(offset) else offset
+                            reach = distance[live] / g.diagonal - off * np.einsum("in,in->n", normal[:, live], towards[:, live])
+                            ok[live] = (hit < 0) | (t >= reach * SEEN_BEFORE)
+                        v = v * ok
+                    value += v
+                if worlds:
+                    towards = worlds[0].gather(world_x, normal, u[3:5])[0]
+                    hit, _, _, _ = _trace(tables, x, towards, g.region_of(rows))
+                    escaped = np.flatnonzero(hit < 0)
+                    for world in worlds:
+                        value[:, escaped] += world.radiance_times_pi(towards[:, escaped])
+                if emitters is not None:
+                    source = emitters.choose(u[5])
+                    e = patch_point_rows(g, source, u[6], u[7].copy(), u[8].copy()).astype(np.float64)
+                    normal_s = g.patch_normal_rows.take(source, axis=1).astype(np.float64)
+                    e -= normal_s * g.ray_offsets(source, np.float64)
+                    if g.regions is not None:
+                        e += g.regions.shift(g.regions.of(source)) - g.regions.shift(g.regions.of(rows))
+                    e -= surface
+                    length = np.sqrt(np.einsum("in,in->n", e, e))
+                    e /= length
+                    cos_x = np.einsum("in,in->n", normal, e)
+                    cos_y = -np.einsum("in,in->n", normal_s, e)
+                    live = np.flatnonzero((cos_x > 0) & (cos_y > 0) & (source != rows))
+                    if live.size:
+                        hit, hit_patch, front, t = _trace(tables, x[:, live], e[:, live],
+                                                          None if g.regions is None else g.region_of(rows[live]))
+                        reach = length[live] - (offset[live] if np.ndim(offset) else offset) * cos_x[live]
+                        met = ((hit >= 0) & (hit_patch == source[live]) & front) | (hit < 0) | (t >= reach * SEEN_BEFORE)
+                        s = source[live]
+                        d_world = length[live] * g.diagonal
+                        weight = cos_x[live] * cos_y[live] / (np.pi * d_world**2) * scene.patch_area[s] / (power[s] / power.sum())
+                        value[:, live] += scene.emission[s].T * (weight * met)
+                sums = np.stack([np.bincount(rows, weights=value[c], minlength=P) for c in range(3)], axis=1)
+                out[r] += sums[patches] / samples
+    return out
+
+
+
+@dataclass
+class Refined:
+    """The result of :func:`refine_by_direct_light`."""
+
+    meshes: list  # PatchMesh per object
+    origins: list  # (P_k,) the first mesh's patch of each patch, per object
+    cells: list  # Cells per object
+    steps: list  # per step: {"level", "candidates", "split", "patches", "seconds"}
+
+
+def _combined_scene(meshes, origins, base_scene):
+    """The PatchScene of ``meshes``, each patch with the materials of the first scene's patch
+    it lies in (its emission per area: the same power), the same lights and aim."""
+    from .scene import PatchScene
+
+    offsets = np.cumsum([0] + [len(m.points) for m in meshes])
+    vertices = np.concatenate([m.points for m in meshes])
+    triangles = np.concatenate([np.asarray(m.triangles, np.int64) + offsets[k] for k, m in enumerate(meshes)])
+    patch_offsets = np.cumsum([0] + [m.patch_count for m in meshes])
+    triangle_patch = np.concatenate([np.asarray(m.triangle_patch, np.int64) + patch_offsets[k] for k, m in enumerate(meshes)])
+    origin = np.concatenate(origins)
+    return PatchScene(vertices, triangles, triangle_patch, base_scene.reflectivity[origin], base_scene.emission[origin],
+                      lights=base_scene.lights.lights, aim=base_scene.lights.aim), patch_offsets
+
+
+def refine_by_direct_light(meshes, base_scene, detail: Detail, seed=0, receives=None, should_stop=None):
+    """Split the patches of ``meshes`` (one PatchMesh per object, ``base_scene`` their
+    PatchScene: materials and lights) where their direct light changes (see the module's
+    docstring), ``detail`` deciding how far. ``receives`` (per object, bool): only those
+    objects' patches split. Returns :class:`Refined`."""
+    import time
+    import warnings
+
+    receives = [True] * len(meshes) if receives is None else list(receives)
+    base_offsets = np.cumsum([0] + [m.patch_count for m in meshes])
+    cells = [cells_of(m) for m in meshes]
+    base_count = int(base_offsets[-1])
+    limit = int(detail.budget * base_count)
+    mean_light = None
+    steps = []
+    for level in range(detail.levels):
+        started = time.perf_counter()
+        candidate = [(c.level == level) & ~c.frozen & bool(r) for c, r in zip(cells, receives)]
+        count = sum(c.count for c in cells)
+        if not any(c.any() for c in candidate) or count + 3 > limit:
+            break
+        trial = [split(c, k, balance=False) for c, k in zip(cells, candidate)]
+        made = [patch_mesh(t, conforming=False) for t, _ in trial]
+        origins = [o + base_offsets[k] for k, (_, o) in enumerate(made)]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene, patch_offsets = _combined_scene([m for m, _ in made], origins, base_scene)
+        children, parents = [], []  # combined child patches, and (object, cell) of their parent
+        for k, ((t, parent), cand) in enumerate(zip(trial, candidate)):
+            rows = np.flatnonzero(cand[parent])
+            children.append(rows + patch_offsets[k])
+            parents.append(parent[rows] + (int(k) << 40))
+        children, parents = np.concatenate(children), np.concatenate(parents)
+        if should_stop is not None and should_stop():
+            break
+        estimates = direct_estimates(scene, children, detail.samples, [seed, level]).mean(axis=2)  # (2,n) grey
+        value = estimates.mean(axis=0)
+        noise = ((estimates[0] - estimates[1]) / 2) ** 2  # variance of each child's mean
+        area = scene.patch_area[children]
+        if mean_light is None:
+            mean_light = float((value * area).sum() / max(area.sum(), 1e-300))
+        group = np.unique(parents)
+        index = np.searchsorted(group, parents)
+        n = len(group)
+        high = np.full(n, -np.inf)
+        low = np.full(n, np.inf)
+        np.maximum.at(high, index, value)
+        np.minimum.at(low, index, value)
+        sizes = np.bincount(index, minlength=n)
+        local = np.bincount(index, weights=value, minlength=n) / sizes
+        pooled = np.bincount(index, weights=noise, minlength=n) / sizes
+        change = high - low
+        visible = detail.contrast * np.maximum(local, detail.floor * mean_light)
+        measured = NOISE_Z * np.sqrt(2 * pooled)
+        score = change / np.maximum(visible, measured)
+        chosen = np.flatnonzero(score > 1)
+        room = max(0, (limit - count) // 3)
+        if chosen.size > room:
+            chosen = chosen[np.argsort(-score[chosen], kind="stable")[:room]]
+        chosen_objects = group[chosen] >> 40
+        chosen_cells = group[chosen] & ((1 << 40) - 1)
+        for k in range(len(cells)):
+            marked = np.zeros(cells[k].count, bool)
+            marked[chosen_cells[chosen_objects == k]] = True
+            if marked.any():
+                cells[k], _ = split(cells[k], marked)
+        steps.append({"level": level, "candidates": int(n), "split": int(chosen.size),
+                      "patches": int(sum(c.count for c in cells)), "seconds": time.perf_counter() - started})
+        if chosen.size == 0:
+            break
+    made = [patch_mesh(c) for c in cells]
+    return Refined([m for m, _ in made], [o for _, o in made], cells, steps)
