@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import meshing
-from ..core.adaptive import DETAILS, refine_by_direct_light
+from ..core.adaptive import DETAILS, refine_by_direct_light, shading_triangulation
 from .cleaning import drop_zero_area_faces
 from .patches import MAX_PATCHES, Patches, _GEOMETRY_CACHE, patch_materials, result_layers
 
@@ -59,8 +59,7 @@ def refined(objects, patches: Patches, detail: str, seed: int = 0, layers=False,
     if sum(m.patch_count for m in result.meshes) == patches.combined.patch_count:
         return replace(patches, refinement=steps)
     objects, _ = drop_zero_area_faces(objects)  # (as make_patches read them: the same faces)
-    meshes = [meshing.PatchMesh(m.points, m.face_sizes, m.corner_verts, m.patch_face, m.triangles, m.triangle_patch,
-                                m.patch_area) for m in result.meshes]
+    meshes = [_copy(m) for m in result.meshes]
     combined = meshing.concatenate(meshes)
     if combined.patch_count > MAX_PATCHES:
         raise ValueError(f"Detail {detail.lower()} would make {combined.patch_count:,} patches, more than the limit of "
@@ -87,3 +86,27 @@ def refinement_text(patches: Patches) -> str:
     seconds = sum(s["seconds"] for s in steps)
     return (f"Detail: {patches.combined.patch_count:,} patches after {len(steps)} refinement step"
             f"{'s' if len(steps) > 1 else ''} ({seconds:.1f} s)")
+
+
+def _copy(mesh):
+    """A PatchMesh of its own (concatenate makes a mesh share the combined arrays), shading kept."""
+    out = meshing.PatchMesh(mesh.points, mesh.face_sizes, mesh.corner_verts, mesh.patch_face, mesh.triangles,
+                            mesh.triangle_patch, mesh.patch_area)
+    out.shading_triangles, out.shading_triangle_patch = shading_triangulation(mesh)
+    return out
+
+
+def shading_arrays(patches: Patches, scene):
+    """(triangles, patch of each) of the scene's points the smooth colours are made on: refined
+    meshes' polygons with every corner (their midpoints: no T-junction, no seam); None where no
+    mesh is refined (the scene's own)."""
+    if not any(getattr(m, "shading_triangles", None) is not None for m in patches.meshes):
+        return None
+    vertex = np.cumsum([0] + [len(m.points) for m in patches.meshes])
+    patch = patches.combined.patch_offsets
+    triangles, triangle_patch = [], []
+    for k, m in enumerate(patches.meshes):
+        t, tp = shading_triangulation(m)
+        triangles.append(np.asarray(t, np.int64) + vertex[k])
+        triangle_patch.append(np.asarray(tp, np.int64) + patch[k])
+    return np.concatenate(triangles).astype(np.int32), np.concatenate(triangle_patch).astype(np.int32)

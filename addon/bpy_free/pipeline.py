@@ -319,8 +319,9 @@ def _write_colours(out, scene, result, settings):
     made = {}  # "smooth", "light" -> per object (C_k,3) at its polygon corners (None: not receiving)
     both = settings.output in ("BOTH", "TEXTURED")
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
-        for name, corners in _smooth_corners(scene, result, light=textured):
-            made[name] = _at_polygon_corners(patches, scene, corners)
+        shading = adaptive_patches.shading_arrays(patches, scene)
+        for name, corners in _smooth_corners(scene, result, light=textured, shading=shading):
+            made[name] = _at_polygon_corners(patches, scene, corners, shading)
             del corners  # (let go of before the next is made)
     elif both:
         shown = "the textures times each patch's own light are shown" if textured else "the flat colours are shown"
@@ -340,10 +341,12 @@ def _write_colours(out, scene, result, settings):
             out.light_colours.append(flat_light[rows] if flat_light is not None and o.receives else None)
 
 
-def _at_polygon_corners(patches, scene, corners):
+def _at_polygon_corners(patches, scene, corners, shading=None):
     """Per object, the values (C_k,3) at its result mesh's polygon corners, read from the
     scene's triangle corners (T,3,3), as float32 (as they are written); None for an object
-    that receives no result."""
+    that receives no result. ``shading``: the (triangles, patch of each) ``corners`` are on, if
+    not the scene's."""
+    triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
     out = []
     for k, mesh in enumerate(patches.meshes):
@@ -351,25 +354,28 @@ def _at_polygon_corners(patches, scene, corners):
             out.append(None)
             continue
         out.append(smoothing.polygon_corner_values(
-            corners, scene.triangles, scene.triangle_patch, mesh.corner_patch + patches.combined.patch_offsets[k],
+            corners, triangles, triangle_patch, mesh.corner_patch + patches.combined.patch_offsets[k],
             mesh.corner_verts + point_start[k]).astype(np.float32))
     return out
 
 
-def _smooth_corners(scene, result, light=False):
+def _smooth_corners(scene, result, light=False, shading=None):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``arriving_light``) at every
     corner of the scene's triangles, smooth; then ("smooth", (T,3,3)): the reflected light, its
     tile noise filtered within its measured variance, joined across objects and kept apart at
     creases (core smoothing), plus each patch's own emission, flat. Made one at a time (a
-    generator), so that the caller lets go of one before the next is made."""
-    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    generator), so that the caller lets go of one before the next is made. ``shading``: the
+    (triangles, patch of each) to make them on, if not the scene's (a refined mesh's, with every
+    polygon corner: adaptive_patches.shading_arrays)."""
+    triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
+    surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count)
     if light:
         yield "light", surface.corner_values(arriving_light(surface, result.irradiance, result.irradiance_variance,
                                                             scene.reflectivity))
     reflected = surface.filter_noise(np.maximum(result.reflected, 0.0), result.reflected_variance)
     corners = surface.corner_values(reflected)
     del reflected
-    corners += scene.emission[scene.triangle_patch][:, None, :]
+    corners += scene.emission[triangle_patch][:, None, :]
     yield "smooth", corners
 
 

@@ -325,6 +325,8 @@ def patch_mesh(cells: Cells, conforming=True):
     """(PatchMesh of the cells, the first mesh's patch of each patch): one patch a cell, in cell
     order. ``conforming``: a cell takes its neighbours' midpoints on its edges as corners (no
     T-junction); else each cell is its own corners (for estimates that need no welded mesh).
+    The patches' triangles are each cell's own (the core's); ``shading_triangles`` and
+    ``shading_triangle_patch`` on the mesh triangulate the polygons, midpoints included.
     Unsplit cells of the first mesh without such points keep its polygon and triangles."""
     L = cells.count
     cell, key, a, b, number = cells.edges()
@@ -339,7 +341,6 @@ def patch_mesh(cells: Cells, conforming=True):
     base = cells.base
     original = (cells.level == 0) & (mask == 0)
     sizes = np.zeros(L, np.int64)
-    parts = []  # (cells, (n,k) corners, (n,t,3) triangles as points)
     base_sizes = np.asarray(base.face_sizes, np.int64)
     base_starts = starts_of(base_sizes)
     base_verts = np.asarray(base.corner_verts, np.int64)
@@ -368,28 +369,54 @@ def patch_mesh(cells: Cells, conforming=True):
         rank = ranks_in_runs(sizes[kept])
         corner_verts[np.repeat(starts[kept], sizes[kept]) + rank] = base_verts[
             np.repeat(base_starts[cells.origin[kept]], sizes[kept]) + rank]
-    tri_parts, patch_parts = [], []
-    if kept.size:
-        base_tp = np.asarray(base.triangle_patch, np.int64)
-        patch_of_base = np.full(base.patch_count, -1, np.int64)
-        patch_of_base[cells.origin[kept]] = kept
-        rows = np.flatnonzero(patch_of_base[base_tp] >= 0)
-        tri_parts.append(np.asarray(base.triangles, np.int64)[rows])
-        patch_parts.append(patch_of_base[base_tp[rows]])
-    for members, corners, tris in polygon_of.values():
+    for members, corners, _ in polygon_of.values():
         k = corners.shape[1]
         corner_verts[(starts[members][:, None] + np.arange(k)).ravel()] = corners.ravel()
-        tri_parts.append(tris.reshape(-1, 3))
-        patch_parts.append(np.repeat(members, tris.shape[1]))
-    triangles = np.concatenate(tri_parts) if tri_parts else np.zeros((0, 3), np.int64)
-    triangle_patch = np.concatenate(patch_parts) if patch_parts else np.zeros(0, np.int64)
-    order = np.argsort(triangle_patch, kind="stable")
-    triangles, triangle_patch = triangles[order], triangle_patch[order]
     points = cells.points
+    first = cells.level == 0
+    # the core's triangles: each cell's own (a grid cell's two, a parallelogram where it was one),
+    # which cover the polygon whatever midpoints its edges carry
+    own = [(members, cells.corners[members][:, :count][:, _pattern(count, 0)[1]])
+           for count, members in ((4, np.flatnonzero(~first & quad)), (3, np.flatnonzero(~first & ~quad)))]
+    triangles, triangle_patch = _triangulation(L, base, cells.origin, np.flatnonzero(first), own)
+    # the shading's: the polygon's own corners, midpoints included (smooth colours need them)
+    shaded = [(members, tris) for members, _, tris in polygon_of.values()]
+    shading = _triangulation(L, base, cells.origin, kept, shaded)
     area = np.bincount(triangle_patch, weights=triangle_areas(points, triangles), minlength=L)
     mesh = PatchMesh(points, sizes.astype(np.int32), corner_verts.astype(np.int32), cells.face.astype(np.int32),
                      triangles.astype(np.int32), triangle_patch.astype(np.int32), area)
+    mesh.shading_triangles = shading[0].astype(np.int32)
+    mesh.shading_triangle_patch = shading[1].astype(np.int32)
     return mesh, cells.origin.copy()
+
+
+def _triangulation(count, base, origin, from_base, parts):
+    """(triangles (T,3), patch of each (T,)) sorted by patch: the first mesh's triangles for the
+    cells ``from_base`` (unsplit first patches), and ``parts`` (cells, (n,t,3) triangles)."""
+    tri_parts, patch_parts = [], []
+    if from_base.size:
+        base_tp = np.asarray(base.triangle_patch, np.int64)
+        patch_of_base = np.full(base.patch_count, -1, np.int64)
+        patch_of_base[origin[from_base]] = from_base
+        rows = np.flatnonzero(patch_of_base[base_tp] >= 0)
+        tri_parts.append(np.asarray(base.triangles, np.int64)[rows])
+        patch_parts.append(patch_of_base[base_tp[rows]])
+    for members, tris in parts:
+        if len(members):
+            tri_parts.append(tris.reshape(-1, 3))
+            patch_parts.append(np.repeat(members, tris.shape[1]))
+    triangles = np.concatenate(tri_parts) if tri_parts else np.zeros((0, 3), np.int64)
+    triangle_patch = np.concatenate(patch_parts) if patch_parts else np.zeros(0, np.int64)
+    order = np.argsort(triangle_patch, kind="stable")
+    return triangles[order], triangle_patch[order]
+
+
+def shading_triangulation(mesh):
+    """(triangles, patch of each) the smooth colours are made on: a refined mesh's triangles with
+    every polygon corner (its neighbours' midpoints included), else the mesh's own."""
+    if getattr(mesh, "shading_triangles", None) is not None:
+        return mesh.shading_triangles, mesh.shading_triangle_patch
+    return mesh.triangles, mesh.triangle_patch
 
 
 def refine(mesh: PatchMesh, marked, cells: Cells | None = None):

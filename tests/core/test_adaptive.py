@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from addon.core import PatchScene, meshing, smoothing, solve
-from addon.core.adaptive import DETAILS, Detail, cells_of, patch_mesh, refine, refine_by_direct_light, split
+from addon.core.adaptive import (DETAILS, Detail, cells_of, patch_mesh, refine, refine_by_direct_light,
+                                 shading_triangulation, split)
 from addon.core.faces import starts_of, triangle_areas
 from addon.core.lights import PointLight
 
@@ -60,13 +61,20 @@ def test_refined_mesh_has_no_crack(make):
         assert set(uses) == {2}
     np.testing.assert_allclose(np.bincount(origin, weights=refined.patch_area, minlength=mesh.patch_count),
                                mesh.patch_area, rtol=1e-12)
-    areas = triangle_areas(refined.points, refined.triangles)
-    assert areas.min() > 1e-3 * np.median(areas)
-    cross = np.cross(*(refined.points[refined.triangles[:, k]] - refined.points[refined.triangles[:, 0]] for k in (1, 2)))
     base_normal = np.cross(*(mesh.points[mesh.triangles[:, k]] - mesh.points[mesh.triangles[:, 0]] for k in (1, 2)))
     patch_normal = np.zeros((mesh.patch_count, 3))
     np.add.at(patch_normal, mesh.triangle_patch, base_normal)
-    assert (np.einsum("ij,ij->i", cross, patch_normal[origin[refined.triangle_patch]]) > 0).all()
+    # both triangulations: the core's (each cell's own) and the shading's (every polygon corner)
+    for triangles, triangle_patch in ((refined.triangles, refined.triangle_patch), shading_triangulation(refined)):
+        areas = triangle_areas(refined.points, triangles)
+        assert areas.min() > 1e-3 * np.median(areas)
+        np.testing.assert_allclose(np.bincount(triangle_patch, weights=areas), refined.patch_area, rtol=1e-12)
+        cross = np.cross(*(refined.points[triangles[:, k]] - refined.points[triangles[:, 0]] for k in (1, 2)))
+        assert (np.einsum("ij,ij->i", cross, patch_normal[origin[triangle_patch]]) > 0).all()
+    # every polygon corner is a corner of the shading's triangles of its patch (and no other point)
+    triangles, triangle_patch = shading_triangulation(refined)
+    used = {(p, v) for p, row in zip(triangle_patch, triangles) for v in row}
+    assert used == set(zip(refined.corner_patch, refined.corner_verts))
 
 
 def test_neighbours_differ_by_one_split_at_most():
@@ -150,10 +158,11 @@ def test_smooth_colours_agree_at_a_refinement_border():
     marked = np.zeros(mesh.patch_count, bool)
     marked[[3, 4]] = True
     refined, origin, _ = refine(mesh, marked)
-    surface = smoothing.Surface.of(refined.points, refined.triangles, refined.triangle_patch, refined.patch_count)
+    triangles, triangle_patch = shading_triangulation(refined)
+    surface = smoothing.Surface.of(refined.points, triangles, triangle_patch, refined.patch_count)
     values = 1.0 + surface.patch_centroid @ np.array([[0.3, 0.1, 0.2], [0.2, 0.3, 0.1], [0.1, 0.2, 0.3]])
     corners = surface.corner_values(values, iterations=300)  # (converged: no leftover of the last scale)
-    at = smoothing.polygon_corner_values(corners, refined.triangles, refined.triangle_patch, refined.corner_patch,
+    at = smoothing.polygon_corner_values(corners, triangles, triangle_patch, refined.corner_patch,
                                          refined.corner_verts)
     # polygon corners at one point on one face of the box (one normal): one value
     normal = np.round(surface.patch_normal[refined.corner_patch], 6)
