@@ -52,9 +52,10 @@ def refined(objects, patches: Patches, detail: str, seed: int = 0, layers=False,
         result = refine_by_direct_light(patches.meshes, patches.patch_scene(), DETAILS[detail], int(seed),
                                         receives=[o.receives for o in patches.objects], should_stop=should_stop)
         cached = (result, time.perf_counter() - started)
-        with _LAST.lock:
-            _LAST.key, _LAST.value = key, cached
-    result, seconds = cached
+        if not result.stopped:  # (a refinement cut short is not the one these settings make)
+            with _LAST.lock:
+                _LAST.key, _LAST.value = key, cached
+    result, _ = cached
     steps = [dict(s) for s in result.steps]
     if sum(m.patch_count for m in result.meshes) == patches.combined.patch_count:
         return replace(patches, refinement=steps)

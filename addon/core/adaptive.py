@@ -25,13 +25,21 @@ size (``levels`` splits of the first patches) or a patch budget.
 """
 from __future__ import annotations
 
+import time
+import warnings
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
 
 from .faces import ranks_in_runs, starts_of, triangle_areas
+from .first_shot import SEEN_BEFORE, _trace
+from .lights import WorldLight
 from .meshing import PatchMesh
+from .names import EXIT_RANDOM, FINITE
+from .sampling import SourceTable, patch_point_rows, stratified_by_patch
+from .scene import PatchScene
+from .tables import WalkTables
 
 KEY = np.int64(1) << np.int64(31)  # edge key: smaller point * KEY + larger point
 
@@ -435,6 +443,9 @@ def refine(mesh: PatchMesh, marked, cells: Cells | None = None):
 # or a direction of the sky (2), an emitting patch (1) and its point (3).
 SAMPLE_DIMENSIONS = (0, 1, 7, 2, 3, 4, 5, 6, 8)
 NOISE_Z = 3.0  # standard errors a difference must pass to be light, not the estimate's noise
+# Children at least this share of the scene's diagonal on a side: patches smaller than 1e-3 of it
+# take ray offsets of their own (geometry_build.local_offsets), which turns the walk's grids off.
+SMALLEST_SIDE = 2e-3
 
 
 @dataclass(frozen=True)
@@ -462,12 +473,6 @@ def direct_estimates(scene, patches, samples, seed, replicas=2):
     of ``scene``, each the mean of ``samples`` stratified points of the patch, every point
     looking at every lamp and the sun by a shadow ray (their light needs no choice among
     them), at the sky by a cosine ray and at an emitting patch chosen by power."""
-    from .first_shot import SEEN_BEFORE, _trace
-    from .lights import WorldLight
-    from .names import EXIT_RANDOM, FINITE
-    from .sampling import SourceTable, patch_point_rows, stratified_by_patch
-    from .tables import WalkTables
-
     patches = np.asarray(patches, np.int64)
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     g = tables.geometry
@@ -547,13 +552,12 @@ class Refined:
     origins: list  # (P_k,) the first mesh's patch of each patch, per object
     cells: list  # Cells per object
     steps: list  # per step: {"level", "candidates", "split", "patches", "seconds"}
+    stopped: bool = False  # should_stop() ended it early
 
 
 def _combined_scene(meshes, origins, base_scene):
     """The PatchScene of ``meshes``, each patch with the materials of the first scene's patch
     it lies in (its emission per area: the same power), the same lights and aim."""
-    from .scene import PatchScene
-
     offsets = np.cumsum([0] + [len(m.points) for m in meshes])
     vertices = np.concatenate([m.points for m in meshes])
     triangles = np.concatenate([np.asarray(m.triangles, np.int64) + offsets[k] for k, m in enumerate(meshes)])
@@ -569,9 +573,6 @@ def refine_by_direct_light(meshes, base_scene, detail: Detail, seed=0, receives=
     PatchScene: materials and lights) where their direct light changes (see the module's
     docstring), ``detail`` deciding how far. ``receives`` (per object, bool): only those
     objects' patches split. Returns :class:`Refined`."""
-    import time
-    import warnings
-
     receives = [True] * len(meshes) if receives is None else list(receives)
     base_offsets = np.cumsum([0] + [m.patch_count for m in meshes])
     cells = [cells_of(m) for m in meshes]
@@ -579,9 +580,12 @@ def refine_by_direct_light(meshes, base_scene, detail: Detail, seed=0, receives=
     limit = int(detail.budget * base_count)
     mean_light = None
     steps = []
+    stopped = False
     for level in range(detail.levels):
         started = time.perf_counter()
-        candidate = [(c.level == level) & ~c.frozen & bool(r) for c, r in zip(cells, receives)]
+        smallest = (SMALLEST_SIDE * base_scene.geometry.diagonal) ** 2 * 4  # (a cell's area: its children's four)
+        candidate = [(c.level == level) & ~c.frozen & bool(r) & (patch_mesh(c, conforming=False)[0].patch_area >= smallest)
+                     for c, r in zip(cells, receives)]
         count = sum(c.count for c in cells)
         if not any(c.any() for c in candidate) or count + 3 > limit:
             break
@@ -598,6 +602,7 @@ def refine_by_direct_light(meshes, base_scene, detail: Detail, seed=0, receives=
             parents.append(parent[rows] + (int(k) << 40))
         children, parents = np.concatenate(children), np.concatenate(parents)
         if should_stop is not None and should_stop():
+            stopped = True
             break
         estimates = direct_estimates(scene, children, detail.samples, [seed, level]).mean(axis=2)  # (2,n) grey
         value = estimates.mean(axis=0)
@@ -635,4 +640,4 @@ def refine_by_direct_light(meshes, base_scene, detail: Detail, seed=0, receives=
         if chosen.size == 0:
             break
     made = [patch_mesh(c) for c in cells]
-    return Refined([m for m, _ in made], [o for _, o in made], cells, steps)
+    return Refined([m for m, _ in made], [o for _, o in made], cells, steps, stopped)

@@ -225,3 +225,4 @@ def test_a_shadow_edge_splits():
     assert (counts[edge_row] == 4).all()
     assert (counts[~edge_row] == 1).all()
     assert refined.meshes[1].patch_count == m_block.patch_count  # (not receiving: not refined)
+
