@@ -70,7 +70,7 @@ def run(detail, target, patch_size=0.0, seed=0, colours="TEXTURED"):
     return image, solve, shown, int(settings.last_patches), float(settings.last_patch_size)
 
 
-def measure(name, targets, details, reference_samples, log=print):
+def measure(name, targets, details, reference_samples, scales=(), log=print):
     from addon.blender_write.results import previous_results
 
     info = interior_scene.build(name)
@@ -82,9 +82,11 @@ def measure(name, targets, details, reference_samples, log=print):
         run(detail, max(targets), seed=99)
     for target in targets:
         configs = [("uniform", "OFF", 0.0)] + [(f"adaptive {d.lower()}", d, 0.0) for d in details]
+        configs += [(f"uniform {scale:g}x size", "OFF", scale) for scale in scales]
         done = {}
-        for label, detail, size in configs:
-            image, solve, shown, patches, used = run(detail, target)
+        for label, detail, scale in configs:
+            size = scale * done["uniform"][1] if scale else 0.0
+            image, solve, shown, patches, used = run(detail, target, patch_size=size)
             if mask is None:
                 px = picture.pixel_map(info, previous_results())
                 emitters = [info.meshes.index(n) for n in info.emitters]
@@ -177,6 +179,8 @@ def main(argv=None):
     parser.add_argument("--scenes", nargs="+", default=["window_room"], choices=list(interior_scene.SCENES))
     parser.add_argument("--targets", nargs="+", type=float, default=[4.0, 2.0, 1.0])
     parser.add_argument("--details", nargs="+", default=["MEDIUM"])
+    parser.add_argument("--uniform-scales", nargs="*", type=float, default=[0.7, 0.5],
+                        help="uniform patches also at these fractions of the automatic size (the time axis)")
     parser.add_argument("--reference-samples", type=int, default=256)
     parser.add_argument("--out", type=Path, default=RESULTS / "adaptive.md")
     args = parser.parse_args(argv)
@@ -184,7 +188,7 @@ def main(argv=None):
     loads = [os.getloadavg()[0]]
     rooms = {}
     for name in args.scenes:
-        rooms[name] = measure(name, args.targets, args.details, args.reference_samples)
+        rooms[name] = measure(name, args.targets, args.details, args.reference_samples, args.uniform_scales)
         middle = sorted(args.targets)[len(args.targets) // 2]
         labels = ["uniform"] + [f"adaptive {d.lower()}" for d in args.details]
         side_by_side(rooms[name], labels, middle, args.out.parent / f"{args.out.stem}_{name}.png")

@@ -21,7 +21,9 @@ every sample point, no choice by power; emitting patches and the sky by their ow
 twice independently; a cell splits when its children differ by more than a visible share of
 the local light (and of a floor relative to the scene's mean, so dark corners do not eat the
 budget) and by more than the two estimates' own noise. The splits repeat down to a smallest
-size (``levels`` splits of the first patches) or a patch budget.
+size (``levels`` splits of the first patches, children no smaller than SMALLEST_SIDE of the
+scene) or a patch budget. Cells that another object runs into (partly buried,
+``visibility``) stay whole.
 """
 from __future__ import annotations
 
@@ -624,6 +626,12 @@ def refine_by_direct_light(meshes, base_scene, detail: Detail, seed=0, receives=
         visible = detail.contrast * np.maximum(local, detail.floor * mean_light)
         measured = NOISE_Z * np.sqrt(2 * pooled)
         score = change / np.maximum(visible, measured)
+        # a cell another object runs into stays whole: its buried children would get no light, and
+        # a black patch beside lit ones rings in the smooth colours (its part inside is not seen)
+        buried = scene.geometry.buried
+        if buried is not None:
+            inside = np.isin(children, np.concatenate([buried.patch, buried.whole]))
+            score[np.bincount(index, weights=inside, minlength=n) > 0] = 0.0
         chosen = np.flatnonzero(score > 1)
         room = max(0, (limit - count) // 3)
         if chosen.size > room:
