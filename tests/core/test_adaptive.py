@@ -226,3 +226,27 @@ def test_a_shadow_edge_splits():
     assert (counts[~edge_row] == 1).all()
     assert refined.meshes[1].patch_count == m_block.patch_count  # (not receiving: not refined)
 
+
+
+def test_cells_another_object_runs_into_stay_whole():
+    """A wall box standing through a floor under a low lamp: the floor's patches it crosses
+    (partly buried) do not split, their lit neighbours do."""
+    floor = np.array([[0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0]], float)
+    m_floor = meshing.mesh_patches(floor, [4], [0, 1, 2, 3], 0.5)
+    lo, hi = np.array([1.9, -0.5, -0.3]), np.array([2.1, 4.5, 2.0])
+    corners = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
+    # an outward box: 0 1 3 2 bottom (down), 4 6 7 5 top (up), sides outward
+    faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
+    m_wall = meshing.mesh_patches(corners, [4] * 6, sum(faces, []), 0.5)
+    combined = meshing.concatenate([m_floor, m_wall])
+    P = combined.patch_count
+    scene = PatchScene(combined.vertices, combined.triangles, combined.triangle_patch, np.full(P, 0.5), np.zeros(P),
+                       lights=[PointLight(np.array([1.5, 2.0, 0.6]), np.full(3, 1.0))])
+    assert scene.geometry.buried is not None
+    refined = refine_by_direct_light([m_floor, m_wall], scene, Detail(levels=1, contrast=0.1, budget=10.0), seed=0,
+                                     receives=[True, False])
+    counts = np.bincount(refined.origins[0], minlength=m_floor.patch_count)
+    centre_x = np.array([m_floor.points[m_floor.corner_verts[4 * p:4 * p + 4], 0].mean() for p in range(m_floor.patch_count)])
+    crossed = np.abs(centre_x - 2.0) < 0.3  # the columns 1.5-2.0 and 2.0-2.5
+    assert (counts[crossed] == 1).all()
+    assert (counts[np.abs(centre_x - 1.25) < 0.01] == 4).any()  # under the lamp, beside the wall: split
