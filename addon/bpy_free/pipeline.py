@@ -372,7 +372,7 @@ def _smooth_corners(scene, result, light=False, shading=None):
     if light:
         yield "light", surface.corner_values(arriving_light(surface, result.irradiance, result.irradiance_variance,
                                                             scene.reflectivity))
-    reflected = surface.filter_noise(np.maximum(result.reflected, 0.0), result.reflected_variance)
+    reflected = surface.filter_light(result.reflected, result.reflected_variance)
     corners = surface.corner_values(reflected)
     del reflected
     corners += scene.emission[triangle_patch][:, None, :]
@@ -387,17 +387,5 @@ def _smooth_light(scene, result, light=False):
 
 def arriving_light(surface, irradiance, variance, reflectivity):
     """(P,3) the light arriving at each patch (H: B = E + rho H), its noise filtered as the
-    reflected light's is, from its own batch-means variance. Where a channel's reflectivity is
-    0 the light shows nowhere (the surface is black there) but joins the neighbours' corners,
-    and the two-way iteration gathers it with a thousandth of the samples (a heavy-tailed
-    estimate): there it is the neighbours' (core smoothing ``fill_from_neighbours``)."""
-    black = np.asarray(reflectivity) <= 0
-    light = np.maximum(irradiance, 0.0)
-    variance = np.asarray(variance, np.float64)
-    if black.any():
-        light = surface.fill_from_neighbours(light, black)
-        # as noisy as the neighbours it came from: never an anchor for them
-        measured = np.isfinite(variance)
-        filled = surface.fill_from_neighbours(np.where(measured, variance, 0.0), black | ~measured)
-        variance = np.where(black & measured, filled, variance)
-    return surface.filter_noise(light, variance)
+    reflected light's is (core smoothing ``Surface.arriving_light``)."""
+    return surface.arriving_light(irradiance, variance, reflectivity)

@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from .lights import WorldLight
+from .near_choice import near_choice
 from .names import EXIT_RANDOM, FINITE
 from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front, region_of
 from .sampling import SourceTable, add_sphere_points, patch_point_rows, source_weights, stratified_by_patch
@@ -57,6 +58,9 @@ GATHER_SOBOL_DIMENSIONS = (0, 1, 6, 2, 3, 4, 5, 7, 8, 9)
 # many times the emitters' share of the area, from COSINE_SHARE_LEAST to 1.
 COSINE_SHARE_PER_AREA = 10.0
 COSINE_SHARE_LEAST = 0.1
+# A receiver's own share beside emitters: this many times its form factor to them (near_choice's
+# bound), where that is more than the scene's share.
+COSINE_SHARE_PER_FORM = 3.0
 # The strategies that find an emitting patch (_emitter_weight).
 SHADOW, COSINE = range(2)
 # Rays from the sources a solve casts, once, to split the direct light found on no front side
@@ -115,10 +119,16 @@ class Gathering:
         weights = source_weights(scene.patch_area, scene.emission, light_power * looked_at[:, None])
         self.table = SourceTable(weights) if weights.any() else None
         self.choice = weights / weights.sum() if weights.any() else weights  # P_s
+        self.near = near_choice(scene, self.choice) if self.table is not None else None
         self.emission = scene.emission.T  # (3,P)
         self.reflectivity = scene.reflectivity.T  # (3,P)
         self.patch_area = scene.patch_area
         self.cosine_share = cosine_share(scene, bool(self.worlds))
+        # (P,) each receiver's: beside an emitter (near_choice's form factor bound), up to 1
+        self.cosine_shares = np.full(scene.patch_count, self.cosine_share)
+        if self.near is not None and self.near.active and self.cosine_share < 1:
+            near = np.clip(COSINE_SHARE_PER_FORM * self.near.form, COSINE_SHARE_LEAST, 1.0)
+            self.cosine_shares = np.maximum(self.cosine_shares, near)
         # P_s / A_s of each emitting patch (_emitter_weight), A_j / n_j of each patch (ReflectedPoints).
         self.shadow_density = self.choice[:scene.patch_count] / scene.patch_area
         self.area_per_sample = scene.patch_area / self.samples
@@ -126,6 +136,17 @@ class Gathering:
         # (escaped, blocked) of the light found on no front: what the solve measures (fate_shares).
         self.fate_shares = tuple(fate_shares)
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
+
+    def choose(self, patch, u):
+        """(n,) the source a shadow ray from each sample of ``patch`` looks at (near_choice)."""
+        return self.near.choose(patch, u, self.table) if self.near.active else self.table.choose(u)
+
+    def density(self, patch, source):
+        """(n,) P_s / A_s: the chance that a sample of ``patch`` looks at emitting patch
+        ``source``, per unit of its area."""
+        if self.near is None or not self.near.active:
+            return self.shadow_density.take(source)
+        return self.near.probability(patch, source) / self.patch_area.take(source)
 
     def draw(self, rng):
         """This chunk's samples: the patch of each, count_j of patch j (the whole part of its
@@ -186,9 +207,10 @@ def _gather_block(tables, gathering, patch, x32, value, rng, parts=None):
     rays = 0
     shadow, cosine = (value, value) if parts is None else parts[0]
     if gathering.table is not None:
-        rays += _shadow_rays(tables, gathering, patch, x, normal, u, shadow)
+        source = gathering.choose(patch, u[2])
+        rays += _shadow_rays(tables, gathering, patch, source, x, normal, u, shadow)
         if parts is not None:
-            parts[1][0] = parts[2].take(gathering.table.choose(u[2]))
+            parts[1][0] = parts[2].take(source)
     if gathering.cosine_share > 0:
         rays += _cosine_rays(tables, gathering, patch, x, normal, u, cosine, groups=None if parts is None else parts[1][1])
     if parts is not None:
@@ -207,15 +229,17 @@ def _blocks(patch, size):
     return [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
 
 
-def _emitter_weight(gathering, technique, source, cos_x, cos_y, distance_world):
+def _emitter_weight(gathering, technique, receiver, source, cos_x, cos_y, distance_world):
     """(n,) the weighted estimate over E_s, as a sample of the receiving patch, of an emitting
-    patch s met at distance d by a sample of ``technique`` (SHADOW or COSINE). The strategies'
-    densities at x, in solid angle, each per gathering sample: p_shadow = P_s d^2 / (A_s cos_y)
+    patch s met at distance d by a sample of ``technique`` (SHADOW or COSINE) of patch
+    ``receiver``. The strategies' densities at x, in solid angle, each per gathering sample:
+    p_shadow = P_s d^2 / (A_s cos_y) (P_s the receiver's chance of looking at s)
     (one shadow ray a sample) and p_cosine = q cos_x / pi (q = the cosine share); a sample of
     strategy t weighs in as f p_t / sum p^2, f = E_s cos_x / pi (the power heuristic). A
     receiver's irradiance is the sum of its samples' estimates over n_j."""
     p_cosine = cos_x * (1.0 / np.pi)
-    densities = (gathering.shadow_density.take(source) * distance_world**2 / cos_y, gathering.cosine_share * p_cosine)
+    densities = (gathering.density(receiver, source) * distance_world**2 / cos_y,
+                 gathering.cosine_shares.take(receiver) * p_cosine)
     square = densities[0] ** 2
     square += densities[1] ** 2
     weight = p_cosine * densities[technique]
@@ -223,11 +247,11 @@ def _emitter_weight(gathering, technique, source, cos_x, cos_y, distance_world):
     return weight
 
 
-def _shadow_rays(tables, gathering, patch, x, normal, u, value):
-    """Adds each sample's shadow-ray estimate to ``value``; returns the rays traced."""
+def _shadow_rays(tables, gathering, patch, source, x, normal, u, value):
+    """Adds each sample's shadow-ray estimate (towards its ``source``) to ``value``; returns
+    the rays traced."""
     g, P = tables.geometry, tables.patch_count
     n = patch.size
-    source = gathering.table.choose(u[2])
     towards = np.empty_like(x)
     distance = np.empty(n)  # unit space, to the point looked at
     weight = np.zeros(n)  # an emitting patch's estimate over its emittance
@@ -299,7 +323,7 @@ def _towards_emitters(tables, gathering, patch, source, surface, normal, u):
     cos_x = np.einsum("in,in->n", normal, e)
     cos_y = -np.einsum("in,in->n", normal_s, e)
     ok = (cos_x > 0) & (cos_y > 0) & (source != patch)
-    w = _emitter_weight(gathering, SHADOW, source, cos_x, np.maximum(cos_y, 1e-12), length * g.diagonal)
+    w = _emitter_weight(gathering, SHADOW, patch, source, cos_x, np.maximum(cos_y, 1e-12), length * g.diagonal)
     return e, length, np.where(ok, w, 0.0)
 
 
@@ -310,7 +334,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, 
     traced. ``groups`` (n,), where given, takes the source group of what each ray found."""
     g = tables.geometry
     if gathering.cosine_share < 1 and not cast_all:
-        cast = np.flatnonzero(u[9] < gathering.cosine_share)
+        cast = np.flatnonzero(u[9] < gathering.cosine_shares.take(patch))
         part = np.zeros((3, cast.size))
         found = None if groups is None else groups[cast]
         rays = _cosine_rays(tables, gathering, patch[cast], x[:, cast], normal[:, cast], u[:, cast], part, True, found)
@@ -327,7 +351,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, 
         s = source[met]
         cos_x = np.einsum("in,in->n", normal[:, met], towards[:, met])
         cos_y = -np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), towards[:, met])
-        value[:, met] += gathering.emission[:, s] * _emitter_weight(gathering, COSINE, s, cos_x, np.maximum(cos_y, 1e-12), t[met] * g.diagonal)
+        value[:, met] += gathering.emission[:, s] * _emitter_weight(gathering, COSINE, patch[met], s, cos_x, np.maximum(cos_y, 1e-12), t[met] * g.diagonal)
     escaped = np.flatnonzero(hit < 0)
     if escaped.size and gathering.worlds:
         for world in gathering.worlds:

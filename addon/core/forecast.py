@@ -88,9 +88,10 @@ def raw_rate(scene, rays=1 << 14, seed=0):
 
 def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, stop_rule="measured", method="walk",
              direct_light=None, exit_point="random", sampling="independent", threads=None, max_seconds=None, seed=0,
-             bounces=None, budget=PILOT_RAYS, should_stop=None):
+             bounces=None, budget=PILOT_RAYS, should_stop=None, per_source=False, groups=None):
     """The Forecast of ``solve(scene, estimator, ...)`` with these arguments (``method`` a
-    method, not "auto"; ``bounces`` the expected bounces of a path, diagnostics.check_bounces).
+    method, not "auto"; ``bounces`` the expected bounces of a path, diagnostics.check_bounces;
+    ``per_source``, ``groups``: the pilot keeps each group's light apart, as the run will).
     ``should_stop()`` ends the pilot early (a run starting): the forecast is then from what it has."""
     chosen = methods.create(method, direct_light)
     plan = chunk_plan(scene, chosen, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
@@ -105,6 +106,7 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
         began, finished = time.perf_counter(), []
         r = solve(scene, estimator, paths=chunk * chunks, threshold=threshold, seed=seed, exit_point=exit_point,
                   sampling=sampling, threads=threads, direct_light=chosen.direct_light, method=method, chunk_paths=chunk,
+                  per_source=per_source, groups=groups,
                   progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
                   should_stop=lambda: time.perf_counter() - began > limit or bool(should_stop and should_stop()))
         everything = time.perf_counter() - began
@@ -141,3 +143,41 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
                     rays_per_path=rays_per_path, seconds_per_path=per_path, setup_seconds=setup,
                     pilot_chunk=pilot_chunk, pilot_chunks=r.chunks, pilot_seconds=time.perf_counter() - start,
                     measured=measured, time_limited=limited)
+
+
+def measured_choice(scene, estimator, candidates, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None,
+                    direct_light=None, stop_rule=None, budget=PILOT_RAYS, margin=1.0, **kwargs):
+    """(the cheapest of ``candidates`` (method names), {name: Forecast}): a pilot of each
+    (``forecast``, ``kwargs`` its other arguments) measures its time to the same error on this
+    machine: the forecast seconds to ``target_mse``, else the variance per path times the
+    seconds per path; the first candidate unless another costs less than 1 / ``margin`` of it.
+    A pilot that measured no error (not two chunks in PILOT_SECONDS: per source, rays cost
+    more than the budget assumes) is run again on an eighth of the budget; a candidate that
+    still measured none is dearer than one that did; none measured: the first."""
+    stop_rule = stop_rule or ("measured" if target_mse is not None else "predicted")
+
+    def pilot(name, rays):
+        return forecast(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
+                        max_seconds=max_seconds, method=name, stop_rule=stop_rule, budget=rays,
+                        direct_light=methods.direct_light_for(name, direct_light, scene.lights), **kwargs)
+
+    forecasts = {}
+    for name in candidates:
+        forecasts[name] = pilot(name, budget)
+        if not forecasts[name].measured:
+            forecasts[name] = pilot(name, budget // 8)
+    measured = [name for name in candidates if forecasts[name].measured]
+    if not measured:
+        return candidates[0], forecasts
+    cost = {name: cost_at_same_error(forecasts[name], target_mse) for name in measured}
+    cheapest = min(measured, key=cost.get)
+    first = candidates[0]
+    if first in cost and cost[first] <= margin * cost[cheapest]:
+        return first, forecasts
+    return cheapest, forecasts
+
+
+def cost_at_same_error(f, target_mse=None):
+    """What a Forecast's run costs at a given error: its seconds to ``target_mse``, else its
+    variance per path times its seconds per path (the seconds to a unit variance)."""
+    return f.seconds if target_mse is not None else f.variance_per_path * f.seconds_per_path

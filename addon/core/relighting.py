@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .error_model import mean_reflected_radiosity
+from .grouping import SourceGroups, check_per_source, source_groups
 
 
 class GroupBatches:
@@ -68,7 +69,7 @@ class GroupBatches:
             radiosity[s] += np.where((patch_group == s)[:, None], scene.emission, 0.0)
         covariance = self.spread(N) / ((total.chunks - 1) * N) if total.chunks > 1 else np.full((self.channels, S, S), math.nan)
         return PerSource(self.groups.names, radiosity, irradiance, group_power(scene, self.groups), covariance,
-                         scene_scale(scene), target_mse)
+                         scene_scale(scene), target_mse, patch_group)
 
 
 def group_power(scene, groups):
@@ -94,7 +95,8 @@ class PerSource:
     E in its radiosity), summing to the solve's own over groups; ``power`` (S,3) each group's
     power; ``covariance`` (C,S,S) the area-weighted mean over patches of the groups' batch
     covariance of the reflected radiosity (C = 1 for a grey scene, whose channels are alike;
-    NaN below 2 chunks); ``scale`` b_ave per unit of power; the solve's ``target_mse`` or None."""
+    NaN below 2 chunks); ``scale`` b_ave per unit of power; the solve's ``target_mse`` or None;
+    ``patch_group`` (P,) int32 the group of each patch's own emission (-1: none), or None."""
 
     names: tuple
     radiosity: np.ndarray
@@ -103,6 +105,7 @@ class PerSource:
     covariance: np.ndarray
     scale: float
     target_mse: float | None = None
+    patch_group: np.ndarray | None = None
 
     @property
     def count(self):
@@ -167,3 +170,149 @@ def relight(per_source, weights, irradiance=False):
 def _combine(values, w):
     """(P,3) sum_s w_s values_s of (S,P,3) ``values`` (one pass over them: it is memory-bound)."""
     return np.einsum("spc,sc->pc", values, w.astype(values.dtype, copy=False))
+
+
+def combine(per_source, parts, weights):
+    """sum_s w_s parts_s (...,3) of any per-source ``parts`` (S,...,3) (smooth corners of
+    ``smooth_sources``, an object's polygon corners), with ``weights`` as ``relight`` takes them;
+    in the parts' dtype."""
+    w = check_weights(per_source, weights)
+    parts = np.asarray(parts)
+    if parts.shape[:1] != (per_source.count,) or parts.shape[-1] != 3:
+        raise ValueError(f"parts must have shape ({per_source.count}, ..., 3): one a source; got {parts.shape}")
+    flat = parts.reshape(per_source.count, -1, 3)
+    return _combine(flat, w).reshape(parts.shape[1:])
+
+
+def smooth_sources(surface, scene, result, light=False, dtype=np.float64):
+    """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
+    output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
+    they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
+    ("light", (S,T,3,3)) first with ``light``, the light arriving (``Surface.arriving_light``);
+    then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``) and
+    smooth, plus each group's own emission, flat. ``surface`` is ``smoothing.Surface.of`` the
+    scene's triangles; ``result`` a per-source solve's SolveResult. Made in float64, given as
+    ``dtype`` (float32: half the memory, as they are written; their sum then the whole's to
+    float32 rounding)."""
+    per_source = result.per_source
+    if per_source is None:
+        raise ValueError("the solve has no per-source results: solve with per_source=True")
+    if light:
+        light, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
+                                             return_filter=True)
+        _, corners = surface.corner_values(light, return_filter=True)
+        yield "light", corners(fill(per_source.irradiance), dtype)
+    filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
+    _, corners = surface.corner_values(filtered, return_filter=True)
+    smooth = corners(noise(per_source.irradiance * scene.reflectivity), dtype)
+    emitting = per_source_emission(scene, per_source)
+    for s in range(per_source.count):  # (a part at a time: no (S,T,3) copy)
+        smooth[s] += emitting[s, surface.triangle_patch][:, None, :]
+    yield "smooth", smooth
+
+
+def per_source_emission(scene, per_source):
+    """(S,P,3) each group's own emitting patches' E (0 elsewhere)."""
+    if per_source.patch_group is None:
+        raise ValueError("the per-source results do not say which group each emitting patch is in (patch_group)")
+    emission = np.zeros((per_source.count, scene.patch_count, 3))
+    group = per_source.patch_group
+    for s in range(per_source.count):
+        emission[s] = np.where((group == s)[:, None], scene.emission, 0.0)
+    return emission
+
+
+def resolve(scene, per_source, names, **solve_kwargs):
+    """``per_source`` with the groups ``names`` re-solved on ``scene`` (a lamp moved, reshaped,
+    re-angled or added: the scene as it is now, on the same patches) and the others kept as they
+    are: a PerSource of the scene's groups (``solve_kwargs["groups"]``, default
+    ``source_groups(scene)``), in their order. The re-solve traces only the named groups' sources
+    (every other light and emitting patch left out) with ``solve_kwargs`` (paths or target_mse,
+    method, seed, ...; a target applies to the named groups' light alone); it is independent of
+    the kept groups' run (give it a seed of its own), so their covariance is 0. A group of the
+    solve the scene no longer has (a lamp deleted) is left out. ValueError in one line for a
+    name the scene's groups do not have, a group the solve did not have that is not named, or
+    other patches (geometry changed: solve again)."""
+    from . import solver  # (the solver's batches use this module)
+
+    groups = solve_kwargs.pop("groups", None)
+    groups = source_groups(scene) if groups is None else groups
+    check_per_source(scene, groups)
+    names = (names,) if isinstance(names, str) else tuple(names)
+    unknown = [n for n in names if n not in groups.names]
+    if unknown:
+        raise ValueError(f"no source group named {', '.join(map(repr, unknown))}; "
+                         f"the groups are {', '.join(map(repr, groups.names))}")
+    if per_source.radiosity.shape[1] != scene.patch_count:
+        raise ValueError(f"the per-source results are of {per_source.radiosity.shape[1]:,} patches, the scene has "
+                         f"{scene.patch_count:,}: the geometry changed, solve again")
+    missing = [n for n in groups.names if n not in names and n not in per_source.names]
+    if missing:
+        raise ValueError(f"source groups {', '.join(map(repr, missing))} are new: name them to be solved")
+    solve_kwargs.pop("per_source", None)
+    new = [groups.names.index(n) for n in dict.fromkeys(names)]
+    sub = _named_sources(scene, groups, new)
+    if sub is None:  # the named groups give no light now: their results are nothing
+        redone = _dark(scene.patch_count, len(new), per_source.covariance.shape[0])
+    else:
+        sub_scene, sub_groups = sub
+        redone = solver.solve(sub_scene, per_source=True, groups=SourceGroups(*sub_groups), **solve_kwargs).per_source
+    return _joined(scene, groups, per_source, new, redone)
+
+
+def _named_sources(scene, groups, new):
+    """(a scene of only the groups ``new``'s sources, its SourceGroups' fields), or None where
+    they give no power."""
+    P = scene.patch_count
+    local = np.full(groups.count, -1, np.int32)
+    local[new] = np.arange(len(new), dtype=np.int32)
+    own = groups.patch_group(P)
+    patch_group = np.where(own >= 0, local.take(np.maximum(own, 0)), -1).astype(np.int32)
+    emission = np.where((patch_group >= 0)[:, None], scene.emission, 0.0)
+    light_group = local.take(groups.light_group) if len(groups.light_group) else np.zeros(0, np.int32)
+    lights = [light for light, g in zip(scene.lights.lights, light_group) if g >= 0]
+    power = emission.any() or any(np.any(light_power > 0) for light_power, g in
+                                  zip(_light_powers(scene), light_group) if g >= 0)
+    if not power:
+        return None
+    sub = scene.with_materials(scene.reflectivity, emission, lights)
+    kept = light_group[light_group >= 0]
+    light_sources = kept.take(sub.lights.light_of) if len(kept) else np.zeros(0, np.int32)
+    source_group = np.concatenate([patch_group, light_sources])
+    return sub, (tuple(groups.names[g] for g in new), source_group.astype(np.int32), kept.astype(np.int32))
+
+
+def _light_powers(scene):
+    """(L,3) each light's emitters' power summed."""
+    out = np.zeros((len(scene.lights), 3))
+    if len(scene.lights):
+        np.add.at(out, scene.lights.light_of, scene.lights.power)
+    return out
+
+
+def _dark(P, S, C):
+    """A PerSource of S groups that give no light."""
+    zeros = np.zeros((S, P, 3))
+    return PerSource(("",) * S, zeros, zeros.copy(), np.zeros((S, 3)), np.zeros((C, S, S)), math.nan)
+
+
+def _joined(scene, groups, per_source, new, redone):
+    """The PerSource of ``groups``: the rows ``new`` from ``redone``, the rest from ``per_source``."""
+    S, P = groups.count, scene.patch_count
+    source = {g: ("new", k) for k, g in enumerate(new)}
+    source.update({g: ("old", per_source.names.index(n)) for g, n in enumerate(groups.names) if g not in source})
+    C = max(per_source.covariance.shape[0], redone.covariance.shape[0])
+    old_cov = np.broadcast_to(per_source.covariance, (C,) + per_source.covariance.shape[1:])
+    new_cov = np.broadcast_to(redone.covariance, (C,) + redone.covariance.shape[1:])
+    radiosity = np.empty((S, P, 3), per_source.radiosity.dtype)
+    irradiance = np.empty((S, P, 3), per_source.irradiance.dtype)
+    power = np.empty((S, 3))
+    covariance = np.zeros((C, S, S))
+    for g, (kind, k) in source.items():
+        ps = redone if kind == "new" else per_source
+        radiosity[g], irradiance[g], power[g] = ps.radiosity[k], ps.irradiance[k], ps.power[k]
+        for h, (other, m) in source.items():
+            if other == kind:  # (independent runs: no covariance across them)
+                covariance[:, g, h] = (new_cov if kind == "new" else old_cov)[:, k, m]
+    return PerSource(groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), per_source.target_mse,
+                     groups.patch_group(P).copy())

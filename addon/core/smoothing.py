@@ -27,31 +27,17 @@ non-negative continuous answer, and keeps part of its step. Every step keeps val
 non-negative (averages of non-negative values, a clip at 0, a non-negative scale); negative
 values (a signed estimator's noise) count as 0, non-finite ones are refused.
 
-Noise (``filter_noise``). Each patch's value is re-estimated from itself and its neighbours
-(patches sharing a welded point, normals within the crease angle) by a weighted least-squares
-plane in the patch's tangent plane (value = a + gradient . offset of the neighbour's centroid;
-the estimate is a). Weights are k over the neighbourhood's mean variance (where hits are sparse
-a patch's own grows with its value: weighting by it took light away), k = max(0, 1 - d^2 /
-c^2), d^2 the largest over channels of (v_p - v_q)^2 / (s_p^2 + s_q^2), s^2 the measured
-(batch-means) variances: neighbours within their noise of the patch are used, neighbours more than c standard errors away (real
-detail: a shadow edge, a hot spot) are not used at all, and a linear gradient across the
-neighbourhood (light falling off along a wall) is fitted, not averaged away. Bias bound: the
-result is clipped to v_p +- c * max over used neighbours of sqrt(s_p^2 + s_q^2), per channel, so
-no patch moves by more than c combined standard errors of the estimates it was compared with,
-whatever the light (``filter_noise(..., bound=True)`` returns that limit); non-negative values
-stay non-negative (clipped at 0). A zero variance (a patch no path reached) is replaced by the
-mean of its neighbours' (and the bound with it), so a black speckle neither anchors its neighbours
-nor stays black. Patches without a variance (NaN: fewer than two batches) are left as they are.
+Noise (``filter_noise``): ``noise_filter``.
 """
 from dataclasses import dataclass
 
 import numpy as np
 
+from .noise_filter import NOISE_CUTOFF, NoiseFilter, _checked, _sum
 from .welding import run_starts, weld_points
 
 CREASE_ANGLE = 30.0  # degrees, as Blender's auto smooth
 WELD_FRACTION = 1e-4  # of the median patch's side
-NOISE_CUTOFF = 3.0  # standard errors beyond which a neighbour is real detail, not noise
 ITERATIONS = 10
 RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
 
@@ -62,7 +48,7 @@ LOWEST_SHARE = 0.5
 
 
 @dataclass
-class Surface:
+class Surface(NoiseFilter):
     """The scene's triangles as one welded surface, built once for any number of value sets.
 
     point          (T,3) welded point of every triangle corner
@@ -161,31 +147,50 @@ class Surface:
 
     def _patch_means(self, x):
         """Area-weighted mean (P,) of the linear interpolation of corner values (T*3,)."""
-        tri = x.reshape(-1, 3).sum(axis=1) * (self.triangle_area / 3.0)
+        tri = x[0::3] + x[1::3]  # (a triangle's three corners added in order: as sum(axis=1) adds them, 8x faster)
+        tri += x[2::3]
+        tri *= self.triangle_area / 3.0
         sums = _sum(self.triangle_patch, tri, self.patch_count)
         return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
 
-    def corner_values(self, patch_values, iterations=ITERATIONS):
+    def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
         compatible corners, the area-weighted mean of each patch's linear interpolation equal to
-        its value (negative values taken as 0), non-negative."""
+        its value (negative values taken as 0), non-negative. With ``return_filter``, also
+        ``apply`` (``LinearCorners``): the same steps with these values' clips, floors and final
+        scales held fixed, a linear map of (P,k) or (S,P,k) values to (T,3,k) or (S,T,3,k) corners
+        whose value at ``patch_values`` is these corners (float error), so that parts of the
+        values (each source's) give corners that add up to these."""
         # a signed estimator's slightly negative patches show as black: light is never negative
-        values = np.maximum(_checked(patch_values, self.patch_count, "patch values"), 0.0)
+        checked = _checked(patch_values, self.patch_count, "patch values")
+        values = np.maximum(checked, 0.0)
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
         out = np.empty((len(self.triangle_patch), 3, values.shape[1]))
+        records = []
         for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
             channel = np.ascontiguousarray(values[:, k])
-            out[:, :, k] = self._corner_channel(channel, corner_patch, averaging, iterations).reshape(-1, 3)
-        return out
+            record = {} if return_filter else None
+            out[:, :, k] = self._corner_channel(channel, corner_patch, averaging, iterations, record).reshape(-1, 3)
+            records.append(record)
+        if not return_filter:
+            return out
+        return out, LinearCorners(self, checked > 0, corner_patch, averaging, int(iterations), records)
 
-    def _corner_channel(self, values, corner_patch, averaging, iterations):
+    def _corner_channel(self, values, corner_patch, averaging, iterations, record=None):
+        """One channel's corners (T*3,); ``record`` (a dict), where given, keeps the floored
+        corners of each step, the floors' patches, the final scales and the flat corners."""
         x = self._average_corners(values[corner_patch], averaging)
         floor = LOWEST_SHARE * self._corner_lowest(values[corner_patch], averaging)
+        if record is not None:
+            record["lowest"] = self._corner_lowest_patch(values, corner_patch, averaging)
+            record["floored"] = []
         for _ in range(int(iterations)):
             # each patch's missing light, spread continuously over the corners around it
             missing = (values - self._patch_means(x))[corner_patch]
             x += RELAXATION * self._average_corners(missing, averaging)
+            if record is not None:
+                record["floored"].append(np.flatnonzero(x < floor))
             # a bright patch beside dim ones would push its neighbours' far corners down to black:
             # never below a share of the darkest patch meeting there (the last scale keeps means)
             np.maximum(x, floor, out=x)
@@ -195,165 +200,58 @@ class Surface:
         x *= scale[corner_patch]
         flat = np.flatnonzero((means <= 0)[corner_patch])
         x[flat] = values[corner_patch[flat]]
+        if record is not None:
+            record["scale"], record["flat"] = scale, flat
         return x
 
-    # -- noise ---------------------------------------------------------------------------------
-    def neighbours(self, block=1 << 18):
-        """Patch pairs (p, q), p != q, both directions, sorted by p: sharing a welded point,
-        normals within the crease angle. Made a block of points at a time (``block`` candidate
-        pairs), so memory goes with the patches, not with the points' valences squared."""
-        P = max(self.patch_count, 1)
-        code = np.unique(self.point.ravel().astype(np.int64) * P + np.repeat(self.triangle_patch, 3))
-        point, patch = code // P, code % P
-        del code
-        starts = run_starts(point)
-        sizes = np.diff(np.r_[starts, len(point)])
-        ends = np.cumsum(sizes * sizes)
-        found = []
-        lo = 0
-        while lo < len(starts):
-            hi = max(int(np.searchsorted(ends, ends[lo] - sizes[lo] ** 2 + block, "right")), lo + 1)
-            s, n = starts[lo:hi], sizes[lo:hi]
-            square = n * n
-            first = np.repeat(s, square)
-            size = np.repeat(n, square)
-            rank = np.arange(len(first)) - np.repeat(np.cumsum(square) - square, square)
-            a, b = patch[first + rank // size], patch[first + rank % size]
-            keep = (a != b) & (np.einsum("ij,ij->i", self.patch_normal[a], self.patch_normal[b]) >= self.cos_crease)
-            found.append(np.unique(a[keep] * P + b[keep]))
-            lo = hi
-        pair = np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)
-        small = np.int32 if P < 2 ** 31 else np.int64
-        return (pair // P).astype(small), (pair % P).astype(small)
+    def _corner_lowest_patch(self, values, corner_patch, averaging):
+        """(T*3,) the patch of the lowest of the compatible corners' values at each corner's
+        point (``_corner_lowest``'s, as a patch: what the floor is a share of)."""
+        point, _, _, crease, local, o = averaging
+        x = values[corner_patch]
+        order = np.lexsort((x, point))
+        first = order[run_starts(point[order])]
+        lowest_corner = np.empty(len(self.smooth_point), np.int64)
+        lowest_corner[point[first]] = first
+        lowest = lowest_corner[point]
+        if len(crease):
+            order = np.lexsort((x[o], local))
+            first = order[run_starts(local[order])]
+            lowest[crease[local[first]]] = o[first]
+        return corner_patch[lowest]
 
-    def fill_from_neighbours(self, patch_values, missing):
-        """Per-patch values (P,k) with those flagged ``missing`` (P,k) replaced, per channel, by
-        the area-weighted mean of the neighbours' (``neighbours``) that are not; a patch with no
-        such neighbour keeps its own. (For values that show nowhere,
-        such as the light arriving at a black patch, but join their neighbours' corners.)"""
-        values = _checked(patch_values, self.patch_count, "patch values")
-        missing = np.asarray(missing, bool).reshape(values.shape)
-        if not missing.any():
-            return values
-        p, q = self.neighbours()
-        out = values.copy()
-        for c in range(values.shape[1]):  # over channels, not elements
-            give = missing[p, c] & ~missing[q, c]
-            weight = _sum(p[give], self.patch_area[q[give]], self.patch_count)
-            total = _sum(p[give], self.patch_area[q[give]] * values[q[give], c], self.patch_count)
-            fill = missing[:, c] & (weight > 0)
-            out[fill, c] = total[fill] / weight[fill]
+
+class LinearCorners:
+    """``Surface.corner_values`` with the clips, floors and scales of one set of values held
+    fixed: ``apply(x)``, x (P,k) or (S,P,k), gives (T,3,k) or (S,T,3,k) corners, linear in x."""
+
+    def __init__(self, surface, positive, corner_patch, averaging, iterations, records):
+        self.surface, self.positive, self.corner_patch = surface, positive, corner_patch
+        self.averaging, self.iterations, self.records = averaging, iterations, records
+
+    def __call__(self, x, dtype=np.float64):
+        """The corners of ``x`` (P,k) or (S,P,k), made in float64, given as ``dtype``."""
+        x = np.asarray(x, np.float64)
+        if x.shape[-2:] != self.positive.shape:
+            raise ValueError(f"the corners take values of shape (P, k) = {self.positive.shape} (or (S, P, k)); got {x.shape}")
+        if x.ndim == 3:
+            out = np.empty((len(x), len(self.surface.triangle_patch), 3, x.shape[2]), dtype)
+            for s, part in enumerate(x):  # (one part's float64 steps at a time)
+                out[s] = self(part)
+            return out
+        surface, cp = self.surface, self.corner_patch
+        values = np.where(self.positive, x, 0.0)  # (the whole's negative patches count as 0)
+        out = np.empty((len(surface.triangle_patch), 3, values.shape[1]), dtype)
+        for k, record in enumerate(self.records):  # over colour channels, not elements
+            v = np.ascontiguousarray(values[:, k])
+            corner = surface._average_corners(v[cp], self.averaging)
+            for floored in record["floored"]:
+                corner += RELAXATION * surface._average_corners((v - surface._patch_means(corner))[cp], self.averaging)
+                corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
+            corner *= record["scale"][cp]
+            corner[record["flat"]] = v[cp[record["flat"]]]
+            out[:, :, k] = corner.reshape(-1, 3)
         return out
-
-    def filter_noise(self, patch_values, patch_variances, cutoff=NOISE_CUTOFF, bound=False):
-        """Noise-filtered per-patch values (P,k) from values and the variances of their estimates
-        (P,k); patches with a NaN or infinite variance are left as they are and not used. With
-        ``bound``, also the largest change each patch may have been given (P,k)."""
-        values = _checked(patch_values, self.patch_count, "patch values")
-        var = np.asarray(patch_variances, np.float64).reshape(values.shape)
-        known = np.isfinite(var).all(axis=1) & (var >= 0).all(axis=1)
-        largest = float(np.abs(values).max()) if values.size else 0.0
-        if not largest > 0:  # no light anywhere (nothing reached a reflecting patch): nothing to filter
-            return (values.copy(), np.zeros_like(values)) if bound else values.copy()
-        floor = 1e-12 * largest ** 2
-        p, q = self.neighbours()
-        var = _unmeasured_from_neighbours(np.where(known[:, None], var, np.nan), p, q)
-        var = np.where(known[:, None], np.maximum(var, floor), np.inf)
-        d2 = np.zeros(len(p))
-        for c in range(values.shape[1]):  # over colour channels, not elements
-            np.maximum(d2, (values[p, c] - values[q, c]) ** 2 / (var[p, c] + var[q, c]), out=d2)
-        k = np.where(known[p] & known[q], np.clip(1.0 - d2 / cutoff ** 2, 0.0, None), 0.0)
-        del d2
-        used = k > 0
-        pooled = _pooled(var, known, p, q)
-        p, q, k = p[used], q[used], k[used]
-        limit = np.zeros_like(values)
-        if len(p):
-            runs = run_starts(p)
-            for c in range(values.shape[1]):
-                limit[p[runs], c] = cutoff * np.sqrt(np.maximum.reduceat(var[p, c] + var[q, c], runs))
-        fitted = self._local_fit(values, pooled, known, p, q, k)
-        out = np.clip(fitted, values - limit, values + limit)
-        out = np.where(values >= 0, np.maximum(out, 0.0), out)
-        return (out, limit) if bound else out
-
-    def _local_fit(self, values, var, known, p, q, k):
-        """Each patch's value from a weighted least-squares plane (value = a + gradient . offset,
-        in the patch's tangent plane) through itself and its neighbours q, weights k / var:
-        a gradient across the neighbourhood moves no patch."""
-        n = self.patch_normal
-        axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
-        t1 = np.cross(n, axis)
-        t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-300)
-        t2 = np.cross(n, t1)
-        design = np.zeros((3, len(p)))  # 1 and the neighbour's offset along t1 and t2
-        design[0] = 1.0
-        for a in range(3):  # over axes, not elements
-            offset = self.patch_centroid[q, a] - self.patch_centroid[p, a]
-            design[1] += offset * t1[p, a]
-            design[2] += offset * t2[p, a]
-        del offset
-        # a little ridge on the gradient keeps a row of neighbours (an edge) solvable
-        ridge = 1e-3 * self.patch_area
-        out = values.copy()
-        P = len(values)
-        for c in range(values.shape[1]):  # over colour channels, not elements
-            own = np.where(known, 1.0 / var[:, c], 0.0)
-            w = k / var[q, c]
-            M = np.empty((P, 3, 3))
-            for i in range(3):
-                for j in range(i, 3):
-                    M[:, i, j] = M[:, j, i] = _sum(p, w * design[i] * design[j], P)
-            rhs = np.stack([_sum(p, w * values[q, c] * design[i], P) for i in range(3)], axis=1)
-            M[:, 0, 0] += own
-            rhs[:, 0] += own * values[:, c]
-            M[:, 1, 1] += ridge * M[:, 0, 0]
-            M[:, 2, 2] += ridge * M[:, 0, 0]
-            solvable = known & (M[:, 0, 0] > 0)
-            fit = np.linalg.solve(np.where(solvable[:, None, None], M, np.eye(3)), rhs[:, :, None])[:, 0, 0]
-            out[:, c] = np.where(solvable, fit, values[:, c])
-        return out
-
-
-def _pooled(var, known, p, q):
-    """Each patch's variance as the mean of its own and its known neighbours', for the fit's weights
-    (a patch's own grows with its value where hits are sparse: weighting by it lost light)."""
-    P = len(var)
-    finite = np.where(known[:, None], var, 0.0)
-    count = np.bincount(p, weights=known[q].astype(np.float64), minlength=P) + known
-    pooled = np.stack([np.bincount(p, weights=finite[q, c], minlength=P) + finite[:, c] for c in range(var.shape[1])], axis=1)
-    return np.where(known[:, None], pooled / np.maximum(count, 1)[:, None], var)
-
-
-def _unmeasured_from_neighbours(var, p, q):
-    """Variances (P,k) where a zero (a patch no path reached: its batches all agree on nothing)
-    is replaced by the mean of its neighbours' non-zero ones, so that it neither anchors its
-    neighbours nor stays as it is when they disagree with it."""
-    zero = (var == 0).all(axis=1)
-    if not zero.any():
-        return var
-    out = var.copy()
-    give = (~zero[q]) & zero[p] & np.isfinite(var[q]).all(axis=1)
-    count = np.bincount(p[give], minlength=len(var))
-    for c in range(var.shape[1]):
-        total = _sum(p[give], var[q[give], c], len(var))
-        out[:, c] = np.where(zero & (count > 0), total / np.maximum(count, 1), var[:, c])
-    return out
-
-
-def _sum(index, weights, n):
-    """np.bincount's sums as floats, also when there is nothing to sum."""
-    return np.bincount(index, weights=weights, minlength=n).astype(np.float64, copy=False)
-
-
-def _checked(values, P, what):
-    values = np.asarray(values, np.float64)
-    values = values.reshape(len(values), -1) if values.ndim != 2 else values
-    if len(values) != P:
-        raise ValueError(f"{what}: {len(values)} rows for {P} patches")
-    if not np.isfinite(values).all():
-        raise ValueError(f"{what} are not all finite")
-    return values
 
 
 def _crease_pairs(point, triangle_patch, patch_normal, cos_crease):

@@ -108,7 +108,8 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     its direct light always gathered (``direct_light`` None: the method's own, gathered for it,
     shot for the walks); its error, too, is measured, never predicted. ``method="auto"`` runs
     it where its chunks give every patch enough rays, else the walk (:func:`.methods.choose`;
-    ``SolveResult.method`` says which ran).
+    with ``per_source``, where it would run the two-way iteration, pilots of both measure which
+    is cheaper on this machine; ``SolveResult.method`` says which ran).
     ``progress(fraction, stats)`` and ``should_stop()`` are called from the calling thread
     between chunks (``stats["radiosity"](dtype)`` gives the result so far); ``max_seconds``
     bounds the wall time. A stopped run returns the complete chunks it has. ``speedups`` (:class:`.speedups.Speedups`) switches speed-ups on or off.
@@ -117,12 +118,15 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     (``SolveResult.per_source``, a relighting.PerSource; ``groups``: grouping.source_groups's,
     default each light, and the patches of each emittance): what relighting.relight recombines.
     """
+    start = time.perf_counter()  # (Automatic's pilots, with per-source results, count in the time)
     _check_amounts(estimator, threshold, paths, target_mse, max_seconds, threads, chunk_paths)
-    method = _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds)
-    _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method)
     groups = _groups(scene, per_source, groups)
+    method = _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds,
+                     dict(per_source=per_source, groups=groups, exit_point=exit_point, sampling=sampling, threads=threads,
+                          seed=seed, stop_rule=stop_rule))
+    _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method)
     cluster = cluster_address(cluster) if isinstance(cluster, str) else cluster  # (its form; connecting comes later)
-    paths, start = None if paths is None else int(paths), time.perf_counter()  # (numpy integers welcome)
+    paths = None if paths is None else int(paths)  # (numpy integers welcome)
     plan = chunk_plan(scene, method, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
                       stop_rule=stop_rule, max_seconds=max_seconds)
     chunk = plan.chunk if chunk_paths is None else int(chunk_paths)
@@ -138,12 +142,13 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
                    threads=runner.threads)
 
 
-def _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds):
-    """The Method the solve runs: Automatic's choice (``methods.automatic``) where it is asked
-    for, with the direct light asked (None: the method's own)."""
+def _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds, pilot):
+    """The Method the solve runs: Automatic's choice (``methods.automatic``; with per-source
+    results, measured by ``pilot``'s arguments) where it is asked for, with the direct light
+    asked (None: the method's own)."""
     if method == AUTO:
         method = methods.choose(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
-                                max_seconds=max_seconds)
+                                max_seconds=max_seconds, direct_light=direct_light, **pilot)
     return methods.create(method, direct_light)
 
 

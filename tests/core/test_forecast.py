@@ -9,6 +9,7 @@ from addon.core import predict, relative_rms_to_mse, solve
 from addon.core import forecast as fc
 from addon.core.diagnostics import MAX_BOUNCES, check_bounces, expected_bounces
 from addon.core.methods import TwoWay, choose as choose_method
+from addon.core.methods.automatic import MEASURED_MARGIN
 from addon.core.plan import MIN_MEASURED_CHUNKS
 
 from boxes import box_scene, open_box_with_card
@@ -104,3 +105,99 @@ def test_a_walk_pilot_keeps_its_variance_per_path_and_the_two_way_scales_it_with
     chunk, chunks = fc.pilot_size(10**6, 5.0, budget=1 << 20)
     assert chunks == 2 and chunk * chunks * 5.0 <= 1 << 20
     assert np.isfinite(fc.raw_rate(box_scene(WALLS, CEILING_LIGHT, n=2)[0]))
+
+
+# ---------------------------------------------------------------------------------------------
+# Automatic with per-source results: measured
+# ---------------------------------------------------------------------------------------------
+
+def _lamp_box(lamps):
+    """A closed colour box of 8 x 8 patches a face (where Automatic runs the two-way iteration
+    at 400,000 paths) lit by ``lamps`` point lamps under its ceiling, each its own group."""
+    from boxes import box_rectangles, rectangles_to_mesh
+
+    from addon.core import PatchScene
+    from addon.core.lights import PointLight
+
+    colours = np.array([(0.7, 0.7, 0.7), (0.5, 0.5, 0.5), (0.8, 0.3, 0.2), (0.2, 0.7, 0.3), (0.6, 0.6, 0.6), (0.4, 0.4, 0.8)])
+    origin, u, v, face = box_rectangles((1, 1, 1), n=8)
+    V, T, TP = rectangles_to_mesh(origin, u, v)
+    side = int(np.ceil(np.sqrt(lamps)))
+    spots = [(x, y) for x in np.linspace(0.2, 0.8, side) for y in np.linspace(0.2, 0.8, side)][:lamps]
+    lights = [PointLight(np.array([x, y, 0.85]), np.full(3, 1.0 / lamps), name=f"lamp {k}") for k, (x, y) in enumerate(spots)]
+    return PatchScene(V, T, TP, colours[face], np.zeros((len(face), 3)), lights)
+
+
+def _fake_forecast(costs, calls):
+    """A forecast that records its arguments and returns, per method, (variance per path,
+    seconds per path) from ``costs`` (None: its pilot measured nothing)."""
+    def forecast(scene, estimator, **kw):
+        calls.append(kw)
+        cost = costs[kw["method"]]
+        return fc.Forecast(paths=1e5, rays=1e6, seconds=1.0, chunk=1000, chunks=100.0,
+                           variance_per_path=math.nan if cost is None else cost[0], rays_per_path=10.0,
+                           seconds_per_path=1e-5 if cost is None else cost[1], setup_seconds=0.0, pilot_chunk=1000,
+                           pilot_chunks=0 if cost is None else 4, pilot_seconds=1.0, measured=cost is not None)
+    return forecast
+
+
+def test_automatic_with_per_source_results_runs_what_the_pilots_measure_cheaper(monkeypatch):
+    """Per-source results cost the two-way iteration a share of every group on every ray and
+    the walk hardly anything: where Automatic's rule picks the two-way iteration, a per-source
+    solve compares the two by pilots with per-source results (time per path x variance per path),
+    and runs the cheaper; without per-source results nothing is measured, as before."""
+    from addon.core import source_groups
+
+    scene = _lamp_box(4)
+    groups = source_groups(scene)
+    calls = []
+    # the two-way iteration: a quarter of the variance, twice the time a path: it stays
+    monkeypatch.setattr(fc, "forecast", _fake_forecast({"two_way": (1.0, 2e-5), "walk": (4.0, 1e-5)}, calls))
+    assert choose_method(scene, paths=400_000) == "two_way" and calls == []
+    assert choose_method(scene, paths=400_000, per_source=True, groups=groups, threads=2, seed=3) == "two_way"
+    assert [c["method"] for c in calls] == ["two_way", "walk"]
+    assert all(c["per_source"] and c["groups"] is groups and c["seed"] == 3 for c in calls)
+    assert calls[0]["direct_light"] == "gathered" and calls[1]["direct_light"] == "shot"
+    # with many groups its time a path grows past the walk's at the same error: the walk runs
+    monkeypatch.setattr(fc, "forecast", _fake_forecast({"two_way": (1.0, 8e-5), "walk": (4.0, 1e-5)}, calls))
+    assert choose_method(scene, paths=400_000, per_source=True, groups=groups) == "walk"
+    # ... but not where the two are within the pilots' noise (the margin): the rule's choice stays
+    monkeypatch.setattr(fc, "forecast", _fake_forecast({"two_way": (1.0, 5e-5), "walk": (4.0, 1e-5)}, calls))
+    assert 5e-5 / 4e-5 < MEASURED_MARGIN
+    assert choose_method(scene, paths=400_000, per_source=True, groups=groups) == "two_way"
+    # a pilot that measures nothing even on an eighth of the budget is the dearer
+    calls.clear()
+    monkeypatch.setattr(fc, "forecast", _fake_forecast({"two_way": None, "walk": (4.0, 1e-5)}, calls))
+    assert choose_method(scene, paths=400_000, per_source=True, groups=groups) == "walk"
+    assert [c["budget"] for c in calls] == [fc.PILOT_RAYS, fc.PILOT_RAYS // 8, fc.PILOT_RAYS]
+    # under a short time limit the pilots would take it: the rule's choice, nothing measured
+    calls.clear()
+    assert choose_method(scene, paths=400_000, per_source=True, groups=groups, max_seconds=30.0) == "two_way"
+    assert calls == []
+    # one group is the total: nothing to measure
+    calls.clear()
+    one = _lamp_box(1)
+    assert choose_method(one, paths=400_000, per_source=True, groups=source_groups(one)) == "two_way" and calls == []
+    # a scene where the rule picks the walk measures nothing
+    assert choose_method(scene, paths=2_000, per_source=True, groups=groups) == "walk" and calls == []
+
+
+def test_a_per_source_automatic_solve_runs_the_method_its_real_pilots_found_cheaper(monkeypatch):
+    """The same with real pilots, in a box of 64 lamps: the solve runs the walk where its
+    measured cost at the same error is below the two-way iteration's by the margin, else the
+    two-way iteration (whichever it is on this machine), with per-source results."""
+    scene = _lamp_box(64)
+    seen = []
+    real = fc.forecast
+
+    def spy(*args, **kw):
+        seen.append((kw["method"], kw["per_source"], real(*args, **kw)))
+        return seen[-1][2]
+
+    monkeypatch.setattr(fc, "forecast", spy)
+    r = solve(scene, paths=400_000, method="auto", per_source=True, threads=2, seed=1)
+    last = {method: f for method, _, f in seen}
+    assert set(last) == {"two_way", "walk"} and all(per_source for _, per_source, _ in seen)
+    cost = {m: fc.cost_at_same_error(f) for m, f in last.items()}
+    assert r.method == ("walk" if cost["two_way"] > MEASURED_MARGIN * cost["walk"] else "two_way"), cost
+    assert r.per_source.count == 64

@@ -20,6 +20,7 @@ import pytest
 from boxes import CEILING, box_rectangles, box_scene, rectangles_to_mesh
 
 from addon.core import PatchScene, relight, solve, source_groups
+from addon.core.relighting import resolve
 from addon.core import grouping
 from addon.core.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
 
@@ -212,3 +213,164 @@ def test_a_per_source_solve_cancelled_before_its_first_chunk_keeps_the_emission_
     np.testing.assert_array_equal(r.per_source.radiosity.sum(axis=0), scene.emission)
     relit = relight(r.per_source, WEIGHTS)
     assert math.isnan(relit.mse) and math.isnan(relit.relative_rms) and not relit.past_target
+
+
+@pytest.mark.parametrize("case", [METHODS[0], METHODS[7]], ids=[IDS[0], IDS[7]])
+def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_flat_ones(case):
+    """smooth_sources: each group's smooth radiosity and light arriving, made with the whole's
+    noise-filter weights, clips and corner scales, add up to what the pipeline shows for the solve
+    (float error); recombined with new weights they are the same linear map of the relit values."""
+    from addon.bpy_free import pipeline
+    from addon.core import smoothing
+    from addon.core.relighting import combine, per_source_emission, smooth_sources
+
+    scene = _open_box()
+    r = _solve(scene, case, paths=40_000, seed=3, per_source=True)
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    parts = dict(smooth_sources(surface, scene, r, light=True))
+    whole = dict(pipeline._smooth_corners(scene, r, light=True))
+    for name in ("light", "smooth"):
+        assert parts[name].shape == (6,) + whole[name].shape
+        np.testing.assert_allclose(parts[name].sum(axis=0), whole[name], rtol=0, atol=1e-13 * whole[name].max())
+    # recombined with new weights, the smooth parts are the whole's smoothing applied to the relit parts
+    relit = combine(r.per_source, parts["smooth"], WEIGHTS)
+    assert relit.shape == whole["smooth"].shape
+    filtered, noise = surface.filter_light(r.reflected, r.reflected_variance, return_filter=True)
+    corners = surface.corner_values(filtered, return_filter=True)[1]
+    reflected = np.einsum("spc,sc->pc", r.per_source.irradiance, WEIGHTS) * scene.reflectivity
+    emission = np.einsum("spc,sc->pc", per_source_emission(scene, r.per_source), WEIGHTS)
+    expected = corners(noise(reflected)) + emission[scene.triangle_patch][:, None, :]
+    np.testing.assert_allclose(relit, expected, rtol=0, atol=1e-12 * expected.max())
+    with pytest.raises(ValueError, match=r"parts must have shape \(6, \.\.\., 3\)"):
+        combine(r.per_source, parts["smooth"][:5], WEIGHTS)
+    # as float32 (as they are written): half the memory, the whole's to float32 rounding
+    single = dict(smooth_sources(surface, scene, r, light=True, dtype=np.float32))
+    for name in ("light", "smooth"):
+        assert single[name].dtype == np.float32
+        np.testing.assert_allclose(single[name], parts[name], rtol=1e-6, atol=1e-6 * whole[name].max())
+    # the emitting patches' own E is in their group's colours only
+    emission = per_source_emission(scene, r.per_source)
+    assert np.array_equal(emission.sum(axis=0), scene.emission) and not emission[1:].any()
+    with pytest.raises(ValueError, match="per_source=True"):
+        next(smooth_sources(surface, scene, _solve(scene, case, paths=2_000, seed=3)))
+
+
+# ---------------------------------------------------------------------------------------------
+# Re-solving what changed: a lamp moved
+# ---------------------------------------------------------------------------------------------
+
+def _moved_box():
+    """The open box with its area lamp moved lower and to the other side (the rest as it was)."""
+    scene = _open_box()
+    lights = list(scene.lights.lights)
+    lights[2] = AreaLight(np.array([0.25, 0.7, 0.5]), np.array([0.1, 0, 0]), np.array([0, 0.1, 0]),
+                          np.array([0.0, 0.0, -1.0]), np.full(3, 24.0), name="area")
+    return scene.with_materials(scene.reflectivity, scene.emission, lights)
+
+
+def _kwargs(case, **kw):
+    method, direct_light, exit_point, estimator = case
+    return dict(estimator=estimator, method=method, direct_light=direct_light, exit_point=exit_point, threads=2, **kw)
+
+
+@pytest.mark.parametrize("case", METHODS, ids=IDS)
+def test_a_moved_lamp_re_solved_alone_recombines_to_a_fresh_solve_of_the_moved_scene(case):
+    """resolve re-solves the moved area lamp's group only: the recombination at the solve's
+    strengths (and relit with tints and the point lamp off) agrees with a fresh per-source solve of
+    the moved scene within their joint noise, while the results before the move do not; the kept
+    groups are the solve's to the bit, their covariance with the re-solved one 0."""
+    r = _solve(_open_box(), case, paths=150_000, seed=7, per_source=True)
+    ps, moved = r.per_source, _moved_box()
+    redone = resolve(moved, ps, ["area"], **_kwargs(case, paths=150_000, seed=9))
+    fresh = _solve(moved, case, paths=150_000, seed=8, per_source=True)
+    for weights in (np.ones((6, 3)), WEIGHTS):
+        relit, fresh_relit = relight(redone, weights), relight(fresh.per_source, weights)
+        z = _joint_noise_z(relit.radiosity, fresh_relit.radiosity, relit.mse, fresh_relit.mse, fresh.reflected_variance,
+                           moved.patch_area)
+        assert abs(z) < Z, z
+    before = relight(ps, np.ones((6, 3)))
+    z_before = _joint_noise_z(before.radiosity, fresh.radiosity, before.mse, fresh.measured_mse, fresh.reflected_variance,
+                              moved.patch_area)
+    assert z_before > Z, z_before
+    area = ps.names.index("area")
+    kept = [g for g in range(6) if g != area]
+    assert redone.names == ps.names
+    for name in ("radiosity", "irradiance", "power"):
+        assert np.array_equal(getattr(redone, name)[kept], getattr(ps, name)[kept])
+    assert np.array_equal(redone.covariance[:, kept][:, :, kept], ps.covariance[:, kept][:, :, kept])
+    assert not redone.covariance[:, area, kept].any() and not redone.covariance[:, kept, area].any()
+    assert redone.covariance[:, area, area].min() > 0
+    assert redone.scale == ps.scale and redone.target_mse == ps.target_mse
+    np.testing.assert_array_equal(redone.patch_group, ps.patch_group)
+
+
+def test_only_the_named_groups_sources_are_traced(monkeypatch):
+    """A spy on the solve resolve calls: it is given only the named groups' sources (the area
+    lamp; then the emitting patches' group and the sun), every other light and emission left out."""
+    from addon.core import solver
+
+    seen = []
+    real = solver.solve
+
+    def spy(scene, *args, **kwargs):
+        seen.append((scene, kwargs["groups"]))
+        return real(scene, *args, **kwargs)
+
+    ps = solve(_open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
+    monkeypatch.setattr(solver, "solve", spy)
+    moved = _moved_box()
+    resolve(moved, ps, ["area"], paths=20_000, seed=2, threads=2)
+    scene, groups = seen[-1]
+    assert [light.name for light in scene.lights.lights] == ["area"] and not scene.emission.any()
+    assert groups.names == ("area",)
+    emission_group = ps.names[0]
+    redone = resolve(moved, ps, ["sun", emission_group], paths=20_000, seed=2, threads=2)
+    scene, groups = seen[-1]
+    assert [light.name for light in scene.lights.lights] == ["sun"] and groups.names == ("sun", emission_group)
+    np.testing.assert_array_equal(scene.emission, moved.emission)
+    assert redone.names == ps.names and len(seen) == 2
+
+
+def test_resolve_refuses_a_name_it_does_not_have_and_changed_geometry_in_one_line():
+    ps = solve(_open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
+    with pytest.raises(ValueError, match=r"^no source group named 'lamp'; the groups are .*'area'"):
+        resolve(_moved_box(), ps, ["lamp"], paths=1000)
+    with pytest.raises(ValueError, match="the geometry changed, solve again"):
+        resolve(_open_box(n=2), ps, ["area"], paths=1000)
+    # a lamp added: its group is new, and is solved where it is named
+    scene = _moved_box()
+    added = scene.with_materials(scene.reflectivity, scene.emission,
+                                 list(scene.lights.lights) + [PointLight(np.full(3, 0.5), np.full(3, 0.1), name="new")])
+    with pytest.raises(ValueError, match="'new' are new: name them"):
+        resolve(added, ps, ["area"], paths=1000)
+    grown = resolve(added, ps, ["area", "new"], paths=20_000, seed=3, threads=2)
+    assert grown.names == ps.names + ("new",) and grown.radiosity[-1].max() > 0
+
+
+def test_a_group_that_gives_no_light_now_is_re_solved_as_dark_without_tracing():
+    """The area lamp at strength 0 (the scene has it, dark): its results are 0, nothing traced."""
+    ps = solve(_open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
+    scene = _open_box(np.array([(1, 1, 1)] * 3 + [(0, 0, 0)] + [(1, 1, 1)] * 2))
+    redone = resolve(scene, ps, ["area"], paths=20_000, seed=2)
+    assert not redone.radiosity[3].any() and not redone.covariance[:, 3].any()
+    assert np.array_equal(redone.radiosity[:3], ps.radiosity[:3])
+
+
+@pytest.mark.parametrize("case", [METHODS[0], METHODS[4], METHODS[7]], ids=[IDS[0], IDS[4], IDS[7]])
+def test_the_error_of_a_re_solved_recombination_follows_the_spread_over_seeds(case):
+    """As for a solve's recombination (above): the MSE relight reports for the re-solved
+    results, from the kept groups' covariance and the re-solved one's, against the area-weighted
+    variance of the relit result over 16 seeds of the solve and the re-solve."""
+    scene, moved = _open_box(), _moved_box()
+    weight = scene.patch_area / scene.patch_area.sum()
+    relit, reported = [], []
+    for seed in range(16):
+        ps = _solve(scene, case, paths=20_000, seed=100 + seed, per_source=True).per_source
+        r = relight(resolve(moved, ps, ["area", "spot"], **_kwargs(case, paths=20_000, seed=300 + seed)), WEIGHTS)
+        relit.append(r.radiosity)
+        reported.append(r.mse)
+    terms = weight[:, None] * np.var(relit, axis=0, ddof=1)
+    empirical = float(terms.sum() / 3)
+    n_eff = terms.sum() ** 2 / (terms**2).sum()
+    band = Z * math.sqrt(2 / (15 * n_eff)) * CORRELATION_ALLOWANCE
+    assert abs(np.mean(reported) / empirical - 1) < band, (np.mean(reported), empirical)

@@ -419,3 +419,87 @@ def test_the_noise_filter_moves_no_light_where_hits_are_sparse(hits):
     shift = np.array(shift)
     assert abs(shift.mean()) < Z * shift.std(ddof=1) / np.sqrt(SEEDS), shift
     assert np.mean(filtered_error) < np.mean(raw_error)
+
+
+# ---------------------------------------------------------------------------------------------
+# Fixed weights: the whole's filter and corners applied to its parts (each source's light)
+# ---------------------------------------------------------------------------------------------
+
+def _lamp_box_parts():
+    """A closed box of 4 x 4 patches a face lit by a point lamp near its ceiling and a dim one
+    low (bright patches beside dim ones: clips and floors happen), solved with each lamp's light
+    apart: (surface, the whole's reflected light and variance, each lamp's (2,P,3))."""
+    from boxes import box_rectangles, rectangles_to_mesh
+
+    from addon.core import PatchScene, solve
+    from addon.core.lights import PointLight
+
+    origin, u, v, _ = box_rectangles((1, 1, 1), n=4)
+    V, T, TP = rectangles_to_mesh(origin, u, v)
+    P = TP.max() + 1
+    lamps = [PointLight(np.array([0.4, 0.45, 0.8]), np.array([3.0, 2.4, 1.5]), name="high"),
+             PointLight(np.array([0.7, 0.2, 0.15]), np.array([0.2, 0.3, 0.5]), name="low")]
+    scene = PatchScene(V, T, TP, np.full(P, 0.6), np.zeros(P), lamps)
+    r = solve(scene, paths=20_000, seed=1, per_source=True, threads=2)
+    parts = r.per_source.irradiance * scene.reflectivity
+    return smoothing.Surface.of(V, T, TP, P), r.reflected, r.reflected_variance, parts
+
+
+def test_the_noise_filter_with_its_weights_fixed_is_linear_and_its_parts_add_up_to_the_filtered_whole():
+    surface, whole, variance, parts = _lamp_box_parts()
+    values = np.maximum(whole, 0.0)
+    filtered, limit, apply = surface.filter_noise(values, variance, bound=True, return_filter=True)
+    # the filtered values are today's, to the bit; the clips were used (a share of the fit's change)
+    assert np.array_equal(filtered, surface.filter_noise(values, variance))
+    assert np.array_equal(limit, surface.filter_noise(values, variance, bound=True)[1])
+    assert (apply.share < 1).any() and (apply.share > 0).any()
+    scale = np.abs(filtered).max()
+    np.testing.assert_allclose(apply(values), filtered, rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(apply(parts).sum(axis=0), filtered, rtol=0, atol=1e-13 * scale)
+    rng = np.random.default_rng(2)
+    x, y = rng.normal(size=values.shape), rng.normal(size=values.shape)
+    np.testing.assert_allclose(apply(2.5 * x - 0.7 * y), 2.5 * apply(x) - 0.7 * apply(y), rtol=0, atol=1e-12)
+    # one part alone with weight 1 is the whole: the filter of the whole
+    np.testing.assert_allclose(apply(values[None])[0], filtered, rtol=0, atol=1e-13 * scale)
+    with pytest.raises(ValueError, match=r"shape \(P, k\)"):
+        apply(values[:-1])
+
+
+def test_the_filtered_light_and_its_corners_add_up_over_parts_with_negative_light_as_none():
+    """filter_light (the whole at least 0) then corner_values, each with the whole's weights,
+    clips, floors and scales: the parts' corners add up to the whole's, also where the whole is
+    negative (a signed estimator's noise) and where corners were floored."""
+    surface, whole, variance, parts = _lamp_box_parts()
+    shift = 1.3 * whole.min(axis=0)
+    signed = whole - shift
+    parts = parts - shift / 2  # (two parts: they add up to ``signed``)
+    assert (signed < 0).any()
+    filtered, apply = surface.filter_light(signed, variance, return_filter=True)
+    assert np.array_equal(filtered, surface.filter_noise(np.maximum(signed, 0.0), variance))
+    np.testing.assert_allclose(apply(parts).sum(axis=0), filtered, rtol=0, atol=1e-13 * filtered.max())
+    corners, corner_apply = surface.corner_values(filtered, return_filter=True)
+    assert np.array_equal(corners, surface.corner_values(filtered))
+    assert any(len(f) for record in corner_apply.records for f in record["floored"])
+    np.testing.assert_allclose(corner_apply(apply(parts)).sum(axis=0), corners, rtol=0, atol=1e-12 * corners.max())
+    rng = np.random.default_rng(3)
+    x, y = rng.normal(size=filtered.shape), rng.normal(size=filtered.shape)
+    np.testing.assert_allclose(corner_apply(x + 3 * y), corner_apply(x) + 3 * corner_apply(y), rtol=0, atol=1e-11)
+
+
+def test_the_light_arriving_at_black_channels_fills_from_neighbours_linearly():
+    """arriving_light: where a channel's reflectivity is 0 the light is the neighbours'; as a
+    linear map of the parts it adds up to the whole's, which is what the pipeline shows."""
+    from addon.bpy_free import pipeline
+
+    surface, _, variance, parts = _lamp_box_parts()
+    P = surface.patch_count
+    reflectivity = np.full((P, 3), 0.6)
+    reflectivity[::3, 1] = 0.0  # green black on a third of the patches
+    irradiance = parts.sum(axis=0) / 0.6
+    light, apply = surface.arriving_light(irradiance, variance, reflectivity, return_filter=True)
+    assert np.array_equal(light, pipeline.arriving_light(surface, irradiance, variance, reflectivity))
+    filled, fill = surface.fill_from_neighbours(irradiance, reflectivity <= 0, return_filter=True)
+    assert np.array_equal(filled, surface.fill_from_neighbours(irradiance, reflectivity <= 0))
+    assert not np.allclose(filled[::3, 1], irradiance[::3, 1])
+    np.testing.assert_allclose(fill(irradiance), filled, rtol=0, atol=1e-13 * filled.max())
+    np.testing.assert_allclose(apply(parts / 0.6).sum(axis=0), light, rtol=0, atol=1e-13 * light.max())
