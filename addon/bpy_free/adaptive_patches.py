@@ -11,7 +11,8 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import meshing
-from ..core.adaptive import DETAILS, refine_by_direct_light, shading_triangulation
+from ..core.adaptive import shading_triangulation
+from ..core.adaptive_light import DETAILS, refine_by_direct_light
 from .cleaning import drop_zero_area_faces
 from .patches import MAX_PATCHES, Patches, _GEOMETRY_CACHE, patch_materials, result_layers
 

@@ -15,33 +15,17 @@ that share an edge with them (their midpoints would land on the n-gon's edge). C
 different objects are never joined: where two objects' patches touch, refinement on one side
 leaves the other's edge as it was (the smoothing joins them by position as before).
 
-Where to split (:func:`refine_by_direct_light`): before any walk, the direct light of each
-candidate's children is estimated by shadow rays to every source (each lamp and the sun at
-every sample point, no choice by power; emitting patches and the sky by their own samples),
-twice independently; a cell splits when its children differ by more than a visible share of
-the local light (and of a floor relative to the scene's mean, so dark corners do not eat the
-budget) and by more than the two estimates' own noise. The splits repeat down to a smallest
-size (``levels`` splits of the first patches, children no smaller than SMALLEST_SIDE of the
-scene) or a patch budget. Cells that another object runs into (partly buried,
-``visibility``) stay whole.
+Where to split: :mod:`.adaptive_light`.
 """
 from __future__ import annotations
 
-import time
-import warnings
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
 
 from .faces import ranks_in_runs, starts_of, triangle_areas
-from .first_shot import SEEN_BEFORE, _trace
-from .lights import WorldLight
 from .meshing import PatchMesh
-from .names import EXIT_RANDOM, FINITE
-from .sampling import SourceTable, patch_point_rows, stratified_by_patch
-from .scene import PatchScene
-from .tables import WalkTables
 
 KEY = np.int64(1) << np.int64(31)  # edge key: smaller point * KEY + larger point
 
@@ -292,11 +276,9 @@ def _pattern(corner_count, mask):
             polygon.append(2 * k + 1)
             xy.append(0.5 * (ideal[k] + ideal[(k + 1) % corner_count]))
     xy = np.array(xy)
-    alive = list(range(len(polygon)))
-    triangles = []
-    if mask == 0:
-        triangles = [(0, k + 1, k + 2) for k in range(corner_count - 2)]  # the meshing's own fan
-        return tuple(polygon), np.array(triangles, np.int64)
+    alive, triangles = list(range(len(polygon))), []
+    if mask == 0:  # the meshing's own fan
+        return tuple(polygon), np.array([(0, k + 1, k + 2) for k in range(corner_count - 2)], np.int64)
     while len(alive) > 3:
         best, best_angle = None, -1.0
         for i in range(len(alive)):
@@ -331,6 +313,35 @@ def _smallest_angle(a, b, c):
     return min(angle(a, b, c), angle(b, c, a), angle(c, a, b))
 
 
+def _midpoint_masks(cells: Cells, conforming):
+    """((L,) bits of the edges of each cell that carry a midpoint, (L,4) those midpoints or -1)."""
+    L = cells.count
+    mask = np.zeros(L, np.int64)
+    mid = np.full((L, 4), -1, np.int64)
+    if conforming and len(cells.mid_keys):
+        cell, key, _, _, number = cells.edges()
+        at, found = _lookup(cells.mid_keys, key)
+        np.bitwise_or.at(mask, cell[found], np.left_shift(1, number[found]))
+        mid[cell[found], number[found]] = cells.mid_points[at[found]]
+    return mask, mid
+
+
+def _polygons(cells: Cells, rest, mask, mid):
+    """Per pattern (corner count, midpoint bits) of the cells ``rest``: (cells, (n,k) polygon
+    corners, (n,t,3) its triangles)."""
+    kinds = np.where(cells.is_quad[rest], 4, 3) * 16 + mask[rest]
+    out = []
+    for kind in np.unique(kinds):
+        members = rest[kinds == kind]
+        polygon, triangles = _pattern(*divmod(int(kind), 16))
+        local = np.empty((len(members), 8), np.int64)
+        local[:, 0::2] = cells.corners[members]
+        local[:, 1::2] = mid[members]
+        corners = local[:, list(polygon)]
+        out.append((members, corners, corners[:, triangles]))
+    return out
+
+
 def patch_mesh(cells: Cells, conforming=True):
     """(PatchMesh of the cells, the first mesh's patch of each patch): one patch a cell, in cell
     order. ``conforming``: a cell takes its neighbours' midpoints on its edges as corners (no
@@ -338,62 +349,32 @@ def patch_mesh(cells: Cells, conforming=True):
     The patches' triangles are each cell's own (the core's); ``shading_triangles`` and
     ``shading_triangle_patch`` on the mesh triangulate the polygons, midpoints included.
     Unsplit cells of the first mesh without such points keep its polygon and triangles."""
-    L = cells.count
-    cell, key, a, b, number = cells.edges()
-    mask = np.zeros(L, np.int64)
-    mid = np.full((L, 4), -1, np.int64)
-    if conforming and len(cells.mid_keys):
-        at, found = _lookup(cells.mid_keys, key)
-        mask_bits = np.zeros(L, np.int64)
-        np.bitwise_or.at(mask_bits, cell[found], np.left_shift(1, number[found]))
-        mask = mask_bits
-        mid[cell[found], number[found]] = cells.mid_points[at[found]]
-    base = cells.base
-    original = (cells.level == 0) & (mask == 0)
+    L, base, quad = cells.count, cells.base, cells.is_quad
+    mask, mid = _midpoint_masks(cells, conforming)
+    first = cells.level == 0
+    kept = np.flatnonzero(first & (mask == 0))
+    polygons = _polygons(cells, np.flatnonzero(~first | (mask != 0)), mask, mid)
     sizes = np.zeros(L, np.int64)
     base_sizes = np.asarray(base.face_sizes, np.int64)
-    base_starts = starts_of(base_sizes)
-    base_verts = np.asarray(base.corner_verts, np.int64)
-    kept = np.flatnonzero(original)
     sizes[kept] = base_sizes[cells.origin[kept]]
-    groups = {}
-    quad = cells.is_quad
-    rest = np.flatnonzero(~original)
-    kinds = np.where(quad[rest], 4, 3) * 16 + mask[rest]
-    for kind in np.unique(kinds):
-        members = rest[kinds == kind]
-        groups[int(kind)] = members
-    polygon_of = {}
-    for kind, members in groups.items():
-        count, m = divmod(kind, 16)
-        polygon, triangles = _pattern(count, m)
-        local = np.empty((len(members), 8), np.int64)
-        local[:, 0::2] = cells.corners[members]
-        local[:, 1::2] = mid[members]
-        corners = local[:, list(polygon)]
-        sizes[members] = len(polygon)
-        polygon_of[kind] = (members, corners, corners[:, triangles])
+    for members, corners, _ in polygons:
+        sizes[members] = corners.shape[1]
     starts = starts_of(sizes)
     corner_verts = np.empty(int(sizes.sum()), np.int64)
-    if kept.size:
-        rank = ranks_in_runs(sizes[kept])
-        corner_verts[np.repeat(starts[kept], sizes[kept]) + rank] = base_verts[
-            np.repeat(base_starts[cells.origin[kept]], sizes[kept]) + rank]
-    for members, corners, _ in polygon_of.values():
-        k = corners.shape[1]
-        corner_verts[(starts[members][:, None] + np.arange(k)).ravel()] = corners.ravel()
-    points = cells.points
-    first = cells.level == 0
+    rank = ranks_in_runs(sizes[kept])
+    corner_verts[np.repeat(starts[kept], sizes[kept]) + rank] = np.asarray(base.corner_verts, np.int64)[
+        np.repeat(starts_of(base_sizes)[cells.origin[kept]], sizes[kept]) + rank]
+    for members, corners, _ in polygons:
+        corner_verts[(starts[members][:, None] + np.arange(corners.shape[1])).ravel()] = corners.ravel()
     # the core's triangles: each cell's own (a grid cell's two, a parallelogram where it was one),
     # which cover the polygon whatever midpoints its edges carry
     own = [(members, cells.corners[members][:, :count][:, _pattern(count, 0)[1]])
            for count, members in ((4, np.flatnonzero(~first & quad)), (3, np.flatnonzero(~first & ~quad)))]
     triangles, triangle_patch = _triangulation(L, base, cells.origin, np.flatnonzero(first), own)
     # the shading's: the polygon's own corners, midpoints included (smooth colours need them)
-    shaded = [(members, tris) for members, _, tris in polygon_of.values()]
-    shading = _triangulation(L, base, cells.origin, kept, shaded)
-    area = np.bincount(triangle_patch, weights=triangle_areas(points, triangles), minlength=L)
-    mesh = PatchMesh(points, sizes.astype(np.int32), corner_verts.astype(np.int32), cells.face.astype(np.int32),
+    shading = _triangulation(L, base, cells.origin, kept, [(members, tris) for members, _, tris in polygons])
+    area = np.bincount(triangle_patch, weights=triangle_areas(cells.points, triangles), minlength=L)
+    mesh = PatchMesh(cells.points, sizes.astype(np.int32), corner_verts.astype(np.int32), cells.face.astype(np.int32),
                      triangles.astype(np.int32), triangle_patch.astype(np.int32), area)
     mesh.shading_triangles = shading[0].astype(np.int32)
     mesh.shading_triangle_patch = shading[1].astype(np.int32)
@@ -430,222 +411,9 @@ def shading_triangulation(mesh):
 
 
 def refine(mesh: PatchMesh, marked, cells: Cells | None = None):
-    """Split the ``marked`` patches of ``mesh`` (quads 2 x 2, triangles into 4; their coarser
-    neighbours too where balance needs it): (the refined PatchMesh, the first mesh's patch of
-    each refined patch, its Cells for further splits)."""
+    """Split the ``marked`` patches of ``mesh`` (and what balance needs): (the refined PatchMesh,
+    the first mesh's patch of each refined patch, its Cells for further splits)."""
     cells = cells_of(mesh) if cells is None else cells
     cells, _ = split(cells, marked)
     refined, origin = patch_mesh(cells)
     return refined, origin, cells
-
-
-# --- where to split: the direct light of the candidates' children --------------------------
-
-# Sobol' dimensions of a sample: its point on the patch (2) and triangle (1), a point of a light
-# or a direction of the sky (2), an emitting patch (1) and its point (3).
-SAMPLE_DIMENSIONS = (0, 1, 7, 2, 3, 4, 5, 6, 8)
-NOISE_Z = 3.0  # standard errors a difference must pass to be light, not the estimate's noise
-# Children at least this share of the scene's diagonal on a side: patches smaller than 1e-3 of it
-# take ray offsets of their own (geometry_build.local_offsets), which turns the walk's grids off.
-SMALLEST_SIDE = 2e-3
-
-
-@dataclass(frozen=True)
-class Detail:
-    """How far refinement goes: ``levels`` splits of the first patches at most, a cell splits
-    when its children's direct light differs by ``contrast`` of the local light (or of ``floor``
-    times the scene's mean), the patches at most ``budget`` times the first count."""
-
-    levels: int
-    contrast: float
-    floor: float = 0.2
-    budget: float = 3.0
-    samples: int = 4  # points per child and estimate (two estimates)
-
-
-DETAILS = {
-    "LOW": Detail(levels=1, contrast=0.5, budget=1.5),
-    "MEDIUM": Detail(levels=2, contrast=0.25, budget=2.5),
-    "HIGH": Detail(levels=3, contrast=0.12, budget=4.0),
-}
-
-
-def direct_estimates(scene, patches, samples, seed, replicas=2):
-    """(replicas, n, 3): independent estimates of the direct irradiance of ``patches`` (n,)
-    of ``scene``, each the mean of ``samples`` stratified points of the patch, every point
-    looking at every lamp and the sun by a shadow ray (their light needs no choice among
-    them), at the sky by a cosine ray and at an emitting patch chosen by power."""
-    patches = np.asarray(patches, np.int64)
-    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
-    g = tables.geometry
-    P = scene.patch_count
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 29,))))
-    lamps = [light for light in scene.lights.lights if not isinstance(light, WorldLight)]
-    worlds = [light for light in scene.lights.lights if isinstance(light, WorldLight)]
-    power = scene.patch_area * scene.emission.mean(axis=1)
-    emitters = SourceTable(power) if (power > 0).any() else None
-    out = np.zeros((replicas, len(patches), 3))
-    order = np.argsort(patches, kind="stable")
-    rows_sorted = np.repeat(patches[order], samples)
-    with tables.numpy_turn:
-        for r in range(replicas):
-            for block in range(0, len(rows_sorted), 1 << 18):
-                rows = rows_sorted[block:block + (1 << 18)]
-                u = stratified_by_patch(rows, P, SAMPLE_DIMENSIONS, rng, dtype=np.float32)
-                x = patch_point_rows(g, rows, u[2], u[0].copy(), u[1].copy()).astype(np.float64)
-                normal = g.patch_normal_rows.take(rows, axis=1).astype(np.float64)
-                offset = g.ray_offsets(rows, np.float64)
-                surface = x - normal * offset
-                world_x = g.to_world(surface.T, rows).T
-                value = np.zeros((3, rows.size))
-
-                for light in lamps:
-                    towards, distance, v = light.gather(world_x, normal, u[3:5])
-                    if getattr(light, "casts_shadow", True):
-                        live = np.flatnonzero(v.any(axis=0))
-                        ok = np.zeros(rows.size, bool)
-                        if live.size:
-                            hit, _, _, t = _trace(tables, x[:, live], towards[:, live],
-                                                  None if g.regions is None else g.region_of(rows[live]))
-                            off = offset[live] if np.ndim(offset) else offset
-                            reach = distance[live] / g.diagonal - off * np.einsum("in,in->n", normal[:, live], towards[:, live])
-                            ok[live] = (hit < 0) | (t >= reach * SEEN_BEFORE)
-                        v = v * ok
-                    value += v
-                if worlds:
-                    towards = worlds[0].gather(world_x, normal, u[3:5])[0]
-                    hit, _, _, _ = _trace(tables, x, towards, g.region_of(rows))
-                    escaped = np.flatnonzero(hit < 0)
-                    for world in worlds:
-                        value[:, escaped] += world.radiance_times_pi(towards[:, escaped])
-                if emitters is not None:
-                    source = emitters.choose(u[5])
-                    e = patch_point_rows(g, source, u[6], u[7].copy(), u[8].copy()).astype(np.float64)
-                    normal_s = g.patch_normal_rows.take(source, axis=1).astype(np.float64)
-                    e -= normal_s * g.ray_offsets(source, np.float64)
-                    if g.regions is not None:
-                        e += g.regions.shift(g.regions.of(source)) - g.regions.shift(g.regions.of(rows))
-                    e -= surface
-                    length = np.sqrt(np.einsum("in,in->n", e, e))
-                    e /= length
-                    cos_x = np.einsum("in,in->n", normal, e)
-                    cos_y = -np.einsum("in,in->n", normal_s, e)
-                    live = np.flatnonzero((cos_x > 0) & (cos_y > 0) & (source != rows))
-                    if live.size:
-                        hit, hit_patch, front, t = _trace(tables, x[:, live], e[:, live],
-                                                          None if g.regions is None else g.region_of(rows[live]))
-                        reach = length[live] - (offset[live] if np.ndim(offset) else offset) * cos_x[live]
-                        met = ((hit >= 0) & (hit_patch == source[live]) & front) | (hit < 0) | (t >= reach * SEEN_BEFORE)
-                        s = source[live]
-                        d_world = length[live] * g.diagonal
-                        weight = cos_x[live] * cos_y[live] / (np.pi * d_world**2) * scene.patch_area[s] / (power[s] / power.sum())
-                        value[:, live] += scene.emission[s].T * (weight * met)
-                sums = np.stack([np.bincount(rows, weights=value[c], minlength=P) for c in range(3)], axis=1)
-                out[r] += sums[patches] / samples
-    return out
-
-
-
-@dataclass
-class Refined:
-    """The result of :func:`refine_by_direct_light`."""
-
-    meshes: list  # PatchMesh per object
-    origins: list  # (P_k,) the first mesh's patch of each patch, per object
-    cells: list  # Cells per object
-    steps: list  # per step: {"level", "candidates", "split", "patches", "seconds"}
-    stopped: bool = False  # should_stop() ended it early
-
-
-def _combined_scene(meshes, origins, base_scene):
-    """The PatchScene of ``meshes``, each patch with the materials of the first scene's patch
-    it lies in (its emission per area: the same power), the same lights and aim."""
-    offsets = np.cumsum([0] + [len(m.points) for m in meshes])
-    vertices = np.concatenate([m.points for m in meshes])
-    triangles = np.concatenate([np.asarray(m.triangles, np.int64) + offsets[k] for k, m in enumerate(meshes)])
-    patch_offsets = np.cumsum([0] + [m.patch_count for m in meshes])
-    triangle_patch = np.concatenate([np.asarray(m.triangle_patch, np.int64) + patch_offsets[k] for k, m in enumerate(meshes)])
-    origin = np.concatenate(origins)
-    return PatchScene(vertices, triangles, triangle_patch, base_scene.reflectivity[origin], base_scene.emission[origin],
-                      lights=base_scene.lights.lights, aim=base_scene.lights.aim), patch_offsets
-
-
-def refine_by_direct_light(meshes, base_scene, detail: Detail, seed=0, receives=None, should_stop=None):
-    """Split the patches of ``meshes`` (one PatchMesh per object, ``base_scene`` their
-    PatchScene: materials and lights) where their direct light changes (see the module's
-    docstring), ``detail`` deciding how far. ``receives`` (per object, bool): only those
-    objects' patches split. Returns :class:`Refined`."""
-    receives = [True] * len(meshes) if receives is None else list(receives)
-    base_offsets = np.cumsum([0] + [m.patch_count for m in meshes])
-    cells = [cells_of(m) for m in meshes]
-    base_count = int(base_offsets[-1])
-    limit = int(detail.budget * base_count)
-    mean_light = None
-    steps = []
-    stopped = False
-    for level in range(detail.levels):
-        started = time.perf_counter()
-        smallest = (SMALLEST_SIDE * base_scene.geometry.diagonal) ** 2 * 4  # (a cell's area: its children's four)
-        candidate = [(c.level == level) & ~c.frozen & bool(r) & (patch_mesh(c, conforming=False)[0].patch_area >= smallest)
-                     for c, r in zip(cells, receives)]
-        count = sum(c.count for c in cells)
-        if not any(c.any() for c in candidate) or count + 3 > limit:
-            break
-        trial = [split(c, k, balance=False) for c, k in zip(cells, candidate)]
-        made = [patch_mesh(t, conforming=False) for t, _ in trial]
-        origins = [o + base_offsets[k] for k, (_, o) in enumerate(made)]
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            scene, patch_offsets = _combined_scene([m for m, _ in made], origins, base_scene)
-        children, parents = [], []  # combined child patches, and (object, cell) of their parent
-        for k, ((t, parent), cand) in enumerate(zip(trial, candidate)):
-            rows = np.flatnonzero(cand[parent])
-            children.append(rows + patch_offsets[k])
-            parents.append(parent[rows] + (int(k) << 40))
-        children, parents = np.concatenate(children), np.concatenate(parents)
-        if should_stop is not None and should_stop():
-            stopped = True
-            break
-        estimates = direct_estimates(scene, children, detail.samples, [seed, level]).mean(axis=2)  # (2,n) grey
-        value = estimates.mean(axis=0)
-        noise = ((estimates[0] - estimates[1]) / 2) ** 2  # variance of each child's mean
-        area = scene.patch_area[children]
-        if mean_light is None:
-            mean_light = float((value * area).sum() / max(area.sum(), 1e-300))
-        group = np.unique(parents)
-        index = np.searchsorted(group, parents)
-        n = len(group)
-        high = np.full(n, -np.inf)
-        low = np.full(n, np.inf)
-        np.maximum.at(high, index, value)
-        np.minimum.at(low, index, value)
-        sizes = np.bincount(index, minlength=n)
-        local = np.bincount(index, weights=value, minlength=n) / sizes
-        pooled = np.bincount(index, weights=noise, minlength=n) / sizes
-        change = high - low
-        visible = detail.contrast * np.maximum(local, detail.floor * mean_light)
-        measured = NOISE_Z * np.sqrt(2 * pooled)
-        score = change / np.maximum(visible, measured)
-        # a cell another object runs into stays whole: its buried children would get no light, and
-        # a black patch beside lit ones rings in the smooth colours (its part inside is not seen)
-        buried = scene.geometry.buried
-        if buried is not None:
-            inside = np.isin(children, np.concatenate([buried.patch, buried.whole]))
-            score[np.bincount(index, weights=inside, minlength=n) > 0] = 0.0
-        chosen = np.flatnonzero(score > 1)
-        room = max(0, (limit - count) // 3)
-        if chosen.size > room:
-            chosen = chosen[np.argsort(-score[chosen], kind="stable")[:room]]
-        chosen_objects = group[chosen] >> 40
-        chosen_cells = group[chosen] & ((1 << 40) - 1)
-        for k in range(len(cells)):
-            marked = np.zeros(cells[k].count, bool)
-            marked[chosen_cells[chosen_objects == k]] = True
-            if marked.any():
-                cells[k], _ = split(cells[k], marked)
-        steps.append({"level": level, "candidates": int(n), "split": int(chosen.size),
-                      "patches": int(sum(c.count for c in cells)), "seconds": time.perf_counter() - started})
-        if chosen.size == 0:
-            break
-    made = [patch_mesh(c) for c in cells]
-    return Refined([m for m, _ in made], [o for _, o in made], cells, steps, stopped)

@@ -112,6 +112,6 @@ def test_the_detail_option_on_the_command_line():
     assert checked(parser().parse_args([])).detail == "OFF"
     with pytest.raises(ValueError, match="--detail must be one of OFF, LOW, MEDIUM, HIGH; got 'finest'"):
         options.DETAIL.check("finest")
-    from addon.core.adaptive import DETAILS
+    from addon.core.adaptive_light import DETAILS
 
     assert set(DETAILS) == {i for i, _, _ in options.DETAIL.items} - {"OFF"}

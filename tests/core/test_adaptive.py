@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from addon.core import PatchScene, meshing, smoothing, solve
-from addon.core.adaptive import (DETAILS, Detail, cells_of, patch_mesh, refine, refine_by_direct_light,
-                                 shading_triangulation, split)
+from addon.core.adaptive import cells_of, patch_mesh, refine, shading_triangulation, split
+from addon.core.adaptive_light import DETAILS, Detail, refine_by_direct_light
 from addon.core.faces import starts_of, triangle_areas
 from addon.core.lights import PointLight
 

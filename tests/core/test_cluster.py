@@ -455,7 +455,7 @@ def test_a_cluster_solve_on_adaptive_patches_is_bitwise_the_local_one(client, me
     """Patches refined where a lamp's direct light changes (core.adaptive): the cluster's solve
     of the refined scene is bit for bit the local one."""
     from addon.core import meshing
-    from addon.core.adaptive import DETAILS, refine_by_direct_light
+    from addon.core.adaptive_light import DETAILS, refine_by_direct_light
     from addon.core.lights import PointLight
 
     corners = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [0, 0, 1], [2, 0, 1], [2, 2, 1], [0, 2, 1]], float)
