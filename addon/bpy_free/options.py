@@ -178,6 +178,17 @@ PER_SOURCE = Choice("per_source", "--per-light", "AUTO", (
      "them with new strengths and colours without tracing a ray; refused beyond patches x sources of 8 million"),
     ("OFF", "Off", "The total only: the fastest solve; a changed lamp needs a new solve"),
 ), "Per-light results", "Keep each light's own result so that turning a lamp's strength or colour relights at once")
+# --- Detail (adaptive patches) ---
+DETAIL = Choice("detail", "--detail", "OFF", (
+    ("OFF", "Off", "Every patch the patch size: the same grid everywhere"),
+    ("LOW", "Low", "Patches where the direct light changes split once (at most 1.5x the patches)"),
+    ("MEDIUM", "Medium", "Split up to twice, down to a quarter of the patch size, where the direct light changes "
+     "by a quarter (at most 2.5x the patches)"),
+    ("HIGH", "High", "Split up to three times, down to an eighth of the patch size, where the direct light changes "
+     "by an eighth (at most 4x the patches)"),
+), "Detail", "Smaller patches where the direct light changes (a lamp's hot spot, shadow edges, a spot's cone, "
+   "sun through a window), found by shadow rays before the solve; large patches where it is flat")
+
 SEED = Number("seed", "--seed", 0, 0, 2**31 - 1, "Seed", "Random seed (same seed, same result)", integer=True)
 TIME_LIMIT = Number("time_limit", "--time-limit", 0.0, 0.0, None, "Time limit",
                     "Stop after this many seconds (0: no limit); the paths done so far are kept", unit="s")
@@ -205,8 +216,8 @@ CLUSTER = ClusterAddress("cluster", "--cluster", "", "Cluster",
                          "(distributed.comm.tls.ca-file, .client.cert, .client.key) or its environment "
                          "(DASK_DISTRIBUTED__COMM__TLS__CA_FILE, __CLIENT__CERT, __CLIENT__KEY)")
 
-SETTINGS = (METHOD, ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, EXIT_POINT, SAMPLING, DIRECT_LIGHT, STOP_RULE, OUTPUT,
-            PER_SOURCE, SEED,
+SETTINGS = (METHOD, ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, DETAIL, EXIT_POINT, SAMPLING, DIRECT_LIGHT,
+            STOP_RULE, OUTPUT, PER_SOURCE, SEED,
             TIME_LIMIT, THREADS, SCENE_OBJECTS, LIGHT_OUTPUT, INDIRECT_OUTPUT, CLUSTER)
 
 # Patch size 0: the selection's largest extent over this.

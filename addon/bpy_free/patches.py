@@ -126,6 +126,7 @@ class Patches:
     object_lightgroups: tuple = ()
     # per object, ResultLayers of a receiving object (make_patches(..., layers=True)), else None
     layers: list = field(default_factory=list)
+    refinement: list = field(default_factory=list)  # the Detail setting's steps (adaptive_patches), if any
 
     def patch_scene(self):
         """The core scene; geometry, sampling tables and the Embree scene are built once per

@@ -18,7 +18,7 @@ from ..core.forecast import forecast
 from ..core import methods
 from ..core.names import AUTO
 from . import options, relit
-from . import trim
+from . import adaptive_patches, trim
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
 
@@ -44,6 +44,7 @@ class SolveSettings:
     direct_light: str = options.DIRECT_LIGHT.default  # "gathered": the first bounce by shadow rays (core first_shot)
     method: str = options.METHOD.default  # "two_way": the core's two-way iteration (it gathers its direct light)
     per_source: str = options.PER_SOURCE.default  # per-light results for relighting (relit.groups_for)
+    detail: str = options.DETAIL.default  # adaptive patches (adaptive_patches): OFF, LOW, MEDIUM, HIGH
 
 
 @dataclass
@@ -210,7 +211,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     paper's predictions beside them; a ValueError where the solve would refuse the scene.
     ``should_stop()`` cuts the pilot short (the panel's, when a run starts)."""
     started = time.perf_counter()
-    patches = make_patches(objects, settings.patch_size)
+    patches = adaptive_patches.refined(objects, make_patches(objects, settings.patch_size), settings.detail,
+                                       settings.seed, should_stop=should_stop)
     scene, notes = scene_and_notes(patches)
     building = time.perf_counter() - started  # (a run meshes again)
     automatic = settings.method == AUTO
@@ -227,6 +229,7 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
         "others": sum(not o.receives for o in patches.objects),
         "patches": int(scene.patch_count),
         "patch_size": float(patches.patch_size),
+        "refinement": adaptive_patches.refinement_text(patches),
         "paths": int(math.ceil(f.paths)),
         "rays": float(f.rays),
         "paper_paths": int(p.paths),  # formula (2)/(3) for the target or the paths given
@@ -263,6 +266,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     """
     trim.fix_mmap_threshold()
     patches = make_patches(objects, settings.patch_size, layers=True)
+    patches = adaptive_patches.refined(objects, patches, settings.detail, settings.seed, layers=True,
+                                       should_stop=should_stop)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
     scene, notes = scene_and_notes(patches)
@@ -324,9 +329,10 @@ def _write_colours(out, scene, result, settings):
     made = {}  # "smooth", "light" -> per object (C_k,3) at its polygon corners (None: not receiving)
     both = settings.output in ("BOTH", "TEXTURED")
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
+        shading = adaptive_patches.shading_arrays(patches, scene)
         smooth = _smooth_corners if out.sources_out is None else relit.SmoothSources(out, _at_polygon_corners).corners
-        for name, corners in smooth(scene, result, light=textured):
-            made[name] = _at_polygon_corners(patches, scene, corners)
+        for name, corners in smooth(scene, result, light=textured, shading=shading):
+            made[name] = _at_polygon_corners(patches, scene, corners, shading)
             del corners  # (let go of before the next is made)
     elif both:
         shown = "the textures times each patch's own light are shown" if textured else "the flat colours are shown"
@@ -346,10 +352,11 @@ def _write_colours(out, scene, result, settings):
             out.light_colours.append(flat_light[rows] if flat_light is not None and o.receives else None)
 
 
-def _at_polygon_corners(patches, scene, corners):
-    """Per object, the values (C_k,3) at its result mesh's polygon corners, read from the
-    scene's triangle corners (T,3,3), as float32 (as they are written); None for an object
-    that receives no result."""
+def _at_polygon_corners(patches, scene, corners, shading=None):
+    """Per object, the values (C_k,3) at its result mesh's polygon corners, read from the triangle
+    corners (T,3,3) of ``shading`` (triangles, patch of each) or else the scene's, as float32 (as
+    written); None for an object that receives no result."""
+    triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
     out = []
     for k, mesh in enumerate(patches.meshes):
@@ -357,25 +364,28 @@ def _at_polygon_corners(patches, scene, corners):
             out.append(None)
             continue
         out.append(smoothing.polygon_corner_values(
-            corners, scene.triangles, scene.triangle_patch, mesh.corner_patch + patches.combined.patch_offsets[k],
+            corners, triangles, triangle_patch, mesh.corner_patch + patches.combined.patch_offsets[k],
             mesh.corner_verts + point_start[k]).astype(np.float32))
     return out
 
 
-def _smooth_corners(scene, result, light=False):
+def _smooth_corners(scene, result, light=False, shading=None):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``arriving_light``) at every
     corner of the scene's triangles, smooth; then ("smooth", (T,3,3)): the reflected light, its
     tile noise filtered within its measured variance, joined across objects and kept apart at
     creases (core smoothing), plus each patch's own emission, flat. Made one at a time (a
-    generator), so that the caller lets go of one before the next is made."""
-    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    generator), so that the caller lets go of one before the next is made. ``shading``: the
+    (triangles, patch of each) to make them on, if not the scene's (a refined mesh's, with every
+    polygon corner: adaptive_patches.shading_arrays)."""
+    triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
+    surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count)
     if light:
         yield "light", surface.corner_values(arriving_light(surface, result.irradiance, result.irradiance_variance,
                                                             scene.reflectivity))
     reflected = surface.filter_light(result.reflected, result.reflected_variance)
     corners = surface.corner_values(reflected)
     del reflected
-    corners += scene.emission[scene.triangle_patch][:, None, :]
+    corners += scene.emission[triangle_patch][:, None, :]
     yield "smooth", corners
 
 
@@ -386,6 +396,5 @@ def _smooth_light(scene, result, light=False):
 
 
 def arriving_light(surface, irradiance, variance, reflectivity):
-    """(P,3) the light arriving at each patch (H: B = E + rho H), its noise filtered as the
-    reflected light's is (core smoothing ``Surface.arriving_light``)."""
+    """(P,3) the light arriving at each patch (H: B = E + rho H), noise filtered (``Surface.arriving_light``)."""
     return surface.arriving_light(irradiance, variance, reflectivity)

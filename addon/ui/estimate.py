@@ -46,6 +46,7 @@ def _key(context):
     return (
         context.scene.name, names, settings.estimator, round(settings.threshold, 9),
         round(settings.target_error, 6), round(settings.patch_size, 9), STATE.generation,
+        getattr(settings, "detail", "OFF"),
     )
 
 

@@ -49,6 +49,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
     threshold: _number(options.THRESHOLD, _changed, precision=4, step=0.01)
     target_error: _number(options.TARGET_ERROR, _changed, soft_min=0.5, soft_max=20.0, precision=2, subtype="PERCENTAGE")
     patch_size: _number(options.PATCH_SIZE, _changed, soft_max=10.0, precision=3, subtype="DISTANCE", unit="LENGTH")
+    detail: _enum(options.DETAIL, _changed)  # adaptive patches
     exit_point: _enum(options.EXIT_POINT)
     sampling: _enum(options.SAMPLING)
     direct_light: _enum(options.DIRECT_LIGHT, _changed)
@@ -125,6 +126,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
             indirect_output=bool(self.indirect_output),
             cluster=self.cluster.strip(),
             per_source=self.per_source,
+            detail=self.detail,
         )
 
 

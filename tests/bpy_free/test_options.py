@@ -101,3 +101,17 @@ def test_the_options_say_what_the_error_target_covers():
     assert "noise" in words and "patch" in words and "continuous" in words, words
     assert "closer to the continuous" in options.EXIT_POINT.description.lower() or any(
         "continuous" in d.lower() for _, _, d in options.EXIT_POINT.items)
+
+
+def test_the_detail_option_on_the_command_line():
+    """--detail takes off/low/medium/high in any case and refuses anything else in one line."""
+    from addon.bpy_free import options
+    from addon.cli.arguments import checked, parser
+
+    assert checked(parser().parse_args(["--detail", "medium"])).detail == "MEDIUM"
+    assert checked(parser().parse_args([])).detail == "OFF"
+    with pytest.raises(ValueError, match="--detail must be one of OFF, LOW, MEDIUM, HIGH; got 'finest'"):
+        options.DETAIL.check("finest")
+    from addon.core.adaptive_light import DETAILS
+
+    assert set(DETAILS) == {i for i, _, _ in options.DETAIL.items} - {"OFF"}

@@ -448,3 +448,28 @@ def test_a_missing_certificate_file_is_named(tls_cluster, scene):
     with dask.config.set(_tls_settings(ca, cert + ".missing", key)):
         with pytest.raises(ClusterError, match=r"cert\.pem\.missing' named by distributed\.comm\.tls\.client\.cert"):
             solve(scene, paths=1000, cluster=address)
+
+
+@pytest.mark.parametrize("method", ["walk", "two_way"])
+def test_a_cluster_solve_on_adaptive_patches_is_bitwise_the_local_one(client, method):
+    """Patches refined where a lamp's direct light changes (core.adaptive): the cluster's solve
+    of the refined scene is bit for bit the local one."""
+    from addon.core import meshing
+    from addon.core.adaptive_light import DETAILS, refine_by_direct_light
+    from addon.core.lights import PointLight
+
+    corners = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [0, 0, 1], [2, 0, 1], [2, 2, 1], [0, 2, 1]], float)
+    faces = [[0, 1, 2, 3], [4, 7, 6, 5], [0, 4, 5, 1], [1, 5, 6, 2], [2, 6, 7, 3], [3, 7, 4, 0]]
+    mesh = meshing.mesh_patches(corners, [4] * 6, sum(faces, []), 0.5)
+    lamp = [PointLight(np.array([1.0, 1.0, 0.8]), np.full(3, 0.5))]
+    P = mesh.patch_count
+    first = PatchScene(mesh.points, mesh.triangles, mesh.triangle_patch, np.full((P, 3), 0.6), np.zeros((P, 3)), lights=lamp)
+    refined = refine_by_direct_light([mesh], first, DETAILS["MEDIUM"], seed=2).meshes[0]
+    assert refined.patch_count > P and (np.asarray(refined.face_sizes) > 4).any()  # (split, T-junctions resolved)
+    Q = refined.patch_count
+    scene = PatchScene(refined.points, refined.triangles, refined.triangle_patch, np.full((Q, 3), 0.6), np.zeros((Q, 3)),
+                       lights=lamp)
+    kw = dict(paths=40_000, seed=9, method=method, direct_light=GATHERED if method == "walk" else None, exit_point=EXIT_HIT)
+    local, remote = solve(scene, FINITE, threads=2, **kw), solve(scene, FINITE, cluster=client, **kw)
+    assert np.array_equal(local.radiosity, remote.radiosity)
+    assert np.array_equal(local.reflected_variance, remote.reflected_variance, equal_nan=True)
