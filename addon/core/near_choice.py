@@ -25,6 +25,8 @@ import weakref
 
 import numpy as np
 
+from .sampling import patch_point_rows
+
 # The mixture's weight on nearness; the rest is by power.
 NEAR_SHARE = 0.5
 # The most receiver x cluster entries kept (two float64 tables of this many).
@@ -50,14 +52,13 @@ def near_choice(scene, choice):
 
 
 def patch_centres(scene):
-    """(P,3) world-space area-weighted centres of the patches."""
-    v = scene.vertices[scene.triangles]  # (T,3,3)
-    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-    centre = v.mean(axis=1) * area[:, None]
-    P = scene.patch_count
-    sums = np.stack([np.bincount(scene.triangle_patch, weights=centre[:, k], minlength=P) for k in range(3)], axis=1)
-    total = np.bincount(scene.triangle_patch, weights=area, minlength=P)
-    return sums / np.maximum(total, 1e-300)[:, None]
+    """(P,3) world-space points in the middle of the patches (each one's (0.5, 0.5) point: the
+    centre of a parallelogram, a middle point of others; nearness needs no more), float64."""
+    g, P = scene.geometry, scene.patch_count
+    patch = np.arange(P)
+    half = np.full(P, 0.5, np.float32)
+    points = patch_point_rows(g, patch, half.copy(), half.copy(), half.copy())
+    return g.to_world(points.T.astype(np.float64), patch)
 
 
 def _morton(points, bits=MORTON_BITS):
