@@ -78,7 +78,7 @@ def save_meta(scene, meta):
 
 
 class Stored:
-    """The arrays of one set of per-source results: per result object {kind: (S,n,3) float32},
+    """The arrays of one set of per-source results: per result object {kind: (3,S,n) float32},
     and each object's polygon sizes (for FACE_CORNERS outputs)."""
 
     # Full recombinations between two of the updates by the changed sources alone (float error
@@ -86,6 +86,9 @@ class Stored:
     FULL_EVERY = 64
 
     def __init__(self, meta, arrays):
+        # channel-major (3,S,n): a full recombination is one BLAS product a channel (2.5x an einsum)
+        arrays = {name: {kind: np.ascontiguousarray(np.moveaxis(v, 2, 0)) for kind, v in kinds.items()}
+                  for name, kinds in arrays.items()}
         self.meta, self.arrays, self.sizes = meta, arrays, {}
         self.last = {}  # (object, kind) -> (weights (S,3), the unclipped sum (n,3) float32, updates since full)
         self.buffers, self.corner_patch = {}, {}
@@ -94,17 +97,21 @@ class Stored:
         """(n,3) float32 (not to be changed): the object's ``kind`` values recombined with ``w`` (S,3): by
         the sources whose weights changed since the last recombination alone where they are
         few (a lamp turned: one source's values read, not S)."""
-        values = self.arrays[name][kind]
+        values = self.arrays[name][kind]  # (3,S,n)
         last = self.last.get((name, kind))
         changed = None if last is None else np.flatnonzero((w != last[0]).any(axis=1))
         if changed is not None and len(changed) <= len(w) // 2 and last[2] < self.FULL_EVERY:
             total = last[1]
             delta = (w[changed] - last[0][changed]).astype(np.float32)
             for s, d in zip(changed, delta):  # (no copy of the changed sources' values)
-                total += values[s] * d
+                for c in range(3):
+                    total[:, c] += values[c, s] * d[c]
             count = last[2] + 1
         else:
-            total = np.einsum("snc,sc->nc", values, w.astype(np.float32))
+            w32 = w.astype(np.float32)
+            total = np.empty((values.shape[2], 3), np.float32)
+            for c in range(3):
+                total[:, c] = w32[:, c] @ values[c]
             count = 0
         self.last[(name, kind)] = (w.copy(), total, count)
         return total

@@ -144,7 +144,7 @@ def test_relight_follows_each_weight_exactly(blender):
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     bulb = meta["names"].index("Bulb")
     for name in meta["objects"]:
-        flat = stored.arrays[name]["flat"]
+        flat = np.moveaxis(stored.arrays[name]["flat"], 0, 2)  # (stored channel-major: (3,S,n))
         expected = np.maximum(flat.sum(axis=0) + flat[bulb], 0)
         got = np.repeat(expected, stored.sizes[name], axis=0)
         values = _attributes()[(name, "Radiosity")].reshape(-1, 4)[:, :3]
