@@ -19,7 +19,6 @@ import json
 import math
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -33,43 +32,11 @@ from benchmarks import picture_metrics as pm  # noqa: E402
 
 
 def run(detail, target, patch_size=0.0, seed=0, colours="TEXTURED", limit=0.0):
-    """The product with these settings (the panel's defaults otherwise), then its preview:
-    (image, solve seconds, preview seconds, patches)."""
-    import bpy
-
-    from addon.bpy_free import options
-    from addon.cli import preview
-    from addon.cli.run import release_solve_memory
-    from addon.ui import operators
-
-    scene = bpy.context.scene
-    sources = picture.source_objects()
-    settings = scene.radiosity
-    for option in options.SETTINGS:
-        setattr(settings, option.name, option.default)
-    settings.target_error, settings.output, settings.seed = target, colours, seed
-    settings.detail, settings.patch_size = detail, patch_size
-    settings.time_limit = limit  # (0: none; else the solve stops there, its paths kept)
-    operators.LAST_ERROR = ""
-    wall = time.perf_counter()
-    result = bpy.ops.radiosity.solve(quiet_errors=True)
-    release_solve_memory()
-    solve = time.perf_counter() - wall
-    if "FINISHED" not in result:
-        raise RuntimeError(f"the solve failed: {operators.LAST_ERROR}")
-    picture.show_results(True)
-    changes = preview.preview_settings(scene, sources, interior_scene.RESOLUTION[0], picture.PREVIEW_SAMPLES, 0.0)
-    hidden = [(o, o.hide_render) for o in sources]
-    try:
-        for o, _ in hidden:
-            o.hide_render = True
-        scene.render.threads_mode, scene.render.threads = "FIXED", picture.THREADS
-        image, shown = picture.render_exr(scene)
-    finally:
-        for o, h in hidden:
-            o.hide_render = h
-        changes.restore()
-    return image, solve, shown, int(settings.last_patches), float(settings.last_patch_size)
+    """The product with these settings (the picture benchmark's otherwise: picture.product), then
+    its preview: (image, solve seconds, preview seconds, patches, patch size)."""
+    image, solve, shown, stats = picture.product(colours, seed, target_error=target, detail=detail,
+                                                 patch_size=patch_size, time_limit=limit)
+    return image, solve, shown, int(stats["patches"]), float(stats["patch_size"])
 
 
 def budget_text(target, limit):

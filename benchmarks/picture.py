@@ -237,10 +237,11 @@ def prepare_product(scene, colours, seed=0):
     return settings
 
 
-def product(colours, seed=0, width=interior_scene.RESOLUTION[0]):
+def product(colours, seed=0, width=interior_scene.RESOLUTION[0], **overrides):
     """The product as the command line runs it: the panel's settings at their defaults but the
-    error target (2%), the output mode ``colours`` and the seed; the operator, then the preview
-    (its settings, rendered to EXR). (image, solve seconds, preview seconds, statistics)."""
+    error target (2%), the output mode ``colours`` and the seed (and ``overrides``, settings by
+    name: a detail, a patch size, a time limit); the operator, then the preview (its settings,
+    rendered to EXR). (image, solve seconds, preview seconds, statistics)."""
     import bpy
 
     from addon.cli import preview
@@ -250,6 +251,8 @@ def product(colours, seed=0, width=interior_scene.RESOLUTION[0]):
     scene = bpy.context.scene
     sources = source_objects()
     settings = prepare_product(scene, colours, seed)
+    for name, value in overrides.items():
+        setattr(settings, name, value)
     operators.LAST_ERROR = ""
     wall = time.perf_counter()
     result = bpy.ops.radiosity.solve(quiet_errors=True)

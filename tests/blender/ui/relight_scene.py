@@ -4,20 +4,15 @@ inside."""
 import bpy
 import numpy as np
 
+from benchmarks import interior_scene
+
 from ..conftest import box_arrays, make_object, principled
 
 SOURCES = ("Bulb", "Panel", "Sun", "World", "Glow")  # point, area, sun, world, emissive material
 
 
 def lamp(kind, name, location, energy, colour=(1, 1, 1), rotation=(0, 0, 0), **settings):
-    data = bpy.data.lights.new(name, kind)
-    data.energy, data.color = energy, colour
-    for key, value in settings.items():
-        setattr(data, key, value)
-    obj = bpy.data.objects.new(name, data)
-    obj.location, obj.rotation_euler = location, rotation
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
+    return interior_scene.lamp(name, kind, location, rotation, energy=energy, color=colour, **settings)
 
 
 def build(context, output="FACE"):
