@@ -17,7 +17,7 @@ OFFSET_TOLERANCE = 1e-6
 # A point lies in a triangle within this barycentric margin (on a shared edge it is in both).
 INSIDE_MARGIN = 1e-6
 # Pairs of a plane's triangles examined at most (a plane's triangles squared; beyond, not examined).
-MAX_PAIRS = 1 << 22
+MAX_PAIRS = 1 << 20  # (a plane of up to 1,024 triangles: the pair test's arrays stay ~40 MB)
 
 
 class Contacts:

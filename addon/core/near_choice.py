@@ -97,12 +97,12 @@ class NearChoice:
         self.cluster_of[emitters] = cluster
         # within a cluster, by power: each cluster's cumulative run ends at 1, offset by its index
         inner = np.cumsum(power) - np.repeat(np.cumsum(cluster_power) - cluster_power, np.bincount(cluster, minlength=K))
-        self.within = power / cluster_power[cluster]  # Phi_s / Phi_c, in the order of ``emitters``
+        within = power / cluster_power[cluster]  # Phi_s / Phi_c, in the order of ``emitters``
         self.inner_cdf = inner / cluster_power[cluster] + cluster
         self.inner_cdf[np.r_[np.flatnonzero(np.diff(cluster)), emitters.size - 1]] = np.arange(K) + 1.0
         self.emitters = emitters
         self.within_of = np.zeros(choice.size)
-        self.within_of[emitters] = self.within
+        self.within_of[emitters] = within
         area = np.bincount(cluster, weights=scene.patch_area[emitters], minlength=K)
         middle = np.stack([np.bincount(cluster, weights=power * centres[emitters, k], minlength=K)
                            for k in range(3)], axis=1) / cluster_power[:, None]
