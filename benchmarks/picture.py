@@ -251,8 +251,9 @@ def product(colours, seed=0, width=interior_scene.RESOLUTION[0], **overrides):
     scene = bpy.context.scene
     sources = source_objects()
     settings = prepare_product(scene, colours, seed)
-    for name, value in overrides.items():
-        setattr(settings, name, value)
+    for name, value in overrides.items():  # (given as text on the command line: read as the setting's type)
+        current = getattr(settings, name)
+        setattr(settings, name, type(current)(value) if isinstance(value, str) and not isinstance(current, str) else value)
     operators.LAST_ERROR = ""
     wall = time.perf_counter()
     result = bpy.ops.radiosity.solve(quiet_errors=True)
@@ -444,24 +445,25 @@ def samples_for(seconds, line, most):
     return int(min(max(1, round(1 + (seconds - first) / per_sample)), most))
 
 
-def measure(name, colours, reference_samples, rounds, diffuse=False, warm_up=True, most=1 << 16, log=print):
+def measure(name, colours, reference_samples, rounds, diffuse=False, warm_up=True, most=1 << 16, log=print, **overrides):
     """One room: the reference, then rounds alternating the product and Cycles at its wall time
     (the sample counts from the first round's product time on lines timed before; at most
     ``most``), and the pixel map; a dict of images, times and statistics. ``diffuse``: every
-    material's Specular IOR Level set to 0 first (Lambertian surfaces, the product's own model)."""
+    material's Specular IOR Level set to 0 first (Lambertian surfaces, the product's own model);
+    ``overrides`` the product's settings by name."""
     info = interior_scene.build(name)
     if diffuse:
         interior_scene.make_diffuse()
     first, second, reference_seconds = reference(name, reference_samples, log)
     if warm_up:
         log(f"{name}: warming up (a solve and a render, not counted)")
-        product(colours, seed=99)
+        product(colours, seed=99, **overrides)
     cycles_image(1)
     lines = time_lines(log)
     samples = {}
     runs = {"product": [], **{kind: [] for kind in CYCLES_KINDS}}
     for k in range(rounds):  # alternating, so that a busy moment of the machine hits every side
-        image, solve, shown, stats = product(colours, seed=k)
+        image, solve, shown, stats = product(colours, seed=k, **overrides)
         runs["product"].append({"image": image, "seconds": solve + shown, "solve": solve, "preview": shown, "stats": stats})
         samples = samples or {kind: samples_for(solve + shown, line, most) for kind, line in lines.items()}
         for kind, (denoise, unbiased) in CYCLES_KINDS.items():
@@ -632,6 +634,8 @@ def main(argv=None):
                         "(where a solve takes minutes its start-up is noise)")
     parser.add_argument("--max-samples", type=int, default=1 << 16, help="cap on Cycles' samples at the product's time "
                         "(where the product takes minutes; the report gives the times measured)")
+    parser.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="the product's settings by name "
+                        "(e.g. detail=MEDIUM)")
     parser.add_argument("--replot", action="store_true", help="rewrite the report from its .json (rooms measured so far)")
     args = parser.parse_args(argv)
     if args.replot:
@@ -650,7 +654,9 @@ def main(argv=None):
     loads = [os.getloadavg()[0]]
     rooms = {}
     for name in args.scenes:
-        m = measure(name, colours, args.reference_samples, args.rounds, args.diffuse, args.warm_up, args.max_samples)
+        overrides = dict(item.split("=", 1) for item in args.set)
+        m = measure(name, colours, args.reference_samples, args.rounds, args.diffuse, args.warm_up, args.max_samples,
+                    **overrides)
         a, ref, mask = analyse(m)
         png = f"{args.out.stem}_{name}.png"
         side_by_side(m, ref, mask, a["exposure"], args.out.parent / png)

@@ -11,11 +11,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core import meshing, predict, relative_rms_to_mse, smoothing, solve
+from ..core import meshing, methods, point_direct, predict, relative_rms_to_mse, smoothing, solve
 from ..core.diagnostics import MAX_BOUNCES, check_bounces
+from ..core.covered import hidden_patches
 from ..core.first_shot import direct_irradiance
 from ..core.forecast import forecast
-from ..core import methods
 from ..core.names import AUTO
 from . import options, relit
 from . import adaptive_patches, trim
@@ -370,21 +370,23 @@ def _at_polygon_corners(patches, scene, corners, shading=None):
 
 
 def _smooth_corners(scene, result, light=False, shading=None):
-    """("light", (T,3,3)) with ``light`` first: the light arriving (``arriving_light``) at every
+    """("light", (T,3,3)) with ``light`` first: the light arriving (``Surface.arriving_light``) at every
     corner of the scene's triangles, smooth; then ("smooth", (T,3,3)): the reflected light, its
-    tile noise filtered within its measured variance, joined across objects and kept apart at
-    creases (core smoothing), plus each patch's own emission, flat. Made one at a time (a
-    generator), so that the caller lets go of one before the next is made. ``shading``: the
-    (triangles, patch of each) to make them on, if not the scene's (a refined mesh's, with every
-    polygon corner: adaptive_patches.shading_arrays)."""
+    tile noise filtered within its measured variance, joined across objects (not across hidden
+    patches: core covered) and kept apart at creases (core smoothing), plus each patch's own
+    emission, flat; both with the direct light's shape within each patch (core point_direct).
+    Made one at a time (a generator), so that the caller lets go of one before the next is made.
+    ``shading``: the (triangles, patch of each) to make them on, if not the scene's (a refined
+    mesh's, with every polygon corner: adaptive_patches.shading_arrays)."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
-    surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count)
+    surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
+                                   hidden=hidden_patches(scene.geometry))
+    direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed)
     if light:
-        yield "light", surface.corner_values(arriving_light(surface, result.irradiance, result.irradiance_variance,
-                                                            scene.reflectivity))
+        arriving = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity)
+        yield "light", point_direct.shown(surface, arriving, direct)
     reflected = surface.filter_light(result.reflected, result.reflected_variance)
-    corners = surface.corner_values(reflected)
-    del reflected
+    corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity))
     corners += scene.emission[triangle_patch][:, None, :]
     yield "smooth", corners
 
@@ -393,8 +395,3 @@ def _smooth_light(scene, result, light=False):
     """(smooth radiosity, smooth light arriving or None), each (T,3,3) (``_smooth_corners``)."""
     made = dict(_smooth_corners(scene, result, light))
     return made["smooth"], made.get("light")
-
-
-def arriving_light(surface, irradiance, variance, reflectivity):
-    """(P,3) the light arriving at each patch (H: B = E + rho H), noise filtered (``Surface.arriving_light``)."""
-    return surface.arriving_light(irradiance, variance, reflectivity)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .error_model import mean_reflected_radiosity
+from . import point_direct
 from .grouping import SourceGroups, check_per_source, source_groups
 
 
@@ -69,7 +70,7 @@ class GroupBatches:
             radiosity[s] += np.where((patch_group == s)[:, None], scene.emission, 0.0)
         covariance = self.spread(N) / ((total.chunks - 1) * N) if total.chunks > 1 else np.full((self.channels, S, S), math.nan)
         return PerSource(self.groups.names, radiosity, irradiance, group_power(scene, self.groups), covariance,
-                         scene_scale(scene), target_mse, patch_group)
+                         scene_scale(scene), target_mse, patch_group, self.groups.light_group)
 
 
 def group_power(scene, groups):
@@ -96,7 +97,8 @@ class PerSource:
     power; ``covariance`` (C,S,S) the area-weighted mean over patches of the groups' batch
     covariance of the reflected radiosity (C = 1 for a grey scene, whose channels are alike;
     NaN below 2 chunks); ``scale`` b_ave per unit of power; the solve's ``target_mse`` or None;
-    ``patch_group`` (P,) int32 the group of each patch's own emission (-1: none), or None."""
+    ``patch_group`` (P,) int32 the group of each patch's own emission (-1: none), or None;
+    ``light_group`` (L,) int32 the group of each light, or None."""
 
     names: tuple
     radiosity: np.ndarray
@@ -106,6 +108,7 @@ class PerSource:
     scale: float
     target_mse: float | None = None
     patch_group: np.ndarray | None = None
+    light_group: np.ndarray | None = None
 
     @property
     def count(self):
@@ -184,27 +187,32 @@ def combine(per_source, parts, weights):
     return _combine(flat, w).reshape(parts.shape[1:])
 
 
-def smooth_sources(surface, scene, result, light=False, dtype=np.float64):
+def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triangles=None):
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
     they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
     ("light", (S,T,3,3)) first with ``light``, the light arriving (``Surface.arriving_light``);
     then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``) and
-    smooth, plus each group's own emission, flat. ``surface`` is ``smoothing.Surface.of`` the
-    scene's triangles; ``result`` a per-source solve's SolveResult. Made in float64, given as
-    ``dtype`` (float32: half the memory, as they are written; their sum then the whole's to
-    float32 rounding)."""
+    smooth, plus each group's own emission, flat. Both show the direct light at the corners (``point_direct``), each group's own.
+    ``surface`` is ``smoothing.Surface.of`` the scene's triangles (or ``triangles``, (T,3) of its
+    vertices); ``result`` a per-source solve's SolveResult. Made in float64, given as ``dtype``
+    (float32: half the memory, as they are written; their sum then the whole's to float32
+    rounding)."""
     per_source = result.per_source
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
+    direct = point_direct.corner_direct(surface, scene, scene.triangles if triangles is None else triangles,
+                                        seed=result.seed, light_group=per_source.light_group,
+                                        patch_group=per_source.patch_group, groups=per_source.count)
+    whole = None if direct is None else point_direct.CornerDirect(direct.corners.sum(axis=0), direct.means.sum(axis=0))
     if light:
-        light, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
-                                             return_filter=True)
-        _, corners = surface.corner_values(light, return_filter=True)
-        yield "light", corners(fill(per_source.irradiance), dtype)
+        arriving, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
+                                                return_filter=True)
+        yield "light", point_direct.shown(surface, arriving, whole, fill(per_source.irradiance), direct, dtype)[1]
     filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
-    _, corners = surface.corner_values(filtered, return_filter=True)
-    smooth = corners(noise(per_source.irradiance * scene.reflectivity), dtype)
+    rho = scene.reflectivity
+    _, smooth = point_direct.shown(surface, filtered, whole and point_direct.scaled(surface, whole, rho),
+                                       noise(per_source.irradiance * rho), direct and point_direct.scaled(surface, direct, rho), dtype)
     emitting = per_source_emission(scene, per_source)
     for s in range(per_source.count):  # (a part at a time: no (S,T,3) copy)
         smooth[s] += emitting[s, surface.triangle_patch][:, None, :]
@@ -315,4 +323,4 @@ def _joined(scene, groups, per_source, new, redone):
             if other == kind:  # (independent runs: no covariance across them)
                 covariance[:, g, h] = (new_cov if kind == "new" else old_cov)[:, k, m]
     return PerSource(groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), per_source.target_mse,
-                     groups.patch_group(P).copy())
+                     groups.patch_group(P).copy(), np.asarray(groups.light_group, np.int32))

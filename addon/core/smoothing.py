@@ -66,16 +66,19 @@ class Surface(NoiseFilter):
     cos_crease: float
     smooth_point: np.ndarray  # (n,) bool: every pair of corners at the point compatible
     pairs: tuple  # (corner, other corner) flat indices, compatible, at crease points
+    hidden: np.ndarray | None = None  # (P,) bool: patches no camera sees, which no neighbour's corners read
 
     @property
     def patch_count(self):
         return len(self.patch_area)
 
     @classmethod
-    def of(cls, vertices, triangles, triangle_patch, patch_count=None, crease_angle=CREASE_ANGLE, weld=None):
+    def of(cls, vertices, triangles, triangle_patch, patch_count=None, crease_angle=CREASE_ANGLE, weld=None, hidden=None):
         """``vertices`` (V,3) world positions, ``triangles`` (T,3) vertex indices, ``triangle_patch``
         (T,) patch of each triangle; ``weld`` a length (default WELD_FRACTION of the median
-        patch's side, at least float32 rounding of the coordinates)."""
+        patch's side, at least float32 rounding of the coordinates); ``hidden`` (P,) bool the
+        patches no camera sees (``covered.hidden_patches``: under a box, behind a panel that
+        touches them), whose light, nothing or little, joins no visible neighbour's corners."""
         vertices = np.asarray(vertices, np.float64)
         triangles = np.asarray(triangles)
         triangle_patch = np.asarray(triangle_patch)
@@ -104,7 +107,7 @@ class Surface(NoiseFilter):
         cos_crease = float(np.cos(np.radians(crease_angle)))
         smooth_point, pairs = _crease_pairs(point, triangle_patch, patch_normal, cos_crease)
         return cls(point, triangle_patch, triangle_area, patch_area, patch_normal, centroid, cos_crease,
-                   smooth_point, pairs)
+                   smooth_point, pairs, None if hidden is None or not np.any(hidden) else np.asarray(hidden, bool))
 
     # -- corner values -------------------------------------------------------------------------
     def _averaging(self):
@@ -112,7 +115,7 @@ class Surface(NoiseFilter):
         compatible weight around it (0 where it is zero), the crease corners and their pairs
         renumbered among them."""
         point = self.point.ravel()
-        w = np.repeat(self.triangle_area, 3)
+        w = np.repeat(self.triangle_area if self.hidden is None else self.triangle_area * ~self.hidden[self.triangle_patch], 3)
         total = np.bincount(point, weights=w, minlength=len(self.smooth_point))[point]
         crease = np.flatnonzero(~self.smooth_point[point])
         c, o = self.pairs
@@ -181,7 +184,8 @@ class Surface(NoiseFilter):
         """One channel's corners (T*3,); ``record`` (a dict), where given, keeps the floored
         corners of each step, the floors' patches, the final scales and the flat corners."""
         x = self._average_corners(values[corner_patch], averaging)
-        floor = LOWEST_SHARE * self._corner_lowest(values[corner_patch], averaging)
+        floor = LOWEST_SHARE * self._corner_lowest(self._seen_values(values, corner_patch), averaging)
+        floor[np.isinf(floor)] = 0.0  # (a point only hidden patches meet)
         if record is not None:
             record["lowest"] = self._corner_lowest_patch(values, corner_patch, averaging)
             record["floored"] = []
@@ -204,11 +208,16 @@ class Surface(NoiseFilter):
             record["scale"], record["flat"] = scale, flat
         return x
 
+    def _seen_values(self, values, corner_patch):
+        """(T*3,) each corner's patch value, inf at hidden patches' (no floor is a share of them)."""
+        x = values[corner_patch]
+        return x if self.hidden is None else np.where(self.hidden[corner_patch], np.inf, x)
+
     def _corner_lowest_patch(self, values, corner_patch, averaging):
         """(T*3,) the patch of the lowest of the compatible corners' values at each corner's
         point (``_corner_lowest``'s, as a patch: what the floor is a share of)."""
         point, _, _, crease, local, o = averaging
-        x = values[corner_patch]
+        x = self._seen_values(values, corner_patch)
         order = np.lexsort((x, point))
         first = order[run_starts(point[order])]
         lowest_corner = np.empty(len(self.smooth_point), np.int64)

@@ -150,23 +150,15 @@ def find_buried(geometry):
     keep = np.repeat(partly, per_patch) & ~buried_cell
     # Where some patch is partly buried, others may lie inside an object whole (nothing crosses
     # them): their centres, probed.
-    rest = np.ones(geometry.patch_count, bool)
-    rest[crossed] = False
-    rest = np.flatnonzero(rest)
+    rest = np.setdiff1d(np.arange(geometry.patch_count), crossed)
     half = np.full(rest.size, 0.5)
     whole = np.concatenate([crossed[visible_count == 0], rest[buried_points(geometry, rest, half, half, half)]])
     slot = np.full(geometry.patch_count, -1, np.int32)
     slot[crossed[partly]] = np.arange(int(partly.sum()), dtype=np.int32)
     counts = visible_count[partly]
-    return Buried(
-        slot=slot,
-        patch=crossed[partly].astype(np.int32),
-        bins=bins[partly],
-        first=np.concatenate(([0], np.cumsum(counts))).astype(np.int64),
-        cells=cell[keep].astype(np.int32),
-        fraction=counts / per_patch[partly],
-        whole=np.sort(whole).astype(np.int32),
-    )
+    return Buried(slot=slot, patch=crossed[partly].astype(np.int32), bins=bins[partly],
+                  first=np.concatenate(([0], np.cumsum(counts))).astype(np.int64), cells=cell[keep].astype(np.int32),
+                  fraction=counts / per_patch[partly], whole=np.sort(whole).astype(np.int32))
 
 
 def cell_states(geometry, patch, bins):
@@ -223,11 +215,15 @@ def cell_uniforms(cell, bins, cells=CELLS):
 
 
 def buried_points(geometry, patch, u_triangle, u0, u1):
-    """(n,) bool: whether each point of ``patch`` at the given uniforms is buried: along VOTES of
-    the probes it is inside more solids than it enters (:func:`windings` >= 1). Probes are cast
-    only for points still undecided."""
-    g = geometry
-    origins = patch_point_rows(g, patch, u_triangle.astype(np.float64), u0.astype(np.float32), u1.astype(np.float32))
+    """(n,) bool: whether each point of ``patch`` at the given uniforms is buried (``buried_at``)."""
+    origins = patch_point_rows(geometry, patch, u_triangle.astype(np.float64), u0.astype(np.float32), u1.astype(np.float32))
+    return buried_at(geometry, origins, patch)
+
+
+def buried_at(g, origins, patch):
+    """(n,) bool: whether each point (3,n) unit space, pushed off) of ``patch`` is buried: along
+    VOTES of the probes it is inside more solids than it enters (:func:`windings` >= 1). Probes
+    are cast only for points still undecided."""
     normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
     tangent, bitangent = _tangents(normal)
     inside, outside = np.zeros(patch.size, np.int32), np.zeros(patch.size, np.int32)

@@ -7,7 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 from boxes import box_scene, open_box_with_card
 
-from addon.core import solve
+from addon.core import PatchScene, solve
+from addon.core.lights import WorldLight
 from addon.bpy_free.pipeline import _smooth_light, light_account_text
 from addon.core.meshing import mesh_patches
 from addon.core.textures import patch_texture_average, sample_bilinear
@@ -73,8 +74,11 @@ def _plane(patch_size=0.25):
     """A 1 x 1 m quad meshed into patches, as the pipeline's scene and the patch mesh."""
     mesh = mesh_patches(SQUARE, np.array([4]), np.array([0, 1, 2, 3]), patch_size,
                         face_triangles=SQUARE_TRIANGLES, triangle_face=np.zeros(2, int))
+    lit = PatchScene(mesh.points, mesh.triangles, mesh.triangle_patch, np.full(mesh.patch_count, 0.5),
+                     np.zeros(mesh.patch_count), lights=[WorldLight(np.ones(3))])  # (the sky alone: no point_direct)
     scene = SimpleNamespace(vertices=mesh.points, triangles=mesh.triangles, triangle_patch=mesh.triangle_patch,
-                            patch_count=mesh.patch_count, emission=np.zeros((mesh.patch_count, 3)))
+                            patch_count=mesh.patch_count, emission=np.zeros((mesh.patch_count, 3)),
+                            geometry=lit.geometry, lights=lit.lights)
     return mesh, scene
 
 
@@ -88,7 +92,7 @@ def _centres(mesh):
 
 def _result(H, variance, reflectivity):
     return SimpleNamespace(reflected=reflectivity * H, reflected_variance=reflectivity ** 2 * variance,
-                           irradiance=H, irradiance_variance=variance)
+                           irradiance=H, irradiance_variance=variance, seed=0)
 
 
 def _fine_samples(n=32):

@@ -217,7 +217,7 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     noise-filter weights, clips and corner scales, add up to what the pipeline shows for the solve
     (float error); recombined with new weights they are the same linear map of the relit values."""
     from addon.bpy_free import pipeline
-    from addon.core import smoothing
+    from addon.core import point_direct, smoothing
     from addon.core.relighting import combine, per_source_emission, smooth_sources
 
     scene = _open_box()
@@ -232,10 +232,18 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     relit = combine(r.per_source, parts["smooth"], WEIGHTS)
     assert relit.shape == whole["smooth"].shape
     filtered, noise = surface.filter_light(r.reflected, r.reflected_variance, return_filter=True)
-    corners = surface.corner_values(filtered, return_filter=True)[1]
-    reflected = np.einsum("spc,sc->pc", r.per_source.irradiance, WEIGHTS) * scene.reflectivity
-    emission = np.einsum("spc,sc->pc", per_source_emission(scene, r.per_source), WEIGHTS)
-    expected = corners(noise(reflected)) + emission[scene.triangle_patch][:, None, :]
+    rho = scene.reflectivity
+    ps = r.per_source
+    direct = point_direct.corner_direct(surface, scene, scene.triangles, seed=r.seed, light_group=ps.light_group,
+                                        patch_group=ps.patch_group, groups=ps.count)
+    whole_direct = point_direct.CornerDirect(direct.corners.sum(axis=0), direct.means.sum(axis=0))
+    relit_direct = point_direct.CornerDirect(np.einsum("stkc,sc->tkc", direct.corners, WEIGHTS)[None],
+                                             np.einsum("spc,sc->pc", direct.means, WEIGHTS)[None])
+    reflected = np.einsum("spc,sc->pc", ps.irradiance, WEIGHTS) * rho
+    emission = np.einsum("spc,sc->pc", per_source_emission(scene, ps), WEIGHTS)
+    expected = point_direct.shown(surface, filtered, point_direct.scaled(surface, whole_direct, rho), noise(reflected)[None],
+                                  point_direct.scaled(surface, relit_direct, rho))[1][0]
+    expected += emission[scene.triangle_patch][:, None, :]
     np.testing.assert_allclose(relit, expected, rtol=0, atol=1e-12 * expected.max())
     with pytest.raises(ValueError, match=r"parts must have shape \(6, \.\.\., 3\)"):
         combine(r.per_source, parts["smooth"][:5], WEIGHTS)

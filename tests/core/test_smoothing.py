@@ -489,15 +489,13 @@ def test_the_filtered_light_and_its_corners_add_up_over_parts_with_negative_ligh
 def test_the_light_arriving_at_black_channels_fills_from_neighbours_linearly():
     """arriving_light: where a channel's reflectivity is 0 the light is the neighbours'; as a
     linear map of the parts it adds up to the whole's, which is what the pipeline shows."""
-    from addon.bpy_free import pipeline
-
     surface, _, variance, parts = _lamp_box_parts()
     P = surface.patch_count
     reflectivity = np.full((P, 3), 0.6)
     reflectivity[::3, 1] = 0.0  # green black on a third of the patches
     irradiance = parts.sum(axis=0) / 0.6
     light, apply = surface.arriving_light(irradiance, variance, reflectivity, return_filter=True)
-    assert np.array_equal(light, pipeline.arriving_light(surface, irradiance, variance, reflectivity))
+    assert np.array_equal(light, surface.arriving_light(irradiance, variance, reflectivity))
     filled, fill = surface.fill_from_neighbours(irradiance, reflectivity <= 0, return_filter=True)
     assert np.array_equal(filled, surface.fill_from_neighbours(irradiance, reflectivity <= 0))
     assert not np.allclose(filled[::3, 1], irradiance[::3, 1])

@@ -1,0 +1,237 @@
+"""Direct light at the shown mesh's corners: the light's shape inside a patch.
+
+A patch's solved light is its mean over the patch, and the smooth display (``smoothing``)
+interpolates means: a lamp's hot spot narrower than a patch, or the edge of the sun's patch
+through a window, comes out as wide as the patches. The light straight from a lamp, the sun or
+an emitting patch is cheap at a point (a point lamp's or the sun's at a point is one shadow ray,
+exact), so the display takes it point by point, as the classic two-pass methods' final gather
+does for direct light, and keeps the solve for the rest:
+
+    L = corners(H - M) + D
+
+D the direct light at every corner of the shading triangles (each lamp and the sun by
+``SAMPLES`` stratified shadow rays, each emitting material's patches by as many points chosen by
+power), M each patch's area-weighted mean of D's linear interpolation, H the solved (filtered)
+light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``) of
+the difference's positive and negative parts apart. Every patch's mean is still its solved
+value (float error; ``Surface.corner_values``' own guarantee), so the display moves no light,
+and the solve's noise stays where it was; what D adds is the light's shape within the patch.
+The sky stays in H - M (soft light, which a point estimate would need many rays for). Beside an
+emitter a corner's light is heavy-tailed: a corner whose standard error passes NOISE_SHARE of
+its patch's brightest corner's light is sampled again with MORE_SAMPLES times the samples, and a
+patch that still has one keeps that source's light in H - M (the smooth display, as without
+this module).
+
+A corner is evaluated a hundredth of the way from its point towards its patch's centre (inside
+the patch: a point on the edge shared with a wall standing on it would graze the wall). A
+corner inside another object (a floor's corner under a box; ``visibility.buried_at``) takes the
+mean of its patch's corners that are not: the camera never sees it, and a dark corner would
+spread a dark rim onto the visible part.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from .adaptive_light import _emitters, _lamps
+from .lights import WorldLight
+from .names import EXIT_RANDOM, FINITE
+from .sampling import SourceTable, stratified_by_patch
+from .tables import WalkTables
+from .visibility import buried_at
+
+SAMPLES = 16  # shadow rays a corner, per lamp and per emitting material
+MORE_SAMPLES = 8  # times the samples where a corner's light is noisier than NOISE_SHARE
+RETRIES = 2  # (16, 128, 1,024 samples)
+NOISE_SHARE = 0.04  # of the light of the patch's brightest corner: a standard error the eye would see
+INWARD = 0.01  # of the way from a corner to its patch's centre
+BLOCK_SAMPLES = 1 << 20  # samples traced at a time
+# Sobol' dimensions of a corner's sample: a point of a lamp (2, read as u[3:5]), an emitting
+# patch (u[5]) and a point of it (u[6:9]).
+DIMENSIONS = (0, 1, 2, 3, 4, 5, 6, 7, 8)
+
+
+@dataclass
+class CornerDirect:
+    """Direct light at the corners of the shading triangles: ``corners`` (T,3,3) (or (G,T,3,3)
+    per source group), and each patch's mean of its linear interpolation ``means`` (P,3) (or
+    (G,P,3))."""
+
+    corners: np.ndarray
+    means: np.ndarray
+
+
+def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0):
+    """The direct light (``CornerDirect``; None where ``has_direct`` is not) at the corners of ``triangles`` (T,3) (of
+    ``scene.vertices``; ``surface`` is ``smoothing.Surface.of`` them) from every lamp, sun and
+    emitting patch of ``scene``. Given ``groups`` > 0, ``light_group`` (L,) the group of each
+    light and ``patch_group`` (P,) of each emitting patch: each group's light apart (they add up
+    to the whole)."""
+    if not has_direct(scene):
+        return None
+    P = scene.patch_count
+    keys, first, corner_key = np.unique(surface.point.ravel().astype(np.int64) * P + np.repeat(surface.triangle_patch, 3),
+                                        return_index=True, return_inverse=True)
+    patch = keys % P
+    position = scene.vertices[np.asarray(triangles).ravel()[first]]
+    position = position + INWARD * (surface.patch_centroid[patch] - position)
+    value = _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups)  # ([G,]n,3)
+    _fill_buried(scene.geometry, position, patch, value)
+    corners = value[..., corner_key.ravel(), :].reshape(value.shape[:-2] + (-1, 3, 3))
+    return CornerDirect(corners, patch_means(surface, corners))
+
+
+def has_direct(scene):
+    """Whether ``scene`` has a lamp, a sun or an emitting patch (the sky alone stays smooth)."""
+    return bool(scene.emission.any()) or any(not isinstance(light, WorldLight) for light in scene.lights.lights)
+
+
+def patch_means(surface, corners):
+    """([G,]P,3) each patch's area-weighted mean of the linear interpolation of ``corners``
+    ([G,]T,3,3)."""
+    if corners.ndim == 4:
+        return np.stack([patch_means(surface, part) for part in corners])
+    return np.stack([surface._patch_means(np.ascontiguousarray(corners[:, :, c]).ravel()) for c in range(3)], axis=1)
+
+
+def _unit_points(g, position, patch):
+    """(3,n) unit-space points of world ``position`` (n,3) of ``patch``, in its region's frame."""
+    unit = (position - g.centre) / g.diagonal
+    if g.regions is not None:
+        unit -= g.regions.centre[g.regions.of(patch)]
+    return unit.T
+
+
+class _Corners:
+    """A block of corners as ``adaptive_light``'s lamps and emitters read sample points: unit-space
+    origins (pushed off), normals, offsets, surface points and world positions."""
+
+    def __init__(self, g, rows, surface_unit, world):
+        self.rows = rows
+        self.normal = g.patch_normal_rows.take(rows, axis=1).astype(np.float64)
+        self.offset = g.ray_offsets(rows, np.float64)
+        self.surface = surface_unit
+        self.x = surface_unit + self.normal * self.offset
+        self.world = world
+
+    def offset_of(self, live):
+        return self.offset[live] if np.ndim(self.offset) else self.offset
+
+
+def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups):
+    """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
+    lamp and each emitting group apart (``_part_at``), added up into its group's row."""
+    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
+    power = scene.patch_area * scene.emission.mean(axis=1)
+    emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
+    parts = [(light_group[k] if groups else 0, partial(_lamps, lamps=[light]))
+             for k, light in enumerate(scene.lights.lights) if not isinstance(light, WorldLight)]
+    for group in np.unique(emitter_group[power > 0]):
+        mine = np.where(emitter_group == group, power, 0.0)
+        parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine)))
+    out = np.zeros((max(groups, 1), len(patch), 3))
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 28,))))
+    with tables.numpy_turn:
+        for group, add in parts:
+            out[group] += _part_at(tables, position, patch, samples, rng, add)
+    return out if groups else out[0]
+
+
+def _part_at(tables, position, patch, samples, rng, add):
+    """(n,3) one lamp's or emitting group's light (``add(tables, points, u, value)``) at the
+    points: the mean of ``samples`` stratified samples, MORE_SAMPLES times as many (RETRIES
+    times at most) where a corner's standard error passes NOISE_SHARE of its patch's
+    brightest corner's light (beside an emitter the light is heavy-tailed); 0 on the patches
+    where one still does (their light stays in the solve's smooth display)."""
+    value, error = _sampled(tables, position, patch, samples, rng, add)
+    noisy = _noisy(patch, value, error)
+    for _ in range(RETRIES):
+        if not noisy.any():
+            return value
+        samples *= MORE_SAMPLES
+        again = np.flatnonzero(noisy)
+        value[again], error[again] = _sampled(tables, position[again], patch[again], samples, rng, add)
+        noisy = _noisy(patch, value, error)
+    value[np.isin(patch, patch[noisy])] = 0.0
+    return value
+
+
+def _noisy(patch, value, error):
+    """(n,) bool: the corners whose standard error passes NOISE_SHARE of their patch's brightest."""
+    grey = value.sum(axis=1)
+    brightest = np.zeros(patch.max(initial=0) + 1)
+    np.maximum.at(brightest, patch, grey)
+    return error > NOISE_SHARE * brightest[patch]
+
+
+def _sampled(tables, position, patch, samples, rng, add):
+    """((n,3) the mean of ``samples`` stratified samples at each point, (n,) its standard error
+    (channels summed))."""
+    g = tables.geometry
+    mean, error = np.empty((len(patch), 3)), np.empty(len(patch))
+    step = max(1, BLOCK_SAMPLES // samples)
+    for start in range(0, len(patch), step):
+        block = slice(start, min(len(patch), start + step))
+        n = block.stop - block.start
+        u = stratified_by_patch(np.repeat(np.arange(n), samples), n, DIMENSIONS, rng, dtype=np.float32)
+        unit = np.repeat(_unit_points(g, position[block], patch[block]), samples, axis=1)
+        points = _Corners(g, np.repeat(patch[block], samples), unit, np.repeat(position[block].T, samples, axis=1))
+        value = np.zeros((3, n * samples))
+        add(tables, points, u=u, value=value)
+        value = value.reshape(3, n, samples)
+        mean[block] = value.mean(axis=2).T
+        error[block] = value.sum(axis=0).std(axis=1, ddof=1) / np.sqrt(samples)
+    return mean, error
+
+
+def _fill_buried(g, position, patch, value):
+    """Gives each corner inside another object (``visibility.buried_at``) the mean of its patch's
+    corners that are not (0 where none is), in place; ``value`` ([G,]n,3)."""
+    buried_patches = g.buried
+    if buried_patches is None:
+        return
+    candidates = np.flatnonzero(np.isin(patch, np.concatenate([buried_patches.patch, buried_patches.whole])))
+    if not candidates.size:
+        return
+    rows = patch[candidates]
+    pushed = _unit_points(g, position[candidates], rows) + g.patch_normal_rows.take(rows, axis=1) * g.ray_offsets(rows, np.float64)
+    inside = candidates[buried_at(g, pushed, rows)]
+    if not inside.size:
+        return
+    seen = np.ones(len(patch), bool)
+    seen[inside] = False
+    count = np.bincount(patch, weights=seen, minlength=g.patch_count)
+    for part in value.reshape((-1,) + value.shape[-2:]):
+        for c in range(3):
+            total = np.bincount(patch, weights=part[:, c] * seen, minlength=g.patch_count)
+            part[inside, c] = np.divide(total, count, out=np.zeros_like(total), where=count > 0)[patch[inside]]
+
+
+def scaled(surface, direct, factor):
+    """``direct`` times per-patch ``factor`` (P,3) (a reflectivity: the reflected light's share)."""
+    return CornerDirect(direct.corners * factor[surface.triangle_patch][:, None, :], direct.means * factor)
+
+
+def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float64):
+    """(T,3,3) the corners shown for per-patch ``values`` (P,3) whose direct part is ``direct``
+    (None: ``Surface.corner_values`` alone): corners(values - M) + D (the module's docstring);
+    with ``parts`` (S,P,3), each group's values as linear maps of the whole's make them (adding
+    up to ``values``), and ``part_direct`` their CornerDirect, also (S,T,3,3) each group's
+    corners, adding up to the whole's."""
+    if direct is None:
+        whole, apply = surface.corner_values(values, return_filter=True)
+        return whole if parts is None else (whole, apply(parts, dtype))
+    rest = values - direct.means
+    up, up_map = surface.corner_values(np.maximum(rest, 0.0), return_filter=True)
+    down, down_map = surface.corner_values(np.maximum(-rest, 0.0), return_filter=True)
+    up -= down
+    up += direct.corners
+    if parts is None:
+        return up
+    part_rest = parts - part_direct.means
+    each = up_map(part_rest, dtype)
+    each -= down_map(-part_rest, dtype)
+    each += part_direct.corners
+    return up, each
