@@ -21,6 +21,7 @@ import bpy
 from ..blender_read.materials import _shader_node, surface_terms
 
 TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
+LIVE_PROPERTY = "radiosity_live_lamps"  # marks copies whose own shader the lamps light (textured_material)
 TEXTURED_SUFFIX = " Radiosity"
 IDENTITY = ((1.0, 1.0, 1.0), (0.0, 0.0, 0.0))  # (scale, offset): the base colour is the reflectivity
 # The panel's switch to the flat per-patch colours, read by every result material from the scene
@@ -53,11 +54,12 @@ def can_copy(material):
     return True, None
 
 
-def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY):
+def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, live=False):
     """A new material showing ``source``'s base colour * scale + offset (``terms``, RGB each)
     times the colour attribute ``light_attribute``, plus its emission, or, where the panel's
     flat switch is on, the colour attribute ``flat_attribute``; ``can_copy(source)`` must
-    hold. The copy is cut down to what drives that, and marked as ours."""
+    hold. The copy is cut down to what drives that, and marked as ours. ``live``: its own
+    shader is kept too, for the lamps to light (``_lit_by_lamps``)."""
     material = source.copy()
     material.name = source.name + TEXTURED_SUFFIX
     for key in list(material.keys()):  # (a copy carries the source's custom properties)
@@ -101,12 +103,46 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY):
 
     emission = emission_output(tree, total, flat_attribute, (x + 600, y))
     output = nodes.new("ShaderNodeOutputMaterial")
-    output.location = (x + 1000, y)
+    output.location = (x + 1200, y)
     output.target = "ALL"
-    links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    surface_shader = emission.outputs["Emission"]
+    if live and shader.bl_idname in _BASE:
+        surface_shader = _lit_by_lamps(tree, shader, emission, (x + 800, y))
+        material[LIVE_PROPERTY] = True
+    links.new(surface_shader, output.inputs["Surface"])
     _keep_only_upstream(tree, output)
     output.is_active_output = True
     return material
+
+
+def _lit_by_lamps(tree, shader, emission, location):
+    """The surface shader of a live result: the source's own shader (its emission off: the
+    Emission shader shows it), lit by the scene's lamps as the renderer draws them, added to
+    ``emission`` seen by the camera alone (the solved light, which must light nothing); where the
+    flat switch is on, the flat colours alone."""
+    nodes, links = tree.nodes, tree.links
+    x, y = location
+    for name in _EMISSION.get(shader.bl_idname, ())[1:]:  # (its strength)
+        for link in list(shader.inputs[name].links):
+            links.remove(link)
+        shader.inputs[name].default_value = 0.0
+    path = nodes.new("ShaderNodeLightPath")
+    path.location = (x - 200, y + 300)
+    links.new(path.outputs["Is Camera Ray"], emission.inputs["Strength"])
+    added = nodes.new("ShaderNodeAddShader")
+    added.location = (x, y)
+    links.new(emission.outputs["Emission"], added.inputs[0])
+    links.new(shader.outputs[0], added.inputs[1])
+    switch = nodes.new("ShaderNodeAttribute")
+    switch.attribute_type = "VIEW_LAYER"
+    switch.attribute_name = FLAT_SWITCH
+    switch.location = (x, y + 250)
+    mix = nodes.new("ShaderNodeMixShader")
+    mix.location = (x + 200, y)
+    links.new(switch.outputs["Fac"], mix.inputs["Fac"])
+    links.new(added.outputs[0], mix.inputs[1])
+    links.new(emission.outputs["Emission"], mix.inputs[2])
+    return mix.outputs[0]
 
 
 def _emitted(tree, shader, location):
@@ -183,10 +219,10 @@ def _keep_only_upstream(tree, output):
         tree.nodes.remove(node)
 
 
-def result_materials(slot_names, light_attribute, flat_attribute, fallback, notes, made):
+def result_materials(slot_names, light_attribute, flat_attribute, fallback, notes, made, live=False):
     """The result material of each source slot: the textured copy of the named material
-    (made once a run, kept in ``made`` by name), or ``fallback`` where there is none or it
-    cannot be copied (``notes`` get a line for the latter, once)."""
+    (made once a run, kept in ``made`` by name; ``live``: lit by the lamps too), or ``fallback``
+    where there is none or it cannot be copied (``notes`` get a line for the latter, once)."""
     out = []
     for name in slot_names:
         source = bpy.data.materials.get(name)
@@ -196,7 +232,7 @@ def result_materials(slot_names, light_attribute, flat_attribute, fallback, note
                 notes.append(note)
             # the surface as the camera sees it (a Principled BSDF's specular layer beside its base colour)
             made[name] = (textured_material(source, light_attribute, flat_attribute,
-                                            surface_terms(source)) if ok else None)
+                                            surface_terms(source), live) if ok else None)
         out.append(made[name] or fallback)
     return out
 

@@ -272,6 +272,7 @@ def write_results(context, output_data, output_mode, scene=None):
     smooth_written = output_mode in ("VERTEX", "BOTH", "TEXTURED") and any(
         p is not None for p in output_data.smooth_colours)
     flat_name = PATCH_ATTRIBUTE_NAME if smooth_written and output_mode != "VERTEX" else ATTRIBUTE_NAME
+    live = getattr(output_data, "live_lamps", False)  # (the lamps light the textured materials' own shaders)
     try:
         material = result_material(flat_name)
         for index, (arrays, faces) in enumerate(zip(output_data.patches.objects, output_data.face_colours)):
@@ -279,7 +280,7 @@ def write_results(context, output_data, output_mode, scene=None):
                 continue
             obj = _result_object(output_data, index, output_mode, layers_of[index], light_of[index], notes,
                                  lambda slots: textured.result_materials(slots, LIGHT_ATTRIBUTE_NAME, flat_name,
-                                                                         material, notes, made), material)
+                                                                         material, notes, made, live), material)
             created.append(obj)
             obj[SOURCE_PROPERTY] = arrays.name
     except Exception:

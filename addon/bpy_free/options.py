@@ -178,6 +178,11 @@ PER_SOURCE = Choice("per_source", "--per-light", "AUTO", (
      "them with new strengths and colours without tracing a ray; refused beyond patches x sources of 8 million"),
     ("OFF", "Off", "The total only: the fastest solve; a changed lamp needs a new solve"),
 ), "Per-light results", "Keep each light's own result so that turning a lamp's strength or colour relights at once")
+LIVE_LAMPS = Flag("live_lamps", "--live-lamps", False, "Live lamps",
+                  "Textured: the lamps' and suns' own light on the results is drawn by the renderer, each "
+                  "pixel's (sharp hot spots and shadows, the material's highlights), and the solve gives the rest "
+                  "('Radiosity Light' without it). Render with Max Bounces 0 and a world that lights nothing, as the "
+                  "preview and the saved file do; off (default): all of the light from the solve, right in any view")
 # --- Detail (adaptive patches) ---
 DETAIL = Choice("detail", "--detail", "OFF", (
     ("OFF", "Off", "Every patch the patch size: the same grid everywhere"),
@@ -217,7 +222,7 @@ CLUSTER = ClusterAddress("cluster", "--cluster", "", "Cluster",
                          "(DASK_DISTRIBUTED__COMM__TLS__CA_FILE, __CLIENT__CERT, __CLIENT__KEY)")
 
 SETTINGS = (METHOD, ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, DETAIL, EXIT_POINT, SAMPLING, DIRECT_LIGHT,
-            STOP_RULE, OUTPUT, PER_SOURCE, SEED,
+            STOP_RULE, OUTPUT, LIVE_LAMPS, PER_SOURCE, SEED,
             TIME_LIMIT, THREADS, SCENE_OBJECTS, LIGHT_OUTPUT, INDIRECT_OUTPUT, CLUSTER)
 
 # Patch size 0: the selection's largest extent over this.

@@ -39,6 +39,7 @@ class SolveSettings:
     threads: int | None = None
     output: str = options.OUTPUT.default
     light_output: bool = options.LIGHT_OUTPUT.default
+    live_lamps: bool = options.LIVE_LAMPS.default  # textured: the lamps' direct light drawn by Blender
     indirect_output: bool = options.INDIRECT_OUTPUT.default
     cluster: str = options.CLUSTER.default  # a Dask scheduler address; empty: this machine's threads
     direct_light: str = options.DIRECT_LIGHT.default  # "gathered": the first bounce by shadow rays (core first_shot)
@@ -66,6 +67,7 @@ class SolveOutput:
     sources: str = ""  # the sources that took part (sources_text)
     back_warning: str | None = None  # light absorbed on back sides in view of the selection (back_light_warning)
     sources_out: object = None  # relit.SourceResults of a per-source solve, else None
+    live_lamps: bool = False  # the textured light leaves the lamps' direct light to the renderer
 
     def blocked_fraction(self):
         """Share of the emitted power absorbed on the back side of faces."""
@@ -316,6 +318,7 @@ def _write_colours(out, scene, result, settings):
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
     radiosity = np.maximum(result.radiosity, 0.0)
     textured = settings.output == "TEXTURED"
+    out.live_lamps = textured and settings.live_lamps and point_direct.has_lamps(scene)
     extras = {}
     if settings.light_output and not textured:  # (the textured output writes the light smooth)
         extras[LIGHT_ATTRIBUTE] = np.maximum(result.irradiance, 0.0)
@@ -331,8 +334,8 @@ def _write_colours(out, scene, result, settings):
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
         shading = adaptive_patches.shading_arrays(patches, scene)
         smooth = _smooth_corners if out.sources_out is None else relit.SmoothSources(out, _at_polygon_corners).corners
-        for name, corners in smooth(scene, result, light=textured, shading=shading):
-            made[name] = _at_polygon_corners(patches, scene, corners, shading)
+        for name, corners in smooth(scene, result, light=textured, shading=shading, live=out.live_lamps):
+            made[name] = _at_polygon_corners(patches, scene, corners, shading, least=0.0)
             del corners  # (let go of before the next is made)
     elif both:
         shown = "the textures times each patch's own light are shown" if textured else "the flat colours are shown"
@@ -341,7 +344,8 @@ def _write_colours(out, scene, result, settings):
                          f"{options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory of the run); "
                          f"{shown}: choose Smooth colours to make them")
     out.light_domain = "CORNER" if "light" in made else "FACE"
-    flat_light = np.maximum(result.irradiance, 0.0) if textured and "light" not in made else None
+    flat_light = None if not textured or "light" in made else np.maximum(
+        result.irradiance - (point_direct.lamp_means(scene, seed=result.seed) if out.live_lamps else 0.0), 0.0)
     for k, o in enumerate(patches.objects):
         rows = patches.combined.patch_slice(k)
         out.face_colours.append(radiosity[rows] if o.receives else None)
@@ -352,10 +356,10 @@ def _write_colours(out, scene, result, settings):
             out.light_colours.append(flat_light[rows] if flat_light is not None and o.receives else None)
 
 
-def _at_polygon_corners(patches, scene, corners, shading=None):
+def _at_polygon_corners(patches, scene, corners, shading=None, least=None):
     """Per object, the values (C_k,3) at its result mesh's polygon corners, read from the triangle
     corners (T,3,3) of ``shading`` (triangles, patch of each) or else the scene's, as float32 (as
-    written); None for an object that receives no result."""
+    written; at least ``least`` where given); None for an object that receives no result."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
     out = []
@@ -365,13 +369,13 @@ def _at_polygon_corners(patches, scene, corners, shading=None):
             continue
         out.append(smoothing.polygon_corner_values(
             corners, triangles, triangle_patch, mesh.corner_patch + patches.combined.patch_offsets[k],
-            mesh.corner_verts + point_start[k]).astype(np.float32))
+            mesh.corner_verts + point_start[k]).astype(np.float32).clip(least, np.inf))
     return out
 
 
-def _smooth_corners(scene, result, light=False, shading=None):
+def _smooth_corners(scene, result, light=False, shading=None, live=False):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``Surface.arriving_light``) at every
-    corner of the scene's triangles, smooth; then ("smooth", (T,3,3)): the reflected light, its
+    corner of the scene's triangles, smooth (``live``: the lamps' direct light left out); then ("smooth", (T,3,3)): the reflected light, its
     tile noise filtered within its measured variance, joined across objects (not across hidden
     patches: core covered) and kept apart at creases (core smoothing), plus each patch's own
     emission, flat; both with the direct light's shape within each patch (core point_direct).
@@ -383,10 +387,9 @@ def _smooth_corners(scene, result, light=False, shading=None):
                                    hidden=hidden_patches(scene.geometry))
     direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed)
     if light:
-        arriving = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity)
-        yield "light", point_direct.shown(surface, arriving, direct)
+        yield "light", point_direct.light_corners(surface, scene, result, direct, live, triangles)
     reflected = surface.filter_light(result.reflected, result.reflected_variance)
-    corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity))
+    corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True))
     corners += scene.emission[triangle_patch][:, None, :]
     yield "smooth", corners
 

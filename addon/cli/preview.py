@@ -102,7 +102,8 @@ class SceneChanges:
 
 def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> SceneChanges:
     """Set the scene up to render the result objects' baked colours: Cycles without bounces
-    (the light transport is in the colours), no denoising, Standard view, the given exposure,
+    (the light transport is in the colours; live lamps light their materials directly, then
+    denoised), otherwise no denoising, Standard view, the given exposure,
     a black world of its own, PNG output, and a camera if the scene has none. Returns the
     changes, for ``restore()``."""
     import bpy
@@ -141,10 +142,7 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     changes.set(view, "view_transform", "Standard")
     changes.set(view, "look", "None")
     changes.set(view, "exposure", exposure)
-    # The results only need to be seen (no bounces): as lights, Cycles would build a light tree
-    # over every emitting triangle, which at a million patches took more memory than the scene.
-    for material in _result_materials(scene):
-        changes.set(material.cycles, "emission_sampling", "NONE")
+    _results_seen(scene, changes)
     world = bpy.data.worlds.new("Radiosity Preview World")
     world.color = (0.0, 0.0, 0.0)
     if world.node_tree is not None:
@@ -155,6 +153,19 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     changes.made(lambda world=world: bpy.data.worlds.remove(world))
     changes.keep("filepath", owner=render)
     return changes
+
+
+def _results_seen(scene, changes):
+    """The results' materials only seen: as lights, Cycles would build a light tree over every
+    emitting triangle, which at a million patches took more memory than the scene. Live lamps
+    (``LIVE_PROPERTY``): their light drawn at the preview's samples, denoised."""
+    from ..blender_write.materials import LIVE_PROPERTY
+
+    materials = _result_materials(scene)
+    for material in materials:
+        changes.set(material.cycles, "emission_sampling", "NONE")
+    if any(material.get(LIVE_PROPERTY) for material in materials):
+        changes.set(scene.cycles, "use_denoising", True)
 
 
 def _result_materials(scene):
@@ -181,7 +192,7 @@ def render_preview(path, sources, width=480, samples=16, exposure=0.0, keep_sett
 
     scene = bpy.context.scene
     changes = preview_settings(scene, sources, width, samples, exposure)
-    hidden = [(o, o.hide_render) for o in sources]
+    hidden = [(o, o.hide_render) for o in sources if o.type != "LIGHT"]  # (lamps light live results)
     try:
         for o, _ in hidden:
             o.hide_render = True

@@ -16,11 +16,17 @@ light, and corners() the mean-preserving smooth corner values (``Surface.corner_
 the difference's positive and negative parts apart. Every patch's mean is still its solved
 value (float error; ``Surface.corner_values``' own guarantee), so the display moves no light,
 and the solve's noise stays where it was; what D adds is the light's shape within the patch.
-The sky stays in H - M (soft light, which a point estimate would need many rays for). Beside an
-emitter a corner's light is heavy-tailed: a corner whose standard error passes NOISE_SHARE of
-its patch's brightest corner's light is sampled again with MORE_SAMPLES times the samples, and a
-patch that still has one keeps that source's light in H - M (the smooth display, as without
-this module).
+The sky stays in H - M (soft light, which a point estimate would need many rays for).
+
+Beside an emitter a corner's light is heavy-tailed: a corner whose standard error passes
+NOISE_SHARE of its patch's brightest corner's light is sampled again with MORE_SAMPLES times the
+samples (RETRIES times). (Giving up on the patches still above it, their smooth display beside
+their neighbours' shaped one, drew blocks on the Cornell box's walls by its light.) A patch
+whose M passes OVERSHOOT times its H (the interpolation far above its mean: a corner a
+centimetre from an emitter) shows corners(H) alone.
+
+With live lamps (``light_corners``) the renderer draws the lamps' and suns' own light pixel by
+pixel, and the light shown is H less each patch's mean of it (``lamp_means``).
 
 A corner is evaluated a hundredth of the way from its point towards its patch's centre (inside
 the patch: a point on the edge shared with a wall standing on it would graze the wall). A
@@ -35,7 +41,7 @@ from functools import partial
 
 import numpy as np
 
-from .adaptive_light import _emitters, _lamps
+from .adaptive_light import SAMPLE_DIMENSIONS, _emitters, _lamps, _Points
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .sampling import SourceTable, stratified_by_patch
@@ -46,8 +52,10 @@ SAMPLES = 16  # shadow rays a corner, per lamp and per emitting material
 MORE_SAMPLES = 8  # times the samples where a corner's light is noisier than NOISE_SHARE
 RETRIES = 2  # (16, 128, 1,024 samples)
 NOISE_SHARE = 0.04  # of the light of the patch's brightest corner: a standard error the eye would see
+OVERSHOOT = 2.0  # a patch's direct light's interpolated mean over its solved light beyond which it is not shown
 INWARD = 0.01  # of the way from a corner to its patch's centre
-BLOCK_SAMPLES = 1 << 20  # samples traced at a time
+BLOCK_SAMPLES = 1 << 17  # samples traced at a time (about 40 MB of temporaries)
+LAMP_MEAN_SAMPLES = 64  # points a patch for its mean of the lamps' light (lamp_means)
 # Sobol' dimensions of a corner's sample: a point of a lamp (2, read as u[3:5]), an emitting
 # patch (u[5]) and a point of it (u[6:9]).
 DIMENSIONS = (0, 1, 2, 3, 4, 5, 6, 7, 8)
@@ -63,13 +71,14 @@ class CornerDirect:
     means: np.ndarray
 
 
-def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0):
-    """The direct light (``CornerDirect``; None where ``has_direct`` is not) at the corners of ``triangles`` (T,3) (of
-    ``scene.vertices``; ``surface`` is ``smoothing.Surface.of`` them) from every lamp, sun and
-    emitting patch of ``scene``. Given ``groups`` > 0, ``light_group`` (L,) the group of each
-    light and ``patch_group`` (P,) of each emitting patch: each group's light apart (they add up
-    to the whole)."""
-    if not has_direct(scene):
+def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0,
+                  lamps=True):
+    """The direct light (``CornerDirect``; None where ``has_direct`` is not) at the corners of
+    ``triangles`` (T,3) (of ``scene.vertices``; ``surface`` is ``smoothing.Surface.of`` them)
+    from every lamp and sun (not with ``lamps`` False) and emitting patch of ``scene``. Given
+    ``groups`` > 0, ``light_group`` (L,) the group of each light and ``patch_group`` (P,) of
+    each emitting patch: each group's light apart (they add up to the whole)."""
+    if not has_direct(scene, lamps):
         return None
     P = scene.patch_count
     keys, first, corner_key = np.unique(surface.point.ravel().astype(np.int64) * P + np.repeat(surface.triangle_patch, 3),
@@ -77,15 +86,23 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     patch = keys % P
     position = scene.vertices[np.asarray(triangles).ravel()[first]]
     position = position + INWARD * (surface.patch_centroid[patch] - position)
-    value = _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups)  # ([G,]n,3)
+    value = _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, lamps)  # ([G,]n,3)
     _fill_buried(scene.geometry, position, patch, value)
+    if not groups:  # (the whole's corners as written, float32: the memory of the largest scenes)
+        value = value.astype(np.float32)
     corners = value[..., corner_key.ravel(), :].reshape(value.shape[:-2] + (-1, 3, 3))
     return CornerDirect(corners, patch_means(surface, corners))
 
 
-def has_direct(scene):
-    """Whether ``scene`` has a lamp, a sun or an emitting patch (the sky alone stays smooth)."""
-    return bool(scene.emission.any()) or any(not isinstance(light, WorldLight) for light in scene.lights.lights)
+def has_direct(scene, lamps=True):
+    """Whether ``scene`` has a lamp or a sun (with ``lamps``) or an emitting patch (the sky alone
+    stays smooth)."""
+    return bool(scene.emission.any()) or (lamps and has_lamps(scene))
+
+
+def has_lamps(scene):
+    """Whether ``scene`` has a lamp or a sun (a light other than the world)."""
+    return any(not isinstance(light, WorldLight) for light in scene.lights.lights)
 
 
 def patch_means(surface, corners):
@@ -93,7 +110,8 @@ def patch_means(surface, corners):
     ([G,]T,3,3)."""
     if corners.ndim == 4:
         return np.stack([patch_means(surface, part) for part in corners])
-    return np.stack([surface._patch_means(np.ascontiguousarray(corners[:, :, c]).ravel()) for c in range(3)], axis=1)
+    return np.stack([surface._patch_means(np.ascontiguousarray(corners[:, :, c], dtype=np.float64).ravel())
+                     for c in range(3)], axis=1)
 
 
 def _unit_points(g, position, patch):
@@ -120,14 +138,14 @@ class _Corners:
         return self.offset[live] if np.ndim(self.offset) else self.offset
 
 
-def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups):
+def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, lamps=True):
     """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
     lamp and each emitting group apart (``_part_at``), added up into its group's row."""
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     power = scene.patch_area * scene.emission.mean(axis=1)
     emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
     parts = [(light_group[k] if groups else 0, partial(_lamps, lamps=[light]))
-             for k, light in enumerate(scene.lights.lights) if not isinstance(light, WorldLight)]
+             for k, light in enumerate(scene.lights.lights) if lamps and not isinstance(light, WorldLight)]
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
         parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine)))
@@ -143,18 +161,16 @@ def _part_at(tables, position, patch, samples, rng, add):
     """(n,3) one lamp's or emitting group's light (``add(tables, points, u, value)``) at the
     points: the mean of ``samples`` stratified samples, MORE_SAMPLES times as many (RETRIES
     times at most) where a corner's standard error passes NOISE_SHARE of its patch's
-    brightest corner's light (beside an emitter the light is heavy-tailed); 0 on the patches
-    where one still does (their light stays in the solve's smooth display)."""
+    brightest corner's light (beside an emitter the light is heavy-tailed)."""
     value, error = _sampled(tables, position, patch, samples, rng, add)
     noisy = _noisy(patch, value, error)
     for _ in range(RETRIES):
         if not noisy.any():
-            return value
+            break
         samples *= MORE_SAMPLES
         again = np.flatnonzero(noisy)
         value[again], error[again] = _sampled(tables, position[again], patch[again], samples, rng, add)
         noisy = _noisy(patch, value, error)
-    value[np.isin(patch, patch[noisy])] = 0.0
     return value
 
 
@@ -209,29 +225,90 @@ def _fill_buried(g, position, patch, value):
             part[inside, c] = np.divide(total, count, out=np.zeros_like(total), where=count > 0)[patch[inside]]
 
 
-def scaled(surface, direct, factor):
-    """``direct`` times per-patch ``factor`` (P,3) (a reflectivity: the reflected light's share)."""
-    return CornerDirect(direct.corners * factor[surface.triangle_patch][:, None, :], direct.means * factor)
+def scaled(surface, direct, factor, in_place=False):
+    """``direct`` times per-patch ``factor`` (P,3) (a reflectivity: the reflected light's share);
+    ``in_place``: ``direct`` itself, changed (the memory of a copy)."""
+    if not in_place:
+        return CornerDirect(direct.corners * factor[surface.triangle_patch][:, None, :], direct.means * factor)
+    direct.corners *= factor[surface.triangle_patch][:, None, :]
+    direct.means *= factor
+    return direct
 
 
 def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float64):
     """(T,3,3) the corners shown for per-patch ``values`` (P,3) whose direct part is ``direct``
-    (None: ``Surface.corner_values`` alone): corners(values - M) + D (the module's docstring);
-    with ``parts`` (S,P,3), each group's values as linear maps of the whole's make them (adding
-    up to ``values``), and ``part_direct`` their CornerDirect, also (S,T,3,3) each group's
-    corners, adding up to the whole's."""
+    (None: ``Surface.corner_values`` alone): corners(values - M) + D (the module's docstring),
+    the difference's positive and negative parts apart; a patch whose M passes OVERSHOOT times
+    its value in a channel shows its smooth value alone. With ``parts`` (S,P,3), each group's
+    values as linear maps of the whole's make them (adding up to ``values``), and
+    ``part_direct`` their CornerDirect, also (S,T,3,3) each group's corners, adding up to the
+    whole's. A corner may come out below 0 (the negative part's spread), as the writer clips."""
+    maps = parts is not None
     if direct is None:
+        if not maps:
+            return surface.corner_values(values)
         whole, apply = surface.corner_values(values, return_filter=True)
-        return whole if parts is None else (whole, apply(parts, dtype))
+        return whole, apply(parts, dtype)
+    keep = (values * OVERSHOOT >= direct.means).all(axis=1)
+    direct = _kept(surface, direct, keep)
     rest = values - direct.means
-    up, up_map = surface.corner_values(np.maximum(rest, 0.0), return_filter=True)
-    down, down_map = surface.corner_values(np.maximum(-rest, 0.0), return_filter=True)
-    up -= down
-    up += direct.corners
-    if parts is None:
-        return up
+    negative = (rest < 0).any()
+    up = surface.corner_values(np.maximum(rest, 0.0), return_filter=maps)
+    down = surface.corner_values(np.maximum(-rest, 0.0), return_filter=maps) if negative else None
+    shown_corners = up[0] if maps else up
+    if negative:
+        shown_corners -= down[0] if maps else down
+    shown_corners += direct.corners
+    if not maps:
+        return shown_corners
+    part_direct = _kept(surface, part_direct, keep)
     part_rest = parts - part_direct.means
-    each = up_map(part_rest, dtype)
-    each -= down_map(-part_rest, dtype)
+    each = up[1](part_rest, dtype)
+    if negative:
+        each -= down[1](-part_rest, dtype)
     each += part_direct.corners
-    return up, each
+    return shown_corners, each
+
+
+def _kept(surface, direct, keep):
+    """``direct`` with nothing on the patches not in ``keep`` (P,) bool (itself where all are)."""
+    if keep.all():
+        return direct
+    return CornerDirect(direct.corners * keep[surface.triangle_patch][:, None, None],
+                        direct.means * keep[:, None])
+
+
+def light_corners(surface, scene, result, direct, live=False, triangles=None):
+    """(T,3,3) the light arriving (``Surface.arriving_light``) shown at the corners with the
+    direct light's shape (``shown``; ``direct`` the CornerDirect of every source). ``live``:
+    without the lamps' and suns' light (``lamp_means``), which the renderer draws itself; the
+    emitting patches' direct light shaped as before (``triangles``: the surface's, for it)."""
+    irradiance = result.irradiance
+    if live:
+        irradiance = irradiance - lamp_means(scene, seed=result.seed)
+        direct = corner_direct(surface, scene, triangles, seed=result.seed, lamps=False)
+    return shown(surface, surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity), direct)
+
+
+def lamp_means(scene, samples=LAMP_MEAN_SAMPLES, seed=0, light_group=None, groups=0):
+    """([G,]P,3) each patch's mean of the lamps' and suns' direct light (each ``samples``
+    stratified points over its visible part, every lamp looked at from each): the light a
+    renderer draws live where the lamps light the surfaces themselves (``LIVE`` results), to
+    leave out of the solved light. Given ``groups`` > 0 and ``light_group`` (L,), each group's."""
+    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
+    g, P = tables.geometry, scene.patch_count
+    lamps = [(k, light) for k, light in enumerate(scene.lights.lights) if not isinstance(light, WorldLight)]
+    out = np.zeros((max(groups, 1), P, 3))
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 27,))))
+    step = max(1, BLOCK_SAMPLES // samples)
+    with tables.numpy_turn:
+        for start in range(0, P, step):
+            rows = np.repeat(np.arange(start, min(P, start + step)), samples)
+            u = stratified_by_patch(rows, P, SAMPLE_DIMENSIONS, rng, dtype=np.float32)
+            points = _Points(g, rows, u)
+            for k, light in lamps:
+                value = np.zeros((3, rows.size))
+                _lamps(tables, points, [light], u, value)
+                out[light_group[k] if groups else 0, start:start + rows.size // samples] += (
+                    value.reshape(3, -1, samples).mean(axis=2).T)
+    return out if groups else out[0]

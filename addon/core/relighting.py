@@ -187,7 +187,7 @@ def combine(per_source, parts, weights):
     return _combine(flat, w).reshape(parts.shape[1:])
 
 
-def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triangles=None):
+def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triangles=None, live=False):
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
     they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
@@ -201,14 +201,23 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     per_source = result.per_source
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
-    direct = point_direct.corner_direct(surface, scene, scene.triangles if triangles is None else triangles,
+    triangles = scene.triangles if triangles is None else triangles
+    direct = point_direct.corner_direct(surface, scene, triangles,
                                         seed=result.seed, light_group=per_source.light_group,
                                         patch_group=per_source.patch_group, groups=per_source.count)
-    whole = None if direct is None else point_direct.CornerDirect(direct.corners.sum(axis=0), direct.means.sum(axis=0))
+    whole = _summed(direct)
     if light:
-        arriving, fill = surface.arriving_light(result.irradiance, result.irradiance_variance, scene.reflectivity,
+        irradiance, total, shaped, shaped_whole = per_source.irradiance, result.irradiance, direct, whole
+        if live:  # (the lamps' direct light left to the renderer: point_direct.light_corners)
+            lamps = point_direct.lamp_means(scene, seed=result.seed, light_group=per_source.light_group,
+                                            groups=per_source.count)
+            irradiance, total = irradiance - lamps, total - lamps.sum(axis=0)
+            shaped = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, patch_group=per_source.patch_group,
+                                                groups=per_source.count, lamps=False)
+            shaped_whole = _summed(shaped)
+        arriving, fill = surface.arriving_light(total, result.irradiance_variance, scene.reflectivity,
                                                 return_filter=True)
-        yield "light", point_direct.shown(surface, arriving, whole, fill(per_source.irradiance), direct, dtype)[1]
+        yield "light", point_direct.shown(surface, arriving, shaped_whole, fill(irradiance), shaped, dtype)[1]
     filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
     rho = scene.reflectivity
     _, smooth = point_direct.shown(surface, filtered, whole and point_direct.scaled(surface, whole, rho),
@@ -217,6 +226,11 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     for s in range(per_source.count):  # (a part at a time: no (S,T,3) copy)
         smooth[s] += emitting[s, surface.triangle_patch][:, None, :]
     yield "smooth", smooth
+
+
+def _summed(direct):
+    """The whole's CornerDirect of a per-group one (None stays None)."""
+    return None if direct is None else point_direct.CornerDirect(direct.corners.sum(axis=0), direct.means.sum(axis=0))
 
 
 def per_source_emission(scene, per_source):

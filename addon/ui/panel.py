@@ -50,6 +50,9 @@ def draw_settings(layout, settings):
     row.prop(settings, "direct_light")
     col.prop(settings, "stop_rule")
     layout.prop(settings, "output")
+    row = layout.row()
+    row.active = settings.output == "TEXTURED"
+    row.prop(settings, "live_lamps")
     layout.prop(settings, "per_source")
     layout.prop(settings, "show_patches")
     row = layout.row(align=True)

@@ -76,6 +76,8 @@ class RadiositySettings(bpy.types.PropertyGroup):
     )
     use_scene_objects: BoolProperty(name=options.SCENE_OBJECTS.label, description=options.SCENE_OBJECTS.description,
                                     default=options.SCENE_OBJECTS.default, update=_changed)
+    live_lamps: BoolProperty(name=options.LIVE_LAMPS.label, description=options.LIVE_LAMPS.description,
+                             default=options.LIVE_LAMPS.default)
     light_output: BoolProperty(name=options.LIGHT_OUTPUT.label, description=options.LIGHT_OUTPUT.description,
                                default=options.LIGHT_OUTPUT.default)
     indirect_output: BoolProperty(name=options.INDIRECT_OUTPUT.label, description=options.INDIRECT_OUTPUT.description,
@@ -123,6 +125,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
             threads=int(self.threads) or None,
             output=self.output,
             light_output=bool(self.light_output),
+            live_lamps=bool(self.live_lamps),
             indirect_output=bool(self.indirect_output),
             cluster=self.cluster.strip(),
             per_source=self.per_source,

@@ -225,9 +225,9 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
     parts = dict(smooth_sources(surface, scene, r, light=True))
     whole = dict(pipeline._smooth_corners(scene, r, light=True))
-    for name in ("light", "smooth"):
+    for name in ("light", "smooth"):  # (float32 rounding: the pipeline keeps the whole's direct light as written)
         assert parts[name].shape == (6,) + whole[name].shape
-        np.testing.assert_allclose(parts[name].sum(axis=0), whole[name], rtol=0, atol=1e-13 * whole[name].max())
+        np.testing.assert_allclose(parts[name].sum(axis=0), whole[name], rtol=0, atol=1e-6 * whole[name].max())
     # recombined with new weights, the smooth parts are the whole's smoothing applied to the relit parts
     relit = combine(r.per_source, parts["smooth"], WEIGHTS)
     assert relit.shape == whole["smooth"].shape

@@ -187,9 +187,10 @@ def _top_camera(scene, location, ortho_scale, pixels):
     scene.render.threads_mode, scene.render.threads = "FIXED", 1
 
 
-def _preview_centres(blender, tmp_path, name="preview.png"):
+def _preview_centres(blender, tmp_path, name="preview.png", exposure=None):
     """The linear grey of the centre pixel of each checker square, (SQUARES, SQUARES), from the
-    preview rendered from above at 8 pixels a square."""
+    preview rendered from above at 8 pixels a square (``exposure``: by default, the brightest
+    square's light just below white)."""
     scene = blender.scene
     if scene.camera is None:
         _top_camera(scene, (0.5, 0.5, 2.0), 1.0, 8 * SQUARES)
@@ -199,7 +200,8 @@ def _preview_centres(blender, tmp_path, name="preview.png"):
         values = np.empty(len(attr.data) * 4, np.float32)
         attr.data.foreach_get("color", values)
         light = np.concatenate([light, values.reshape(-1, 4)[:, :3].ravel()])
-    exposure = float(np.log2(0.9 / (0.8 * light.max())))  # the brightest square just below white
+    if exposure is None:
+        exposure = float(np.log2(0.9 / (0.8 * light.max())))
     path = str(tmp_path / name)
     render_preview(path, [o for o in bpy.data.objects if o.name == "Floor"], width=8 * SQUARES, samples=4,
                    exposure=exposure)
@@ -208,6 +210,14 @@ def _preview_centres(blender, tmp_path, name="preview.png"):
     image.pixels.foreach_get(pixels)
     grey = _linear(pixels.reshape(8 * SQUARES, 8 * SQUARES, 4)[..., :3].mean(axis=2))
     return grey[4::8, 4::8]
+
+
+def _light_of(obj):
+    """(C,3) the result's 'Radiosity Light' colours."""
+    light = obj.data.attributes["Radiosity Light"]
+    values = np.empty(len(light.data) * 4, np.float32)
+    light.data.foreach_get("color", values)
+    return values.reshape(-1, 4)[:, :3]
 
 
 def _neighbour_ratios(centres):
@@ -300,3 +310,31 @@ def test_a_principled_floor_s_copy_shows_its_specular_light_beside_its_base_colo
     assert np.allclose(node.inputs[1].default_value[:], scale, atol=1e-6)
     assert np.allclose(node.inputs[2].default_value[:], offset, atol=1e-6)
     assert min(offset) > 0.01 and max(scale) < 1.0
+
+
+def test_live_lamps_leave_the_lamps_own_light_to_the_renderer_and_show_the_same_picture(blender, tmp_path):
+    """Live lamps: a lone floor under a point lamp has no light but the lamp's own, so its
+    'Radiosity Light' is 0 (within 1% of the baked one: the solve's and the lamps' patch means,
+    each from its own points; the lamp's light drawn by the renderer, each pixel's; the emission is
+    seen by the camera alone and lights nothing), its material adds its own Principled shader for
+    the lamp to light; the preview (Cycles, no bounces, denoised) shows the checker's 8:1 and,
+    square by square, the baked preview's picture within 5% (the solve's 5% patches against the
+    renderer's pixels; Lambertian: Specular IOR Level 0)."""
+    floor, material = _checker_floor()
+    material.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
+    baked_light = _light_of(_solve(blender)["Floor"])
+    exposure = float(np.log2(0.9 / (0.8 * baked_light.max())))
+    baked = _preview_centres(blender, tmp_path, "baked.png", exposure)
+    results = _solve(blender, live_lamps=True)
+    assert np.abs(_light_of(results["Floor"])).max() < 0.01 * baked_light.max()
+    copy = results["Floor"].data.materials[0]
+    nodes = copy.node_tree.nodes
+    kinds = {n.bl_idname for n in nodes}
+    assert {"ShaderNodeBsdfPrincipled", "ShaderNodeAddShader", "ShaderNodeMixShader", "ShaderNodeLightPath"} <= kinds
+    emission = next(n for n in nodes if n.bl_idname == "ShaderNodeEmission")
+    assert emission.inputs["Strength"].links[0].from_socket.name == "Is Camera Ray"
+    assert material.node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value == 0  # (the user's untouched)
+    live = _preview_centres(blender, tmp_path, "live.png", exposure)
+    assert 8 / 1.15 < np.median(_neighbour_ratios(live)) < 8 * 1.15
+    ratio = live / baked
+    assert 0.95 < np.median(ratio) < 1.05 and np.percentile(np.abs(ratio - 1), 90) < 0.05, np.percentile(ratio, [5, 50, 95])
