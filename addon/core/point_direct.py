@@ -12,8 +12,8 @@ does for direct light, and keeps the solve for the rest:
 D the direct light at every corner of the shading triangles (each lamp and the sun by
 ``SAMPLES`` stratified shadow rays, each emitting material's patches by as many points chosen by
 power), M each patch's area-weighted mean of D's linear interpolation, H the solved (filtered)
-light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``) of
-the difference's positive and negative parts apart. Every patch's mean is still its solved
+light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``).
+Every patch's mean is still its solved
 value (float error; ``Surface.corner_values``' own guarantee), so the display moves no light,
 and the solve's noise stays where it was; what D adds is the light's shape within the patch.
 The sky stays in H - M (soft light, which a point estimate would need many rays for).
@@ -21,9 +21,12 @@ The sky stays in H - M (soft light, which a point estimate would need many rays 
 Beside an emitter a corner's light is heavy-tailed: a corner whose standard error passes
 NOISE_SHARE of its patch's brightest corner's light is sampled again with MORE_SAMPLES times the
 samples (RETRIES times). (Giving up on the patches still above it, their smooth display beside
-their neighbours' shaped one, drew blocks on the Cornell box's walls by its light.) A patch
-whose M passes OVERSHOOT times its H (the interpolation far above its mean: a corner a
-centimetre from an emitter) shows corners(H) alone.
+their neighbours' shaped one, drew blocks on the Cornell box's walls by its light.) Where M
+passes H (the interpolation of a peak above its mean, or the solve's noise) the patch's D is
+scaled down to H, its shape kept: H - M is never negative, and the display one smoothing of it
+(the negative part smoothed apart had spread below black and cost a third smoothing's memory);
+where M passes OVERSHOOT times H (a corner a centimetre from an emitter) it shows corners(H)
+alone.
 
 With live lamps (``light_corners``) the renderer draws the lamps' and suns' own light pixel by
 pixel, and the light shown is H less each patch's mean of it (``lamp_means``).
@@ -54,7 +57,7 @@ RETRIES = 2  # (16, 128, 1,024 samples)
 NOISE_SHARE = 0.04  # of the light of the patch's brightest corner: a standard error the eye would see
 OVERSHOOT = 2.0  # a patch's direct light's interpolated mean over its solved light beyond which it is not shown
 INWARD = 0.01  # of the way from a corner to its patch's centre
-BLOCK_SAMPLES = 1 << 17  # samples traced at a time (about 40 MB of temporaries)
+BLOCK_SAMPLES = 1 << 15  # samples traced at a time (about 500 bytes of temporaries each)
 LAMP_MEAN_SAMPLES = 64  # points a patch for its mean of the lamps' light (lamp_means)
 # Sobol' dimensions of a corner's sample: a point of a lamp (2, read as u[3:5]), an emitting
 # patch (u[5]) and a point of it (u[6:9]).
@@ -84,8 +87,14 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     keys, first, corner_key = np.unique(surface.point.ravel().astype(np.int64) * P + np.repeat(surface.triangle_patch, 3),
                                         return_index=True, return_inverse=True)
     patch = keys % P
+    del keys
     position = scene.vertices[np.asarray(triangles).ravel()[first]]
-    position = position + INWARD * (surface.patch_centroid[patch] - position)
+    del first
+    towards = surface.patch_centroid[patch]  # (in place: four (n,3) temporaries were most of this stage's memory)
+    towards -= position
+    towards *= INWARD
+    position += towards
+    del towards
     value = _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, lamps)  # ([G,]n,3)
     _fill_buried(scene.geometry, position, patch, value)
     if not groups:  # (the whole's corners as written, float32: the memory of the largest scenes)
@@ -186,7 +195,7 @@ def _sampled(tables, position, patch, samples, rng, add):
     """((n,3) the mean of ``samples`` stratified samples at each point, (n,) its standard error
     (channels summed))."""
     g = tables.geometry
-    mean, error = np.empty((len(patch), 3)), np.empty(len(patch))
+    mean, error = np.empty((len(patch), 3), np.float32), np.empty(len(patch), np.float32)  # (as shown)
     step = max(1, BLOCK_SAMPLES // samples)
     for start in range(0, len(patch), step):
         block = slice(start, min(len(patch), start + step))
@@ -238,44 +247,43 @@ def scaled(surface, direct, factor, in_place=False):
 def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float64):
     """(T,3,3) the corners shown for per-patch ``values`` (P,3) whose direct part is ``direct``
     (None: ``Surface.corner_values`` alone): corners(values - M) + D (the module's docstring),
-    the difference's positive and negative parts apart; a patch whose M passes OVERSHOOT times
-    its value in a channel shows its smooth value alone. With ``parts`` (S,P,3), each group's
-    values as linear maps of the whole's make them (adding up to ``values``), and
+    D scaled on the patches where M passes the value (``_fitted``). With ``parts`` (S,P,3), each
+    group's values as linear maps of the whole's make them (adding up to ``values``), and
     ``part_direct`` their CornerDirect, also (S,T,3,3) each group's corners, adding up to the
-    whole's. A corner may come out below 0 (the negative part's spread), as the writer clips."""
+    whole's."""
     maps = parts is not None
     if direct is None:
         if not maps:
             return surface.corner_values(values)
         whole, apply = surface.corner_values(values, return_filter=True)
         return whole, apply(parts, dtype)
-    keep = (values * OVERSHOOT >= direct.means).all(axis=1)
-    direct = _kept(surface, direct, keep)
-    rest = values - direct.means
-    negative = (rest < 0).any()
-    up = surface.corner_values(np.maximum(rest, 0.0), return_filter=maps)
-    down = surface.corner_values(np.maximum(-rest, 0.0), return_filter=maps) if negative else None
-    shown_corners = up[0] if maps else up
-    if negative:
-        shown_corners -= down[0] if maps else down
+    scale = _fitted(values, direct.means)
+    direct = _kept(surface, direct, scale)
+    shown_corners, apply = surface.corner_values(values - direct.means, return_filter=True) if maps else (
+        surface.corner_values(values - direct.means), None)
     shown_corners += direct.corners
     if not maps:
         return shown_corners
-    part_direct = _kept(surface, part_direct, keep)
-    part_rest = parts - part_direct.means
-    each = up[1](part_rest, dtype)
-    if negative:
-        each -= down[1](-part_rest, dtype)
+    part_direct = _kept(surface, part_direct, scale)
+    each = apply(parts - part_direct.means, dtype)
     each += part_direct.corners
     return shown_corners, each
 
 
-def _kept(surface, direct, keep):
-    """``direct`` with nothing on the patches not in ``keep`` (P,) bool (itself where all are)."""
-    if keep.all():
+def _fitted(values, means):
+    """(P,3) each patch's scale of its direct light: 1, or its value over its direct light's
+    interpolated mean where that is more (the shape kept, the mean the patch's: nothing of the
+    rest below 0), 0 where the mean passes OVERSHOOT times the value."""
+    scale = np.divide(values, means, out=np.ones_like(values), where=means > values)
+    scale[(means > OVERSHOOT * values).any(axis=1)] = 0.0
+    return scale
+
+
+def _kept(surface, direct, scale):
+    """``direct`` times per-patch ``scale`` (P,3) (itself where it is 1 everywhere)."""
+    if (scale == 1).all():
         return direct
-    return CornerDirect(direct.corners * keep[surface.triangle_patch][:, None, None],
-                        direct.means * keep[:, None])
+    return CornerDirect(direct.corners * scale[surface.triangle_patch][:, None, :], direct.means * scale)
 
 
 def light_corners(surface, scene, result, direct, live=False, triangles=None):
