@@ -1,0 +1,101 @@
+"""The Detail's refinement from the solve's own estimates (bpy_free.solve_refinement): refining
+solves at a looser target split where the solved light changes, the final solve meets the user's
+target on the final mesh, reproducibly for a seed (on a cluster too), and cancel stops it."""
+import os
+import time
+
+import numpy as np
+import pytest
+
+from addon.bpy_free import adaptive_patches, pipeline, solve_refinement
+from addon.core import adaptive_light
+from addon.core.adaptive_light import Detail
+
+from test_adaptive_patches import room
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+@pytest.fixture(autouse=True)
+def roomy(monkeypatch):
+    """Medium with room left after the direct light's refinement (the test room's lamp takes
+    all of Medium's own budget)."""
+    monkeypatch.setitem(adaptive_light.DETAILS, "MEDIUM", Detail(levels=2, contrast=0.25, budget=6.0))
+
+
+def settings(**more):
+    return pipeline.SolveSettings(**{"patch_size": 0.2, "detail": "MEDIUM", "relative_rms": 0.05, "seed": 3, **more})
+
+
+def test_refining_solves_split_and_the_final_solve_meets_the_target():
+    out = pipeline.run_solve(room(), settings())
+    steps = out.patches.refinement
+    solved = [s for s in steps if s.get("solve")]
+    assert solved and solved[0]["split"] > 0
+    direct = [s for s in steps if not s.get("solve")][-1]["patches"]
+    assert out.patches.combined.patch_count == solved[-1]["patches"] > direct
+    assert out.patches.combined.patch_count <= int(6.0 * steps[0]["first"]) + 3 * 4  # (balance may add a few)
+    r = out.result
+    assert r.stopped == "target"
+    assert r.measured_mse <= out.target_mse
+    assert len(out.face_colours[0]) == out.patches.combined.patch_count
+    assert "at most" in adaptive_patches.refinement_text(out.patches)
+
+
+def test_without_refining_solves_the_direct_light_refinement_alone(monkeypatch):
+    monkeypatch.setattr(solve_refinement, "ROUNDS", 0)
+    out = pipeline.run_solve(room(), settings())
+    assert not any(s.get("solve") for s in out.patches.refinement)
+
+
+def test_the_same_seed_makes_the_same_mesh_and_result():
+    first = pipeline.run_solve(room(), settings())
+    second = pipeline.run_solve(room(), settings())
+    assert first.patches.combined.patch_count == second.patches.combined.patch_count
+    assert np.array_equal(first.result.radiosity, second.result.radiosity)
+
+
+def test_cancel_after_a_refining_solve_stops_the_run(monkeypatch):
+    """A cancel that comes while the mesh is refined by a solve's estimates: no refined mesh is
+    solved further, the run ends cancelled (the operator then writes nothing)."""
+    cancelled = []
+    refine = solve_refinement.refine_by_solve
+
+    def refine_then_cancel(*args, **kwargs):
+        cancelled.append(True)
+        return refine(*args, **kwargs)
+
+    monkeypatch.setattr(solve_refinement, "refine_by_solve", refine_then_cancel)
+    out = pipeline.run_solve(room(), settings(), should_stop=lambda: bool(cancelled))
+    assert len(cancelled) == 1  # (the second refining solve never ran)
+    assert out.result.stopped == "cancelled"
+
+
+def test_the_final_solve_has_what_is_left_of_the_time_limit():
+    s = settings(max_seconds=10.0, method="auto", per_source="OFF")
+    final = solve_refinement._final(s, "walk", time.perf_counter() - 3.0)
+    assert final.method == "walk" and 6.9 < final.max_seconds < 7.01
+    late = solve_refinement._final(s, "walk", time.perf_counter() - 30.0)
+    assert late.max_seconds == pytest.approx(10.0 * solve_refinement.SHARE)
+    assert solve_refinement._final(settings(per_source="ON"), "walk", time.perf_counter()).method == "auto"
+
+
+def test_the_predicted_time_counts_the_refining_solves():
+    objects = room()
+    patches = adaptive_patches.refined(objects, pipeline.make_patches(objects, 0.2), "MEDIUM", 3)
+    assert solve_refinement.predicted_seconds(patches, 8.0) == pytest.approx(8.0 * (1 + 2 / 4))
+    assert solve_refinement.predicted_seconds(pipeline.make_patches(objects, 0.2), 8.0) == 8.0
+
+
+def test_on_a_cluster_the_refinement_and_result_are_bitwise_the_local_ones():
+    distributed = pytest.importorskip("distributed", reason="Dask's distributed is in requirements.txt: CI installs it")
+    import dask
+
+    os.environ["PYTHONPATH"] = os.pathsep.join([ROOT, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    dask.config.set({"distributed.nanny.pre-spawn-environ": {}})
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  silence_logs=40) as cluster:
+        remote = pipeline.run_solve(room(), settings(cluster=cluster.scheduler_address))
+    local = pipeline.run_solve(room(), settings())
+    assert [s["patches"] for s in remote.patches.refinement] == [s["patches"] for s in local.patches.refinement]
+    assert np.array_equal(remote.result.radiosity, local.result.radiosity)
