@@ -90,18 +90,18 @@ def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False
 
 
 def refinement_text(patches: Patches) -> str:
-    """One line of what refinement did and may do, e.g. "Detail: 4,782 -> 6,909 patches (at most
-    11,955) in 2 steps (2.0 s), then up to 2 refining solves"."""
+    """What refinement did and may do, for the estimate's patch line, e.g. "refined from 4,782 in
+    2 steps (2.0 s), at most 11,955 after up to 2 refining solves" ("" without refinement)."""
     steps = getattr(patches, "refinement", None)
     if not steps:
         return ""
     from .solve_refinement import ROUNDS  # (it imports this module)
 
     seconds = sum(s["seconds"] for s in steps)
-    text = (f"Detail: {steps[0]['first']:,} -> {patches.combined.patch_count:,} patches (at most {steps[0]['budget']:,}) "
-            f"in {len(steps)} step{'s' if len(steps) > 1 else ''} ({seconds:.1f} s)")
-    solved = sum(1 for s in steps if s.get("solve"))
-    return text + (f", then up to {ROUNDS} refining solves" if ROUNDS and not solved else "")
+    text = (f"refined from {steps[0]['first']:,} in {len(steps)} step{'s' if len(steps) > 1 else ''} ({seconds:.1f} s), "
+            f"at most {steps[0]['budget']:,}")
+    solved = any(s.get("solve") for s in steps)
+    return text + (f" after up to {ROUNDS} refining solves" if ROUNDS and not solved else "")
 
 
 def _copy(mesh):

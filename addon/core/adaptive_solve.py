@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .adaptive import edge_keys, split
+from .adaptive import balanced, edge_keys, split
 from .adaptive_light import NOISE_Z, SMALLEST_SIDE
 from .faces import ranks_in_runs, starts_of
 from .smoothing import CREASE_ANGLE
@@ -98,14 +98,33 @@ def refine_by_solve(cells, meshes, light, variance, detail, diagonal, first_coun
         owner.append(np.full(c.count, k))
     score, owner = np.concatenate(scores), np.concatenate(owner)
     chosen = np.flatnonzero(score > 1)
-    count = int(offsets[-1])
-    room = max(0, (int(detail.budget * first_count) - count) // 3)
-    if chosen.size > room:  # the largest differences first
-        chosen = chosen[np.argsort(-score[chosen], kind="stable")[:room]]
+    chosen = chosen[np.argsort(-score[chosen], kind="stable")]  # the largest differences first
+    marks = _within_budget(cells, offsets, owner, chosen, int(detail.budget * first_count) - int(offsets[-1]))
     out = list(cells)
-    for k in range(len(cells)):
-        marked = np.zeros(cells[k].count, bool)
-        marked[chosen[owner[chosen] == k] - offsets[k]] = True
+    for k, marked in enumerate(marks):
         if marked.any():
             out[k], _ = split(cells[k], marked)
+    chosen = chosen[:int(sum(m.sum() for m in marks))]
     return out, {"candidates": int((score > 0).sum()), "split": int(chosen.size), "patches": int(sum(c.count for c in out))}
+
+
+def _within_budget(cells, offsets, owner, ranked, room):
+    """Per object, (L,) bool: the first of the ``ranked`` patches whose splits, with what balance
+    adds, make at most ``room`` more patches (each split three more)."""
+    def marks(n):
+        out = [np.zeros(c.count, bool) for c in cells]
+        for k in range(len(cells)):
+            mine = ranked[:n][owner[ranked[:n]] == k]
+            out[k][mine - offsets[k]] = True
+        return out
+
+    def added(n):
+        return 3 * sum(int(balanced(c, m).sum()) for c, m in zip(cells, marks(n)) if m.any())
+
+    if added(len(ranked)) <= room:
+        return marks(len(ranked))
+    low, high = 0, min(len(ranked), max(0, room) // 3)  # (n splits add 3n at least; added(low) fits)
+    while low < high:  # the most that fit (what balance adds only grows with n)
+        middle = (low + high + 1) // 2
+        low, high = (middle, high) if added(middle) <= room else (low, middle - 1)
+    return marks(low)

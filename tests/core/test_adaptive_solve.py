@@ -161,3 +161,25 @@ def test_the_refining_splits_are_where_the_light_changes():
     hot = np.flatnonzero((np.abs(c[:, 2] - 2.5) < 1e-9) & (np.linalg.norm(c[:, :2] - [2.0, 1.5], axis=1) < 0.8))
     assert hot.size and (counts[hot] > 1).all()
     assert np.median(counts[hot]) > np.median(counts)
+
+
+def test_what_balance_adds_stays_within_the_budget():
+    """A step of light across the refined column (well measured there, noisy outside): its finer
+    cells split, and so must their coarse neighbours outside (balance); the step takes only as
+    many of the largest differences as fit in the budget with what balance adds."""
+    mesh = floor()
+    cells = cells_of(mesh)
+    once, _ = refine_by_solve([cells], [mesh], step_light(mesh), np.full((mesh.patch_count, 3), 1e-4), WIDE,
+                              np.sqrt(32), mesh.patch_count)
+    refined, _ = patch_mesh(once[0])
+    c = centres(refined)
+    column = np.abs(c[:, 0] - 2) < 0.5
+    light = np.repeat((1.0 + (column & (c[:, 1] > 2)))[:, None], 3, axis=1)
+    variance = np.repeat(np.where(column, 1e-4, 100.0)[:, None], 3, axis=1)
+    free = Detail(levels=2, contrast=0.25, budget=10.0)
+    out, step = refine_by_solve(once, [refined], light, variance, free, np.sqrt(32), mesh.patch_count)
+    assert out[0].count > once[0].count + 3 * step["split"]  # (balance split coarse cells beside them)
+    for budget in (1.9, 2.0, 2.1, 2.2):
+        detail = Detail(levels=2, contrast=0.25, budget=budget)
+        out, step = refine_by_solve(once, [refined], light, variance, detail, np.sqrt(32), mesh.patch_count)
+        assert step["split"] > 0 and out[0].count <= int(budget * mesh.patch_count), budget
