@@ -43,8 +43,12 @@ def detail_and_rounds(spec):
 
 
 def label_of(spec):
+    from addon.bpy_free.solve_refinement import ROUNDS
+
     name, rounds = detail_and_rounds(spec)
-    return f"adaptive {name.lower()}" + (" (direct light only)" if rounds == 0 else "")
+    rounds = ROUNDS if rounds is None else rounds
+    return f"adaptive {name.lower()}" + (f" (+{rounds} refining solve{'s' if rounds > 1 else ''})" if rounds else
+                                         " (direct light only)")
 
 
 def run(detail, target, patch_size=0.0, seed=0, colours="TEXTURED", limit=0.0):
@@ -109,7 +113,7 @@ def measure(name, budgets, details, reference_samples, scales=(), rounds=1, log=
                 row = found.setdefault(label, {"config": label, "target": target, "limit": limit, "budget": budget,
                                                "patches": patches, "patch_size": used, "steps": [],
                                                "errors": [], "seconds": [], "solve": [], "preview": []})
-                row["steps"].append([dict(st) for st in LAST_STEPS])
+                row.setdefault("steps", []).append([dict(st) for st in LAST_STEPS])
                 row["errors"].append(pm.relative_mae(image, ref, mask))
                 row["seconds"].append(solve + shown)
                 row["solve"].append(solve)

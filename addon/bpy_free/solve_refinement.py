@@ -20,6 +20,9 @@ from .scene_notes import scene_and_notes
 ROUNDS = 2  # solves that refine the mesh at most (0: the direct light's refinement alone)
 LOOSER = 2.0  # their relative error target, times the user's (a quarter of the paths)
 SHARE = 0.2  # of a time limit, each refining solve's at most
+# Of a time limit: refining steps start only within the first REFINING (each rebuilds the scene and
+# solves), and the final solve has at least FINAL (else it may not finish its first batch).
+REFINING, FINAL = 0.4, 0.5
 
 
 def refined(objects, patches, settings, progress=None, should_stop=None, on_prediction=None):
@@ -36,7 +39,8 @@ def refined(objects, patches, settings, progress=None, should_stop=None, on_pred
     started, method = time.perf_counter(), None
     budget = int(DETAILS[settings.detail].budget * first_count)
     for round_ in range(ROUNDS):
-        if (should_stop is not None and should_stop()) or patches.combined.patch_count + 3 > budget:
+        late = settings.max_seconds and time.perf_counter() - started > REFINING * settings.max_seconds
+        if late or (should_stop is not None and should_stop()) or patches.combined.patch_count + 3 > budget:
             break
         scene, _ = scene_and_notes(patches)
         if method is None:  # (chosen for the user's target: a looser one would choose otherwise)
@@ -77,14 +81,14 @@ def _loose(settings):
 
 
 def _final(settings, method, started):
-    """The final solve's settings: the time limit less what refining took (at least a share of
+    """The final solve's settings: the time limit less what refining took (at least FINAL of
     it); the method chosen for the refining solves where "auto" was asked (its choice is not
     made again; with per-light results it is, measured with them)."""
     if method is not None and settings.method == AUTO and settings.per_source == "OFF":
         settings = replace(settings, method=method)
     if settings.max_seconds:
         left = settings.max_seconds - (time.perf_counter() - started)
-        settings = replace(settings, max_seconds=max(left, settings.max_seconds * SHARE))
+        settings = replace(settings, max_seconds=max(left, settings.max_seconds * FINAL))
     return settings
 
 

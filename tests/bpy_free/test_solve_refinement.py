@@ -76,7 +76,7 @@ def test_the_final_solve_has_what_is_left_of_the_time_limit():
     final = solve_refinement._final(s, "walk", time.perf_counter() - 3.0)
     assert final.method == "walk" and 6.9 < final.max_seconds < 7.01
     late = solve_refinement._final(s, "walk", time.perf_counter() - 30.0)
-    assert late.max_seconds == pytest.approx(10.0 * solve_refinement.SHARE)
+    assert late.max_seconds == pytest.approx(10.0 * solve_refinement.FINAL)
     assert solve_refinement._final(settings(per_source="ON"), "walk", time.perf_counter()).method == "auto"
 
 
@@ -107,3 +107,53 @@ def test_the_estimate_shows_the_patch_budget_and_the_refining_solves():
     first = pipeline.make_patches(objects, 0.2).combined.patch_count
     assert value["refinement"].startswith(f"refined from {first:,} ")
     assert value["refinement"].endswith(f"at most {int(6.0 * first):,} after up to 2 refining solves")
+
+
+def test_the_live_view_is_given_each_refining_steps_mesh_and_its_result(monkeypatch):
+    """The running job hears of every mesh the refinement makes (the live view draws each step's
+    result on it), the final one last, and every live result it keeps is on the mesh it has then."""
+    from addon.bpy_free import worker
+
+    monkeypatch.setattr(worker, "LIVE_SECONDS", 0.0)
+    job = worker.SolveJob(room(), settings())
+    job.live_view = True
+    seen, drawn = [], []
+    hear_prediction, hear_progress = job._on_prediction, job._on_progress
+
+    def on_prediction(prediction, patch_count, patches=None):
+        seen.append(patch_count)
+        hear_prediction(prediction, patch_count, patches)
+
+    def on_progress(fraction, stats):
+        hear_progress(fraction, stats)
+        drawn.append((len(job.live[1]), job.patches.combined.patch_count))
+
+    job._on_prediction, job._on_progress = on_prediction, on_progress
+    job.run()
+    assert job.error is None
+    assert len(set(seen)) >= 2 and seen == sorted(seen) and seen[-1] == job.output.patches.combined.patch_count
+    assert {n for n, _ in drawn} == set(seen) and all(n == p for n, p in drawn)
+
+
+def test_with_a_time_limit_late_refining_steps_are_skipped_and_the_final_solve_keeps_half(monkeypatch):
+    """Refining steps that have taken more than REFINING of the time limit start no more (a clock
+    that moves 3 s a reading: the first step ends 9 s in, past 40% of 10 s), and the final solve
+    has at least FINAL of it (before, it had what was left, and could not finish a batch)."""
+    class Clock:
+        now = 0.0
+
+        def perf_counter(self):
+            self.now += 3.0
+            return self.now
+
+    monkeypatch.setitem(adaptive_light.DETAILS, "MEDIUM", Detail(levels=2, contrast=0.25, budget=12.0))
+    unlimited = pipeline.run_solve(room(), settings())
+    assert sum(1 for s in unlimited.patches.refinement if s.get("solve")) == 2
+    finals = []
+    monkeypatch.setattr(solve_refinement, "time", Clock())
+    final = solve_refinement._final
+    monkeypatch.setattr(solve_refinement, "_final", lambda *a: finals.append(final(*a)) or finals[-1])
+    limited = pipeline.run_solve(room(), settings(max_seconds=10.0))
+    assert sum(1 for s in limited.patches.refinement if s.get("solve")) == 1
+    assert finals[0].max_seconds == pytest.approx(10.0 * solve_refinement.FINAL)
+    assert limited.result.paths > 0
