@@ -91,7 +91,7 @@ def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False
 
 def refinement_text(patches: Patches) -> str:
     """What refinement did and may do, for the estimate's patch line, e.g. "refined from 4,782 in
-    2 steps (2.0 s), at most 11,955 after up to 2 refining solves" ("" without refinement)."""
+    2 steps (0.5 s), at most 11,955 after a refining solve" ("" without refinement)."""
     steps = getattr(patches, "refinement", None)
     if not steps:
         return ""
@@ -101,7 +101,9 @@ def refinement_text(patches: Patches) -> str:
     text = (f"refined from {steps[0]['first']:,} in {len(steps)} step{'s' if len(steps) > 1 else ''} ({seconds:.1f} s), "
             f"at most {steps[0]['budget']:,}")
     solved = any(s.get("solve") for s in steps)
-    return text + (f" after up to {ROUNDS} refining solves" if ROUNDS and not solved else "")
+    if not ROUNDS or solved:
+        return text
+    return text + (" after a refining solve" if ROUNDS == 1 else f" after up to {ROUNDS} refining solves")
 
 
 def _copy(mesh):

@@ -17,7 +17,9 @@ from ..core.names import AUTO
 from . import adaptive_patches
 from .scene_notes import scene_and_notes
 
-ROUNDS = 2  # solves that refine the mesh at most (0: the direct light's refinement alone)
+# Solves that refine the mesh at most (0: the direct light's refinement alone); one measured best at
+# equal time (docs/adaptive.md): a second cost its time and splits noise
+ROUNDS = 1
 LOOSER = 2.0  # their relative error target, times the user's (a quarter of the paths)
 SHARE = 0.2  # of a time limit, each refining solve's at most
 # Of a time limit: refining steps start only within the first REFINING (each rebuilds the scene and

@@ -19,8 +19,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 @pytest.fixture(autouse=True)
 def roomy(monkeypatch):
     """Medium with room left after the direct light's refinement (the test room's lamp takes
-    all of Medium's own budget)."""
+    all of Medium's own budget), and two refining solves (the product's one, and a repeat)."""
     monkeypatch.setitem(adaptive_light.DETAILS, "MEDIUM", Detail(levels=2, contrast=0.25, budget=6.0))
+    monkeypatch.setattr(solve_refinement, "ROUNDS", 2)
 
 
 def settings(**more):
@@ -107,6 +108,9 @@ def test_the_estimate_shows_the_patch_budget_and_the_refining_solves():
     first = pipeline.make_patches(objects, 0.2).combined.patch_count
     assert value["refinement"].startswith(f"refined from {first:,} ")
     assert value["refinement"].endswith(f"at most {int(6.0 * first):,} after up to 2 refining solves")
+    solve_refinement.ROUNDS = 1  # (the product's; the fixture's monkeypatch puts it back)
+    assert adaptive_patches.refinement_text(adaptive_patches.refined(objects, pipeline.make_patches(objects, 0.2),
+                                                                     "MEDIUM", 3)).endswith("after a refining solve")
 
 
 def test_the_live_view_is_given_each_refining_steps_mesh_and_its_result(monkeypatch):
