@@ -161,3 +161,23 @@ def test_with_a_time_limit_late_refining_steps_are_skipped_and_the_final_solve_k
     assert sum(1 for s in limited.patches.refinement if s.get("solve")) == 1
     assert finals[0].max_seconds == pytest.approx(10.0 * solve_refinement.FINAL)
     assert limited.result.paths > 0
+
+
+def test_a_refining_solve_is_a_quarter_of_the_fewest_paths_the_final_solve_runs(monkeypatch):
+    """With an error target the refining solve runs MEASURED_STOP_CHUNKS chunks of a quarter of
+    the final solve's chunk (a looser target stopped on its measured error ran many small chunks,
+    more paths than the final solve); with a path count, a quarter of it."""
+    from addon.core.plan import MEASURED_STOP_CHUNKS
+
+    monkeypatch.setattr(solve_refinement, "ROUNDS", 1)
+    runs = []
+    solve = solve_refinement.solve
+    monkeypatch.setattr(solve_refinement, "solve", lambda *a, **k: runs.append((k, solve(*a, **k))) or runs[-1][1])
+    out = pipeline.run_solve(room(), settings())
+    (kwargs, refining), = runs
+    assert kwargs["target_mse"] is None and refining.chunks == MEASURED_STOP_CHUNKS
+    assert refining.paths == MEASURED_STOP_CHUNKS * kwargs["chunk_paths"]
+    assert 4 * refining.paths <= out.result.paths * 1.01 and out.result.stopped == "target"
+    runs.clear()
+    pipeline.run_solve(room(), settings(paths=40_000))
+    assert runs[0][1].paths == 10_000
