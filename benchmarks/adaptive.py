@@ -31,11 +31,48 @@ from benchmarks import interior_scene, picture  # noqa: E402
 from benchmarks import picture_metrics as pm  # noqa: E402
 
 
+# The refinement steps of the last run (solve_refinement.refined's, recorded by :func:`run`).
+LAST_STEPS = []
+
+
+def detail_and_rounds(spec):
+    """("MEDIUM", None) of "MEDIUM" (the product's refining solves), ("MEDIUM", 0) of "MEDIUM/0"
+    (the direct light's refinement alone)."""
+    name, _, rounds = spec.partition("/")
+    return name, (int(rounds) if rounds else None)
+
+
+def label_of(spec):
+    from addon.bpy_free.solve_refinement import ROUNDS
+
+    name, rounds = detail_and_rounds(spec)
+    rounds = ROUNDS if rounds is None else rounds
+    return f"adaptive {name.lower()}" + (f" (+{rounds} refining solve{'s' if rounds > 1 else ''})" if rounds else
+                                         " (direct light only)")
+
+
 def run(detail, target, patch_size=0.0, seed=0, colours="TEXTURED", limit=0.0):
     """The product with these settings (the picture benchmark's otherwise: picture.product), then
-    its preview: (image, solve seconds, preview seconds, patches, patch size)."""
-    image, solve, shown, stats = picture.product(colours, seed, target_error=target, detail=detail,
-                                                 patch_size=patch_size, time_limit=limit)
+    its preview: (image, solve seconds, preview seconds, patches, patch size). ``detail`` "MEDIUM/0":
+    Medium without the refining solves."""
+    from addon.bpy_free import solve_refinement
+
+    name, rounds = detail_and_rounds(detail)
+    original, kept = solve_refinement.refined, solve_refinement.ROUNDS
+
+    def recording(*args, **kwargs):
+        patches, settings = original(*args, **kwargs)
+        LAST_STEPS[:] = [dict(s) for s in patches.refinement]
+        return patches, settings
+
+    LAST_STEPS.clear()
+    solve_refinement.refined = recording
+    solve_refinement.ROUNDS = kept if rounds is None else rounds
+    try:
+        image, solve, shown, stats = picture.product(colours, seed, target_error=target, detail=name,
+                                                     patch_size=patch_size, time_limit=limit)
+    finally:
+        solve_refinement.refined, solve_refinement.ROUNDS = original, kept
     return image, solve, shown, int(stats["patches"]), float(stats["patch_size"])
 
 
@@ -58,7 +95,7 @@ def measure(name, budgets, details, reference_samples, scales=(), rounds=1, log=
     steps = refinement_steps(details)
     for target, limit in budgets:
         budget = budget_text(target, limit)
-        configs = [("uniform", "OFF", 0.0)] + [(f"adaptive {d.lower()}", d, 0.0) for d in details]
+        configs = [("uniform", "OFF", 0.0)] + [(label_of(d), d, 0.0) for d in details]
         configs += [(f"uniform {scale:g}x size", "OFF", scale) for scale in scales]
         found = {}
         for k in range(rounds):
@@ -74,8 +111,9 @@ def measure(name, budgets, details, reference_samples, scales=(), rounds=1, log=
                     emitters = [info.meshes.index(n) for n in info.emitters]
                     mask = pm.surface_mask(px["object_id"], emitters, px["lamp"])
                 row = found.setdefault(label, {"config": label, "target": target, "limit": limit, "budget": budget,
-                                               "patches": patches, "patch_size": used,
+                                               "patches": patches, "patch_size": used, "steps": [],
                                                "errors": [], "seconds": [], "solve": [], "preview": []})
+                row.setdefault("steps", []).append([dict(st) for st in LAST_STEPS])
                 row["errors"].append(pm.relative_mae(image, ref, mask))
                 row["seconds"].append(solve + shown)
                 row["solve"].append(solve)
@@ -86,9 +124,9 @@ def measure(name, budgets, details, reference_samples, scales=(), rounds=1, log=
                     f"error {row['errors'][-1]:.4f}")
             if k == 0:  # then uniform at each adaptive run's patch count, in every later round too
                 base = found["uniform"]
-                added = [(f"uniform at adaptive {d.lower()}'s count", "OFF",
-                          math.sqrt(base["patches"] / found[f"adaptive {d.lower()}"]["patches"]))
-                         for d in details if f"adaptive {d.lower()}" in found]
+                added = [(f"uniform at {label_of(d)}'s count", "OFF",
+                          math.sqrt(base["patches"] / found[label_of(d)]["patches"]))
+                         for d in details if label_of(d) in found]
                 configs += added
                 for label, detail, scale in added:
                     try:
@@ -124,7 +162,7 @@ def refinement_steps(details, seed=0):
     patches = make_patches(objects, 0.0)
     scene = patches.patch_scene()
     out = {"first": patches.combined.patch_count}
-    for d in details:
+    for d in dict.fromkeys(detail_and_rounds(spec)[0] for spec in details):
         result = refine_by_direct_light(patches.meshes, scene, DETAILS[d], seed, receives=[o.receives for o in patches.objects])
         out[d] = result.steps
     return out
@@ -201,6 +239,17 @@ def report(rooms, command, loads, out):
                 for st in taken:
                     lines.append(f"| {d.lower()} | {st['level'] + 1} | {st['candidates']:,} | {st['split']:,} | "
                                  f"{st['patches']:,} | {st['seconds']:.2f} |")
+        runs = [r for r in m["rows"] if any(r.get("steps") or [])]
+        if runs:
+            lines += ["", "Refinement steps in the runs (round 0; a refining solve's seconds include its solve):", "",
+                      "| configuration | budget | step | kind | split | patches after | seconds | refining solve: paths, s |",
+                      "|---|---|---|---|---|---|---|---|"]
+            for r in runs:
+                for k, st in enumerate(r["steps"][0]):
+                    kind = "solve" if st.get("solve") else "direct light"
+                    solved = f"{st['paths']:,}, {st['solve_seconds']:.2f}" if st.get("solve") else "-"
+                    lines.append(f"| {r['config']} | {r['budget']} | {k + 1} | {kind} | {st['split']:,} | "
+                                 f"{st['patches']:,} | {st['seconds']:.2f} | {solved} |")
         lines.append("")
     out.write_text("\n".join(lines))
 
@@ -225,7 +274,7 @@ def main(argv=None):
         budgets = [(t, 0.0) for t in args.targets] + [(0.5, limit) for limit in args.time_limits]
         rooms[name] = measure(name, budgets, args.details, args.reference_samples, args.uniform_scales, args.rounds)
         middle = budget_text(*budgets[len(budgets) // 2])
-        labels = [label for label in ["uniform"] + [f"adaptive {d.lower()}" for d in args.details]
+        labels = [label for label in ["uniform"] + [label_of(d) for d in args.details]
                   if (label, middle) in rooms[name]["images"]]
         side_by_side(rooms[name], labels, middle, args.out.parent / f"{args.out.stem}_{name}.png")
         saved = {n: {"rows": m["rows"], "steps": m["steps"]} for n, m in rooms.items()}

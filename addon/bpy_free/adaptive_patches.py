@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import meshing
-from ..core.adaptive import shading_triangulation
+from ..core.adaptive import patch_mesh, shading_triangulation
 from ..core.adaptive_light import DETAILS, refine_by_direct_light
 from .cleaning import drop_zero_area_faces
 from .patches import MAX_PATCHES, Patches, _GEOMETRY_CACHE, _patch_material, patch_materials, result_layers
@@ -33,7 +33,7 @@ _LAST = _Last()
 
 def _key(patches, detail, seed):
     digest = hashlib.blake2b(digest_size=16)
-    digest.update(f"{patches.geometry_key}|{detail}|{seed}".encode())
+    digest.update(f"{patches.geometry_key}|{detail}|{DETAILS.get(detail)}|{seed}".encode())
     digest.update(np.ascontiguousarray(patches.emission).tobytes())
     digest.update(pickle.dumps(tuple(patches.lights)))
     return digest.hexdigest()
@@ -57,11 +57,18 @@ def refined(objects, patches: Patches, detail: str, seed: int = 0, layers=False,
             with _LAST.lock:
                 _LAST.key, _LAST.value = key, cached
     result, _ = cached
-    steps = [dict(s) for s in result.steps]
+    first = patches.combined.patch_count
+    steps = [dict(s, first=first, budget=int(DETAILS[detail].budget * first)) for s in result.steps]
     if sum(m.patch_count for m in result.meshes) == patches.combined.patch_count:
-        return replace(patches, refinement=steps)
+        return replace(patches, refinement=steps, cells=result.cells)
+    return of_cells(objects, patches, result.cells, key + ":refined", steps, layers, detail)
+
+
+def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False, detail="") -> Patches:
+    """``patches`` (make_patches' of ``objects``, or refined ones) on the conforming meshes of
+    ``cells`` (core.adaptive, one per object), their materials and result layers made again."""
     objects, _ = drop_zero_area_faces(objects)  # (as make_patches read them: the same faces)
-    meshes = [_copy(m) for m in result.meshes]
+    meshes = [_copy(patch_mesh(c)[0]) for c in cells]
     combined = meshing.concatenate(meshes)
     if combined.patch_count > MAX_PATCHES:
         raise ValueError(f"Detail {detail.lower()} would make {combined.patch_count:,} patches, more than the limit of "
@@ -69,13 +76,12 @@ def refined(objects, patches: Patches, detail: str, seed: int = 0, layers=False,
     materials = [patch_materials(o, m) for o, m in zip(objects, meshes)]
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
     emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
-    geometry_key = key + ":refined"
     _GEOMETRY_CACHE.store(geometry_key, meshes, combined)
     names = {n: i for i, n in enumerate(patches.material_names)}  # (per-light groups read each patch's)
     patch_material = np.concatenate([_patch_material(o, m, names) for o, m in zip(objects, meshes)])
     out = replace(patches, meshes=meshes, combined=combined, reflectivity=reflectivity, emission=emission,
                   geometry_key=geometry_key, refinement=steps, patch_material=patch_material,
-                  material_names=tuple(names))
+                  material_names=tuple(names), cells=list(cells))
     if layers:
         out.layers = [result_layers(o, m) if o.receives else None for o, m in zip(objects, meshes)]
     else:
@@ -84,13 +90,20 @@ def refined(objects, patches: Patches, detail: str, seed: int = 0, layers=False,
 
 
 def refinement_text(patches: Patches) -> str:
-    """One line of what refinement did, e.g. "Detail: 11,354 -> 19,020 patches in 2 steps (3.1 s)"."""
+    """What refinement did and may do, for the estimate's patch line, e.g. "refined from 4,782 in
+    2 steps (0.5 s), at most 11,955 after a refining solve" ("" without refinement)."""
     steps = getattr(patches, "refinement", None)
     if not steps:
         return ""
+    from .solve_refinement import ROUNDS  # (it imports this module)
+
     seconds = sum(s["seconds"] for s in steps)
-    return (f"Detail: {patches.combined.patch_count:,} patches after {len(steps)} refinement step"
-            f"{'s' if len(steps) > 1 else ''} ({seconds:.1f} s)")
+    text = (f"refined from {steps[0]['first']:,} in {len(steps)} step{'s' if len(steps) > 1 else ''} ({seconds:.1f} s), "
+            f"at most {steps[0]['budget']:,}")
+    solved = any(s.get("solve") for s in steps)
+    if not ROUNDS or solved:
+        return text
+    return text + (" after a refining solve" if ROUNDS == 1 else f" after up to {ROUNDS} refining solves")
 
 
 def _copy(mesh):

@@ -127,6 +127,7 @@ class Patches:
     # per object, ResultLayers of a receiving object (make_patches(..., layers=True)), else None
     layers: list = field(default_factory=list)
     refinement: list = field(default_factory=list)  # the Detail setting's steps (adaptive_patches), if any
+    cells: list | None = None  # the Detail's core.adaptive Cells per object (further splits), if any
 
     def patch_scene(self):
         """The core scene; geometry, sampling tables and the Embree scene are built once per

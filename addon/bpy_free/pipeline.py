@@ -18,7 +18,7 @@ from ..core.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
 from . import options, relit
-from . import adaptive_patches, trim
+from . import adaptive_patches, solve_refinement, trim
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
 
@@ -224,7 +224,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
     f = forecast_for(scene, settings, target, bounces, should_stop)
-    needed = building + f.seconds  # (what the settings need; a time limit may end the run first)
+    # (what the settings need, the Detail's refining solves included; a time limit may end the run first)
+    needed = building + solve_refinement.predicted_seconds(patches, f.seconds)
     seconds = min(needed, building + settings.max_seconds) if f.time_limited else needed
     return {
         "objects": sum(o.receives for o in patches.objects),
@@ -268,8 +269,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     """
     trim.fix_mmap_threshold()
     patches = make_patches(objects, settings.patch_size, layers=True)
-    patches = adaptive_patches.refined(objects, patches, settings.detail, settings.seed, layers=True,
-                                       should_stop=should_stop)
+    patches, settings = solve_refinement.refined(objects, patches, settings, progress, should_stop, on_prediction)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
     scene, notes = scene_and_notes(patches)

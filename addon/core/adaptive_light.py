@@ -21,6 +21,7 @@ import numpy as np
 
 from .adaptive import cells_of, patch_mesh, split
 from .first_shot import SEEN_BEFORE, _trace
+from .geometry_build import build_geometry
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .sampling import SourceTable, patch_point_rows, stratified_by_patch
@@ -176,8 +177,11 @@ def _combined_scene(meshes, origins, base_scene):
     patch_offsets = np.cumsum([0] + [m.patch_count for m in meshes])
     triangle_patch = np.concatenate([np.asarray(m.triangle_patch, np.int64) + patch_offsets[k] for k, m in enumerate(meshes)])
     origin = np.concatenate(origins)
+    # (no probes for buried parts: the cells they would find stay whole already, and the probes took
+    # most of a step's time)
+    geometry = build_geometry(vertices, triangles, triangle_patch, int(patch_offsets[-1]), visible_parts=False)
     return PatchScene(vertices, triangles, triangle_patch, base_scene.reflectivity[origin], base_scene.emission[origin],
-                      lights=base_scene.lights.lights, aim=base_scene.lights.aim), patch_offsets
+                      lights=base_scene.lights.lights, aim=base_scene.lights.aim, _geometry=geometry), patch_offsets
 
 
 def _trial(cells, candidate, base_offsets, base_scene):
@@ -197,11 +201,9 @@ def _trial(cells, candidate, base_offsets, base_scene):
     return scene, np.concatenate(children), np.concatenate(parents)
 
 
-def _scores(scene, children, parents, estimates, detail, mean_light):
+def _scores(children, parents, estimates, detail, mean_light):
     """(the parents (n,), each one's change over what it must pass to split (n,)): its children's
-    spread against the visible share of the local light and their estimates' noise; 0 for a cell
-    another object runs into (its buried children would get no light, and a black patch beside
-    lit ones rings in the smooth colours)."""
+    spread against the visible share of the local light and their estimates' noise."""
     value = estimates.mean(axis=0)
     noise = ((estimates[0] - estimates[1]) / 2) ** 2  # variance of each child's mean
     group = np.unique(parents)
@@ -215,10 +217,6 @@ def _scores(scene, children, parents, estimates, detail, mean_light):
     pooled = np.bincount(index, weights=noise, minlength=n) / sizes
     visible = detail.contrast * np.maximum(local, detail.floor * mean_light)
     score = (high - low) / np.maximum(visible, NOISE_Z * np.sqrt(2 * pooled))
-    buried = scene.geometry.buried
-    if buried is not None:
-        inside = np.isin(children, np.concatenate([buried.patch, buried.whole]))
-        score[np.bincount(index, weights=inside, minlength=n) > 0] = 0.0
     return group, score
 
 
@@ -232,11 +230,16 @@ def refine_by_direct_light(meshes, base_scene, detail: Detail, seed=0, receives=
     cells = [cells_of(m) for m in meshes]
     limit = int(detail.budget * base_offsets[-1])
     smallest = (SMALLEST_SIDE * base_scene.geometry.diagonal) ** 2 * 4  # (a cell's area: its children's four)
+    # cells another object runs into stay whole (their buried children would get no light, and a
+    # black patch beside lit ones rings in the smooth colours): those of a first patch partly buried
+    buried, whole = base_scene.geometry.buried, np.zeros(base_offsets[-1], bool)
+    if buried is not None:
+        whole[np.concatenate([buried.patch, buried.whole]).astype(np.int64)] = True
     mean_light, steps, stopped = None, [], False
     for level in range(detail.levels):
         started = time.perf_counter()
-        candidate = [(c.level == level) & ~c.frozen & bool(r) & (patch_mesh(c, conforming=False)[0].patch_area >= smallest)
-                     for c, r in zip(cells, receives)]
+        candidate = [(c.level == level) & ~c.frozen & bool(r) & ~whole[c.origin + base_offsets[k]]
+                     & (patch_mesh(c, conforming=False)[0].patch_area >= smallest) for k, (c, r) in enumerate(zip(cells, receives))]
         count = sum(c.count for c in cells)
         if not any(c.any() for c in candidate) or count + 3 > limit:
             break
@@ -248,7 +251,7 @@ def refine_by_direct_light(meshes, base_scene, detail: Detail, seed=0, receives=
         if mean_light is None:
             area = scene.patch_area[children]
             mean_light = float((estimates.mean(axis=0) * area).sum() / max(area.sum(), 1e-300))
-        group, score = _scores(scene, children, parents, estimates, detail, mean_light)
+        group, score = _scores(children, parents, estimates, detail, mean_light)
         chosen = np.flatnonzero(score > 1)
         room = max(0, (limit - count) // 3)
         if chosen.size > room:  # the largest changes first

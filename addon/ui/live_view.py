@@ -83,12 +83,15 @@ class LiveView:
     def draw(self):
         version, radiosity = self.job.live
         patches = self.job.patches
-        if radiosity is None or patches is None:
+        # (the Detail's refining solves change the patches: a result is drawn on its own mesh, the
+        # last one drawn kept until the next mesh's first result)
+        fresh = radiosity is not None and patches is not None and len(radiosity) == patches.combined.patch_count
+        if not fresh and self._drawn is None:
             return
         import gpu
 
         shader = gpu.shader.from_builtin("FLAT_COLOR")
-        if self._drawn is None or self._drawn[0] != version:
+        if fresh and (self._drawn is None or self._drawn[0] != version):
             self._drawn = None  # the old batch goes before the new one is made
             self._drawn = (version, batch(*triangles(patches, radiosity)))
         gpu.state.depth_test_set("LESS_EQUAL")

@@ -97,7 +97,8 @@ def estimate_lines(value):
         ("method", f"Method: {METHOD_LABELS.get(value.get('method'), value.get('method'))}"
          + (" (automatic)" if value.get("automatic") else "")),
         ("patches", f"Objects: {value['objects']} get results, {value.get('others', 0)} more block and reflect"),
-        ("size", f"Patches: {_number(value['patches'])} (size {size}" + (", refined)" if value.get("refinement") else ")")),
+        ("size", f"Patches: {_number(value['patches'])} (size {size}"
+         + (f", {value['refinement']})" if value.get("refinement") else ")")),
         ("sources", f"Sources: {value.get('sources') or '-'}"),
         ("efficiency", value["efficiency"]),
         ("reflectivity", f"Average reflectivity {value['R_ave']:.2f}, path length {value['path_length']:.2f}"),
