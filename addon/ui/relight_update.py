@@ -1,7 +1,7 @@
 """``radiosity.update``'s work (bpy): the stale sources' results solved again, and only theirs,
 where a lamp moved, was reshaped or re-angled (core relighting.resolve, on the same patches, the
 other sources' results kept as they are); a full solve where the geometry changed, a lamp was
-added or the solve's results are not in memory (a reopened file)."""
+added, the solve's results are not in memory (a reopened file) or Detail refined the patches."""
 
 from __future__ import annotations
 
@@ -37,6 +37,8 @@ def update(context):
         return _full(context, meta, f"{', '.join(outcome.added)} added")
     if last is None:
         return _full(context, meta, "the solve's results are not in memory (the file was reopened)")
+    if last[1].detail != "OFF":  # (its patches came from the solve's own light: a lamp moved moves them)
+        return _full(context, meta, f"Detail {last[1].detail.lower()} refines the patches from the light")
     return _partial(context, meta, stale, last)
 
 

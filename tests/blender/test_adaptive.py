@@ -105,3 +105,27 @@ def test_per_light_results_on_refined_patches_relight_to_what_the_solve_wrote(bl
     bpy.data.lights[-1].energy = 20.0
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     assert any(not np.allclose(colours()[key], solved[key]) for key in solved)
+
+
+def test_update_after_a_lamp_moved_solves_everything_again_where_detail_refined_the_patches(blender):
+    """Detail's patches come from the solve's light, so a moved lamp moves them: Update solves
+    everything again (a partial re-solve on the unrefined patches failed against the stored
+    per-source results) and says why; the results are then current."""
+    from addon.ui import relight as relight_ui
+
+    build_test_scene()
+    bpy.ops.object.light_add(type="POINT", location=(0.3, 0.7, 0.6))
+    lamp = bpy.context.object
+    lamp.data.energy = 2.0
+    s = configure(blender, output="TEXTURED")
+    s.detail, s.per_source = "MEDIUM", "ON"
+    for name in ("Room", "Lamp", "Block"):
+        bpy.data.objects[name].select_set(True)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    lamp.location = (0.6, 0.4, 0.6)
+    bpy.context.view_layer.update()
+    assert relight_ui.assess(bpy.context.scene).stale
+    from addon.ui import relight_update
+
+    assert "Detail medium refines the patches" in relight_update.update(bpy.context)
+    assert relight_ui.assess(bpy.context.scene).stale == set()
