@@ -131,6 +131,22 @@ def test_furnace_on_a_refined_mesh():
     assert np.abs(z).max() < 5.0, np.abs(z).max()
 
 
+@pytest.mark.parametrize("method,exit_point", [("walk", "hit"), ("walk", "random"), ("two_way", "hit"),
+                                               ("two_way", "random")])
+def test_every_method_and_exit_point_meets_the_furnace_on_a_refined_mesh(method, exit_point):
+    """The paper's walk and the two-way iteration, from hit points and random points, on a mesh
+    refined twice at random (cells of three sizes, n-gons at the borders): every patch's B =
+    E / (1 - R) within 5 of its own measured standard errors."""
+    E, R = 1.0, 0.5
+    cells = randomly_refined(box_mesh(1.0), 2, seed=8)
+    refined, _ = patch_mesh(cells)
+    P = refined.patch_count
+    scene = PatchScene(refined.points, refined.triangles, refined.triangle_patch, np.full(P, R), np.full(P, E))
+    result = solve(scene, method=method, paths=100_000, seed=4, exit_point=exit_point)
+    z = (result.radiosity[:, 0] - E / (1 - R)) / np.sqrt(result.reflected_variance[:, 0])
+    assert np.abs(z).max() < 5.0, np.abs(z).max()
+
+
 def test_energy_balance_on_a_refined_mesh():
     """Under a lamp in a closed box, everything emitted is absorbed (nothing escapes) on the
     refined mesh as on the first."""
