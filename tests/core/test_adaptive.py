@@ -8,7 +8,7 @@ from addon.core import PatchScene, meshing, smoothing, solve
 from addon.core.adaptive import cells_of, patch_mesh, refine, shading_triangulation, split
 from addon.core.adaptive_light import DETAILS, Detail, refine_by_direct_light
 from addon.core.faces import starts_of, triangle_areas
-from addon.core.lights import PointLight
+from addon.core.lights import PointLight, SunLight
 
 # A closed box 4 x 3 x 2.5 of six quads, faces towards the inside.
 BOX = np.array([[0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0], [0, 0, 2.5], [4, 0, 2.5], [4, 3, 2.5], [0, 3, 2.5]], float)
@@ -221,9 +221,10 @@ def test_the_hot_spot_splits_and_the_flat_far_floor_does_not():
     assert refined.steps[0]["split"] > 0 and len(refined.steps) == 2
 
 
-def test_a_shadow_edge_splits():
-    """A blocker's shadow on a floor under a lamp: the patches its edge crosses split; the
-    lit and the shadowed floor far from it do not (beyond the hot spot)."""
+@pytest.mark.parametrize("source", ["lamp", "sun"])
+def test_a_shadow_edge_splits(source):
+    """A blocker's shadow on a floor under a lamp or the sun: the patches its edge crosses split;
+    the lit and the shadowed floor far from it do not (beyond the hot spot)."""
     floor = np.array([[0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0]], float)
     blocker = np.array([[0, 0, 1.0], [4, 0, 1.0], [4, 2.14, 1.0], [0, 2.14, 1.0]], float)  # faces down
     m_floor = meshing.mesh_patches(floor, [4], [0, 1, 2, 3], 0.5)
@@ -231,12 +232,13 @@ def test_a_shadow_edge_splits():
     combined = meshing.concatenate([m_floor, m_block])
     P = combined.patch_count
     scene = PatchScene(combined.vertices, combined.triangles, combined.triangle_patch, np.full(P, 0.5), np.zeros(P),
-                       lights=[PointLight(np.array([2.0, 2.0, 20.0]), np.full(3, 400.0))])
+                       lights=[PointLight(np.array([2.0, 2.0, 20.0]), np.full(3, 400.0)) if source == "lamp" else
+                               SunLight(np.array([0.0, 0.0, -1.0]), np.full(3, 1.0))])
     refined = refine_by_direct_light([m_floor, m_block], scene, Detail(levels=1, contrast=0.25, budget=10.0), seed=0,
                                      receives=[True, False])
     counts = np.bincount(refined.origins[0], minlength=m_floor.patch_count)
     centre_y = np.array([m_floor.points[m_floor.corner_verts[4 * p:4 * p + 4], 1].mean() for p in range(m_floor.patch_count)])
-    # the shadow edge on the floor: y = 2 + 0.14 * 20 / 19 = 2.147, inside the row of patches 2.0-2.5
+    # the shadow edge on the floor: y = 2 + 0.14 * 20 / 19 = 2.147 (the sun's: 2.14), in the row of patches 2.0-2.5
     edge_row = np.abs(centre_y - 2.25) < 0.01
     assert (counts[edge_row] == 4).all()
     assert (counts[~edge_row] == 1).all()
