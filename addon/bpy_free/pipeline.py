@@ -17,8 +17,7 @@ from ..core.covered import hidden_patches
 from ..core.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
-from . import options, relit
-from . import adaptive_patches, solve_refinement, trim
+from . import adaptive_patches, options, relit, solve_refinement, trim
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
 
@@ -385,10 +384,11 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False):
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                    hidden=hidden_patches(scene.geometry))
+    arriving = point_direct.arriving(surface, scene, result, live) if light else None  # (filters first: with the
+    reflected = surface.filter_light(result.reflected, result.reflected_variance)  # direct light held, the peak)
     direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed)
     if light:
-        yield "light", point_direct.light_corners(surface, scene, result, direct, live, triangles)
-    reflected = surface.filter_light(result.reflected, result.reflected_variance)
+        yield "light", point_direct.light_corners(surface, scene, arriving, direct, live, triangles, result.seed)
     corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True))
     corners += scene.emission[triangle_patch][:, None, :]
     yield "smooth", corners

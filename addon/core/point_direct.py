@@ -28,7 +28,7 @@ scaled down to H, its shape kept: H - M is never negative, and the display one s
 where M passes OVERSHOOT times H (a corner a centimetre from an emitter) it shows corners(H)
 alone.
 
-With live lamps (``light_corners``) the renderer draws the lamps' and suns' own light pixel by
+With live lamps (``arriving``, ``light_corners``) the renderer draws the lamps' and suns' own light pixel by
 pixel, and the light shown is H less each patch's mean of it (``lamp_means``).
 
 A corner is evaluated a hundredth of the way from its point towards its patch's centre (inside
@@ -286,16 +286,20 @@ def _kept(surface, direct, scale):
     return CornerDirect(direct.corners * scale[surface.triangle_patch][:, None, :], direct.means * scale)
 
 
-def light_corners(surface, scene, result, direct, live=False, triangles=None):
-    """(T,3,3) the light arriving (``Surface.arriving_light``) shown at the corners with the
-    direct light's shape (``shown``; ``direct`` the CornerDirect of every source). ``live``:
-    without the lamps' and suns' light (``lamp_means``), which the renderer draws itself; the
-    emitting patches' direct light shaped as before (``triangles``: the surface's, for it)."""
-    irradiance = result.irradiance
+def arriving(surface, scene, result, live=False):
+    """(P,3) the light arriving (``Surface.arriving_light``: noise filtered); ``live``: less
+    the lamps' and suns' (``lamp_means``), which the renderer draws itself."""
+    irradiance = result.irradiance - lamp_means(scene, seed=result.seed) if live else result.irradiance
+    return surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity)
+
+
+def light_corners(surface, scene, light, direct, live=False, triangles=None, seed=0):
+    """(T,3,3) the light arriving ``light`` (``arriving``) shown at the corners with the direct
+    light's shape (``shown``; ``direct`` the CornerDirect of every source); ``live``: of the
+    emitting patches alone (``triangles``: the surface's, and the solve's ``seed``, for it)."""
     if live:
-        irradiance = irradiance - lamp_means(scene, seed=result.seed)
-        direct = corner_direct(surface, scene, triangles, seed=result.seed, lamps=False)
-    return shown(surface, surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity), direct)
+        direct = corner_direct(surface, scene, triangles, seed=seed, lamps=False)
+    return shown(surface, light, direct)
 
 
 def lamp_means(scene, samples=LAMP_MEAN_SAMPLES, seed=0, light_group=None, groups=0):

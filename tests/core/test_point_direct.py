@@ -208,9 +208,12 @@ def test_live_lamps_leave_each_patch_its_solved_light_less_the_lamps_mean_and_gr
     scene, _, _ = _lit_ceiling(lights=lamps)
     result = solve(scene, method="walk", paths=20_000, seed=5, per_source=True)
     surface = _surface(scene)
-    live = point_direct.light_corners(surface, scene, result, None, live=True, triangles=scene.triangles)
-    arriving = surface.arriving_light(result.irradiance - point_direct.lamp_means(scene, seed=result.seed),
-                                      result.irradiance_variance, scene.reflectivity)
+    arriving = point_direct.arriving(surface, scene, result, live=True)
+    live = point_direct.light_corners(surface, scene, arriving, None, live=True, triangles=scene.triangles,
+                                      seed=result.seed)
+    np.testing.assert_array_equal(arriving, surface.arriving_light(
+        result.irradiance - point_direct.lamp_means(scene, seed=result.seed), result.irradiance_variance,
+        scene.reflectivity))
     np.testing.assert_allclose(point_direct.patch_means(surface, live), arriving, rtol=1e-10, atol=1e-12)
     parts = dict(smooth_sources(surface, scene, result, light=True, live=True))["light"]
     np.testing.assert_allclose(parts.sum(axis=0), live, rtol=0, atol=1e-12 * live.max())
