@@ -22,6 +22,7 @@ from ..blender_read.materials import _shader_node, surface_terms
 
 TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
 LIVE_PROPERTY = "radiosity_live_lamps"  # marks copies whose own shader the lamps light (textured_material)
+LIVE_EMITS_PROPERTY = "radiosity_live_emits"  # marks live copies whose own emission lights the others
 TEXTURED_SUFFIX = " Radiosity"
 IDENTITY = ((1.0, 1.0, 1.0), (0.0, 0.0, 0.0))  # (scale, offset): the base colour is the reflectivity
 # The panel's switch to the flat per-patch colours, read by every result material from the scene
@@ -92,7 +93,13 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     links.new(light.outputs["Color"], lit.inputs[1])
     total = lit.outputs[0]
 
+    lit_live = live and shader.bl_idname in _BASE
     emitted = _emitted(tree, shader, (x, y - 450))
+    if live and emitted is not None:
+        material[LIVE_EMITS_PROPERTY] = True
+    if lit_live and emitted is not None:  # (the shader's own emission shows it, and lights the others)
+        nodes.remove(emitted.node)
+        emitted = None
     if emitted is not None:
         added = nodes.new("ShaderNodeVectorMath")
         added.operation = "ADD"
@@ -106,7 +113,7 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     output.location = (x + 1200, y)
     output.target = "ALL"
     surface_shader = emission.outputs["Emission"]
-    if live and shader.bl_idname in _BASE:
+    if lit_live:
         surface_shader = _lit_by_lamps(tree, shader, emission, (x + 800, y))
         material[LIVE_PROPERTY] = True
     links.new(surface_shader, output.inputs["Surface"])
@@ -116,19 +123,13 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
 
 
 def _lit_by_lamps(tree, shader, emission, location):
-    """The surface shader of a live result: the source's own shader (its emission off: the
-    Emission shader shows it), lit by the scene's lamps as the renderer draws them, added to
-    ``emission`` seen by the camera alone (the solved light, which must light nothing); where the
-    flat switch is on, the flat colours alone."""
+    """The surface shader of a live result: the source's own shader, lit by the scene's lamps
+    and emitting materials as the renderer draws them, its own emission lighting the others,
+    added to ``emission`` seen by the camera alone (the solved light, which must light nothing);
+    where the flat switch is on, the flat colours alone."""
     nodes, links = tree.nodes, tree.links
     x, y = location
-    for name in _EMISSION.get(shader.bl_idname, ())[1:]:  # (its strength)
-        for link in list(shader.inputs[name].links):
-            links.remove(link)
-        shader.inputs[name].default_value = 0.0
-    path = nodes.new("ShaderNodeLightPath")
-    path.location = (x - 200, y + 300)
-    links.new(path.outputs["Is Camera Ray"], emission.inputs["Strength"])
+    camera_only(tree, emission, (x - 200, y + 300))
     added = nodes.new("ShaderNodeAddShader")
     added.location = (x, y)
     links.new(emission.outputs["Emission"], added.inputs[0])
@@ -143,6 +144,14 @@ def _lit_by_lamps(tree, shader, emission, location):
     links.new(added.outputs[0], mix.inputs[1])
     links.new(emission.outputs["Emission"], mix.inputs[2])
     return mix.outputs[0]
+
+
+def camera_only(tree, emission, location):
+    """Makes the Emission shader ``emission`` seen by the camera alone (a Light Path node): with
+    live lamps the solved light must light nothing, the renderer draws the direct light."""
+    path = tree.nodes.new("ShaderNodeLightPath")
+    path.location = location
+    tree.links.new(path.outputs["Is Camera Ray"], emission.inputs["Strength"])
 
 
 def _emitted(tree, shader, location):

@@ -27,10 +27,11 @@ def is_result_object(obj) -> bool:
     return obj is not None and SOURCE_PROPERTY in obj.keys()
 
 
-def result_material(flat_attribute=ATTRIBUTE_NAME):
+def result_material(flat_attribute=ATTRIBUTE_NAME, live=False):
     """The material that shows the 'Radiosity' attribute as emission, or ``flat_attribute``
     where the panel's flat switch is on (ours, never a user's material that happens to have the
-    same name; rebuilt each run, for the run's attribute names)."""
+    same name; rebuilt each run, for the run's attribute names); ``live`` (live lamps): seen by
+    the camera alone, as the live materials' solved light."""
     material = next((m for m in bpy.data.materials if MATERIAL_PROPERTY in m.keys() and m.node_tree is not None),
                     None)
     if material is None:
@@ -48,6 +49,8 @@ def result_material(flat_attribute=ATTRIBUTE_NAME):
     output = tree.nodes.new("ShaderNodeOutputMaterial")
     output.location = (300, 0)
     tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    if live:
+        textured.camera_only(tree, emission, (-150, 250))
     material.diffuse_color = (1.0, 1.0, 1.0, 1.0)
     return material
 
@@ -274,7 +277,7 @@ def write_results(context, output_data, output_mode, scene=None):
     flat_name = PATCH_ATTRIBUTE_NAME if smooth_written and output_mode != "VERTEX" else ATTRIBUTE_NAME
     live = getattr(output_data, "live_lamps", False)  # (the lamps light the textured materials' own shaders)
     try:
-        material = result_material(flat_name)
+        material = result_material(flat_name, live)
         for index, (arrays, faces) in enumerate(zip(output_data.patches.objects, output_data.face_colours)):
             if faces is None:  # an object of the rest of the scene: it took part, gets no result
                 continue

@@ -317,7 +317,7 @@ def _write_colours(out, scene, result, settings):
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
     radiosity = np.maximum(result.radiosity, 0.0)
     textured = settings.output == "TEXTURED"
-    out.live_lamps = textured and settings.live_lamps and point_direct.has_lamps(scene)
+    out.live_lamps = textured and settings.live_lamps and point_direct.has_direct(scene)
     extras = {}
     if settings.light_output and not textured:  # (the textured output writes the light smooth)
         extras[LIGHT_ATTRIBUTE] = np.maximum(result.irradiance, 0.0)
@@ -344,7 +344,8 @@ def _write_colours(out, scene, result, settings):
                          f"{shown}: choose Smooth colours to make them")
     out.light_domain = "CORNER" if "light" in made else "FACE"
     flat_light = None if not textured or "light" in made else np.maximum(
-        result.irradiance - (point_direct.lamp_means(scene, seed=result.seed) if out.live_lamps else 0.0), 0.0)
+        result.irradiance - (point_direct.live_means(scene, seed=result.seed, light=result.irradiance)
+                             if out.live_lamps else 0.0), 0.0)
     for k, o in enumerate(patches.objects):
         rows = patches.combined.patch_slice(k)
         out.face_colours.append(radiosity[rows] if o.receives else None)
@@ -374,7 +375,7 @@ def _at_polygon_corners(patches, scene, corners, shading=None, least=None):
 
 def _smooth_corners(scene, result, light=False, shading=None, live=False):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``Surface.arriving_light``) at every
-    corner of the scene's triangles, smooth (``live``: the lamps' direct light left out); then ("smooth", (T,3,3)): the reflected light, its
+    corner of the scene's triangles, smooth (``live``: the lamps', suns' and emitters' direct light left out); then ("smooth", (T,3,3)): the reflected light, its
     tile noise filtered within its measured variance, joined across objects (not across hidden
     patches: core covered) and kept apart at creases (core smoothing), plus each patch's own
     emission, flat; both with the direct light's shape within each patch (core point_direct).
@@ -388,7 +389,7 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False):
     reflected = surface.filter_light(result.reflected, result.reflected_variance)  # direct light held, the peak)
     direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed)
     if light:
-        yield "light", point_direct.light_corners(surface, scene, arriving, direct, live, triangles, result.seed)
+        yield "light", point_direct.light_corners(surface, scene, arriving, direct, live)
     corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True))
     corners += scene.emission[triangle_patch][:, None, :]
     yield "smooth", corners

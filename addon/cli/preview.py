@@ -158,12 +158,14 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
 def _results_seen(scene, changes):
     """The results' materials only seen: as lights, Cycles would build a light tree over every
     emitting triangle, which at a million patches took more memory than the scene. Live lamps
-    (``LIVE_PROPERTY``): their light drawn at the preview's samples, denoised."""
-    from ..blender_write.materials import LIVE_PROPERTY
+    (``LIVE_PROPERTY``): their light drawn at the preview's samples, denoised; the emitting
+    materials among them (``LIVE_EMITS_PROPERTY``) sampled as lights, as their sources are."""
+    from ..blender_write.materials import LIVE_EMITS_PROPERTY, LIVE_PROPERTY
 
     materials = _result_materials(scene)
     for material in materials:
-        changes.set(material.cycles, "emission_sampling", "NONE")
+        if not material.get(LIVE_EMITS_PROPERTY):
+            changes.set(material.cycles, "emission_sampling", "NONE")
     if any(material.get(LIVE_PROPERTY) for material in materials):
         changes.set(scene.cycles, "use_denoising", True)
 

@@ -28,8 +28,9 @@ scaled down to H, its shape kept: H - M is never negative, and the display one s
 where M passes OVERSHOOT times H (a corner a centimetre from an emitter) it shows corners(H)
 alone.
 
-With live lamps (``arriving``, ``light_corners``) the renderer draws the lamps' and suns' own light pixel by
-pixel, and the light shown is H less each patch's mean of it (``lamp_means``).
+With live lamps (``arriving``, ``light_corners``) the renderer draws the lamps', suns' and emitting
+materials' own light pixel by pixel, and the light shown is H less each patch's mean of it
+(``live_means``), smooth.
 
 A corner is evaluated a hundredth of the way from its point towards its patch's centre (inside
 the patch: a point on the edge shared with a wall standing on it would graze the wall). A
@@ -58,7 +59,7 @@ NOISE_SHARE = 0.04  # of the light of the patch's brightest corner: a standard e
 OVERSHOOT = 2.0  # a patch's direct light's interpolated mean over its solved light beyond which it is not shown
 INWARD = 0.01  # of the way from a corner to its patch's centre
 BLOCK_SAMPLES = 1 << 15  # samples traced at a time (about 500 bytes of temporaries each)
-LAMP_MEAN_SAMPLES = 64  # points a patch for its mean of the lamps' light (lamp_means)
+LIVE_MEAN_SAMPLES = 64  # points a patch for its mean of the live light (live_means), before the noisy ones' again
 # Sobol' dimensions of a corner's sample: a point of a lamp (2, read as u[3:5]), an emitting
 # patch (u[5]) and a point of it (u[6:9]).
 DIMENSIONS = (0, 1, 2, 3, 4, 5, 6, 7, 8)
@@ -147,10 +148,9 @@ class _Corners:
         return self.offset[live] if np.ndim(self.offset) else self.offset
 
 
-def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, lamps=True):
-    """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
-    lamp and each emitting group apart (``_part_at``), added up into its group's row."""
-    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
+def _sources(scene, light_group, patch_group, groups, lamps=True):
+    """[(group, add)] each lamp and sun (with ``lamps``) and each emitting group as
+    ``add(tables, points, u, value)`` adds its light at sample points (``adaptive_light``)."""
     power = scene.patch_area * scene.emission.mean(axis=1)
     emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
     parts = [(light_group[k] if groups else 0, partial(_lamps, lamps=[light]))
@@ -158,10 +158,17 @@ def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, 
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
         parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine)))
+    return parts
+
+
+def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, lamps=True):
+    """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
+    lamp and each emitting group apart (``_part_at``), added up into its group's row."""
+    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     out = np.zeros((max(groups, 1), len(patch), 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 28,))))
     with tables.numpy_turn:
-        for group, add in parts:
+        for group, add in _sources(scene, light_group, patch_group, groups, lamps):
             out[group] += _part_at(tables, position, patch, samples, rng, add)
     return out if groups else out[0]
 
@@ -288,39 +295,64 @@ def _kept(surface, direct, scale):
 
 def arriving(surface, scene, result, live=False):
     """(P,3) the light arriving (``Surface.arriving_light``: noise filtered); ``live``: less
-    the lamps' and suns' (``lamp_means``), which the renderer draws itself."""
-    irradiance = result.irradiance - lamp_means(scene, seed=result.seed) if live else result.irradiance
+    the lamps', suns' and emitting patches' (``live_means``), which the renderer draws itself."""
+    irradiance = result.irradiance - live_means(scene, seed=result.seed, light=result.irradiance) if live \
+        else result.irradiance
     return surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity)
 
 
-def light_corners(surface, scene, light, direct, live=False, triangles=None, seed=0):
+def light_corners(surface, scene, light, direct, live=False):
     """(T,3,3) the light arriving ``light`` (``arriving``) shown at the corners with the direct
-    light's shape (``shown``; ``direct`` the CornerDirect of every source); ``live``: of the
-    emitting patches alone (``triangles``: the surface's, and the solve's ``seed``, for it)."""
-    if live:
-        direct = corner_direct(surface, scene, triangles, seed=seed, lamps=False)
-    return shown(surface, light, direct)
+    light's shape (``shown``; ``direct`` the CornerDirect of every source); ``live``: smooth
+    alone (the renderer draws every lamp's, sun's and emitter's own light, and the sky's is soft)."""
+    return shown(surface, light, None if live else direct)
 
 
-def lamp_means(scene, samples=LAMP_MEAN_SAMPLES, seed=0, light_group=None, groups=0):
-    """([G,]P,3) each patch's mean of the lamps' and suns' direct light (each ``samples``
-    stratified points over its visible part, every lamp looked at from each): the light a
-    renderer draws live where the lamps light the surfaces themselves (``LIVE`` results), to
-    leave out of the solved light. Given ``groups`` > 0 and ``light_group`` (L,), each group's."""
+def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0):
+    """([G,]P,3) each patch's mean of the light a renderer draws live where the lamps, suns and
+    emitting materials light the surfaces themselves (``LIVE`` results): their direct light, from
+    ``samples`` stratified points over the patch's visible part, every lamp and emitting group
+    looked at from each. A patch whose mean's standard error passes NOISE_SHARE of its solved
+    ``light`` (P,3), or of the mean itself, is sampled again with MORE_SAMPLES times as many
+    points, RETRIES times (beside an emitter the light is heavy-tailed). Given ``groups`` > 0,
+    ``light_group`` (L,) and ``patch_group`` (P,): each group's (``corner_direct``)."""
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
-    g, P = tables.geometry, scene.patch_count
-    lamps = [(k, light) for k, light in enumerate(scene.lights.lights) if not isinstance(light, WorldLight)]
-    out = np.zeros((max(groups, 1), P, 3))
+    out = np.zeros((max(groups, 1), scene.patch_count, 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 27,))))
-    step = max(1, BLOCK_SAMPLES // samples)
     with tables.numpy_turn:
-        for start in range(0, P, step):
-            rows = np.repeat(np.arange(start, min(P, start + step)), samples)
-            u = stratified_by_patch(rows, P, SAMPLE_DIMENSIONS, rng, dtype=np.float32)
-            points = _Points(g, rows, u)
-            for k, light in lamps:
-                value = np.zeros((3, rows.size))
-                _lamps(tables, points, [light], u, value)
-                out[light_group[k] if groups else 0, start:start + rows.size // samples] += (
-                    value.reshape(3, -1, samples).mean(axis=2).T)
+        for group, add in _sources(scene, light_group, patch_group, groups):
+            out[group] += _means_of(tables, samples, rng, add, light)
     return out if groups else out[0]
+
+
+def _means_of(tables, samples, rng, add, light):
+    """(P,3) one source's mean light over each patch (``live_means``), noisy patches again."""
+    patches = np.arange(tables.geometry.patch_count)
+    mean, error = _patch_sampled(tables, patches, samples, rng, add)
+    for _ in range(RETRIES):
+        shown_light = mean.sum(axis=1) if light is None else np.maximum(light.sum(axis=1), mean.sum(axis=1))
+        noisy = np.flatnonzero(error > NOISE_SHARE * shown_light)
+        if not noisy.size:
+            break
+        samples *= MORE_SAMPLES
+        mean[noisy], error[noisy] = _patch_sampled(tables, noisy, samples, rng, add)
+    return mean
+
+
+def _patch_sampled(tables, patches, samples, rng, add):
+    """((n,3) the mean of ``samples`` stratified points of each of ``patches``' light, (n,) its
+    standard error (channels summed))."""
+    g = tables.geometry
+    mean, error = np.empty((len(patches), 3)), np.empty(len(patches))
+    step = max(1, BLOCK_SAMPLES // samples)
+    for start in range(0, len(patches), step):
+        block = slice(start, min(len(patches), start + step))
+        n = block.stop - block.start
+        local = np.repeat(np.arange(n), samples)
+        u = stratified_by_patch(local, n, SAMPLE_DIMENSIONS, rng, dtype=np.float32)
+        value = np.zeros((3, n * samples))
+        add(tables, _Points(g, patches[block][local], u), u=u, value=value)
+        value = value.reshape(3, n, samples)
+        mean[block] = value.mean(axis=2).T
+        error[block] = value.sum(axis=0).std(axis=1, ddof=1) / np.sqrt(samples)
+    return mean, error

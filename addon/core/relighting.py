@@ -208,13 +208,10 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     whole = _summed(direct)
     if light:
         irradiance, total, shaped, shaped_whole = per_source.irradiance, result.irradiance, direct, whole
-        if live:  # (the lamps' direct light left to the renderer: point_direct.light_corners)
-            lamps = point_direct.lamp_means(scene, seed=result.seed, light_group=per_source.light_group,
-                                            groups=per_source.count)
-            irradiance, total = irradiance - lamps, total - lamps.sum(axis=0)
-            shaped = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, patch_group=per_source.patch_group,
-                                                groups=per_source.count, lamps=False)
-            shaped_whole = _summed(shaped)
+        if live:  # (the lamps', suns' and emitters' direct light left to the renderer: point_direct.light_corners)
+            drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
+                                            patch_group=per_source.patch_group, groups=per_source.count)
+            irradiance, total, shaped, shaped_whole = irradiance - drawn, total - drawn.sum(axis=0), None, None
         arriving, fill = surface.arriving_light(total, result.irradiance_variance, scene.reflectivity,
                                                 return_filter=True)
         yield "light", point_direct.shown(surface, arriving, shaped_whole, fill(irradiance), shaped, dtype)[1]
