@@ -202,20 +202,22 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
     triangles = scene.triangles if triangles is None else triangles
+    if light:  # (the noise filters first, as the pipeline's: with the direct light's corners held, the peak)
+        irradiance, total = per_source.irradiance, result.irradiance
+        if live:  # (the lamps', suns' and emitters' direct light left to the renderer: point_direct.light_corners)
+            drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
+                                            patch_group=per_source.patch_group, groups=per_source.count)
+            irradiance, total = irradiance - drawn, total - drawn.sum(axis=0)
+        arriving, fill = surface.arriving_light(total, result.irradiance_variance, scene.reflectivity,
+                                                return_filter=True)
+    filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
     direct = point_direct.corner_direct(surface, scene, triangles,
                                         seed=result.seed, light_group=per_source.light_group,
                                         patch_group=per_source.patch_group, groups=per_source.count)
     whole = _summed(direct)
     if light:
-        irradiance, total, shaped, shaped_whole = per_source.irradiance, result.irradiance, direct, whole
-        if live:  # (the lamps', suns' and emitters' direct light left to the renderer: point_direct.light_corners)
-            drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
-                                            patch_group=per_source.patch_group, groups=per_source.count)
-            irradiance, total, shaped, shaped_whole = irradiance - drawn, total - drawn.sum(axis=0), None, None
-        arriving, fill = surface.arriving_light(total, result.irradiance_variance, scene.reflectivity,
-                                                return_filter=True)
+        shaped, shaped_whole = (None, None) if live else (direct, whole)
         yield "light", point_direct.shown(surface, arriving, shaped_whole, fill(irradiance), shaped, dtype)[1]
-    filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
     rho = scene.reflectivity
     _, smooth = point_direct.shown(surface, filtered, whole and point_direct.scaled(surface, whole, rho),
                                        noise(per_source.irradiance * rho), direct and point_direct.scaled(surface, direct, rho), dtype)
