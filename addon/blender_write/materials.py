@@ -94,20 +94,7 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     total = lit.outputs[0]
 
     lit_live = live and shader.bl_idname in _BASE
-    emitted = _emitted(tree, shader, (x, y - 450))
-    if live and emitted is not None:
-        material[LIVE_EMITS_PROPERTY] = True
-    if lit_live and emitted is not None:  # (the shader's own emission shows it, and lights the others)
-        nodes.remove(emitted.node)
-        emitted = None
-    if emitted is not None:
-        added = nodes.new("ShaderNodeVectorMath")
-        added.operation = "ADD"
-        added.location = (x + 400, y)
-        links.new(total, added.inputs[0])
-        links.new(emitted, added.inputs[1])
-        total = added.outputs[0]
-
+    total = _plus_emission(material, shader, total, live, lit_live, (x, y))
     emission = emission_output(tree, total, flat_attribute, (x + 600, y))
     output = nodes.new("ShaderNodeOutputMaterial")
     output.location = (x + 1200, y)
@@ -120,6 +107,27 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     _keep_only_upstream(tree, output)
     output.is_active_output = True
     return material
+
+
+def _plus_emission(material, shader, total, live, lit_live, location):
+    """``total`` (a socket) plus the shader's emission colour x strength where it emits, but
+    where the live copy's own shader shows it (``lit_live``: it lights the others in the
+    render too); an emitting live copy is marked LIVE_EMITS_PROPERTY (sampled as a light)."""
+    tree, (x, y) = material.node_tree, location
+    emitted = _emitted(tree, shader, (x, y - 450))
+    if emitted is None:
+        return total
+    if live:
+        material[LIVE_EMITS_PROPERTY] = True
+    if lit_live:
+        tree.nodes.remove(emitted.node)
+        return total
+    added = tree.nodes.new("ShaderNodeVectorMath")
+    added.operation = "ADD"
+    added.location = (x + 400, y)
+    tree.links.new(total, added.inputs[0])
+    tree.links.new(emitted, added.inputs[1])
+    return added.outputs[0]
 
 
 def _lit_by_lamps(tree, shader, emission, location):
