@@ -372,15 +372,15 @@ def _at_polygon_corners(patches, scene, corners, shading=None, least=None):
     return out
 
 
-def _smooth_corners(scene, result, light=False, shading=None, live=False):
+def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=np.float32):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``Surface.arriving_light``) at every
     corner of the scene's triangles, smooth (``live``: the lamps', suns' and emitters' direct light left out); then ("smooth", (T,3,3)): the reflected light, its
     tile noise filtered within its measured variance, joined across objects (not across hidden
     patches: core covered) and kept apart at creases (core smoothing), plus each patch's own
     emission, flat; both with the direct light's shape within each patch (core point_direct).
-    Made one at a time (a generator), so that the caller lets go of one before the next is made.
-    ``shading``: the (triangles, patch of each) to make them on, if not the scene's (a refined
-    mesh's, with every polygon corner: adaptive_patches.shading_arrays)."""
+    Made one at a time (a generator), so that the caller lets go of one before the next is made; given as
+    ``dtype`` (float32: as written). ``shading``: the (triangles, patch of each) to make them on, if not the
+    scene's (a refined mesh's, with every polygon corner: adaptive_patches.shading_arrays)."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                    hidden=hidden_patches(scene.geometry))
@@ -388,13 +388,13 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False):
     reflected = surface.filter_light(result.reflected, result.reflected_variance)  # direct light held, the peak)
     direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed)
     if light:
-        yield "light", point_direct.light_corners(surface, scene, arriving, direct, live)
-    corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True))
+        yield "light", point_direct.light_corners(surface, scene, arriving, direct, live, dtype)
+    corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True), dtype=dtype)
     corners += scene.emission[triangle_patch][:, None, :]
     yield "smooth", corners
 
 
 def _smooth_light(scene, result, light=False):
     """(smooth radiosity, smooth light arriving or None), each (T,3,3) (``_smooth_corners``)."""
-    made = dict(_smooth_corners(scene, result, light))
+    made = dict(_smooth_corners(scene, result, light, dtype=np.float64))
     return made["smooth"], made.get("light")

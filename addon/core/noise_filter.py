@@ -26,6 +26,7 @@ import numpy as np
 from .welding import run_starts
 
 NOISE_CUTOFF = 3.0  # standard errors beyond which a neighbour is real detail, not noise
+FIT_BLOCK = 1 << 16  # neighbour pairs a local fit sums at a time (about 100 bytes of temporaries each)
 
 
 class NoiseFilter:
@@ -167,48 +168,66 @@ class NoiseFilter:
         in the patch's tangent plane) through itself and its neighbours q, weights k / var:
         a gradient across the neighbourhood moves no patch. Returns (fit, weights): with
         ``operator``, weights = (own (P,k), pair (n,k)), the fit as a sum over values (fit_p =
-        own_p v_p + sum_q pair_pq v_q); else None."""
+        own_p v_p + sum_q pair_pq v_q); else None. The pairs' sums are made FIT_BLOCK pairs at a
+        time (the pairs' temporaries were the peak memory of the largest scenes' smoothing)."""
+        P, C = values.shape
+        frame = self._tangents()
+        ridge = 1e-3 * self.patch_area  # (a little ridge on the gradient keeps a row of neighbours solvable)
+        out = values.copy()
+        if operator:
+            own_weight, pair_weight = np.empty_like(values), np.empty((len(p), C))
+        for c in range(C):  # over colour channels, not elements
+            m, rhs = np.zeros((P, 3, 3)), np.zeros((P, 3))
+            for block in _blocks(len(p)):
+                pb, qb = p[block], q[block]
+                design = self._design(pb, qb, frame)
+                w = k[block] / var[qb, c]
+                for i in range(3):
+                    wd = w * design[i]
+                    rhs[:, i] += _sum(pb, wd * values[qb, c], P)
+                    for j in range(i, 3):
+                        m[:, i, j] += _sum(pb, wd * design[j], P)
+            for i, j in ((1, 0), (2, 0), (2, 1)):
+                m[:, i, j] = m[:, j, i]
+            own = np.where(known, 1.0 / var[:, c], 0.0)
+            m[:, 0, 0] += own
+            rhs[:, 0] += own * values[:, c]
+            m[:, 1, 1] += ridge * m[:, 0, 0]
+            m[:, 2, 2] += ridge * m[:, 0, 0]
+            solvable = known & (m[:, 0, 0] > 0)
+            m[~solvable] = np.eye(3)
+            fit = np.linalg.solve(m, rhs[:, :, None])[:, 0, 0]
+            out[:, c] = np.where(solvable, fit, values[:, c])
+            if operator:
+                # a = g . rhs, g the first row of M's inverse (M is symmetric)
+                g = np.linalg.solve(m, np.broadcast_to(np.eye(3)[:, :1], (P, 3, 1)))[:, :, 0]
+                g[~solvable] = 0.0
+                own_weight[:, c] = np.where(solvable, g[:, 0] * own, 1.0)
+                for block in _blocks(len(p)):
+                    pb, qb = p[block], q[block]
+                    design = self._design(pb, qb, frame)
+                    pair_weight[block, c] = k[block] / var[qb, c] * (
+                        g[pb, 0] * design[0] + g[pb, 1] * design[1] + g[pb, 2] * design[2])
+        return out, ((own_weight, pair_weight) if operator else None)
+
+    def _tangents(self):
+        """(t1, t2) (P,3) each: a frame of each patch's tangent plane."""
         n = self.patch_normal
         axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
         t1 = np.cross(n, axis)
         t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-300)
-        t2 = np.cross(n, t1)
-        design = np.zeros((3, len(p)))  # 1 and the neighbour's offset along t1 and t2
+        return t1, np.cross(n, t1)
+
+    def _design(self, p, q, frame):
+        """(3, n) 1 and the neighbour's offset along p's tangents t1 and t2, of pairs (p, q)."""
+        t1, t2 = frame
+        design = np.zeros((3, len(p)))
         design[0] = 1.0
         for a in range(3):  # over axes, not elements
             offset = self.patch_centroid[q, a] - self.patch_centroid[p, a]
             design[1] += offset * t1[p, a]
             design[2] += offset * t2[p, a]
-        del offset
-        # a little ridge on the gradient keeps a row of neighbours (an edge) solvable
-        ridge = 1e-3 * self.patch_area
-        out = values.copy()
-        P = len(values)
-        if operator:
-            own_weight, pair_weight = np.empty_like(values), np.empty((len(p), values.shape[1]))
-        for c in range(values.shape[1]):  # over colour channels, not elements
-            own = np.where(known, 1.0 / var[:, c], 0.0)
-            w = k / var[q, c]
-            M = np.empty((P, 3, 3))
-            for i in range(3):
-                for j in range(i, 3):
-                    M[:, i, j] = M[:, j, i] = _sum(p, w * design[i] * design[j], P)
-            rhs = np.stack([_sum(p, w * values[q, c] * design[i], P) for i in range(3)], axis=1)
-            M[:, 0, 0] += own
-            rhs[:, 0] += own * values[:, c]
-            M[:, 1, 1] += ridge * M[:, 0, 0]
-            M[:, 2, 2] += ridge * M[:, 0, 0]
-            solvable = known & (M[:, 0, 0] > 0)
-            M = np.where(solvable[:, None, None], M, np.eye(3))
-            fit = np.linalg.solve(M, rhs[:, :, None])[:, 0, 0]
-            out[:, c] = np.where(solvable, fit, values[:, c])
-            if operator:
-                # a = g . rhs, g the first row of M's inverse (M is symmetric)
-                g = np.linalg.solve(M, np.broadcast_to(np.eye(3)[:, :1], (P, 3, 1)))[:, :, 0]
-                g[~solvable] = 0.0
-                own_weight[:, c] = np.where(solvable, g[:, 0] * own, 1.0)
-                pair_weight[:, c] = w * (g[p, 0] * design[0] + g[p, 1] * design[1] + g[p, 2] * design[2])
-        return out, ((own_weight, pair_weight) if operator else None)
+        return design
 
 
 class LinearFilter:
@@ -282,6 +301,11 @@ def _unmeasured_from_neighbours(var, p, q):
         total = _sum(p[give], var[q[give], c], len(var))
         out[:, c] = np.where(zero & (count > 0), total / np.maximum(count, 1), var[:, c])
     return out
+
+
+def _blocks(n, size=FIT_BLOCK):
+    """Slices of ``size`` of n pairs."""
+    return [slice(start, min(n, start + size)) for start in range(0, n, size)]
 
 
 def _sum(index, weights, n):

@@ -257,17 +257,18 @@ def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float6
     D scaled on the patches where M passes the value (``_fitted``). With ``parts`` (S,P,3), each
     group's values as linear maps of the whole's make them (adding up to ``values``), and
     ``part_direct`` their CornerDirect, also (S,T,3,3) each group's corners, adding up to the
-    whole's."""
+    whole's. Made in float64, given as ``dtype`` (the parts; the whole too where there are none:
+    float32, as they are written, half the memory)."""
     maps = parts is not None
     if direct is None:
         if not maps:
-            return surface.corner_values(values)
+            return surface.corner_values(values, dtype=dtype)
         whole, apply = surface.corner_values(values, return_filter=True)
         return whole, apply(parts, dtype)
     scale = _fitted(values, direct.means)
     direct = _kept(surface, direct, scale)
     shown_corners, apply = surface.corner_values(values - direct.means, return_filter=True) if maps else (
-        surface.corner_values(values - direct.means), None)
+        surface.corner_values(values - direct.means, dtype=dtype), None)
     shown_corners += direct.corners
     if not maps:
         return shown_corners
@@ -301,11 +302,12 @@ def arriving(surface, scene, result, live=False):
     return surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity)
 
 
-def light_corners(surface, scene, light, direct, live=False):
+def light_corners(surface, scene, light, direct, live=False, dtype=np.float64):
     """(T,3,3) the light arriving ``light`` (``arriving``) shown at the corners with the direct
-    light's shape (``shown``; ``direct`` the CornerDirect of every source); ``live``: smooth
-    alone (the renderer draws every lamp's, sun's and emitter's own light, and the sky's is soft)."""
-    return shown(surface, light, None if live else direct)
+    light's shape (``shown``, given as ``dtype``; ``direct`` the CornerDirect of every source);
+    ``live``: smooth alone (the renderer draws every lamp's, sun's and emitter's own light, and
+    the sky's is soft)."""
+    return shown(surface, light, None if live else direct, dtype=dtype)
 
 
 def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0):

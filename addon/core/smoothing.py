@@ -156,20 +156,21 @@ class Surface(NoiseFilter):
         sums = _sum(self.triangle_patch, tri, self.patch_count)
         return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
 
-    def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False):
+    def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
         compatible corners, the area-weighted mean of each patch's linear interpolation equal to
         its value (negative values taken as 0), non-negative. With ``return_filter``, also
         ``apply`` (``LinearCorners``): the same steps with these values' clips, floors and final
         scales held fixed, a linear map of (P,k) or (S,P,k) values to (T,3,k) or (S,T,3,k) corners
         whose value at ``patch_values`` is these corners (float error), so that parts of the
-        values (each source's) give corners that add up to these."""
+        values (each source's) give corners that add up to these. Made in float64 a channel at
+        a time, given as ``dtype``."""
         # a signed estimator's slightly negative patches show as black: light is never negative
         checked = _checked(patch_values, self.patch_count, "patch values")
         values = np.maximum(checked, 0.0)
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
-        out = np.empty((len(self.triangle_patch), 3, values.shape[1]))
+        out = np.empty((len(self.triangle_patch), 3, values.shape[1]), dtype)
         records = []
         for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
             channel = np.ascontiguousarray(values[:, k])
