@@ -180,13 +180,15 @@ class NoiseFilter:
             m, rhs = np.zeros((P, 3, 3)), np.zeros((P, 3))
             for block in _blocks(len(p)):
                 pb, qb = p[block], q[block]
+                lo, hi = int(pb[0]), int(pb[-1]) + 1  # (p sorted: the block's patches are a run)
+                local = pb - lo
                 design = self._design(pb, qb, frame)
                 w = k[block] / var[qb, c]
                 for i in range(3):
                     wd = w * design[i]
-                    rhs[:, i] += _sum(pb, wd * values[qb, c], P)
+                    rhs[lo:hi, i] += _sum(local, wd * values[qb, c], hi - lo)
                     for j in range(i, 3):
-                        m[:, i, j] += _sum(pb, wd * design[j], P)
+                        m[lo:hi, i, j] += _sum(local, wd * design[j], hi - lo)
             for i, j in ((1, 0), (2, 0), (2, 1)):
                 m[:, i, j] = m[:, j, i]
             own = np.where(known, 1.0 / var[:, c], 0.0)
