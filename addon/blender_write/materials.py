@@ -130,6 +130,19 @@ def _plus_emission(material, shader, total, live, lit_live, location):
     return added.outputs[0]
 
 
+def follow_emission(copy, source):
+    """A live copy's own shader's emission (``LIVE_EMITS_PROPERTY``: it lights the others in
+    the render) set to its source's now, where the source's inputs are values (Relight)."""
+    node, own = _shader_node(source), None
+    if node is not None and copy.node_tree is not None:
+        own = copy.node_tree.nodes.get(node.name)
+    if own is None or own.bl_idname != node.bl_idname:
+        return
+    for name in _EMISSION.get(node.bl_idname, ()):
+        if not node.inputs[name].is_linked and not own.inputs[name].is_linked:
+            own.inputs[name].default_value = node.inputs[name].default_value
+
+
 def _lit_by_lamps(tree, shader, emission, location):
     """The surface shader of a live result: the source's own shader, lit by the scene's lamps
     and emitting materials as the renderer draws them, its own emission lighting the others,

@@ -12,7 +12,7 @@ from bpy.app.handlers import persistent
 
 from ..blender_read import sources
 from ..blender_write import relight_store
-from ..blender_write.materials import TEXTURED_PROPERTY, is_textured_material
+from ..blender_write.materials import LIVE_EMITS_PROPERTY, TEXTURED_PROPERTY, follow_emission, is_textured_material
 from ..bpy_free import relit
 
 LIVE_DELAY = 0.02  # seconds: changes that come together (a slider drag) relight once
@@ -98,6 +98,8 @@ def _textured_emission():
             continue
         source = bpy.data.materials.get(material[TEXTURED_PROPERTY])
         node = next((n for n in material.node_tree.nodes if n.label == "Emission"), None)
+        if source is not None and material.get(LIVE_EMITS_PROPERTY):
+            follow_emission(material, source)  # (a live copy's own shader emits)
         if source is None or node is None:
             continue
         emission = sources.material_emission(source)

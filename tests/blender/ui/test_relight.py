@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from addon.blender_write import relight_store
+from addon.blender_write.results import previous_results
 from addon.ui import operators, relight as relight_ui
 
 from . import relight_scene as rs
@@ -366,3 +367,19 @@ def test_a_colour_channel_solved_dark_cannot_be_relit_and_is_stale(blender):
     bpy.data.objects["Bulb"].data.color = (0.5, 0.0, 0.0)  # within what was solved: relit
     outcome = relight_ui.assess(bpy.context.scene)
     assert outcome.state(bulb) == "relit" and outcome.stale == set() and outcome.unsolved == set()
+
+
+def test_a_live_emitter_s_copy_follows_its_material_on_relight(blender):
+    """Live lamps: an emitting material's copy emits with its own shader (it lights the other
+    results in the render), so Relight sets that shader's emission to the source's now; before,
+    only the baked copies' emission term followed, and a live glow kept its solved strength."""
+    settings = rs.build(blender, output="TEXTURED")
+    settings.live_lamps = True
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    copy = next(o for o in previous_results(bpy.context.scene) if o["radiosity_source"] == "Strip").data.materials[0]
+    shader = copy.node_tree.nodes["Principled BSDF"]
+    assert shader.inputs["Emission Strength"].default_value == 3.0
+    rs.change(bpy.context)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    assert shader.inputs["Emission Strength"].default_value == 5.0
+    assert tuple(shader.inputs["Emission Color"].default_value) == pytest.approx((1.0, 0.3, 0.2, 1.0))
