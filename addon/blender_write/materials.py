@@ -114,14 +114,13 @@ def _plus_emission(material, shader, total, live, lit_live, location):
     where the live copy's own shader shows it (``lit_live``: it lights the others in the
     render too); an emitting live copy is marked LIVE_EMITS_PROPERTY (sampled as a light)."""
     tree, (x, y) = material.node_tree, location
-    emitted = _emitted(tree, shader, (x, y - 450))
-    if emitted is None:
+    if not _emits(shader):
         return total
     if live:
         material[LIVE_EMITS_PROPERTY] = True
     if lit_live:
-        tree.nodes.remove(emitted.node)
         return total
+    emitted = _emitted(tree, shader, (x, y - 450))
     added = tree.nodes.new("ShaderNodeVectorMath")
     added.operation = "ADD"
     added.location = (x + 400, y)
@@ -175,14 +174,20 @@ def camera_only(tree, emission, location):
     tree.links.new(path.outputs["Is Camera Ray"], emission.inputs["Strength"])
 
 
+def _emits(shader):
+    """Whether the shader has an emission whose strength is not a plain 0."""
+    if shader.bl_idname not in _EMISSION:
+        return False
+    strength = shader.inputs[_EMISSION[shader.bl_idname][1]]
+    return strength.is_linked or strength.default_value != 0
+
+
 def _emitted(tree, shader, location):
     """The shader's emission colour x strength (a socket: its own subtree where linked), or None
     where it emits nothing."""
-    if shader.bl_idname not in _EMISSION:
+    if not _emits(shader):
         return None
     colour, strength = (shader.inputs[name] for name in _EMISSION[shader.bl_idname])
-    if not strength.is_linked and strength.default_value == 0:
-        return None
     emitted = tree.nodes.new("ShaderNodeVectorMath")
     emitted.operation = "SCALE"
     emitted.label = "Emission"

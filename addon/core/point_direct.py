@@ -75,14 +75,13 @@ class CornerDirect:
     means: np.ndarray
 
 
-def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0,
-                  lamps=True):
+def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0):
     """The direct light (``CornerDirect``; None where ``has_direct`` is not) at the corners of
     ``triangles`` (T,3) (of ``scene.vertices``; ``surface`` is ``smoothing.Surface.of`` them)
-    from every lamp and sun (not with ``lamps`` False) and emitting patch of ``scene``. Given
+    from every lamp and sun and emitting patch of ``scene``. Given
     ``groups`` > 0, ``light_group`` (L,) the group of each light and ``patch_group`` (P,) of
     each emitting patch: each group's light apart (they add up to the whole)."""
-    if not has_direct(scene, lamps):
+    if not has_direct(scene):
         return None
     P = scene.patch_count
     keys, first, corner_key = np.unique(surface.point.ravel().astype(np.int64) * P + np.repeat(surface.triangle_patch, 3),
@@ -96,7 +95,7 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     towards *= INWARD
     position += towards
     del towards
-    value = _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, lamps)  # ([G,]n,3)
+    value = _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups)  # ([G,]n,3)
     _fill_buried(scene.geometry, position, patch, value)
     if not groups:  # (the whole's corners as written, float32: the memory of the largest scenes)
         value = value.astype(np.float32)
@@ -104,10 +103,9 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     return CornerDirect(corners, patch_means(surface, corners))
 
 
-def has_direct(scene, lamps=True):
-    """Whether ``scene`` has a lamp or a sun (with ``lamps``) or an emitting patch (the sky alone
-    stays smooth)."""
-    return bool(scene.emission.any()) or (lamps and has_lamps(scene))
+def has_direct(scene):
+    """Whether ``scene`` has a lamp or a sun or an emitting patch (the sky alone stays smooth)."""
+    return bool(scene.emission.any()) or has_lamps(scene)
 
 
 def has_lamps(scene):
@@ -148,46 +146,60 @@ class _Corners:
         return self.offset[live] if np.ndim(self.offset) else self.offset
 
 
-def _sources(scene, light_group, patch_group, groups, lamps=True):
-    """[(group, add)] each lamp and sun (with ``lamps``) and each emitting group as
+def _sources(scene, light_group, patch_group, groups):
+    """[(group, add)] each lamp and sun and each emitting group as
     ``add(tables, points, u, value)`` adds its light at sample points (``adaptive_light``)."""
     power = scene.patch_area * scene.emission.mean(axis=1)
     emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
     parts = [(light_group[k] if groups else 0, partial(_lamps, lamps=[light]))
-             for k, light in enumerate(scene.lights.lights) if lamps and not isinstance(light, WorldLight)]
+             for k, light in enumerate(scene.lights.lights) if not isinstance(light, WorldLight)]
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
         parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine)))
     return parts
 
 
-def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, lamps=True):
+def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups):
     """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
     lamp and each emitting group apart (``_part_at``), added up into its group's row."""
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     out = np.zeros((max(groups, 1), len(patch), 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 28,))))
     with tables.numpy_turn:
-        for group, add in _sources(scene, light_group, patch_group, groups, lamps):
+        for group, add in _sources(scene, light_group, patch_group, groups):
             out[group] += _part_at(tables, position, patch, samples, rng, add)
     return out if groups else out[0]
 
 
 def _part_at(tables, position, patch, samples, rng, add):
     """(n,3) one lamp's or emitting group's light (``add(tables, points, u, value)``) at the
-    points: the mean of ``samples`` stratified samples, MORE_SAMPLES times as many (RETRIES
-    times at most) where a corner's standard error passes NOISE_SHARE of its patch's
-    brightest corner's light (beside an emitter the light is heavy-tailed)."""
-    value, error = _sampled(tables, position, patch, samples, rng, add)
-    noisy = _noisy(patch, value, error)
+    points: the mean of ``samples`` stratified samples, again (``_retried``) where a corner's
+    standard error passes NOISE_SHARE of its patch's brightest corner's light (beside an
+    emitter the light is heavy-tailed)."""
+    g = tables.geometry
+
+    def sample(rows, count):
+        def points(block, local, u):
+            at = rows[block]
+            unit = _unit_points(g, position[at], patch[at])[:, local]
+            return _Corners(g, patch[at][local], unit, position[at].T[:, local])
+        return _sampled(tables, len(rows), count, rng, add, points, DIMENSIONS, np.float32)  # (as shown)
+
+    return _retried(sample, len(patch), samples, lambda value, error: _noisy(patch, value, error))
+
+
+def _retried(sample, n, samples, too_noisy):
+    """(n,3) ``sample(rows, samples)``'s means of n points or patches, those whose error
+    ``too_noisy(mean, error)`` flags sampled again with MORE_SAMPLES times as many samples,
+    RETRIES times at most."""
+    mean, error = sample(np.arange(n), samples)
     for _ in range(RETRIES):
-        if not noisy.any():
+        again = np.flatnonzero(too_noisy(mean, error))
+        if not again.size:
             break
         samples *= MORE_SAMPLES
-        again = np.flatnonzero(noisy)
-        value[again], error[again] = _sampled(tables, position[again], patch[again], samples, rng, add)
-        noisy = _noisy(patch, value, error)
-    return value
+        mean[again], error[again] = sample(again, samples)
+    return mean
 
 
 def _noisy(patch, value, error):
@@ -198,21 +210,19 @@ def _noisy(patch, value, error):
     return error > NOISE_SHARE * brightest[patch]
 
 
-def _sampled(tables, position, patch, samples, rng, add):
-    """((n,3) the mean of ``samples`` stratified samples at each point, (n,) its standard error
-    (channels summed))."""
-    g = tables.geometry
-    mean, error = np.empty((len(patch), 3), np.float32), np.empty(len(patch), np.float32)  # (as shown)
+def _sampled(tables, n, samples, rng, add, points, dimensions, dtype=np.float64):
+    """((n,3) the mean of ``samples`` stratified samples of each of n points or patches, (n,) its
+    standard error (channels summed)); ``points(block, local, u)`` a block's sample points
+    (``local`` each sample's row in the block), BLOCK_SAMPLES samples at a time."""
+    mean, error = np.empty((n, 3), dtype), np.empty(n, dtype)
     step = max(1, BLOCK_SAMPLES // samples)
-    for start in range(0, len(patch), step):
-        block = slice(start, min(len(patch), start + step))
-        n = block.stop - block.start
-        u = stratified_by_patch(np.repeat(np.arange(n), samples), n, DIMENSIONS, rng, dtype=np.float32)
-        unit = np.repeat(_unit_points(g, position[block], patch[block]), samples, axis=1)
-        points = _Corners(g, np.repeat(patch[block], samples), unit, np.repeat(position[block].T, samples, axis=1))
-        value = np.zeros((3, n * samples))
-        add(tables, points, u=u, value=value)
-        value = value.reshape(3, n, samples)
+    for start in range(0, n, step):
+        block = slice(start, min(n, start + step))
+        local = np.repeat(np.arange(block.stop - block.start), samples)
+        u = stratified_by_patch(local, block.stop - block.start, dimensions, rng, dtype=np.float32)
+        value = np.zeros((3, local.size))
+        add(tables, points(block, local, u), u=u, value=value)
+        value = value.reshape(3, -1, samples)
         mean[block] = value.mean(axis=2).T
         error[block] = value.sum(axis=0).std(axis=1, ddof=1) / np.sqrt(samples)
     return mean, error
@@ -329,32 +339,14 @@ def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group
 
 def _means_of(tables, samples, rng, add, light):
     """(P,3) one source's mean light over each patch (``live_means``), noisy patches again."""
-    patches = np.arange(tables.geometry.patch_count)
-    mean, error = _patch_sampled(tables, patches, samples, rng, add)
-    for _ in range(RETRIES):
-        shown_light = mean.sum(axis=1) if light is None else np.maximum(light.sum(axis=1), mean.sum(axis=1))
-        noisy = np.flatnonzero(error > NOISE_SHARE * shown_light)
-        if not noisy.size:
-            break
-        samples *= MORE_SAMPLES
-        mean[noisy], error[noisy] = _patch_sampled(tables, noisy, samples, rng, add)
-    return mean
-
-
-def _patch_sampled(tables, patches, samples, rng, add):
-    """((n,3) the mean of ``samples`` stratified points of each of ``patches``' light, (n,) its
-    standard error (channels summed))."""
     g = tables.geometry
-    mean, error = np.empty((len(patches), 3)), np.empty(len(patches))
-    step = max(1, BLOCK_SAMPLES // samples)
-    for start in range(0, len(patches), step):
-        block = slice(start, min(len(patches), start + step))
-        n = block.stop - block.start
-        local = np.repeat(np.arange(n), samples)
-        u = stratified_by_patch(local, n, SAMPLE_DIMENSIONS, rng, dtype=np.float32)
-        value = np.zeros((3, n * samples))
-        add(tables, _Points(g, patches[block][local], u), u=u, value=value)
-        value = value.reshape(3, n, samples)
-        mean[block] = value.mean(axis=2).T
-        error[block] = value.sum(axis=0).std(axis=1, ddof=1) / np.sqrt(samples)
-    return mean, error
+
+    def sample(rows, count):
+        return _sampled(tables, len(rows), count, rng, add, lambda block, local, u: _Points(g, rows[block][local], u),
+                        SAMPLE_DIMENSIONS)
+
+    def too_noisy(mean, error):
+        shown_light = mean.sum(axis=1) if light is None else np.maximum(light.sum(axis=1), mean.sum(axis=1))
+        return error > NOISE_SHARE * shown_light
+
+    return _retried(sample, g.patch_count, samples, too_noisy)
