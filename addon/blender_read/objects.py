@@ -145,6 +145,8 @@ def _in_world_space(a, matrix_world, name, uid) -> ObjectArrays:
         slot_colours = tuple(None if c is None else c[:, ::-1].copy() for c in slot_colours)
         if a["layers"] is not None:
             a["layers"] = a["layers"].reversed()
+    if a["layers"] is not None:
+        a["layers"] = a["layers"].placed(M[:3, :3])
     slot = np.clip(a["material_index"], 0, len(a["R_slots"]) - 1)
     return ObjectArrays(
         name=name,
@@ -168,11 +170,14 @@ def _in_world_space(a, matrix_world, name, uid) -> ObjectArrays:
 
 def source_layers(mesh, triangles) -> SourceLayers:
     """Every UV map and colour attribute of an evaluated mesh at its loop triangles' corners
-    (float32), with the names its materials read by default."""
+    (float32), with the names its materials read by default, and its shading normals there
+    unless every face is flat."""
     T = len(triangles)
-    if not len(mesh.uv_layers) and not len(mesh.color_attributes):
+    smooth = mesh.normals_domain != "FACE"  # (flat faces alone need no normals: the result is shaded flat)
+    if not len(mesh.uv_layers) and not len(mesh.color_attributes) and not smooth:
         return SourceLayers()
     loops = _get(mesh.loop_triangles, "loops", T, np.int32, 3)
+    normals = _get(mesh.corner_normals, "vector", len(mesh.loops), np.float32, 3)[loops] if smooth else None
     uv = []
     for layer in mesh.uv_layers:
         values = np.empty(len(mesh.loops) * 2, dtype=np.float32)
@@ -192,7 +197,7 @@ def source_layers(mesh, triangles) -> SourceLayers:
     if 0 <= index < len(mesh.color_attributes):
         render_colour = mesh.color_attributes[index].name
     return SourceLayers(tuple(uv), tuple(colours), active.name if active else "", render.name if render else "",
-                        render_colour)
+                        render_colour, normals)
 
 
 def _attribute_colours(mesh, T, triangles, attributes, name, notes):

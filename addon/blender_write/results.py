@@ -168,9 +168,9 @@ def write_light(mesh, values, domain):
 
 
 def write_layers(mesh, layers, notes, name):
-    """The source's UV maps and colour attributes (``patches.ResultLayers``) on the result
-    mesh, under their own names, the same ones active; a UV map or colour attribute named as one
-    of ours is left out (said so)."""
+    """The source's UV maps, colour attributes and shading (``patches.ResultLayers``) on the
+    result mesh, under their own names, the same ones active; a UV map or colour attribute named
+    as one of ours is left out (said so)."""
     for uv_name, values in layers.uv:
         if uv_name in OUR_ATTRIBUTES:
             notes.append(f"'{name}': its UV map '{uv_name}' has the name of a result's colours; "
@@ -189,6 +189,12 @@ def write_layers(mesh, layers, notes, name):
             continue
         attr = mesh.color_attributes.new(colour_name, "FLOAT_COLOR", "CORNER")
         attr.data.foreach_set("color", values.ravel())
+    # the source's shading (a new mesh is smooth everywhere: live lamps would light a box's
+    # sides with its top's normal near their shared edge)
+    if layers.normals is None:
+        mesh.shade_flat()
+    else:
+        mesh.normals_split_custom_set(layers.normals)
 
 
 def _show_colours(mesh, render_colour):

@@ -43,16 +43,31 @@ class SourceLayers:
     active_uv: str = ""  # the UV map shown for editing
     render_uv: str = ""  # the UV map a texture without a UV Map node reads
     render_colour: str = ""  # the colour attribute a Color Attribute node without a name reads
+    # (T,3,3) float32 shading normals at the corners (world space once ``placed``); None: every face flat
+    normals: np.ndarray | None = None
 
     def taken(self, rows):
         """The layers of the loop triangles ``rows`` (a mask or indices) only."""
         return replace(self, uv=tuple((n, a[rows]) for n, a in self.uv),
-                       colours=tuple((n, a[rows]) for n, a in self.colours))
+                       colours=tuple((n, a[rows]) for n, a in self.colours),
+                       normals=None if self.normals is None else self.normals[rows])
 
     def reversed(self):
         """The layers of the triangles with their corners reversed (a mirrored object)."""
         return replace(self, uv=tuple((n, a[:, ::-1].copy()) for n, a in self.uv),
-                       colours=tuple((n, a[:, ::-1].copy()) for n, a in self.colours))
+                       colours=tuple((n, a[:, ::-1].copy()) for n, a in self.colours),
+                       normals=None if self.normals is None else self.normals[:, ::-1].copy())
+
+    def placed(self, linear):
+        """The layers of the object placed by the (3,3) ``linear`` part of its matrix: normals
+        transform by its inverse transpose (outward under a negative scale too)."""
+        if self.normals is None:
+            return self
+        if not abs(np.linalg.det(linear)) > 0:  # (flattened to a plane or less: its faces are flat)
+            return replace(self, normals=None)
+        normals = self.normals.reshape(-1, 3) @ np.linalg.inv(linear).astype(np.float32)  # (rows: n M^-1 = M^-T n)
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+        return replace(self, normals=normals.reshape(self.normals.shape))
 
 
 @dataclass
@@ -67,6 +82,7 @@ class ResultLayers:
     render_colour: str
     patch_slot: np.ndarray  # (P,) int32
     slot_names: tuple       # the source's material of each slot
+    normals: np.ndarray | None = None  # (C,3) float32 the source's shading normals; None: flat faces
 
 
 @dataclass
@@ -378,11 +394,18 @@ def result_layers(o, mesh) -> ResultLayers:
             else np.asarray(o.face_slot, np.int32)[mesh.patch_face])
     source = o.layers or SourceLayers()
     named = [*source.uv, *source.colours]
+    if source.normals is not None:  # (the shading the source has: smooth faces, sharp edges, custom normals)
+        named.append(("", source.normals))
     values = []
     if named:
         corner_face = np.repeat(mesh.patch_face, mesh.face_sizes)
         values = corner_layers(mesh.points, mesh.corner_verts, corner_face, o.vertices[o.triangles], o.triangle_face,
                                [layer for _, layer in named])
+    normals = None
+    if source.normals is not None:
+        normals = values.pop()
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
     pairs = [(name, value) for (name, _), value in zip(named, values)]
     return ResultLayers(tuple(pairs[: len(source.uv)]), tuple(pairs[len(source.uv):]), source.active_uv,
-                        source.render_uv, source.render_colour, slot, tuple(o.slot_names) or ("(no material)",))
+                        source.render_uv, source.render_colour, slot, tuple(o.slot_names) or ("(no material)",),
+                        normals)

@@ -86,3 +86,66 @@ def test_both_leaves_the_smooth_light_out_above_its_patch_bound_and_says_so(blen
     starts = np.r_[0, np.cumsum(sizes)[:-1]]
     assert (colours == np.repeat(colours[starts], sizes, axis=0)).all()  # flat per patch
     assert any("smooth colours left out at 96 patches" in n for n in notes), notes
+
+
+def _world_corner_normals(obj):
+    """(C,3) positions and normals of an object's corners in world space, the normals as the
+    renderer shades with them (object-space corner normals by the inverse transpose)."""
+    mesh = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    co, _, corners = mesh_arrays(mesh)
+    normals = np.empty(len(mesh.loops) * 3, np.float32)
+    mesh.corner_normals.foreach_get("vector", normals)
+    M = np.array(obj.matrix_world)
+    world = normals.reshape(-1, 3).astype(np.float64) @ np.linalg.inv(M[:3, :3])
+    return co[corners] @ M[:3, :3].T + M[:3, 3], world / np.linalg.norm(world, axis=1, keepdims=True)
+
+
+def test_results_are_shaded_as_their_sources_flat_smooth_and_creased(blender):
+    """A result mesh is shaded as its source: a flat box flat; a smooth, mirrored, stretched ball
+    with the source's normals where their corners meet (the renderer's normal matrix); a smooth
+    post whose cap edges are sharp keeps them sharp. Before, every result was smooth across every
+    edge: with live lamps the renderer lit a box's side near its top with the top's normal (the
+    lamp room's bed 1.5-2x too bright there, dark below)."""
+    room_v, room_f = box_arrays((-1, -1, 0), (1, 1, 2), inward=True)
+    white = principled("White", (0.7, 0.7, 0.7))
+    room = make_object("Room", room_v, room_f, [white])
+    block_v, block_f = box_arrays((0.3, 0.3, 0), (0.7, 0.6, 0.4), inward=False)
+    block = make_object("Block", block_v, block_f, [white])
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=12, ring_count=6, radius=0.3, location=(-0.5, 0.4, 0.8))
+    ball = bpy.context.object
+    ball.name, ball.scale = "Ball", (1.0, 1.5, -0.8)  # (stretched and mirrored)
+    ball.data.shade_smooth()
+    bpy.ops.mesh.primitive_cylinder_add(vertices=8, radius=0.15, depth=0.8, location=(0.4, -0.5, 0.4))
+    post = bpy.context.object
+    post.name = "Post"
+    post.data.shade_smooth()
+    edges = post.data.edges
+    rim = [len({round(post.data.vertices[v].co.z, 6) for v in e.vertices}) == 1 for e in edges]  # (not the sides')
+    for e, on_rim in zip(edges, rim):
+        e.use_edge_sharp = on_rim  # (the caps' edges: a crease, the sides smooth)
+    for o in (ball, post):
+        o.data.materials.append(white)
+    for o in (room, block, ball, post):  # (adding a primitive deselects the rest)
+        o.select_set(True)
+    _lamp("POINT", "Bulb", location=(0.0, 0.0, 1.6), energy=60.0, shadow_soft_size=0.0)
+    s = blender.scene.radiosity
+    s.patch_size, s.target_error, s.threads = 0.1, 5.0, 2
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    results = {o["radiosity_source"]: o for o in result_objects()}
+    assert results["Block"].data.normals_domain == "FACE" and results["Room"].data.normals_domain == "FACE"
+    for name in ("Ball", "Post"):
+        assert results[name].data.normals_domain == "CORNER", (name, bpy.data.objects[name].data.normals_domain)
+        source_at, source_n = _world_corner_normals(bpy.data.objects[name])
+        result_at, result_n = _world_corner_normals(results[name])
+        shared = 0
+        for p, n in zip(result_at, result_n):
+            same = np.linalg.norm(source_at - p, axis=1) < 1e-5
+            if same.any():  # a corner of the source there: one of its normals, on the same side
+                shared += 1
+                assert np.max(source_n[same] @ n) > 0.9995, (name, p, n)
+        assert shared >= 24
+    at, n = _world_corner_normals(results["Post"])
+    cap = np.abs(at[:, 2] - 0.8) < 1e-6
+    up = n[:, 2] > 0.5
+    assert cap.sum() >= 16 and np.allclose(n[cap & up], [0, 0, 1], atol=1e-3)  # the cap's corners flat
+    assert np.all(np.abs(n[cap & ~up, 2]) < 1e-3)  # the side's corners at the rim horizontal
