@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..blender_write.results import is_result_object
-from ..bpy_free.patches import ObjectArrays, SourceLayers
+from ..bpy_free.patches import ObjectArrays
+from ..bpy_free.surface_layers import SourceLayers
 from ..core import meshing
 from . import SceneError
 from .materials import slot_tables

@@ -168,7 +168,7 @@ def write_light(mesh, values, domain):
 
 
 def write_layers(mesh, layers, notes, name):
-    """The source's UV maps, colour attributes and shading (``patches.ResultLayers``) on the
+    """The source's UV maps, colour attributes and shading (``surface_layers.ResultLayers``) on the
     result mesh, under their own names, the same ones active; a UV map or colour attribute named
     as one of ours is left out (said so)."""
     for uv_name, values in layers.uv:
