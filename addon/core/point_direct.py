@@ -276,15 +276,14 @@ def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float6
         whole, apply = surface.corner_values(values, return_filter=True)
         return whole, apply(parts, dtype)
     scale = _fitted(values, direct.means)
-    direct = _kept(surface, direct, scale)
-    shown_corners, apply = surface.corner_values(values - direct.means, return_filter=True) if maps else (
-        surface.corner_values(values - direct.means, dtype=dtype), None)
-    shown_corners += direct.corners
+    shown_corners, apply = surface.corner_values(values - direct.means * scale, return_filter=True) if maps else (
+        surface.corner_values(values - direct.means * scale, dtype=dtype), None)
+    _add_kept(shown_corners, direct.corners, scale, surface.triangle_patch)
     if not maps:
         return shown_corners
-    part_direct = _kept(surface, part_direct, scale)
-    each = apply(parts - part_direct.means, dtype)
-    each += part_direct.corners
+    each = apply(parts - part_direct.means * scale, dtype)
+    for part, corners in zip(each, part_direct.corners):
+        _add_kept(part, corners, scale, surface.triangle_patch)
     return shown_corners, each
 
 
@@ -297,11 +296,15 @@ def _fitted(values, means):
     return scale
 
 
-def _kept(surface, direct, scale):
-    """``direct`` times per-patch ``scale`` (P,3) (itself where it is 1 everywhere)."""
+def _add_kept(out, corners, scale, triangle_patch, block=1 << 16):
+    """``out`` (T,3,3) += ``corners`` (T,3,3) times their patch's ``scale`` (P,3), a block of
+    triangles at a time (a scaled copy of the corners was the largest array of the smoothing)."""
     if (scale == 1).all():
-        return direct
-    return CornerDirect(direct.corners * scale[surface.triangle_patch][:, None, :], direct.means * scale)
+        out += corners
+        return
+    for start in range(0, len(corners), block):
+        rows = slice(start, start + block)
+        out[rows] += corners[rows] * scale[triangle_patch[rows]][:, None, :]
 
 
 def arriving(surface, scene, result, live=False):

@@ -48,7 +48,9 @@ def _peak_of(cmd, cwd):
 # patches with the preview: 2,255 B when Cycles built a light tree over every emitting triangle of
 # the preview, 1,141-1,243 B since; 1,625-1,645 B with the smooth light's direct-light corners and
 # noise filters (a clean clone's CI 1,793), 1,545-1,577 B once the filter's fit went a block of
-# pairs at a time; runs differ by up to 40 MiB (250 B a patch here). At a million patches it is
+# pairs at a time (1,583-1,636 on a later day; a clean clone's CI 1,830), 1,435-1,466 B once the
+# direct light's kept corners were added a block at a time; runs differ by up to 40 MiB (250 B a
+# patch here). At a million patches it is
 # about 0.75 KiB (docs/performance.md, results/memory_cli.md).
 GROWTH_PER_PATCH = 1.75 * 1024
 
