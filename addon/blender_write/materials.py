@@ -163,7 +163,31 @@ def _lit_by_lamps(tree, shader, emission, location):
     links.new(switch.outputs["Fac"], mix.inputs["Fac"])
     links.new(added.outputs[0], mix.inputs[1])
     links.new(emission.outputs["Emission"], mix.inputs[2])
-    return mix.outputs[0]
+    return _camera_sees(tree, shader, mix.outputs[0], (x + 200, y - 250))
+
+
+def _camera_sees(tree, shader, surface, location):
+    """``surface`` for camera rays; for every other ray nothing but the source's own emission, if
+    it emits (it stays a light): a render with bounces would otherwise light the results again
+    from one another, the light the solve has already put in them (any number of bounces then
+    draws the same picture; shadow rays still meet an opaque surface)."""
+    nodes, links = tree.nodes, tree.links
+    x, y = location
+    path = nodes.new("ShaderNodeLightPath")
+    path.location = (x, y - 250)
+    seen = nodes.new("ShaderNodeMixShader")
+    seen.label = "Camera only (but its own emission)"
+    seen.location = (x + 200, y)
+    links.new(path.outputs["Is Camera Ray"], seen.inputs["Fac"])
+    emitted = _emitted(tree, shader, (x, y - 450))
+    if emitted is not None:
+        light = nodes.new("ShaderNodeEmission")
+        light.location = (x + 100, y - 450)
+        light.inputs["Strength"].default_value = 1.0
+        links.new(emitted, light.inputs["Color"])
+        links.new(light.outputs["Emission"], seen.inputs[1])
+    links.new(surface, seen.inputs[2])
+    return seen.outputs[0]
 
 
 def camera_only(tree, emission, location):

@@ -9,7 +9,7 @@ from addon.bpy_free import options
 from addon.cli.preview import render_preview
 
 from ..blender_read.test_lights import _lamp
-from ..conftest import make_object, mesh_arrays, principled, read_colours, result_objects
+from ..conftest import box_arrays, make_object, mesh_arrays, principled, read_colours, result_objects
 
 SQUARES = 16  # checker squares a metre: four a 0.25 m patch's side
 
@@ -390,3 +390,38 @@ def _panel_form_factors():
         angle = np.arccos(np.clip((a * b).sum(-1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1), -1, 1))
         total = total + angle * normal[..., 2] / np.linalg.norm(normal, axis=-1)
     return np.abs(total) / (2 * np.pi)
+
+
+def test_live_results_light_nothing_again_in_a_render_with_bounces(blender, tmp_path, monkeypatch):
+    """Live lamps: a result is what the camera sees; any other ray sees nothing of it but an
+    emitter's own light (the glowing panel's test above: its light reaches the floor so). A
+    checker floor under a white hood (walls and a ceiling, Lambertian) with a point lamp inside:
+    the live preview rendered with 4 bounces shows the picture it shows with none, square by
+    square within 3% (the same samples: only the bounces differ). Before, the renderer's bounces
+    lit the floor a second time from the lamp-lit hood, light the solve had already put into the
+    floor's 'Radiosity Light' (1.5x on the dark squares; the light ones were white)."""
+    from addon.cli import preview
+
+    _, material = _checker_floor()
+    material.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
+    hood_v, hood_f = box_arrays((-0.5, -0.5, 0.0), (1.5, 1.5, 2.5), inward=True)
+    white = principled("White", (0.8, 0.8, 0.8))
+    white.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
+    hood = make_object("Hood", hood_v, [f for f in hood_f if any(hood_v[i][2] > 0 for i in f)], [white])
+    hood.select_set(True)
+    results = _solve(blender, live_lamps=True)
+    assert results["Floor"].data.materials[0].get("radiosity_live_lamps")
+    shown = dict(sources=("Floor", "Hood"), samples=16)
+    still = _preview_centres(blender, tmp_path, "none.png", **shown)
+    settings = preview.preview_settings
+
+    def with_bounces(scene, *args, **kwargs):
+        changes = settings(scene, *args, **kwargs)
+        changes.set(scene.cycles, "max_bounces", 4)
+        changes.set(scene.cycles, "diffuse_bounces", 4)
+        return changes
+
+    monkeypatch.setattr(preview, "preview_settings", with_bounces)
+    bounced = _preview_centres(blender, tmp_path, "four.png", **shown)
+    ratio = bounced / still
+    assert 0.97 < np.median(ratio) < 1.03 and np.percentile(np.abs(ratio - 1), 90) < 0.03, np.percentile(ratio, [5, 50, 95])
