@@ -317,7 +317,7 @@ def _write_colours(out, scene, result, settings):
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
     radiosity = np.maximum(result.radiosity, 0.0)
     textured = settings.output == "TEXTURED"
-    out.live_lamps = textured and settings.live_lamps and point_direct.has_direct(scene)
+    out.live_lamps = textured and settings.live_lamps and point_direct.has_live(scene)
     extras = {}
     if settings.light_output and not textured:  # (the textured output writes the light smooth)
         extras[LIGHT_ATTRIBUTE] = np.maximum(result.irradiance, 0.0)
@@ -374,7 +374,7 @@ def _at_polygon_corners(patches, scene, corners, shading=None, least=None):
 
 def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=np.float32):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``Surface.arriving_light``) at every
-    corner of the scene's triangles, smooth (``live``: the lamps', suns' and emitters' direct light left out); then ("smooth", (T,3,3)): the reflected light, its
+    corner of the scene's triangles, smooth (``live``: the lamps', suns', emitters' and world's direct light left out); then ("smooth", (T,3,3)): the reflected light, its
     tile noise filtered within its measured variance, joined across objects (not across hidden
     patches: core covered) and kept apart at creases (core smoothing), plus each patch's own
     emission, flat; both with the direct light's shape within each patch (core point_direct).

@@ -104,8 +104,9 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     """Set the scene up to render the result objects' baked colours: Cycles without bounces
     (the light transport is in the colours; live lamps light their materials directly, then
     denoised), otherwise no denoising, Standard view, the given exposure,
-    a black world of its own, PNG output, and a camera if the scene has none. Returns the
-    changes, for ``restore()``."""
+    a black world of its own (live results: the scene's, where it gives light, which the renderer
+    draws on them), PNG output, and a camera if the scene has none. Returns the changes, for
+    ``restore()``."""
     import bpy
 
     changes = SceneChanges()
@@ -142,7 +143,9 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     changes.set(view, "view_transform", "Standard")
     changes.set(view, "look", "None")
     changes.set(view, "exposure", exposure)
-    _results_seen(scene, changes)
+    if _results_seen(scene, changes) and _world_lights(scene):
+        changes.keep("filepath", owner=render)
+        return changes  # (live results: the renderer draws the world's light on them as the solve read it)
     world = bpy.data.worlds.new("Radiosity Preview World")
     world.color = (0.0, 0.0, 0.0)
     if world.node_tree is not None:
@@ -159,15 +162,28 @@ def _results_seen(scene, changes):
     """The results' materials only seen: as lights, Cycles would build a light tree over every
     emitting triangle, which at a million patches took more memory than the scene. Live lamps
     (``LIVE_PROPERTY``): their light drawn at the preview's samples, denoised; the emitting
-    materials among them (``LIVE_EMITS_PROPERTY``) sampled as lights, as their sources are."""
+    materials among them (``LIVE_EMITS_PROPERTY``) sampled as lights, as their sources are.
+    Whether any result is live."""
     from ..blender_write.materials import LIVE_EMITS_PROPERTY, LIVE_PROPERTY
 
     materials = _result_materials(scene)
     for material in materials:
         if not material.get(LIVE_EMITS_PROPERTY):
             changes.set(material.cycles, "emission_sampling", "NONE")
-    if any(material.get(LIVE_PROPERTY) for material in materials):
+    live = any(material.get(LIVE_PROPERTY) for material in materials)
+    if live:
         changes.set(scene.cycles, "use_denoising", True)
+    return live
+
+
+def _world_lights(scene):
+    """Whether the scene's world gives light as the solve reads it (``read_world``)."""
+    from ..blender_read.lights import LightError, read_world
+
+    try:
+        return read_world(scene, []) is not None
+    except LightError:
+        return False
 
 
 def _result_materials(scene):

@@ -28,9 +28,9 @@ scaled down to H, its shape kept: H - M is never negative, and the display one s
 where M passes OVERSHOOT times H (a corner a centimetre from an emitter) it shows corners(H)
 alone.
 
-With live lamps (``arriving``, ``light_corners``) the renderer draws the lamps', suns' and emitting
-materials' own light pixel by pixel, and the light shown is H less each patch's mean of it
-(``live_means``), smooth.
+With live lamps (``arriving``, ``light_corners``) the renderer draws the lamps', suns', emitting
+materials' and the world's own light pixel by pixel, and the light shown is H less each patch's
+mean of it (``live_means``), smooth.
 
 A corner is evaluated a hundredth of the way from its point towards its patch's centre (inside
 the patch: a point on the edge shared with a wall standing on it would graze the wall). A
@@ -45,7 +45,7 @@ from functools import partial
 
 import numpy as np
 
-from .adaptive_light import SAMPLE_DIMENSIONS, _emitters, _lamps, _Points
+from .adaptive_light import SAMPLE_DIMENSIONS, _emitters, _lamps, _Points, _sky
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .sampling import SourceTable, stratified_by_patch
@@ -108,6 +108,12 @@ def has_direct(scene):
     return bool(scene.emission.any()) or has_lamps(scene)
 
 
+def has_live(scene):
+    """Whether ``scene`` has light a renderer draws live (``live_means``): a lamp, a sun, an
+    emitting patch or the world."""
+    return bool(scene.emission.any()) or bool(scene.lights.lights)
+
+
 def has_lamps(scene):
     """Whether ``scene`` has a lamp or a sun (a light other than the world)."""
     return any(not isinstance(light, WorldLight) for light in scene.lights.lights)
@@ -146,13 +152,14 @@ class _Corners:
         return self.offset[live] if np.ndim(self.offset) else self.offset
 
 
-def _sources(scene, light_group, patch_group, groups):
-    """[(group, add)] each lamp and sun and each emitting group as
+def _sources(scene, light_group, patch_group, groups, sky=False):
+    """[(group, add)] each lamp and sun and each emitting group (and each world: ``sky``) as
     ``add(tables, points, u, value)`` adds its light at sample points (``adaptive_light``)."""
     power = scene.patch_area * scene.emission.mean(axis=1)
     emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
-    parts = [(light_group[k] if groups else 0, partial(_lamps, lamps=[light]))
-             for k, light in enumerate(scene.lights.lights) if not isinstance(light, WorldLight)]
+    parts = [(light_group[k] if groups else 0,
+              partial(_sky, worlds=[light]) if isinstance(light, WorldLight) else partial(_lamps, lamps=[light]))
+             for k, light in enumerate(scene.lights.lights) if sky or not isinstance(light, WorldLight)]
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
         parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine)))
@@ -309,7 +316,8 @@ def _add_kept(out, corners, scale, triangle_patch, block=1 << 16):
 
 def arriving(surface, scene, result, live=False):
     """(P,3) the light arriving (``Surface.arriving_light``: noise filtered); ``live``: less
-    the lamps', suns' and emitting patches' (``live_means``), which the renderer draws itself."""
+    the lamps', suns', emitting patches' and world's (``live_means``), which the renderer draws
+    itself."""
     irradiance = result.irradiance - live_means(scene, seed=result.seed, light=result.irradiance) if live \
         else result.irradiance
     return surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity)
@@ -318,16 +326,16 @@ def arriving(surface, scene, result, live=False):
 def light_corners(surface, scene, light, direct, live=False, dtype=np.float64):
     """(T,3,3) the light arriving ``light`` (``arriving``) shown at the corners with the direct
     light's shape (``shown``, given as ``dtype``; ``direct`` the CornerDirect of every source);
-    ``live``: smooth alone (the renderer draws every lamp's, sun's and emitter's own light, and
-    the sky's is soft)."""
+    ``live``: smooth alone (the renderer draws every lamp's, sun's, emitter's and the world's own
+    light)."""
     return shown(surface, light, None if live else direct, dtype=dtype)
 
 
 def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0):
-    """([G,]P,3) each patch's mean of the light a renderer draws live where the lamps, suns and
-    emitting materials light the surfaces themselves (``LIVE`` results): their direct light, from
-    ``samples`` stratified points over the patch's visible part, every lamp and emitting group
-    looked at from each. A patch whose mean's standard error passes NOISE_SHARE of its solved
+    """([G,]P,3) each patch's mean of the light a renderer draws live where the lamps, suns,
+    emitting materials and the world light the surfaces themselves (``LIVE`` results): their
+    direct light, from ``samples`` stratified points over the patch's visible part, every lamp
+    and emitting group looked at from each (the world along one cosine ray). A patch whose mean's standard error passes NOISE_SHARE of its solved
     ``light`` (P,3), or of the mean itself, is sampled again with MORE_SAMPLES times as many
     points, RETRIES times (beside an emitter the light is heavy-tailed). Given ``groups`` > 0,
     ``light_group`` (L,) and ``patch_group`` (P,): each group's (``corner_direct``)."""
@@ -335,7 +343,7 @@ def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group
     out = np.zeros((max(groups, 1), scene.patch_count, 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 27,))))
     with tables.numpy_turn:
-        for group, add in _sources(scene, light_group, patch_group, groups):
+        for group, add in _sources(scene, light_group, patch_group, groups, sky=True):
             out[group] += _means_of(tables, samples, rng, add, light)
     return out if groups else out[0]
 

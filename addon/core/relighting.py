@@ -204,7 +204,7 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     triangles = scene.triangles if triangles is None else triangles
     if light:  # (the noise filters first, as the pipeline's: with the direct light's corners held, the peak)
         irradiance, total = per_source.irradiance, result.irradiance
-        if live:  # (the lamps', suns' and emitters' direct light left to the renderer: point_direct.light_corners)
+        if live:  # (the lamps', suns', emitters' and world's direct light left to the renderer: point_direct.light_corners)
             drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
                                             patch_group=per_source.patch_group, groups=per_source.count)
             irradiance, total = irradiance - drawn, total - drawn.sum(axis=0)

@@ -425,3 +425,30 @@ def test_live_results_light_nothing_again_in_a_render_with_bounces(blender, tmp_
     bounced = _preview_centres(blender, tmp_path, "four.png", **shown)
     ratio = bounced / still
     assert 0.97 < np.median(ratio) < 1.03 and np.percentile(np.abs(ratio - 1), 90) < 0.03, np.percentile(ratio, [5, 50, 95])
+
+
+def test_live_lamps_leave_the_worlds_light_to_the_renderer_too(blender, tmp_path):
+    """Live lamps under a world: a checker floor lit by the world alone (no lamp; Lambertian) has
+    no light but the world's own, so its 'Radiosity Light' is 0 (within 2% of the baked one: the
+    solve's and the live patch means, each from its own rays); the preview keeps the scene's
+    world, whose light the renderer draws on the floor (16 samples, denoised), and shows the baked
+    picture within 5% square by square. Before, the world's light stayed in 'Radiosity Light'
+    and the preview drew it with a black world: a render with the scene's world lit the floor
+    twice."""
+    _, material = _checker_floor()
+    material.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
+    bpy.data.objects.remove(bpy.data.objects["Bulb"])
+    world = bpy.data.worlds.new("Sky")
+    if world.node_tree is None:  # (Blender 4: nodes made on use_nodes; Blender 5 always has them)
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.5, 0.6, 0.7, 1.0)
+    blender.scene.world = world
+    baked_light = _light_of(_solve(blender)["Floor"])
+    exposure = float(np.log2(0.9 / (0.8 * baked_light.max())))
+    baked = _preview_centres(blender, tmp_path, "baked.png", exposure, samples=16)
+    results = _solve(blender, live_lamps=True)
+    assert np.abs(_light_of(results["Floor"])).max() < 0.02 * baked_light.max()
+    live = _preview_centres(blender, tmp_path, "live.png", exposure, samples=16)
+    assert blender.scene.world == world  # (the preview's own put back)
+    ratio = live / baked
+    assert 0.95 < np.median(ratio) < 1.05 and np.percentile(np.abs(ratio - 1), 90) < 0.05, np.percentile(ratio, [5, 50, 95])
