@@ -371,7 +371,8 @@ def test_a_colour_channel_solved_dark_cannot_be_relit_and_is_stale(blender):
 
 def test_a_live_emitter_s_copy_follows_its_material_on_relight(blender):
     """Live lamps: an emitting material's copy emits with its own shader (it lights the other
-    results in the render), so Relight sets that shader's emission to the source's now; before,
+    results in the render; every ray but the camera's sees that emission alone), so Relight sets
+    both to the source's now; before,
     only the baked copies' emission term followed, and a live glow kept its solved strength."""
     settings = rs.build(blender, output="TEXTURED")
     settings.live_lamps = True
@@ -383,3 +384,7 @@ def test_a_live_emitter_s_copy_follows_its_material_on_relight(blender):
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     assert shader.inputs["Emission Strength"].default_value == 5.0
     assert tuple(shader.inputs["Emission Color"].default_value) == pytest.approx((1.0, 0.3, 0.2, 1.0))
+    # (and the light it is to every ray but the camera's: colour x strength)
+    seen = next(n for n in copy.node_tree.nodes if n.label == "Emission")
+    assert seen.inputs["Scale"].default_value == 5.0
+    assert tuple(seen.inputs[0].default_value) == pytest.approx((1.0, 0.3, 0.2))
