@@ -153,13 +153,24 @@ def read_world(scene, notes):
         raise LightError(f"world '{world.name}': its colour or strength is not a finite number")
     if strength < 0 or (colour < 0).any():
         raise LightError(f"world '{world.name}' has a negative colour or strength")
-    if strength == 0:
+    if not _gives_light(colour, strength, image):
         return None
     if image is not None:
         return WorldLight(image=image_pixels(image, world.name) * strength, name=world.name)
-    if strength == 0 or not colour.any():
-        return None
     return WorldLight(irradiance=colour * strength, name=world.name)
+
+
+def world_gives_light(scene):
+    """Whether ``read_world`` finds light in the scene's world (without reading an image's pixels)."""
+    if scene.world is None:
+        return False
+    colour, strength, image = _background(scene.world, [])
+    valid = np.isfinite(colour).all() and math.isfinite(strength) and strength >= 0 and not (colour < 0).any()
+    return bool(valid and _gives_light(colour, strength, image))
+
+
+def _gives_light(colour, strength, image):
+    return strength > 0 and (image is not None or bool(colour.any()))
 
 
 def _background(world, notes):

@@ -65,24 +65,26 @@ class ResultLayers:
 
 
 def result_layers(o, mesh) -> ResultLayers:
-    """The ResultLayers of object ``o`` meshed as ``mesh``: its UV maps and colour attributes
-    interpolated at every patch corner from the source face the patch lies on (core.textures)."""
+    """The ResultLayers of object ``o`` meshed as ``mesh``: its UV maps, colour attributes and
+    shading normals interpolated at every patch corner from the source face the patch lies on
+    (core.textures)."""
     slot = (np.zeros(mesh.patch_count, np.int32) if o.face_slot is None
             else np.asarray(o.face_slot, np.int32)[mesh.patch_face])
     source = o.layers or SourceLayers()
     named = [*source.uv, *source.colours]
+    layers = [layer for _, layer in named]
     if source.normals is not None:  # (the shading the source has: smooth faces, sharp edges, custom normals)
-        named.append(("", source.normals))
+        layers.append(source.normals)
     values = []
-    if named:
+    if layers:
         corner_face = np.repeat(mesh.patch_face, mesh.face_sizes)
         values = corner_layers(mesh.points, mesh.corner_verts, corner_face, o.vertices[o.triangles], o.triangle_face,
-                               [layer for _, layer in named])
+                               layers)
     normals = None
     if source.normals is not None:
         normals = values.pop()
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-    pairs = [(name, value) for (name, _), value in zip(named, values)]
+    pairs = [(name, value) for (name, _), value in zip(named, values, strict=True)]
     return ResultLayers(tuple(pairs[: len(source.uv)]), tuple(pairs[len(source.uv):]), source.active_uv,
                         source.render_uv, source.render_colour, slot, tuple(o.slot_names) or ("(no material)",),
                         normals)

@@ -109,6 +109,8 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     ``restore()``."""
     import bpy
 
+    from ..blender_read.lights import world_gives_light
+
     changes = SceneChanges()
     render = scene.render
     if scene.camera is None:
@@ -143,7 +145,7 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     changes.set(view, "view_transform", "Standard")
     changes.set(view, "look", "None")
     changes.set(view, "exposure", exposure)
-    if _results_seen(scene, changes) and _world_lights(scene):
+    if _results_seen(scene, changes) and world_gives_light(scene):
         changes.keep("filepath", owner=render)
         return changes  # (live results: the renderer draws the world's light on them as the solve read it)
     world = bpy.data.worlds.new("Radiosity Preview World")
@@ -174,16 +176,6 @@ def _results_seen(scene, changes):
     if live:
         changes.set(scene.cycles, "use_denoising", True)
     return live
-
-
-def _world_lights(scene):
-    """Whether the scene's world gives light as the solve reads it (``read_world``)."""
-    from ..blender_read.lights import LightError, read_world
-
-    try:
-        return read_world(scene, []) is not None
-    except LightError:
-        return False
 
 
 def _result_materials(scene):
