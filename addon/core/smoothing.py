@@ -23,7 +23,10 @@ values clipped at 0). A last step scales each patch's corners by value / mean, w
 patch's mean exactly its value (float error) whatever the iteration count and whatever the mesh;
 what the iterations buy is small jumps left by that last step where a continuous answer exists
 (benchmarks/results/smoothing.md); a sharp step of light across a smooth joint has no
-non-negative continuous answer, and keeps part of its step. Every step keeps values
+non-negative continuous answer, and keeps part of its step. Where light falls off faster than a
+patch can follow, the continuous answer swings corners up and down row after row (bands): where
+the iterations turn a patch's corners against the plain average's, it and its neighbours keep
+the plain average, scaled (``_ringing``). Every step keeps values
 non-negative (averages of non-negative values, a clip at 0, a non-negative scale); negative
 values (a signed estimator's noise) count as 0, non-finite ones are refused.
 
@@ -39,6 +42,10 @@ from .welding import run_starts, weld_points
 CREASE_ANGLE = 30.0  # degrees, as Blender's auto smooth
 WELD_FRACTION = 1e-4  # of the median patch's side
 ITERATIONS = 10
+# A patch rings where its corners' deviations from its value, after the iterations, correlate
+# below -RINGING with the plain average's (turned against it, not a rounding's sign).
+RINGING = 0.5
+RINGING_BLOCK = 1 << 18  # corners compared at a time
 RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
 
 
@@ -199,15 +206,46 @@ class Surface(NoiseFilter):
             # a bright patch beside dim ones would push its neighbours' far corners down to black:
             # never below a share of the darkest patch meeting there (the last scale keeps means)
             np.maximum(x, floor, out=x)
+        x, scale, flat = self._scale_to(values, x, corner_patch)
+        # (no iterations, made again rather than kept through them: what ringing falls back to)
+        plain, plain_scale, _ = self._scale_to(values, self._average_corners(values[corner_patch], averaging), corner_patch)
+        rings = self._ringing(values, x, plain, corner_patch)
+        x[rings] = plain[rings]
+        if record is not None:
+            record["scale"], record["flat"], record["rings"], record["plain_scale"] = scale, flat, rings, plain_scale
+        return x
+
+    def _scale_to(self, values, x, corner_patch):
+        """Corners ``x`` (T*3,) scaled in place to each patch's value (exact at last; a patch
+        whose corners all came to zero keeps its own value, flat): (x, scales (P,), flat corners)."""
         means = self._patch_means(x)
-        # exact at last: a patch whose corners all came to zero keeps its own value, flat
         scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
         x *= scale[corner_patch]
         flat = np.flatnonzero((means <= 0)[corner_patch])
         x[flat] = values[corner_patch[flat]]
-        if record is not None:
-            record["scale"], record["flat"] = scale, flat
-        return x
+        return x, scale, flat
+
+    def _ringing(self, values, x, plain, corner_patch):
+        """(T*3,) corners of the patches whose corners the iterations turned against the plain
+        average's (their deviations from the patch's value correlated below -RINGING), and of the
+        patches around them: light falling off faster than a patch can follow, where keeping
+        every mean swings corners up and down row after row (bands); they keep ``plain``."""
+        agree, own_size, plain_size = (np.zeros(self.patch_count) for _ in range(3))
+        for start in range(0, len(x), RINGING_BLOCK):  # (a block of corners at a time: no (T*3,) temporaries)
+            rows = slice(start, start + RINGING_BLOCK)
+            patches = corner_patch[rows]
+            own, other = x[rows] - values[patches], plain[rows] - values[patches]
+            agree += _sum(patches, own * other, self.patch_count)
+            own_size += _sum(patches, own * own, self.patch_count)
+            plain_size += _sum(patches, other * other, self.patch_count)
+        size = np.sqrt(own_size * plain_size)
+        point = self.point.ravel()
+        touched = np.zeros(len(self.smooth_point), bool)
+        touched[point[(agree < -RINGING * size)[corner_patch]]] = True
+        # and the patches around them, so that the steep part is plain on both sides of each corner
+        rings = np.zeros(self.patch_count, bool)
+        rings[corner_patch[touched[point]]] = True
+        return np.flatnonzero(rings[corner_patch])
 
     def _seen_values(self, values, corner_patch):
         """(T*3,) each corner's patch value, inf at hidden patches' (no floor is a share of them)."""
@@ -255,11 +293,13 @@ class LinearCorners:
         for k, record in enumerate(self.records):  # over colour channels, not elements
             v = np.ascontiguousarray(values[:, k])
             corner = surface._average_corners(v[cp], self.averaging)
+            plain = corner * record["plain_scale"][cp]
             for floored in record["floored"]:
                 corner += RELAXATION * surface._average_corners((v - surface._patch_means(corner))[cp], self.averaging)
                 corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
             corner *= record["scale"][cp]
             corner[record["flat"]] = v[cp[record["flat"]]]
+            corner[record["rings"]] = plain[record["rings"]]
             out[:, :, k] = corner.reshape(-1, 3)
         return out
 

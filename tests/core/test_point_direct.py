@@ -95,9 +95,10 @@ def _exact_means(lamp, rectangles, k=48):
 def test_a_lamps_hot_spot_is_shown_nearer_the_exact_light_than_the_patch_means_alone():
     """Given the exact patch means (no indirect light), the smooth display alone shows a hot spot
     as wide as the patches; with the corners' direct light, the light at points across every
-    triangle (what a camera sees between corners) is at least twice as close to the exact light
-    (a point lamp's light is exact at the corners; what is left is its linear interpolation
-    between corners a patch apart, across a hot spot about 1.5 patches wide)."""
+    triangle (what a camera sees between corners) is 1.4 times as close to the exact light (a
+    point lamp's light is exact at the corners; what is left is its linear interpolation between
+    corners a patch apart, across a hot spot about 1.5 patches wide). (Deterministic: 0.057
+    against 0.083; before the smooth display stopped ringing, 0.146.)"""
     scene, lamp, rectangles = _lit_ceiling()
     surface = _surface(scene)
     means = np.repeat(_exact_means(lamp, rectangles)[:, None], 3, axis=1)
@@ -111,7 +112,7 @@ def test_a_lamps_hot_spot_is_shown_nearer_the_exact_light_than_the_patch_means_a
     exact = _ceiling_light(lamp, points)
     error_before = np.abs(np.einsum("wk,tk->tw", weights, before) - exact).mean()
     error_after = np.abs(np.einsum("wk,tk->tw", weights, after) - exact).mean()
-    assert error_after < error_before / 2, (error_before, error_after)
+    assert error_after < error_before / 1.4, (error_before, error_after)
 
 
 def test_every_patchs_mean_is_kept_where_its_light_is_below_its_direct_lights_mean():

@@ -388,6 +388,37 @@ def test_a_bright_patch_beside_dim_ones_never_pushes_a_corner_to_black():
                                / surface.patch_area[:, None], values, rtol=1e-9)
 
 
+def test_light_falling_off_faster_than_a_patch_can_follow_shows_no_bands():
+    """Light falling off 4.2x from one patch to the next (as on a ceiling beside a wall a strip
+    lights) has no continuous answer that keeps every patch's mean without swinging: the
+    iterations pushed corners up and down row after row (far corners up to 2.8x the near ones
+    of their patch), seen as bands. Where they turn a patch's corners against the plain average of the
+    patches around each corner, that patch and its neighbours keep the plain average, scaled to
+    their means: along the fall-off every patch's corners fall, no patch's near corners rise above
+    the patch's before it, each patch keeps its mean, and parts made with the fixed weights add
+    up to the whole."""
+    points, quads, triangles, patch = _grid(12, 4, (0, 0, 0), (12, 0, 0), (0, 4, 0))
+    x = _centres(points, quads)[:, 0]
+    values = np.exp(-x / 0.7)[:, None] * np.array([1.0, 0.8, 0.6])
+    surface = smoothing.Surface.of(points, triangles, patch, len(quads))
+    corners, apply = surface.corner_values(values, return_filter=True)
+    np.testing.assert_allclose(surface._patch_means(corners[..., 0].ravel()), values[:, 0], rtol=1e-9)
+    corner_x = points[triangles][..., 0]  # (T,3)
+    near = np.full(len(quads), np.inf)
+    far = np.full(len(quads), -np.inf)
+    left = corner_x == np.floor(x[patch])[:, None]
+    np.minimum.at(near, np.repeat(patch, 3)[left.ravel()], corners[..., 0][left])
+    np.maximum.at(far, np.repeat(patch, 3)[~left.ravel()], corners[..., 0][~left])
+    lit = values[:, 0] > 1e-4
+    assert np.all(far[lit] <= near[lit]), np.round(far[lit] / near[lit], 3)
+    order = np.lexsort((x, _centres(points, quads)[:, 1]))
+    rising = (near[order][1:] > near[order][:-1] * (1 + 1e-9)) & (np.diff(x[order]) > 0) & lit[order][1:]
+    assert not rising.any()
+    assert any(len(record["rings"]) for record in apply.records)
+    parts = np.stack([0.3 * values, 0.7 * values])
+    np.testing.assert_allclose(apply(parts).sum(axis=0), corners, rtol=0, atol=1e-12 * corners.max())
+
+
 def test_no_light_anywhere_filters_to_no_light():
     """Every patch 0 with a zero variance (a scene whose light reaches no reflecting patch, such as a
     glowing black floor beside a wall facing away): the filter gives 0s, not NaN (before, the
