@@ -1,11 +1,11 @@
 """Materials read into colours: a surface shader's base colour and emission, and the image
 textures and colour attributes read per patch instead of a material's one value (bpy).
 
-Units: emission = emission colour x strength, reflectivity = the light a surface returns (a closed box
-emitting S with albedo R gives S / (1 - R), as Cycles): a Diffuse BSDF's colour, a Principled BSDF's
-scale * base colour + offset with its other layers' light as energy (core.principled), per patch where
-the base colour is; solved as passed on in the room (``transport_terms``, Cycles' Filter Glossy), shown
-as the camera sees it (``surface_terms``; by view, ``surface_terms(by_view=True)``).
+Units: emission = emission colour x strength, reflectivity = the light a surface returns (a
+closed box emitting S with albedo R gives S / (1 - R), as Cycles): a Diffuse BSDF's colour, a
+Principled BSDF's scale * base colour + offset with the light of its other layers as energy
+(core.principled), per patch where the base colour is; solved as passed on from surface to surface
+(``transport_terms``, Cycles' Filter Glossy), shown as the camera sees it (``surface_terms``).
 """
 
 from __future__ import annotations
@@ -246,18 +246,18 @@ def _principled_inputs(node, base, notes, what, blur=0.0):
     )
 
 
-def surface_terms(material, blur=0.0, by_view=False):
+def surface_terms(material, blur=0.0):
     """(scale (3,), offset (3,)) of a material: the light it returns is ``scale * base colour +
     offset`` for the base colour of each point (its image texture or colour attribute); (1, 0) for
     anything but a Principled BSDF. As the camera sees the surface (``blur`` 0); ``transport_terms``
-    for the light it passes on in the room. ``by_view``: (mu, scale, offset) along views of cosine
-    mu (``principled.view_terms``), or None for anything but a Principled BSDF."""
+    for the light it passes on in the room."""
     node = _shader_node(material)
     if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
-        return None if by_view else (np.ones(3), np.zeros(3))
-    notes, what = [], f"material '{material.name}'"
-    inputs = _principled_inputs(node, _socket_colour(node, "Base Color", notes, what), notes, what, blur)
-    return principled.view_terms(inputs) if by_view else principled.surface_terms(inputs)
+        return np.ones(3), np.zeros(3)
+    notes = []
+    what = f"material '{material.name}'"
+    base = _socket_colour(node, "Base Color", notes, what)
+    return principled.surface_terms(_principled_inputs(node, base, notes, what, blur))
 
 
 def transport_terms(material):
@@ -278,7 +278,7 @@ def _principled_note(node, p, what):
     eta, _ = principled.specular_eta_f0(p.ior, p.specular_ior_level)
     counted = [name for name, on in (("coat", used("Coat Weight")), ("metallic", used("Metallic")),
                                      ("specular", eta != 1.0)) if on]
-    missing = ["highlights of uneven light (shown as even light's, by view angle)"] if counted else []
+    missing = ["view-dependent highlights (shown as their average over view directions)"] if counted else []
     if used("Transmission Weight"):
         missing.append("light through transmission (only its reflection counted)")
     if used("Subsurface Weight"):

@@ -8,9 +8,7 @@ node groups), and shows
     (base colour * scale + offset) * light + emission colour * strength
 
 through an Emission shader, ``light`` being a colour attribute of the result mesh (the smooth
-light arriving, H in B = E + rho H). A Principled BSDF's scale and offset follow each pixel's
-view angle, as Cycles weighs its layers (a dark base seen at a grazing angle returns more of
-even light than face on; the solve counts their mean over views). The texture stays at its own resolution whatever the patch
+light arriving, H in B = E + rho H). The texture stays at its own resolution whatever the patch
 size; the patch's reflected radiosity is the area mean of (base colour x light) over it, up to
 how much the texture and the light vary together inside it. The user's material is never
 changed: a copy is made and cut down.
@@ -19,7 +17,6 @@ changed: a copy is made and cut down.
 from __future__ import annotations
 
 import bpy
-import numpy as np
 
 from ..blender_read.materials import _shader_node, surface_terms
 
@@ -59,8 +56,8 @@ def can_copy(material):
 
 
 def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, live=False):
-    """A new material showing ``source``'s base colour * scale + offset (``terms``: RGB each,
-    or a Principled BSDF's along each pixel's view, (mu, scale, offset) as ``_by_view`` takes) times the colour attribute ``light_attribute``, plus its emission, or, where the panel's
+    """A new material showing ``source``'s base colour * scale + offset (``terms``, RGB each)
+    times the colour attribute ``light_attribute``, plus its emission, or, where the panel's
     flat switch is on, the colour attribute ``flat_attribute``; ``can_copy(source)`` must
     hold. The copy is cut down to what drives that, and marked as ours. ``live``: its own
     shader is kept too, for the lamps to light (``_lit_by_lamps``)."""
@@ -75,18 +72,15 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     shader = tree.nodes[_shader_node(source).name]
     nodes, links = tree.nodes, tree.links
     x, y = shader.location.x + 300, shader.location.y
-    scale, offset = terms[-2:]
+    scale, offset = terms
 
     surface = nodes.new("ShaderNodeVectorMath")  # base colour * scale + offset
     surface.operation = "MULTIPLY_ADD"
     surface.label = "Reflectivity"
     surface.location = (x, y)
     _feed(links, shader, _BASE.get(shader.bl_idname), surface.inputs[0], default=(0.0, 0.0, 0.0))
-    if len(terms) == 2:  # (scale, offset) for every view
-        surface.inputs[1].default_value = tuple(float(v) for v in scale)
-        surface.inputs[2].default_value = tuple(float(v) for v in offset)
-    else:
-        _by_view(tree, terms, surface, (x - 500, y + 350))
+    surface.inputs[1].default_value = tuple(float(v) for v in scale)
+    surface.inputs[2].default_value = tuple(float(v) for v in offset)
 
     light = nodes.new("ShaderNodeAttribute")
     light.attribute_type = "GEOMETRY"
@@ -113,33 +107,6 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     _keep_only_upstream(tree, output)
     output.is_active_output = True
     return material
-
-
-def _by_view(tree, terms, surface, location):
-    """``surface``'s scale and offset from a Principled BSDF's ``terms`` (mu (M,), scale (M,3),
-    offset (M,3): ``surface_terms(by_view=True)``) at each pixel's view: RGB Curves of 1 - mu,
-    fed the Layer Weight's Facing (1 - |cos| of the view at the shading normal)."""
-    mu, *values = terms
-    facing = tree.nodes.new("ShaderNodeLayerWeight")
-    facing.inputs["Blend"].default_value = 0.5  # (Facing is then 1 - |cos| itself)
-    facing.location = location
-    order = np.argsort(1.0 - mu)
-    for k, (name, value) in enumerate(zip(("Scale by view", "Offset by view"), values)):
-        curve = tree.nodes.new("ShaderNodeRGBCurve")
-        curve.label = name
-        curve.location = (location[0] + 200, location[1] - 300 * k)
-        curve.mapping.use_clip = False  # (a metallic tangent's offset is below 0)
-        curve.mapping.extend = "HORIZONTAL"
-        for c in range(3):  # curves R, G, B (the 4th, applied to all, stays the identity)
-            points = curve.mapping.curves[c].points
-            while len(points) < len(order):
-                points.new(0.0, 0.0)
-            for point, i in zip(points, order):
-                point.location = (float(1.0 - mu[i]), float(value[i, c]))
-                point.handle_type = "AUTO_CLAMPED"
-        curve.mapping.update()
-        tree.links.new(facing.outputs["Facing"], curve.inputs["Color"])
-        tree.links.new(curve.outputs["Color"], surface.inputs[1 + k])
 
 
 def _plus_emission(material, shader, total, live, lit_live, location):
@@ -322,9 +289,9 @@ def result_materials(slot_names, light_attribute, flat_attribute, fallback, note
             ok, note = can_copy(source) if source is not None and not is_textured_material(source) else (False, None)
             if note:
                 notes.append(note)
-            # the surface as the camera sees it (a Principled BSDF's specular layer beside its base colour, by view)
+            # the surface as the camera sees it (a Principled BSDF's specular layer beside its base colour)
             made[name] = (textured_material(source, light_attribute, flat_attribute,
-                                            surface_terms(source, by_view=True) or IDENTITY, live) if ok else None)
+                                            surface_terms(source), live) if ok else None)
         out.append(made[name] or fallback)
     return out
 

@@ -335,28 +335,20 @@ def principled_albedo(p: PrincipledInputs, base=None):
     return (w * (energy + weight * base[None, :])).sum(axis=0)
 
 
-def view_terms(p: PrincipledInputs):
-    """(mu (M,), scale (M,3), offset (M,3)): the light the surface returns towards a view of
-    cosine ``mu`` under even light is ``scale * base colour + offset`` (Cycles weighs its layers
-    at the view direction, so a dark base seen at a grazing angle returns more than its mean); the
-    metallic part linearised at ``p.base``."""
+def surface_terms(p: PrincipledInputs):
+    """(scale (3,), offset (3,)): reflectivity = scale * base colour + offset, exact for a
+    dielectric and, with metallic, the tangent at ``p.base`` (the metallic albedo is not linear in
+    its colour)."""
     base = np.maximum(np.asarray(p.base, dtype=np.float64), 0.0)
+    w = mu_nodes()[1][:, None]
     energy, weight = _layers_out(p, base)
-    scale, offset = weight, energy
+    scale = (w * weight).sum(axis=0)
+    offset = (w * energy).sum(axis=0)
     if float(np.clip(p.metallic, 0.0, 1.0)) > 1e-5:
         h = 1e-3
-        up = _layers_out(p, np.minimum(base + h, 1.0))[0]
-        down = _layers_out(p, np.maximum(base - h, 0.0))[0]
+        up = (w * _layers_out(p, np.minimum(base + h, 1.0))[0]).sum(axis=0)
+        down = (w * _layers_out(p, np.maximum(base - h, 0.0))[0]).sum(axis=0)
         slope = (up - down) / (np.minimum(base + h, 1.0) - np.maximum(base - h, 0.0))
         scale = scale + slope
         offset = offset - slope * base
-    return mu_nodes()[0], scale, offset
-
-
-def surface_terms(p: PrincipledInputs):
-    """(scale (3,), offset (3,)): reflectivity = scale * base colour + offset, the cosine-weighted
-    mean of ``view_terms`` over views: exact for a dielectric and, with metallic, the tangent at
-    ``p.base`` (the metallic albedo is not linear in its colour)."""
-    _, scale, offset = view_terms(p)
-    w = mu_nodes()[1][:, None]
-    return (w * scale).sum(axis=0), (w * offset).sum(axis=0)
+    return scale, offset

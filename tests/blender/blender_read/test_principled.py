@@ -103,9 +103,9 @@ def test_one_note_per_material_naming_only_what_it_uses(blender):
     principled_notes = [n for n in notes if "Principled" in n]
     assert principled_notes == [
         "materials 'Plaster', 'Wood': Principled specular reflection counted as diffuse light (its hemispherical "
-        "albedo); not modelled: highlights of uneven light (shown as even light's, by view angle)",
+        "albedo); not modelled: view-dependent highlights (shown as their average over view directions)",
         "material 'Glass': Principled specular reflection counted as diffuse light (its hemispherical albedo); "
-        "not modelled: highlights of uneven light (shown as even light's, by view angle), light through "
+        "not modelled: view-dependent highlights (shown as their average over view directions), light through "
         "transmission (only its reflection counted)",
     ]
     assert not any("'Matte'" in n or "'Lamp'" in n for n in notes)

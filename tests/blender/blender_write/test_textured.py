@@ -296,93 +296,20 @@ def test_a_source_attribute_named_as_ours_is_left_out_with_a_note(blender, monke
     assert any("'Floor': its colour attribute 'Radiosity'" in n for n in outputs[0].notes), outputs[0].notes
 
 
-def test_a_principled_floor_s_copy_shows_its_specular_light_beside_its_base_colour_by_view(blender):
+def test_a_principled_floor_s_copy_shows_its_specular_light_beside_its_base_colour(blender):
     """A Principled BSDF at its default specular level returns more than its base colour (its
-    specular layer's light), and more at a grazing view than face on: the copy's reflectivity
-    node takes its scale and offset from curves of the view's Facing that pass through the
-    material's own terms by view, whose cosine-weighted mean is its terms as the solve counts
-    them (the identity showed the floor darker than its render)."""
+    specular layer's light): the copy's reflectivity node carries the material's own terms as
+    the camera sees them, not the identity (which showed the floor darker than its render)."""
     from addon.blender_read.materials import surface_terms
-    from addon.core.principled import mu_nodes
 
     floor, material = _checker_floor()
     material.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.5
     copy = _solve(blender)["Floor"].data.materials[0]
     node = next(n for n in copy.node_tree.nodes if n.label == "Reflectivity")
-    mu, scale, offset = surface_terms(material, by_view=True)
-    weights = mu_nodes()[1][:, None]
-    for k, (socket, terms, mean) in enumerate(zip(node.inputs[1:3], (scale, offset), surface_terms(material))):
-        curve = socket.links[0].from_node
-        assert curve.bl_idname == "ShaderNodeRGBCurve" and curve.inputs["Color"].links[0].from_socket.name == "Facing"
-        drawn = np.array([[curve.mapping.evaluate(curve.mapping.curves[c], 1.0 - m) for c in range(3)] for m in mu])
-        assert np.allclose(drawn, terms, rtol=3e-3)  # (Blender evaluates a curve from a table of 256)
-        assert np.allclose((weights * terms).sum(axis=0), mean, rtol=1e-9)
-    assert min(surface_terms(material)[1]) > 0.01 and max(surface_terms(material)[0]) < 1.0
-    assert offset[0, 0] > 2.0 * offset[-1, 0]  # (mu ascending: the grazing view's specular light is the larger)
-
-
-def _ortho_view(scene, tilt, pixels=32):
-    """An orthographic camera 1 m across, looking at the origin from ``tilt`` radians off the
-    vertical (towards +y): every pixel sees the floor along a view of cosine cos(tilt)."""
-    data = bpy.data.cameras.new("View")
-    data.type, data.ortho_scale = "ORTHO", 1.0
-    camera = bpy.data.objects.new("View", data)
-    camera.location = (0.0, -3.0 * np.sin(tilt), 3.0 * np.cos(tilt))
-    camera.rotation_euler = (tilt, 0.0, 0.0)
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    scene.render.resolution_x = scene.render.resolution_y = pixels
-    scene.render.threads_mode, scene.render.threads = "FIXED", 1
-
-
-def _exr_pixels(path):
-    image = bpy.data.images.load(str(path))
-    pixels = np.empty(len(image.pixels), np.float32)
-    image.pixels.foreach_get(pixels)
-    pixels = pixels.reshape(image.size[1], image.size[0], 4)[..., :3]
-    bpy.data.images.remove(image)
-    return pixels
-
-
-def test_a_principled_result_seen_face_on_and_at_a_grazing_angle_is_as_bright_as_its_render(blender, tmp_path):
-    """Two Principled floors side by side under an even white sky and nothing else, so that each
-    returns its directional albedo towards the camera: a dark base (default specular) and a grey
-    one with a red Specular Tint (each channel's own curve). The preview of the results (Cycles, no
-    bounces) is as bright as Cycles' render of the floors themselves, channel by channel, within
-    3% (0.4% here), seen face on and 75 degrees off (cos 0.26). Before, the results showed the
-    mean over views at every angle: the dark floor 1.08-1.25 of its render face on and 0.66-0.84
-    at the grazing view, the tinted one 1.05-1.06 and 0.88-0.90."""
-    scene = blender.scene
-    dark, tinted = principled("Dark", (0.05, 0.1, 0.2)), principled("Tinted", (0.3, 0.3, 0.3))
-    for material in (dark, tinted):
-        material.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.5
-    tinted.node_tree.nodes["Principled BSDF"].inputs["Specular Tint"].default_value = (1.0, 0.4, 0.1, 1.0)
-    for name, material, x0 in (("Dark", dark, -2.0), ("Tinted", tinted, 0.0)):
-        make_object(name, [(x0, -2, 0), (x0 + 2, -2, 0), (x0 + 2, 2, 0), (x0, 2, 0)], [(0, 1, 2, 3)], [material]).select_set(True)
-    world = bpy.data.worlds.new("Even sky")
-    if world.node_tree is None:  # (Blender 4: nodes made on use_nodes; Blender 5 always has them)
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-    scene.world = world
-    sources = [bpy.data.objects["Dark"], bpy.data.objects["Tinted"]]
-    results = _solve(blender, patch_size=0.5)
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    for tilt in (0.0, np.radians(75.0)):
-        _ortho_view(scene, tilt)
-        render_preview(str(tmp_path / "preview.exr"), sources, width=32, samples=16)
-        preview = _exr_pixels(tmp_path / "preview.exr")
-        for obj in results.values():
-            obj.hide_render = True
-        scene.render.engine, scene.cycles.samples = "CYCLES", 256
-        scene.view_settings.view_transform, scene.view_settings.exposure = "Standard", 0.0
-        scene.render.filepath = str(tmp_path / "cycles.exr")
-        bpy.ops.render.render(write_still=True)
-        cycles = _exr_pixels(tmp_path / "cycles.exr")
-        for obj in results.values():
-            obj.hide_render = False
-        for name, columns in (("Dark", slice(3, 13)), ("Tinted", slice(19, 29))):
-            ratio = preview[4:28, columns].mean(axis=(0, 1)) / cycles[4:28, columns].mean(axis=(0, 1))
-            assert np.all(np.abs(ratio - 1.0) < 0.03), (name, np.degrees(tilt), ratio)
+    scale, offset = surface_terms(material)
+    assert np.allclose(node.inputs[1].default_value[:], scale, atol=1e-6)
+    assert np.allclose(node.inputs[2].default_value[:], offset, atol=1e-6)
+    assert min(offset) > 0.01 and max(scale) < 1.0
 
 
 def test_live_lamps_leave_the_lamps_own_light_to_the_renderer_and_show_the_same_picture(blender, tmp_path):
