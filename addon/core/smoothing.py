@@ -26,7 +26,7 @@ what the iterations buy is small jumps left by that last step where a continuous
 non-negative continuous answer, and keeps part of its step. Where light falls off faster than a
 patch can follow, the continuous answer swings corners up and down row after row (bands): where
 the iterations turn a patch's corners against the plain average's, it and its neighbours keep
-the plain average, scaled (``_ringing``). Every step keeps values
+the plain average, scaled, in every channel if in one (``_ringing``). Every step keeps values
 non-negative (averages of non-negative values, a clip at 0, a non-negative scale); negative
 values (a signed estimator's noise) count as 0, non-finite ones are refused.
 
@@ -45,7 +45,8 @@ ITERATIONS = 10
 # A patch rings where its corners' deviations from its value, after the iterations, correlate
 # below -RINGING with the plain average's (turned against it, not a rounding's sign).
 RINGING = 0.5
-RINGING_BLOCK = 1 << 18  # corners compared at a time
+RINGING_BLOCK = 1 << 16  # corners compared at a time (a few hundred kB of temporaries)
+SIGNIFICANT = 1e-3  # nor where the iterations moved its corners by less than this share of its value (RMS)
 RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
 
 
@@ -178,19 +179,33 @@ class Surface(NoiseFilter):
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
         out = np.empty((len(self.triangle_patch), 3, values.shape[1]), dtype)
-        records = []
+        records, plain_scales = [], []
+        rings = np.zeros(self.patch_count, bool)
         for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
             channel = np.ascontiguousarray(values[:, k])
             record = {} if return_filter else None
-            out[:, :, k] = self._corner_channel(channel, corner_patch, averaging, iterations, record).reshape(-1, 3)
+            x, plain_scale, ringing = self._corner_channel(channel, corner_patch, averaging, iterations, record)
+            out[:, :, k] = x.reshape(-1, 3)
+            del x  # (not held through the next channel's steps)
             records.append(record)
+            plain_scales.append(plain_scale)
+            rings |= ringing
+        # patches that ring in any channel take the plain average in every one (no colour fringes)
+        flat_out = out.reshape(-1, values.shape[1])
+        for k, (record, plain_scale) in enumerate(zip(records, plain_scales)):
+            if rings.any():
+                plain = self._average_corners(np.ascontiguousarray(values[:, k])[corner_patch], averaging)
+                _put_rings(flat_out[:, k], plain, plain_scale, rings, corner_patch)
+            if record is not None:
+                record["rings"], record["plain_scale"] = rings, plain_scale
         if not return_filter:
             return out
         return out, LinearCorners(self, checked > 0, corner_patch, averaging, int(iterations), records)
 
     def _corner_channel(self, values, corner_patch, averaging, iterations, record=None):
-        """One channel's corners (T*3,); ``record`` (a dict), where given, keeps the floored
-        corners of each step, the floors' patches, the final scales and the flat corners."""
+        """One channel's corners (T*3,), the scales (P,) of its plain average (no iterations) and
+        its ringing patches (P,) bool (``_ringing``); ``record`` (a dict), where given, keeps the
+        floored corners of each step, the floors' patches, the final scales and the flat corners."""
         x = self._average_corners(values[corner_patch], averaging)
         floor = LOWEST_SHARE * self._corner_lowest(self._seen_values(values, corner_patch), averaging)
         floor[np.isinf(floor)] = 0.0  # (a point only hidden patches meet)
@@ -206,14 +221,13 @@ class Surface(NoiseFilter):
             # a bright patch beside dim ones would push its neighbours' far corners down to black:
             # never below a share of the darkest patch meeting there (the last scale keeps means)
             np.maximum(x, floor, out=x)
+        del floor  # (a (T*3,) array less while the plain average is made)
         x, scale, flat = self._scale_to(values, x, corner_patch)
         # (no iterations, made again rather than kept through them: what ringing falls back to)
         plain, plain_scale, _ = self._scale_to(values, self._average_corners(values[corner_patch], averaging), corner_patch)
-        rings = self._ringing(values, x, plain, corner_patch)
-        x[rings] = plain[rings]
         if record is not None:
-            record["scale"], record["flat"], record["rings"], record["plain_scale"] = scale, flat, rings, plain_scale
-        return x
+            record["scale"], record["flat"] = scale, flat
+        return x, plain_scale, self._ringing(values, x, plain, corner_patch)
 
     def _scale_to(self, values, x, corner_patch):
         """Corners ``x`` (T*3,) scaled in place to each patch's value (exact at last; a patch
@@ -226,10 +240,10 @@ class Surface(NoiseFilter):
         return x, scale, flat
 
     def _ringing(self, values, x, plain, corner_patch):
-        """(T*3,) corners of the patches whose corners the iterations turned against the plain
-        average's (their deviations from the patch's value correlated below -RINGING), and of the
-        patches around them: light falling off faster than a patch can follow, where keeping
-        every mean swings corners up and down row after row (bands); they keep ``plain``."""
+        """(P,) bool: the patches whose corners the iterations turned against the plain average's
+        (their deviations from the patch's value correlated below -RINGING), and the patches
+        around them: light falling off faster than a patch can follow, where keeping every mean
+        swings corners up and down row after row (bands); they keep the plain average."""
         agree, own_size, plain_size = (np.zeros(self.patch_count) for _ in range(3))
         for start in range(0, len(x), RINGING_BLOCK):  # (a block of corners at a time: no (T*3,) temporaries)
             rows = slice(start, start + RINGING_BLOCK)
@@ -238,14 +252,22 @@ class Surface(NoiseFilter):
             agree += _sum(patches, own * other, self.patch_count)
             own_size += _sum(patches, own * own, self.patch_count)
             plain_size += _sum(patches, other * other, self.patch_count)
-        size = np.sqrt(own_size * plain_size)
+        # (where the iterations moved nothing that matters, the correlation is a rounding's sign)
+        counts = np.bincount(corner_patch, minlength=self.patch_count)
+        moved = own_size > counts * np.square(SIGNIFICANT * values)
+        ringing = moved & (agree < -RINGING * np.sqrt(own_size * plain_size))
         point = self.point.ravel()
         touched = np.zeros(len(self.smooth_point), bool)
-        touched[point[(agree < -RINGING * size)[corner_patch]]] = True
-        # and the patches around them, so that the steep part is plain on both sides of each corner
         rings = np.zeros(self.patch_count, bool)
-        rings[corner_patch[touched[point]]] = True
-        return np.flatnonzero(rings[corner_patch])
+        # and the patches around them, so that the steep part is plain on both sides of each corner
+        for step in (0, 1):
+            for start in range(0, len(x), RINGING_BLOCK):
+                rows = slice(start, start + RINGING_BLOCK)
+                if step == 0:
+                    touched[point[rows][ringing[corner_patch[rows]]]] = True
+                else:
+                    rings[corner_patch[rows][touched[point[rows]]]] = True
+        return rings
 
     def _seen_values(self, values, corner_patch):
         """(T*3,) each corner's patch value, inf at hidden patches' (no floor is a share of them)."""
@@ -299,9 +321,18 @@ class LinearCorners:
                 corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
             corner *= record["scale"][cp]
             corner[record["flat"]] = v[cp[record["flat"]]]
-            corner[record["rings"]] = plain[record["rings"]]
+            _put_rings(corner, plain, 1.0, record["rings"], cp)
             out[:, :, k] = corner.reshape(-1, 3)
         return out
+
+
+def _put_rings(out, plain, scale, rings, corner_patch, block=RINGING_BLOCK):
+    """``out`` (T*3,) = ``plain`` x ``scale`` (P,) or a number, at the corners of the patches
+    ``rings`` (P,) bool: a block of corners at a time (no (T*3,) index)."""
+    for start in range(0, len(plain), block):
+        rows = slice(start, start + block)
+        at = np.flatnonzero(rings[corner_patch[rows]]) + start
+        out[at] = plain[at] * (scale if np.isscalar(scale) else scale[corner_patch[at]])
 
 
 def _crease_pairs(point, triangle_patch, patch_normal, cos_crease):

@@ -417,6 +417,13 @@ def test_light_falling_off_faster_than_a_patch_can_follow_shows_no_bands():
     assert any(len(record["rings"]) for record in apply.records)
     parts = np.stack([0.3 * values, 0.7 * values])
     np.testing.assert_allclose(apply(parts).sum(axis=0), corners, rtol=0, atol=1e-12 * corners.max())
+    # a channel that does not ring on its own (a gentle ramp) takes the plain average where another
+    # rings, so that no patch's colour changes at the border of that zone
+    values[:, 2] = 0.5 + 0.01 * x
+    corners, apply = surface.corner_values(values, return_filter=True)
+    rings = [record["rings"] for record in apply.records]
+    assert len(rings[0]) and all(np.array_equal(r, rings[0]) for r in rings[1:])
+    np.testing.assert_allclose(surface._patch_means(corners[..., 2].ravel()), values[:, 2], rtol=1e-9)
 
 
 def test_no_light_anywhere_filters_to_no_light():
