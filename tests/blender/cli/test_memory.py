@@ -49,8 +49,9 @@ def _peak_of(cmd, cwd):
 # the preview, 1,141-1,243 B since; 1,625-1,645 B with the smooth light's direct-light corners and
 # noise filters (a clean clone's CI 1,793), 1,545-1,577 B once the filter's fit went a block of
 # pairs at a time (1,583-1,636 on a later day; a clean clone's CI 1,830), 1,435-1,466 B once the
-# direct light's kept corners were added a block at a time; runs differ by up to 40 MiB (250 B a
-# patch here). At a million patches it is
+# direct light's kept corners were added a block at a time, 1,429-1,469 B with the smooth
+# display's ringing test (its statistics a block of corners at a time; 1,535-1,569 B when they were
+# whole arrays); runs differ by up to 40 MiB (250 B a patch here). At a million patches it is
 # about 0.75 KiB (docs/performance.md, results/memory_cli.md).
 GROWTH_PER_PATCH = 1.75 * 1024
 
