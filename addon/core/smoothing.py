@@ -190,7 +190,8 @@ class Surface(NoiseFilter):
             records.append(record)
             plain_scales.append(plain_scale)
             rings |= ringing
-        # patches that ring in any channel take the plain average in every one (no colour fringes)
+        # patches that ring in any channel take the plain average in every one (no colour fringes);
+        # it is made again here (one averaging pass) rather than kept from each channel's steps
         flat_out = out.reshape(-1, values.shape[1])
         for k, (record, plain_scale) in enumerate(zip(records, plain_scales)):
             if rings.any():
@@ -256,17 +257,15 @@ class Surface(NoiseFilter):
         counts = np.bincount(corner_patch, minlength=self.patch_count)
         moved = own_size > counts * np.square(SIGNIFICANT * values)
         ringing = moved & (agree < -RINGING * np.sqrt(own_size * plain_size))
+        # and the patches around them, so that the steep part is plain on both sides of each corner
         point = self.point.ravel()
         touched = np.zeros(len(self.smooth_point), bool)
+        blocks = [slice(start, start + RINGING_BLOCK) for start in range(0, len(x), RINGING_BLOCK)]
+        for rows in blocks:
+            touched[point[rows][ringing[corner_patch[rows]]]] = True
         rings = np.zeros(self.patch_count, bool)
-        # and the patches around them, so that the steep part is plain on both sides of each corner
-        for step in (0, 1):
-            for start in range(0, len(x), RINGING_BLOCK):
-                rows = slice(start, start + RINGING_BLOCK)
-                if step == 0:
-                    touched[point[rows][ringing[corner_patch[rows]]]] = True
-                else:
-                    rings[corner_patch[rows][touched[point[rows]]]] = True
+        for rows in blocks:
+            rings[corner_patch[rows][touched[point[rows]]]] = True
         return rings
 
     def _seen_values(self, values, corner_patch):
@@ -315,24 +314,23 @@ class LinearCorners:
         for k, record in enumerate(self.records):  # over colour channels, not elements
             v = np.ascontiguousarray(values[:, k])
             corner = surface._average_corners(v[cp], self.averaging)
-            plain = corner * record["plain_scale"][cp]
+            plain = corner.copy()
             for floored in record["floored"]:
                 corner += RELAXATION * surface._average_corners((v - surface._patch_means(corner))[cp], self.averaging)
                 corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
             corner *= record["scale"][cp]
             corner[record["flat"]] = v[cp[record["flat"]]]
-            _put_rings(corner, plain, 1.0, record["rings"], cp)
+            _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
             out[:, :, k] = corner.reshape(-1, 3)
         return out
 
 
 def _put_rings(out, plain, scale, rings, corner_patch, block=RINGING_BLOCK):
-    """``out`` (T*3,) = ``plain`` x ``scale`` (P,) or a number, at the corners of the patches
-    ``rings`` (P,) bool: a block of corners at a time (no (T*3,) index)."""
+    """``out`` (T*3,) = the plain average ``plain`` x its ``scale`` (P,) at the corners of the
+    patches ``rings`` (P,) bool: a block of corners at a time (no (T*3,) index)."""
     for start in range(0, len(plain), block):
-        rows = slice(start, start + block)
-        at = np.flatnonzero(rings[corner_patch[rows]]) + start
-        out[at] = plain[at] * (scale if np.isscalar(scale) else scale[corner_patch[at]])
+        at = np.flatnonzero(rings[corner_patch[start:start + block]]) + start
+        out[at] = plain[at] * scale[corner_patch[at]]
 
 
 def _crease_pairs(point, triangle_patch, patch_normal, cos_crease):
