@@ -18,6 +18,8 @@ OFFSET_TOLERANCE = 1e-6
 INSIDE_MARGIN = 1e-6
 # Pairs of a plane's triangles examined at most (a plane's triangles squared; beyond, not examined).
 MAX_PAIRS = 1 << 20  # (a plane of up to 1,024 triangles: the pair test's arrays stay ~40 MB)
+# Candidate pairs tested for overlap at once.
+PAIR_BLOCK = 1 << 16
 
 
 class Contacts:
@@ -40,7 +42,6 @@ class Contacts:
         key[~ok] = np.iinfo(np.int64).min  # (no plane: never a contact)
         _, plane = np.unique(key, axis=0, return_inverse=True)
         plane = plane.ravel()
-        self.corners = c
         pairs = []
         order = np.argsort(plane, kind="stable")
         cuts = np.flatnonzero(np.diff(plane[order])) + 1
@@ -52,10 +53,14 @@ class Contacts:
             meet = (a != b) & np.all((low[a] <= high[b] + OFFSET_TOLERANCE) & (low[b] <= high[a] + OFFSET_TOLERANCE), axis=1)
             pairs.append(np.column_stack([a[meet], b[meet]]))
         pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), np.int64)
+        # only pairs whose insides overlap: a grid's neighbours share edges, and a hit tests each pair
+        pairs = pairs[_overlapping(c, n, pairs)]
         pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
         self.first = np.searchsorted(pairs[:, 0], np.arange(len(c) + 1))
         self.partner = pairs[:, 1]
         self.same = side[pairs[:, 0]] == side[pairs[:, 1]]
+        # each partner's barycentric rows, made once: a hit is then two dot products a partner
+        self.origin, self.to_v, self.to_u = _barycentric_rows(c[self.partner])
 
     @property
     def any(self):
@@ -71,22 +76,40 @@ class Contacts:
         if hit.size == 0:
             return out
         row = np.repeat(self.first[triangle] - np.cumsum(count) + count, count) + np.arange(hit.size)
-        inside = _in_triangles(points[hit], self.corners[self.partner[row]])
+        w = points[hit] - self.origin[row]
+        v, u = np.einsum("ij,ij->i", w, self.to_v[row]), np.einsum("ij,ij->i", w, self.to_u[row])
+        inside = (v > INSIDE_MARGIN) & (u > INSIDE_MARGIN) & (u + v < 1 - INSIDE_MARGIN)
         np.add.at(out, hit[inside], np.where(self.same[row[inside]], 1, -1))
         return out
 
 
-def _in_triangles(p, tri):
-    """(n,) bool: points p (n,3) in the planes of triangles tri (n,3,3) lie inside them, by
-    more than INSIDE_MARGIN (a point on a shared edge is in neither)."""
-    e1, e2, w = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], p - tri[:, 0]
-    d11, d12, d22 = (np.einsum("ij,ij->i", x, y) for x, y in ((e1, e1), (e1, e2), (e2, e2)))
-    w1, w2 = np.einsum("ij,ij->i", w, e1), np.einsum("ij,ij->i", w, e2)
+def _overlapping(corners, normal, pairs):
+    """(m,) bool: whether the coplanar triangles of each pair (m,2) overlap by more than
+    OFFSET_TOLERANCE across every in-plane axis of their six edges (separating axes), a block of
+    pairs at a time."""
+    keep = np.zeros(len(pairs), bool)
+    for start in range(0, len(pairs), PAIR_BLOCK):
+        a, b = corners[pairs[start:start + PAIR_BLOCK, 0]], corners[pairs[start:start + PAIR_BLOCK, 1]]
+        n = normal[pairs[start:start + PAIR_BLOCK, 0]]
+        apart = np.zeros(len(a), bool)
+        for tri in (a, b):
+            for i in range(3):
+                axis = np.cross(tri[:, (i + 1) % 3] - tri[:, i], n)
+                axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
+                pa, pb = np.einsum("nkj,nj->nk", a, axis), np.einsum("nkj,nj->nk", b, axis)
+                apart |= (pa.max(axis=1) <= pb.min(axis=1) + OFFSET_TOLERANCE) | (pb.max(axis=1) <= pa.min(axis=1) + OFFSET_TOLERANCE)
+        keep[start:start + PAIR_BLOCK] = ~apart
+    return keep
+
+
+def _barycentric_rows(tri):
+    """For triangles tri (n,3,3) of positive area: (origin, to_v, to_u) (n,3) each, so that a
+    point p in a triangle's plane is p = origin + v e1 + u e2 with v = (p - origin) . to_v and
+    u = (p - origin) . to_u (e1, e2 its edges from the first corner)."""
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    d11, d12, d22 = (np.einsum("ij,ij->i", x, y)[:, None] for x, y in ((e1, e1), (e1, e2), (e2, e2)))
     det = d11 * d22 - d12 * d12
-    safe = np.where(det > 0, det, 1.0)
-    v = (d22 * w1 - d12 * w2) / safe
-    u = (d11 * w2 - d12 * w1) / safe
-    return (det > 0) & (v > INSIDE_MARGIN) & (u > INSIDE_MARGIN) & (u + v < 1 - INSIDE_MARGIN)
+    return tri[:, 0].copy(), (d22 * e1 - d12 * e2) / det, (d11 * e2 - d12 * e1) / det
 
 
 def contacts_of(geometry):
