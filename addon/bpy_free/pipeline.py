@@ -124,7 +124,7 @@ def forecast_for(scene, settings: SolveSettings, target, bounces, should_stop=No
                     threshold=settings.threshold, stop_rule=settings.stop_rule if target is not None else "predicted",
                     method=settings.method, direct_light=direct_light_for(scene, settings), exit_point=settings.exit_point,
                     sampling=settings.sampling, threads=settings.threads or None, max_seconds=settings.max_seconds or None,
-                    seed=int(settings.seed), bounces=bounces, should_stop=should_stop)
+                    seed=int(settings.seed), bounces=bounces, should_stop=should_stop, error_scale=options.ERROR_SCALE)
 
 
 def efficiency_sentence(relative_efficiency) -> str:
@@ -295,8 +295,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         cluster=settings.cluster or None,
         direct_light=direct_light_for(scene, settings),
         method=settings.method,
-        per_source=groups is not None,
-        groups=groups,
+        per_source=groups is not None, groups=groups, error_scale=options.ERROR_SCALE,
     )
     trim.give_back()
     out = SolveOutput(patches, result, prediction, target, notes=notes,

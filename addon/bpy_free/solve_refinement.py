@@ -15,7 +15,7 @@ from ..core.plan import MEASURED_STOP_CHUNKS, chunk_plan
 from ..core.adaptive_light import DETAILS
 from ..core.adaptive_solve import refine_by_solve
 from ..core.names import AUTO
-from . import adaptive_patches
+from . import adaptive_patches, options
 from .scene_notes import scene_and_notes
 
 # Solves that refine the mesh at most (0: the direct light's refinement alone); one measured best at
@@ -61,7 +61,7 @@ def refined(objects, patches, settings, progress=None, should_stop=None, on_pred
                        progress=progress, should_stop=should_stop, max_seconds=loose.max_seconds or None,
                        threads=loose.threads or None, cluster=loose.cluster or None,
                        direct_light=pipeline.direct_light_for(scene, loose), method=loose.method,
-                       chunk_paths=None if chunk is None else _quarter(chunk))
+                       chunk_paths=None if chunk is None else _quarter(chunk), error_scale=options.ERROR_SCALE)
         if result.stopped == "cancelled":
             break
         cells, step = refine_by_solve(patches.cells, patches.meshes, result.irradiance, result.irradiance_variance,

@@ -94,12 +94,12 @@ class SolveJob:
         self.patch_count = patch_count
         self.patches = patches
 
-    def relative_error(self, mse):
-        """An MSE as the relative RMS error the settings speak of (None if unknown)."""
-        p = self.prediction
-        if p is None or mse is None or not mse == mse or p.mean_reflected_radiosity <= 0:
-            return None
-        return mse ** 0.5 / p.mean_reflected_radiosity
+    @staticmethod
+    def relative_error(stats):
+        """The run's error now as the relative RMS the settings speak of, from its progress
+        ``stats`` (None if unknown)."""
+        error = stats.get("relative_error")
+        return float(error) if error is not None and error == error else None
 
     def _hand_over_objects(self):
         """The objects' arrays, which the job then lets go of: run_solve drops them once meshed."""

@@ -64,7 +64,7 @@ def progress_text(job) -> str:
     parts = [f"{fraction * 100:5.1f}%", f"{paths:,} of {planned:,} expected paths" if planned else f"{paths:,} paths"]
     if p.get("rays_per_second"):
         parts.append(f"{p['rays_per_second'] / 1e6:.2f} Mray/s")
-    error = job.relative_error(p.get("measured_mse"))
+    error = job.relative_error(p)
     if error is not None:
         target = job.settings.relative_rms
         parts.append(f"error {error * 100:.2f}%" + (f" (target {target * 100:g}%)" if not job.settings.paths else ""))

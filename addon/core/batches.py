@@ -49,6 +49,7 @@ class Batches:
         self._reflectivity = tables.reflectivity  # (C,P)
         self.weight = scene.patch_area / scene.total_area
         self._mse_at = (0, math.nan)  # (chunks, measured_mse at that many chunks)
+        self._mean_at = (0, math.nan)  # (chunks, mean_reflected at that many chunks)
         # Area-weighted Helmert increments of the sum of squares, one a chunk from the second on:
         # a pass over the patches a chunk, made only for a run that stops on its measured error.
         self.increments = [] if increments else None
@@ -177,6 +178,17 @@ class Batches:
         mse = spread_sum / ((self.chunks - 1) * self.paths)
         self._mse_at = (self.chunks, mse)
         return mse
+
+    def mean_reflected(self):
+        """The area-weighted mean over patches (and channels) of the reflected radiosity so far,
+        sum_j A_j b_j / A_T = Phi_T sum_j R_j I_j / (A_T N): what a relative error on the measured
+        scale is relative to. NaN before any path."""
+        if self.paths == 0:
+            return math.nan
+        if self._mean_at[0] != self.chunks:
+            reflected = sum(float(np.einsum("i,i->", self._reflectivity[k], self.incident[k])) for k in range(self.channels))
+            self._mean_at = (self.chunks, reflected * self.scene.total_power / (self.scene.total_area * self.paths * self.channels))
+        return self._mean_at[1]
 
     def _increment(self, tally):
         """sum over patches (and channels) of A_j / (C A_T) score^2 n N / (N + n) (I_k / n - I / N)^2:

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import methods
-from .plan import MEASURED_STOP_CHUNKS, MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target
+from .names import SCALE_PAPER
+from .plan import MEASURED_STOP_CHUNKS, MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target, target_now
 from .solver import solve
 
 # A pilot traces about this many rays (about a second on two threads) ...
@@ -88,10 +89,11 @@ def raw_rate(scene, rays=1 << 14, seed=0):
 
 def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, stop_rule="measured", method="walk",
              direct_light=None, exit_point="random", sampling="independent", threads=None, max_seconds=None, seed=0,
-             bounces=None, budget=PILOT_RAYS, should_stop=None, per_source=False, groups=None):
+             bounces=None, budget=PILOT_RAYS, should_stop=None, per_source=False, groups=None, error_scale=SCALE_PAPER):
     """The Forecast of ``solve(scene, estimator, ...)`` with these arguments (``method`` a
     method, not "auto"; ``bounces`` the expected bounces of a path, diagnostics.check_bounces;
-    ``per_source``, ``groups``: the pilot keeps each group's light apart, as the run will).
+    ``per_source``, ``groups``: the pilot keeps each group's light apart, as the run will; on the
+    measured ``error_scale`` the target is the pilot's own mean's, as the run's will be).
     ``should_stop()`` ends the pilot early (a run starting): the forecast is then from what it has."""
     chosen = methods.create(method, direct_light)
     plan = chunk_plan(scene, chosen, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
@@ -133,7 +135,9 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
     if paths is not None or not plan.measured_rule:
         expected = float(plan.cap)
     elif variance == variance:
-        expected = paths_to_target(1, variance, target_mse, plan.chunk, plan.cap)
+        target = target_now(target_mse, error_scale, plan.prediction, r.mean_reflected)
+        expected = paths_to_target(1, variance, target, plan.chunk, plan.cap)
+        expected = float(plan.cap) if expected != expected else expected
     else:  # at least the chunks the measured rule needs, at most the cap
         expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
     seconds = setup + per_path * expected

@@ -33,6 +33,11 @@ PREDICTED = "predicted"  # after the paths formula (2)/(3) predicts for the targ
 MEASURED = "measured"    # once the batch-means estimate meets the target
 STOP_RULES = (PREDICTED, MEASURED)
 
+# What an error target's relative RMS is relative to (the mean reflected radiosity).
+SCALE_PAPER = "paper"        # b_ave = R_ave Phi_T / (A_T (1 - R_ave)): the paper's, a closed scene's mean
+SCALE_MEASURED = "measured"  # the run's own area-weighted mean of b: light that leaves the scene is not counted
+ERROR_SCALES = (SCALE_PAPER, SCALE_MEASURED)
+
 # Why a solve stopped (SolveResult.stopped).
 STOP_PATHS = "paths"
 STOP_TARGET = "target"

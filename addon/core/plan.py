@@ -9,7 +9,7 @@ import math
 from dataclasses import dataclass
 
 from .error_model import predict
-from .names import MEASURED
+from .names import MEASURED, SCALE_PAPER
 
 # A chunk aims at about this many rays: enough wavefront steps that its last short ones cost
 # little, few enough that progress and the batch error estimate come often.
@@ -67,12 +67,33 @@ def chunk_paths_for(expected_path_length, planned_paths, min_chunks=MIN_CHUNKS):
 def paths_to_target(paths, measured_mse, target_mse, chunk, cap):
     """The paths a run stopping on its measured error is expected to end at, from its MSE after
     ``paths`` (which falls as 1 / paths): whole chunks, at least MEASURED_STOP_CHUNKS, at most
-    ``cap``. NaN MSE (fewer than 2 chunks): NaN."""
-    if not measured_mse >= 0 or paths <= 0:
+    ``cap``. NaN MSE (fewer than 2 chunks) or target: NaN; a target of 0 (nothing reflected yet)
+    with an error: the cap."""
+    if not measured_mse >= 0 or paths <= 0 or not target_mse >= 0:
         return math.nan
-    needed = paths * measured_mse / target_mse
+    if target_mse == 0 and measured_mse > 0:
+        return float(cap)
+    needed = paths * measured_mse / target_mse if measured_mse > 0 else 0.0
     chunks = max(MEASURED_STOP_CHUNKS, math.ceil(needed / chunk))
     return float(min(cap, chunks * chunk))
+
+
+def target_now(target_mse, error_scale, prediction, mean_reflected):
+    """The MSE a measured stop holds a run to: ``target_mse`` on the paper's scale; on the
+    measured scale the same error relative to the run's own mean reflected radiosity b_now,
+    target_mse (b_now / b_ave)^2 (the paper's b_ave: what target_mse was made relative to).
+    NaN (never met) before any path; 0 while nothing is reflected (met by no error at all)."""
+    if error_scale == SCALE_PAPER:
+        return target_mse
+    return target_mse * (mean_reflected / prediction.mean_reflected_radiosity) ** 2
+
+
+def relative_error(mse, error_scale, prediction, mean_reflected):
+    """An MSE as a relative RMS error on ``error_scale`` (no error: 0; NaN where unknown)."""
+    mean = prediction.mean_reflected_radiosity if error_scale == SCALE_PAPER else mean_reflected
+    if mse == 0:
+        return 0.0
+    return math.sqrt(mse) / mean if mse > 0 and mean > 0 else math.nan
 
 
 def meets_target(total, target_mse):

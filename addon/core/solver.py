@@ -26,6 +26,7 @@ from .diagnostics import check_bounces
 from .error_model import check_estimator, check_positive
 from .names import (
     AUTO,
+    ERROR_SCALES,
     EXIT_POINTS,
     EXIT_RANDOM,
     FINITE,
@@ -34,6 +35,7 @@ from .names import (
     MEASURED,
     PREDICTED,
     SAMPLINGS,
+    SCALE_PAPER,
     SHOT,
     STOP_CANCELLED,
     STOP_PATHS,
@@ -42,7 +44,7 @@ from .names import (
     STOP_TIME_LIMIT,
     WALK,
 )
-from .plan import chunk_plan, meets_target, paths_to_target, target_bound
+from .plan import chunk_plan, meets_target, paths_to_target, relative_error, target_bound, target_now
 from .runners import ThreadRunner
 from .grouping import check_per_source, source_groups
 from .speedups import Speedups
@@ -64,6 +66,7 @@ class SolveResult:
     mean_path_length: float
     predicted_mse: float
     measured_mse: float
+    mean_reflected: float  # the area-weighted mean of ``reflected`` over patches and channels
     stopped: str
     estimator: str
     threshold: float | None
@@ -80,6 +83,12 @@ class SolveResult:
     method: str = WALK
     gather_rays: int = 0  # per chunk, with the direct light gathered
     per_source: object = None  # relighting.PerSource (per_source=True), else None
+    error_scale: str = SCALE_PAPER  # what relative_error is relative to (names.ERROR_SCALES)
+
+    @property
+    def relative_error(self):
+        """The measured error as a relative RMS on the run's ``error_scale`` (NaN: unknown)."""
+        return relative_error(self.measured_mse, self.error_scale, self.prediction, self.mean_reflected)
 
     @property
     def rays_per_second(self):
@@ -88,13 +97,18 @@ class SolveResult:
 
 def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3, seed=0, exit_point=EXIT_RANDOM,
           stop_rule=PREDICTED, progress=None, should_stop=None, max_seconds=None, threads=None, sampling=INDEPENDENT,
-          speedups=None, direct_light=None, cluster=None, method=WALK, chunk_paths=None, per_source=False, groups=None):
+          speedups=None, direct_light=None, cluster=None, method=WALK, chunk_paths=None, per_source=False, groups=None,
+          error_scale=SCALE_PAPER):
     """Radiosity of ``scene`` by its method's chunks (the paper's shooting random walks unless
     ``method`` says otherwise).
 
     Runs ``paths`` paths, or, with ``target_mse``, the paths formula (2)/(3) predicts for it
     (``stop_rule="predicted"``) or until the batch estimate meets it (``"measured"``, capped
-    by ``paths`` if given, else 64 times the prediction). ``direct_light="gathered"`` (beyond the
+    by ``paths`` if given, else 64 times the prediction). ``error_scale`` says what the error is
+    relative to: the paper's b_ave (``"paper"``, a closed scene's mean reflected radiosity, which
+    ``target_mse`` is then made with: ``relative_rms_to_mse``), or the run's own mean reflected
+    radiosity as it goes (``"measured"``: the same relative error, ``plan.target_now``, where light
+    leaves the scene and b_ave overstates the light in it). ``direct_light="gathered"`` (beyond the
     paper, ``first_shot``) gathers each patch's direct light by shadow rays and walks only its
     reflection; the paper's formulas do not predict its error, so with ``target_mse`` it always
     stops on the measured error. ``cluster`` (a ``dask.distributed.Client`` or a scheduler
@@ -124,7 +138,7 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     method = _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds,
                      dict(per_source=per_source, groups=groups, exit_point=exit_point, sampling=sampling, threads=threads,
                           seed=seed, stop_rule=stop_rule))
-    _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method)
+    _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method, error_scale)
     cluster = cluster_address(cluster) if isinstance(cluster, str) else cluster  # (its form; connecting comes later)
     paths = None if paths is None else int(paths)  # (numpy integers welcome)
     plan = chunk_plan(scene, method, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
@@ -135,11 +149,11 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     runner = _runner(scene, cluster, threads, method, state, estimator, threshold, exit_point, sampling, groups)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
     done_rule = STOP_TARGET if (paths is None and not plan.measured_rule) else STOP_PATHS
-    run = _Run(plan, chunk, target_mse if plan.measured_rule else None, done_rule, start)
+    run = _Run(plan, chunk, target_mse if plan.measured_rule else None, done_rule, start, error_scale)
     total, stopped = run.chunks(scene, state, runner, int(seed), progress, should_stop, max_seconds)
     return _result(scene, total, stopped, run, method, state, target_mse, estimator=estimator, exit_point=exit_point,
                    threshold=threshold if estimator != FINITE else None, sampling=sampling, seed=int(seed),
-                   threads=runner.threads)
+                   threads=runner.threads, error_scale=error_scale)
 
 
 def _choose(scene, estimator, method, direct_light, paths, target_mse, threshold, max_seconds, pilot):
@@ -163,7 +177,7 @@ def _check_amounts(estimator, threshold, paths, target_mse, max_seconds, threads
         raise ValueError("give paths (a path count) or target_mse (an error target)")
 
 
-def _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method):
+def _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method, error_scale):
     """ValueError, in one line, for any other argument the solve cannot run with; else nothing."""
     if exit_point not in EXIT_POINTS:
         raise ValueError(f"exit_point must be one of {', '.join(EXIT_POINTS)}; got {exit_point!r}")
@@ -175,6 +189,8 @@ def _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule,
                          "(shadow rays from each patch)")
     if stop_rule not in STOP_RULES:
         raise ValueError(f"stop_rule must be one of {', '.join(STOP_RULES)}; got {stop_rule!r}")
+    if error_scale not in ERROR_SCALES:
+        raise ValueError(f"error_scale must be one of {', '.join(ERROR_SCALES)}; got {error_scale!r}")
     if stop_rule == MEASURED and target_mse is None:
         raise ValueError("stop_rule='measured' needs a target_mse")
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
@@ -210,10 +226,17 @@ class _Run:
     """A run of a plan's chunks: submitted in order, a group at a time, while the runner has
     room; their tallies added in order; stopped by the plan's rule, a cancel or the time limit."""
 
-    def __init__(self, plan, chunk, measured_target, done_rule, start):
+    def __init__(self, plan, chunk, measured_target, done_rule, start, error_scale):
         self.plan, self.chunk, self.start = plan, chunk, start
         self.measured_target = measured_target  # (None: the run stops on its paths)
         self.done_rule = done_rule
+        self.error_scale = error_scale
+
+    def target(self, total):
+        """The MSE the measured stop rule holds the run to now (None: it stops on its paths)."""
+        if self.measured_target is None:
+            return None
+        return target_now(self.measured_target, self.error_scale, self.plan.prediction, total.mean_reflected())
 
     def chunks(self, scene, state, runner, seed, progress, should_stop, max_seconds):
         """(Batches of the chunks added, why the run stopped)."""
@@ -251,8 +274,9 @@ class _Run:
         for tally in tallies:
             total.add(tally)
             if progress is not None:
-                progress(*_progress(total, self.plan.prediction, self.plan.cap, self.measured_target, self.start, self.chunk))
-        if self.measured_target is not None and meets_target(total, self.measured_target):
+                progress(*_progress(total, self, self.start))
+        target = self.target(total)
+        if target is not None and meets_target(total, target):
             return STOP_TARGET
         if total.paths >= self.plan.cap:
             return self.done_rule
@@ -267,6 +291,7 @@ def _result(scene, total, stopped, run, method, state, target_mse, **settings):
     reflected_variance = total.reflected_variance()
     irradiance_variance = total.irradiance_variance()
     measured_mse = total.let_go_of_squares()
+    mean_reflected = total.mean_reflected()
     reflected = total.reflected()
     prediction = run.plan.prediction
     return SolveResult(
@@ -281,6 +306,7 @@ def _result(scene, total, stopped, run, method, state, target_mse, **settings):
         mean_path_length=total.rays / n if n else math.nan,
         predicted_mse=prediction.mse_for(n) if method.predicted else math.nan,
         measured_mse=measured_mse,
+        mean_reflected=mean_reflected,
         stopped=stopped,
         chunks=total.chunks,
         energy=total.energy() if n else {},
@@ -295,16 +321,18 @@ def _result(scene, total, stopped, run, method, state, target_mse, **settings):
     )
 
 
-def _progress(total, prediction, cap, measured_target, start, chunk):
+def _progress(total, run, start):
     """(fraction, stats) for ``progress``: the share of the paths the run is expected to end at
     (the cap; with the measured stop rule, where the bound it stops on says it will meet the
     target), and the seconds left at the run's pace so far (NaN until it is known)."""
     elapsed = time.perf_counter() - start
     mse_now = total.measured_mse()
+    prediction, cap = run.plan.prediction, run.plan.cap
     expected = float(cap)
-    if measured_target is not None:
+    target = run.target(total)
+    if target is not None and target == target:
         bound = target_bound(total)
-        expected = paths_to_target(total.paths, bound if bound == bound else mse_now, measured_target, chunk, cap)
+        expected = paths_to_target(total.paths, bound if bound == bound else mse_now, target, run.chunk, cap)
     fraction = total.paths / expected if expected > 0 else 0.0  # (NaN > 0 is False)
     left = (expected - total.paths) * elapsed / total.paths if total.paths else math.nan
     return min(1.0, fraction), {
@@ -313,6 +341,7 @@ def _progress(total, prediction, cap, measured_target, start, chunk):
         "seconds": elapsed,
         "rays_per_second": total.rays / elapsed if elapsed > 0 else math.nan,
         "measured_mse": mse_now,
+        "relative_error": relative_error(mse_now, run.error_scale, prediction, total.mean_reflected()),  # NaN while unknown
         "expected_paths": expected,  # NaN while unknown
         "seconds_left": max(0.0, left) if left == left else math.nan,
         "predicted_mse": prediction.mse_for(total.paths),

@@ -50,7 +50,7 @@ def _run_stats(output):
         "last_patch_size": float(output.patches.patch_size),
         "last_stopped": str(r.stopped),
         "last_estimator": _method_text(r),
-        "last_relative_error": _percent(output.prediction, measured),
+        "last_relative_error": 100.0 * r.relative_error if r.relative_error == r.relative_error else -1.0,
         "last_target_error": float(output.settings_relative_rms * 100.0) if output.settings_relative_rms else 0.0,
     }
 
@@ -60,12 +60,6 @@ def _method_text(result):
     if result.method == "two_way":
         return "two-way iteration, direct light gathered"
     return str(result.estimator) + (", direct light gathered" if result.direct_light == "gathered" else "")
-
-
-def _percent(prediction, mse):
-    """An MSE as a relative RMS error in percent of the mean reflected radiosity (-1: unknown)."""
-    mean = getattr(prediction, "mean_reflected_radiosity", 0.0)
-    return 100.0 * mse**0.5 / mean if mse == mse and mse >= 0 and mean > 0 else -1.0
 
 
 def _store_stats(settings, stats):

@@ -141,7 +141,7 @@ def draw_progress(layout, job):
         expected = expected if expected is not None and expected == expected else job.prediction.paths
         col.label(text=f"Patches: {_number(job.patch_count)}   Paths to do: {_number(expected)}")
     mse = stats.get("measured_mse")
-    relative = job.relative_error(mse)
+    relative = job.relative_error(stats)
     target = job.settings.relative_rms * 100
     if relative is not None:
         col.label(text=f"Error now: {relative * 100:.2f}% (target {target:.2f}%)")

@@ -14,7 +14,7 @@ from ..blender_read import sources
 from ..blender_read.selection import read_selection
 from ..blender_write import relight_store
 from ..blender_write.results import write_results
-from ..bpy_free import pipeline, relit
+from ..bpy_free import options, pipeline, relit
 from ..bpy_free.patches import make_patches
 from ..bpy_free.scene_notes import scene_and_notes
 from ..core import relighting
@@ -103,7 +103,7 @@ def solve_kwargs(scene, settings, target):
                 stop_rule=settings.stop_rule if target is not None else "predicted",
                 max_seconds=settings.max_seconds or None, threads=settings.threads or None,
                 cluster=settings.cluster or None, direct_light=pipeline.direct_light_for(scene, settings),
-                method=settings.method)
+                method=settings.method, error_scale=options.ERROR_SCALE)
 
 
 def _snapshot(scene, meta, stale):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import addon
-from addon.bpy_free.options import EXIT_POINT, METHOD, STOP_RULE
+from addon.bpy_free.options import ERROR_SCALE, EXIT_POINT, METHOD, STOP_RULE
 from addon.ui import estimate
 from addon.bpy_free import pipeline
 from addon.blender_read.materials import material_colours, transport_terms
@@ -100,6 +100,7 @@ def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1, **solve_options
     solve_options.setdefault("stop_rule", STOP_RULE.default)  # the extension's defaults
     solve_options.setdefault("method", METHOD.default)
     solve_options.setdefault("exit_point", EXIT_POINT.default)
+    solve_options.setdefault("error_scale", ERROR_SCALE)
     result = solve(scene, "finite", target_mse=target, seed=seed, threads=threads, **solve_options)
     return names, meshes, c, result
 
@@ -558,7 +559,7 @@ def test_panel_draws_in_empty_normal_and_running_states(blender):
     job._on_prediction(prediction, scene.patch_count)
     mse = (0.07 * prediction.mean_reflected_radiosity) ** 2  # a 7% relative error
     job._on_progress(0.4, {"paths": 1000, "rays": 2000, "seconds": 0.1, "rays_per_second": 20000.0,
-                           "measured_mse": mse})
+                           "measured_mse": mse, "relative_error": 0.07})
     worker.set_running_job(job)
     try:
         log = draw_panel(blender)

@@ -311,6 +311,7 @@ def test_progress_line_and_summary_speak_of_the_target():
     the summary the error reached as a share of the target."""
     from types import SimpleNamespace
 
+    from addon.bpy_free.worker import SolveJob
     from addon.cli.progress import progress_text
     from addon.cli.run import summary
 
@@ -320,10 +321,10 @@ def test_progress_line_and_summary_speak_of_the_target():
 
         def snapshot(self):
             return {"fraction": 0.25, "paths": 250_000, "seconds": 3.0, "rays_per_second": 2.5e6,
-                    "measured_mse": (0.06 * 2.0) ** 2, "expected_paths": 1_000_000.0, "seconds_left": 9.0}
+                    "measured_mse": (0.06 * 2.0) ** 2, "relative_error": 0.06, "expected_paths": 1_000_000.0,
+                    "seconds_left": 9.0}
 
-        def relative_error(self, mse):
-            return mse**0.5 / 2.0
+        relative_error = staticmethod(SolveJob.relative_error)
 
     text = progress_text(Job())
     assert "250,000 of 1,000,000 expected paths" in text and "2.50 Mray/s" in text
