@@ -343,7 +343,7 @@ def _write_colours(out, scene, result, settings):
                          f"{shown}: choose Smooth colours to make them")
     out.light_domain = "CORNER" if "light" in made else "FACE"
     flat_light = None if not textured or "light" in made else np.maximum(result.irradiance - (  # (lamps drawn live)
-        point_direct.live_means(scene, seed=result.seed, light=result.irradiance) if out.live_lamps else 0.0), 0.0)
+        point_direct.live_light(scene, result) if out.live_lamps else 0.0), 0.0)
     for k, o in enumerate(patches.objects):
         rows = patches.combined.patch_slice(k)
         out.face_colours.append(radiosity[rows] if o.receives else None)

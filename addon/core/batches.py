@@ -35,6 +35,7 @@ class Batches:
         self.channels = C
         self.incident = np.zeros((C, P))
         self.incident_sq = np.zeros((C, P))  # sum_k I_k^2 / n_k
+        self.direct = None  # (C,P) the part of ``incident`` straight from the sources, where chunks gather it apart
         self.emitted = np.zeros(C)
         self.absorbed = np.zeros(C)
         self.escaped = np.zeros(C)
@@ -58,6 +59,8 @@ class Batches:
         if self.increments is not None and self.paths > 0:
             self.increments.append(self._increment(tally))
         self.incident += tally.incident
+        if tally.direct is not None:
+            self.direct = tally.direct.copy() if self.direct is None else np.add(self.direct, tally.direct, out=self.direct)
         if self.groups is not None:
             self.groups.add(tally)
         for c, row in enumerate(tally.incident):  # a channel at a time: a (P,) temporary, not (C,P)
@@ -119,6 +122,22 @@ class Batches:
 
         def column(k):
             h = self.incident[k] * (self.scene.total_power / self.scene.patch_area)
+            h /= self.paths
+            return h
+
+        return self._columns(column)
+
+    def direct_irradiance(self):
+        """(P,3) the direct light's part of ``irradiance``, where every chunk gathered it apart
+        (the two-way iteration, the gathered walk); else None."""
+        direct = self.direct
+        if direct is None and self.groups is not None and self.groups.direct is not None:
+            direct = self.groups.direct.sum(axis=0)
+        if direct is None or self.paths == 0:
+            return None
+
+        def column(k):
+            h = direct[k] * (self.scene.total_power / self.scene.patch_area)
             h /= self.paths
             return h
 

@@ -318,8 +318,7 @@ def arriving(surface, scene, result, live=False):
     """(P,3) the light arriving (``Surface.arriving_light``: noise filtered); ``live``: less
     the lamps', suns', emitting patches' and world's (``live_means``), which the renderer draws
     itself."""
-    irradiance = result.irradiance - live_means(scene, seed=result.seed, light=result.irradiance) if live \
-        else result.irradiance
+    irradiance = result.irradiance - live_light(scene, result) if live else result.irradiance
     return surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity)
 
 
@@ -329,6 +328,16 @@ def light_corners(surface, scene, light, direct, live=False, dtype=np.float64):
     ``live``: smooth alone (the renderer draws every lamp's, sun's, emitter's and the world's own
     light)."""
     return shown(surface, light, None if live else direct, dtype=dtype)
+
+
+def live_light(scene, result):
+    """(P,3) each patch's mean of the light a renderer draws live (every source's direct light):
+    the solve's own, where its chunks gathered it apart (``SolveResult.direct_irradiance``: what
+    is left of the total is then the reflected light with its own noise alone), else
+    ``live_means``, an estimate of its own (the light left carries the noise of both)."""
+    if result.direct_irradiance is not None:
+        return result.direct_irradiance
+    return live_means(scene, seed=result.seed, light=result.irradiance)
 
 
 def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0):

@@ -34,6 +34,7 @@ class GroupBatches:
         C, P, S = tables.channels, scene.patch_count, groups.count
         self.groups, self.channels = groups, C
         self.incident = np.zeros((S, C, P))
+        self.direct = None  # (S,C,P) of it straight from the sources, where chunks gather it apart
         self.cross = np.zeros((C, S, S))  # sum_k sum_j W_j I_sj^(k) I_tj^(k) / n_k
         score = tables.reflectivity * (scene.total_power / scene.patch_area)  # (C,P)
         self.root_weight = score * np.sqrt(scene.patch_area / scene.total_area)  # sqrt(W_j)
@@ -41,6 +42,8 @@ class GroupBatches:
     def add(self, tally):
         """Adds a chunk's ``incident_groups`` (S,C,P) of ``tally.paths`` paths."""
         self.incident += tally.incident_groups
+        if tally.direct_groups is not None:
+            self.direct = tally.direct_groups.copy() if self.direct is None else np.add(self.direct, tally.direct_groups, out=self.direct)
         for c in range(self.channels):
             x = tally.incident_groups[:, c] * self.root_weight[c]
             # (einsum, not a BLAS product: OpenBLAS's threads would spin beside the walks' threads)
@@ -59,18 +62,23 @@ class GroupBatches:
         """The PerSource of the run ``total`` (batches.Batches) made."""
         S, N = self.groups.count, total.paths
         radiosity = np.empty((S, scene.patch_count, 3))
-        irradiance = np.empty((S, scene.patch_count, 3))
+        irradiance = self.irradiance(scene, self.incident, N)
         patch_group = self.groups.patch_group(scene.patch_count)
         for s in range(S):
-            for c in range(3):
-                k = c if self.channels == 3 else 0
-                h = self.incident[s, k] * (scene.total_power / scene.patch_area) / N if N else np.zeros(scene.patch_count)
-                irradiance[s, :, c] = h
-                radiosity[s, :, c] = scene.reflectivity[:, c] * h
+            radiosity[s] = scene.reflectivity * irradiance[s]
             radiosity[s] += np.where((patch_group == s)[:, None], scene.emission, 0.0)
         covariance = self.spread(N) / ((total.chunks - 1) * N) if total.chunks > 1 else np.full((self.channels, S, S), math.nan)
+        direct = None if self.direct is None else self.irradiance(scene, self.direct, N)
         return PerSource(self.groups.names, radiosity, irradiance, group_power(scene, self.groups), covariance,
-                         scene_scale(scene), target_mse, patch_group, self.groups.light_group)
+                         scene_scale(scene), target_mse, patch_group, self.groups.light_group, direct)
+
+    def irradiance(self, scene, incident, paths):
+        """(S,P,3) the irradiance of incident power (S,C,P) summed over ``paths`` paths."""
+        out = np.zeros((incident.shape[0], scene.patch_count, 3))
+        if paths:
+            for c in range(3):
+                out[:, :, c] = incident[:, c if self.channels == 3 else 0] * (scene.total_power / scene.patch_area) / paths
+        return out
 
 
 def group_power(scene, groups):
@@ -109,6 +117,7 @@ class PerSource:
     target_mse: float | None = None
     patch_group: np.ndarray | None = None
     light_group: np.ndarray | None = None
+    direct_irradiance: np.ndarray | None = None  # (S,P,3) of ``irradiance`` straight from the sources, where gathered apart
 
     @property
     def count(self):
@@ -205,8 +214,10 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     if light:  # (the noise filters first, as the pipeline's: with the direct light's corners held, the peak)
         irradiance, total = per_source.irradiance, result.irradiance
         if live:  # (the lamps', suns', emitters' and world's direct light left to the renderer: point_direct.light_corners)
-            drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
-                                            patch_group=per_source.patch_group, groups=per_source.count)
+            drawn = per_source.direct_irradiance  # (the solve's own: point_direct.live_light)
+            if drawn is None:
+                drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
+                                                patch_group=per_source.patch_group, groups=per_source.count)
             irradiance, total = irradiance - drawn, total - drawn.sum(axis=0)
         arriving, fill = surface.arriving_light(total, result.irradiance_variance, scene.reflectivity,
                                                 return_filter=True)

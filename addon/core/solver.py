@@ -84,6 +84,7 @@ class SolveResult:
     gather_rays: int = 0  # per chunk, with the direct light gathered
     per_source: object = None  # relighting.PerSource (per_source=True), else None
     error_scale: str = SCALE_PAPER  # what relative_error is relative to (names.ERROR_SCALES)
+    direct_irradiance: np.ndarray | None = None  # (P,3) H's part straight from the sources, where gathered apart
 
     @property
     def relative_error(self):
@@ -299,6 +300,7 @@ def _result(scene, total, stopped, run, method, state, target_mse, **settings):
         reflected=reflected,
         reflected_variance=reflected_variance,
         irradiance=total.irradiance(),
+        direct_irradiance=total.direct_irradiance(),
         irradiance_variance=irradiance_variance,
         paths=n,
         rays=total.rays,

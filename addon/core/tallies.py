@@ -41,6 +41,8 @@ class ChunkTally:
     undistributed: np.ndarray            # (C,) left on paths cut by the threshold
     ended: dict = field(default_factory=dict)  # path counts by how they ended
     incident_groups: np.ndarray | None = None  # (S,C,P) incident by source group (per-source solves)
+    direct: np.ndarray | None = None  # (C,P) the part of ``incident`` straight from the sources, where gathered apart
+    direct_groups: np.ndarray | None = None  # (S,C,P) the same by source group (per-source solves)
 
 
 class Accounts:

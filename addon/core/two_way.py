@@ -46,7 +46,7 @@ escape or meet a back side estimate of its reflected power is tallied as escaped
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -149,6 +149,7 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
     state = Chunk(np.zeros_like(H), H.copy(), np.zeros(C), escaped, blocked, gather_rays, reflectivity=tables.reflectivity)
     if tables.groups is not None:
         state = grouped_chunk(tables, gathering, gathered[3], gather_rays)
+        direct = state.irradiance * area  # (S C,P) each group's direct light
     R = state.reflectivity
     if tables.exit_random:
         state.reflected = R * state.irradiance
@@ -177,9 +178,9 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
     absorbed = state.absorbed + ((1.0 - R) * incident).sum(axis=1)
     scale = paths / gathering.total_power  # relative weight per unit of power
     if tables.groups is not None:
-        return grouped_tally(state, paths, scale, incident, emitted, absorbed, (escaped, blocked))
+        return grouped_tally(state, paths, scale, incident, emitted, absorbed, (escaped, blocked), direct * scale)
     return ChunkTally(paths, state.rays, incident * scale, emitted * scale, absorbed * scale, state.escaped * scale,
-                      state.blocked * scale, np.zeros(C), {"generations": state.generations})
+                      state.blocked * scale, np.zeros(C), {"generations": state.generations}, direct=direct * scale)
 
 
 def grouped_chunk(tables, gathering, parts, gather_rays):
@@ -193,16 +194,16 @@ def grouped_chunk(tables, gathering, parts, gather_rays):
                  reflectivity=np.tile(tables.reflectivity, (S, 1)), groups=S)
 
 
-def grouped_tally(state, paths, scale, incident, emitted, absorbed, lost):
+def grouped_tally(state, paths, scale, incident, emitted, absorbed, lost, direct):
     """The ChunkTally of a per-source chunk: (S C,...) rows summed over the groups, each group's
-    incident power its ``incident_groups``."""
+    incident power its ``incident_groups``, and of it the direct light (S C,P) its ``direct_groups``."""
     S = state.groups
     C = incident.shape[0] // S
     by_channel = lambda a: a.reshape(S, C).sum(axis=0)  # noqa: E731
     tally = ChunkTally(paths, state.rays, None, emitted * scale, by_channel(absorbed) * scale,
                        (by_channel(state.escaped) + lost[0]) * scale, (by_channel(state.blocked) + lost[1]) * scale,
                        np.zeros(C), {"generations": state.generations})
-    return with_groups(tally, (incident * scale).reshape(S, C, -1))
+    return replace(with_groups(tally, (incident * scale).reshape(S, C, -1)), direct_groups=direct.reshape(S, C, -1))
 
 
 def reflected_power(area, reflected, groups=1):
