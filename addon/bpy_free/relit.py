@@ -115,7 +115,8 @@ class SourceResults:
         return {"names": list(ps.names),
                 "members": [[[kind, name, [float(x) for x in p]] for kind, name, p in group] for group in self.members],
                 "power": ps.power.tolist(), "covariance": ps.covariance.tolist(),  # (NaN below 2 chunks: JSON's NaN)
-                "scale": float(ps.scale), "target_mse": ps.target_mse}
+                "scale": float(ps.scale), "target_mse": ps.target_mse,
+                "reflected_means": None if ps.reflected_means is None else ps.reflected_means.tolist()}
 
 
 def source_results(scene, patches, result, groups):
@@ -164,8 +165,9 @@ def relit_error(meta, w):
     S = len(meta["names"])
     covariance = np.asarray(meta["covariance"], np.float64)
     empty = np.zeros((S, 0, 3))
+    means = meta.get("reflected_means")  # (None: the paper's b_ave, as results saved before it)
     ps = PerSource(tuple(meta["names"]), empty, empty, np.asarray(meta["power"], np.float64), covariance,
-                   float(meta["scale"]), meta["target_mse"])
+                   float(meta["scale"]), meta["target_mse"], reflected_means=None if means is None else np.asarray(means, np.float64))
     return relight(ps, w)
 
 

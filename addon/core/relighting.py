@@ -58,8 +58,9 @@ class GroupBatches:
             spread[c] -= np.einsum("sp,tp->st", x, x) / paths
         return spread
 
-    def results(self, scene, total, target_mse):
-        """The PerSource of the run ``total`` (batches.Batches) made."""
+    def results(self, scene, total, target_mse, measured_scale=False):
+        """The PerSource of the run ``total`` (batches.Batches) made (``measured_scale``: with
+        each group's own mean reflected radiosity, which its relit error is then relative to)."""
         S, N = self.groups.count, total.paths
         radiosity = np.empty((S, scene.patch_count, 3))
         irradiance = self.irradiance(scene, self.incident, N)
@@ -69,8 +70,11 @@ class GroupBatches:
             radiosity[s] += np.where((patch_group == s)[:, None], scene.emission, 0.0)
         covariance = self.spread(N) / ((total.chunks - 1) * N) if total.chunks > 1 else np.full((self.channels, S, S), math.nan)
         direct = None if self.direct is None else self.irradiance(scene, self.direct, N)
+        means = None
+        if measured_scale:  # (area-weighted over patches: Batches.mean_reflected's, group by group)
+            means = np.einsum("spc,pc,p->sc", irradiance, scene.reflectivity, scene.patch_area / scene.total_area)
         return PerSource(self.groups.names, radiosity, irradiance, group_power(scene, self.groups), covariance,
-                         scene_scale(scene), target_mse, patch_group, self.groups.light_group, direct)
+                         scene_scale(scene), target_mse, patch_group, self.groups.light_group, direct, means)
 
     def irradiance(self, scene, incident, paths):
         """(S,P,3) the irradiance of incident power (S,C,P) summed over ``paths`` paths."""
@@ -118,6 +122,9 @@ class PerSource:
     patch_group: np.ndarray | None = None
     light_group: np.ndarray | None = None
     direct_irradiance: np.ndarray | None = None  # (S,P,3) of ``irradiance`` straight from the sources, where gathered apart
+    # (S,3) each group's area-weighted mean reflected radiosity, where the solve held its error to
+    # its own mean (error_scale "measured"): the relit error is then relative to theirs recombined
+    reflected_means: np.ndarray | None = None
 
     @property
     def count(self):
@@ -130,7 +137,14 @@ class PerSource:
         return float(np.mean([weights[:, c] @ self.covariance[c if C == 3 else 0] @ weights[:, c] for c in range(3)]))
 
     def mean_reflected(self, weights):
-        """b_ave at the powers ``weights`` give (what the relative RMS error is relative to)."""
+        """What the relative RMS error is relative to at the powers ``weights`` give: the groups'
+        own mean reflected radiosities recombined (``reflected_means``), else b_ave (``paper_mean``)."""
+        if self.reflected_means is None:
+            return self.paper_mean(weights)
+        return float((np.asarray(weights, np.float64) * self.reflected_means).sum(axis=0).mean())
+
+    def paper_mean(self, weights):
+        """The paper's b_ave at the powers ``weights`` give (what ``target_mse`` was made relative to)."""
         return self.scale * float((np.asarray(weights, np.float64) * self.power).sum(axis=0).mean())
 
 
@@ -175,7 +189,7 @@ def relight(per_source, weights, irradiance=False):
     relative = math.sqrt(mse) / scale if scale > 0 else (0.0 if mse == 0 else math.inf)
     target = None
     if per_source.target_mse is not None:
-        target = math.sqrt(per_source.target_mse) / per_source.mean_reflected(np.ones_like(w))
+        target = math.sqrt(per_source.target_mse) / per_source.paper_mean(np.ones_like(w))
     return Relit(radiosity, light, mse, relative, target, target is not None and relative > target)
 
 
@@ -340,11 +354,14 @@ def _joined(scene, groups, per_source, new, redone):
     irradiance = np.empty((S, P, 3), per_source.irradiance.dtype)
     power = np.empty((S, 3))
     covariance = np.zeros((C, S, S))
+    means = None if per_source.reflected_means is None or redone.reflected_means is None else np.empty((S, 3))
     for g, (kind, k) in source.items():
         ps = redone if kind == "new" else per_source
         radiosity[g], irradiance[g], power[g] = ps.radiosity[k], ps.irradiance[k], ps.power[k]
+        if means is not None:
+            means[g] = ps.reflected_means[k]
         for h, (other, m) in source.items():
             if other == kind:  # (independent runs: no covariance across them)
                 covariance[:, g, h] = (new_cov if kind == "new" else old_cov)[:, k, m]
     return PerSource(groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), per_source.target_mse,
-                     groups.patch_group(P).copy(), np.asarray(groups.light_group, np.int32))
+                     groups.patch_group(P).copy(), np.asarray(groups.light_group, np.int32), reflected_means=means)

@@ -35,6 +35,7 @@ from .names import (
     MEASURED,
     PREDICTED,
     SAMPLINGS,
+    SCALE_MEASURED,
     SCALE_PAPER,
     SHOT,
     STOP_CANCELLED,
@@ -288,7 +289,8 @@ def _result(scene, total, stopped, run, method, state, target_mse, **settings):
     """The SolveResult of a run's batches: one (P,3) result at a time, the sums of squares let
     go of once the error is estimated."""
     n = total.paths
-    per_source = None if total.groups is None else total.groups.results(scene, total, target_mse)
+    per_source = None if total.groups is None else total.groups.results(
+        scene, total, target_mse, measured_scale=settings["error_scale"] == SCALE_MEASURED)
     reflected_variance = total.reflected_variance()
     irradiance_variance = total.irradiance_variance()
     measured_mse = total.let_go_of_squares()

@@ -140,3 +140,29 @@ def test_the_target_is_kept_relative_to_the_light_that_stays_in_an_open_scene(me
     if method == "walk":
         paper = delivered("paper")[:, 0]
         assert paper.mean() - 2 * paper.std(ddof=1) / math.sqrt(len(paper)) > 1.0, paper
+
+
+def test_a_relit_error_speaks_of_the_same_scale_as_the_solves():
+    """Relit at the solved strengths, a per-source solve's error is the solve's own, on its scale:
+    in the open tray the measured one (the paper's b_ave there is 7.3x the mean, and the relit
+    error read on it was 7.3x too low beside the solve's); the target is still the relative
+    target asked for; doubling every source leaves the relative error alone. Saved with the
+    results (relit.relit_error from the stored numbers) it reads the same."""
+    from addon.bpy_free.relit import relit_error
+    from addon.core.relighting import relight
+
+    scene, _ = open_box()
+    target = relative_rms_to_mse(predict(scene), 0.02)
+    r = solve(scene, target_mse=target, seed=1, stop_rule="measured", threads=1, method="two_way",
+              per_source=True, error_scale=ERROR_SCALE)
+    same = relight(r.per_source, np.ones(r.per_source.count))
+    assert same.relative_rms == pytest.approx(r.relative_error, rel=1e-6)
+    assert same.target_relative_rms == pytest.approx(0.02, rel=1e-9)
+    assert relight(r.per_source, 2 * np.ones(r.per_source.count)).relative_rms == pytest.approx(same.relative_rms, rel=1e-9)
+    ps = r.per_source
+    meta = {"names": list(ps.names), "power": ps.power.tolist(), "covariance": ps.covariance.tolist(),
+            "scale": ps.scale, "target_mse": ps.target_mse, "reflected_means": ps.reflected_means.tolist()}
+    assert relit_error(meta, np.ones((ps.count, 3))).relative_rms == pytest.approx(same.relative_rms, rel=1e-9)
+    paper = solve(scene, target_mse=target, seed=1, stop_rule="measured", threads=1, method="two_way", per_source=True)
+    assert paper.per_source.reflected_means is None
+    assert relight(paper.per_source, np.ones(paper.per_source.count)).relative_rms == pytest.approx(paper.relative_error, rel=1e-6)
