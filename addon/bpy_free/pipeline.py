@@ -295,7 +295,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         cluster=settings.cluster or None,
         direct_light=direct_light_for(scene, settings),
         method=settings.method,
-        per_source=groups is not None, groups=groups, error_scale=options.ERROR_SCALE,
+        per_source=groups is not None, groups=groups, error_scale=options.ERROR_SCALE, direct_apart=settings.live_lamps,
     )
     trim.give_back()
     out = SolveOutput(patches, result, prediction, target, notes=notes,

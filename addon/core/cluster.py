@@ -48,6 +48,7 @@ class WalkParameters:
     # key: solves of other seeds reuse the state.
     spec: object = None
     groups: object = None  # the SourceGroups of a per-source solve (None: none)
+    direct_apart: bool = False  # gathered direct light kept apart in the tallies (WalkTables.direct_apart)
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,7 +130,8 @@ def _cached_state(payload, parameters):
     scene = PatchScene(*payload.arrays, lights=payload.lights, aim=payload.aim, _geometry=geometry)
     _worker_geometries[payload.geometry_key] = scene.geometry
     p = parameters
-    tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups, groups=p.groups)
+    tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups, groups=p.groups,
+                        direct_apart=p.direct_apart)
     state = _worker_states[key] = methods.create(p.method, p.direct_light).rebuild(scene, tables, p.spec)
     for cache in (_worker_states, _worker_geometries):
         while len(cache) > WORKER_TABLES:

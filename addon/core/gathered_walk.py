@@ -95,7 +95,7 @@ def gathered_chunk(tables, gathering, paths, rng, walk):
     if grouped:  # (each group's direct light, and its reflection as the walk's sources)
         H_groups = gathered[3].irradiance(tables.groups.count, tables.patch_count, gathering.samples)
         incident_groups = H_groups[:, :C] * (gathering.patch_area * scale)
-        direct_groups = incident_groups
+        direct_groups = incident_groups if tables.direct_apart else None
         grouped = (gathering.reflectivity * H_groups, gathered[3])
     if walk_power > 0:
         tally = walk(reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples, grouped or None),
@@ -113,5 +113,6 @@ def gathered_chunk(tables, gathering, paths, rng, walk):
     # casts no shadow reaches, through objects, more than it emits.
     lost_escaped, lost_blocked = split_lost(gathering, emitted - absorbed - walked)
     tally = ChunkTally(paths, rays, incident, emitted, absorbed + walk_absorbed, lost_escaped + walk_escaped,
-                       blocked + lost_blocked, undistributed, ended, direct=None if grouped else direct[:C] * scale)
+                       blocked + lost_blocked, undistributed, ended,
+                       direct=direct[:C] * scale if tables.direct_apart and not grouped else None)
     return replace(with_groups(tally, incident_groups), direct_groups=direct_groups) if grouped else tally

@@ -100,7 +100,7 @@ class SolveResult:
 def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3, seed=0, exit_point=EXIT_RANDOM,
           stop_rule=PREDICTED, progress=None, should_stop=None, max_seconds=None, threads=None, sampling=INDEPENDENT,
           speedups=None, direct_light=None, cluster=None, method=WALK, chunk_paths=None, per_source=False, groups=None,
-          error_scale=SCALE_PAPER):
+          error_scale=SCALE_PAPER, direct_apart=False):
     """Radiosity of ``scene`` by its method's chunks (the paper's shooting random walks unless
     ``method`` says otherwise).
 
@@ -110,7 +110,9 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     relative to: the paper's b_ave (``"paper"``, a closed scene's mean reflected radiosity, which
     ``target_mse`` is then made with: ``relative_rms_to_mse``), or the run's own mean reflected
     radiosity as it goes (``"measured"``: the same relative error, ``plan.target_now``, where light
-    leaves the scene and b_ave overstates the light in it). ``direct_light="gathered"`` (beyond the
+    leaves the scene and b_ave overstates the light in it). ``direct_apart``: where the chunks
+    gather the direct light, its part of the result too (``SolveResult.direct_irradiance``, and
+    each group's with ``per_source``), at a (C,P) array more a group. ``direct_light="gathered"`` (beyond the
     paper, ``first_shot``) gathers each patch's direct light by shadow rays and walks only its
     reflection; the paper's formulas do not predict its error, so with ``target_mse`` it always
     stops on the measured error. ``cluster`` (a ``dask.distributed.Client`` or a scheduler
@@ -146,7 +148,7 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     plan = chunk_plan(scene, method, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
                       stop_rule=stop_rule, max_seconds=max_seconds)
     chunk = plan.chunk if chunk_paths is None else int(chunk_paths)
-    tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups, groups=groups)
+    tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups, groups=groups, direct_apart=direct_apart)
     state = method.create(scene, tables, chunk, int(seed), plan.prediction)
     runner = _runner(scene, cluster, threads, method, state, estimator, threshold, exit_point, sampling, groups)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
@@ -220,7 +222,7 @@ def _runner(scene, cluster, threads, method, state, estimator, threshold, exit_p
     if cluster is None:
         return ThreadRunner(int(threads or min(os.cpu_count() or 1, 8)))
     parameters = WalkParameters(estimator, float(threshold), exit_point, sampling, state.tables.speedups, method.name,
-                                method.direct_light, state.spec, groups)
+                                method.direct_light, state.spec, groups, state.tables.direct_apart)
     return ClusterRunner(cluster, scene, parameters)
 
 

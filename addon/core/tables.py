@@ -29,8 +29,10 @@ class WalkTables:
     has no use for it); a variant is a copy (``with_turn``, ``with_sources``)."""
 
     def __init__(self, scene, estimator, threshold, exit_point, sampling=INDEPENDENT, speedups=None, max_classes=PATCH_CLASSES_MAX,
-                 groups=None):
+                 groups=None, direct_apart=False):
         g = self.geometry = scene.geometry
+        # Chunks that gather the direct light keep it apart in their tallies (ChunkTally.direct).
+        self.direct_apart = bool(direct_apart)
         self.estimator = estimator
         self.finite = estimator == FINITE
         self.threshold = float(threshold)

@@ -177,10 +177,11 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
     incident = state.irradiance * area
     absorbed = state.absorbed + ((1.0 - R) * incident).sum(axis=1)
     scale = paths / gathering.total_power  # relative weight per unit of power
+    direct = direct * scale if tables.direct_apart else None
     if tables.groups is not None:
-        return grouped_tally(state, paths, scale, incident, emitted, absorbed, (escaped, blocked), direct * scale)
+        return grouped_tally(state, paths, scale, incident, emitted, absorbed, (escaped, blocked), direct)
     return ChunkTally(paths, state.rays, incident * scale, emitted * scale, absorbed * scale, state.escaped * scale,
-                      state.blocked * scale, np.zeros(C), {"generations": state.generations}, direct=direct * scale)
+                      state.blocked * scale, np.zeros(C), {"generations": state.generations}, direct=direct)
 
 
 def grouped_chunk(tables, gathering, parts, gather_rays):
@@ -196,14 +197,15 @@ def grouped_chunk(tables, gathering, parts, gather_rays):
 
 def grouped_tally(state, paths, scale, incident, emitted, absorbed, lost, direct):
     """The ChunkTally of a per-source chunk: (S C,...) rows summed over the groups, each group's
-    incident power its ``incident_groups``, and of it the direct light (S C,P) its ``direct_groups``."""
+    incident power its ``incident_groups``, and of it the direct light (S C,P, or None) its ``direct_groups``."""
     S = state.groups
     C = incident.shape[0] // S
     by_channel = lambda a: a.reshape(S, C).sum(axis=0)  # noqa: E731
     tally = ChunkTally(paths, state.rays, None, emitted * scale, by_channel(absorbed) * scale,
                        (by_channel(state.escaped) + lost[0]) * scale, (by_channel(state.blocked) + lost[1]) * scale,
                        np.zeros(C), {"generations": state.generations})
-    return replace(with_groups(tally, (incident * scale).reshape(S, C, -1)), direct_groups=direct.reshape(S, C, -1))
+    tally = with_groups(tally, (incident * scale).reshape(S, C, -1))
+    return tally if direct is None else replace(tally, direct_groups=direct.reshape(S, C, -1))
 
 
 def reflected_power(area, reflected, groups=1):

@@ -282,7 +282,8 @@ def test_the_worlds_patch_means_are_the_exact_means_beside_what_hides_the_sky():
 def test_live_lamps_take_the_solves_own_direct_light_out_where_it_was_gathered_apart():
     """Live, the renderer draws every source's direct light and the results show the rest. Where
     the solve gathered the direct light apart (the two-way iteration, the gathered walk) its own
-    estimate is taken out (SolveResult.direct_irradiance), and the light left is the reflected
+    estimate is taken out (SolveResult.direct_irradiance, with direct_apart: the pipeline asks for
+    it with live lamps), and the light left is the reflected
     light with its own noise alone; live_means, an estimate of its own, left the noise of both.
     A closed box (R 0.3: the direct light is most of it), lit by one ceiling patch, 8 seeds:
     the direct part's and the rest's totals are the exact solution's (F E and F (B - E)) within
@@ -301,7 +302,7 @@ def test_live_lamps_take_the_solves_own_direct_light_out_where_it_was_gathered_a
     area = scene.patch_area[:, None]
     totals, own, theirs = [], [], []
     for seed in range(8):
-        r = solve(scene, method="two_way", paths=20_000, seed=seed, threads=1)
+        r = solve(scene, method="two_way", paths=20_000, seed=seed, threads=1, direct_apart=True)
         assert point_direct.live_light(scene, r) is r.direct_irradiance
         rest = r.irradiance - r.direct_irradiance
         totals.append(((r.direct_irradiance * area).sum(), (rest * area).sum()))
@@ -312,6 +313,7 @@ def test_live_lamps_take_the_solves_own_direct_light_out_where_it_was_gathered_a
     z = (totals.mean(axis=0) - [(direct * area).sum(), (reflected * area).sum()]) / (totals.std(axis=0, ddof=1) / np.sqrt(8))
     assert np.all(np.abs(z) < 4), z
     assert np.mean(own) < 0.6 * np.mean(theirs), (np.mean(own), np.mean(theirs))
-    walk = solve(scene, method="walk", paths=2_000, seed=1, threads=1)
+    walk = solve(scene, method="walk", paths=2_000, seed=1, threads=1, direct_apart=True)
     assert walk.direct_irradiance is None
+    assert solve(scene, method="two_way", paths=2_000, seed=1, threads=1).direct_irradiance is None  # (not asked: no memory for it)
     np.testing.assert_array_equal(point_direct.live_light(scene, walk), point_direct.live_means(scene, seed=1, light=walk.irradiance))
