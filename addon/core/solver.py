@@ -110,9 +110,8 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     relative to: the paper's b_ave (``"paper"``, a closed scene's mean reflected radiosity, which
     ``target_mse`` is then made with: ``relative_rms_to_mse``), or the run's own mean reflected
     radiosity as it goes (``"measured"``: the same relative error, ``plan.target_now``, where light
-    leaves the scene and b_ave overstates the light in it). ``direct_apart``: where the chunks
-    gather the direct light, its part of the result too (``SolveResult.direct_irradiance``, and
-    each group's with ``per_source``), at a (C,P) array more a group. ``direct_light="gathered"`` (beyond the
+    leaves the scene and b_ave overstates the light in it). ``direct_apart``: where chunks gather
+    the direct light, its part too (``SolveResult.direct_irradiance``). ``direct_light="gathered"`` (beyond the
     paper, ``first_shot``) gathers each patch's direct light by shadow rays and walks only its
     reflection; the paper's formulas do not predict its error, so with ``target_mse`` it always
     stops on the measured error. ``cluster`` (a ``dask.distributed.Client`` or a scheduler
