@@ -206,7 +206,8 @@ class Batches:
             return math.nan
         if self._mean_at[0] != self.chunks:
             reflected = sum(float(np.einsum("i,i->", self._reflectivity[k], self.incident[k])) for k in range(self.channels))
-            self._mean_at = (self.chunks, reflected * self.scene.total_power / (self.scene.total_area * self.paths * self.channels))
+            scale = self.scene.total_power / (self.scene.total_area * self.paths * self.channels)
+            self._mean_at = (self.chunks, reflected * scale)
         return self._mean_at[1]
 
     def _increment(self, tally):

@@ -89,15 +89,16 @@ def _overlapping(corners, normal, pairs):
     pairs at a time."""
     keep = np.zeros(len(pairs), bool)
     for start in range(0, len(pairs), PAIR_BLOCK):
-        a, b = corners[pairs[start:start + PAIR_BLOCK, 0]], corners[pairs[start:start + PAIR_BLOCK, 1]]
-        n = normal[pairs[start:start + PAIR_BLOCK, 0]]
+        rows = pairs[start:start + PAIR_BLOCK]
+        a, b, n = corners[rows[:, 0]], corners[rows[:, 1]], normal[rows[:, 0]]
         apart = np.zeros(len(a), bool)
         for tri in (a, b):
             for i in range(3):
                 axis = np.cross(tri[:, (i + 1) % 3] - tri[:, i], n)
                 axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
                 pa, pb = np.einsum("nkj,nj->nk", a, axis), np.einsum("nkj,nj->nk", b, axis)
-                apart |= (pa.max(axis=1) <= pb.min(axis=1) + OFFSET_TOLERANCE) | (pb.max(axis=1) <= pa.min(axis=1) + OFFSET_TOLERANCE)
+                low_a, high_a, low_b, high_b = pa.min(axis=1), pa.max(axis=1), pb.min(axis=1), pb.max(axis=1)
+                apart |= (high_a <= low_b + OFFSET_TOLERANCE) | (high_b <= low_a + OFFSET_TOLERANCE)
         keep[start:start + PAIR_BLOCK] = ~apart
     return keep
 

@@ -43,7 +43,8 @@ class GroupBatches:
         """Adds a chunk's ``incident_groups`` (S,C,P) of ``tally.paths`` paths."""
         self.incident += tally.incident_groups
         if tally.direct_groups is not None:
-            self.direct = tally.direct_groups.copy() if self.direct is None else np.add(self.direct, tally.direct_groups, out=self.direct)
+            self.direct = tally.direct_groups.copy() if self.direct is None else \
+                np.add(self.direct, tally.direct_groups, out=self.direct)
         for c in range(self.channels):
             x = tally.incident_groups[:, c] * self.root_weight[c]
             # (einsum, not a BLAS product: OpenBLAS's threads would spin beside the walks' threads)
