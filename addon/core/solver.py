@@ -147,8 +147,7 @@ def solve(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-
     plan = chunk_plan(scene, method, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
                       stop_rule=stop_rule, max_seconds=max_seconds)
     chunk = plan.chunk if chunk_paths is None else int(chunk_paths)
-    tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups, groups=groups,
-                        direct_apart=direct_apart)
+    tables = WalkTables(scene, estimator, threshold, exit_point, sampling, speedups, groups=groups, direct_apart=direct_apart)
     state = method.create(scene, tables, chunk, int(seed), plan.prediction)
     runner = _runner(scene, cluster, threads, method, state, estimator, threshold, exit_point, sampling, groups)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
