@@ -115,13 +115,15 @@ class Batches:
             return self.scene.emission.astype(dtype)
         return self._columns(self._reflected, dtype, plus=self.scene.emission)
 
-    def irradiance(self):
-        """(P,3) H, the light arriving at each patch over pi (B = E + R H): incident power over area."""
+    def irradiance(self, incident=None):
+        """(P,3) H, the light arriving at each patch over pi (B = E + R H): incident power over
+        area (of ``incident`` (C,P) where given, a part of it)."""
+        incident = self.incident if incident is None else incident
         if self.paths == 0:
             return np.zeros((self.scene.patch_count, 3))
 
         def column(k):
-            h = self.incident[k] * (self.scene.total_power / self.scene.patch_area)
+            h = incident[k] * (self.scene.total_power / self.scene.patch_area)
             h /= self.paths
             return h
 
@@ -133,15 +135,7 @@ class Batches:
         direct = self.direct
         if direct is None and self.groups is not None and self.groups.direct is not None:
             direct = self.groups.direct.sum(axis=0)
-        if direct is None or self.paths == 0:
-            return None
-
-        def column(k):
-            h = direct[k] * (self.scene.total_power / self.scene.patch_area)
-            h /= self.paths
-            return h
-
-        return self._columns(column)
+        return None if direct is None or self.paths == 0 else self.irradiance(direct)
 
     def _variance(self, k):
         variance = self._spread(k)

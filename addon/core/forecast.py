@@ -137,7 +137,6 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
     elif variance == variance:
         target = target_now(target_mse, error_scale, plan.prediction, r.mean_reflected)
         expected = paths_to_target(1, variance, target, plan.chunk, plan.cap)
-        expected = float(plan.cap) if expected != expected else expected
     else:  # at least the chunks the measured rule needs, at most the cap
         expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
     seconds = setup + per_path * expected

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .error_model import predict
+from .error_model import mse_to_relative_rms, predict
 from .names import MEASURED, SCALE_PAPER
 
 # A chunk aims at about this many rays: enough wavefront steps that its last short ones cost
@@ -90,10 +90,11 @@ def target_now(target_mse, error_scale, prediction, mean_reflected):
 
 def relative_error(mse, error_scale, prediction, mean_reflected):
     """An MSE as a relative RMS error on ``error_scale`` (no error: 0; NaN where unknown)."""
-    mean = prediction.mean_reflected_radiosity if error_scale == SCALE_PAPER else mean_reflected
+    if error_scale == SCALE_PAPER:
+        return mse_to_relative_rms(prediction, mse)
     if mse == 0:
         return 0.0
-    return math.sqrt(mse) / mean if mse > 0 and mean > 0 else math.nan
+    return math.sqrt(mse) / mean_reflected if mse > 0 and mean_reflected > 0 else math.nan
 
 
 def meets_target(total, target_mse):

@@ -335,7 +335,7 @@ def _progress(total, run, start):
     prediction, cap = run.plan.prediction, run.plan.cap
     expected = float(cap)
     target = run.target(total)
-    if target is not None and target == target:
+    if target is not None:
         bound = target_bound(total)
         expected = paths_to_target(total.paths, bound if bound == bound else mse_now, target, run.chunk, cap)
     fraction = total.paths / expected if expected > 0 else 0.0  # (NaN > 0 is False)

@@ -149,7 +149,7 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
     state = Chunk(np.zeros_like(H), H.copy(), np.zeros(C), escaped, blocked, gather_rays, reflectivity=tables.reflectivity)
     if tables.groups is not None:
         state = grouped_chunk(tables, gathering, gathered[3], gather_rays)
-        direct = state.irradiance * area  # (S C,P) each group's direct light
+        direct = state.irradiance * area if tables.direct_apart else None  # (S C,P) each group's direct light
     R = state.reflectivity
     if tables.exit_random:
         state.reflected = R * state.irradiance
@@ -177,7 +177,7 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
     incident = state.irradiance * area
     absorbed = state.absorbed + ((1.0 - R) * incident).sum(axis=1)
     scale = paths / gathering.total_power  # relative weight per unit of power
-    direct = direct * scale if tables.direct_apart else None
+    direct = direct * scale if tables.direct_apart else None  # (kept in the tally only where asked)
     if tables.groups is not None:
         return grouped_tally(state, paths, scale, incident, emitted, absorbed, (escaped, blocked), direct)
     return ChunkTally(paths, state.rays, incident * scale, emitted * scale, absorbed * scale, state.escaped * scale,
