@@ -251,22 +251,30 @@ def surface_terms(material, blur=0.0):
     offset`` for the base colour of each point (its image texture or colour attribute); (1, 0) for
     anything but a Principled BSDF. As the camera sees the surface (``blur`` 0); ``transport_terms``
     for the light it passes on in the room."""
-    node = _shader_node(material)
-    if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
-        return np.ones(3), np.zeros(3)
-    notes = []
-    what = f"material '{material.name}'"
-    base = _socket_colour(node, "Base Color", notes, what)
-    return principled.surface_terms(_principled_inputs(node, base, notes, what, blur))
+    inputs = _material_inputs(material, blur)
+    return (np.ones(3), np.zeros(3)) if inputs is None else principled.surface_terms(inputs)
 
 
 def transport_terms(material):
-    """``surface_terms`` of the light passed on from surface to surface (under Filter Glossy): solved."""
-    return surface_terms(material, filter_glossy())
+    """``surface_terms`` of the light passed on from surface to surface (under Filter Glossy): solved;
+    and the glossy lobe's (share, alpha) (core.principled.glossy_terms; None but for a Principled BSDF)."""
+    inputs = _material_inputs(material, filter_glossy())
+    if inputs is None:
+        return np.ones(3), np.zeros(3), None
+    return (*principled.surface_terms(inputs), principled.glossy_terms(inputs))
 
 
-#: The tail shared by Principled notes; notes that differ only in the material merge (``merged_notes``).
-_LAYERS_COUNTED = "reflection counted as diffuse light (its hemispherical albedo)"
+def _material_inputs(material, blur):
+    node = _shader_node(material)
+    if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
+        return None
+    what = f"material '{material.name}'"
+    return _principled_inputs(node, _socket_colour(node, "Base Color", [], what), [], what, blur)
+
+
+#: The tail shared by Principled notes; notes that differ only in the material merge (``selection.merged_notes``).
+_LAYERS_COUNTED = ("reflection counted at its hemispherical albedo (a lamp's, sun's or emitter's light sent along its "
+                   "lobe where it first lands, with the hit exit; the rest as diffuse light)")
 
 
 def _principled_note(node, p, what):
@@ -296,23 +304,6 @@ def _principled_note(node, p, what):
         return []
     head = f"Principled {' and '.join(counted)} {_LAYERS_COUNTED}; " if counted else "Principled: "
     return [f"{what}: {head}not modelled: {', '.join(missing)}"]
-
-
-def merged_notes(notes):
-    """The notes with those of several materials that say the same thing about a Principled
-    BSDF joined into one naming them all, at the first one's place."""
-    out, names = [], {}
-    for note in notes:
-        name, _, tail = note[len("material '"):].partition("': Principled ")
-        if not (note.startswith("material '") and tail):
-            out.append(note)
-        elif tail in names:
-            names[tail].append(f"'{name}'")
-        else:
-            names[tail] = [f"'{name}'"]
-            out.append((tail,))
-    return [item if isinstance(item, str) else f"material{'s' * (len(names[item[0]]) > 1)} "
-            f"{', '.join(names[item[0]])}: Principled {item[0]}" for item in out]
 
 
 #: The socket of each shader that gives the base colour, and the emission colour and strength.
@@ -387,14 +378,14 @@ def slot_tables(obj, notes):
         if emission is not None:
             per_patch.add(_EMISSION[node.bl_idname][0])
         R[k], E[k], more = material_colours(material, per_patch)
-        scale, offset = transport_terms(material)
+        scale, offset, lobe = transport_terms(material)
         if texture is not None and not (np.all(scale == 1) and np.all(offset == 0)):
             pixels = texture[0]
             texture = ((pixels * scale + offset).astype(pixels.dtype, copy=False), *texture[1:])
         textures.append(texture)
         attributes.append(attribute)
         emission_textures.append(emission)
-        terms.append((scale, offset))
+        terms.append((scale, offset, lobe))
         notes.extend(more)
     names = tuple("(no material)" if m is None else m.name for m in materials)
     return R, E, names, tuple(textures), tuple(attributes), tuple(emission_textures), tuple(terms)

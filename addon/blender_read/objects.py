@@ -127,8 +127,10 @@ def _mesh_materials(evaluated, mesh, triangles, name, notes):
         textures, emission_textures = kept[: len(textures)], kept[len(textures):]
     # colour attributes are base colours: the light returned is scale * colour + offset
     colours = _attribute_colours(mesh, T, triangles, attributes, name, notes)
-    slot_colours = tuple(None if c is None else c * scale + offset for c, (scale, offset) in zip(colours, terms))
-    return {"R_slots": R_slots, "E_slots": E_slots, "slot_names": slot_names, "textures": textures,
+    slot_colours = tuple(None if c is None else c * scale + offset for c, (scale, offset, _) in zip(colours, terms))
+    # each slot's glossy lobe (share, alpha), none: (0, 1)
+    G_slots = np.array([(0.0, 0.0, 0.0, 1.0) if lobe is None else (*lobe[0], lobe[1]) for *_, lobe in terms])
+    return {"R_slots": R_slots, "E_slots": E_slots, "G_slots": G_slots, "slot_names": slot_names, "textures": textures,
             "emission_textures": emission_textures, "triangle_uv": triangle_uv, "slot_colours": slot_colours}
 
 
@@ -161,6 +163,7 @@ def _in_world_space(a, matrix_world, name, uid) -> ObjectArrays:
         triangle_face=a["triangle_face"],
         face_reflectivity=_per_face(a["R_slots"], slot),
         face_emission=_per_face(a["E_slots"], slot),
+        face_glossy=_per_face(a["G_slots"], slot),
         triangle_uv=triangle_uv,
         slot_textures=a["textures"] if triangle_uv is not None else (),
         slot_emission_textures=a["emission_textures"] if triangle_uv is not None else (),

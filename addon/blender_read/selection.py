@@ -7,7 +7,6 @@ import numpy as np
 
 from . import SceneError, objects as object_reading
 from .lights import LightError, read_lights, read_world
-from .materials import merged_notes
 
 #: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
 #: need R < 1; without the setting, a base colour of 1 or more is refused).
@@ -187,3 +186,18 @@ class Selection(list):
         self.light_labels = tuple(light_labels) if light_labels is not None else (None,) * len(self.lights)
 
 
+def merged_notes(notes):
+    """The notes with those of several materials that say the same thing about a Principled
+    BSDF joined into one naming them all, at the first one's place."""
+    out, names = [], {}
+    for note in notes:
+        name, _, tail = note[len("material '"):].partition("': Principled ")
+        if not (note.startswith("material '") and tail):
+            out.append(note)
+        elif tail in names:
+            names[tail].append(f"'{name}'")
+        else:
+            names[tail] = [f"'{name}'"]
+            out.append((tail,))
+    return [item if isinstance(item, str) else f"material{'s' * (len(names[item[0]]) > 1)} "
+            f"{', '.join(names[item[0]])}: Principled {item[0]}" for item in out]

@@ -14,7 +14,7 @@ from ..core import meshing
 from ..core.adaptive import patch_mesh, shading_triangulation
 from ..core.adaptive_light import DETAILS, refine_by_direct_light
 from .cleaning import drop_zero_area_faces
-from .patches import MAX_PATCHES, Patches, _GEOMETRY_CACHE, _patch_material, patch_materials
+from .patches import MAX_PATCHES, Patches, _GEOMETRY_CACHE, _patch_glossy, _patch_material, patch_materials
 from .surface_layers import result_layers
 
 OFF = "OFF"
@@ -82,7 +82,7 @@ def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False
     patch_material = np.concatenate([_patch_material(o, m, names) for o, m in zip(objects, meshes)])
     out = replace(patches, meshes=meshes, combined=combined, reflectivity=reflectivity, emission=emission,
                   geometry_key=geometry_key, refinement=steps, patch_material=patch_material,
-                  material_names=tuple(names), cells=list(cells))
+                  material_names=tuple(names), cells=list(cells), glossy=_patch_glossy(objects, meshes))
     if layers:
         out.layers = [result_layers(o, m) if o.receives else None for o, m in zip(objects, meshes)]
     else:

@@ -56,6 +56,7 @@ class ObjectArrays:
     slot_emission_textures: tuple = ()  # per slot: (pixels, affine, UV map, strength) or None
     layers: SourceLayers | None = None  # UV maps and colour attributes the result keeps (selected objects)
     lightgroup: str = ""  # the object's Blender light group ("": none)
+    face_glossy: np.ndarray | None = None  # (F,4) the glossy lobe's share (3) and alpha (core.glossy); None: none
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,7 @@ class Patches:
     layers: list = field(default_factory=list)
     refinement: list = field(default_factory=list)  # the Detail setting's steps (adaptive_patches), if any
     cells: list | None = None  # the Detail's core.adaptive Cells per object (further splits), if any
+    glossy: tuple | None = None  # (share (P,3), alpha (P,)) of the glossy lobe (core.glossy), or None
 
     def patch_scene(self):
         """The core scene; geometry, sampling tables and the Embree scene are built once per
@@ -157,7 +159,8 @@ class _GeometryCache:
             if base is not None and base.patch_count == patches.combined.patch_count:
                 for message in entry["warnings"]:  # what building it said, said again
                     warnings.warn(message, stacklevel=2)  # the Warning itself: keeps its .patches
-                return base.with_materials(patches.reflectivity, patches.emission, lights=patches.lights)
+                return base.with_materials(patches.reflectivity, patches.emission, lights=patches.lights,
+                                           glossy=patches.glossy)
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 scene = PatchScene(
@@ -167,6 +170,7 @@ class _GeometryCache:
                     patches.reflectivity,
                     patches.emission,
                     lights=patches.lights,
+                    glossy=patches.glossy,
                 )
             for w in caught:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -286,10 +290,21 @@ def _with_materials(objects, meshes, combined, key) -> Patches:
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
     emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
     out = Patches([ObjectInfo.of(o) for o in objects], meshes, combined, reflectivity, emission, key)
+    out.glossy = _patch_glossy(objects, meshes)
     names = {}
     out.patch_material = np.concatenate([_patch_material(o, m, names) for o, m in zip(objects, meshes)])
     out.material_names, out.object_lightgroups = tuple(names), tuple(o.lightgroup for o in objects)
     return out
+
+
+def _patch_glossy(objects, meshes):
+    """(share (P,3), alpha (P,)) of every patch's glossy lobe, its face's; None where none has one."""
+    if all(o.face_glossy is None for o in objects):
+        return None
+    none = np.array([0.0, 0.0, 0.0, 1.0])
+    rows = np.concatenate([(np.broadcast_to(none, (m.patch_count, 4)) if o.face_glossy is None
+                            else o.face_glossy[m.patch_face]) for o, m in zip(objects, meshes)])
+    return (rows[:, :3], rows[:, 3]) if rows[:, :3].any() else None
 
 
 def _patch_material(o, mesh, names):

@@ -181,7 +181,8 @@ def _combined_scene(meshes, origins, base_scene):
     # most of a step's time)
     geometry = build_geometry(vertices, triangles, triangle_patch, int(patch_offsets[-1]), visible_parts=False)
     return PatchScene(vertices, triangles, triangle_patch, base_scene.reflectivity[origin], base_scene.emission[origin],
-                      lights=base_scene.lights.lights, aim=base_scene.lights.aim, _geometry=geometry), patch_offsets
+                      lights=base_scene.lights.lights, aim=base_scene.lights.aim,
+                      glossy=None if base_scene.glossy is None else base_scene.glossy.take(origin), _geometry=geometry), patch_offsets
 
 
 def _trial(cells, candidate, base_offsets, base_scene):

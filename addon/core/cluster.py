@@ -61,13 +61,14 @@ class ScenePayload:
     aim: tuple
     geometry_key: str
     key: str
+    glossy: object = None  # the scene's GlossyLobe (None: none)
 
     @classmethod
     def of(cls, scene):
         arrays = (scene.vertices, scene.triangles, scene.triangle_patch, scene.reflectivity, scene.emission)
         geometry = _digest(arrays[:3])
-        whole = _digest(arrays[3:], geometry, pickle.dumps((scene.lights.lights, scene.lights.aim)))
-        return cls(arrays, scene.lights.lights, scene.lights.aim, geometry, whole)
+        whole = _digest(arrays[3:], geometry, pickle.dumps((scene.lights.lights, scene.lights.aim, scene.glossy)))
+        return cls(arrays, scene.lights.lights, scene.lights.aim, geometry, whole, scene.glossy)
 
 
 def _digest(arrays, *extra):
@@ -127,7 +128,7 @@ def _cached_state(payload, parameters):
         _worker_states.move_to_end(key)
         return state
     geometry = _worker_geometries.get(payload.geometry_key)
-    scene = PatchScene(*payload.arrays, lights=payload.lights, aim=payload.aim, _geometry=geometry)
+    scene = PatchScene(*payload.arrays, lights=payload.lights, aim=payload.aim, glossy=payload.glossy, _geometry=geometry)
     _worker_geometries[payload.geometry_key] = scene.geometry
     p = parameters
     tables = WalkTables(scene, p.estimator, p.threshold, p.exit_point, p.sampling, p.speedups, groups=p.groups,

@@ -36,7 +36,7 @@ import numpy as np
 from .lights import WorldLight
 from .near_choice import near_choice
 from .names import EXIT_RANDOM, FINITE
-from .rays import cast as ray_cast, hit_patches, leave_sources, meets_front, region_of
+from .rays import hit_patches, meets_front
 from .sampling import SourceTable, add_sphere_points, patch_point_rows, source_weights, stratified_by_patch
 from .grouping import SampleParts
 from .tables import WalkTables
@@ -136,6 +136,9 @@ class Gathering:
         # (escaped, blocked) of the light found on no front: what the solve measures (fate_shares).
         self.fate_shares = tuple(fate_shares)
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
+        # The glossy share of each patch's reflection (glossy.GlossyLobe) or None: where it is, each
+        # sample keeps its shadow ray's part and direction (the lobe's light and where it came from).
+        self.glossy = getattr(scene, "glossy", None)
 
     def choose(self, patch, u):
         """(n,) the source a shadow ray from each sample of ``patch`` looks at (near_choice)."""
@@ -172,30 +175,41 @@ def gather_direct(tables, gathering, rng, grouped=False):
     own (points, sources, their points and directions evenly spread; each sample uniform, so
     the estimate stays unbiased, and chunks and patches independent, so batch means hold).
     ``grouped`` (per-source results): each sample's estimate is also kept as its shadow ray's
-    and its cosine ray's parts, each of one source group (grouping.SampleParts), a fourth item."""
+    and its cosine ray's parts, each of one source group (grouping.SampleParts), a fourth item.
+    Where the scene has a glossy lobe (``gathering.glossy``) the samples hold a fourth item, the
+    shadow ray's part of each estimate (3,n) and the unit direction it looked in (3,n float32)."""
     P = tables.patch_count
     patch, scale = gathering.draw(rng)
     x = np.empty((3, patch.size), dtype=np.float32)  # unit space (ReflectedPoints keeps them)
     value = np.zeros((3, patch.size))
     parts = SampleParts(tables, patch) if grouped else None
+    lobe = None
+    if gathering.glossy is not None:
+        lobe = (parts.value[0] if grouped else np.zeros((3, patch.size)), np.zeros((3, patch.size), dtype=np.float32))
     rays = 0
     for rows in _blocks(patch, SAMPLE_BLOCK):  # (a large chunk's memory stays that of a block)
         rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng,
-                              None if parts is None else parts.block(rows))
+                              None if parts is None else parts.block(rows),
+                              None if lobe is None else (lobe[0][:, rows], lobe[1][:, rows]))
     value *= scale
+    if lobe is not None and not grouped:
+        lobe[0][:] *= scale
     # (float64 even for a chunk that drew no sample: bincount of nothing gives integers)
     H = np.stack([np.bincount(patch, weights=value[c], minlength=P) for c in range(3)]).astype(np.float64, copy=False)
     H /= gathering.samples
+    samples = (patch, x, value) if lobe is None else (patch, x, value, lobe)
     if parts is not None:
         parts.value *= scale
-        return H, rays, (patch, x, value), parts
-    return H, rays, (patch, x, value)
+        return H, rays, samples, parts
+    return H, rays, samples
 
 
-def _gather_block(tables, gathering, patch, x32, value, rng, parts=None):
+def _gather_block(tables, gathering, patch, x32, value, rng, parts=None, lobe=None):
     """The samples of a run of whole patches: their points into ``x32`` (3,n), their estimates
     added to ``value`` (3,n) (and, given the block's ``parts``, (value (2,3,n), group (2,n),
-    group of each shadow source), kept as its shadow and its cosine part); returns the rays traced."""
+    group of each shadow source), kept as its shadow and its cosine part; given ``lobe``
+    (shadow part (3,n), direction (3,n)), the shadow ray's part and direction kept there too);
+    returns the rays traced."""
     g = tables.geometry
     if gathering.stratified:
         u = stratified_by_patch(patch, tables.patch_count, GATHER_SOBOL_DIMENSIONS, rng, dtype=np.float32)
@@ -206,16 +220,19 @@ def _gather_block(tables, gathering, patch, x32, value, rng, parts=None):
     normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
     rays = 0
     shadow, cosine = (value, value) if parts is None else parts[0]
+    if lobe is not None and parts is None:
+        shadow = lobe[0]
     if gathering.table is not None:
         source = gathering.choose(patch, u[2])
-        rays += _shadow_rays(tables, gathering, patch, source, x, normal, u, shadow)
+        rays += _shadow_rays(tables, gathering, patch, source, x, normal, u, shadow, None if lobe is None else lobe[1])
         if parts is not None:
             parts[1][0] = parts[2].take(source)
     if gathering.cosine_share > 0:
         rays += _cosine_rays(tables, gathering, patch, x, normal, u, cosine, groups=None if parts is None else parts[1][1])
     if parts is not None:
-        value += shadow
         value += cosine
+    if parts is not None or lobe is not None:
+        value += shadow
     return rays
 
 
@@ -247,9 +264,9 @@ def _emitter_weight(gathering, technique, receiver, source, cos_x, cos_y, distan
     return weight
 
 
-def _shadow_rays(tables, gathering, patch, source, x, normal, u, value):
-    """Adds each sample's shadow-ray estimate (towards its ``source``) to ``value``; returns
-    the rays traced."""
+def _shadow_rays(tables, gathering, patch, source, x, normal, u, value, directions=None):
+    """Adds each sample's shadow-ray estimate (towards its ``source``) to ``value`` (and the
+    unit direction it looked in to ``directions``, where given); returns the rays traced."""
     g, P = tables.geometry, tables.patch_count
     n = patch.size
     towards = np.empty_like(x)
@@ -304,6 +321,8 @@ def _shadow_rays(tables, gathering, patch, source, x, normal, u, value):
         value += gathering.emission.take(source if on_patch.all() else np.where(on_patch, source, 0), axis=1) * weight
     if lit is not None:
         value += lit
+    if directions is not None:
+        directions[:] = towards
     return live.size
 
 
@@ -383,25 +402,6 @@ def direct_irradiance(scene, samples=64, seed=0):
         for _ in range(rounds):
             total += gather_direct(tables, gathering, rng)[0]
     return (total / rounds).T
-
-
-def fate_shares(tables, seed):
-    """(escaped, blocked): how FATE_RAYS rays from the sources (drawn and leaving as the walk's
-    first rays) that find no patch's front divide between nothing and a back side, so that
-    light landing on back sides (flipped normals) is reported as such; (1, 0) where none ends
-    either way (a closed scene, whose lost direct light is the gathering's noise about 0).
-    Measured once a solve, from the seed's own stream: the chunks split their lost light alike
-    (only the accounts read it), and no chunk pays for a cast of its own."""
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(FATE_STREAM,))))
-    source = tables.sources.sample(FATE_RAYS, rng)
-    u = rng.random((tables.uniforms_per_ray, FATE_RAYS), dtype=np.float32)
-    hits = ray_cast(tables, *leave_sources(tables, source, u), region_of(tables, source))
-    escaped = np.count_nonzero(hits.hit < 0)
-    blocked = np.count_nonzero((hits.hit >= 0) & ~hits.front)
-    if escaped + blocked == 0:
-        return 1.0, 0.0
-    share = blocked / (escaped + blocked)
-    return 1.0 - share, share
 
 
 def pilot_irradiance(tables, gathering, seed):

@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from .first_shot import gather_direct
+from .glossy import reflect
 from .sampling import SourceTable, add_sphere_points, channel_sum, source_weights
 from .grouping import Mix, with_groups
 from .tallies import ChunkTally
@@ -23,26 +24,103 @@ class ReflectedPoints:
     at point x_k of patch j, reflects R_j A_j / n_j times the irradiance it found (``power``
     (K,3), in the walk's source table after the patches), in cosine-distributed directions
     about the patch's normal. Their sum over patch j's samples is A_j E'_j. Points and normals
-    stay in the walk's unit space, float32 (the points already pushed off the surface)."""
+    stay in the walk's unit space, float32 (the points already pushed off the surface).
+
+    Where the scene has a glossy lobe (:mod:`.glossy`) and the samples kept their shadow rays'
+    part and direction, the glossy share of the shadow part leaves along its lobe instead: it
+    is taken out of sample k's row and becomes a row of its own after the K (``glossy_rows``),
+    only for the samples that have some. ``count`` is K."""
 
     def __init__(self, gathering, geometry, samples):
-        patch, x, value = samples
+        patch, x, value = samples[:3]
         factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
-        self.power = np.ascontiguousarray((value * factor.take(patch, axis=1)).T)
+        power = value * factor.take(patch, axis=1)
+        self.count = patch.size
+        self.sample = None  # each row's sample (None: row k is sample k, no glossy rows)
+        lobe = samples[3] if len(samples) > 3 else None
+        if lobe is not None:
+            shadow, towards = lobe
+            glossy = shadow * (gathering.glossy.share.T * gathering.area_per_sample).take(patch, axis=1)
+            power -= glossy
+            np.maximum(power, 0.0, out=power)  # (R value - g shadow >= 0 but for rounding)
+            keep = np.flatnonzero(glossy.max(axis=0) > 0)
+            self.sample = np.concatenate([np.arange(self.count), keep])
+            self.towards = towards.take(keep, axis=1)
+            self.alpha = gathering.glossy.alpha.take(patch.take(keep))
+            power = np.hstack([power, glossy.take(keep, axis=1)])
+        self.power = np.ascontiguousarray(power.T)
         self.patch = patch
         self.points = np.asarray(x, dtype=np.float32)
         self.normals = geometry.patch_normal_rows.take(patch, axis=1)
 
+    @property
+    def glossy_rows(self):
+        """(G,) the rows of the glossy shares (none: an empty array)."""
+        return np.arange(self.count, self.power.shape[0])
+
+    def samples_of(self, rows):
+        """(n,) the sample each of ``rows`` leaves from."""
+        return rows if self.sample is None else self.sample.take(rows)
+
     def unit_rays(self, rows, u, geometry):
-        """Rays from samples ``rows`` with uniforms ``u`` (4, n) float32 (directions from u[2:4],
-        as a patch's: normal plus a uniform sphere point): (3, n) unit-space origins, directions,
-        as :meth:`.lights.Lights.unit_rays` gives them (the points are in unit space already:
+        """Rays from rows ``rows`` with uniforms ``u`` (4, n) float32 (directions from u[2:4],
+        as a patch's: normal plus a uniform sphere point; a glossy row's about the mirror of
+        where its light came from, glossy.reflect): (3, n) unit-space origins, directions, as
+        :meth:`.lights.Lights.unit_rays` gives them (the points are in unit space already:
         ``geometry`` is not read)."""
-        return self.points.take(rows, axis=1), add_sphere_points(self.normals.take(rows, axis=1), u[2], u[3])
+        k = self.samples_of(rows)
+        directions = add_sphere_points(self.normals.take(k, axis=1), u[2], u[3])
+        if self.sample is not None:
+            lobe = np.flatnonzero(rows >= self.count)
+            if lobe.size:
+                g = rows.take(lobe) - self.count
+                directions[:, lobe] = reflect(self.normals.take(k.take(lobe), axis=1), self.towards.take(g, axis=1),
+                                              self.alpha.take(g), u[2].take(lobe), u[3].take(lobe))
+        return self.points.take(k, axis=1), directions
 
     def regions(self, rows, geometry):
-        """(n,) the region frame of samples ``rows``' points (their patches'), or None."""
-        return geometry.region_of(self.patch.take(rows))
+        """(n,) the region frame of rows ``rows``' points (their patches'), or None."""
+        return geometry.region_of(self.patch.take(self.samples_of(rows)))
+
+    def group_power(self, gathering, parts, S, C):
+        """(S C, rows) each source group's part of every row's power (per-source results):
+        a sample's shadow and cosine parts (grouping.SampleParts) each in its group, the
+        glossy share of the shadow part in its glossy row."""
+        patch = self.patch
+        factor = (gathering.reflectivity * gathering.area_per_sample).take(patch, axis=1)[:C]  # (C,K)
+        glossy = None
+        if self.sample is not None:
+            glossy = (gathering.glossy.share.T * gathering.area_per_sample).take(patch, axis=1)[:C]
+        power = np.zeros((S, C, self.power.shape[0]))
+        for m in range(2):
+            found = np.flatnonzero(parts.group[m] >= 0)
+            part = parts.value[m][:C].take(found, axis=1)
+            if m == 0 and glossy is not None:
+                shine = part * glossy.take(found, axis=1)
+                power[parts.group[m].take(found), :, found] += np.maximum(part * factor.take(found, axis=1) - shine, 0.0).T
+                row = np.full(self.count, -1)
+                row[self.sample[self.count:]] = np.arange(self.count, self.power.shape[0])
+                there = row.take(found) >= 0
+                power[parts.group[m].take(found[there]), :, row.take(found[there])] += shine[:, there].T
+            else:
+                power[parts.group[m].take(found), :, found] += (part * factor.take(found, axis=1)).T
+        return power.reshape(S * C, -1)
+
+    def mix(self, gathering, parts, offset):
+        """The rows as a walk's sources of ids from ``offset`` on, each a grouping.Mix of its
+        shadow and cosine parts (a glossy row: its share of the shadow part alone)."""
+        factor = (gathering.reflectivity * gathering.area_per_sample).take(self.patch, axis=1)  # (3,K)
+        if self.sample is None:
+            return parts.mix(factor, offset)
+        keep = self.sample[self.count:]
+        shine = parts.value[0] * (gathering.glossy.share.T * gathering.area_per_sample).take(self.patch, axis=1)
+        power = parts.value * factor
+        power[0] = np.maximum(power[0] - shine, 0.0)
+        lobe = np.zeros((2, 3, keep.size))
+        lobe[0] = shine.take(keep, axis=1)
+        group = np.maximum(np.hstack([parts.group, parts.group.take(keep, axis=1)]), 0)
+        group[1, self.count:] = 0
+        return Mix(offset, group, np.ascontiguousarray(np.concatenate([power, lobe], axis=2).transpose(0, 2, 1)))
 
 
 def reflected_sources(tables, gathering, emission, samples, groups=None):
@@ -61,9 +139,7 @@ def reflected_sources(tables, gathering, emission, samples, groups=None):
         return tables.with_sources(SourceTable(source_weights(area, emission)), emission, None, mix)
     points = ReflectedPoints(gathering, tables.geometry, samples)
     none = np.zeros_like(emission)
-    mix = None
-    if groups is not None:
-        mix = groups[1].mix((gathering.reflectivity * gathering.area_per_sample).take(samples[0], axis=1), area.size)
+    mix = None if groups is None else points.mix(gathering, groups[1], area.size)
     return tables.with_sources(SourceTable(source_weights(area, none, points.power)), none, points, mix)
 
 

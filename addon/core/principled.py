@@ -352,3 +352,16 @@ def surface_terms(p: PrincipledInputs):
         scale = scale + slope
         offset = offset - slope * base
     return scale, offset
+
+
+def glossy_terms(p: PrincipledInputs):
+    """(share (3,), alpha): the part of the hemispherical albedo its glossy layers reflect (the
+    specular layer's, the metallic's at ``p.base``, a coat's and transmission's reflection), and
+    the GGX alpha of the lobe it leaves along: the base roughness squared, widened as Filter
+    Glossy widens it (the weighted mean of ``blurred_roughness``'s alphas; a coat's light is
+    given the same lobe)."""
+    base = np.maximum(np.asarray(p.base, dtype=np.float64), 0.0)
+    energy, _ = _layers_out(p, base)
+    share = (mu_nodes()[1][:, None] * energy).sum(axis=0)
+    roughness, weight = blurred_roughness(float(np.clip(p.roughness, 0.0, 1.0)), p.filter_glossy)
+    return share, float((weight * roughness ** 2).sum() / weight.sum())

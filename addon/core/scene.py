@@ -12,8 +12,12 @@ from functools import cached_property
 import numpy as np
 
 from .geometry_build import build_geometry
+from .glossy import GlossyLobe
 from .lights import Lights
 from .validation import PatchError, material_rows, validate_light_numbers, validate_lights, validate_materials
+
+SAME = object()  # with_materials: keep the scene's own
+
 
 class PatchScene:
     """Patches (groups of coplanar triangles) with their reflectivity and emittance.
@@ -29,18 +33,25 @@ class PatchScene:
     lights : light sources beside the emissive patches (``lights``: point, spot, area, sun, world).
     aim : (centre, radius) of the sphere sun and world light is aimed at (the part of the scene
         whose light matters); default the bounding sphere of every patch.
+    glossy : (share (P,3), alpha (P,)) or a GlossyLobe: the share of each patch's reflectivity
+        that its first reflection of a source's light sends along a GGX lobe (``glossy``);
+        default none (every reflection Lambertian).
 
     Degenerate triangles are dropped with a warning; everything else that is wrong raises
     ``ValueError`` naming the problem and the offending indices.
     """
 
-    def __init__(self, vertices, triangles, triangle_patch, reflectivity, emission, lights=(), aim=None, *, _geometry=None):
+    def __init__(self, vertices, triangles, triangle_patch, reflectivity, emission, lights=(), aim=None, *, glossy=None,
+                 _geometry=None):
         reflectivity_arr = np.asarray(reflectivity)
         if reflectivity_arr.ndim not in (1, 2) or reflectivity_arr.shape[0] == 0:
             raise ValueError(f"reflectivity must have shape (P,) or (P, 3) with P > 0; got {reflectivity_arr.shape}")
         patch_count = material_rows(reflectivity_arr, emission, triangle_patch)
         lights = tuple(lights.lights if isinstance(lights, Lights) else lights)
         self.reflectivity, self.emission = validate_materials(reflectivity, emission, patch_count, require_emitter=not lights)
+        if isinstance(glossy, GlossyLobe):
+            glossy = (glossy.share, glossy.alpha)
+        self.glossy = None if glossy is None else GlossyLobe.checked(*glossy, self.reflectivity)
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.triangles = np.asarray(triangles)
         self.triangle_patch = np.asarray(triangle_patch)
@@ -67,12 +78,14 @@ class PatchScene:
             raise ValueError("the scene has no source: every emission is zero and no light gives power")
 
     # --- materials -------------------------------------------------------------------------
-    def with_materials(self, reflectivity, emission, lights=None):
-        """A scene on the same patches with other materials (and the same lights unless given),
-        sharing geometry and ray tracer."""
+    def with_materials(self, reflectivity, emission, lights=None, glossy=SAME):
+        """A scene on the same patches with other materials (and the same lights and glossy
+        lobe unless given; the lobe's share held to the new reflectivity), sharing geometry and
+        ray tracer."""
         return PatchScene(
             self.vertices, self.triangles, self.triangle_patch, reflectivity, emission,
-            self.lights if lights is None else lights, self.lights.aim, _geometry=self.geometry,
+            self.lights if lights is None else lights, self.lights.aim,
+            glossy=self.glossy if glossy is SAME else glossy, _geometry=self.geometry,
         )
 
     # --- sizes -----------------------------------------------------------------------------

@@ -24,7 +24,7 @@ Per chunk:
 
     gather_direct   each patch's direct irradiance H^0 (``first_shot``: shadow rays and cosine
                     rays, weighted by the power heuristic)
-    reflect_first   the first reflection R H^0: a constant over each patch (exit_point="random",
+    reflect_first   (first_reflection) the first reflection R H^0: a constant over each patch (exit_point="random",
                     the discrete method), or as uneven over a patch as the light that landed on
                     it (exit_point="hit": the constant, and what the gathering samples found
                     beyond it, shot from them, a patch's rays of either sign in pairs of one
@@ -51,17 +51,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import rays
-from .faces import ranks_in_runs
+from .first_reflection import FIRST_REFLECTION_RAYS, reflect_first  # noqa: F401 (the first: read as a chunk's rays)
 from .first_shot import MAX_GATHER_SAMPLES, gather_direct
-from .gathered_walk import ReflectedPoints, split_lost
+from .gathered_walk import split_lost
 from .jacobi import HALTON, systematic_counts
-from .sampling import SOBOL, shifted_float32, unit_floats
+from .sampling import shifted_float32
 from .grouping import with_groups
 from .tallies import ChunkTally
 
-# Rays of a chunk of n paths: n FIRST_REFLECTION_RAYS from the gathering samples (hit exit),
-# then n GENERATION_RAYS in the first two-way generation, fewer as the light dies down.
-FIRST_REFLECTION_RAYS = 3.0
+# Rays of a chunk of n paths: n FIRST_REFLECTION_RAYS from the gathering samples (hit exit,
+# first_reflection), then n GENERATION_RAYS in the first two-way generation, fewer as the light dies down.
 GENERATION_RAYS = 2.0
 # ... and n DIRECT_SAMPLES gathering samples of the direct light (two rays each).
 DIRECT_SAMPLES = 1.5
@@ -225,66 +224,6 @@ def leaving(area, reflected):
     return _sums(reflected, area)
 
 
-def reflect_first(tables, gathering, state, samples, paths, rng, parts=None):
-    """The first reflection as uneven over each patch as the light that landed on it (hit exit).
-
-    Each sample k of patch j is a point source of what it found (power p_k,
-    gathered_walk.ReflectedPoints), sum_k p_k = R_j A_j H_j. The samples are uniform points of j,
-    m_j of them, so sources of power sum_k p_k / m_j at them are patch j reflecting R_j H_j
-    uniformly, which the first two-way generation carries (``state.reflected``). What is left
-    (zero in sum over each patch), c_k = p_k - sum / m_j, is shot from the samples: rays
-    allotted in proportion to |c_k|, each carrying an equal share of sum |c| with c_k's sign,
-    a patch's positive and negative rays in pairs of one direction (_paired_ranks). It is small
-    where the direct light is even over a patch; its irradiance (``state.correction``) joins
-    the first generation's. Per source (the samples' ``parts``), a ray carries each group's c_k."""
-    C, P = tables.channels, tables.patch_count
-    patch = samples[0]
-    state.reflected = state.reflectivity * state.irradiance
-    points = ReflectedPoints(gathering, tables.geometry, samples)
-    power = points.power[:, :C].T  # (C,K)
-    spread = np.bincount(patch, minlength=P)  # m_j
-    mean = np.stack([np.bincount(patch, weights=p, minlength=P) for p in power])
-    mean /= np.maximum(spread, 1)
-    left = power - mean.take(patch, axis=1)  # c_k
-    size = np.abs(left).mean(axis=0)  # what a sample's rays are allotted by
-    total = float(size.sum())
-    if total <= 0:
-        return
-    count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / max(float(power.sum()) / C, 1e-300))))
-    sample = np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
-    state.rays += count
-    rows_left = left if parts is None else _group_left(parts, gathering, patch, spread, C, state.groups)
-    correction = np.zeros((rows_left.shape[0], P))
-    ray_patch = patch.take(sample)
-    rank, shift = _paired_ranks(ray_patch, (left.sum(axis=0) < 0).take(sample), P, rng)
-    table = SOBOL.rows(int(rank.max(initial=0)) + 1)[:2]
-    for start in range(0, count, RAY_BLOCK):
-        rows = slice(start, min(start + RAY_BLOCK, count))
-        k = sample[rows]
-        u = np.empty((4, k.size), dtype=np.float32)  # (a sample's point is its origin: u[2:4] the direction)
-        u[2:4] = _shifted_points(table, rank[rows], shift.take(ray_patch[rows], axis=1))
-        origins, directions = points.unit_rays(k, u, tables.geometry)
-        hits = rays.cast(tables, origins, directions, points.regions(k, tables.geometry))
-        carried = rows_left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
-        correction += _bincount(hits.patch, hits.front, carried, P)
-        state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
-        state.blocked += carried.compress((hits.hit >= 0) & ~hits.front, axis=1).sum(axis=1)
-    state.correction = correction / gathering.patch_area
-
-
-def _group_left(parts, gathering, patch, spread, C, S):
-    """(S C,K) c_k of each group: a sample's part of each group's power, less its patch's mean."""
-    P = spread.size
-    factor = (gathering.reflectivity * gathering.area_per_sample).take(patch, axis=1)[:C]  # (C,K)
-    power = np.zeros((S, C, patch.size))
-    for m in range(2):
-        found = parts.group[m] >= 0
-        power[parts.group[m][found], :, np.flatnonzero(found)] += (parts.value[m][:C] * factor)[:, found].T
-    power = power.reshape(S * C, -1)
-    mean = np.stack([np.bincount(patch, weights=p, minlength=P) for p in power]) / np.maximum(spread, 1)
-    return power - mean.take(patch, axis=1)
-
-
 def generation(tables, area, state, weight, count, rng):
     """One two-way generation of ``count`` rays: their irradiance added to ``state``, its
     reflection the next ``state.reflected``. The rays go out RAY_BLOCK at a time (a run of
@@ -355,30 +294,6 @@ def _score_rows(to, source, s, value, H):
         row += np.bincount(to, weights=weights, minlength=row.size)
 
 
-def _paired_ranks(ray_patch, negative, P, rng):
-    """The first reflection's correction rays in pairs of one direction: each ray's rank among
-    its patch's rays of its sign ((n,) int64), and a random digital shift of each patch's
-    ((2,P) uint32). Ray r of a patch's rays that carry more than the patch's mean and ray r of
-    those that carry less take Sobol' point r of the patch's shift (each direction uniform,
-    each sign's set evenly spread): the two leave the patch in the same direction from nearby
-    points, and where they land on the same patch their shares, of opposite signs, cancel.
-    ``ray_patch`` is in patch order (the samples are), so a rank is a count of the rays before
-    it in its patch's run with its sign: no sort."""
-    position = ranks_in_runs(np.bincount(ray_patch, minlength=P))  # within its patch's run
-    negative_before = np.cumsum(negative) - negative  # in the whole list
-    negative_rank = negative_before - negative_before[np.arange(ray_patch.size) - position]
-    rank = np.where(negative, negative_rank, position - negative_rank)
-    return rank, rng.integers(0, 1 << 32, size=(2, P), dtype=np.uint32)
-
-
-def _shifted_points(table, rank, shift):
-    """(2, n) float32 in [0, 1): Sobol' points ``rank`` of ``table`` (2, m) uint32, each XORed
-    with its own ``shift`` (2, n)."""
-    points = table.take(rank, axis=1)
-    points ^= shift
-    return unit_floats(points, np.float32)
-
-
 def _ray_blocks(count, rng):
     """The blocks of ``count`` rays, RAY_BLOCK at a time, one by one: (rows, a slice; u (4, n)
     float32), u the Halton points 0..n-1 (bases 2, 3, 5, 7) shifted by one random vector modulo
@@ -394,12 +309,6 @@ def _ray_blocks(count, rng):
             yield slice(start, start + n), shifted_float32(points)
 
     return blocks()
-
-
-def _bincount(patch, mask, weights, P):
-    """(C,P) sums of ``weights`` (C,n) over the masked columns, by patch."""
-    index = patch.compress(mask)
-    return np.stack([np.bincount(index, weights=w.compress(mask), minlength=P) for w in weights])
 
 
 def _sums(values, weights):

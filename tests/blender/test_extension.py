@@ -317,7 +317,7 @@ def test_textured_and_unusual_materials_are_read_with_notes(blender):
     tex.inputs["Color1"].default_value = (0.9, 0.5, 0.1, 1)
     tex.inputs["Color2"].default_value = (0.1, 0.3, 0.5, 1)
     R, E, notes = material_colours(m)
-    scale, offset = transport_terms(m)  # a default Principled BSDF: its specular layer's light too
+    scale, offset, _ = transport_terms(m)  # a default Principled BSDF: its specular layer's light too
     np.testing.assert_allclose(R, scale * [0.5, 0.4, 0.3] + offset, rtol=1e-6)  # the checker's average
     assert any("Base Color" in n and "average" in n for n in notes)
     d = bpy.data.materials.new("Diffuse")

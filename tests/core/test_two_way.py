@@ -229,15 +229,16 @@ def test_a_small_plan_runs_in_fewer_larger_chunks_than_the_walk_s():
 
 def test_chunks_traced_in_blocks_are_still_exact(monkeypatch):
     """A large chunk gathers and casts a block at a time (first_shot.SAMPLE_BLOCK,
-    two_way.RAY_BLOCK: its memory is a block's). With blocks of a few hundred samples and rays
+    two_way.RAY_BLOCK, first_reflection.RAY_BLOCK: its memory is a block's). With blocks of a few hundred samples and rays
     every chunk here is tens of blocks, and the results still hold: the closed colour box is its
     discrete exact solution (z-scores as above), and with exit_point="hit" the unevenly lit
     floor's first reflection still leaves from where the light landed (the first reflection's
     rays in blocks too)."""
-    from addon.core import first_shot, two_way
+    from addon.core import first_reflection, first_shot, two_way
 
     monkeypatch.setattr(first_shot, "SAMPLE_BLOCK", 500)
     monkeypatch.setattr(two_way, "RAY_BLOCK", 700)
+    monkeypatch.setattr(first_reflection, "RAY_BLOCK", 700)
     scene, exact = _box_with_one_emitter()
     r = solve(scene, paths=200_000, seed=1, method="two_way")
     assert _z_ok(_z(r, exact), r.chunks)
@@ -281,7 +282,7 @@ def test_paired_ranks_count_each_patch_and_sign_in_order():
     """A correction ray's rank is the number of rays before it with its patch and its sign (the
     rays come in patch order): ray r of a patch's positive shares and ray r of its negative ones
     take one Sobol' point. Checked against that count written as a loop."""
-    from addon.core.two_way import _paired_ranks
+    from addon.core.first_reflection import _paired_ranks
 
     rng = np.random.default_rng(3)
     for P, n in ((1, 0), (4, 1), (6, 200), (50, 5000)):

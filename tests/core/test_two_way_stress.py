@@ -105,7 +105,7 @@ def test_a_card_seen_from_behind_gets_nothing_and_its_back_takes_the_form_factor
     """An emitting square under a parallel card that faces away: the card gets no light, and the
     share of the power its back takes (blocked) is the exact form factor. The gathering finds
     no front lit, so all the power is split between escaped and blocked by the solve's
-    FATE_RAYS rays from the emitter (first_shot.fate_shares): a binomial count."""
+    FATE_RAYS rays from the emitter (methods.base.fate_shares): a binomial count."""
     origin = np.array([[0.0, 0, 0], [0.0, 0, 0.5]])
     u = np.array([[1.0, 0, 0], [1.0, 0, 0]])
     v = np.array([[0.0, 1, 0], [0.0, 1, 0]])

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..first_shot import Gathering, fate_shares
+from ..first_shot import FATE_RAYS, FATE_STREAM, Gathering
+from ..rays import cast as ray_cast, leave_sources, region_of
 from ..plan import chunk_paths_for
 
 # A method beyond the paper's formulas plans its chunks for this fraction of the paths they
@@ -76,7 +77,7 @@ class Method:
 @dataclass(frozen=True)
 class GatheringSpec:
     """What a gathering of the direct light is rebuilt from: each patch's expected samples, and
-    the solve's (escaped, blocked) split of what it finds on no front (first_shot.fate_shares),
+    the solve's (escaped, blocked) split of what it finds on no front (fate_shares, below),
     which is a solve's own and no part of the key a worker keeps its state under."""
 
     samples: tuple
@@ -144,3 +145,22 @@ def solve_gathering(scene, tables, samples, seed):
 def spec_gathering(scene, spec):
     """The Gathering a GatheringSpec was made of."""
     return Gathering(scene, np.asarray(spec.samples), fate_shares=spec.fate_shares)
+
+
+def fate_shares(tables, seed):
+    """(escaped, blocked): how FATE_RAYS rays from the sources (drawn and leaving as the walk's
+    first rays) that find no patch's front divide between nothing and a back side, so that
+    light landing on back sides (flipped normals) is reported as such; (1, 0) where none ends
+    either way (a closed scene, whose lost direct light is the gathering's noise about 0).
+    Measured once a solve, from the seed's own stream: the chunks split their lost light alike
+    (only the accounts read it), and no chunk pays for a cast of its own."""
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(FATE_STREAM,))))
+    source = tables.sources.sample(FATE_RAYS, rng)
+    u = rng.random((tables.uniforms_per_ray, FATE_RAYS), dtype=np.float32)
+    hits = ray_cast(tables, *leave_sources(tables, source, u), region_of(tables, source))
+    escaped = np.count_nonzero(hits.hit < 0)
+    blocked = np.count_nonzero((hits.hit >= 0) & ~hits.front)
+    if escaped + blocked == 0:
+        return 1.0, 0.0
+    share = blocked / (escaped + blocked)
+    return 1.0 - share, share

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from addon.blender_read import images
-from addon.blender_read.materials import material_colours, surface_terms, transport_terms
+from addon.blender_read.materials import _LAYERS_COUNTED as LAYERS, material_colours, surface_terms, transport_terms
 from addon.blender_read.selection import read_selection
 from addon.bpy_free import pipeline
 from addon.core import principled as core
@@ -39,7 +39,11 @@ def test_a_default_principled_material_returns_more_than_its_base_colour(blender
     scale, offset = surface_terms(bpy.data.materials["Floor"])  # as the camera sees it
     np.testing.assert_allclose(scale, 0.9388, atol=2e-3)  # 1 - the layering estimate, cosine-weighted
     np.testing.assert_allclose(offset, 0.0598, atol=2e-3)  # the specular layer's multiscatter albedo
-    np.testing.assert_allclose(transport_terms(bpy.data.materials["Floor"]), [scale, [0.0440] * 3], atol=2e-3)
+    *terms, (share, alpha) = transport_terms(bpy.data.materials["Floor"])
+    np.testing.assert_allclose(terms, [scale, [0.0440] * 3], atol=2e-3)
+    # its glossy lobe: all of the offset (a dielectric), alpha roughness squared widened by Filter Glossy
+    np.testing.assert_allclose(share, terms[1], rtol=1e-9)
+    assert 0.25 < alpha < 0.5
     blender.scene.cycles.blur_glossy = 0.0  # no Filter Glossy: the light passed on is the light seen
     np.testing.assert_allclose(material_colours(bpy.data.materials["Floor"])[0], scale * floor + offset, rtol=1e-6)
     # Specular IOR Level 0 (no specular layer) and the Diffuse BSDF: the base colour itself
@@ -88,6 +92,42 @@ def test_textures_and_colour_attributes_carry_the_specular_light_per_patch(blend
     assert o.slot_textures[1] is None and o.slot_colours[0] is None
 
 
+def test_each_patch_carries_its_materials_glossy_lobe_into_the_solved_scene(blender):
+    """A Principled box (roughness 0.3) and a Diffuse BSDF box: the first's patches carry the
+    glossy share and alpha its material's terms give (without Filter Glossy, alpha 0.3 squared),
+    the second's none; the core scene gets them."""
+    from addon.bpy_free.patches import make_patches
+
+    blender.scene.cycles.blur_glossy = 0.0
+
+    shiny = default_material("Shiny", (0.2, 0.3, 0.4), Roughness=0.3)
+    matte = bpy.data.materials.new("Matte")
+    tree = matte.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    tree.links.new(diffuse.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    for k, material in enumerate([shiny, matte]):
+        v, f = box_arrays((2 * k, 0, 0), (2 * k + 1, 1, 1), inward=False)
+        make_object(f"Box {k}", v, f, [material]).select_set(True)
+    lamp = default_material("Lamp", (0.5, 0.5, 0.5), **{"Emission Strength": 1.0})
+    v, f = box_arrays((0, 0, 3), (1, 1, 3.1), inward=False)
+    make_object("Lamp", v, f, [lamp]).select_set(True)
+    objects, _ = read_selection(blender)
+    patches = make_patches(objects, 0.5)
+    share, alpha = patches.glossy
+    _, _, (expected, expected_alpha) = transport_terms(shiny)
+    names = [o.name for o in objects]
+    offsets = np.cumsum([0] + [m.patch_count for m in patches.meshes])
+    rows = {name: slice(offsets[k], offsets[k + 1]) for k, name in enumerate(names)}
+    np.testing.assert_allclose(share[rows["Box 0"]], np.broadcast_to(expected, share[rows["Box 0"]].shape), rtol=1e-6)
+    np.testing.assert_allclose(alpha[rows["Box 0"]], expected_alpha, rtol=1e-6)
+    assert expected_alpha == pytest.approx(0.09) and expected.min() > 0.02
+    assert not share[rows["Box 1"]].any()
+    scene = patches.patch_scene()
+    np.testing.assert_allclose(scene.glossy.share, np.minimum(share, scene.reflectivity))
+    blender.scene.cycles.blur_glossy = 1.0
+
+
 def test_one_note_per_material_naming_only_what_it_uses(blender):
     """Two objects share a default material, a second default material says the same: one note
     names both; a glass and a matte material: the glass's own note, none for the matte."""
@@ -102,11 +142,10 @@ def test_one_note_per_material_naming_only_what_it_uses(blender):
     _, notes = read_selection(blender)
     principled_notes = [n for n in notes if "Principled" in n]
     assert principled_notes == [
-        "materials 'Plaster', 'Wood': Principled specular reflection counted as diffuse light (its hemispherical "
-        "albedo); not modelled: view-dependent highlights (shown as their average over view directions)",
-        "material 'Glass': Principled specular reflection counted as diffuse light (its hemispherical albedo); "
-        "not modelled: view-dependent highlights (shown as their average over view directions), light through "
-        "transmission (only its reflection counted)",
+        f"materials 'Plaster', 'Wood': Principled specular {LAYERS}; not modelled: view-dependent highlights "
+        "(shown as their average over view directions)",
+        f"material 'Glass': Principled specular {LAYERS}; not modelled: view-dependent highlights (shown as their "
+        "average over view directions), light through transmission (only its reflection counted)",
     ]
     assert not any("'Matte'" in n or "'Lamp'" in n for n in notes)
 
