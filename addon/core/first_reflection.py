@@ -41,7 +41,7 @@ def reflect_first(tables, gathering, state, samples, paths, rng, parts=None):
     C, P = tables.channels, tables.patch_count
     patch = samples[0]
     state.reflected = state.reflectivity * state.irradiance
-    points = ReflectedPoints(gathering, tables.geometry, samples)
+    points = ReflectedPoints(gathering, tables.geometry, samples, rng)
     K = points.count
     power = points.power[:, :C].T
     rows_power = power if parts is None else points.group_power(gathering, parts, state.groups, C)
@@ -103,7 +103,7 @@ def _shoot_glossy(tables, state, points, rows_power, correction, paths, total_po
     state.rays += count
     for start in range(0, count, RAY_BLOCK):
         g = row[start:start + RAY_BLOCK]
-        u = rng.random((4, g.size), dtype=np.float32)
+        u = np.zeros((4, g.size), dtype=np.float32)  # (the lobe draws its own directions: ReflectedPoints)
         carried = rows_power.take(g, axis=1) * (total / count / size.take(g))
         _cast_carried(tables, state, points, g + points.count, u, carried, correction)
 

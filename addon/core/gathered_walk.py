@@ -29,9 +29,10 @@ class ReflectedPoints:
     Where the scene has a glossy lobe (:mod:`.glossy`) and the samples kept their shadow rays'
     part and direction, the glossy share of the shadow part leaves along its lobe instead: it
     is taken out of sample k's row and becomes a row of its own after the K (``glossy_rows``),
-    only for the samples that have some. ``count`` is K."""
+    only for the samples that have some (their directions drawn from a generator of their own,
+    seeded from the chunk's ``rng``). ``count`` is K."""
 
-    def __init__(self, gathering, geometry, samples):
+    def __init__(self, gathering, geometry, samples, rng=None):
         patch, x, value = samples[:3]
         factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
         power = value * factor.take(patch, axis=1)
@@ -47,6 +48,7 @@ class ReflectedPoints:
             self.sample = np.concatenate([np.arange(self.count), keep])
             self.towards = towards.take(keep, axis=1)
             self.alpha = gathering.glossy.alpha.take(patch.take(keep))
+            self.rng = np.random.default_rng(rng.integers(1 << 63))
             power = np.hstack([power, glossy.take(keep, axis=1)])
         self.power = np.ascontiguousarray(power.T)
         self.patch = patch
@@ -64,8 +66,8 @@ class ReflectedPoints:
 
     def unit_rays(self, rows, u, geometry):
         """Rays from rows ``rows`` with uniforms ``u`` (4, n) float32 (directions from u[2:4],
-        as a patch's: normal plus a uniform sphere point; a glossy row's about the mirror of
-        where its light came from, glossy.reflect): (3, n) unit-space origins, directions, as
+        as a patch's: normal plus a uniform sphere point; a glossy row's along its lobe about the
+        mirror of where its light came from, glossy.reflect, from the rows' own generator): (3, n) unit-space origins, directions, as
         :meth:`.lights.Lights.unit_rays` gives them (the points are in unit space already:
         ``geometry`` is not read)."""
         k = self.samples_of(rows)
@@ -75,7 +77,7 @@ class ReflectedPoints:
             if lobe.size:
                 g = rows.take(lobe) - self.count
                 directions[:, lobe] = reflect(self.normals.take(k.take(lobe), axis=1), self.towards.take(g, axis=1),
-                                              self.alpha.take(g), u[2].take(lobe), u[3].take(lobe))
+                                              self.alpha.take(g), self.rng)
         return self.points.take(k, axis=1), directions
 
     def regions(self, rows, geometry):
@@ -123,7 +125,7 @@ class ReflectedPoints:
         return Mix(offset, group, np.ascontiguousarray(np.concatenate([power, lobe], axis=2).transpose(0, 2, 1)))
 
 
-def reflected_sources(tables, gathering, emission, samples, groups=None):
+def reflected_sources(tables, gathering, emission, samples, groups=None, rng=None):
     """The walk's tables with the patches' reflected direct light as its only sources
     (everything else shared): ``emission`` (P,3) E' from uniform points of each patch (random
     exit), or, leaving from hit points, the gathering ``samples`` (gather_direct's) as
@@ -137,7 +139,7 @@ def reflected_sources(tables, gathering, emission, samples, groups=None):
             mix = Mix(0, np.broadcast_to(np.arange(S, dtype=np.int32)[:, None], (S, P)),
                       np.ascontiguousarray((groups[0] * area).transpose(0, 2, 1)))
         return tables.with_sources(SourceTable(source_weights(area, emission)), emission, None, mix)
-    points = ReflectedPoints(gathering, tables.geometry, samples)
+    points = ReflectedPoints(gathering, tables.geometry, samples, rng)
     none = np.zeros_like(emission)
     mix = None if groups is None else points.mix(gathering, groups[1], area.size)
     return tables.with_sources(SourceTable(source_weights(area, none, points.power)), none, points, mix)
@@ -174,7 +176,7 @@ def gathered_chunk(tables, gathering, paths, rng, walk):
         direct_groups = incident_groups if tables.direct_apart else None
         grouped = (gathering.reflectivity * H_groups, gathered[3])
     if walk_power > 0:
-        tally = walk(reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples, grouped or None),
+        tally = walk(reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples, grouped or None, rng),
                      paths, rng)
         w = walk_power / gathering.total_power
         incident = incident + tally.incident * w

@@ -12,10 +12,10 @@ Where the gathering knows that direction (each sample's shadow ray, ``first_shot
 ``glossy`` (P,3) of what the sample found leaves along the GGX lobe about the mirror of the
 light's direction (``reflect``), from the sample's point; the rest stays diffuse. The amount is
 the material's hemispherical mean (as everywhere else, so the accounts and the reflectivity are
-those of the diffuse solve); only its direction is the lobe's: visible normals of GGX seen from
-the light (Dupuy and Benyoub's spherical caps), the direction mirrored about one, and a direction
-that would leave below the surface (which masking and multiple scattering share out) mirrored
-back above it. Not carried along its lobe: the light after the first bounce, a sky's and a
+those of the diffuse solve); only its direction is the lobe's: the single-scattering GGX lobe
+times the cosine, as Cycles' multiple-scattering GGX scales it (visible normals seen from the
+light, Dupuy and Benyoub's spherical caps; the direction mirrored about one kept with the chance
+G2/G1 of its masking, none below the surface). Not carried along its lobe: the light after the first bounce, a sky's and a
 cosine ray's light (spread evenly, as before), and the paper's shot walk.
 """
 from __future__ import annotations
@@ -24,8 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .principled import smith_lambda
+
 # A patch whose glossy share is below this in every channel reflects evenly.
 LEAST_SHARE = 1e-6
+# Draws of a lobe direction before a ray takes the mirror direction (each kept with the chance
+# G2/G1: at 45 degrees and alpha 0.36 about nine in ten are).
+TRIES = 8
 
 
 @dataclass(frozen=True)
@@ -72,25 +77,46 @@ def frame(normal):
     return tangent, bitangent
 
 
-def reflect(normal, towards, alpha, u1, u2):
+def reflect(normal, towards, alpha, rng, tries=TRIES):
     """(3,n) unit directions of light arriving from unit ``towards`` (3,n, from the surface to
     the light) on surfaces of unit ``normal`` (3,n) reflected by GGX microfacets of ``alpha``
-    (n,): a visible normal h seen from the light (uniforms ``u1``, ``u2`` (n,)), the light
-    mirrored about it; one that would leave below the surface mirrored back above it."""
+    (n,), distributed as the single-scattering lobe times the cosine (with a constant Fresnel):
+    a visible normal h seen from the light, the light mirrored about it, kept with the chance
+    G2/G1 (the masking of the way out; none below the surface), else drawn again (``rng``), up
+    to ``tries`` times; a ray still without one takes the mirror direction."""
     normal = np.asarray(normal, dtype=np.float64)
     towards = np.asarray(towards, dtype=np.float64)
+    alpha = np.asarray(alpha, dtype=np.float64)
     tangent, bitangent = frame(normal)
     local = np.stack([np.einsum("in,in->n", f, towards) for f in (tangent, bitangent, normal)])
     local[2] = np.maximum(local[2], 1e-9)
     local /= np.sqrt(np.einsum("in,in->n", local, local))
-    stretched = local * np.stack([alpha, alpha, np.ones_like(alpha)])  # the unit-roughness configuration
+    out = local * np.array([[-1.0], [-1.0], [1.0]])  # the mirror direction, for the rays left without one
+    pending = np.arange(alpha.size)
+    lambda_in = smith_lambda(alpha, local[2])
+    for _ in range(tries):
+        if not pending.size:
+            break
+        u = rng.random((3, pending.size))
+        wi, a = local[:, pending], alpha[pending]
+        o = _mirrored(wi, a, u[0], u[1])
+        up = np.maximum(o[2], 1e-12)
+        keep = (o[2] > 0) & (u[2] * (1.0 + lambda_in[pending] + smith_lambda(a, up)) < 1.0 + lambda_in[pending])
+        out[:, pending[keep]] = o[:, keep]
+        pending = pending[~keep]
+    return tangent * out[0] + bitangent * out[1] + normal * out[2]
+
+
+def _mirrored(local, alpha, u1, u2):
+    """(3,n) ``local`` (unit, in the surface's frame) mirrored about a visible normal of GGX
+    (alpha (n,)) drawn from uniforms ``u1``, ``u2``: the view stretched to unit roughness, a
+    point of the spherical cap below it plus the view, unstretched (Dupuy and Benyoub)."""
+    stretched = local * np.stack([alpha, alpha, np.ones_like(alpha)])
     stretched /= np.sqrt(np.einsum("in,in->n", stretched, stretched))
-    phi = 2.0 * np.pi * np.asarray(u1, dtype=np.float64)
-    z = (1.0 - np.asarray(u2, dtype=np.float64)) * (1.0 + stretched[2]) - stretched[2]
+    phi = 2.0 * np.pi * u1
+    z = (1.0 - u2) * (1.0 + stretched[2]) - stretched[2]
     r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
-    h = np.stack([r * np.cos(phi), r * np.sin(phi), z]) + stretched  # a visible normal, stretched
+    h = np.stack([r * np.cos(phi), r * np.sin(phi), z]) + stretched
     h[:2] *= alpha
     h /= np.maximum(np.sqrt(np.einsum("in,in->n", h, h)), 1e-300)
-    out = 2.0 * np.einsum("in,in->n", local, h) * h - local
-    out[2] = np.abs(out[2])  # (below the surface: mirrored back above it)
-    return tangent * out[0] + bitangent * out[1] + normal * out[2]
+    return 2.0 * np.einsum("in,in->n", local, h) * h - local
