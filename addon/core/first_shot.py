@@ -137,7 +137,7 @@ class Gathering:
         self.fate_shares = tuple(fate_shares)
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
         # The glossy share of each patch's reflection (glossy.GlossyLobe) or None: where it is, each
-        # sample keeps its shadow ray's part and direction (the lobe's light and where it came from).
+        # sample keeps its two rays' parts and directions (the lobe's light and where it came from).
         self.glossy = getattr(scene, "glossy", None)
 
     def choose(self, patch, u):
@@ -176,21 +176,22 @@ def gather_direct(tables, gathering, rng, grouped=False):
     the estimate stays unbiased, and chunks and patches independent, so batch means hold).
     ``grouped`` (per-source results): each sample's estimate is also kept as its shadow ray's
     and its cosine ray's parts, each of one source group (grouping.SampleParts), a fourth item.
-    Where the scene has a glossy lobe (``gathering.glossy``) the samples hold a fourth item, the
-    shadow ray's part of each estimate (3,n) and the unit direction it looked in (3,n float32)."""
+    Where the scene has a glossy lobe (``gathering.glossy``) the samples hold a fourth item: each
+    estimate's shadow and cosine ray's parts (2,3,n) and the unit directions they looked in
+    (2,3,n float32)."""
     P = tables.patch_count
     patch, scale = gathering.draw(rng)
     x = np.empty((3, patch.size), dtype=np.float32)  # unit space (ReflectedPoints keeps them)
     value = np.zeros((3, patch.size))
     parts = SampleParts(tables, patch) if grouped else None
     lobe = None
-    if gathering.glossy is not None:
-        lobe = (parts.value[0] if grouped else np.zeros((3, patch.size)), np.zeros((3, patch.size), dtype=np.float32))
+    if gathering.glossy is not None:  # (each technique's part and direction: (2,3,n) each)
+        lobe = (parts.value if grouped else np.zeros((2, 3, patch.size)), np.zeros((2, 3, patch.size), dtype=np.float32))
     rays = 0
     for rows in _blocks(patch, SAMPLE_BLOCK):  # (a large chunk's memory stays that of a block)
         rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng,
                               None if parts is None else parts.block(rows),
-                              None if lobe is None else (lobe[0][:, rows], lobe[1][:, rows]))
+                              None if lobe is None else (lobe[0][:, :, rows], lobe[1][:, :, rows]))
     value *= scale
     if lobe is not None and not grouped:
         lobe[0][:] *= scale
@@ -208,7 +209,7 @@ def _gather_block(tables, gathering, patch, x32, value, rng, parts=None, lobe=No
     """The samples of a run of whole patches: their points into ``x32`` (3,n), their estimates
     added to ``value`` (3,n) (and, given the block's ``parts``, (value (2,3,n), group (2,n),
     group of each shadow source), kept as its shadow and its cosine part; given ``lobe``
-    (shadow part (3,n), direction (3,n)), the shadow ray's part and direction kept there too);
+    (parts (2,3,n), directions (2,3,n)), the two rays' parts and directions kept there too);
     returns the rays traced."""
     g = tables.geometry
     if gathering.stratified:
@@ -221,18 +222,19 @@ def _gather_block(tables, gathering, patch, x32, value, rng, parts=None, lobe=No
     rays = 0
     shadow, cosine = (value, value) if parts is None else parts[0]
     if lobe is not None and parts is None:
-        shadow = lobe[0]
+        shadow, cosine = lobe[0]
+    directions = (None, None) if lobe is None else lobe[1]
     if gathering.table is not None:
         source = gathering.choose(patch, u[2])
-        rays += _shadow_rays(tables, gathering, patch, source, x, normal, u, shadow, None if lobe is None else lobe[1])
+        rays += _shadow_rays(tables, gathering, patch, source, x, normal, u, shadow, directions[0])
         if parts is not None:
             parts[1][0] = parts[2].take(source)
     if gathering.cosine_share > 0:
-        rays += _cosine_rays(tables, gathering, patch, x, normal, u, cosine, groups=None if parts is None else parts[1][1])
-    if parts is not None:
-        value += cosine
+        rays += _cosine_rays(tables, gathering, patch, x, normal, u, cosine, groups=None if parts is None else parts[1][1],
+                             directions=directions[1])
     if parts is not None or lobe is not None:
         value += shadow
+        value += cosine
     return rays
 
 
@@ -346,20 +348,24 @@ def _towards_emitters(tables, gathering, patch, source, surface, normal, u):
     return e, length, np.where(ok, w, 0.0)
 
 
-def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, groups=None):
+def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, groups=None, directions=None):
     """Adds each sample's cosine-ray estimate to ``value``: the emitting patch it meets (weighted
     against the shadow rays), or the sky where it escapes. A sample casts one with probability
     ``gathering.cosine_share`` (u[9]), which the balance heuristic counts. Returns the rays
-    traced. ``groups`` (n,), where given, takes the source group of what each ray found."""
+    traced. ``groups`` (n,), where given, takes the source group of what each ray found;
+    ``directions`` (3,n), where given, the ray's unit direction."""
     g = tables.geometry
     if gathering.cosine_share < 1 and not cast_all:
         cast = np.flatnonzero(u[9] < gathering.cosine_shares.take(patch))
         part = np.zeros((3, cast.size))
         found = None if groups is None else groups[cast]
-        rays = _cosine_rays(tables, gathering, patch[cast], x[:, cast], normal[:, cast], u[:, cast], part, True, found)
+        towards = None if directions is None else np.zeros((3, cast.size), dtype=np.float32)
+        rays = _cosine_rays(tables, gathering, patch[cast], x[:, cast], normal[:, cast], u[:, cast], part, True, found, towards)
         value[:, cast] += part
         if groups is not None:
             groups[cast] = found
+        if directions is not None:
+            directions[:, cast] = towards
         return rays
     towards = add_sphere_points(g.patch_normal_rows.take(patch, axis=1), u[5], u[6])
     towards = towards.astype(np.float64)
@@ -377,6 +383,8 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, 
             value[:, escaped] += world.radiance_times_pi(towards[:, escaped])
     if groups is not None:  # (escaped: the world's group; every world is in one, grouping)
         groups[:] = np.where(hit < 0, tables.groups.world, tables.groups.whole.source_group.take(source))
+    if directions is not None:
+        directions[:] = towards
     return patch.size
 
 

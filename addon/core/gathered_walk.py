@@ -26,11 +26,11 @@ class ReflectedPoints:
     about the patch's normal. Their sum over patch j's samples is A_j E'_j. Points and normals
     stay in the walk's unit space, float32 (the points already pushed off the surface).
 
-    Where the scene has a glossy lobe (:mod:`.glossy`) and the samples kept their shadow rays'
-    part and direction, the glossy share of the shadow part leaves along its lobe instead: it
-    is taken out of sample k's row and becomes a row of its own after the K (``glossy_rows``),
-    only for the samples that have some (their directions drawn from a generator of their own,
-    seeded from the chunk's ``rng``). ``count`` is K."""
+    Where the scene has a glossy lobe (:mod:`.glossy`) and the samples kept their rays' parts
+    and directions, the glossy share of each part leaves along its lobe instead: it is taken out
+    of sample k's row and becomes a row of its own after the K (``glossy_rows``; the shadow
+    rays' parts, then the cosine rays'), only for the parts that have some (their directions
+    drawn from a generator of their own, seeded from the chunk's ``rng``). ``count`` is K."""
 
     def __init__(self, gathering, geometry, samples, rng=None):
         patch, x, value = samples[:3]
@@ -40,20 +40,32 @@ class ReflectedPoints:
         self.sample = None  # each row's sample (None: row k is sample k, no glossy rows)
         lobe = samples[3] if len(samples) > 3 else None
         if lobe is not None:
-            shadow, towards = lobe
-            glossy = shadow * (gathering.glossy.share.T * gathering.area_per_sample).take(patch, axis=1)
-            power -= glossy
-            np.maximum(power, 0.0, out=power)  # (R value - g shadow >= 0 but for rounding)
-            keep = np.flatnonzero(glossy.max(axis=0) > 0)
-            self.sample = np.concatenate([np.arange(self.count), keep])
-            self.towards = towards.take(keep, axis=1)
-            self.alpha = gathering.glossy.alpha.take(patch.take(keep))
+            parts, directions = lobe
+            shine = self._shine(gathering, patch)
+            kept, rows = [], [power]
+            self.row_of = np.full((2, self.count), -1)  # each part's glossy row (-1: none)
+            for m in range(2):
+                glossy = parts[m] * shine
+                power -= glossy
+                keep = np.flatnonzero(glossy.max(axis=0) > 0)
+                self.row_of[m, keep] = self.count + sum(k.size for k in kept) + np.arange(keep.size)
+                kept.append(keep)
+                rows.append(glossy.take(keep, axis=1))
+            np.maximum(power, 0.0, out=power)  # (R value - g parts >= 0 but for rounding)
+            self.sample = np.concatenate([np.arange(self.count), *kept])
+            self.towards = np.hstack([directions[m].take(k, axis=1) for m, k in enumerate(kept)])
+            self.alpha = gathering.glossy.alpha.take(patch.take(self.sample[self.count:]))
             self.rng = np.random.default_rng(rng.integers(1 << 63))
-            power = np.hstack([power, glossy.take(keep, axis=1)])
+            power = np.hstack(rows)
         self.power = np.ascontiguousarray(power.T)
         self.patch = patch
         self.points = np.asarray(x, dtype=np.float32)
         self.normals = geometry.patch_normal_rows.take(patch, axis=1)
+
+    @staticmethod
+    def _shine(gathering, patch):
+        """(3,K) g_j A_j / n_j of each sample: what its parts' glossy share is."""
+        return (gathering.glossy.share.T * gathering.area_per_sample).take(patch, axis=1)
 
     @property
     def glossy_rows(self):
@@ -67,9 +79,9 @@ class ReflectedPoints:
     def unit_rays(self, rows, u, geometry):
         """Rays from rows ``rows`` with uniforms ``u`` (4, n) float32 (directions from u[2:4],
         as a patch's: normal plus a uniform sphere point; a glossy row's along its lobe about the
-        mirror of where its light came from, glossy.reflect, from the rows' own generator): (3, n) unit-space origins, directions, as
-        :meth:`.lights.Lights.unit_rays` gives them (the points are in unit space already:
-        ``geometry`` is not read)."""
+        mirror of where its light came from, glossy.reflect, from the rows' own generator):
+        (3, n) unit-space origins, directions, as :meth:`.lights.Lights.unit_rays` gives them
+        (the points are in unit space already: ``geometry`` is not read)."""
         k = self.samples_of(rows)
         directions = add_sphere_points(self.normals.take(k, axis=1), u[2], u[3])
         if self.sample is not None:
@@ -84,45 +96,47 @@ class ReflectedPoints:
         """(n,) the region frame of rows ``rows``' points (their patches'), or None."""
         return geometry.region_of(self.patch.take(self.samples_of(rows)))
 
+    def _part_power(self, gathering, parts, channels=3):
+        """((2,C,K) each part's diffuse power, (2,C,K) its glossy power or None): a sample's
+        shadow and cosine parts (grouping.SampleParts) times R A / n less their glossy share."""
+        factor = (gathering.reflectivity * gathering.area_per_sample).take(self.patch, axis=1)[:channels]
+        power = parts.value[:, :channels] * factor
+        if self.sample is None:
+            return power, None
+        glossy = parts.value[:, :channels] * self._shine(gathering, self.patch)[:channels]
+        return np.maximum(power - glossy, 0.0), glossy
+
     def group_power(self, gathering, parts, S, C):
         """(S C, rows) each source group's part of every row's power (per-source results):
-        a sample's shadow and cosine parts (grouping.SampleParts) each in its group, the
-        glossy share of the shadow part in its glossy row."""
-        patch = self.patch
-        factor = (gathering.reflectivity * gathering.area_per_sample).take(patch, axis=1)[:C]  # (C,K)
-        glossy = None
-        if self.sample is not None:
-            glossy = (gathering.glossy.share.T * gathering.area_per_sample).take(patch, axis=1)[:C]
+        a sample's shadow and cosine parts each in its group, each part's glossy share in its
+        glossy row."""
+        diffuse, glossy = self._part_power(gathering, parts, C)
         power = np.zeros((S, C, self.power.shape[0]))
         for m in range(2):
             found = np.flatnonzero(parts.group[m] >= 0)
-            part = parts.value[m][:C].take(found, axis=1)
-            if m == 0 and glossy is not None:
-                shine = part * glossy.take(found, axis=1)
-                power[parts.group[m].take(found), :, found] += np.maximum(part * factor.take(found, axis=1) - shine, 0.0).T
-                row = np.full(self.count, -1)
-                row[self.sample[self.count:]] = np.arange(self.count, self.power.shape[0])
-                there = row.take(found) >= 0
-                power[parts.group[m].take(found[there]), :, row.take(found[there])] += shine[:, there].T
-            else:
-                power[parts.group[m].take(found), :, found] += (part * factor.take(found, axis=1)).T
+            group = parts.group[m].take(found)
+            power[group, :, found] += diffuse[m].take(found, axis=1).T
+            if glossy is not None:
+                row = self.row_of[m].take(found)
+                there = row >= 0
+                power[group[there], :, row[there]] += glossy[m].take(found[there], axis=1).T
         return power.reshape(S * C, -1)
 
     def mix(self, gathering, parts, offset):
         """The rows as a walk's sources of ids from ``offset`` on, each a grouping.Mix of its
-        shadow and cosine parts (a glossy row: its share of the shadow part alone)."""
-        factor = (gathering.reflectivity * gathering.area_per_sample).take(self.patch, axis=1)  # (3,K)
-        if self.sample is None:
-            return parts.mix(factor, offset)
-        keep = self.sample[self.count:]
-        shine = parts.value[0] * (gathering.glossy.share.T * gathering.area_per_sample).take(self.patch, axis=1)
-        power = parts.value * factor
-        power[0] = np.maximum(power[0] - shine, 0.0)
-        lobe = np.zeros((2, 3, keep.size))
-        lobe[0] = shine.take(keep, axis=1)
-        group = np.maximum(np.hstack([parts.group, parts.group.take(keep, axis=1)]), 0)
-        group[1, self.count:] = 0
-        return Mix(offset, group, np.ascontiguousarray(np.concatenate([power, lobe], axis=2).transpose(0, 2, 1)))
+        shadow and cosine parts (a glossy row: its share of its part alone)."""
+        diffuse, glossy = self._part_power(gathering, parts)
+        group = np.maximum(parts.group, 0)
+        if glossy is None:
+            return Mix(offset, group, np.ascontiguousarray(diffuse.transpose(0, 2, 1)))
+        G = self.power.shape[0] - self.count
+        lobe_group, lobe = np.zeros((2, G), dtype=group.dtype), np.zeros((2, 3, G))
+        for m in range(2):
+            at = np.flatnonzero(self.row_of[m] >= 0)
+            lobe_group[0, self.row_of[m, at] - self.count] = group[m, at]
+            lobe[0][:, self.row_of[m, at] - self.count] = glossy[m][:, at]
+        return Mix(offset, np.hstack([group, lobe_group]),
+                   np.ascontiguousarray(np.concatenate([diffuse, lobe], axis=2).transpose(0, 2, 1)))
 
 
 def reflected_sources(tables, gathering, emission, samples, groups=None, rng=None):

@@ -122,3 +122,35 @@ def test_a_sunlit_floors_glossy_light_lands_where_its_mirror_image_falls(method,
                   exit_point="hit", method=method, **kwargs)
     z_plain = (plain.irradiance[:, 0] - exact) / error
     assert np.abs(z_plain[band]).min() > 10
+
+
+@pytest.mark.parametrize("method", ["two_way", "walk"])
+def test_a_mirror_floor_shows_the_wall_the_sky_it_reflects(method):
+    """The same floor and wall under a sky bright only above and behind the floor (radiance
+    W / pi in the directions x < 0, z > 0; black elsewhere), found by the gathering's cosine rays
+    alone. Each patch sees half of its cosine-weighted hemisphere bright and nothing of the
+    other surface there: H0 = W / 2. The mirror floor (share 0.4) shows the wall the bright sky
+    wherever the wall sees the floor: 0.4 W times its form factor to the floor (the floor
+    reflecting evenly would give it half of that). Against (I - F R) X = 0.4 W F_wall,floor +
+    F (R - g) H0: the 128 patches within 4.5 batch standard errors (mean squared z below 2);
+    the floor reflecting evenly leaves the wall's mean more than 10 of its standard errors off."""
+    from addon.core.lights import WorldLight
+
+    scene, F, R, g, origin = _floor_and_wall(0.4)
+    W = 0.7
+    sky = np.zeros((16, 32, 3))  # equirectangular: rows from +z down, columns of x < 0 the outer quarters
+    sky[:8, :8] = sky[:8, 24:] = W
+    scene = scene.with_materials(scene.reflectivity, scene.emission, lights=[WorldLight(image=sky)])
+    wall = origin[:, 0] > 1.2
+    H0 = np.full(R.size, 0.5 * W)
+    glossy = wall * g.max() * W * F[:, ~wall].sum(axis=1)
+    exact = H0 + np.linalg.solve(np.eye(R.size) - F * R[None, :], glossy + F @ ((R - g) * H0))
+    kwargs = dict(direct_light="gathered") if method == "walk" else {}
+    result = solve(scene, paths=400_000, seed=4, exit_point="hit", method=method, **kwargs)
+    error = np.sqrt(result.irradiance_variance[:, 0])
+    z = (result.irradiance[:, 0] - exact) / error
+    assert np.abs(z).max() < 4.5 and (z ** 2).mean() < 2.0
+    plain = solve(scene.with_materials(scene.reflectivity, scene.emission, glossy=None), paths=400_000, seed=4,
+                  exit_point="hit", method=method, **kwargs)
+    mean_error = np.sqrt((error[wall] ** 2).sum()) / wall.sum()  # the wall's mean's standard error
+    assert abs((plain.irradiance[wall, 0] - exact[wall]).mean()) > 10 * mean_error
