@@ -8,12 +8,9 @@ Sobol' points with a random digital shift of its own), each looking at one sourc
 (none for a light that casts no shadow: its light passes through objects, as Cycles draws it),
 and along one cosine-distributed ray (an emitting patch it meets, or the sky; none where the
 only sources are lamps, which no ray meets, and with a chance where emitters are small,
-``cosine_share``): the two strategies weighted by the power heuristic (``_emitter_weight``).
-(Rays shot from the emitting patches, a third strategy whose hits were samples of the patches
-they met, once paid in the figure 1 cube; since a patch's samples are stratified the noise of
-their landing counts made the direct light's variance per ray 1.8-5x higher per patch, 3-14x
-in RMS over the mean, in every scene measured (benchmarks/direct_strategies.py), and they are
-gone.) The walk then shoots only what the direct light reflects: patch j is
+``cosine_share``): the two strategies weighted by the power heuristic (``_emitter_weight``;
+rays shot from the emitting patches, a third, lost to these in every scene measured:
+benchmarks/direct_strategies.py). The walk then shoots only what the direct light reflects: patch j is
 a source of emittance E'_j = R_j H_j, and the walk adds the light of every later bounce
 (``direct_light="gathered"`` in :func:`.solver.solve`). Leaving from hit points (the
 continuous walk), the reflected light leaves from where it arrived: each sample is a point
@@ -136,8 +133,8 @@ class Gathering:
         # (escaped, blocked) of the light found on no front: what the solve measures (fate_shares).
         self.fate_shares = tuple(fate_shares)
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
-        # The glossy share of each patch's reflection (glossy.GlossyLobe) or None: where it is, each
-        # sample keeps its two rays' parts and directions (the lobe's light and where it came from).
+        # The glossy share of each patch's reflection (glossy.GlossyLobe) or None: where it is,
+        # each sample keeps its rays' parts and directions.
         self.glossy = getattr(scene, "glossy", None)
 
     def choose(self, patch, u):
@@ -176,17 +173,15 @@ def gather_direct(tables, gathering, rng, grouped=False):
     the estimate stays unbiased, and chunks and patches independent, so batch means hold).
     ``grouped`` (per-source results): each sample's estimate is also kept as its shadow ray's
     and its cosine ray's parts, each of one source group (grouping.SampleParts), a fourth item.
-    Where the scene has a glossy lobe (``gathering.glossy``) the samples hold a fourth item: each
-    estimate's shadow and cosine ray's parts (2,3,n) and the unit directions they looked in
-    (2,3,n float32)."""
+    With a glossy lobe (``gathering.glossy``) the samples hold a fourth item: the two rays'
+    parts (2,3,n) and unit directions (2,3,n float32)."""
     P = tables.patch_count
     patch, scale = gathering.draw(rng)
     x = np.empty((3, patch.size), dtype=np.float32)  # unit space (ReflectedPoints keeps them)
     value = np.zeros((3, patch.size))
     parts = SampleParts(tables, patch) if grouped else None
-    lobe = None
-    if gathering.glossy is not None:  # (each technique's part and direction: (2,3,n) each)
-        lobe = (parts.value if grouped else np.zeros((2, 3, patch.size)), np.zeros((2, 3, patch.size), dtype=np.float32))
+    lobe = None if gathering.glossy is None else (  # (each technique's part and direction: (2,3,n) each)
+        parts.value if grouped else np.zeros((2, 3, patch.size)), np.zeros((2, 3, patch.size), dtype=np.float32))
     rays = 0
     for rows in _blocks(patch, SAMPLE_BLOCK):  # (a large chunk's memory stays that of a block)
         rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng,
@@ -233,8 +228,7 @@ def _gather_block(tables, gathering, patch, x32, value, rng, parts=None, lobe=No
         rays += _cosine_rays(tables, gathering, patch, x, normal, u, cosine, groups=None if parts is None else parts[1][1],
                              directions=directions[1])
     if parts is not None or lobe is not None:
-        value += shadow
-        value += cosine
+        value += shadow + cosine
     return rays
 
 
