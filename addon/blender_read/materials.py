@@ -273,8 +273,8 @@ def _material_inputs(material, blur):
 
 
 #: The tail shared by Principled notes; notes that differ only in the material merge (``selection.merged_notes``).
-_LAYERS_COUNTED = ("reflection counted at its hemispherical albedo (a lamp's, sun's or emitter's light sent along its "
-                   "lobe where it first lands, with the hit exit; the rest as diffuse light)")
+_LAYERS_COUNTED = ("reflection counted at its hemispherical albedo (the direct light's sent along its lobe where it "
+                   "first lands, with the hit exit; the rest as diffuse light)")
 
 
 def _principled_note(node, p, what):

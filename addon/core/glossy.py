@@ -5,18 +5,19 @@ light it receives (``core.principled``: the ``offset`` of reflectivity = scale x
 for a dielectric) about the mirror direction, not as a Lambertian surface does. Radiosity keeps
 one number per patch and spreads every reflection evenly; for the light after a bounce, which
 arrives from everywhere, that is the mean of the lobe over its directions. The direct light of a
-lamp, a sun or an emitter arrives from one direction, and its glossy share leaves towards one
+lamp, a sun, a window's sky or an emitter arrives from a few directions, and its glossy share leaves towards one
 side: a sunlit floor's specular light goes on towards the wall opposite the window.
 
-Where the gathering knows that direction (each sample's shadow ray, ``first_shot``), the share
-``glossy`` (P,3) of what the sample found leaves along the GGX lobe about the mirror of the
-light's direction (``reflect``), from the sample's point; the rest stays diffuse. The amount is
-the material's hemispherical mean (as everywhere else, so the accounts and the reflectivity are
-those of the diffuse solve); only its direction is the lobe's: the single-scattering GGX lobe
-times the cosine, as Cycles' multiple-scattering GGX scales it (visible normals seen from the
-light, Dupuy and Benyoub's spherical caps; the direction mirrored about one kept with the chance
-G2/G1 of its masking, none below the surface). Not carried along its lobe: the light after the first bounce, a sky's and a
-cosine ray's light (spread evenly, as before), and the paper's shot walk.
+Where the gathering knows that direction (each sample's shadow ray to a source and its cosine
+ray to an emitter or the sky, ``first_shot``), the share ``glossy`` (P,3) of what each ray found
+leaves along the GGX lobe about the mirror of the light's direction (``reflect``), from the
+sample's point; the rest stays diffuse. The amount is the material's hemispherical mean (as
+everywhere else, so the accounts and the reflectivity are those of the diffuse solve); only its
+direction is the lobe's: the single-scattering GGX lobe times the cosine, as Cycles'
+multiple-scattering GGX scales it (visible normals seen from the light, Dupuy and Benyoub's
+spherical caps; the direction mirrored about one kept with the chance G2/G1 of its masking, none
+below the surface). Not carried along its lobe: the light after the first bounce (spread evenly,
+as before), the random exit and the paper's shot walk.
 """
 from __future__ import annotations
 
