@@ -243,11 +243,6 @@ class SampleParts:
         H /= samples
         return H
 
-    def mix(self, factor, offset):
-        """The samples as a walk's sources of ids from ``offset`` on, each a Mix of its two
-        parts times ``factor`` (3,n)."""
-        return Mix(offset, np.maximum(self.group, 0), np.ascontiguousarray((self.value * factor).transpose(0, 2, 1)))
-
 
 def world_group(scene, groups):
     """The group of the scene's world light (-1: none); ValueError where worlds are in several
