@@ -52,8 +52,9 @@ def measure(name, seeds, **overrides):
 def section(name, names, pixels, ratios, errors):
     mean = ratios.mean(axis=0)
     distance = np.abs(mean - 1.0)
-    lines = [f"## {name}", "", f"{len(ratios)} seeds: the preview's image error {100 * errors[:, 0].mean():.2f}% mean absolute, "
-             f"{100 * errors[:, 1].mean():.2f}% RMS (the reference's noise out), {errors[:, 2].mean():.1f} s a run. Objects' "
+    mae, rms, seconds = errors.mean(axis=0)
+    lines = [f"## {name}", "", f"{len(ratios)} seeds: the preview's image error {100 * mae:.2f}% mean absolute, "
+             f"{100 * rms:.2f}% RMS (the reference's noise out), {seconds:.1f} s a run. Objects' "
              f"mean luminance over the reference's, mean over the seeds: pixel-weighted distance from 1 "
              f"{(distance * pixels).sum() / pixels.sum():.3f}, largest {distance.max():.3f}, "
              f"{int((distance > 0.03).sum())} of {len(names)} beyond 3%.", "",

@@ -49,10 +49,12 @@ def reflect_first(tables, gathering, state, samples, paths, rng, parts=None):
     glossy = points.glossy_rows
     if glossy.size:  # (the lobe's light leaves no patch evenly)
         lobe_patch = patch.take(points.samples_of(glossy))
-        state.reflected -= _bincount(lobe_patch, np.ones(glossy.size, dtype=bool), rows_power[:, K:], P) / gathering.patch_area
+        lobe_power = np.stack([np.bincount(lobe_patch, weights=w, minlength=P) for w in rows_power[:, K:]])
+        state.reflected -= lobe_power / gathering.patch_area
     correction = np.zeros((rows_power.shape[0], P))
     total_power = max(float(points.power[:, :C].sum()) / C, 1e-300)
-    _shoot_left(tables, state, points, None if parts is None else rows_power[:, :K], power[:, :K], spread, correction, paths, total_power, rng)
+    _shoot_left(tables, state, points, None if parts is None else rows_power[:, :K], power[:, :K], spread, correction,
+                paths, total_power, rng)
     if glossy.size:
         _shoot_glossy(tables, state, points, rows_power[:, K:], correction, paths, total_power, rng)
     state.correction = correction / gathering.patch_area
@@ -72,12 +74,10 @@ def _shoot_left(tables, state, points, rows_power, power, spread, correction, pa
     left = less_mean(power)  # c_k
     rows_left = left if rows_power is None else less_mean(rows_power)
     size = np.abs(left).mean(axis=0)  # what a sample's rays are allotted by
-    total = float(size.sum())
-    if total <= 0:
+    allotted = _allot(state, size, paths, total_power, rng)
+    if allotted is None:
         return
-    count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / total_power)))
-    sample = np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
-    state.rays += count
+    total, count, sample = allotted
     ray_patch = patch.take(sample)
     rank, shift = _paired_ranks(ray_patch, (left.sum(axis=0) < 0).take(sample), P, rng)
     table = SOBOL.rows(int(rank.max(initial=0)) + 1)[:2]
@@ -95,17 +95,27 @@ def _shoot_glossy(tables, state, points, rows_power, correction, paths, total_po
     rays allotted in proportion to it (as _shoot_left's); irradiance times area into ``correction``."""
     C = tables.channels
     size = rows_power.reshape(-1, C, rows_power.shape[1]).sum(axis=0).mean(axis=0)
-    total = float(size.sum())
-    if total <= 0:
+    allotted = _allot(state, size, paths, total_power, rng)
+    if allotted is None:
         return
-    count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / total_power)))
-    row = np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
-    state.rays += count
+    total, count, row = allotted
     for start in range(0, count, RAY_BLOCK):
         g = row[start:start + RAY_BLOCK]
         u = np.zeros((4, g.size), dtype=np.float32)  # (the lobe draws its own directions: ReflectedPoints)
         carried = rows_power.take(g, axis=1) * (total / count / size.take(g))
         _cast_carried(tables, state, points, g + points.count, u, carried, correction)
+
+
+def _allot(state, size, paths, total_power, rng):
+    """(total, count, row of each ray) of rays allotted to rows in proportion to ``size`` (n,),
+    FIRST_REFLECTION_RAYS a path for the share ``total / total_power`` (counted in ``state.rays``);
+    None where there is nothing to shoot."""
+    total = float(size.sum())
+    if total <= 0:
+        return None
+    count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / total_power)))
+    state.rays += count
+    return total, count, np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
 
 
 def _cast_carried(tables, state, points, rows, u, carried, correction):

@@ -135,7 +135,7 @@ class Gathering:
         self.total_power = scene.total_power  # Phi_T: the solve's relative weights are times Phi_T / N
         # The glossy share of each patch's reflection (glossy.GlossyLobe) or None: where it is,
         # each sample keeps its rays' parts and directions.
-        self.glossy = getattr(scene, "glossy", None)
+        self.glossy = scene.glossy
 
     def choose(self, patch, u):
         """(n,) the source a shadow ray from each sample of ``patch`` looks at (near_choice)."""

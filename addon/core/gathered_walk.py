@@ -190,8 +190,8 @@ def gathered_chunk(tables, gathering, paths, rng, walk):
         direct_groups = incident_groups if tables.direct_apart else None
         grouped = (gathering.reflectivity * H_groups, gathered[3])
     if walk_power > 0:
-        tally = walk(reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples, grouped or None, rng),
-                     paths, rng)
+        sources = reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples, grouped or None, rng)
+        tally = walk(sources, paths, rng)
         w = walk_power / gathering.total_power
         incident = incident + tally.incident * w
         walked, walk_absorbed, walk_escaped = tally.emitted * w, tally.absorbed * w, tally.escaped * w

@@ -51,7 +51,8 @@ class GlossyLobe:
         alpha = np.asarray(alpha, dtype=np.float64)
         P = reflectivity.shape[0]
         if share.shape != (P, 3) or alpha.shape != (P,):
-            raise ValueError(f"glossy share must be (P, 3) and alpha (P,) with P = {P}; got {share.shape} and {alpha.shape}")
+            raise ValueError(f"glossy share must be (P, 3) and alpha (P,) with P = {P}; "
+                             f"got {share.shape} and {alpha.shape}")
         if not (np.isfinite(share).all() and np.isfinite(alpha).all()) or (share < 0).any():
             raise ValueError("glossy share and alpha must be finite and the share >= 0")
         if ((alpha <= 0) | (alpha > 1)).any():

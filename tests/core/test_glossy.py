@@ -64,9 +64,9 @@ def test_the_lobe_is_ggxs_single_scattering_lobe_times_the_cosine(alpha, degrees
 
 
 def _floor_and_wall(share):
-    """A unit floor (8 x 8 patches, R 0.5 of which ``share`` glossy, alpha 1e-6: a mirror, GGX's tails and all) and a grey wall
-    (R 0.3) 0.5 beyond it facing it (x = 1.5, 8 x 8 patches of 0.25), lit by two suns travelling
-    along (1, 0, -1) / sqrt 2 of irradiance 0.6 and 0.4. (scene, F, R (P,), g (P,), origin)."""
+    """A unit floor (8 x 8 patches, R 0.5 of which ``share`` glossy, alpha 1e-6: a mirror, GGX's
+    tails and all) and a grey wall (R 0.3) 0.5 beyond it facing it (x = 1.5, 8 x 8 patches of
+    0.25), lit by two suns travelling along (1, 0, -1) / sqrt 2 of irradiance 0.6 and 0.4. (scene, F, R (P,), g (P,), origin)."""
     rows = []
     for i in range(8):
         for j in range(8):
