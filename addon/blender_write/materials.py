@@ -8,7 +8,10 @@ node groups), and shows
     (base colour * scale + offset) * light + emission colour * strength
 
 through an Emission shader, ``light`` being a colour attribute of the result mesh (the smooth
-light arriving, H in B = E + rho H). The texture stays at its own resolution whatever the patch
+light arriving, H in B = E + rho H). With live lamps the copy keeps its own shader too, which
+the renderer lights and whose glossy layers it draws mirroring the other results; the emission
+then shows the diffuse base alone, weighed by the view's angle as Cycles weighs it (``ByView``).
+The texture stays at its own resolution whatever the patch
 size; the patch's reflected radiosity is the area mean of (base colour x light) over it, up to
 how much the texture and the light vary together inside it. The user's material is never
 changed: a copy is made and cut down.
@@ -17,8 +20,9 @@ changed: a copy is made and cut down.
 from __future__ import annotations
 
 import bpy
+import numpy as np
 
-from ..blender_read.materials import _shader_node, surface_terms
+from ..blender_read.materials import _shader_node, diffuse_terms, surface_terms
 
 TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
 LIVE_PROPERTY = "radiosity_live_lamps"  # marks copies whose own shader the lamps light (textured_material)
@@ -60,7 +64,8 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     times the colour attribute ``light_attribute``, plus its emission, or, where the panel's
     flat switch is on, the colour attribute ``flat_attribute``; ``can_copy(source)`` must
     hold. The copy is cut down to what drives that, and marked as ours. ``live``: its own
-    shader is kept too, for the lamps to light (``_lit_by_lamps``)."""
+    shader is kept too, for the lamps to light (``_lit_by_lamps``); ``terms`` may then be
+    ``ByView`` (the diffuse base's weight along each pixel's view, offset 0)."""
     material = source.copy()
     material.name = source.name + TEXTURED_SUFFIX
     for key in list(material.keys()):  # (a copy carries the source's custom properties)
@@ -72,15 +77,18 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     shader = tree.nodes[_shader_node(source).name]
     nodes, links = tree.nodes, tree.links
     x, y = shader.location.x + 300, shader.location.y
-    scale, offset = terms
 
     surface = nodes.new("ShaderNodeVectorMath")  # base colour * scale + offset
     surface.operation = "MULTIPLY_ADD"
     surface.label = "Reflectivity"
     surface.location = (x, y)
     _feed(links, shader, _BASE.get(shader.bl_idname), surface.inputs[0], default=(0.0, 0.0, 0.0))
-    surface.inputs[1].default_value = tuple(float(v) for v in scale)
-    surface.inputs[2].default_value = tuple(float(v) for v in offset)
+    if isinstance(terms, ByView):
+        _scale_by_view(tree, terms, surface.inputs[1], (x - 500, y + 350))
+        surface.inputs[2].default_value = (0.0, 0.0, 0.0)
+    else:
+        surface.inputs[1].default_value = tuple(float(v) for v in terms[0])
+        surface.inputs[2].default_value = tuple(float(v) for v in terms[1])
 
     light = nodes.new("ShaderNodeAttribute")
     light.attribute_type = "GEOMETRY"
@@ -107,6 +115,36 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     _keep_only_upstream(tree, output)
     output.is_active_output = True
     return material
+
+
+class ByView(tuple):
+    """(mu (M,), scale (M,3)): a base colour's weight along views of cosine ``mu``, offset 0
+    (``blender_read.materials.diffuse_terms``)."""
+
+
+def _scale_by_view(tree, terms, target, location):
+    """``target`` fed ``terms``' scale at each pixel's view: RGB Curves of 1 - mu, driven by the
+    Layer Weight's Facing (1 - |cos| of the view at the shading normal)."""
+    mu, scale = terms
+    facing = tree.nodes.new("ShaderNodeLayerWeight")
+    facing.inputs["Blend"].default_value = 0.5  # (Facing is then 1 - |cos| itself)
+    facing.location = location
+    curve = tree.nodes.new("ShaderNodeRGBCurve")
+    curve.label = "Diffuse weight by view"
+    curve.location = (location[0] + 200, location[1])
+    curve.mapping.use_clip = False
+    curve.mapping.extend = "HORIZONTAL"
+    order = np.argsort(1.0 - mu)
+    for c in range(3):  # curves R, G, B (the 4th, applied to all, stays the identity)
+        points = curve.mapping.curves[c].points
+        while len(points) < len(order):
+            points.new(0.0, 0.0)
+        for point, i in zip(points, order):
+            point.location = (float(1.0 - mu[i]), float(scale[i, c]))
+            point.handle_type = "AUTO_CLAMPED"
+    curve.mapping.update()
+    tree.links.new(facing.outputs["Facing"], curve.inputs["Color"])
+    tree.links.new(curve.outputs["Color"], target)
 
 
 def _plus_emission(material, shader, total, live, lit_live, location):
@@ -173,12 +211,10 @@ def _camera_sees(tree, shader, surface, location):
     draws the same picture; shadow rays still meet an opaque surface)."""
     nodes, links = tree.nodes, tree.links
     x, y = location
-    path = nodes.new("ShaderNodeLightPath")
-    path.location = (x, y - 250)
     seen = nodes.new("ShaderNodeMixShader")
-    seen.label = "Camera only (but its own emission)"
+    seen.label = "Camera and glossy rays only (but its own emission)"
     seen.location = (x + 200, y)
-    links.new(path.outputs["Is Camera Ray"], seen.inputs["Fac"])
+    links.new(_camera_or_glossy(tree, (x, y - 250)), seen.inputs["Fac"])
     emitted = _emitted(tree, shader, (x, y - 450))
     if emitted is not None:
         light = nodes.new("ShaderNodeEmission")
@@ -191,11 +227,22 @@ def _camera_sees(tree, shader, surface, location):
 
 
 def camera_only(tree, emission, location):
-    """Makes the Emission shader ``emission`` seen by the camera alone (a Light Path node): with
-    live lamps the solved light must light nothing, the renderer draws the direct light."""
+    """Makes the Emission shader ``emission`` seen by camera and glossy rays alone: with live
+    lamps the solved light must light nothing (the renderer draws the direct light), but a
+    specular layer shows it mirrored (the preview's one glossy bounce)."""
+    tree.links.new(_camera_or_glossy(tree, location), emission.inputs["Strength"])
+
+
+def _camera_or_glossy(tree, location):
+    """A socket: 1 on camera and glossy rays, 0 on the others (a Light Path node)."""
     path = tree.nodes.new("ShaderNodeLightPath")
     path.location = location
-    tree.links.new(path.outputs["Is Camera Ray"], emission.inputs["Strength"])
+    either = tree.nodes.new("ShaderNodeMath")
+    either.operation = "MAXIMUM"
+    either.location = (location[0] + 150, location[1])
+    tree.links.new(path.outputs["Is Camera Ray"], either.inputs[0])
+    tree.links.new(path.outputs["Is Glossy Ray"], either.inputs[1])
+    return either.outputs[0]
 
 
 def _emits(shader):
@@ -289,9 +336,10 @@ def result_materials(slot_names, light_attribute, flat_attribute, fallback, note
             ok, note = can_copy(source) if source is not None and not is_textured_material(source) else (False, None)
             if note:
                 notes.append(note)
-            # the surface as the camera sees it (a Principled BSDF's specular layer beside its base colour)
-            made[name] = (textured_material(source, light_attribute, flat_attribute,
-                                            surface_terms(source), live) if ok else None)
+            # the surface as the camera sees it (a Principled BSDF's specular layer beside its base
+            # colour; live, the renderer draws that layer mirroring the others)
+            terms = surface_terms(source) if not live else ByView(diffuse_terms(source) or ()) or IDENTITY
+            made[name] = textured_material(source, light_attribute, flat_attribute, terms, live) if ok else None
         out.append(made[name] or fallback)
     return out
 

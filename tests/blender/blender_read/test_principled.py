@@ -143,9 +143,10 @@ def test_one_note_per_material_naming_only_what_it_uses(blender):
     principled_notes = [n for n in notes if "Principled" in n]
     assert principled_notes == [
         f"materials 'Plaster', 'Wood': Principled specular {LAYERS}; not modelled: view-dependent highlights "
-        "(shown as their average over view directions)",
+        "(shown as their average over view directions; with Live lamps, drawn by the renderer)",
         f"material 'Glass': Principled specular {LAYERS}; not modelled: view-dependent highlights (shown as their "
-        "average over view directions), light through transmission (only its reflection counted)",
+        "average over view directions; with Live lamps, drawn by the renderer), light through transmission (only its "
+        "reflection counted)",
     ]
     assert not any("'Matte'" in n or "'Lamp'" in n for n in notes)
 
