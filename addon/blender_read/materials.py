@@ -255,13 +255,6 @@ def surface_terms(material, blur=0.0):
     return (np.ones(3), np.zeros(3)) if inputs is None else principled.surface_terms(inputs)
 
 
-def diffuse_terms(material):
-    """A Principled BSDF's diffuse base's weight by view, (mu (M,), scale (M,3))
-    (core.principled.diffuse_terms); None for any other material (its base colour is all)."""
-    inputs = _material_inputs(material, 0.0)
-    return None if inputs is None else principled.diffuse_terms(inputs)
-
-
 def transport_terms(material):
     """``surface_terms`` of the light passed on from surface to surface (under Filter Glossy): solved;
     and the glossy lobe's (share, alpha) (core.principled.glossy_terms; None but for a Principled BSDF)."""

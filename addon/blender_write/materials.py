@@ -9,9 +9,9 @@ node groups), and shows
 
 through an Emission shader, ``light`` being a colour attribute of the result mesh (the smooth
 light arriving, H in B = E + rho H). With live lamps the copy keeps its own shader too, which
-the renderer lights and whose glossy layers it draws mirroring the other results; the emission
-then shows the diffuse base alone, weighed by the view's angle as Cycles weighs it (``ByView``).
-The texture stays at its own resolution whatever the patch
+the renderer lights; in Cycles the camera sees that shader, whose one bounce gathers the light
+of the results it meets (their shaders lit by the lamps plus their solved light after a bounce),
+and EEVEE sees the shader plus the solved light. The texture stays at its own resolution whatever the patch
 size; the patch's reflected radiosity is the area mean of (base colour x light) over it, up to
 how much the texture and the light vary together inside it. The user's material is never
 changed: a copy is made and cut down.
@@ -20,9 +20,8 @@ changed: a copy is made and cut down.
 from __future__ import annotations
 
 import bpy
-import numpy as np
 
-from ..blender_read.materials import _shader_node, diffuse_terms, surface_terms
+from ..blender_read.materials import _shader_node, surface_terms
 
 TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
 LIVE_PROPERTY = "radiosity_live_lamps"  # marks copies whose own shader the lamps light (textured_material)
@@ -64,8 +63,7 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     times the colour attribute ``light_attribute``, plus its emission, or, where the panel's
     flat switch is on, the colour attribute ``flat_attribute``; ``can_copy(source)`` must
     hold. The copy is cut down to what drives that, and marked as ours. ``live``: its own
-    shader is kept too, for the lamps to light (``_lit_by_lamps``); ``terms`` may then be
-    ``ByView`` (the diffuse base's weight along each pixel's view, offset 0)."""
+    shader is kept too, for the lamps to light (``_lit_by_lamps``)."""
     material = source.copy()
     material.name = source.name + TEXTURED_SUFFIX
     for key in list(material.keys()):  # (a copy carries the source's custom properties)
@@ -83,12 +81,8 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     surface.label = "Reflectivity"
     surface.location = (x, y)
     _feed(links, shader, _BASE.get(shader.bl_idname), surface.inputs[0], default=(0.0, 0.0, 0.0))
-    if isinstance(terms, ByView):
-        _scale_by_view(tree, terms, surface.inputs[1], (x - 500, y + 350))
-        surface.inputs[2].default_value = (0.0, 0.0, 0.0)
-    else:
-        surface.inputs[1].default_value = tuple(float(v) for v in terms[0])
-        surface.inputs[2].default_value = tuple(float(v) for v in terms[1])
+    surface.inputs[1].default_value = tuple(float(v) for v in terms[0])
+    surface.inputs[2].default_value = tuple(float(v) for v in terms[1])
 
     light = nodes.new("ShaderNodeAttribute")
     light.attribute_type = "GEOMETRY"
@@ -107,44 +101,16 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     output = nodes.new("ShaderNodeOutputMaterial")
     output.location = (x + 1200, y)
     output.target = "ALL"
-    surface_shader = emission.outputs["Emission"]
+    surface_shader, outputs = emission.outputs["Emission"], [output]
     if lit_live:
+        output.target = "CYCLES"
         surface_shader = _lit_by_lamps(tree, shader, emission, (x + 800, y))
+        outputs.append(_eevee_output(tree, shader, emission, (x + 1200, y - 400)))
         material[LIVE_PROPERTY] = True
     links.new(surface_shader, output.inputs["Surface"])
-    _keep_only_upstream(tree, output)
+    _keep_only_upstream(tree, outputs)
     output.is_active_output = True
     return material
-
-
-class ByView(tuple):
-    """(mu (M,), scale (M,3)): a base colour's weight along views of cosine ``mu``, offset 0
-    (``blender_read.materials.diffuse_terms``)."""
-
-
-def _scale_by_view(tree, terms, target, location):
-    """``target`` fed ``terms``' scale at each pixel's view: RGB Curves of 1 - mu, driven by the
-    Layer Weight's Facing (1 - |cos| of the view at the shading normal)."""
-    mu, scale = terms
-    facing = tree.nodes.new("ShaderNodeLayerWeight")
-    facing.inputs["Blend"].default_value = 0.5  # (Facing is then 1 - |cos| itself)
-    facing.location = location
-    curve = tree.nodes.new("ShaderNodeRGBCurve")
-    curve.label = "Diffuse weight by view"
-    curve.location = (location[0] + 200, location[1])
-    curve.mapping.use_clip = False
-    curve.mapping.extend = "HORIZONTAL"
-    order = np.argsort(1.0 - mu)
-    for c in range(3):  # curves R, G, B (the 4th, applied to all, stays the identity)
-        points = curve.mapping.curves[c].points
-        while len(points) < len(order):
-            points.new(0.0, 0.0)
-        for point, i in zip(points, order):
-            point.location = (float(1.0 - mu[i]), float(scale[i, c]))
-            point.handle_type = "AUTO_CLAMPED"
-    curve.mapping.update()
-    tree.links.new(facing.outputs["Facing"], curve.inputs["Color"])
-    tree.links.new(curve.outputs["Color"], target)
 
 
 def _plus_emission(material, shader, total, live, lit_live, location):
@@ -181,40 +147,80 @@ def follow_emission(copy, source):
 
 
 def _lit_by_lamps(tree, shader, emission, location):
-    """The surface shader of a live result: the source's own shader, lit by the scene's lamps
-    and emitting materials as the renderer draws them, its own emission lighting the others,
-    added to ``emission`` seen by the camera alone (the solved light, which must light nothing);
-    where the flat switch is on, the flat colours alone."""
+    """The surface shader of a live result in Cycles: the source's own shader, lit by the scene's
+    lamps and emitting materials as the renderer draws them, its own emission lighting the
+    others. The camera sees that shader, whose bounce gathers the light of the surfaces its rays
+    meet; a ray leaving a camera hit sees the shader plus ``emission``, the solved light after a
+    bounce (what the lamps' light on it does not hold); a deeper ray sees its own emission alone,
+    so that no light is counted twice at any number of bounces (``_seen_by``). Where the flat
+    switch is on, the camera sees the flat colours alone."""
     nodes, links = tree.nodes, tree.links
     x, y = location
-    camera_only(tree, emission, (x - 200, y + 300))
-    added = nodes.new("ShaderNodeAddShader")
-    added.location = (x, y)
-    links.new(emission.outputs["Emission"], added.inputs[0])
-    links.new(shader.outputs[0], added.inputs[1])
     switch = nodes.new("ShaderNodeAttribute")
     switch.attribute_type = "VIEW_LAYER"
     switch.attribute_name = FLAT_SWITCH
     switch.location = (x, y + 250)
+    either = nodes.new("ShaderNodeMath")
+    either.operation = "MAXIMUM"
+    either.location = (x - 200, y + 300)
+    links.new(_ray_depth(tree, "COMPARE", (x - 400, y + 300)), either.inputs[0])  # (a ray leaving a camera hit)
+    links.new(switch.outputs["Fac"], either.inputs[1])
+    links.new(either.outputs[0], emission.inputs["Strength"])
+    added = nodes.new("ShaderNodeAddShader")
+    added.location = (x, y)
+    links.new(emission.outputs["Emission"], added.inputs[0])
+    links.new(shader.outputs[0], added.inputs[1])
     mix = nodes.new("ShaderNodeMixShader")
     mix.location = (x + 200, y)
     links.new(switch.outputs["Fac"], mix.inputs["Fac"])
     links.new(added.outputs[0], mix.inputs[1])
     links.new(emission.outputs["Emission"], mix.inputs[2])
-    return _camera_sees(tree, shader, mix.outputs[0], (x + 200, y - 250))
+    return _seen_by(tree, shader, mix.outputs[0], (x + 200, y - 250))
 
 
-def _camera_sees(tree, shader, surface, location):
-    """``surface`` for camera rays; for every other ray nothing but the source's own emission, if
-    it emits (it stays a light): a render with bounces would otherwise light the results again
-    from one another, the light the solve has already put in them (any number of bounces then
-    draws the same picture; shadow rays still meet an opaque surface)."""
+def _eevee_output(tree, shader, emission, location):
+    """A live result's EEVEE output (its Light Path knows no ray depth): the source's own shader
+    lit by the lamps plus the solved light seen by the camera, or the flat colours alone."""
+    nodes, links = tree.nodes, tree.links
+    x, y = location
+    shown = nodes.new("ShaderNodeEmission")
+    shown.location = (x - 600, y)
+    links.new(emission.inputs["Color"].links[0].from_socket, shown.inputs["Color"])
+    path = nodes.new("ShaderNodeLightPath")
+    path.location = (x - 800, y)
+    links.new(path.outputs["Is Camera Ray"], shown.inputs["Strength"])
+    added = nodes.new("ShaderNodeAddShader")
+    added.location = (x - 400, y)
+    links.new(shown.outputs["Emission"], added.inputs[0])
+    links.new(shader.outputs[0], added.inputs[1])
+    switch = nodes.new("ShaderNodeAttribute")
+    switch.attribute_type = "VIEW_LAYER"
+    switch.attribute_name = FLAT_SWITCH
+    switch.location = (x - 400, y + 250)
+    mix = nodes.new("ShaderNodeMixShader")
+    mix.location = (x - 200, y)
+    links.new(switch.outputs["Fac"], mix.inputs["Fac"])
+    links.new(added.outputs[0], mix.inputs[1])
+    links.new(shown.outputs["Emission"], mix.inputs[2])
+    output = nodes.new("ShaderNodeOutputMaterial")
+    output.location = location
+    output.target = "EEVEE"
+    links.new(mix.outputs[0], output.inputs["Surface"])
+    return output
+
+
+def _seen_by(tree, shader, surface, location):
+    """``surface`` for camera rays and the rays leaving a camera hit; for every deeper ray nothing
+    but the source's own emission, if it emits (it stays a light): a render with more bounces would
+    otherwise light the results again from one another, the light the solve has already put in
+    them (any number of bounces then draws the same picture; shadow rays still meet an opaque
+    surface)."""
     nodes, links = tree.nodes, tree.links
     x, y = location
     seen = nodes.new("ShaderNodeMixShader")
-    seen.label = "Camera and glossy rays only (but its own emission)"
+    seen.label = "Camera rays and the next (deeper: its own emission)"
     seen.location = (x + 200, y)
-    links.new(_camera_or_glossy(tree, (x, y - 250)), seen.inputs["Fac"])
+    links.new(_ray_depth(tree, "LESS_THAN", (x, y - 250)), seen.inputs["Fac"])
     emitted = _emitted(tree, shader, (x, y - 450))
     if emitted is not None:
         light = nodes.new("ShaderNodeEmission")
@@ -227,22 +233,23 @@ def _camera_sees(tree, shader, surface, location):
 
 
 def camera_only(tree, emission, location):
-    """Makes the Emission shader ``emission`` seen by camera and glossy rays alone: with live
-    lamps the solved light must light nothing (the renderer draws the direct light), but a
-    specular layer shows it mirrored (the preview's one glossy bounce)."""
-    tree.links.new(_camera_or_glossy(tree, location), emission.inputs["Strength"])
+    """Makes the Emission shader ``emission`` (a live run's flat result material: the whole
+    solved light) seen by camera rays and the rays leaving a camera hit alone, as ``_seen_by``."""
+    tree.links.new(_ray_depth(tree, "LESS_THAN", location), emission.inputs["Strength"])
 
 
-def _camera_or_glossy(tree, location):
-    """A socket: 1 on camera and glossy rays, 0 on the others (a Light Path node)."""
+def _ray_depth(tree, operation, location):
+    """A socket from a Light Path node's Ray Depth (0 for a camera ray, 1 for a ray leaving its
+    hit): ``LESS_THAN`` 1 up to depth 1; ``COMPARE`` 1 at depth 1 alone."""
     path = tree.nodes.new("ShaderNodeLightPath")
     path.location = location
-    either = tree.nodes.new("ShaderNodeMath")
-    either.operation = "MAXIMUM"
-    either.location = (location[0] + 150, location[1])
-    tree.links.new(path.outputs["Is Camera Ray"], either.inputs[0])
-    tree.links.new(path.outputs["Is Glossy Ray"], either.inputs[1])
-    return either.outputs[0]
+    test = tree.nodes.new("ShaderNodeMath")
+    test.operation = operation
+    test.location = (location[0] + 150, location[1])
+    tree.links.new(path.outputs["Ray Depth"], test.inputs[0])
+    test.inputs[1].default_value = 1.5 if operation == "LESS_THAN" else 1.0
+    test.inputs[2].default_value = 0.5  # (COMPARE's epsilon)
+    return test.outputs[0]
 
 
 def _emits(shader):
@@ -309,10 +316,10 @@ def _feed(links, shader, socket_name, target, default):
         target.default_value = tuple(float(v) for v in value)
 
 
-def _keep_only_upstream(tree, output):
-    """Remove every node that does not feed ``output`` (the original shaders, other outputs)."""
-    keep = {output.name}
-    stack = [output]
+def _keep_only_upstream(tree, outputs):
+    """Remove every node that does not feed ``outputs`` (the original shaders, other outputs)."""
+    keep = {output.name for output in outputs}
+    stack = list(outputs)
     while stack:
         node = stack.pop()
         for socket in node.inputs:
@@ -336,10 +343,9 @@ def result_materials(slot_names, light_attribute, flat_attribute, fallback, note
             ok, note = can_copy(source) if source is not None and not is_textured_material(source) else (False, None)
             if note:
                 notes.append(note)
-            # the surface as the camera sees it (a Principled BSDF's specular layer beside its base
-            # colour; live, the renderer draws that layer mirroring the others)
-            terms = surface_terms(source) if not live else ByView(diffuse_terms(source) or ()) or IDENTITY
-            made[name] = textured_material(source, light_attribute, flat_attribute, terms, live) if ok else None
+            # the surface as the camera sees it (a Principled BSDF's specular layer beside its base colour)
+            made[name] = (textured_material(source, light_attribute, flat_attribute,
+                                            surface_terms(source), live) if ok else None)
         out.append(made[name] or fallback)
     return out
 

@@ -1,5 +1,5 @@
 """The preview: the result objects' baked colours rendered with Cycles (no bounces: the light
-transport is in the colours; live results, one glossy bounce), at an exposure from the results, with every setting it changed
+transport is in the colours; live results, one bounce through them), at an exposure from the results, with every setting it changed
 put back afterwards (bpy and numpy, imported where used)."""
 
 from __future__ import annotations
@@ -103,7 +103,7 @@ class SceneChanges:
 def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> SceneChanges:
     """Set the scene up to render the result objects' baked colours: Cycles without bounces
     (the light transport is in the colours; live lamps light their materials directly, and one
-    glossy bounce lets their specular layers mirror the others, then denoised), otherwise no denoising, Standard view, the given exposure,
+    bounce gathers the results' light at each camera hit, then denoised), otherwise no denoising, Standard view, the given exposure,
     a black world of its own (live results: the scene's, where it gives light, which the renderer
     draws on them), PNG output, and a camera if the scene has none. Returns the changes, for
     ``restore()``."""
@@ -175,9 +175,9 @@ def _results_seen(scene, changes):
     live = any(material.get(LIVE_PROPERTY) for material in materials)
     if live:
         changes.set(scene.cycles, "use_denoising", True)
-        # one glossy bounce: the specular layers mirror the results' solved light (their diffuse
-        # light is in the colours; camera and glossy rays alone see it, materials.camera_only)
-        for name, value in (("max_bounces", 1), ("glossy_bounces", 1), ("diffuse_bounces", 0),
+        # one bounce: the camera's hits gather the light of the results their rays meet, lit by the
+        # lamps and showing their solved light after a bounce (materials._lit_by_lamps)
+        for name, value in (("max_bounces", 1), ("glossy_bounces", 1), ("diffuse_bounces", 1),
                             ("transmission_bounces", 0), ("volume_bounces", 0)):
             changes.set(scene.cycles, name, value)
     return live

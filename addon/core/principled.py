@@ -354,15 +354,6 @@ def surface_terms(p: PrincipledInputs):
     return scale, offset
 
 
-def diffuse_terms(p: PrincipledInputs):
-    """(mu (M,), scale (M,3)): the diffuse base's weight under the layers above it, seen along a
-    view of cosine ``mu`` (Cycles weighs the layers at the view alone, so the diffuse part seen
-    is ``scale(mu) * base colour * light`` whatever the light's directions): what a renderer that
-    draws the glossy layers itself leaves."""
-    base = np.maximum(np.asarray(p.base, dtype=np.float64), 0.0)
-    return mu_nodes()[0], _layers_out(p, base)[1]
-
-
 def glossy_terms(p: PrincipledInputs):
     """(share (3,), alpha): the part of the hemispherical albedo its glossy layers reflect (the
     specular layer's, the metallic's at ``p.base``, a coat's and transmission's reflection), and

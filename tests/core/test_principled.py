@@ -97,26 +97,6 @@ def test_default_principled_returns_its_specular_light_on_top_of_a_scaled_base()
     assert brown[2] > 2 * 0.02 and brown[0] < 0.3 + offset[0]
 
 
-def test_the_diffuse_base_by_view_is_what_the_layers_leave_along_the_view():
-    """``diffuse_terms``: the diffuse base's weight along a view of cosine mu is 1 - the layering
-    estimate at mu (the same brute-force integrals as above), falls towards grazing views, has the
-    defaults' mean ``surface_terms`` scale, and a metallic fraction takes its share."""
-    p = pr.PrincipledInputs()
-    mu, scale = pr.diffuse_terms(p)
-    np.testing.assert_allclose(mu, pr.mu_nodes()[0])
-    layer = pr.ggx(0.5)
-    fss = 0.04 + 0.96 * np.clip((pr.fresnel_dielectric_fss(1.5) - 0.04) / 0.96, 0, 1)
-    fms = fss * layer.E_avg / (1 - fss * (1 - layer.E_avg))
-    darkening = layer.E + fms * (1 - layer.E)
-    for k in (np.argmin(abs(mu - m)) for m in (0.25, 0.5, 0.9)):  # (the brute force is coarse at grazing views)
-        est = brute_force(0.5, mu[k], 1.5, 0.04, 400, 240)[1]
-        np.testing.assert_allclose(scale[k], 1 - est * darkening[k], atol=1e-3)
-    assert np.all(np.diff(scale[:, 0][np.argsort(mu)]) >= -1e-12) and scale[np.argmin(mu), 0] < 0.8 < 0.95 < scale[np.argmax(mu), 0]
-    np.testing.assert_allclose((pr.mu_nodes()[1][:, None] * scale).sum(axis=0), pr.surface_terms(p)[0], rtol=1e-12)
-    half_metal = pr.diffuse_terms(pr.PrincipledInputs(base=(0.9, 0.6, 0.2), metallic=0.5))[1]
-    np.testing.assert_allclose(half_metal, 0.5 * scale, rtol=1e-12)
-
-
 def test_limits_give_the_plain_diffuse_or_all_the_light():
     for p in (pr.PrincipledInputs(specular_ior_level=0.0), pr.PrincipledInputs(ior=1.0),
               pr.PrincipledInputs(specular_ior_level=0.0, roughness=1.0)):
