@@ -166,6 +166,15 @@ def _lit_by_lamps(tree, shader, emission, location):
     links.new(_ray_depth(tree, "COMPARE", (x - 400, y + 300)), either.inputs[0])  # (a ray leaving a camera hit)
     links.new(switch.outputs["Fac"], either.inputs[1])
     links.new(either.outputs[0], emission.inputs["Strength"])
+    shown = _shader_or_flat(tree, shader, emission, switch, (x, y))
+    return _seen_by(tree, shader, shown, (x + 200, y - 250))
+
+
+def _shader_or_flat(tree, shader, emission, switch, location):
+    """A socket: ``shader`` plus the Emission shader ``emission``, or where the flat switch
+    (``switch``, its attribute node) is on, ``emission`` alone."""
+    nodes, links = tree.nodes, tree.links
+    x, y = location
     added = nodes.new("ShaderNodeAddShader")
     added.location = (x, y)
     links.new(emission.outputs["Emission"], added.inputs[0])
@@ -175,7 +184,7 @@ def _lit_by_lamps(tree, shader, emission, location):
     links.new(switch.outputs["Fac"], mix.inputs["Fac"])
     links.new(added.outputs[0], mix.inputs[1])
     links.new(emission.outputs["Emission"], mix.inputs[2])
-    return _seen_by(tree, shader, mix.outputs[0], (x + 200, y - 250))
+    return mix.outputs[0]
 
 
 def _eevee_output(tree, shader, emission, location):
@@ -189,23 +198,14 @@ def _eevee_output(tree, shader, emission, location):
     path = nodes.new("ShaderNodeLightPath")
     path.location = (x - 800, y)
     links.new(path.outputs["Is Camera Ray"], shown.inputs["Strength"])
-    added = nodes.new("ShaderNodeAddShader")
-    added.location = (x - 400, y)
-    links.new(shown.outputs["Emission"], added.inputs[0])
-    links.new(shader.outputs[0], added.inputs[1])
     switch = nodes.new("ShaderNodeAttribute")
     switch.attribute_type = "VIEW_LAYER"
     switch.attribute_name = FLAT_SWITCH
     switch.location = (x - 400, y + 250)
-    mix = nodes.new("ShaderNodeMixShader")
-    mix.location = (x - 200, y)
-    links.new(switch.outputs["Fac"], mix.inputs["Fac"])
-    links.new(added.outputs[0], mix.inputs[1])
-    links.new(shown.outputs["Emission"], mix.inputs[2])
     output = nodes.new("ShaderNodeOutputMaterial")
     output.location = location
     output.target = "EEVEE"
-    links.new(mix.outputs[0], output.inputs["Surface"])
+    links.new(_shader_or_flat(tree, shader, shown, switch, (x - 400, y)), output.inputs["Surface"])
     return output
 
 
