@@ -31,7 +31,7 @@ def result_material(flat_attribute=ATTRIBUTE_NAME, live=False):
     """The material that shows the 'Radiosity' attribute as emission, or ``flat_attribute``
     where the panel's flat switch is on (ours, never a user's material that happens to have the
     same name; rebuilt each run, for the run's attribute names); ``live`` (live lamps): seen by
-    the camera alone, as the live materials' solved light."""
+    the camera and the rays leaving its hits alone, as the live materials' solved light."""
     material = next((m for m in bpy.data.materials if MATERIAL_PROPERTY in m.keys() and m.node_tree is not None),
                     None)
     if material is None:
