@@ -156,10 +156,7 @@ def _lit_by_lamps(tree, shader, emission, location):
     switch is on, the camera sees the flat colours alone."""
     nodes, links = tree.nodes, tree.links
     x, y = location
-    switch = nodes.new("ShaderNodeAttribute")
-    switch.attribute_type = "VIEW_LAYER"
-    switch.attribute_name = FLAT_SWITCH
-    switch.location = (x, y + 250)
+    switch = _flat_switch(tree, (x, y + 250))
     either = nodes.new("ShaderNodeMath")
     either.operation = "MAXIMUM"
     either.location = (x - 200, y + 300)
@@ -198,10 +195,7 @@ def _eevee_output(tree, shader, emission, location):
     path = nodes.new("ShaderNodeLightPath")
     path.location = (x - 800, y)
     links.new(path.outputs["Is Camera Ray"], shown.inputs["Strength"])
-    switch = nodes.new("ShaderNodeAttribute")
-    switch.attribute_type = "VIEW_LAYER"
-    switch.attribute_name = FLAT_SWITCH
-    switch.location = (x - 400, y + 250)
+    switch = _flat_switch(tree, (x - 400, y + 250))
     output = nodes.new("ShaderNodeOutputMaterial")
     output.location = location
     output.target = "EEVEE"
@@ -278,16 +272,22 @@ def _emitted(tree, shader, location):
     return emitted.outputs[0]
 
 
+def _flat_switch(tree, location):
+    """An Attribute node reading the panel's FLAT_SWITCH from the view layer (1: flat colours)."""
+    switch = tree.nodes.new("ShaderNodeAttribute")
+    switch.attribute_type = "VIEW_LAYER"
+    switch.attribute_name = FLAT_SWITCH
+    switch.label = "Flat patches (paper)"
+    switch.location = location
+    return switch
+
+
 def emission_output(tree, colour, flat_attribute, location):
     """An Emission shader of ``colour`` (a socket), or of the colour attribute ``flat_attribute``
     where the scene's FLAT_SWITCH is on."""
     nodes, links = tree.nodes, tree.links
     x, y = location
-    switch = nodes.new("ShaderNodeAttribute")
-    switch.attribute_type = "VIEW_LAYER"
-    switch.attribute_name = FLAT_SWITCH
-    switch.label = "Flat patches (paper)"
-    switch.location = (x - 200, y + 250)
+    switch = _flat_switch(tree, (x - 200, y + 250))
     flat = nodes.new("ShaderNodeAttribute")
     flat.attribute_type = "GEOMETRY"
     flat.attribute_name = flat_attribute

@@ -32,7 +32,7 @@ class ReflectedPoints:
     rays' parts, then the cosine rays'), only for the parts that have some (their directions
     drawn from a generator of their own, seeded from the chunk's ``rng``). ``count`` is K."""
 
-    def __init__(self, gathering, geometry, samples, rng=None):
+    def __init__(self, gathering, geometry, samples, rng):
         patch, x, value = samples[:3]
         factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
         power = value * factor.take(patch, axis=1)
@@ -139,12 +139,13 @@ class ReflectedPoints:
                    np.ascontiguousarray(np.concatenate([diffuse, lobe], axis=2).transpose(0, 2, 1)))
 
 
-def reflected_sources(tables, gathering, emission, samples, groups=None, rng=None):
+def reflected_sources(tables, gathering, emission, samples, rng, groups=None):
     """The walk's tables with the patches' reflected direct light as its only sources
     (everything else shared): ``emission`` (P,3) E' from uniform points of each patch (random
     exit), or, leaving from hit points, the gathering ``samples`` (gather_direct's) as
-    ReflectedPoints. Per source, ``groups`` is (E' of each group (S,3,P), the samples'
-    grouping.SampleParts): each source a mix of groups (grouping.Mix)."""
+    ReflectedPoints (``rng`` seeds their glossy rows' directions). Per source, ``groups`` is (E'
+    of each group (S,3,P), the samples' grouping.SampleParts): each source a mix of groups
+    (grouping.Mix)."""
     area = tables.geometry.patch_area
     if tables.exit_random:
         mix = None
@@ -190,7 +191,7 @@ def gathered_chunk(tables, gathering, paths, rng, walk):
         direct_groups = incident_groups if tables.direct_apart else None
         grouped = (gathering.reflectivity * H_groups, gathered[3])
     if walk_power > 0:
-        sources = reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples, grouped or None, rng)
+        sources = reflected_sources(tables, gathering, np.ascontiguousarray(reflected.T), samples, rng, grouped or None)
         tally = walk(sources, paths, rng)
         w = walk_power / gathering.total_power
         incident = incident + tally.incident * w
