@@ -53,7 +53,8 @@ def chunk_plan(scene, method, estimator, *, paths=None, target_mse=None, thresho
     else:
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
-    chunk = method.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
+    chunk = method.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None,
+                               guessed=measured_rule and paths is None)
     return ChunkPlan(prediction, measured_rule, int(cap), int(chunk))
 
 

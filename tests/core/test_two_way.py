@@ -215,6 +215,31 @@ def test_two_way_chunks_grow_to_enough_rays_a_patch_within_the_plan():
     assert math.ceil(10**6 / tw.TwoWay().chunk_paths(50_000, 2.5, 10**6)) >= plan.MIN_MEASURED_CHUNKS
 
 
+def test_a_guessed_plan_grows_the_two_way_chunks_to_the_balance_of_the_stop_rule():
+    """A run that stops on its measured error plans on a guess (the walk's prediction); where
+    the guess is small, chunks sized from it are small, and their variance per path
+    (1 + G P / n, TWO_WAY_GROWTH) costs more paths than the fewest chunks the stop rule reads.
+    A guessed plan's chunks grow to ``balanced_chunk`` (K n = N (1 + G P / n)), up to
+    TWO_WAY_CHUNK_RAYS_PER_PATCH; a plan of given paths keeps its chunks (its batch estimate
+    needs them), and so does a plan already at that size."""
+    P, planned = 4_000, 64_000
+    n = tw.balanced_chunk(P, planned)
+    K, G = plan.MEASURED_STOP_CHUNKS, tw.TWO_WAY_GROWTH
+    assert K * n == pytest.approx(planned * (1 + G * P / n), rel=1e-3)
+    given, guessed = (tw.TwoWay().chunk_paths(P, 2.5, planned, guessed=g) for g in (False, True))
+    assert given < n == guessed  # (given: 4 rays a patch, 2P paths)
+    assert tw.first_generation_rays(P, given) == tw.TWO_WAY_RAYS_PER_PATCH
+    big = 10**9
+    assert tw.TwoWay().chunk_paths(P, 2.5, big, guessed=True) == tw.TwoWay().chunk_paths(P, 2.5, big)
+    # a solve at a loose target runs such chunks, and the automatic choice reads them
+    scene, _ = _box_with_one_emitter()
+    target = 1e-4
+    chosen = plan.chunk_plan(scene, tw.TwoWay(), "finite", target_mse=target)
+    assert chosen.chunk >= tw.balanced_chunk(scene.patch_count, tw.TwoWay().planned_paths(chosen.prediction.paths_for(target)))
+    r = solve(scene, target_mse=target, seed=1, method="auto")
+    assert r.method == "two_way" and r.stopped == "target" and r.paths == r.chunks * chosen.chunk
+
+
 def test_a_small_plan_runs_in_fewer_larger_chunks_than_the_walk_s():
     """A small plan's two-way chunks are TWO_WAY_MIN_CHUNKS (16), twice the walk's size: a
     chunk's variance per path falls as it grows. A solve of a million paths in the 600-patch

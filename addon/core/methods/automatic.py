@@ -1,8 +1,9 @@
 """Automatic (method="auto"): the two-way iteration where it pays, else the paper's walk.
 
 The two-way iteration pays where its chunks give every patch enough first-generation rays
-(``TwoWay.pays``: at error targets that plan at least plan.MIN_MEASURED_CHUNKS such chunks;
-under a time limit, in chunks of the usual size), in a scene of at most AUTO_MAX_PATCHES
+(``TwoWay.pays``: at error targets that plan at least plan.MIN_MEASURED_CHUNKS such chunks, or
+whose chunks grow to them at the stop rule's balance, ``two_way.balanced_chunk``; under a time
+limit, in chunks of the usual size), in a scene of at most AUTO_MAX_PATCHES
 patches; elsewhere the walk needs fewer rays to the same error.
 
 With per-source results the two-way iteration carries every group's share on every ray, and its
@@ -42,7 +43,8 @@ def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e
     two_way = TwoWay()
     prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
     planned = paths if paths is not None else two_way.planned_paths(prediction.paths_for(target_mse))
-    chunk = two_way.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None)
+    chunk = two_way.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None,
+                                guessed=paths is None and target_mse is not None)  # (as plan.chunk_plan)
     if not two_way.pays(scene.patch_count, chunk):
         return WALK
     groups = pilot.get("groups")

@@ -52,8 +52,9 @@ class Method:
         paper's prediction for the target."""
         return max(1, predicted_paths // UNPREDICTED_PLAN_DIVISOR)
 
-    def chunk_paths(self, patch_count, expected_path_length, planned_paths, time_limited=False):
-        """A chunk's paths in a plan of ``planned_paths``."""
+    def chunk_paths(self, patch_count, expected_path_length, planned_paths, time_limited=False, guessed=False):
+        """A chunk's paths in a plan of ``planned_paths`` (``guessed``: the prediction's, for a run
+        that stops on its measured error)."""
         return chunk_paths_for(expected_path_length, planned_paths)
 
     def rays_per_path(self, bounces):

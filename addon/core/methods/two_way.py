@@ -3,8 +3,9 @@ shooting and gathering about a control variate, its direct light always gathered
 
 What a solve plans for it: chunks large enough that each patch gets TWO_WAY_RAYS_PER_PATCH
 first-generation rays (fewer, and what a generation passes on is mostly its own noise), up to
-TWO_WAY_CHUNK_RAYS_PER_PATCH; its direct light's samples allotted partly by a pilot of the
-direct light (``two_way.direct_samples``); and what the forecast predicts of it: its
+TWO_WAY_CHUNK_RAYS_PER_PATCH, and where the plan is only a guess (a run to an error target),
+at least the balance of the stop rule (``balanced_chunk``); its direct light's samples allotted
+partly by a pilot of the direct light (``two_way.direct_samples``); and what the forecast predicts of it: its
 variance per path falls as its chunks grow, as v_inf (1 + TWO_WAY_GROWTH P / n). The paper's
 formulas do not predict its error, which is measured.
 """
@@ -15,7 +16,7 @@ import math
 from .. import walk as stages
 from ..first_shot import Gathering, pilot_irradiance
 from ..names import GATHERED, TWO_WAY
-from ..plan import MIN_MEASURED_CHUNKS, chunk_paths_for
+from ..plan import MEASURED_STOP_CHUNKS, MIN_MEASURED_CHUNKS, chunk_paths_for
 from ..two_way import GENERATION_RAYS, direct_samples, rays_per_path, two_way_chunk
 from .base import GatheringIntegrator, Method, solve_gathering, spec_gathering
 
@@ -51,19 +52,24 @@ class TwoWay(Method):
     name = TWO_WAY
     direct_lights = (GATHERED,)
 
-    def chunk_paths(self, patch_count, expected_path_length, planned_paths, time_limited=False):
+    def chunk_paths(self, patch_count, expected_path_length, planned_paths, time_limited=False, guessed=False):
         """The usual rays (a small plan in TWO_WAY_MIN_CHUNKS chunks), or more: up to
         TWO_WAY_CHUNK_RAYS_PER_PATCH first-generation rays a patch (GENERATION_RAYS a path)
         within TWO_WAY_MIN_CHUNKS chunks of the plan, and at least TWO_WAY_RAYS_PER_PATCH within
-        MIN_MEASURED_CHUNKS; never more than TWO_WAY_MAX_CHUNK_PATHS. Under a time limit, the
-        usual rays (about plan.RAYS_PER_CHUNK): a chunk of a million paths can take longer than
-        the limit, and a run stopped before its first chunk has nothing to give."""
+        MIN_MEASURED_CHUNKS; never more than TWO_WAY_MAX_CHUNK_PATHS. ``guessed``: the plan is
+        only the walk's prediction for a run that stops on its measured error; the chunks then
+        grow to at least ``balanced_chunk`` (up to TWO_WAY_CHUNK_RAYS_PER_PATCH), where small
+        chunks would cost more paths than the fewest chunks the stop rule reads. Under a time
+        limit, the usual rays (about plan.RAYS_PER_CHUNK): a chunk of a million paths can take
+        longer than the limit, and a run stopped before its first chunk has nothing to give."""
         usual = chunk_paths_for(rays_per_path(expected_path_length), planned_paths, TWO_WAY_MIN_CHUNKS)
         if time_limited:
             return usual
         paths_for = lambda rays: math.ceil(rays * patch_count / GENERATION_RAYS)  # noqa: E731
         grown = min(paths_for(TWO_WAY_CHUNK_RAYS_PER_PATCH), math.ceil(planned_paths / TWO_WAY_MIN_CHUNKS))
         enough = min(paths_for(TWO_WAY_RAYS_PER_PATCH), math.ceil(planned_paths / MIN_MEASURED_CHUNKS))
+        if guessed:
+            grown = max(grown, min(paths_for(TWO_WAY_CHUNK_RAYS_PER_PATCH), balanced_chunk(patch_count, planned_paths)))
         return int(min(TWO_WAY_MAX_CHUNK_PATHS, max(usual, grown, enough)))
 
     def pays(self, patch_count, chunk_paths):
@@ -84,6 +90,15 @@ class TwoWay(Method):
 
     def rebuild(self, scene, tables, spec):
         return TwoWayChunks(tables, spec_gathering(scene, spec))
+
+
+def balanced_chunk(patch_count, planned_paths):
+    """The chunk of n paths at which the fewest chunks a measured stop reads (MEASURED_STOP_CHUNKS
+    of them, K) hold the paths the plan's run takes at that size, its variance per path grown
+    as (1 + G P / n) (TWO_WAY_GROWTH): K n = N (1 + G P / n), for N the plan's paths. Smaller
+    chunks need more paths for the same error; larger ones run past it."""
+    k, n = MEASURED_STOP_CHUNKS, float(planned_paths)
+    return math.ceil((n + math.sqrt(n * n + 4.0 * k * TWO_WAY_GROWTH * patch_count * n)) / (2.0 * k))
 
 
 def first_generation_rays(patch_count, chunk_paths):
