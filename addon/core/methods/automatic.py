@@ -14,9 +14,9 @@ cheaper runs (not under a time limit below MEASURED_MIN_SECONDS, which the pilot
 """
 from __future__ import annotations
 
-from ..error_model import predict
 from ..grouping import source_groups
 from ..names import FINITE, TWO_WAY, WALK
+from ..plan import chunk_plan
 from .two_way import TwoWay
 
 # The largest scene Automatic runs the two-way iteration in: a two-way chunk holds several (C,P)
@@ -41,10 +41,8 @@ def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e
     if scene.patch_count > AUTO_MAX_PATCHES:
         return WALK
     two_way = TwoWay()
-    prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
-    planned = paths if paths is not None else two_way.planned_paths(prediction.paths_for(target_mse))
-    chunk = two_way.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None,
-                                guessed=paths is None and target_mse is not None)  # (as plan.chunk_plan)
+    chunk = chunk_plan(scene, two_way, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
+                       max_seconds=max_seconds).chunk  # (the chunks its run would have)
     if not two_way.pays(scene.patch_count, chunk):
         return WALK
     groups = pilot.get("groups")
