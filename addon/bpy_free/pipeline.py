@@ -13,7 +13,7 @@ import numpy as np
 
 from ..core import meshing, methods, point_direct, predict, relative_rms_to_mse, smoothing, solve
 from ..core.diagnostics import MAX_BOUNCES, check_bounces
-from ..core.covered import hidden_patches
+from ..core.covered import seen_parts
 from ..core.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
@@ -382,7 +382,7 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
     scene's (a refined mesh's, with every polygon corner: adaptive_patches.shading_arrays)."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
-                                   hidden=hidden_patches(scene.geometry))
+                                   **seen_parts(scene, triangles, triangle_patch))
     arriving = point_direct.arriving(surface, scene, result, live) if light else None  # (filters first: with the
     reflected = surface.filter_light(result.reflected, result.reflected_variance)  # direct light held, the peak)
     direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed)

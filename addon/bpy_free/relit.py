@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import smoothing
-from ..core.covered import hidden_patches
+from ..core.covered import seen_parts
 from ..core.grouping import PER_SOURCE_MAX, source_groups
 from ..core.lights import WorldLight
 from ..core.relighting import PerSource, relight, smooth_sources
@@ -135,7 +135,7 @@ def source_corners(scene, result, light=False, shading=None, live=False):
     total's; on the ``shading`` triangles (a refined mesh's) where given."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
-                                   hidden=hidden_patches(scene.geometry))
+                                   **seen_parts(scene, triangles, triangle_patch))
     yield from smooth_sources(surface, scene, result, light, triangles=triangles, live=live)
 
 

@@ -13,16 +13,80 @@ top a patch's width above the floor is not). A patch whose ray meets a back side
 hidden when the near-grazing probes of ``visibility`` meet back sides first too (the floor under
 a box with no bottom, whose patches nothing crosses; under a one-sided table top they escape),
 or buried whole as ``visibility`` found it.
+
+A patch partly buried shows its visible part only, and its light is its mean over that part: the
+smooth colours hold that mean (``smoothing.Surface``'s ``visible``, from ``visible_corner_weights``),
+not the mean over the whole patch, which would hand the buried part its share of a slope and leave
+the part seen too dark where the light climbs toward the buried edge (a cove beside a lamp).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from .rays import meets_front
+from .faces import triangle_areas
 from .sampling import patch_point_rows
 from .visibility import PROBES, _tangents
 
 COVER_SHARE = 1.0  # of the patch's side
+
+
+def seen_parts(scene, triangles, triangle_patch):
+    """``smoothing.Surface.of``'s ``hidden`` and ``visible`` for ``triangles`` (T,3) of the scene's
+    vertices and their patches (the module's docstring)."""
+    g = scene.geometry
+    return dict(hidden=hidden_patches(g), visible=visible_corner_weights(g, scene.vertices, triangles, triangle_patch))
+
+
+def visible_corner_weights(geometry, vertices, triangles, triangle_patch):
+    """(T,3) what each corner weighs in its patch's mean over the visible part: the integral, over
+    the part of its triangle seen, of the corner's barycentric coordinate (a third of the area on
+    patches wholly seen); None where no patch is partly buried. On a partly buried patch, each
+    visible cell's centre (``visibility.Buried``) carries its share of the visible area to the
+    corners of the triangle it lies in, by its barycentric coordinates."""
+    b = geometry.buried
+    if b is None or not b.patch.size:
+        return None
+    vertices, triangles, triangle_patch = np.asarray(vertices, np.float64), np.asarray(triangles), np.asarray(triangle_patch)
+    area = triangle_areas(vertices, triangles)
+    weight = np.repeat(area[:, None] / 3.0, 3, axis=1)
+    partly = np.flatnonzero(b.slot[triangle_patch] >= 0)
+    weight[partly] = 0.0
+    count = np.diff(b.first)
+    patch = np.repeat(b.patch, count).astype(np.int64)
+    rank = np.arange(patch.size) - np.repeat(b.first[:-1], count)
+    u0 = ((rank + 0.5) / np.repeat(count, count)).astype(np.float32)  # (the remap's k-th visible cell, its middle)
+    half = np.full(patch.size, 0.5, np.float32)
+    points = geometry.to_world(patch_point_rows(geometry, patch, half.copy(), u0, half.copy()).T, patch)
+    share = np.bincount(triangle_patch, weights=area, minlength=len(b.slot))[b.patch] * b.fraction / count
+    rows = partly[np.argsort(triangle_patch[partly], kind="stable")]
+    triangle, bary = _containing(vertices, triangles, rows, triangle_patch[rows], patch, points)
+    for k in range(3):
+        weight[:, k] += np.bincount(triangle, weights=np.repeat(share, count) * bary[:, k], minlength=len(weight))
+    return weight
+
+
+def _containing(vertices, triangles, rows, row_patch, patch, points):
+    """For each point of ``patch`` (n,), the triangle among ``rows`` (their patches ``row_patch``,
+    ascending) of that patch it lies in (the one it is least outside of: float rounding at
+    shared edges) and its barycentric coordinates there, clipped to the triangle (n,3)."""
+    first = np.searchsorted(row_patch, patch)
+    many = np.searchsorted(row_patch, patch, side="right") - first
+    pair_point = np.repeat(np.arange(patch.size), many)
+    pair_triangle = rows[np.repeat(first - (np.cumsum(many) - many), many) + np.arange(pair_point.size)]
+    a, e1, e2 = (vertices[triangles[pair_triangle, k]] for k in range(3))
+    e1, e2, d = e1 - a, e2 - a, points[pair_point] - a
+    d00, d01, d11 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    d20, d21 = (d * e1).sum(1), (d * e2).sum(1)
+    det = d00 * d11 - d01 * d01
+    det = np.where(det > 0, det, np.inf)  # (a degenerate triangle holds no point)
+    v, w = (d11 * d20 - d01 * d21) / det, (d00 * d21 - d01 * d20) / det
+    bary = np.column_stack([1.0 - v - w, v, w])
+    inside = bary.min(axis=1) - np.isinf(det)
+    order = np.lexsort((-inside, pair_point))
+    best = order[np.searchsorted(pair_point[order], np.arange(patch.size))]
+    bary = np.clip(bary[best], 0.0, None)
+    return pair_triangle[best], bary / bary.sum(axis=1, keepdims=True)
 
 
 def hidden_patches(geometry):

@@ -75,18 +75,25 @@ class Surface(NoiseFilter):
     smooth_point: np.ndarray  # (n,) bool: every pair of corners at the point compatible
     pairs: tuple  # (corner, other corner) flat indices, compatible, at crease points
     hidden: np.ndarray | None = None  # (P,) bool: patches no camera sees, which no neighbour's corners read
+    # (T*3,) each corner's weight in its patch's mean over the part seen (covered.visible_corner_weights), and
+    # (P,) that part's area; None: every patch seen whole (a third of each triangle's area a corner)
+    visible: np.ndarray | None = None
+    visible_area: np.ndarray | None = None
 
     @property
     def patch_count(self):
         return len(self.patch_area)
 
     @classmethod
-    def of(cls, vertices, triangles, triangle_patch, patch_count=None, crease_angle=CREASE_ANGLE, weld=None, hidden=None):
+    def of(cls, vertices, triangles, triangle_patch, patch_count=None, crease_angle=CREASE_ANGLE, weld=None, hidden=None,
+           visible=None):
         """``vertices`` (V,3) world positions, ``triangles`` (T,3) vertex indices, ``triangle_patch``
         (T,) patch of each triangle; ``weld`` a length (default WELD_FRACTION of the median
         patch's side, at least float32 rounding of the coordinates); ``hidden`` (P,) bool the
         patches no camera sees (``covered.hidden_patches``: under a box, behind a panel that
-        touches them), whose light, nothing or little, joins no visible neighbour's corners."""
+        touches them), whose light, nothing or little, joins no visible neighbour's corners;
+        ``visible`` (T,3) each corner's weight in its patch's mean over the part seen (partly
+        buried patches: ``covered.visible_corner_weights``), the mean every patch's corners keep."""
         vertices = np.asarray(vertices, np.float64)
         triangles = np.asarray(triangles)
         triangle_patch = np.asarray(triangle_patch)
@@ -114,8 +121,12 @@ class Surface(NoiseFilter):
         point = weld_points(vertices, weld)[triangles]
         cos_crease = float(np.cos(np.radians(crease_angle)))
         smooth_point, pairs = _crease_pairs(point, triangle_patch, patch_normal, cos_crease)
+        hidden = None if hidden is None or not np.any(hidden) else np.asarray(hidden, bool)
+        if visible is not None:
+            visible = np.asarray(visible, np.float64).reshape(-1)
+            visible_area = np.bincount(np.repeat(triangle_patch, 3), weights=visible, minlength=P)
         return cls(point, triangle_patch, triangle_area, patch_area, patch_normal, centroid, cos_crease,
-                   smooth_point, pairs, None if hidden is None or not np.any(hidden) else np.asarray(hidden, bool))
+                   smooth_point, pairs, hidden, visible, None if visible is None else visible_area)
 
     # -- corner values -------------------------------------------------------------------------
     def _averaging(self):
@@ -157,7 +168,12 @@ class Surface(NoiseFilter):
         return lowest
 
     def _patch_means(self, x):
-        """Area-weighted mean (P,) of the linear interpolation of corner values (T*3,)."""
+        """Area-weighted mean (P,) of the linear interpolation of corner values (T*3,) over each
+        patch (over the part seen, where ``visible`` is given)."""
+        if self.visible is not None:
+            tri = (x * self.visible).reshape(-1, 3).sum(axis=1)
+            sums = _sum(self.triangle_patch, tri, self.patch_count)
+            return np.divide(sums, self.visible_area, out=np.zeros_like(sums), where=self.visible_area > 0)
         tri = x[0::3] + x[1::3]  # (a triangle's three corners added in order: as sum(axis=1) adds them, 8x faster)
         tri += x[2::3]
         tri *= self.triangle_area / 3.0
