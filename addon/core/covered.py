@@ -29,6 +29,7 @@ from .sampling import patch_point_rows
 from .visibility import PROBES, _tangents
 
 COVER_SHARE = 1.0  # of the patch's side
+BLOCK = 1 << 17  # visible cells located at a time (visible_corner_weights)
 
 
 def seen_parts(scene, triangles, triangle_patch):
@@ -52,17 +53,19 @@ def visible_corner_weights(geometry, vertices, triangles, triangle_patch):
     weight = np.repeat(area[:, None] / 3.0, 3, axis=1)
     partly = np.flatnonzero(b.slot[triangle_patch] >= 0)
     weight[partly] = 0.0
-    count = np.diff(b.first)
-    patch = np.repeat(b.patch, count).astype(np.int64)
-    rank = np.arange(patch.size) - np.repeat(b.first[:-1], count)
-    u0 = ((rank + 0.5) / np.repeat(count, count)).astype(np.float32)  # (the remap's k-th visible cell, its middle)
-    half = np.full(patch.size, 0.5, np.float32)
-    points = geometry.to_world(patch_point_rows(geometry, patch, half.copy(), u0, half.copy()).T, patch)
-    share = np.bincount(triangle_patch, weights=area, minlength=len(b.slot))[b.patch] * b.fraction / count
     rows = partly[np.argsort(triangle_patch[partly], kind="stable")]
-    triangle, bary = _containing(vertices, triangles, rows, triangle_patch[rows], patch, points)
-    for k in range(3):
-        weight[:, k] += np.bincount(triangle, weights=np.repeat(share, count) * bary[:, k], minlength=len(weight))
+    share = np.bincount(triangle_patch, weights=area, minlength=len(b.slot))[b.patch] * b.fraction / np.diff(b.first)
+    ends = np.searchsorted(b.first, np.arange(BLOCK, b.first[-1], BLOCK))  # (the cells a block of patches at a time)
+    for block in np.split(np.arange(b.patch.size), np.unique(ends)):
+        count = np.diff(b.first)[block]
+        patch = np.repeat(b.patch[block], count).astype(np.int64)
+        rank = np.arange(patch.size) - np.repeat(np.cumsum(count) - count, count)
+        u0 = ((rank + 0.5) / np.repeat(count, count)).astype(np.float32)  # (the remap's k-th visible cell, its middle)
+        half = np.full(patch.size, 0.5, np.float32)
+        points = geometry.to_world(patch_point_rows(geometry, patch, half.copy(), u0, half.copy()).T, patch)
+        triangle, bary = _containing(vertices, triangles, rows, triangle_patch[rows], patch, points)
+        for k in range(3):
+            weight[:, k] += np.bincount(triangle, weights=np.repeat(share[block], count) * bary[:, k], minlength=len(weight))
     return weight
 
 

@@ -578,3 +578,19 @@ def test_a_partly_buried_patch_keeps_its_light_on_the_part_seen(seen):
         assert not off.any()
     else:
         assert off.sum() > 20 and (shown / values[rows, 0]).min() < 0.8
+
+
+def test_the_visible_corner_weights_are_the_same_a_few_cells_at_a_time(monkeypatch):
+    """``covered.visible_corner_weights`` locates the visible cells a block of patches at a time:
+    blocks of 100 cells give the same weights as one block, and each partly buried patch's
+    weights add up to its visible area (f_j times its area)."""
+    from overlap_boxes import slab_scene
+    from addon.core import covered
+
+    scene = slab_scene(0.5, 1.0)[0]
+    args = (scene.geometry, scene.vertices, scene.triangles, scene.triangle_patch)
+    whole = covered.visible_corner_weights(*args)
+    monkeypatch.setattr(covered, "BLOCK", 100)
+    assert np.array_equal(covered.visible_corner_weights(*args), whole)
+    seen = np.bincount(scene.triangle_patch, weights=whole.sum(axis=1), minlength=scene.patch_count)
+    np.testing.assert_allclose(seen, scene.patch_area, rtol=1e-12)
