@@ -51,7 +51,9 @@ def parser():
                            help=_literal(f"{option.description} ({option.range_text()}; default {option.default:g})"))
     p.add_argument("--resolution", type=int, default=RESOLUTION.default, help=_literal("preview width in pixels "
                    f"({RESOLUTION.range_text()})"))
-    p.add_argument("--samples", type=int, default=SAMPLES.default, help=_literal(f"Cycles samples for the preview ({SAMPLES.range_text()})"))
+    p.add_argument("--samples", type=int, default=None, help=_literal(
+        f"Cycles samples for the preview ({SAMPLES.range_text()}; default {SAMPLES.default}, {LIVE_SAMPLES} with --live-lamps: "
+        "a live preview is a Monte Carlo render, a baked one has no noise to average)"))
     return p
 
 
@@ -70,10 +72,15 @@ def _literal(text):
 # The preview's own options (not settings of the solve).
 RESOLUTION = options.Number("resolution", "--resolution", 480, 16, 16384, "Resolution", "", unit="pixels", integer=True)
 SAMPLES = options.Number("samples", "--samples", 16, 1, 65536, "Samples", "", integer=True)
+# With live lamps the preview renders the lamps' light and a bounce: at the panel's 5% target, 64 samples
+# take the rest of the time Cycles alone would spend (benchmarks/results/picture_samples64.md).
+LIVE_SAMPLES = 64
 
 
 def checked(args):
     """The arguments with every setting checked against its range (ValueError naming it)."""
+    if args.samples is None:
+        args.samples = LIVE_SAMPLES if getattr(args, "live_lamps", False) else SAMPLES.default
     for option in (*options.SETTINGS, RESOLUTION, SAMPLES):
         setattr(args, option.name, option.check(getattr(args, option.name)))
     return args
