@@ -1,5 +1,5 @@
 """Per-object brightness over several seeds: the picture benchmark's rooms (``picture.py``: the
-product's preview at the panel's defaults and a 2% target) solved with seeds 0..n-1, each
+product's preview at the panel's defaults and a 2% target, or ``--error``, at ``--preview-samples``) solved with seeds 0..n-1, each
 object's mean luminance over the reference's, seed by seed and their mean (one seed's objects
 move by 1-2% with the solve's noise: a single round says little about 3%).
 
@@ -70,7 +70,10 @@ def main(argv=None):
     parser.add_argument("--seeds", type=int, default=4)
     parser.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="the product's settings by name")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "picture_seeds.md")
+    parser.add_argument("--error", type=float, default=pic.TARGET_ERROR, help="the product's error target, percent")
+    parser.add_argument("--preview-samples", type=int, default=pic.PREVIEW_SAMPLES, help="the preview's samples")
     args = parser.parse_args(argv)
+    pic.TARGET_ERROR, pic.PREVIEW_SAMPLES = args.error, args.preview_samples
     overrides = dict(item.split("=", 1) for item in args.set)
     command = "python -m benchmarks.picture_seeds " + " ".join(argv if argv is not None else sys.argv[1:])
     what = __doc__.split("\n\n")[0].replace("\n", " ").split(": ", 1)[1]
