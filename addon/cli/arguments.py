@@ -80,7 +80,7 @@ LIVE_SAMPLES = 64
 def checked(args):
     """The arguments with every setting checked against its range (ValueError naming it)."""
     if args.samples is None:
-        args.samples = LIVE_SAMPLES if getattr(args, "live_lamps", False) else SAMPLES.default
+        args.samples = LIVE_SAMPLES if args.live_lamps else SAMPLES.default
     for option in (*options.SETTINGS, RESOLUTION, SAMPLES):
         setattr(args, option.name, option.check(getattr(args, option.name)))
     return args

@@ -26,6 +26,7 @@ import numpy as np
 from .rays import meets_front
 from .faces import triangle_areas
 from .sampling import patch_point_rows
+from .textures import locate
 from .visibility import PROBES, _tangents
 
 COVER_SHARE = 1.0  # of the patch's side
@@ -63,33 +64,12 @@ def visible_corner_weights(geometry, vertices, triangles, triangle_patch):
         u0 = ((rank + 0.5) / np.repeat(count, count)).astype(np.float32)  # (the remap's k-th visible cell, its middle)
         half = np.full(patch.size, 0.5, np.float32)
         points = geometry.to_world(patch_point_rows(geometry, patch, half.copy(), u0, half.copy()).T, patch)
-        triangle, bary = _containing(vertices, triangles, rows, triangle_patch[rows], patch, points)
+        # (the triangle of its patch each lies in, as a texture's points are found in their face's)
+        triangle, bary = locate(points, patch, vertices[triangles[rows]], triangle_patch[rows])
         for k in range(3):
-            weight[:, k] += np.bincount(triangle, weights=np.repeat(share[block], count) * bary[:, k], minlength=len(weight))
+            weight[:, k] += np.bincount(rows[triangle], weights=np.repeat(share[block], count) * bary[:, k],
+                                        minlength=len(weight))
     return weight
-
-
-def _containing(vertices, triangles, rows, row_patch, patch, points):
-    """For each point of ``patch`` (n,), the triangle among ``rows`` (their patches ``row_patch``,
-    ascending) of that patch it lies in (the one it is least outside of: float rounding at
-    shared edges) and its barycentric coordinates there, clipped to the triangle (n,3)."""
-    first = np.searchsorted(row_patch, patch)
-    many = np.searchsorted(row_patch, patch, side="right") - first
-    pair_point = np.repeat(np.arange(patch.size), many)
-    pair_triangle = rows[np.repeat(first - (np.cumsum(many) - many), many) + np.arange(pair_point.size)]
-    a, e1, e2 = (vertices[triangles[pair_triangle, k]] for k in range(3))
-    e1, e2, d = e1 - a, e2 - a, points[pair_point] - a
-    d00, d01, d11 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-    d20, d21 = (d * e1).sum(1), (d * e2).sum(1)
-    det = d00 * d11 - d01 * d01
-    det = np.where(det > 0, det, np.inf)  # (a degenerate triangle holds no point)
-    v, w = (d11 * d20 - d01 * d21) / det, (d00 * d21 - d01 * d20) / det
-    bary = np.column_stack([1.0 - v - w, v, w])
-    inside = bary.min(axis=1) - np.isinf(det)
-    order = np.lexsort((-inside, pair_point))
-    best = order[np.searchsorted(pair_point[order], np.arange(patch.size))]
-    bary = np.clip(bary[best], 0.0, None)
-    return pair_triangle[best], bary / bary.sum(axis=1, keepdims=True)
 
 
 def hidden_patches(geometry):

@@ -105,8 +105,8 @@ def test_leaving_from_hit_points_the_first_reflection_leaves_from_where_the_ligh
 
 def _cove(n=3):
     """A closed unit box of n x n patches a face (R 0.6) with a cove light: a small emitting box
-    (R 0.8, 3 x 60 x 2 cm) 4 cm from a wall and from the ceiling, five times narrower than a
-    patch (the lamp room's strip on its 0.32 m patches). The strip hides parts of the box from
+    (R 0.8, 3 x 60 x 2 cm) 4 cm from a wall and from the ceiling, a tenth of a
+    patch wide (the lamp room's strip is a fifth of its 0.32 m patches). The strip hides parts of the box from
     one another, so the form factors are cast: A_i F_ij from the hits both ways, each pair's
     counts pooled (G_ij = (c_ij + c_ji) / (n (1/A_i + 1/A_j)), reciprocal by construction).
     (PatchScene, exact discrete solution, index of the strip's patches, of the cove's)."""
