@@ -212,8 +212,10 @@ def _show_colours(mesh, render_colour):
             pass
 
 
-def show_attribute_in_solid_view():
-    """Let the 3D views' solid shading colour objects by their colour attribute."""
+def show_attribute_in_solid_view(live=False):
+    """Let the 3D views' solid shading colour objects by their colour attribute; with live
+    results, Material Preview lit by the scene's lamps and world (its studio light would light
+    them in their place)."""
     for screen in bpy.data.screens:
         for area in screen.areas:
             if area.type != "VIEW_3D":
@@ -221,6 +223,8 @@ def show_attribute_in_solid_view():
             for space in area.spaces:
                 if space.type == "VIEW_3D":
                     space.shading.color_type = "VERTEX"
+                    if live:
+                        space.shading.use_scene_lights = space.shading.use_scene_world = True
 
 
 def _result_object(output_data, index, output_mode, layers, light, notes, materials_for, material):
@@ -307,5 +311,5 @@ def write_results(context, output_data, output_mode, scene=None):
     for obj in created:
         collection.objects.link(obj)
         obj.name = obj.data.name = obj[SOURCE_PROPERTY] + RESULT_SUFFIX  # the names the old ones had
-    show_attribute_in_solid_view()
+    show_attribute_in_solid_view(live)
     return created

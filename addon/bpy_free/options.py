@@ -183,12 +183,13 @@ PER_SOURCE = Choice("per_source", "--per-light", "AUTO", (
      "them with new strengths and colours without tracing a ray; refused beyond patches x sources of 8 million"),
     ("OFF", "Off", "The total only: the fastest solve; a changed lamp needs a new solve"),
 ), "Per-light results", "Keep each light's own result so that turning a lamp's strength or colour relights at once")
-LIVE_LAMPS = Flag("live_lamps", "--live-lamps", False, "Live lamps",
+LIVE_LAMPS = Flag("live_lamps", "--live-lamps", True, "Live lamps",
                   "Textured: the lamps', suns', emitting materials' and the world's own light on the results is "
                   "drawn by the renderer, each pixel's (sharp hot spots and shadows, the material's highlights), and "
-                  "the solve gives the rest ('Radiosity Light' without it). Right in Cycles' render of the scene at "
-                  "any bounces, as the preview and the saved file draw it (not in Material Preview's studio light); "
-                  "off (default): all of the light from the solve, right in any view")
+                  "the solve gives the rest ('Radiosity Light' without it). On (default): right in Cycles' render of "
+                  "the scene at any bounces, as the preview and the saved file draw it, and in Material Preview, "
+                  "switched to the scene's lamps and world; off: all of the light from the solve, the same in any view "
+                  "(Material Preview's studio light too)")
 # --- Detail (adaptive patches) ---
 DETAIL = Choice("detail", "--detail", "OFF", (
     ("OFF", "Off", "Every patch the patch size: the same grid everywhere"),

@@ -52,8 +52,9 @@ def parser():
     p.add_argument("--resolution", type=int, default=RESOLUTION.default, help=_literal("preview width in pixels "
                    f"({RESOLUTION.range_text()})"))
     p.add_argument("--samples", type=int, default=None, help=_literal(
-        f"Cycles samples for the preview ({SAMPLES.range_text()}; default {SAMPLES.default}, {LIVE_SAMPLES} with --live-lamps: "
-        "a live preview is a Monte Carlo render, a baked one has no noise to average)"))
+        f"Cycles samples for the preview ({SAMPLES.range_text()}; default {LIVE_SAMPLES} with live lamps on textured "
+        f"results, {SAMPLES.default} with --no-live-lamps or another output: a live preview is a Monte Carlo render, "
+        "a baked one has no noise to average)"))
     return p
 
 
@@ -80,7 +81,7 @@ LIVE_SAMPLES = 64
 def checked(args):
     """The arguments with every setting checked against its range (ValueError naming it)."""
     if args.samples is None:
-        args.samples = LIVE_SAMPLES if args.live_lamps else SAMPLES.default
+        args.samples = LIVE_SAMPLES if args.live_lamps and args.output == "TEXTURED" else SAMPLES.default
     for option in (*options.SETTINGS, RESOLUTION, SAMPLES):
         setattr(args, option.name, option.check(getattr(args, option.name)))
     return args

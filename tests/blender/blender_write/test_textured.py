@@ -49,9 +49,11 @@ def _checker_floor(uv_maps=(("UVMap", (1.0, 1.0, 0.0, 0.0)),), active=None, rend
     return floor, material
 
 
-def _solve(blender, patch_size=0.25, **settings):
+def _solve(blender, patch_size=0.25, live_lamps=False, **settings):
+    """The results of a solve at these settings; baked unless ``live_lamps`` (most tests here
+    read the light the solve wrote: live, the lamps' part of it is the renderer's)."""
     s = blender.scene.radiosity
-    s.patch_size, s.target_error, s.threads = patch_size, 5.0, 1
+    s.patch_size, s.target_error, s.threads, s.live_lamps = patch_size, 5.0, 1, live_lamps
     for key, value in settings.items():
         setattr(s, key, value)
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
@@ -316,6 +318,31 @@ def test_a_principled_floor_s_copy_shows_its_specular_light_beside_its_base_colo
     assert np.allclose(node.inputs[1].default_value[:], scale, atol=1e-6)
     assert np.allclose(node.inputs[2].default_value[:], offset, atol=1e-6)
     assert min(offset) > 0.01 and max(scale) < 1.0
+
+
+def test_at_the_panels_defaults_the_results_are_live_and_material_preview_shows_the_scenes_lamps(blender):
+    """Live lamps is the default (the picture closest to Cycles' at equal time,
+    docs/picture.md): a solve at the panel's defaults gives each textured copy its own shader for
+    the lamp to light, and the 3D views' Material Preview is switched to the scene's lamps and
+    world (its studio light would light the live results in their place). A baked run leaves
+    Material Preview's lighting as the user set it."""
+    _checker_floor()
+    views = [space for screen in bpy.data.screens for area in screen.areas if area.type == "VIEW_3D"
+             for space in area.spaces if space.type == "VIEW_3D"]
+    assert views
+    for space in views:
+        space.shading.use_scene_lights = space.shading.use_scene_world = False
+    s = blender.scene.radiosity
+    assert s.live_lamps and s.output == "TEXTURED"
+    _solve(blender, live_lamps=False)
+    assert not any(space.shading.use_scene_lights or space.shading.use_scene_world for space in views)
+    s.property_unset("live_lamps")
+    s.patch_size, s.target_error = 0.25, 5.0
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    copy = {o["radiosity_source"]: o for o in result_objects()}["Floor"].data.materials[0]
+    assert copy.get("radiosity_live_lamps")
+    assert "ShaderNodeBsdfPrincipled" in {n.bl_idname for n in copy.node_tree.nodes}
+    assert all(space.shading.use_scene_lights and space.shading.use_scene_world for space in views)
 
 
 def test_live_lamps_leave_the_lamps_own_light_to_the_renderer_and_show_the_same_picture(blender, tmp_path):
