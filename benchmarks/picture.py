@@ -38,8 +38,11 @@ CACHE = ROOT / "out" / "picture_cache"
 from benchmarks import interior_scene  # noqa: E402
 from benchmarks import picture_metrics as pm  # noqa: E402
 
-TARGET_ERROR = 2.0  # percent, the benchmark's error target (--error; the panel's default is 5%)
-PREVIEW_SAMPLES = 16  # the command line's preview default (addon/cli/arguments.py; --preview-samples)
+from addon.bpy_free.options import TARGET_ERROR as _PANEL_TARGET  # noqa: E402
+from addon.cli.arguments import LIVE_SAMPLES  # noqa: E402
+
+TARGET_ERROR = _PANEL_TARGET.default  # percent, the panel's default (--error)
+PREVIEW_SAMPLES = LIVE_SAMPLES  # the command line's preview default with live lamps, the default (--preview-samples)
 THREADS = 2
 
 
@@ -445,10 +448,17 @@ def samples_for(seconds, line, most):
     return int(min(max(1, round(1 + (seconds - first) / per_sample)), most))
 
 
+def tracked(samples, seconds, wall, most):
+    """The next round's sample count: ``samples`` took ``wall`` seconds where the product took
+    ``seconds`` (render time is about proportional to samples; at least 1, at most ``most``)."""
+    return int(min(max(1, round(samples * seconds / max(wall, 1e-3))), most))
+
+
 def measure(name, colours, reference_samples, rounds, diffuse=False, warm_up=True, most=1 << 16, log=print, **overrides):
     """One room: the reference, then rounds alternating the product and Cycles at its wall time
-    (the sample counts from the first round's product time on lines timed before; at most
-    ``most``), and the pixel map; a dict of images, times and statistics. ``diffuse``: every
+    (the first round's sample counts from its product time on lines timed before, each later
+    round's from the one before, ``tracked`` to the product's time; at most ``most``), and the
+    pixel map; a dict of images, times and statistics. ``diffuse``: every
     material's Specular IOR Level set to 0 first (Lambertian surfaces, the product's own model);
     ``overrides`` the product's settings by name."""
     info = interior_scene.build(name)
@@ -465,10 +475,13 @@ def measure(name, colours, reference_samples, rounds, diffuse=False, warm_up=Tru
     for k in range(rounds):  # alternating, so that a busy moment of the machine hits every side
         image, solve, shown, stats = product(colours, seed=k, **overrides)
         runs["product"].append({"image": image, "seconds": solve + shown, "solve": solve, "preview": shown, "stats": stats})
-        samples = samples or {kind: samples_for(solve + shown, line, most) for kind, line in lines.items()}
+        if not samples:
+            samples = {kind: samples_for(solve + shown, line, most) for kind, line in lines.items()}
+        else:
+            samples = {kind: tracked(n, solve + shown, runs[kind][-1]["seconds"], most) for kind, n in samples.items()}
         for kind, (denoise, unbiased) in CYCLES_KINDS.items():
             image, wall = cycles_image(samples[kind], denoise, k, unbiased)
-            runs[kind].append({"image": image, "seconds": wall})
+            runs[kind].append({"image": image, "seconds": wall, "samples": samples[kind]})
         log(f"{name}: round {k}: product {solve:.2f} + {shown:.2f} s, " + ", ".join(
             f"{kind} {samples[kind]} samples {runs[kind][-1]['seconds']:.2f} s" for kind in CYCLES_KINDS))
     from addon.blender_write.results import previous_results
@@ -493,7 +506,8 @@ def analyse(m):
     for kind, runs in m["runs"].items():
         errors = [pm.relative_mae(r["image"], ref, mask) for r in runs]
         rms = [pm.relative_rms(r["image"], ref, mask, variance) for r in runs]
-        out["kinds"][kind] = {"errors": errors, "rms": rms, "seconds": [r["seconds"] for r in runs]}
+        out["kinds"][kind] = {"errors": errors, "rms": rms, "seconds": [r["seconds"] for r in runs],
+                              "samples": [r.get("samples") for r in runs]}
     runs = m["runs"]["product"]
     out["kinds"]["product"].update(solve=[r["solve"] for r in runs], preview=[r["preview"] for r in runs], stats=runs[0]["stats"])
     patched = mask & (px["patch_id"] >= 0)
@@ -571,7 +585,10 @@ def room_section(name, a, colours, png):
             time_text = f"{_seconds(k['seconds']):.2f} s (solve {_seconds(p['solve']):.2f} + preview {_seconds(p['preview']):.2f})"
             samples = f"{PREVIEW_SAMPLES} (preview)"
         else:
-            time_text, samples = f"{_seconds(k['seconds']):.2f} s", str(a["samples"][kind])
+            used = [n for n in k.get("samples", []) if n] or [a["samples"][kind]]
+            ratio = np.array(k["seconds"]) / np.array(p["seconds"])  # (round by round: the same time, as tracked)
+            time_text = f"{_seconds(k['seconds']):.2f} s ({ratio.min():.2f}-{ratio.max():.2f} of the product's)"
+            samples = f"{min(used)}-{max(used)}" if min(used) != max(used) else str(used[0])
         lines.append(f"| {label} | {e.mean():.1f}% ({e.min():.1f}-{e.max():.1f}) | {r.mean():.1f}% ({r.min():.1f}-{r.max():.1f}) "
                      f"| {time_text} | {samples} |")
     lines += [f"| the reference made flat per patch (each patch's visible pixels averaged) | {100 * a['flat_reference']:.1f}% "
@@ -604,7 +621,7 @@ def report(rooms, colours, command, loads, out):
              f"`{command}`: two interiors built by `benchmarks/interior_scene.py` (default Principled materials, walls "
              "of overlapping boxes, packed image textures on the floors, furniture, a subdivided ball or stool), the "
              f"product at the panel's defaults and a {TARGET_ERROR:g}% target, output `{colours}`, its preview at 320 x 240 "
-             f"({PREVIEW_SAMPLES} samples, no bounces), against a Cycles reference. Errors on luminance over the "
+             f"({PREVIEW_SAMPLES} samples; live results with one bounce and the denoiser), against a Cycles reference. Errors on luminance over the "
              "surface pixels (emitters, lamps, background and the pixels next to them excluded), relative to the "
              "reference's mean luminance there: the mean absolute error against the reference as it is (its own noise "
              "included), and the RMS error with the reference's own variance (from its two halves) subtracted: an "

@@ -39,3 +39,12 @@ def test_a_multilayer_render_reads_back_as_its_combined_image_and_its_passes(tmp
     assert np.abs(rebuilt - combined).max() <= 1e-3 * combined.max()
     assert rgb("Glossy Color").max() > 0.01  # default Principled: a specular layer the camera sees
     bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def test_cycles_sample_counts_track_the_products_time_round_by_round():
+    """The picture benchmark's next round gives Cycles the samples that take the product's time
+    at the last round's rate (render time about proportional to samples), within its bounds."""
+    assert picture.tracked(70, 24.0, 28.0, 1 << 16) == 60
+    assert picture.tracked(70, 28.0, 24.0, 1 << 16) == 82
+    assert picture.tracked(3, 1.0, 30.0, 1 << 16) == 1
+    assert picture.tracked(70, 100.0, 1.0, 1000) == 1000
