@@ -35,8 +35,8 @@ Per chunk:
     cast            cosine-distributed rays from Hammersley points of each patch (rays.cast)
     score_two_ways  each segment's two estimates, weighted, about the control variate
     reflect         dB = R H, the next generation's; once its power would pay for fewer than
-                    LEAST_RAYS rays a patch, Russian roulette: go on with dB / q and that many
-                    rays with probability q
+                    LEAST_RAYS rays a patch, that many rays; below ROULETTE_SHARE of that,
+                    Russian roulette: go on with dB / q with probability q
 
 Each generation is, given the previous one, an unbiased estimate of the light it carries on,
 so a chunk's total is unbiased (the roulette keeps the expectation); chunks are independent
@@ -67,13 +67,17 @@ DIRECT_SAMPLES = 1.5
 # The share of them allotted by each patch's estimated direct light; the rest by the allotment
 # weight alone, so that no patch's share falls below that part of it.
 RECEIVED_SHARE = 0.5
-# A generation casts at least this many rays a patch: one whose power would pay for fewer plays
-# Russian roulette, going on with this many rays or not at all. Fewer rays a patch, and a
-# generation's estimate is spikier than the last's (a chain of sparse generations lets a few
-# patches' values grow without bound: at 0.1 runs were up to 5x off); more, and the roulette's
-# all-or-nothing for a whole chunk's last light costs more than it saves. Measured in the closed
-# Cornell box (2,940 and 59,535 patches): 0.5 the least MSE, and no heavy-tailed chunk.
+# A generation casts at least this many rays a patch: one whose power would pay for fewer goes on
+# with this many. Fewer rays a patch, and a generation's estimate is spikier than the last's (a
+# chain of sparse generations lets a few patches' values grow without bound: at 0.1 runs were up
+# to 5x off). Measured in the closed Cornell box (2,940 and 59,535 patches): 0.5 the least MSE,
+# and no heavy-tailed chunk.
 LEAST_RAYS = 0.5
+# Russian roulette ends a chunk's light, all or nothing for every patch at once, only once its
+# power would pay for this share of LEAST_RAYS a patch: what it moves, it moves everywhere
+# together (an error no filter sees as noise, which a picture shows as its brightness), so it
+# plays where the light left is a small share of what the patches were given (docs/picture.md).
+ROULETTE_SHARE = 0.1
 # A generation's rays (and the first reflection's) are cast this many at a time.
 RAY_BLOCK = 1 << 18
 
@@ -164,14 +168,14 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
         count = budget * reflected_power(area, state.reflected, state.groups)
         if count <= 0:
             break
-        if count < least:
-            go_on = count / least
+        if count < least * ROULETTE_SHARE:
+            go_on = count / (least * ROULETTE_SHARE)
             if rng.random() >= go_on:
                 state.absorbed += leaving(area, state.reflected)  # (the roulette's end: nothing leaves)
                 break
             state.absorbed -= leaving(area, state.reflected) * (1.0 / go_on - 1.0)  # what leaves beyond it
             state.reflected = state.reflected / go_on
-            count = least
+        count = max(count, least)
         generation(tables, area, state, weight, int(np.rint(count)), rng)
     incident = state.irradiance * area
     absorbed = state.absorbed + ((1.0 - R) * incident).sum(axis=1)
