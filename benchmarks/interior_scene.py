@@ -1,4 +1,4 @@
-"""Two interiors built with bpy as an artist models them, for the picture benchmark (``picture.py``).
+"""Three interiors built with bpy as an artist models them, for the picture benchmark (``picture.py``).
 
     import bpy
     from benchmarks import interior_scene
@@ -20,6 +20,12 @@ Base Color set (Emission too, for an emitter). Metres, Z up.
   aimed at the bed, an emissive strip under the ceiling along the east wall, a green west wall,
   a floor of packed plank stripes, a bed with a headboard, a wardrobe, a desk, a subdivided stool;
   camera at the south end looking in.
+- ``loft``: a 6 x 5 x 3 m room added after the product's picture work was done on the other two
+  (nothing tuned on it): a tall window in the south wall with a low afternoon sun from the south-west
+  and a warm dim sky, a spot over a dark kitchen counter along the east wall, a soft point lamp
+  beside an armchair, an emissive cube pendant hanging over a coffee table, a terracotta north
+  wall, a bookshelf of boards run into its frame, a floor of packed grey planks, a subdivided pouf;
+  camera in the south-east corner looking north-west.
 """
 from __future__ import annotations
 
@@ -190,6 +196,18 @@ def lamp(name, kind, location, rotation=(0.0, 0.0, 0.0), **settings):
     return obj
 
 
+def sky(name, colour, strength):
+    """The scene's world: a uniform Background of ``colour`` (RGB) at ``strength``."""
+    import bpy
+
+    world = bpy.data.worlds.new(name)
+    background = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    background.inputs["Color"].default_value = (*colour, 1.0)
+    background.inputs["Strength"].default_value = strength
+    bpy.context.scene.world = world
+    return world
+
+
 def look_at(name, location, target, lens):
     """A camera at ``location`` looking at ``target`` (up +Z), the scene's camera, 320 x 240."""
     import bpy
@@ -235,8 +253,6 @@ def shell(size, wall, slab, paint, ceiling_paint, floor_material, window=None):
 
 def window_room():
     """The 5 x 4 x 2.7 m room with a window, sun and sky, a point and an area lamp."""
-    import bpy
-
     size = (5.0, 4.0, 2.7)
     floor_image = packed_image("Floor Checker", checker((10, 8), 32, (0.75, 0.6, 0.45), (0.3, 0.2, 0.15)))
     walls = principled("Wall Paint", (0.8, 0.8, 0.78))
@@ -256,11 +272,7 @@ def window_room():
              lamp("Ceiling Lamp", "POINT", (3.8, 1.2, size[2] - 0.25), energy=60.0, shadow_soft_size=0.05,
                   color=(1.0, 0.85, 0.7)),
              lamp("Wall Panel", "AREA", (4.85, 2.6, 1.6), (0.0, math.radians(90), 0.0), energy=40.0, size=0.6)]
-    world = bpy.data.worlds.new("Sky")
-    background = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
-    background.inputs["Color"].default_value = (0.45, 0.6, 0.9, 1.0)
-    background.inputs["Strength"].default_value = 0.6
-    bpy.context.scene.world = world
+    sky("Sky", (0.45, 0.6, 0.9), 0.6)
     camera = look_at("Camera", (4.7, 3.75, 1.7), (1.0, 0.8, 0.8), 18.0)
     return Interior("window_room", ((0, 0, 0), size), surfaces=[o.name for o in made], lamps=[o.name for o in lamps],
                     camera=camera.name, textured="Floor")
@@ -292,6 +304,40 @@ def lamp_room():
                     lamps=[o.name for o in lamps], camera=camera.name, textured="Floor")
 
 
+def loft():
+    """The 6 x 5 x 3 m loft: a tall south window with a low sun and a warm sky, a spot over the
+    counter, a soft point lamp, an emissive pendant cube."""
+    size = (6.0, 5.0, 3.0)
+    planks = packed_image("Floor Boards", stripes(24, 12, (0.5, 0.5, 0.48), (0.36, 0.35, 0.33)))
+    made = shell(size, 0.2, 0.2, principled("Warm White", (0.82, 0.8, 0.74)), principled("Ceiling White", (0.88, 0.88, 0.88)),
+                 image_material("Floor", planks), window=(0.8, 2.6, 0.4, 2.6))
+    planar_uv(made[0], (0.0, 0.0), (6.0, 3.0))  # boards of 0.25 m along y
+    made[4].data.materials[0] = principled("Terracotta", (0.62, 0.3, 0.2))  # the north wall
+    made.append(boxes_object("Counter", [((5.35, 0.8, 0.0), (6.0, 3.4, 0.9)), ((5.3, 0.75, 0.9), (6.0, 3.45, 0.94))],
+                             principled("Charcoal", (0.12, 0.12, 0.13))))
+    shelves = [((0.6 + 0.02, 4.62, z), (2.6 - 0.02, 4.98, z + 0.03)) for z in (0.4, 0.8, 1.2, 1.6)]
+    made.append(boxes_object("Bookshelf", [((0.6, 4.6, 0.0), (0.64, 5.0, 2.0)), ((2.56, 4.6, 0.0), (2.6, 5.0, 2.0)),
+                                           ((0.6, 4.6, 1.96), (2.6, 5.0, 2.0)), ((0.6, 4.6, 0.0), (2.6, 5.0, 0.06)), *shelves],
+                             principled("Shelf White", (0.72, 0.72, 0.7))))
+    made.append(boxes_object("Coffee Table", [((2.4, 2.0, 0.36), (3.6, 2.7, 0.42)), ((2.45, 2.05, 0.0), (3.55, 2.65, 0.08))],
+                             principled("Walnut", (0.3, 0.18, 0.1))))
+    made.append(boxes_object("Armchair", [((0.6, 2.0, 0.0), (1.5, 2.9, 0.45)), ((0.5, 2.0, 0.0), (0.72, 2.9, 0.95)),
+                                          ((0.6, 1.85, 0.0), (1.5, 2.05, 0.65)), ((0.6, 2.85, 0.0), (1.5, 3.05, 0.65))],
+                             principled("Mustard", (0.7, 0.52, 0.1))))
+    made.append(cylinder("Pouf", (4.0, 3.4, 0.0), 0.3, 0.4, principled("Teal", (0.1, 0.4, 0.42))))
+    pendant = boxes_object("Pendant", [((2.85, 2.2, 2.05), (3.15, 2.5, 2.35))],
+                           principled("Pendant Glow", (0.8, 0.8, 0.8), emission=(1.0, 0.9, 0.75), strength=8.0))
+    lamps = [lamp("Sun", "SUN", (-2.0, -4.0, 3.0), (math.radians(65), 0.0, math.radians(-35)), energy=6.0,
+                  color=(1.0, 0.88, 0.72)),
+             lamp("Counter Spot", "SPOT", (5.4, 2.1, 2.9), energy=200.0, spot_size=math.radians(70), spot_blend=0.4,
+                  shadow_soft_size=0.03),
+             lamp("Reading Lamp", "POINT", (0.45, 3.25, 1.5), energy=40.0, shadow_soft_size=0.15, color=(1.0, 0.8, 0.6))]
+    sky("Evening Sky", (0.9, 0.7, 0.55), 0.3)
+    camera = look_at("Camera", (5.6, 0.4, 1.7), (1.5, 4.0, 0.9), 16.0)
+    return Interior("loft", ((0, 0, 0), size), surfaces=[o.name for o in made], emitters=[pendant.name],
+                    lamps=[o.name for o in lamps], camera=camera.name, textured="Floor")
+
+
 def make_diffuse():
     """Every material's Specular IOR Level set to 0: Principled without its dielectric layer,
     a Lambertian surface (the control that shows what the specular layer accounts for)."""
@@ -303,7 +349,7 @@ def make_diffuse():
             node.inputs["Specular IOR Level"].default_value = 0.0
 
 
-SCENES = {"window_room": window_room, "lamp_room": lamp_room}
+SCENES = {"window_room": window_room, "lamp_room": lamp_room, "loft": loft}
 
 
 def build(name):

@@ -618,7 +618,7 @@ def room_section(name, a, colours, png):
 
 def report(rooms, colours, command, loads, out):
     lines = ["# The picture: the product's preview against Cycles, pixel by pixel", "",
-             f"`{command}`: two interiors built by `benchmarks/interior_scene.py` (default Principled materials, walls "
+             f"`{command}`: interiors built by `benchmarks/interior_scene.py` (default Principled materials, walls "
              "of overlapping boxes, packed image textures on the floors, furniture, a subdivided ball or stool), the "
              f"product at the panel's defaults and a {TARGET_ERROR:g}% target, output `{colours}`, its preview at 320 x 240 "
              f"({PREVIEW_SAMPLES} samples; live results with one bounce and the denoiser), against a Cycles reference. Errors on luminance over the "

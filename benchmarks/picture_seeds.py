@@ -1,9 +1,9 @@
 """Per-object brightness over several seeds: the picture benchmark's rooms (``picture.py``: the
-product's preview at the panel's defaults and a 2% target, or ``--error``, at ``--preview-samples``) solved with seeds 0..n-1, each
+product's preview at the panel's defaults, or ``--error``, at ``--preview-samples``) solved with seeds 0..n-1, each
 object's mean luminance over the reference's, seed by seed and their mean (one seed's objects
 move by 1-2% with the solve's noise: a single round says little about 3%).
 
-    python -m benchmarks.picture_seeds --scenes window_room lamp_room --seeds 4 --set live_lamps=True
+    python -m benchmarks.picture_seeds --scenes window_room lamp_room loft --seeds 4
 
 Uses picture.py's cached references (out/picture_cache/, made there or here). Writes
 benchmarks/results/picture_seeds.md (``--out``).
