@@ -64,7 +64,7 @@ def test_the_floor_texture_is_a_packed_image_on_a_uv_map_the_product_reads(inter
     co = np.array([floor.data.vertices[l.vertex_index].co[:] for l in floor.data.loops])
     top = np.isclose(co[:, 2], 0.0)
     size = np.asarray(interior.room[1], float)
-    scale = {"window_room": size[:2], "lamp_room": (4.0, 4.0)}[interior.name]
+    scale = {"window_room": size[:2], "lamp_room": (4.0, 4.0), "loft": (6.0, 3.0)}[interior.name]
     assert top.any()
     assert np.allclose(uv.reshape(-1, 2)[top], co[top, :2] / np.asarray(scale), atol=1e-5)  # laid flat, metres over its span
 
@@ -103,6 +103,22 @@ def test_the_lamp_room_is_closed_and_lit_by_a_spot_and_a_strip():
     origin = np.broadcast_to(np.array(bpy.context.scene.camera.location), d.shape)
     hit, _ = picture.first_hits(corners, origin, d)
     assert (hit >= 0).all()
+
+
+def test_the_loft_has_its_window_sun_sky_lamps_and_pendant():
+    info = interior_scene.build("loft")
+    assert sorted(bpy.data.objects[n].data.type for n in info.lamps) == ["POINT", "SPOT", "SUN"]
+    assert info.emitters == ["Pendant"]
+    sky = read_world(bpy.context.scene, [])
+    assert sky is not None and np.all(np.asarray(sky.irradiance) > 0)
+    pendant = np.array([v.co[:] for v in bpy.data.objects["Pendant"].data.vertices])
+    assert _inside(pendant.min(axis=0), info.room) and _inside(pendant.max(axis=0), info.room)  # hangs in the air
+    # the window is open: towards it from the room's middle the rays leave; towards the north wall they do not
+    corners, _, _ = picture.mesh_triangles([bpy.data.objects[n] for n in info.meshes])
+    centre = np.array([[1.7, 2.5, 1.5]] * 2)
+    to = np.array([[1.7, -0.5, 1.5], [1.7, 5.5, 1.5]]) - centre
+    hit, _ = picture.first_hits(corners, centre, to / np.linalg.norm(to, axis=1, keepdims=True))
+    assert hit[0] < 0 and hit[1] >= 0
 
 
 def test_the_pixel_map_sees_the_objects_cycles_renders(interior):
