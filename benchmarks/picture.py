@@ -9,10 +9,11 @@ materials, textured floors, furniture, a subdivided ball or stool).
 
 Per room, in one process: the reference (Cycles, 64 bounces, no clamping, two independent halves
 of ``--reference-samples``, cached in out/picture_cache/ by the scene's content); then rounds
-alternating the product (the panel's operator at its defaults and an error target (``--error``, 2% unless given), as the command
-line runs it, then its preview: ``addon/cli/preview.py``'s settings, Cycles without bounces
-over the result objects, at 320 x 240) and Cycles on the original scene at the product's wall
-time (the sample counts from a timing fit in the same run), with OpenImageDenoise and without.
+alternating the product (the panel's operator at its defaults, its error target ``--error``, as the
+command line runs it, then its preview: ``addon/cli/preview.py``'s settings, live results with one
+bounce and the denoiser, ``--preview-samples``, at 320 x 240) and Cycles on the original scene at
+the product's wall time (the first round's sample counts from a timing fit in the same run, each
+later round's tracked to the product's last time), with OpenImageDenoise and without.
 Every image is rendered to a float EXR and compared on surface pixels (``picture_metrics``).
 """
 from __future__ import annotations
@@ -626,7 +627,8 @@ def report(rooms, colours, command, loads, out):
              "reference's mean luminance there: the mean absolute error against the reference as it is (its own noise "
              "included), and the RMS error with the reference's own variance (from its two halves) subtracted: an "
              "estimate of the error against the truth. Cycles at the product's wall time: sample counts from a timing "
-             "line fitted in the same run (capped where the product takes minutes), then rounds alternating with the product. "
+             "line fitted in the same run for the first round (capped where the product takes minutes), each later round's "
+             "tracked to the product's last time, rounds alternating with the product. "
              f"Cycles and the product on {THREADS} threads each, under `nice`, on a 2-core machine shared with other "
              f"work (load average {loads[0]:.1f} at the start, {loads[1]:.1f} at the end): times compare within a "
              "room's rounds, not across runs.", ""]

@@ -212,7 +212,7 @@ def _show_colours(mesh, render_colour):
             pass
 
 
-def show_attribute_in_solid_view(live=False):
+def show_results_in_views(live=False):
     """Let the 3D views' solid shading colour objects by their colour attribute; with live
     results, Material Preview lit by the scene's lamps and world (its studio light would light
     them in their place)."""
@@ -311,5 +311,5 @@ def write_results(context, output_data, output_mode, scene=None):
     for obj in created:
         collection.objects.link(obj)
         obj.name = obj.data.name = obj[SOURCE_PROPERTY] + RESULT_SUFFIX  # the names the old ones had
-    show_attribute_in_solid_view(live)
+    show_results_in_views(live)
     return created
