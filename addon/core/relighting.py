@@ -23,10 +23,8 @@ import numpy as np
 
 from .error_model import mean_reflected_radiosity
 from . import point_direct
+from . import relit_checks
 from .grouping import SourceGroups, check_per_source, source_groups
-
-# A share above the sampled one by no more than this is the same share (float rounding).
-SHARE_ROUNDING = 1e-9
 
 
 class GroupBatches:
@@ -83,7 +81,8 @@ class GroupBatches:
             means = np.einsum("spc,pc,p->sc", irradiance, scene.reflectivity, scene.patch_area / scene.total_area)
         power = group_power(scene, self.groups)
         return PerSource(self.groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), target_mse,
-                         patch_group, self.groups.light_group, direct, means, self.lit.copy(), power_share(power))
+                         patch_group, self.groups.light_group, direct, means, self.lit.copy(),
+                         relit_checks.power_share(power))
 
     def irradiance(self, scene, incident, paths):
         """(S,P,3) the irradiance of incident power (S,C,P) summed over ``paths`` paths."""
@@ -102,13 +101,6 @@ def group_power(scene, groups):
     emitting = groups.source_group >= 0
     np.add.at(power, groups.source_group[emitting], source_power[emitting])
     return power
-
-
-def power_share(power):
-    """(S,) each group's share of (S,3) ``power`` summed over the channels: its share of a solve's
-    samples, which draw sources (and gather toward them) in proportion to it."""
-    total = power.sum(axis=1)
-    return total / total.sum() if total.sum() > 0 else np.zeros(len(total))
 
 
 def scene_scale(scene):
@@ -141,35 +133,13 @@ class PerSource:
     # (S,3) each group's area-weighted mean reflected radiosity, where the solve held its error to
     # its own mean (error_scale "measured"): the relit error is then relative to theirs recombined
     reflected_means: np.ndarray | None = None
-    # (S,) the batches each group's light reached a reflecting patch in, and (S,) its share of
-    # its solve's samples (``power_share``); None in results kept before they were
+    # (S,) the batches each group lit a reflecting patch in; (S,) its share of its solve's samples (relit_checks)
     lit_batches: np.ndarray | None = None
     sampled_share: np.ndarray | None = None
 
     @property
     def count(self):
         return len(self.names)
-
-    def unmeasured(self, weights, relative_rms=math.nan):
-        """The names of the groups whose light a recombination with ``weights`` and a measured
-        ``relative_rms`` error cannot vouch for: lit in fewer than 2 batches (no batch variance of
-        their own: a group that drew no path has 0 light and 0 variance), relit to a larger share
-        of the power than the share of the samples they had (at or below it the solve's own error
-        covered them), and that share more than the error (their light, were all of it missing)."""
-        if self.lit_batches is None or self.sampled_share is None:
-            return ()
-        relit = (np.asarray(weights, np.float64) * self.power).sum(axis=1)
-        if relit.sum() <= 0:
-            return ()
-        share = relit / relit.sum()
-        beyond = (share > self.sampled_share * (1.0 + SHARE_ROUNDING)) & ~(share <= relative_rms)
-        return tuple(name for name, lit, over in zip(self.names, self.lit_batches, beyond) if lit < 2 and over)
-
-    def dark(self, weights):
-        """Whether no group ``weights`` keeps on lit a reflecting patch in any batch: no light to
-        be relative to (on the paper's scale too, whose mean comes from the power)."""
-        on = (np.asarray(weights, np.float64) > 0).any(axis=1)
-        return self.lit_batches is not None and not (self.lit_batches[on] > 0).any()
 
     def mse(self, weights):
         """The measured MSE of the reflected radiosity recombined with ``weights`` (S,3)."""
@@ -193,8 +163,10 @@ class PerSource:
 class Relit:
     """A recombination: ``radiosity`` (P,3), ``irradiance`` (P,3) or None, the measured MSE
     ``mse`` of its reflected radiosity and the ``relative_rms`` error (over b_ave at the new
-    powers; NaN below 2 batches, ``dark`` or with groups ``unmeasured``: PerSource's), ``target_relative_rms``
-    the solve's target in the same terms (None without one), and ``past_target``: whether the new weights move the error past it."""
+    powers; NaN below 2 batches, ``dark`` or with groups ``unmeasured``), ``target_relative_rms``
+    the solve's target in the same terms (None without one), and ``past_target``: whether the new
+    weights move the error past it, and the groups whose re-solve would meet it (``over_target``;
+    ``relit_checks`` has these)."""
 
     radiosity: np.ndarray
     irradiance: np.ndarray | None
@@ -204,6 +176,7 @@ class Relit:
     past_target: bool
     unmeasured: tuple = ()
     dark: bool = False
+    over_target: tuple = ()
 
 
 def check_weights(per_source, weights):
@@ -229,14 +202,15 @@ def relight(per_source, weights, irradiance=False):
     light = _combine(per_source.irradiance, w) if irradiance else None
     mse = per_source.mse(w)
     scale = per_source.mean_reflected(w)
-    dark = per_source.dark(w) or not scale > 0
-    relative = math.nan if dark else math.sqrt(mse) / scale  # (no light: no error relative to it)
-    unmeasured = per_source.unmeasured(w, relative)
-    relative = math.nan if unmeasured else relative
+    dark = relit_checks.dark(per_source, w) or not scale > 0
+    unmeasured = relit_checks.unmeasured(per_source, w, scale) if math.isfinite(mse) else ()
+    relative = math.nan if dark or unmeasured else math.sqrt(mse) / scale  # (no light: no error relative to it)
     target = None
     if per_source.target_mse is not None:
         target = math.sqrt(per_source.target_mse) / per_source.paper_mean(np.ones_like(w))
-    return Relit(radiosity, light, mse, relative, target, target is not None and relative > target, unmeasured, dark)
+    past = target is not None and relative > target
+    return Relit(radiosity, light, mse, relative, target, past, unmeasured, dark,
+                 relit_checks.over_target(per_source, w, scale, target) if past else ())
 
 
 def _combine(values, w):

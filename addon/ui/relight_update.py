@@ -27,7 +27,7 @@ def update(context):
     scene = context.scene
     meta = relight_store.meta_of(scene)
     outcome = relight_ui.assess(scene, meta)
-    stale = sorted(outcome.stale | outcome.unsolved)
+    stale = sorted(outcome.outdated())
     if not stale and not outcome.added:
         return "nothing is stale: Relight follows strengths and colours without a solve"
     last = relight_keep.LAST.get(meta["token"])

@@ -1,5 +1,5 @@
-"""Recombinations whose error the solve's batches cannot give (addon/core/relighting.py,
-PerSource.unmeasured): a source whose share of the paths was hidden by a far brighter one drew
+"""Recombinations whose error the solve's batches cannot give (addon/core/relit_checks.py,
+``unmeasured``): a source whose share of the paths was hidden by a far brighter one drew
 no path, so its own result is 0 with 0 batch variance; relit to most of the light, the error is
 unknown (NaN) and the group named, never "0%". Below its share, or with its light within the
 error, the solve's own error stands; re-solved alone it is measured again; no light at all is
@@ -80,3 +80,25 @@ def test_every_source_off_is_dark_not_an_error_of_0():
     ps = _solve(_open_box(), METHODS[0], paths=20_000, seed=1, per_source=True).per_source
     off = relight(ps, np.zeros(ps.count))
     assert off.dark and math.isnan(off.relative_rms) and off.unmeasured == () and not off.radiosity.any()
+
+
+def test_a_recombination_past_the_target_names_the_groups_whose_re_solve_would_meet_it():
+    """The dimmest source alone at full strength, the rest off (as in test_relighting): past the
+    solve's target, and that source is the one to solve again; re-solved with the target scaled to
+    the light as relit (target_mse times the square of its power over the solve's, as Update
+    gives it), the recombination meets it. At the solve's strengths nothing is past it."""
+    scene = _open_box()
+    first = _solve(scene, METHODS[0], paths=40_000, seed=1, per_source=True)
+    ps = _solve(scene, METHODS[0], target_mse=2 * first.measured_mse, seed=1, per_source=True,
+                stop_rule="measured").per_source
+    assert relight(ps, np.ones(ps.count)).over_target == ()
+    alone = np.zeros(ps.count)
+    dimmest = int(np.argmin(ps.power.mean(axis=1)))
+    alone[dimmest] = 1.0
+    relit = relight(ps, alone)
+    assert relit.past_target and relit.over_target == (ps.names[dimmest],)
+    as_relit = ps.target_mse * (ps.power[dimmest].sum() / ps.power.sum()) ** 2
+    redone = resolve(scene, ps, [ps.names[dimmest]], **_kwargs(METHODS[0], target_mse=as_relit, seed=2,
+                                                                 stop_rule="measured"))
+    again = relight(redone, alone)
+    assert again.over_target == () and not again.past_target, (again.relative_rms, again.target_relative_rms)
