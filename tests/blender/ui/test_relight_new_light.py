@@ -124,3 +124,14 @@ def test_a_lamp_hidden_by_a_far_brighter_emitter_is_stale_when_it_is_most_of_the
     fresh, _ = rs.patch_values()
     result = fresh_output.result
     assert abs(_z(updated, fresh, outcome.error.mse, result.measured_mse, result.reflected_variance, area)) < Z
+
+
+def test_every_source_off_says_no_light_not_an_error_of_0(blender):
+    rs.build(blender)
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    for name in ("Bulb", "Panel", "Sun"):
+        bpy.data.objects[name].data.energy = 0.0
+    _background().inputs["Strength"].default_value = 0.0
+    _emits("Glow", 0.0)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    assert relight_ui.assess(bpy.context.scene).text() == "relit: no light reflected at these strengths (no error to give)"
