@@ -388,6 +388,9 @@ def _joined(scene, groups, per_source, new, redone):
         for h, (other, m) in source.items():
             if other == kind:  # (independent runs: no covariance across them)
                 covariance[:, g, h] = (new_cov if kind == "new" else old_cov)[:, k, m]
-    return PerSource(groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), per_source.target_mse,
+    target, before = per_source.target_mse, per_source.power.mean(axis=1).sum()
+    if target is not None and before > 0:  # (the same relative error of the light as it is now: its power moved)
+        target *= (power.mean(axis=1).sum() / before) ** 2
+    return PerSource(groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), target,
                      groups.patch_group(P).copy(), np.asarray(groups.light_group, np.int32), reflected_means=means,
                      lit_batches=lit, sampled_share=sampled)

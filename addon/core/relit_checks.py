@@ -6,8 +6,8 @@ rule the whole solve's error follows); a group that drew no path has 0 light and
 estimate of nothing. At the solve's strengths the solve's own error covers such a group (its
 light, whatever it is, is in the total as sampled); relit to a larger share of the power than its
 share of the samples, nothing does. ``unmeasured`` names those groups where their share is more
-than the error of the rest; ``over_target`` the groups a re-solve must hold to the target for a
-recombination past it to meet it. No bpy.
+than the error of the rest; ``over_target`` the groups a re-solve must hold to part of the target
+for a recombination past it to meet it. No bpy.
 """
 from __future__ import annotations
 
@@ -17,6 +17,9 @@ import numpy as np
 
 # A share above the sampled one by no more than this is the same share (float rounding).
 SHARE_ROUNDING = 1e-9
+# A recombination past its target: the groups left are held to this share of the target MSE and the
+# re-solved ones to the rest (an even split: re-solved to the whole target, they would put it past again).
+REST_SHARE = 0.5
 
 
 def power_share(power):
@@ -57,17 +60,19 @@ def dark(per_source, weights):
 
 
 def over_target(per_source, weights, scale, target):
-    """The names of the fewest groups, the largest own error first, whose error left out (their
-    light re-solved to the target) brings the recombination with ``weights`` within the relative
-    ``target``; () where it is within it or there is no target."""
+    """The names of the fewest groups, the largest own error first, whose error left out brings
+    the recombination with ``weights`` (its mean ``scale``) within REST_SHARE of the relative
+    ``target``'s MSE, their light to be re-solved to the other share; () where it is within the
+    target or there is none."""
     if target is None or not relative_error(per_source, weights, scale) > target:
         return ()
+    target = target * math.sqrt(REST_SHARE)
     w = np.array(weights, np.float64)
     C = per_source.covariance.shape[0]
     own = np.mean([w[:, c] ** 2 * np.diagonal(per_source.covariance[c if C == 3 else 0]) for c in range(3)], axis=0)
     names = []
     for s in np.argsort(-own, kind="stable"):
-        if relative_error(per_source, w, scale) <= target or own[s] <= 0:
+        if own[s] <= 0 or relative_error(per_source, w, scale) <= target:
             break
         names.append(per_source.names[s])
         w[s] = 0.0

@@ -13,6 +13,7 @@ from test_relighting import IDS, METHODS, Z, _joint_noise_z, _kwargs, _lights, _
 from addon.core import relight
 from addon.core.lights import PointLight
 from addon.core.relighting import resolve
+from addon.core.relit_checks import REST_SHARE
 
 CASES = [METHODS[0], METHODS[3], METHODS[7]]
 
@@ -85,8 +86,9 @@ def test_every_source_off_is_dark_not_an_error_of_0():
 def test_a_recombination_past_the_target_names_the_groups_whose_re_solve_would_meet_it():
     """The dimmest source alone at full strength, the rest off (as in test_relighting): past the
     solve's target, and that source is the one to solve again; re-solved with the target scaled to
-    the light as relit (target_mse times the square of its power over the solve's, as Update
-    gives it), the recombination meets it. At the solve's strengths nothing is past it."""
+    the light as relit (target_mse times the square of its power over the solve's, as Update's
+    scene at its strengths now gives it; the re-solved share of it), the recombination meets it.
+    At the solve's strengths nothing is past it."""
     scene = _open_box()
     first = _solve(scene, METHODS[0], paths=40_000, seed=1, per_source=True)
     ps = _solve(scene, METHODS[0], target_mse=2 * first.measured_mse, seed=1, per_source=True,
@@ -97,8 +99,23 @@ def test_a_recombination_past_the_target_names_the_groups_whose_re_solve_would_m
     alone[dimmest] = 1.0
     relit = relight(ps, alone)
     assert relit.past_target and relit.over_target == (ps.names[dimmest],)
-    as_relit = ps.target_mse * (ps.power[dimmest].sum() / ps.power.sum()) ** 2
+    as_relit = ps.target_mse * (ps.power[dimmest].sum() / ps.power.sum()) ** 2 * (1 - REST_SHARE)
     redone = resolve(scene, ps, [ps.names[dimmest]], **_kwargs(METHODS[0], target_mse=as_relit, seed=2,
                                                                  stop_rule="measured"))
     again = relight(redone, alone)
     assert again.over_target == () and not again.past_target, (again.relative_rms, again.target_relative_rms)
+
+
+def test_a_re_solved_source_at_a_new_strength_keeps_the_solve_s_relative_target():
+    """resolve keeps the solve's target as the same relative error of the light as it is now:
+    the area lamp re-solved at twice its strength, the target's relative RMS is the solve's (before:
+    the absolute target_mse of the solve over the brighter light's mean, a tighter relative one,
+    and a relight meeting the target said past it)."""
+    scene = _open_box()
+    first = _solve(scene, METHODS[0], paths=20_000, seed=1, per_source=True)
+    ps = _solve(scene, METHODS[0], target_mse=2 * first.measured_mse, seed=1, per_source=True,
+                stop_rule="measured").per_source
+    brighter = _open_box(np.array([(1, 1, 1)] * 3 + [(2, 2, 2)] + [(1, 1, 1)] * 2))
+    redone = resolve(brighter, ps, ["area"], **_kwargs(METHODS[0], paths=20_000, seed=2))
+    solved = relight(ps, np.ones(ps.count)).target_relative_rms
+    assert relight(redone, np.ones(ps.count)).target_relative_rms == pytest.approx(solved, rel=1e-12)

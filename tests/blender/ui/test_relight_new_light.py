@@ -135,3 +135,24 @@ def test_every_source_off_says_no_light_not_an_error_of_0(blender):
     _emits("Glow", 0.0)
     assert bpy.ops.radiosity.relight() == {"FINISHED"}
     assert relight_ui.assess(bpy.context.scene).text() == "relit: no light reflected at these strengths (no error to give)"
+
+
+def test_a_relight_past_the_target_marks_the_sources_to_solve_again_and_update_meets_it(blender, monkeypatch):
+    """The bulb and the panel nearly off, the glow up: past the solve's target. The sources whose error
+    puts it there are stale (before: "Update or solve again", and Update said nothing was stale);
+    Update re-solves them to part of the target, and the relit light then meets it."""
+    rs.build(blender)
+    _solve(monkeypatch, seed=7)
+    scene = bpy.context.scene
+    bpy.data.objects["Bulb"].data.energy = 0.1  # (lamps at 0 would leave their groups: a full solve)
+    bpy.data.objects["Panel"].data.energy = 0.1
+    bpy.data.objects["Sun"].data.energy = 0.2
+    _emits("Glow", 30.0, (1.0, 0.9, 0.8))
+    outcome = relight_ui.assess(scene)
+    assert outcome.error.past_target and outcome.over_target, outcome.text()
+    assert outcome.text().endswith(f"; stale: {', '.join(sorted(outcome.over_target))} (Update)")
+    calls = _spy_solves(monkeypatch)
+    assert bpy.ops.radiosity.update() == {"FINISHED"}
+    assert calls == [tuple(n for n in outcome.meta["names"] if n in outcome.over_target)]
+    after = relight_ui.assess(scene)
+    assert not after.error.past_target and after.outdated() == set(), after.text()
