@@ -10,7 +10,7 @@ import pytest
 from addon.cli import run as cli_run
 
 from ..ui import relight_scene as rs
-from ..ui.test_relight_new_light import _background, _emits, _swamped
+from ..ui.test_relight_new_light import background, emits, swamped
 
 
 def _saved(tmp_path, name="room.blend"):
@@ -29,7 +29,7 @@ def _refused(tmp_path, capsys, *args):
 
 def test_a_material_set_to_emit_is_refused(blender, tmp_path, capsys):
     rs.build(blender, "TEXTURED")
-    _emits("White", 0.0)
+    emits("White", 0.0)
     _saved(tmp_path)
     assert _refused(tmp_path, capsys, "--strength", "White=5") == (
         "error: material White: light the solve did not have (off, dark or absent then) cannot be relit: solve again "
@@ -38,7 +38,7 @@ def test_a_material_set_to_emit_is_refused(blender, tmp_path, capsys):
 
 def test_the_world_turned_on_or_a_lamp_that_was_off_is_refused(blender, tmp_path, capsys):
     rs.build(blender, "TEXTURED")
-    _background().inputs["Strength"].default_value = 0.0
+    background().inputs["Strength"].default_value = 0.0
     rs.lamp("POINT", "Spare", (0.5, 0.3, 0.5), 0.0)
     _saved(tmp_path)
     assert _refused(tmp_path, capsys, "--strength", "World=1").startswith(
@@ -48,7 +48,7 @@ def test_the_world_turned_on_or_a_lamp_that_was_off_is_refused(blender, tmp_path
 
 
 def test_a_lamp_hidden_by_a_far_brighter_emitter_relit_to_most_of_the_light_is_refused(blender, tmp_path, capsys):
-    _swamped(blender, 1e10)
+    swamped(blender, 1e10)
     _saved(tmp_path)
     assert _refused(tmp_path, capsys, "--strength", "Glow=0") == (
         "error: Bulb had too few of the solve's paths (light in fewer than 2 batches) to be relit to this share of "
