@@ -10,7 +10,10 @@ import hashlib
 import bpy
 import numpy as np
 
+from ..blender_write.results import is_result_object
+from .lights import world_gives_light
 from .materials import _EMISSION, _shader_node
+from .objects import SOURCE_TYPES
 
 # The lamp settings besides strength and colour that shape its light (by type).
 LAMP_SHAPE = ("type", "shadow_soft_size", "spot_size", "spot_blend", "show_cone", "size", "size_y", "shape", "angle",
@@ -125,6 +128,36 @@ def added_lamps(scene, known):
     """Names of the lamps that light the scene now and are not among ``known`` names."""
     return sorted(o.name for o in scene.objects
                   if o.type == "LIGHT" and o.name not in known and lamp_emission(o).any())
+
+
+def new_light(scene, members, solved, rest_of_scene):
+    """What lights the scene now that a solve of the objects named ``solved`` did not have, its
+    sources ``members`` [(kind, name)]: the world lit where it was not a source ("world W"), a
+    material that emits on a solved object and was not ("material M"), and with ``rest_of_scene``
+    (which then takes part) an object since added that emits ("object O")."""
+    known, solved = set(members), set(solved)
+    out = []
+    if scene.world is not None and ("world", scene.world.name) not in known and world_gives_light(scene):
+        out.append(f"world {scene.world.name}")
+    for obj in sorted(scene.objects, key=lambda o: o.name):
+        if obj.name in solved:
+            out += [f"material {m.name}" for m in _emitting(obj) if ("material", m.name) not in known]
+        elif rest_of_scene and obj.type in SOURCE_TYPES and not obj.hide_render and not is_result_object(obj) \
+                and _emitting(obj):
+            out.append(f"object {obj.name}")
+    return list(dict.fromkeys(out))
+
+
+def _emitting(obj):
+    """The materials that emit on faces of ``obj`` (a mesh's slots that no face uses left out)."""
+    slots = [slot.material for slot in getattr(obj, "material_slots", ())]
+    emitting = [k for k, m in enumerate(slots) if m is not None and material_emission(m).any()]
+    if emitting and obj.type == "MESH" and len(slots) > 1:
+        index = np.zeros(len(obj.data.polygons), np.int32)
+        obj.data.polygons.foreach_get("material_index", index)
+        used = set(np.unique(np.minimum(index, len(slots) - 1)).tolist())
+        emitting = [k for k in emitting if k in used]
+    return [slots[k] for k in emitting]
 
 
 def geometry_signature(scene, names):

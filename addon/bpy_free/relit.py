@@ -116,7 +116,9 @@ class SourceResults:
                 "members": [[[kind, name, [float(x) for x in p]] for kind, name, p in group] for group in self.members],
                 "power": ps.power.tolist(), "covariance": ps.covariance.tolist(),  # (NaN below 2 chunks: JSON's NaN)
                 "scale": float(ps.scale), "target_mse": ps.target_mse,
-                "reflected_means": None if ps.reflected_means is None else ps.reflected_means.tolist()}
+                "reflected_means": None if ps.reflected_means is None else ps.reflected_means.tolist(),
+                "lit_batches": None if ps.lit_batches is None else ps.lit_batches.tolist(),
+                "sampled_share": None if ps.sampled_share is None else ps.sampled_share.tolist()}
 
 
 def source_results(scene, patches, result, groups):
@@ -165,15 +167,24 @@ def relit_error(meta, w):
     S = len(meta["names"])
     covariance = np.asarray(meta["covariance"], np.float64)
     empty = np.zeros((S, 0, 3))
-    means = meta.get("reflected_means")  # (None: the paper's b_ave, as results saved before it)
+    # (None: the paper's b_ave, and no group's batches checked, as in results saved before them)
+    means, lit, share = (meta.get(key) for key in ("reflected_means", "lit_batches", "sampled_share"))
     ps = PerSource(tuple(meta["names"]), empty, empty, np.asarray(meta["power"], np.float64), covariance,
-                   float(meta["scale"]), meta["target_mse"], reflected_means=None if means is None else np.asarray(means, np.float64))
+                   float(meta["scale"]), meta["target_mse"], reflected_means=None if means is None else np.asarray(means, np.float64),
+                   lit_batches=None if lit is None else np.asarray(lit, np.int64),
+                   sampled_share=None if share is None else np.asarray(share, np.float64))
     return relight(ps, w)
 
 
 def error_text(relit):
     """The relit error line, e.g. "relit: error 1.3% (the solve's target 1% applies to the solved
     strengths)"; past the target it says so."""
+    if relit.unmeasured:
+        its = "its" if len(relit.unmeasured) == 1 else "their"
+        return (f"relit: error unknown: {', '.join(relit.unmeasured)} had too few of the solve's paths ({its} light in "
+                f"fewer than 2 batches) for {its} share of the light now")
+    if relit.dark:
+        return "relit: no light reflected at these strengths (no error to give)"
     if not math.isfinite(relit.relative_rms):
         return "relit: error unknown (the solve had fewer than 2 batches)"
     text = f"relit: error {relit.relative_rms * 100:.3g}%"

@@ -23,6 +23,7 @@ import numpy as np
 
 from .error_model import mean_reflected_radiosity
 from . import point_direct
+from . import relit_checks
 from .grouping import SourceGroups, check_per_source, source_groups
 
 
@@ -36,6 +37,7 @@ class GroupBatches:
         self.incident = np.zeros((S, C, P))
         self.direct = None  # (S,C,P) of it straight from the sources, where chunks gather it apart
         self.cross = np.zeros((C, S, S))  # sum_k sum_j W_j I_sj^(k) I_tj^(k) / n_k
+        self.lit = np.zeros(S, np.int64)  # the batches each group's light reached a reflecting patch in
         score = tables.reflectivity * (scene.total_power / scene.patch_area)  # (C,P)
         self.root_weight = score * np.sqrt(scene.patch_area / scene.total_area)  # sqrt(W_j)
 
@@ -45,10 +47,13 @@ class GroupBatches:
         if tally.direct_groups is not None:
             self.direct = tally.direct_groups.copy() if self.direct is None else \
                 np.add(self.direct, tally.direct_groups, out=self.direct)
+        lit = np.zeros(self.groups.count, bool)
         for c in range(self.channels):
             x = tally.incident_groups[:, c] * self.root_weight[c]
+            lit |= x.any(axis=1)
             # (einsum, not a BLAS product: OpenBLAS's threads would spin beside the walks' threads)
             self.cross[c] += np.einsum("sp,tp->st", x, x) / tally.paths
+        self.lit += lit
 
     def spread(self, paths):
         """(C,S,S) M: the cross sums less those of the means, N (chunks - 1) times the batch
@@ -74,8 +79,10 @@ class GroupBatches:
         means = None
         if measured_scale:  # (area-weighted over patches: Batches.mean_reflected's, group by group)
             means = np.einsum("spc,pc,p->sc", irradiance, scene.reflectivity, scene.patch_area / scene.total_area)
-        return PerSource(self.groups.names, radiosity, irradiance, group_power(scene, self.groups), covariance,
-                         scene_scale(scene), target_mse, patch_group, self.groups.light_group, direct, means)
+        power = group_power(scene, self.groups)
+        return PerSource(self.groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), target_mse,
+                         patch_group, self.groups.light_group, direct, means, self.lit.copy(),
+                         relit_checks.power_share(power))
 
     def irradiance(self, scene, incident, paths):
         """(S,P,3) the irradiance of incident power (S,C,P) summed over ``paths`` paths."""
@@ -126,6 +133,9 @@ class PerSource:
     # (S,3) each group's area-weighted mean reflected radiosity, where the solve held its error to
     # its own mean (error_scale "measured"): the relit error is then relative to theirs recombined
     reflected_means: np.ndarray | None = None
+    # (S,) the batches each group lit a reflecting patch in; (S,) its share of its solve's samples (relit_checks)
+    lit_batches: np.ndarray | None = None
+    sampled_share: np.ndarray | None = None
 
     @property
     def count(self):
@@ -153,8 +163,10 @@ class PerSource:
 class Relit:
     """A recombination: ``radiosity`` (P,3), ``irradiance`` (P,3) or None, the measured MSE
     ``mse`` of its reflected radiosity and the ``relative_rms`` error (over b_ave at the new
-    powers), ``target_relative_rms`` the solve's target in the same terms (None without one),
-    and ``past_target``: whether the new weights move the error past it."""
+    powers; NaN below 2 batches, ``dark`` or with groups ``unmeasured``), ``target_relative_rms``
+    the solve's target in the same terms (None without one), and ``past_target``: whether the new
+    weights move the error past it, and the groups whose re-solve would meet it (``over_target``;
+    ``relit_checks`` has these)."""
 
     radiosity: np.ndarray
     irradiance: np.ndarray | None
@@ -162,6 +174,9 @@ class Relit:
     relative_rms: float
     target_relative_rms: float | None
     past_target: bool
+    unmeasured: tuple = ()
+    dark: bool = False
+    over_target: tuple = ()
 
 
 def check_weights(per_source, weights):
@@ -187,11 +202,15 @@ def relight(per_source, weights, irradiance=False):
     light = _combine(per_source.irradiance, w) if irradiance else None
     mse = per_source.mse(w)
     scale = per_source.mean_reflected(w)
-    relative = math.sqrt(mse) / scale if scale > 0 else (0.0 if mse == 0 else math.inf)
+    dark = relit_checks.dark(per_source, w) or not scale > 0
+    unmeasured = relit_checks.unmeasured(per_source, w, scale) if math.isfinite(mse) else ()
+    relative = math.nan if dark or unmeasured else math.sqrt(mse) / scale  # (no light: no error relative to it)
     target = None
     if per_source.target_mse is not None:
         target = math.sqrt(per_source.target_mse) / per_source.paper_mean(np.ones_like(w))
-    return Relit(radiosity, light, mse, relative, target, target is not None and relative > target)
+    past = target is not None and relative > target
+    return Relit(radiosity, light, mse, relative, target, past, unmeasured, dark,
+                 relit_checks.over_target(per_source, w, scale, target) if past else ())
 
 
 def _combine(values, w):
@@ -340,7 +359,8 @@ def _light_powers(scene):
 def _dark(P, S, C):
     """A PerSource of S groups that give no light."""
     zeros = np.zeros((S, P, 3))
-    return PerSource(("",) * S, zeros, zeros.copy(), np.zeros((S, 3)), np.zeros((C, S, S)), math.nan)
+    return PerSource(("",) * S, zeros, zeros.copy(), np.zeros((S, 3)), np.zeros((C, S, S)), math.nan,
+                     lit_batches=np.zeros(S, np.int64), sampled_share=np.zeros(S))
 
 
 def _joined(scene, groups, per_source, new, redone):
@@ -356,13 +376,21 @@ def _joined(scene, groups, per_source, new, redone):
     power = np.empty((S, 3))
     covariance = np.zeros((C, S, S))
     means = None if per_source.reflected_means is None or redone.reflected_means is None else np.empty((S, 3))
+    counted = per_source.lit_batches is not None and per_source.sampled_share is not None
+    lit, sampled = (np.zeros(S, np.int64), np.zeros(S)) if counted else (None, None)
     for g, (kind, k) in source.items():
         ps = redone if kind == "new" else per_source
         radiosity[g], irradiance[g], power[g] = ps.radiosity[k], ps.irradiance[k], ps.power[k]
         if means is not None:
             means[g] = ps.reflected_means[k]
+        if counted:  # (each its own run's: a re-solved group's share is of the re-solve's samples)
+            lit[g], sampled[g] = ps.lit_batches[k], ps.sampled_share[k]
         for h, (other, m) in source.items():
             if other == kind:  # (independent runs: no covariance across them)
                 covariance[:, g, h] = (new_cov if kind == "new" else old_cov)[:, k, m]
-    return PerSource(groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), per_source.target_mse,
-                     groups.patch_group(P).copy(), np.asarray(groups.light_group, np.int32), reflected_means=means)
+    target, before = per_source.target_mse, per_source.power.mean(axis=1).sum()
+    if target is not None and before > 0:  # (the same relative error of the light as it is now: its power moved)
+        target *= (power.mean(axis=1).sum() / before) ** 2
+    return PerSource(groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), target,
+                     groups.patch_group(P).copy(), np.asarray(groups.light_group, np.int32), reflected_means=means,
+                     lit_batches=lit, sampled_share=sampled)

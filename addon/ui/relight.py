@@ -21,17 +21,24 @@ _STATE = {"pending": False, "seconds": 0.0, "generation": 0, "panel": (None, Non
 
 class Relit:
     """One relight's outcome: the weights (S,3), the core's error numbers, each group's state and
-    share of the light, the groups that need an Update and the lamps added since the solve."""
+    share of the light, the groups that need an Update (moved or reshaped: ``stale``; a channel
+    solved dark lit now: ``unsolved``; too few of the solve's paths for their share now, their
+    error unknown: ``unmeasured``; the ones whose error puts the relit light past the solve's
+    target: ``over_target``) and the light the solve did not have (``added``: lamps, emitting
+    materials and objects, the world)."""
 
     def __init__(self, meta, w, error, stale, added, unsolved):
         self.meta, self.weights, self.error, self.stale, self.added = meta, w, error, stale, added
-        self.unsolved = unsolved
+        self.unsolved, self.unmeasured, self.over_target = unsolved, set(error.unmeasured), set(error.over_target)
         power = (w * np.asarray(meta["power"], np.float64)).sum(axis=1)
         self.shares = power / power.sum() if power.sum() > 0 else np.zeros(len(power))
 
+    def outdated(self):
+        """The groups whose results an Update solves again."""
+        return self.stale | self.unsolved | self.unmeasured | self.over_target
+
     def state(self, s):
-        name = self.meta["names"][s]
-        if name in self.stale or name in self.unsolved:
+        if self.meta["names"][s] in self.outdated():
             return "stale"
         return "current" if np.allclose(self.weights[s], 1.0, rtol=1e-6, atol=0) else "relit"
 
@@ -39,8 +46,8 @@ class Relit:
         line = relit.error_text(self.error)
         if self.added:
             line += f"; {', '.join(self.added)} added since the solve: Update solves again"
-        elif self.stale or self.unsolved:
-            line += f"; stale: {', '.join(sorted(self.stale | self.unsolved))} (Update)"
+        elif self.outdated():
+            line += f"; stale: {', '.join(sorted(self.outdated()))} (Update)"
         return line
 
 
@@ -62,7 +69,8 @@ def assess(scene, meta=None):
     if sources.geometry_signature(scene, meta["solved"]) != meta["geometry"]:
         stale = set(meta["names"])
     known = {name for kind, name in members if kind == "light"}
-    added = sources.added_lamps(scene, known)
+    rest_of_scene = bool(getattr(getattr(scene, "radiosity", None), "use_scene_objects", False))
+    added = sources.added_lamps(scene, known) + sources.new_light(scene, members, meta["solved"], rest_of_scene)
     w, unsolved = relit.weights(meta, pairs)
     return Relit(meta, w, relit.relit_error(meta, w), stale, added, unsolved)
 
@@ -126,7 +134,7 @@ class RADIOSITY_OT_relight(bpy.types.Operator):
             self.report({"ERROR"}, f"Radiosity: {exc}")
             return {"CANCELLED"}
         _STATE["seconds"] = time.perf_counter() - started
-        self.report({"WARNING"} if outcome.error.past_target or outcome.stale or outcome.added else {"INFO"},
+        self.report({"WARNING"} if outcome.error.past_target or outcome.outdated() or outcome.added else {"INFO"},
                     f"Radiosity {outcome.text()} ({_STATE['seconds'] * 1000:.0f} ms)")
         return {"FINISHED"}
 

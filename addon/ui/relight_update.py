@@ -18,6 +18,7 @@ from ..bpy_free import options, pipeline, relit
 from ..bpy_free.patches import make_patches
 from ..bpy_free.scene_notes import scene_and_notes
 from ..core import relighting
+from ..core.relit_checks import REST_SHARE
 from . import relight as relight_ui
 from . import relight_keep
 
@@ -27,7 +28,7 @@ def update(context):
     scene = context.scene
     meta = relight_store.meta_of(scene)
     outcome = relight_ui.assess(scene, meta)
-    stale = sorted(outcome.stale | outcome.unsolved)
+    stale = sorted(outcome.outdated())
     if not stale and not outcome.added:
         return "nothing is stale: Relight follows strengths and colours without a solve"
     last = relight_keep.LAST.get(meta["token"])
@@ -39,7 +40,7 @@ def update(context):
         return _full(context, meta, "the solve's results are not in memory (the file was reopened)")
     if last[1].detail != "OFF":  # (its patches came from the solve's own light: a lamp moved moves them)
         return _full(context, meta, f"Detail {last[1].detail.lower()} refines the patches from the light")
-    return _partial(context, meta, stale, last)
+    return _partial(context, meta, stale, last, outcome)
 
 
 def _select(context, meta):
@@ -62,8 +63,23 @@ def _full(context, meta, why):
     return f"solved again ({why})"
 
 
-def _partial(context, meta, stale, last):
-    """Re-solves the groups ``stale`` alone on the scene as it is, keeps the others, writes."""
+def relit_target(outcome, scene, groups, stale, prediction):
+    """The MSE a re-solve of the groups ``stale`` for the light as relit is held to (a group relit
+    past its share of the paths, or the light past the target), or None (the solve's target of
+    ``scene``, the scene as it is): the relit light's target times the square root of the share
+    the groups kept leave (REST_SHARE), relative to the re-solved light's own mean (its b_ave:
+    ``prediction``'s times its share of the power), so that the recombination meets the target."""
+    error = outcome.error
+    if not (outcome.unmeasured or outcome.over_target) or error.target_relative_rms is None:
+        return None
+    power = relighting.group_power(scene, groups).mean(axis=1)
+    share = power[[groups.names.index(name) for name in stale]].sum() / power.sum()
+    return (1.0 - REST_SHARE) * (error.target_relative_rms * prediction.mean_reflected_radiosity * share) ** 2
+
+
+def _partial(context, meta, stale, last, outcome):
+    """Re-solves the groups ``stale`` alone on the scene as it is (to ``relit_target`` where the
+    relight asks), keeps the others, writes."""
     scene = context.scene
     result, settings, patch_size = last
     _select(context, meta)
@@ -75,6 +91,8 @@ def _partial(context, meta, stale, last):
     if list(groups.names) != list(meta["names"]):
         return _full(context, meta, "the sources changed")
     prediction, target = pipeline.prediction_for(core_scene, settings)
+    relit_mse = None if target is None else relit_target(outcome, core_scene, groups, stale, prediction)
+    target = target if relit_mse is None else relit_mse
     settings = pipeline.method_for(core_scene, settings, target)
     per_source = relighting.resolve(core_scene, result.per_source, stale, groups=groups,
                                     **solve_kwargs(core_scene, settings, target))

@@ -45,7 +45,7 @@ Z = 5.0
 CORRELATION_ALLOWANCE = 2.0
 
 
-def _lights(scale=np.ones((5, 3))):
+def every_light(scale=np.ones((5, 3))):
     """Every kind of light, each times its row of ``scale`` (point, spot, area, sun, world)."""
     down = np.array([0.0, 0.0, -1.0])
     sun = np.array([0.3, 0.1, -1.0]) / np.linalg.norm([0.3, 0.1, -1.0])
@@ -59,7 +59,7 @@ def _lights(scale=np.ones((5, 3))):
     ]
 
 
-def _open_box(weights=None, n=4):
+def open_box(weights=None, n=4):
     """A colour box open at the top, two floor patches emitting, lit by a light of every kind
     (and the sun and the sky through the top); with ``weights`` (6,3), every source's strength
     and colour times its row (the relit scene)."""
@@ -70,15 +70,15 @@ def _open_box(weights=None, n=4):
     emission = np.zeros((len(origin), 3))
     emission[[5, 6]] = (8.0, 7.2, 6.4)
     w = np.ones((6, 3)) if weights is None else np.asarray(weights)
-    return PatchScene(V, T, TP, R_FACES[face], emission * w[0], lights=_lights(w[1:]))
+    return PatchScene(V, T, TP, R_FACES[face], emission * w[0], lights=every_light(w[1:]))
 
 
-def _solve(scene, case, **kw):
+def solve_case(scene, case, **kw):
     method, direct_light, exit_point, estimator = case
     return solve(scene, estimator, method=method, direct_light=direct_light, exit_point=exit_point, threads=2, **kw)
 
 
-def _joint_noise_z(a, b, mse_a, mse_b, variance_b, area):
+def joint_noise_z(a, b, mse_a, mse_b, variance_b, area):
     """(T - 1) over T's standard error (module docstring), for (P,3) estimates a and b."""
     weight = area / area.sum()
     T = float((weight[:, None] * (a - b) ** 2).sum() / 3) / (mse_a + mse_b)
@@ -88,7 +88,7 @@ def _joint_noise_z(a, b, mse_a, mse_b, variance_b, area):
 
 
 def test_source_groups_name_every_light_and_emission_and_merge_what_the_caller_labels():
-    scene = _open_box()
+    scene = open_box()
     default = source_groups(scene)
     assert default.names == ("emission (8.0, 7.2, 6.4)", "point", "spot", "area", "sun", "world")
     P = scene.patch_count
@@ -110,8 +110,8 @@ def test_source_groups_name_every_light_and_emission_and_merge_what_the_caller_l
 def test_the_groups_add_up_to_the_solve_and_their_covariance_to_its_error(case):
     """Every method: the groups' radiosity and irradiance sum to the total to float error, and
     the error of the recombination at the solve's own strengths is the solve's measured MSE."""
-    scene = _open_box()
-    r = _solve(scene, case, paths=40_000, seed=3, per_source=True)
+    scene = open_box()
+    r = solve_case(scene, case, paths=40_000, seed=3, per_source=True)
     ps = r.per_source
     assert ps.radiosity.shape == (6, scene.patch_count, 3) and ps.count == 6
     scale = np.abs(r.radiosity).max()
@@ -137,17 +137,17 @@ def test_a_grey_walk_of_interchangeable_paths_adds_up_too():
 def test_a_relit_solve_is_a_fresh_solve_of_the_relit_scene_within_their_joint_noise(case):
     """Every source kind (emissive patches, point, spot, area, sun, world) relit with tints,
     strengths up and down and the point lamp off, against a fresh solve of the relit scene."""
-    r = _solve(_open_box(), case, paths=150_000, seed=7, per_source=True)
+    r = solve_case(open_box(), case, paths=150_000, seed=7, per_source=True)
     relit = relight(r.per_source, WEIGHTS)
-    fresh_scene = _open_box(WEIGHTS)
-    fresh = _solve(fresh_scene, case, paths=150_000, seed=8)
-    z = _joint_noise_z(relit.radiosity, fresh.radiosity, relit.mse, fresh.measured_mse, fresh.reflected_variance,
+    fresh_scene = open_box(WEIGHTS)
+    fresh = solve_case(fresh_scene, case, paths=150_000, seed=8)
+    z = joint_noise_z(relit.radiosity, fresh.radiosity, relit.mse, fresh.measured_mse, fresh.reflected_variance,
                        fresh_scene.patch_area)
     assert abs(z) < Z, z
     # (and the area light's a fifth too strong is outside it)
     wrong = WEIGHTS.copy()
     wrong[3] *= 1.2
-    z_wrong = _joint_noise_z(relight(r.per_source, wrong).radiosity, fresh.radiosity, relit.mse, fresh.measured_mse,
+    z_wrong = joint_noise_z(relight(r.per_source, wrong).radiosity, fresh.radiosity, relit.mse, fresh.measured_mse,
                              fresh.reflected_variance, fresh_scene.patch_area)
     assert z_wrong > Z, z_wrong
 
@@ -159,11 +159,11 @@ def test_the_error_of_a_recombination_follows_the_spread_over_seeds(case):
     empirical variance (each patch's variance over 16 seeds has relative error sqrt(2/15); a mean
     over n_eff independent patches sqrt(2 / (15 n_eff)), widened as the joint-noise test is for
     correlated patches)."""
-    scene = _open_box()
+    scene = open_box()
     weight = scene.patch_area / scene.patch_area.sum()
     relit, reported = [], []
     for seed in range(16):
-        ps = _solve(scene, case, paths=20_000, seed=100 + seed, per_source=True).per_source
+        ps = solve_case(scene, case, paths=20_000, seed=100 + seed, per_source=True).per_source
         r = relight(ps, WEIGHTS)
         relit.append(r.radiosity)
         reported.append(r.mse)
@@ -171,13 +171,13 @@ def test_the_error_of_a_recombination_follows_the_spread_over_seeds(case):
 
 
 def test_weights_of_the_wrong_shape_or_below_zero_are_refused_and_the_target_is_reported():
-    r = solve(_open_box(), paths=40_000, seed=1, per_source=True, threads=2)
+    r = solve(open_box(), paths=40_000, seed=1, per_source=True, threads=2)
     with pytest.raises(ValueError, match=r"weights must have shape \(6, 3\)"):
         relight(r.per_source, np.ones((5, 3)))
     with pytest.raises(ValueError, match="at least 0"):
         relight(r.per_source, -np.ones(6))
     assert relight(r.per_source, np.ones(6)).target_relative_rms is None
-    target = solve(_open_box(), target_mse=2 * r.measured_mse, seed=1, per_source=True, threads=2,
+    target = solve(open_box(), target_mse=2 * r.measured_mse, seed=1, per_source=True, threads=2,
                    stop_rule="measured").per_source
     same = relight(target, np.ones(6))
     assert not same.past_target and same.relative_rms <= same.target_relative_rms
@@ -188,7 +188,7 @@ def test_weights_of_the_wrong_shape_or_below_zero_are_refused_and_the_target_is_
 
 
 def test_too_many_patches_x_sources_is_refused_in_one_line(monkeypatch):
-    scene = _open_box()
+    scene = open_box()
     monkeypatch.setattr(grouping, "PER_SOURCE_MAX", 6 * scene.patch_count - 1)
     with pytest.raises(ValueError, match=r"80 patches x 6 sources = 480, over the cap of 479 .*light groups"):
         solve(scene, paths=1000, per_source=True)
@@ -203,7 +203,7 @@ def _box_of_two():
 
 
 def test_a_per_source_solve_cancelled_before_its_first_chunk_keeps_the_emission_and_says_its_error_is_unknown():
-    scene = _open_box()
+    scene = open_box()
     r = solve(scene, paths=100_000_000, seed=1, per_source=True, threads=2, should_stop=lambda: True)  # (chunks of seconds)
     assert r.stopped == "cancelled" and r.paths == 0
     np.testing.assert_array_equal(r.per_source.radiosity.sum(axis=0), scene.emission)
@@ -220,8 +220,8 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     from addon.core import point_direct, smoothing
     from addon.core.relighting import combine, per_source_emission, smooth_sources
 
-    scene = _open_box()
-    r = _solve(scene, case, paths=40_000, seed=3, per_source=True)
+    scene = open_box()
+    r = solve_case(scene, case, paths=40_000, seed=3, per_source=True)
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
     parts = dict(smooth_sources(surface, scene, r, light=True))
     whole = dict(pipeline._smooth_corners(scene, r, light=True))
@@ -256,7 +256,7 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     emission = per_source_emission(scene, r.per_source)
     assert np.array_equal(emission.sum(axis=0), scene.emission) and not emission[1:].any()
     with pytest.raises(ValueError, match="per_source=True"):
-        next(smooth_sources(surface, scene, _solve(scene, case, paths=2_000, seed=3)))
+        next(smooth_sources(surface, scene, solve_case(scene, case, paths=2_000, seed=3)))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -265,14 +265,14 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
 
 def _moved_box():
     """The open box with its area lamp moved lower and to the other side (the rest as it was)."""
-    scene = _open_box()
+    scene = open_box()
     lights = list(scene.lights.lights)
     lights[2] = AreaLight(np.array([0.25, 0.7, 0.5]), np.array([0.1, 0, 0]), np.array([0, 0.1, 0]),
                           np.array([0.0, 0.0, -1.0]), np.full(3, 24.0), name="area")
     return scene.with_materials(scene.reflectivity, scene.emission, lights)
 
 
-def _kwargs(case, **kw):
+def case_kwargs(case, **kw):
     method, direct_light, exit_point, estimator = case
     return dict(estimator=estimator, method=method, direct_light=direct_light, exit_point=exit_point, threads=2, **kw)
 
@@ -283,17 +283,17 @@ def test_a_moved_lamp_re_solved_alone_recombines_to_a_fresh_solve_of_the_moved_s
     strengths (and relit with tints and the point lamp off) agrees with a fresh per-source solve of
     the moved scene within their joint noise, while the results before the move do not; the kept
     groups are the solve's to the bit, their covariance with the re-solved one 0."""
-    r = _solve(_open_box(), case, paths=150_000, seed=7, per_source=True)
+    r = solve_case(open_box(), case, paths=150_000, seed=7, per_source=True)
     ps, moved = r.per_source, _moved_box()
-    redone = resolve(moved, ps, ["area"], **_kwargs(case, paths=150_000, seed=9))
-    fresh = _solve(moved, case, paths=150_000, seed=8, per_source=True)
+    redone = resolve(moved, ps, ["area"], **case_kwargs(case, paths=150_000, seed=9))
+    fresh = solve_case(moved, case, paths=150_000, seed=8, per_source=True)
     for weights in (np.ones((6, 3)), WEIGHTS):
         relit, fresh_relit = relight(redone, weights), relight(fresh.per_source, weights)
-        z = _joint_noise_z(relit.radiosity, fresh_relit.radiosity, relit.mse, fresh_relit.mse, fresh.reflected_variance,
+        z = joint_noise_z(relit.radiosity, fresh_relit.radiosity, relit.mse, fresh_relit.mse, fresh.reflected_variance,
                            moved.patch_area)
         assert abs(z) < Z, z
     before = relight(ps, np.ones((6, 3)))
-    z_before = _joint_noise_z(before.radiosity, fresh.radiosity, before.mse, fresh.measured_mse, fresh.reflected_variance,
+    z_before = joint_noise_z(before.radiosity, fresh.radiosity, before.mse, fresh.measured_mse, fresh.reflected_variance,
                               moved.patch_area)
     assert z_before > Z, z_before
     area = ps.names.index("area")
@@ -320,7 +320,7 @@ def test_only_the_named_groups_sources_are_traced(monkeypatch):
         seen.append((scene, kwargs["groups"]))
         return real(scene, *args, **kwargs)
 
-    ps = solve(_open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
+    ps = solve(open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
     monkeypatch.setattr(solver, "solve", spy)
     moved = _moved_box()
     resolve(moved, ps, ["area"], paths=20_000, seed=2, threads=2)
@@ -336,11 +336,11 @@ def test_only_the_named_groups_sources_are_traced(monkeypatch):
 
 
 def test_resolve_refuses_a_name_it_does_not_have_and_changed_geometry_in_one_line():
-    ps = solve(_open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
+    ps = solve(open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
     with pytest.raises(ValueError, match=r"^no source group named 'lamp'; the groups are .*'area'"):
         resolve(_moved_box(), ps, ["lamp"], paths=1000)
     with pytest.raises(ValueError, match="the geometry changed, solve again"):
-        resolve(_open_box(n=2), ps, ["area"], paths=1000)
+        resolve(open_box(n=2), ps, ["area"], paths=1000)
     # a lamp added: its group is new, and is solved where it is named
     scene = _moved_box()
     added = scene.with_materials(scene.reflectivity, scene.emission,
@@ -353,8 +353,8 @@ def test_resolve_refuses_a_name_it_does_not_have_and_changed_geometry_in_one_lin
 
 def test_a_group_that_gives_no_light_now_is_re_solved_as_dark_without_tracing():
     """The area lamp at strength 0 (the scene has it, dark): its results are 0, nothing traced."""
-    ps = solve(_open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
-    scene = _open_box(np.array([(1, 1, 1)] * 3 + [(0, 0, 0)] + [(1, 1, 1)] * 2))
+    ps = solve(open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
+    scene = open_box(np.array([(1, 1, 1)] * 3 + [(0, 0, 0)] + [(1, 1, 1)] * 2))
     redone = resolve(scene, ps, ["area"], paths=20_000, seed=2)
     assert not redone.radiosity[3].any() and not redone.covariance[:, 3].any()
     assert np.array_equal(redone.radiosity[:3], ps.radiosity[:3])
@@ -365,12 +365,12 @@ def test_the_error_of_a_re_solved_recombination_follows_the_spread_over_seeds(ca
     """As for a solve's recombination (above): the MSE relight reports for the re-solved
     results, from the kept groups' covariance and the re-solved one's, against the area-weighted
     variance of the relit result over 16 seeds of the solve and the re-solve."""
-    scene, moved = _open_box(), _moved_box()
+    scene, moved = open_box(), _moved_box()
     weight = scene.patch_area / scene.patch_area.sum()
     relit, reported = [], []
     for seed in range(16):
-        ps = _solve(scene, case, paths=20_000, seed=100 + seed, per_source=True).per_source
-        r = relight(resolve(moved, ps, ["area", "spot"], **_kwargs(case, paths=20_000, seed=300 + seed)), WEIGHTS)
+        ps = solve_case(scene, case, paths=20_000, seed=100 + seed, per_source=True).per_source
+        r = relight(resolve(moved, ps, ["area", "spot"], **case_kwargs(case, paths=20_000, seed=300 + seed)), WEIGHTS)
         relit.append(r.radiosity)
         reported.append(r.mse)
     _assert_reported_error_is_the_spread(weight, relit, reported)

@@ -64,7 +64,8 @@ def test_relight_traces_no_ray_from_the_command_line(blender, tmp_path, monkeypa
 
 
 @pytest.mark.parametrize("args,message", [
-    (["--strength", "Nobody=3"], "error: no lamp, world or emissive material named 'Nobody' in the scene"),
+    (["--strength", "Nobody=3"], "error: no lamp, world or emissive material named 'Nobody' in the scene; the "
+                                 "solve's sources: 'Bulb', 'Glow', 'Panel', 'Sun', 'World'"),
     (["--strength", "Bulb=-1"], "error: --strength takes NAME=VALUE with finite values of at least 0; got 'Bulb=-1'"),
     (["--colour", "Bulb=1,2"], "error: --colour takes NAME=R,G,B with finite values of at least 0; got 'Bulb=1,2'"),
 ])

@@ -1,6 +1,8 @@
 """A scene lit by every kind of source, for the relighting tests: an open box (floor and four
 walls, facing in) under a sun and a sky, with a point lamp, an area lamp and an emissive panel
 inside."""
+import math
+
 import bpy
 import numpy as np
 
@@ -73,3 +75,44 @@ def patch_values(name="Radiosity"):
         values.append(data)
         areas.append(area)
     return np.concatenate(values).astype(np.float64), np.concatenate(areas).astype(np.float64)
+
+
+# The joint-noise statistic of the relighting tests (test_relight.py's docstring): |z| < Z passes.
+Z = 5.0
+CORRELATION_ALLOWANCE = 2.0
+
+
+def joint_noise_z(a, b, mse_a, mse_b, variance_b, area):
+    weight = area / area.sum()
+    T = float((weight[:, None] * (a - b) ** 2).sum() / 3) / (mse_a + mse_b)
+    terms = (weight[:, None] * 2 * variance_b).ravel()
+    n_eff = terms.sum() ** 2 / (terms**2).sum()
+    return (T - 1.0) / (math.sqrt(2.0 / n_eff) * CORRELATION_ALLOWANCE)
+
+
+def solve(monkeypatch, seed):
+    """Solves through the operator and returns the run's output (its variances)."""
+    from addon.ui import operators
+
+    kept = []
+    monkeypatch.setattr(operators, "OUTPUT_LISTENER", kept.append)
+    bpy.context.scene.radiosity.seed = seed
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    return kept[-1]
+
+
+def spy_solves(monkeypatch):
+    """The group names of every core solve from here on."""
+    from addon.core import solver
+
+    calls = []
+    original = solver.solve
+
+    def spy(scene, *args, **kwargs):
+        groups = kwargs.get("groups")
+        calls.append(tuple(groups.names) if groups is not None else None)
+        return original(scene, *args, **kwargs)
+
+    monkeypatch.setattr(solver, "solve", spy)
+    monkeypatch.setattr("addon.bpy_free.pipeline.solve", spy)
+    return calls

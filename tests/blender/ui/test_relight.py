@@ -10,37 +10,19 @@ of the relit and the fresh patch values, T = sum_j A_j |d_j|^2 / (A_T (mse_relit
 expectation 1; z = (T - 1) over its standard error sqrt(2 / n_eff), widened 2x for the patches'
 shared paths; |z| < 5 passes, and the solve's own picture, not relit, must fail it (the test can
 see the change)."""
-import math
-
 import bpy
 import numpy as np
 import pytest
 
 from addon.blender_write import relight_store
 from addon.blender_write.results import previous_results
-from addon.ui import operators, relight as relight_ui
+from addon.ui import relight as relight_ui
 
 from . import relight_scene as rs
 
-Z = 5.0
-CORRELATION_ALLOWANCE = 2.0
-
-
-def _z(a, b, mse_a, mse_b, variance_b, area):
-    weight = area / area.sum()
-    T = float((weight[:, None] * (a - b) ** 2).sum() / 3) / (mse_a + mse_b)
-    terms = (weight[:, None] * 2 * variance_b).ravel()
-    n_eff = terms.sum() ** 2 / (terms**2).sum()
-    return (T - 1.0) / (math.sqrt(2.0 / n_eff) * CORRELATION_ALLOWANCE)
-
-
-def _solve(monkeypatch, seed):
-    """Solves (FACE colours, 2% target) and returns the run's output (its variances)."""
-    kept = []
-    monkeypatch.setattr(operators, "OUTPUT_LISTENER", kept.append)
-    bpy.context.scene.radiosity.seed = seed
-    assert bpy.ops.radiosity.solve() == {"FINISHED"}
-    return kept[-1]
+# (the joint-noise statistic, a solve through the operator and a spy on the core's solves: relight_scene's)
+Z = rs.Z
+_z, _solve, _spy_solves = rs.joint_noise_z, rs.solve, rs.spy_solves
 
 
 def _only(kind):
@@ -234,23 +216,6 @@ def test_live_a_lamp_turned_relights_at_once_and_only_then(blender):
     bpy.data.objects["Room"].location.x += 0.0  # nothing of a source: no relight due
     bpy.context.view_layer.update()
     assert not relight_ui._STATE["pending"]
-
-
-def _spy_solves(monkeypatch):
-    """The group names of every core solve from here on."""
-    from addon.core import solver
-
-    calls = []
-    original = solver.solve
-
-    def spy(scene, *args, **kwargs):
-        groups = kwargs.get("groups")
-        calls.append(tuple(groups.names) if groups is not None else None)
-        return original(scene, *args, **kwargs)
-
-    monkeypatch.setattr(solver, "solve", spy)
-    monkeypatch.setattr("addon.bpy_free.pipeline.solve", spy)
-    return calls
 
 
 def test_a_moved_lamp_is_stale_and_update_solves_only_its_light(blender, monkeypatch):
