@@ -76,3 +76,37 @@ def test_a_preview_naming_the_output_file_is_refused_before_the_run(tmp_path, pr
     assert lines == [f"error: --preview and --output both name {tmp_path / 'out' / 'box.blend'}: "
                      "give the preview a file of its own"], proc.stderr
     assert "patches" not in proc.stdout and os.listdir(tmp_path) == []
+
+
+USAGE = os.path.join(ROOT, "docs", "usage.md")
+
+
+def test_the_usage_page_gives_the_command_lines_own_defaults():
+    """docs/usage.md said the default colours were BOTH (TEXTURED is): the defaults it lists are
+    the parser's."""
+    from addon.bpy_free import options
+    from addon.cli.arguments import parser
+
+    with open(USAGE) as f:
+        text = " ".join(f.read().split())
+    stated = text[text.index("choices in any case), defaults:"):]
+    pairs = re.findall(r"`(--[\w-]+) ([\w.]+)`", stated[:stated.index(". ")])
+    assert {flag for flag, _ in pairs} >= {"--method", "--error", "--patch-size", "--colours", "--direct-light"}
+    defaults = parser().parse_args([])
+    by_flag = {o.flag: o for o in options.SETTINGS}
+    for flag, value in pairs:
+        default = getattr(defaults, by_flag[flag].name)
+        assert (float(value) == default) if isinstance(by_flag[flag], options.Number) else value == default, flag
+
+
+def test_the_usage_page_gives_the_exit_status_of_each_kind_of_failure():
+    """docs/usage.md said nothing selected exits with 1 (it is 2, as a wrong command line): its
+    table of statuses says which failures give which, and each signal's status."""
+    from addon.cli.interrupt import STOPPING, status_of
+
+    with open(USAGE) as f:
+        rows = dict(re.findall(r"^\| (\d+) \| (.+) \|$", f.read(), re.M))
+    assert "nothing selected" in rows["2"] and "faces have no area" in rows["2"] and "no emitter" in rows["1"]
+    assert "options that cannot work together" in rows["2"]
+    for signum, name in STOPPING.items():
+        assert name.split()[0] in rows[str(status_of(signum))], name
