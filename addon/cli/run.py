@@ -13,7 +13,7 @@ import time
 from ..bpy_free import options
 from . import preview, scenes
 from .arguments import checked, default_samples, given_options, parser
-from .interrupt import Interrupt, Interrupted
+from .interrupt import Interrupt, Interrupted, exit_now
 from .messages import fail, for_command_line, one_line
 from .progress import ProgressLine
 from .saving import Outputs, check_blend, check_png, output_problem, save_blend
@@ -43,9 +43,12 @@ def main(argv=None):
         try:
             return _run(args, names, interrupt)
         except Interrupted:
-            return interrupt.stopped()
+            status = interrupt.stopped()
         except Refused as exc:
             return fail(str(exc), exc.status)
+    if status != Interrupt.STATUS:  # SIGTERM, SIGHUP: the process ends, as their default would end it (a host's too)
+        exit_now(status)
+    return status
 
 
 def _run(args, names, interrupt):

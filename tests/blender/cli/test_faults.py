@@ -310,6 +310,24 @@ bpy.app.handlers.save_post.append(slow)
 sys.exit(main(sys.argv[1:]))
 """
 
+# A host's script (as inside Blender: main(['--current'])) that would go on after main returns; its
+# save waits in Python until the test says (a file appears), so the main thread itself meets the signal.
+HOST = """
+import os, sys, time
+import bpy
+from addon.__main__ import main
+
+@bpy.app.handlers.persistent
+def held(path, *_):
+    print("saving", file=sys.stderr, flush=True)
+    while not os.path.exists(os.environ["GO_ON"]):
+        time.sleep(0.01)
+
+bpy.app.handlers.save_post.append(held)
+main(sys.argv[1:])
+print("the host went on", flush=True)
+"""
+
 RENDER = ["--resolution", "2000", "--samples", "4096"]  # minutes of rendering: the signal comes first
 
 
@@ -317,10 +335,10 @@ class Piped:
     """The command line with its output on pipes (as under ``timeout`` or a CI runner), read as it
     comes, Blender's temporary folder in a folder of its own (``TMPDIR``)."""
 
-    def __init__(self, args, cwd, temp, code=None):
+    def __init__(self, args, cwd, temp, code=None, env=None):
         command = [sys.executable, "-c", code, *args] if code else [sys.executable, "-m", "addon", *args]
         self.proc = subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     env={**ENV, "TMPDIR": str(temp)}, start_new_session=True)
+                                     env={**ENV, "TMPDIR": str(temp), **(env or {})}, start_new_session=True)
         self.data = b""
 
     def read_until(self, pattern, timeout):
@@ -331,11 +349,14 @@ class Piped:
             if select.select([fd], [], [], 0.05)[0]:
                 self.data += os.read(fd, 65536)
 
-    def stop(self, signum, timeout=30):
-        """Send ``signum``: (exit status, seconds it took, what was printed after it)."""
+    def stop(self, signum, timeout=30, then=None):
+        """Send ``signum`` (and call ``then()``): (exit status, seconds it took, what was printed after it)."""
         before = len(self.data)
         sent = time.monotonic()
         self.proc.send_signal(signum)
+        if then is not None:
+            time.sleep(0.05)  # (the signal handled first)
+            then()
         try:
             rest, _ = self.proc.communicate(timeout=timeout)
         finally:
@@ -354,22 +375,25 @@ def _source_file(tmp_path):
     return source
 
 
-@pytest.mark.parametrize("stage", ["solve", "render", "save"])
+@pytest.mark.parametrize("stage", ["solve", "render", "save", "host"])
 def test_sigterm_stops_as_ctrl_c_does_with_143_and_leaves_no_file(tmp_path, stage):
     """SIGTERM (``timeout``, a CI cancel) in the solve, in Blender's render holding the main
     thread (a temporary .blend already written), or in the save: one line, status 143, no
-    temporary file beside the output and nothing left in the temporary folder."""
+    temporary file beside the output and nothing left in the temporary folder. Called from a
+    host's script, the process ends too, as SIGTERM's default would end it."""
     out, temp = tmp_path / "out", tmp_path / "tmp"
     temp.mkdir()
     args, code, ready = {
         "solve": ([*SLOW, "-q"], None, r"warning: Predicted"),
         "render": (["--open", str(_source_file(tmp_path)), *QUICK[2:], *RENDER], None, r"sources: "),
         "save": ([*QUICK, "--no-preview"], SLOW_SAVE, r"saving"),
+        "host": ([*QUICK, "--no-preview"], HOST, r"saving"),
     }[stage]
-    run = Piped([*args, "-o", str(out / "box.blend")], str(tmp_path), temp, code)
+    go_on = tmp_path / "go on"
+    run = Piped([*args, "-o", str(out / "box.blend")], str(tmp_path), temp, code, {"GO_ON": str(go_on)})
     run.read_until(ready, 120)
     time.sleep(1.0)  # in the solve, the render or the save
-    status, seconds, after = run.stop(signal.SIGTERM)
+    status, seconds, after = run.stop(signal.SIGTERM, then=go_on.touch)
     assert status == 143 and seconds < 3.0, (status, seconds, run.data.decode(errors="replace")[-3000:])
     assert [line for line in after.splitlines() if line.strip()] == [
         "interrupted: stopped by SIGTERM; nothing was saved"], after
