@@ -122,3 +122,15 @@ def test_code_and_pages_keep_the_why_not_the_trackers_history():
              for i, line in enumerate(p.read_text(errors="replace").splitlines(), 1)
              if HISTORY.search(line)]
     assert found == []
+
+
+def test_a_path_a_page_gives_relative_to_itself_is_a_file_of_the_repository():
+    """The sample scenes' page cited the paper at a path outside the repository: a page names
+    files the reader has, and cites papers by their title."""
+    missing = []
+    for page in PAGES:
+        for path in re.findall(r"`(\.\.?/[^`\s]+)`", page.read_text()):
+            target = (page.parent / path).resolve()
+            if ROOT not in target.parents or not target.exists():
+                missing.append(f"{page.relative_to(ROOT)}: {path}")
+    assert missing == []

@@ -33,12 +33,16 @@ class Number:
             raise ValueError(f"{self.flag} must be {self.range_text()}; got {value:g}")
         return value
 
+    def number_text(self, value):
+        """``value`` as the range says it: whole numbers in full (2147483647, not 2.14748e+09)."""
+        return f"{int(value)}" if self.integer else f"{value:g}"
+
     def range_text(self):
         unit = f" {self.unit}" if self.unit else ""
         if self.high is None:
-            text = f"at least {self.low:g}{unit}"
+            text = f"at least {self.number_text(self.low)}{unit}"
         else:
-            text = f"between {self.low:g} and {self.high:g}{unit}"
+            text = f"between {self.number_text(self.low)} and {self.number_text(self.high)}{unit}"
         return f"0 ({self.zero_means}) or {text}" if self.zero_means else text
 
 
@@ -110,13 +114,13 @@ METHOD = Choice("method", "--method", "auto", (
      "variate. Faster to the same error in the rooms measured, of 600 to 500,000 patches; slower where a "
      "large emitter lights most of the scene directly. No formula predicts its error, which is measured as it "
      "runs. The estimator, sampling and direct light settings are the walks'"),
-), "Method")
+), "Method", "How the light is computed: the paper's random walks, the two-way iteration, or Automatic's choice")
 ESTIMATOR = Choice("estimator", "--estimator", "finite", (
     ("finite", "Finite (Phi_T)", "The paper's finite estimator: constant power, a path survives a "
      "hit with the patch's reflectivity"),
     ("biased_infinite", "Biased infinite", "The paper's biased infinite estimator: power times the "
      "reflectivity at every hit, cut when the accumulated reflectivity falls below the threshold t"),
-), "Estimator")
+), "Estimator", "The random walks' estimator (the paper's two); the two-way iteration has its own")
 THRESHOLD = Number("threshold", "--threshold", 1e-3, 1e-6, 0.5, "Threshold t",
                    "Biased infinite estimator: a path ends when the product of reflectivities along it is below t")
 TARGET_ERROR = Number("target_error", "--error", 5.0, 0.05, 100.0, "Error target",
@@ -142,20 +146,22 @@ SAMPLING = Choice("sampling", "--sampling", "independent", (
      "the predicted path counts are derived for this"),
     ("stratified", "Stratified", "Paths allotted to sources in proportion to power and a randomly shifted "
      "low-discrepancy first ray: same expected result, usually less noise for the same time"),
-), "Sampling")
+), "Sampling", "How the random walks draw their sources and first rays")
 DIRECT_LIGHT = Choice("direct_light", "--direct-light", "shot", (
     ("shot", "Shot (paper)", "The paper's walk: paths from the sources carry the direct light too; its predicted "
      "path counts and the estimators' relative efficiency hold for it"),
     ("gathered", "Gathered", "Each patch gathers its direct light by shadow rays to the sources, and the walks carry "
      "only reflected light: no formula predicts its error, which is measured as it runs. Lamps without shadow or "
      "with soft falloff are always gathered"),
-), "Direct light")
+), "Direct light", "How the random walks compute the direct light. The two-way iteration, which Automatic picks where "
+   "each patch gets enough rays (most rooms, the main job's box too), always gathers it, and so do lamps without "
+   "shadow or with soft falloff (Blender's default): there this setting changes nothing")
 STOP_RULE = Choice("stop_rule", "--stop-rule", "measured", (
     ("measured", "Measured error", "Run until the run's own estimate of its error (from independent batches) "
      "meets the target: what you ask for is what you get. The paper's predicted path count is the plan"),
     ("predicted", "Predicted paths", "Run the number of paths the paper's formula (2)/(3) predicts for the "
      "target (a heuristic: the error reached can be above the target)"),
-), "Stop at")
+), "Stop at", "When a run stops: when its measured error meets the target, or after the paper's predicted paths")
 # The error target is relative to the run's own mean reflected radiosity, not the paper's
 # closed-scene b_ave: where light leaves the selection (a window, a room open to the sky) b_ave
 # counts it as if it stayed, and the noise in the room came out up to 3x the target (docs/errors.md).
@@ -174,7 +180,7 @@ OUTPUT = Choice("output", "--colours", "TEXTURED", (
      "at creases, each patch's light kept, tile noise filtered within its measured error"),
     ("BOTH", "Both", f"Smooth colours as 'Radiosity' (shown), the flat per-patch colours as 'Radiosity Patches'; "
      f"above {SMOOTH_MAX_PATCHES:,} patches the flat ones alone, as 'Radiosity'"),
-), "Colours")
+), "Colours", "What the results show: the materials' own textures times the light, or the light's colours alone")
 PER_SOURCE = Choice("per_source", "--per-light", "AUTO", (
     ("AUTO", "Automatic", "On where the scene has 2 to 8 sources (lamps, the world, emissive materials, or "
      "Blender's light groups) and patches x sources stay within a million: the walks' solves then take about "
@@ -212,6 +218,10 @@ SCENE_OBJECTS = Flag("use_scene_objects", "--scene-objects", True, "Rest of the 
                      "The other visible objects block and reflect light (meshed coarser, no results written), as "
                      "they do in a render; off: only the selection takes part")
 
+CLAMP = Flag("clamp_reflectivity", "--clamp-bright-colours", False, "Clamp bright colours",
+             "Use 0.99 for base colours above it (white is 1.0) instead of refusing colours of 1 or more, which "
+             "would never let a path end in a closed room; reported as a warning")
+
 LIGHT_OUTPUT = Flag("light_output", "--light-output", False, "Light only",
                     "Also write the light arriving at each patch, without the surface's colour ('Radiosity Light': "
                     "Cycles' Diffuse bake without Color), to multiply with textures in a material (Textured "
@@ -230,7 +240,7 @@ CLUSTER = ClusterAddress("cluster", "--cluster", "", "Cluster",
 
 SETTINGS = (METHOD, ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, DETAIL, EXIT_POINT, SAMPLING, DIRECT_LIGHT,
             STOP_RULE, OUTPUT, LIVE_LAMPS, PER_SOURCE, SEED,
-            TIME_LIMIT, THREADS, SCENE_OBJECTS, LIGHT_OUTPUT, INDIRECT_OUTPUT, CLUSTER)
+            TIME_LIMIT, THREADS, SCENE_OBJECTS, CLAMP, LIGHT_OUTPUT, INDIRECT_OUTPUT, CLUSTER)
 
 # Patch size 0: the selection's largest extent over this.
 AUTOMATIC_PATCH_DIVISIONS = 20

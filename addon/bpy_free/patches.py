@@ -222,6 +222,10 @@ def check_patch_count(objects, patch_size, limit=None):
     )
 
 
+class NothingToSolve(ValueError):
+    """The selection has no face with an area: no light to compute, no result to write."""
+
+
 def automatic_patch_size(objects) -> float:
     """Patch size 0's meaning: the largest extent of the selected objects' geometry over
     AUTOMATIC_PATCH_DIVISIONS (1.0 where there is no extent)."""
@@ -242,9 +246,11 @@ def make_patches(objects, patch_size, layers=False) -> Patches:
     lights = tuple(getattr(objects, "lights", ()))  # (a blender_read.selection.Selection carries them)
     light_labels = tuple(getattr(objects, "light_labels", None) or (None,) * len(lights))
     check_finite_vertices(objects)
+    selected = [o.name for o in objects if o.receives]
     objects, notes = drop_zero_area_faces(objects)
-    if not objects:
-        raise ValueError("the selected objects have no faces of non-zero area")
+    if not any(o.receives for o in objects):  # (the rest of the scene alone: no result to write)
+        raise NothingToSolve(f"nothing to solve: the selected objects ({', '.join(map(repr, selected))}) "
+                             "have no faces of non-zero area")
     if not patch_size:
         patch_size = automatic_patch_size(objects)
     count = check_patch_count(objects, patch_size)

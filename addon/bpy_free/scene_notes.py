@@ -13,6 +13,9 @@ from .patches import Patches
 #: An object whose emitting faces send at least this share of their light out of the scene
 #: (none of it reaching the other objects) gets a warning.
 ESCAPING_WARNING = 0.9
+#: The most light a source may give, with its reflections: colour attributes are float32, and a hot
+#: spot's corners reach several times its patch's mean.
+STORABLE_LIGHT = float(np.finfo(np.float32).max) / 16
 
 
 def objects_of_patches(patches: Patches, indices) -> str:
@@ -33,12 +36,32 @@ def scene_and_notes(patches: Patches):
         except ValueError as exc:
             where = objects_of_patches(patches, getattr(exc, "patches", None))
             raise ValueError(f"{exc}{where}") from exc
+    check_storable_light(scene, patches)
     notes = list(patches.notes) + [
         f"{w.message}{objects_of_patches(patches, getattr(w.message, 'patches', None))}"
         for w in caught
         if issubclass(w.category, UserWarning)
     ]
     return scene, notes + escaping_sources(patches, scene) + light_notes(scene)
+
+
+def check_storable_light(scene, patches):
+    """ValueError naming the source whose light, with its reflections (up to 1 / (1 - the largest
+    reflectivity) times it), passes what the results' float32 colours hold: emitting faces, area
+    lamps, suns and the world (a point lamp's light has no such bound from its power)."""
+    gain = 1.0 / (1.0 - float(scene.reflectivity.max(initial=0.0)))
+    peak = int(np.argmax(scene.emission.max(axis=1))) if scene.patch_count else 0
+    levels = [(float(scene.emission.max(initial=0.0)), f"emission{objects_of_patches(patches, [peak])}")]
+    for light in scene.lights.lights:
+        for field in ("exitance", "irradiance", "image"):
+            value = getattr(light, field, None)
+            if value is not None:
+                levels.append((float(np.max(value, initial=0.0)), f"light '{light.name}'"))
+    level, what = max(levels, key=lambda pair: pair[0])
+    if level * gain > STORABLE_LIGHT:
+        raise ValueError(f"the {what} is {level:.3g}: with its reflections its light would pass what the results' "
+                         f"colours hold ({STORABLE_LIGHT:.3g}); use smaller units of power (the same picture at a "
+                         "higher exposure)")
 
 
 def light_notes(scene) -> list:

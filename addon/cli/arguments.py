@@ -43,14 +43,15 @@ def parser():
                            help=_literal(option.description))
         elif isinstance(option, options.Choice):
             ids = [i for i, _, _ in option.items]
+            labels = "".join(f"{i}: {label}, " for i, label, _ in option.items if label.lower() != i.lower())
             p.add_argument(option.flag, dest=option.name, default=option.default, metavar="|".join(ids),
-                           help=_literal(f"{option.description} (default {option.default}; any case)"))
+                           help=_literal(f"{option.description} ({labels}default {option.default}; any case)"))
         else:
             kind = int if option.integer else float
-            p.add_argument(option.flag, dest=option.name, type=kind, default=option.default,
-                           help=_literal(f"{option.description} ({option.range_text()}; default {option.default:g})"))
+            p.add_argument(option.flag, dest=option.name, type=kind, default=option.default, help=_literal(
+                f"{option.description} ({option.range_text()}; default {option.number_text(option.default)})"))
     p.add_argument("--resolution", type=int, default=RESOLUTION.default, help=_literal("preview width in pixels "
-                   f"({RESOLUTION.range_text()})"))
+                   f"({RESOLUTION.range_text()}; default {RESOLUTION.default})"))
     p.add_argument("--samples", type=int, default=None, help=_literal(
         f"Cycles samples for the preview ({SAMPLES.range_text()}; default {LIVE_SAMPLES} with live lamps on textured "
         f"results, {SAMPLES.default} with --no-live-lamps or another output: a live preview is a Monte Carlo render, "
@@ -79,10 +80,21 @@ LIVE_SAMPLES = 64
 
 
 def checked(args):
-    """The arguments with every setting checked against its range (ValueError naming it)."""
-    if args.samples is None:
-        args.samples = LIVE_SAMPLES if args.live_lamps and args.output == "TEXTURED" else SAMPLES.default
+    """The arguments with every setting checked against its range (ValueError naming it), and
+    relighting's own options refused without --relight (a solve would ignore them)."""
+    if (args.strength or args.colour) and not args.relight:
+        given = "--strength" if args.strength else "--colour"
+        raise ValueError(f"{given} changes a light for --relight, which recombines a solved file's per-light results; "
+                         "add --relight --open FILE.blend (a solve takes the lights from the scene)")
+    args.samples_given = args.samples is not None
+    if not args.samples_given:
+        args.samples = default_samples(args)
     for option in (*options.SETTINGS, RESOLUTION, SAMPLES):
         setattr(args, option.name, option.check(getattr(args, option.name)))
     return args
 
+
+
+def default_samples(args):
+    """The preview's samples where --samples is not given: more for a live preview (a Monte Carlo render)."""
+    return LIVE_SAMPLES if args.live_lamps and args.output == "TEXTURED" else SAMPLES.default

@@ -237,7 +237,7 @@ def auto_exposure():
             continue
         c = np.empty(len(attr.data) * 4, dtype=np.float32)
         attr.data.foreach_get("color", c)
-        values.append(c.reshape(-1, 4)[:, :3].mean(axis=1))
+        values.append(c.reshape(-1, 4)[:, :3].mean(axis=1, dtype=np.float64))  # (float32 sums overflow near 3e38)
     return _exposure_of(values)
 
 
@@ -254,7 +254,7 @@ def preview_exposure(output) -> float:
         if faces is None:  # the rest of the scene: no results
             continue
         smooth_shown = smooth is not None  # (written: it is 'Radiosity')
-        grey = rgba(smooth if smooth_shown else faces).reshape(-1, 4)[:, :3].mean(axis=1)
+        grey = rgba(smooth if smooth_shown else faces).reshape(-1, 4)[:, :3].mean(axis=1, dtype=np.float64)
         values.append(grey if smooth_shown else np.repeat(grey, mesh.face_sizes))
     return _exposure_of(values)
 

@@ -12,9 +12,9 @@ import time
 
 from ..bpy_free import options
 from . import preview, scenes
-from .arguments import checked, given_options, parser
-from .interrupt import Interrupt, Interrupted
-from .messages import fail, one_line
+from .arguments import checked, default_samples, given_options, parser
+from .interrupt import Interrupt, Interrupted, exit_now
+from .messages import fail, for_command_line, one_line
 from .progress import ProgressLine
 from .saving import Outputs, check_blend, check_png, output_problem, save_blend
 
@@ -43,9 +43,12 @@ def main(argv=None):
         try:
             return _run(args, names, interrupt)
         except Interrupted:
-            return interrupt.stopped()
+            status = interrupt.stopped()
         except Refused as exc:
             return fail(str(exc), exc.status)
+    if status != Interrupt.STATUS:  # SIGTERM, SIGHUP: the process ends, as their default would end it (a host's too)
+        exit_now(status)
+    return status
 
 
 def _run(args, names, interrupt):
@@ -59,6 +62,8 @@ def _run(args, names, interrupt):
     scene_name, own_scene = _open_scene(args, names)
     out_blend = os.path.abspath(args.blend_path or os.path.join("out", f"{scene_name}.blend"))
     png = None if args.no_preview else os.path.abspath(args.preview or os.path.splitext(out_blend)[0] + ".png")
+    if png and os.path.realpath(png) == os.path.realpath(out_blend):  # (the render would be saved over)
+        raise Refused(f"--preview and --output both name {png}: give the preview a file of its own")
     for target in (out_blend, png):  # said before the run, not after it
         problem = target and output_problem(target)
         if problem:
@@ -146,15 +151,21 @@ def _sources(args):
 
 
 def _settings(args, scene_name, own_scene):
-    """The scene's settings (``scene.radiosity``), set from the arguments."""
+    """The scene's settings (``scene.radiosity``), set from the arguments; with --current, the
+    panel's own where the command line gives none."""
     import bpy
 
     settings = bpy.context.scene.radiosity
     if own_scene and scene_name in scenes.sample_scene_names() and not args.patch_size:
         args.patch_size = 1e6  # sample scenes come meshed as in the paper: keep their patches
-    for name, value in getattr(args, "scene_settings", {}).items():  # a sample's own, where no option says otherwise
+    scene_settings = getattr(args, "scene_settings", {})  # a sample's own, where no option says otherwise
+    if args.current:
+        scene_settings = {option.name: getattr(settings, option.name) for option in options.SETTINGS}
+    for name, value in scene_settings.items():
         if name not in args.given:
             setattr(args, name, value)
+    if not args.samples_given:  # (live lamps and the colours may have come from the panel)
+        args.samples = default_samples(args)
     for option in options.SETTINGS:
         setattr(settings, option.name, getattr(args, option.name))
     return settings
@@ -193,7 +204,7 @@ def _solve(args, settings, interrupt, exposure):
         if progress is not None:
             progress.end()
         interrupt.check()
-        sys.stdout.write(reports.getvalue())
+        sys.stdout.write(for_command_line(reports.getvalue()))
     release_solve_memory()
     if "FINISHED" not in result:
         return fail(operators.LAST_ERROR or "the solve did not finish")
@@ -205,15 +216,18 @@ def _warn_before(settings, interrupt):
     import bpy
 
     from ..bpy_free import pipeline
+    from ..bpy_free.patches import NothingToSolve
     from ..blender_read import selection
 
     try:
         warning = pipeline.estimate(selection.read_selection(bpy.context)[0], settings.solve_settings())["warning"]
+    except NothingToSolve as exc:  # as nothing selected is
+        raise Refused(str(exc)) from None
     except ValueError:
         warning = None  # bad input: the solve says what is wrong
     interrupt.check()
     if warning:
-        print(f"warning: {warning}", file=sys.stderr)
+        print(f"warning: {for_command_line(warning)}", file=sys.stderr)
 
 
 def _save(args, interrupt, targets, sources, own_scene, exposure):

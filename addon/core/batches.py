@@ -164,7 +164,11 @@ class Batches:
             variance /= (self.chunks - 1) * self.paths
             return variance
 
-        return self._columns(column, dtype)
+        with np.errstate(over="ignore"):
+            out = self._columns(column, dtype)
+        if np.isinf(out).any():  # light above about 1e19 (float32's square root): its variance kept in float64
+            out = self._columns(column)
+        return out
 
     def _spread(self, k, rows=slice(None)):
         """sum_k I_k^2 / n_k - I^2 / N of channel k at patches ``rows`` (all of them: (P,)), at

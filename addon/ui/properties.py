@@ -67,13 +67,8 @@ class RadiositySettings(bpy.types.PropertyGroup):
         "the result materials switch at once, no new run (the solid view shows the active colour attribute)",
         default=False,
     )
-    clamp_reflectivity: BoolProperty(
-        name="Clamp bright colours",
-        description="Use 0.99 for base colours above it (white is 1.0) instead of refusing colours of "
-        "1 or more, which would never let a path end in a closed room; reported as a warning",
-        default=False,
-        update=_changed,
-    )
+    clamp_reflectivity: BoolProperty(name=options.CLAMP.label, description=options.CLAMP.description,
+                                     default=options.CLAMP.default, update=_changed)
     use_scene_objects: BoolProperty(name=options.SCENE_OBJECTS.label, description=options.SCENE_OBJECTS.description,
                                     default=options.SCENE_OBJECTS.default, update=_changed)
     live_lamps: BoolProperty(name=options.LIVE_LAMPS.label, description=options.LIVE_LAMPS.description,

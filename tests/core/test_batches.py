@@ -11,13 +11,13 @@ from boxes import CEILING, FLOOR, LEFT, box_scene
 N = 6  # patches a side: 36 a face
 
 
-def _black_floor_box():
+def _black_floor_box(glow=1.0):
     """A closed box: black floor, a red wall (green and blue 0), grey walls, a glowing ceiling."""
     R = np.full((6, 3), 0.6)
     R[FLOOR] = 0.0
     R[LEFT] = (0.7, 0.0, 0.0)
     E = np.zeros((6, 3))
-    E[CEILING] = 1.0
+    E[CEILING] = glow
     return box_scene(R, E, n=N)
 
 
@@ -55,3 +55,22 @@ def test_the_walks_light_on_black_patches_errs_by_its_measured_variance():
     K = result.chunks
     band = 3 * np.sqrt(2 / floor.sum() + 2 / (K - 1))
     assert abs(mean_z2 - 1) < band, (mean_z2, band, K)
+
+
+def test_the_variance_of_light_beyond_float32s_square_root_is_kept_whole():
+    """Emission of 1e30: H^2 passes float32's largest (3.4e38), and the variance came out
+    infinite (numpy's "overflow encountered in cast"), which the noise filter then smoothed
+    with. It is the unit scene's times 1e60 (the paths do not depend on the scale), in float64
+    there; float32 where it fits."""
+    import warnings
+
+    scene, _, _ = _black_floor_box()
+    unit = solve(scene, "finite", paths=20_000, seed=3, method="two_way", threads=1)
+    bright_scene, _, _ = _black_floor_box(glow=1e30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        bright = solve(bright_scene, "finite", paths=20_000, seed=3, method="two_way", threads=1)
+    assert unit.irradiance_variance.dtype == np.float32
+    assert np.isfinite(bright.irradiance_variance).all()
+    np.testing.assert_allclose(bright.irradiance_variance / 1e60, unit.irradiance_variance, rtol=1e-5,
+                               atol=1e-6 * float(unit.irradiance_variance.max()))

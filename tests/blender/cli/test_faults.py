@@ -141,7 +141,7 @@ def test_an_output_folder_that_cannot_be_made_is_one_line_before_the_run(tmp_pat
 class Terminal:
     """``python -m addon`` on a pseudo-terminal ``columns`` wide, its output read as it comes."""
 
-    def __init__(self, args, cwd, columns=80):
+    def __init__(self, args, cwd, columns=80, env=None):
         pid, fd = pty.fork()
         if pid == 0:  # the child: the terminal's size, then the command line
             try:
@@ -150,7 +150,7 @@ class Terminal:
                 # (CI) has SIGINT ignored, which exec would hand on, and a program rightly keeps
                 signal.signal(signal.SIGINT, signal.SIG_DFL)
                 os.chdir(cwd)
-                os.execve(sys.executable, [sys.executable, "-m", "addon", *args], ENV)
+                os.execve(sys.executable, [sys.executable, "-m", "addon", *args], env or ENV)
             finally:
                 os._exit(127)
         self.pid, self.fd, self.data, self.status = pid, fd, b"", None
@@ -289,3 +289,139 @@ def test_the_progress_line_ends_cleanly_on_a_narrow_terminal(tmp_path):
     assert not [row for row in rows if progress.search(row)], rows
     assert any(row.startswith("Warning: Time limit reached") for row in rows), rows
     assert any(row.startswith("saved: ") for row in rows), rows
+
+
+# ---------------------------------------------------------------------------------------------
+# SIGTERM (a timeout, a CI cancel) and SIGHUP (the terminal closed): as Ctrl-C
+# ---------------------------------------------------------------------------------------------
+
+# A save that takes its time (save_post: the temporary .blend is on disk): the signal comes during it.
+SLOW_SAVE = """
+import sys, time
+import bpy
+from addon.__main__ import main
+
+@bpy.app.handlers.persistent
+def slow(path, *_):
+    print("saving", file=sys.stderr, flush=True)  # (stdout is taken from the save)
+    time.sleep(60)
+
+bpy.app.handlers.save_post.append(slow)
+sys.exit(main(sys.argv[1:]))
+"""
+
+# A host's script (as inside Blender: main(['--current'])) that would go on after main returns; its
+# save waits in Python until the test says (a file appears), so the main thread itself meets the signal.
+HOST = """
+import os, sys, time
+import bpy
+from addon.__main__ import main
+
+@bpy.app.handlers.persistent
+def held(path, *_):
+    print("saving", file=sys.stderr, flush=True)
+    while not os.path.exists(os.environ["GO_ON"]):
+        time.sleep(0.01)
+
+bpy.app.handlers.save_post.append(held)
+main(sys.argv[1:])
+print("the host went on", flush=True)
+"""
+
+RENDER = ["--resolution", "2000", "--samples", "4096"]  # minutes of rendering: the signal comes first
+
+
+class Piped:
+    """The command line with its output on pipes (as under ``timeout`` or a CI runner), read as it
+    comes, Blender's temporary folder in a folder of its own (``TMPDIR``)."""
+
+    def __init__(self, args, cwd, temp, code=None, env=None):
+        command = [sys.executable, "-c", code, *args] if code else [sys.executable, "-m", "addon", *args]
+        self.proc = subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     env={**ENV, "TMPDIR": str(temp), **(env or {})}, start_new_session=True)
+        self.data = b""
+
+    def read_until(self, pattern, timeout):
+        end = time.monotonic() + timeout
+        fd = self.proc.stdout.fileno()
+        while re.search(pattern, self.data.decode(errors="replace")) is None:
+            assert time.monotonic() < end and self.proc.poll() is None, self.data.decode(errors="replace")[-2000:]
+            if select.select([fd], [], [], 0.05)[0]:
+                self.data += os.read(fd, 65536)
+
+    def stop(self, signum, timeout=30, then=None):
+        """Send ``signum`` (and call ``then()``): (exit status, seconds it took, what was printed after it)."""
+        before = len(self.data)
+        sent = time.monotonic()
+        self.proc.send_signal(signum)
+        if then is not None:
+            time.sleep(0.05)  # (the signal handled first)
+            then()
+        try:
+            rest, _ = self.proc.communicate(timeout=timeout)
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+                self.proc.wait()
+        self.data += rest
+        return self.proc.returncode, time.monotonic() - sent, self.data[before:].decode(errors="replace")
+
+
+def _source_file(tmp_path):
+    """A saved file to --open: its save comes before the preview, so a temporary .blend is on disk while it renders."""
+    source = tmp_path / "src.blend"
+    proc = _cli([*QUICK, "-o", str(source), "--no-preview", "-q"], str(tmp_path))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return source
+
+
+@pytest.mark.parametrize("stage", ["solve", "render", "save", "host"])
+def test_sigterm_stops_as_ctrl_c_does_with_143_and_leaves_no_file(tmp_path, stage):
+    """SIGTERM (``timeout``, a CI cancel) in the solve, in Blender's render holding the main
+    thread (a temporary .blend already written), or in the save: one line, status 143, no
+    temporary file beside the output and nothing left in the temporary folder. Called from a
+    host's script, the process ends too, as SIGTERM's default would end it."""
+    out, temp = tmp_path / "out", tmp_path / "tmp"
+    temp.mkdir()
+    args, code, ready = {
+        "solve": ([*SLOW, "-q"], None, r"warning: Predicted"),
+        "render": (["--open", str(_source_file(tmp_path)), *QUICK[2:], *RENDER], None, r"sources: "),
+        "save": ([*QUICK, "--no-preview"], SLOW_SAVE, r"saving"),
+        "host": ([*QUICK, "--no-preview"], HOST, r"saving"),
+    }[stage]
+    go_on = tmp_path / "go on"
+    run = Piped([*args, "-o", str(out / "box.blend")], str(tmp_path), temp, code, {"GO_ON": str(go_on)})
+    run.read_until(ready, 120)
+    time.sleep(1.0)  # in the solve, the render or the save
+    status, seconds, after = run.stop(signal.SIGTERM, then=go_on.touch)
+    assert status == 143 and seconds < 3.0, (status, seconds, run.data.decode(errors="replace")[-3000:])
+    assert [line for line in after.splitlines() if line.strip()] == [
+        "interrupted: stopped by SIGTERM; nothing was saved"], after
+    assert "saved:" not in run.data.decode(errors="replace")
+    assert not out.exists() or os.listdir(out) == []  # no .box.PID.partial.blend
+    assert os.listdir(temp) == []  # Blender's session folder removed
+
+
+def test_a_closed_terminal_stops_the_run_with_129_and_leaves_no_file(tmp_path):
+    """The terminal closed during the preview (SIGHUP; nothing left to print on): status 129,
+    no temporary .blend beside the output, nothing left in the temporary folder."""
+    out, temp = tmp_path / "out", tmp_path / "tmp"
+    temp.mkdir()
+    source = _source_file(tmp_path)
+    term = Terminal(["--open", str(source), *QUICK[2:], *RENDER, "-o", str(out / "box.blend")], str(tmp_path),
+                    env={**ENV, "TMPDIR": str(temp)})
+    try:
+        term.read_until(r"sources: ", 120)
+        time.sleep(1.0)  # rendering
+        os.close(term.fd)  # the terminal closes: its session's leader gets SIGHUP
+        term.fd = os.open(os.devnull, os.O_RDONLY)  # (for close())
+        end, status = time.monotonic() + 30, None
+        while status is None and time.monotonic() < end:
+            pid, raw = os.waitpid(term.pid, os.WNOHANG)
+            status = os.waitstatus_to_exitcode(raw) if pid else None
+            time.sleep(0.05)
+        term.status = status
+    finally:
+        term.close()
+    assert status == 129, (status, term.text[-3000:])
+    assert os.listdir(out) == [] and os.listdir(temp) == []

@@ -146,7 +146,7 @@ def test_cli_failures_are_one_line_and_a_non_zero_status(tmp_path):
     (["--threshold", "2"], "--threshold must be between 1e-06 and 0.5; got 2"),
     (["--threshold", "0"], "--threshold must be between 1e-06 and 0.5; got 0"),
     (["--patch-size", "-1"], "--patch-size must be 0 (automatic) or at least 0.0001; got -1"),
-    (["--seed", "-5"], "--seed must be between 0 and 2.14748e+09; got -5"),
+    (["--seed", "-5"], "--seed must be between 0 and 2147483647; got -5"),
     (["--threads", "-1"], "--threads must be between 0 and 64; got -1"),
     (["--resolution", "0"], "--resolution must be between 16 and 16384 pixels; got 0"),
     (["--colours", "stripes"], "--colours must be one of TEXTURED, FACE, VERTEX, BOTH; got 'stripes'"),
