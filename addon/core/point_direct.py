@@ -9,9 +9,10 @@ does for direct light, and keeps the solve for the rest:
 
     L = corners(H - M) + D
 
-D the direct light at every corner of the shading triangles (each lamp and the sun by
-``SAMPLES`` stratified shadow rays, each emitting material's patches by as many points chosen by
-power), M each patch's area-weighted mean of D's linear interpolation, H the solved (filtered)
+D the direct light at every corner of the shading triangles (the lamps and suns by ``SAMPLES``
+stratified shadow rays shared among them, each ray to one lamp drawn by what it would give the
+corner unoccluded, ``lamp_choice``: the rays do not multiply with the lamps; each emitting
+material's patches by as many points chosen by power), M each patch's area-weighted mean of D's linear interpolation, H the solved (filtered)
 light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``).
 Every patch's mean is still its solved
 value (float error; ``Surface.corner_values``' own guarantee), so the display moves no light,
@@ -45,14 +46,15 @@ from functools import partial
 
 import numpy as np
 
-from .adaptive_light import SAMPLE_DIMENSIONS, _emitters, _lamps, _Points, _sky
+from .adaptive_light import SAMPLE_DIMENSIONS, _emitters, _Points, _sky, chosen_lamps
+from .lamp_choice import LampChoice, patch_spheres
 from .lights import WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .sampling import SourceTable, stratified_by_patch
 from .tables import WalkTables
 from .visibility import buried_at
 
-SAMPLES = 16  # shadow rays a corner, per lamp and per emitting material
+SAMPLES = 16  # shadow rays a corner, for the lamps (a group's) and per emitting material
 MORE_SAMPLES = 8  # times the samples where a corner's light is noisier than NOISE_SHARE
 RETRIES = 2  # (16, 128, 1,024 samples)
 NOISE_SHARE = 0.04  # of the light of the patch's brightest corner: a standard error the eye would see
@@ -138,10 +140,11 @@ def _unit_points(g, position, patch):
 
 class _Corners:
     """A block of corners as ``adaptive_light``'s lamps and emitters read sample points: unit-space
-    origins (pushed off), normals, offsets, surface points and world positions."""
+    origins (pushed off), normals, offsets, surface points and world positions; ``anchor`` and
+    ``local`` as ``adaptive_light._Points``'."""
 
-    def __init__(self, g, rows, surface_unit, world):
-        self.rows = rows
+    def __init__(self, g, rows, surface_unit, world, anchor=None, local=None):
+        self.rows, self.anchor, self.local = rows, anchor, local
         self.normal = g.patch_normal_rows.take(rows, axis=1).astype(np.float64)
         self.offset = g.ray_offsets(rows, np.float64)
         self.surface = surface_unit
@@ -153,16 +156,29 @@ class _Corners:
 
 
 def _sources(scene, light_group, patch_group, groups, sky=False):
-    """[(group, add)] each lamp and sun and each emitting group (and each world: ``sky``) as
-    ``add(tables, points, u, value)`` adds its light at sample points (``adaptive_light``)."""
+    """[(group, add, paired)] each group's lamps and suns, one of them drawn for each sample by
+    what they would give its point (``lamp_choice``), each emitting group (and each world:
+    ``sky``) as ``add(tables, points, u, value)`` adds its light at sample points
+    (``adaptive_light``), in the order of the lights; ``paired``: a choice among lamps, whose
+    error is measured on pairs of its strata (``_sampled``)."""
     power = scene.patch_area * scene.emission.mean(axis=1)
     emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
-    parts = [(light_group[k] if groups else 0,
-              partial(_sky, worlds=[light]) if isinstance(light, WorldLight) else partial(_lamps, lamps=[light]))
-             for k, light in enumerate(scene.lights.lights) if sky or not isinstance(light, WorldLight)]
+    parts, lamps = [], {}
+    for k, light in enumerate(scene.lights.lights):
+        group = int(light_group[k]) if groups else 0
+        if isinstance(light, WorldLight):
+            if sky:
+                parts.append((group, partial(_sky, worlds=[light]), False))
+            continue
+        if group not in lamps:  # (a group's lamps one source, where its first lamp is)
+            lamps[group] = []
+            parts.append((group, lamps[group], None))
+        lamps[group].append(light)
+    parts = [(group, partial(chosen_lamps, choice=LampChoice(add)), len(add) > 1) if paired is None else (group, add, paired)
+             for group, add, paired in parts]
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
-        parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine)))
+        parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine), False))
     return parts
 
 
@@ -173,12 +189,12 @@ def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, 
     out = np.zeros((max(groups, 1), len(patch), 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 28,))))
     with tables.numpy_turn:
-        for group, add in _sources(scene, light_group, patch_group, groups):
-            out[group] += _part_at(tables, position, patch, samples, rng, add)
+        for group, add, paired in _sources(scene, light_group, patch_group, groups):
+            out[group] += _part_at(tables, position, patch, samples, rng, add, paired)
     return out if groups else out[0]
 
 
-def _part_at(tables, position, patch, samples, rng, add):
+def _part_at(tables, position, patch, samples, rng, add, paired=False):
     """(n,3) one lamp's or emitting group's light (``add(tables, points, u, value)``) at the
     points: the mean of ``samples`` stratified samples, again (``_retried``) where a corner's
     standard error passes NOISE_SHARE of its patch's brightest corner's light (beside an
@@ -189,8 +205,9 @@ def _part_at(tables, position, patch, samples, rng, add):
         def points(block, local, u):
             at = rows[block]
             unit = _unit_points(g, position[at], patch[at])[:, local]
-            return _Corners(g, patch[at][local], unit, position[at].T[:, local])
-        return _sampled(tables, len(rows), count, rng, add, points, DIMENSIONS, np.float32)  # (as shown)
+            anchor = (position[at], g.patch_normal_rows.take(patch[at], axis=1).T.astype(np.float64), 0.0)
+            return _Corners(g, patch[at][local], unit, position[at].T[:, local], anchor, local)
+        return _sampled(tables, len(rows), count, rng, add, points, DIMENSIONS, np.float32, paired)  # (as shown)
 
     return _retried(sample, len(patch), samples, lambda value, error: _noisy(patch, value, error))
 
@@ -217,10 +234,12 @@ def _noisy(patch, value, error):
     return error > NOISE_SHARE * brightest[patch]
 
 
-def _sampled(tables, n, samples, rng, add, points, dimensions, dtype=np.float64):
+def _sampled(tables, n, samples, rng, add, points, dimensions, dtype=np.float64, paired=False):
     """((n,3) the mean of ``samples`` stratified samples of each of n points or patches, (n,) its
     standard error (channels summed)); ``points(block, local, u)`` a block's sample points
-    (``local`` each sample's row in the block), BLOCK_SAMPLES samples at a time."""
+    (``local`` each sample's row in the block), BLOCK_SAMPLES samples at a time. ``paired``: the
+    error of a choice stratified by u[5] (``_paired_error``), else as if the samples were
+    independent."""
     mean, error = np.empty((n, 3), dtype), np.empty(n, dtype)
     step = max(1, BLOCK_SAMPLES // samples)
     for start in range(0, n, step):
@@ -231,8 +250,21 @@ def _sampled(tables, n, samples, rng, add, points, dimensions, dtype=np.float64)
         add(tables, points(block, local, u), u=u, value=value)
         value = value.reshape(3, -1, samples)
         mean[block] = value.mean(axis=2).T
-        error[block] = value.sum(axis=0).std(axis=1, ddof=1) / np.sqrt(samples)
+        grey = value.sum(axis=0)
+        error[block] = _paired_error(grey, u[5].reshape(grey.shape)) if paired else grey.std(axis=1, ddof=1) / np.sqrt(samples)
     return mean, error
+
+
+def _paired_error(value, u):
+    """(k,) the standard error of the means of (k, s) samples whose ``u`` (k, s) has one sample
+    in each of s strata (a Sobol' net's): strata paired with their neighbours, each pair's
+    difference its variance (collapsed strata). Samples as independent would see the choice's
+    spread itself as noise: among lamps each a stratum, one seen and one hidden gave every
+    corner 16 samples' error where the stratified mean has none."""
+    order = np.argsort(u, axis=1)
+    ranked = np.take_along_axis(value, order, axis=1)
+    difference = ranked[:, 0::2] - ranked[:, 1::2]
+    return np.sqrt((difference * difference).sum(axis=1)) / value.shape[1]
 
 
 def _fill_buried(g, position, patch, value):
@@ -351,19 +383,26 @@ def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     out = np.zeros((max(groups, 1), scene.patch_count, 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 27,))))
+    spheres = patch_spheres(scene) if has_lamps(scene) else None
     with tables.numpy_turn:
-        for group, add in _sources(scene, light_group, patch_group, groups, sky=True):
-            out[group] += _means_of(tables, samples, rng, add, light)
+        for group, add, paired in _sources(scene, light_group, patch_group, groups, sky=True):
+            out[group] += _means_of(tables, samples, rng, add, light, spheres, paired)
     return out if groups else out[0]
 
 
-def _means_of(tables, samples, rng, add, light):
-    """(P,3) one source's mean light over each patch (``live_means``), noisy patches again."""
+def _means_of(tables, samples, rng, add, light, spheres, paired=False):
+    """(P,3) one source's mean light over each patch (``live_means``), noisy patches again;
+    ``spheres`` (``lamp_choice.patch_spheres``) the patches' anchors where lamps are chosen."""
     g = tables.geometry
 
+    def points(rows, local, u):
+        anchor = None if spheres is None else (spheres[0][rows], g.patch_normal_rows.take(rows, axis=1).T.astype(
+            np.float64), spheres[1][rows])
+        return _Points(g, rows[local], u, anchor, local)
+
     def sample(rows, count):
-        return _sampled(tables, len(rows), count, rng, add, lambda block, local, u: _Points(g, rows[block][local], u),
-                        SAMPLE_DIMENSIONS)
+        return _sampled(tables, len(rows), count, rng, add, lambda block, local, u: points(rows[block], local, u),
+                        SAMPLE_DIMENSIONS, paired=paired)
 
     def too_noisy(mean, error):
         shown_light = mean.sum(axis=1) if light is None else np.maximum(light.sum(axis=1), mean.sum(axis=1))
