@@ -19,7 +19,9 @@ value (float error; ``Surface.corner_values``' own guarantee), so the display mo
 and the solve's noise stays where it was; what D adds is the light's shape within the patch.
 The sky stays in H - M (soft light, which a point estimate would need many rays for).
 
-Beside an emitter a corner's light is heavy-tailed: a corner whose standard error passes
+Beside an emitter a corner's light is heavy-tailed: a corner whose standard error (measured on
+pairs of neighbouring strata where a sample draws one of several lamps or emitting patches:
+``_paired_error``) passes
 NOISE_SHARE of its patch's brightest corner's light is sampled again with MORE_SAMPLES times the
 samples (RETRIES times). (Giving up on the patches still above it, their smooth display beside
 their neighbours' shaped one, drew blocks on the Cornell box's walls by its light.) Where M
@@ -159,8 +161,8 @@ def _sources(scene, light_group, patch_group, groups, sky=False):
     """[(group, add, paired)] each group's lamps and suns, one of them drawn for each sample by
     what they would give its point (``lamp_choice``), each emitting group (and each world:
     ``sky``) as ``add(tables, points, u, value)`` adds its light at sample points
-    (``adaptive_light``), in the order of the lights; ``paired``: a choice among lamps, whose
-    error is measured on pairs of its strata (``_sampled``)."""
+    (``adaptive_light``), in the order of the lights; ``paired``: a choice among lamps or
+    emitting patches, whose error is measured on pairs of its strata (``_sampled``)."""
     power = scene.patch_area * scene.emission.mean(axis=1)
     emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
     parts, lamps = [], {}
@@ -178,7 +180,7 @@ def _sources(scene, light_group, patch_group, groups, sky=False):
              for group, add, paired in parts]
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
-        parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine), False))
+        parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine), True))
     return parts
 
 
