@@ -40,7 +40,7 @@ def _run_stats(output):
     return {
         "last_paths": int(r.paths),
         "last_rays": int(r.rays),
-        "last_seconds": float(r.seconds),
+        "last_seconds": float(output.seconds or r.seconds),  # (the whole run's: meshing, solve, colours)
         "last_mean_path_length": float(r.mean_path_length),
         "last_predicted_mse": float(r.predicted_mse),
         "last_measured_mse": measured if measured == measured else -1.0,  # NaN -> -1
