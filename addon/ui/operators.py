@@ -8,6 +8,7 @@ from bpy.app.handlers import persistent
 
 from . import live_view
 from ..bpy_free import pipeline
+from ..blender_read import images
 from ..blender_read.selection import read_selection
 from ..blender_write.results import write_results
 from ..bpy_free import worker
@@ -152,6 +153,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             self._error(f"Reading the selection failed ({type(exc).__name__}: {exc}); "
                         "the scene is unchanged")
             return {"CANCELLED"}
+        images.release()  # (the run's arrays hold its images' pixels: the copies kept for a next read go)
         settings = context.scene.radiosity.solve_settings()
         self._notes = notes
         self._scene_uid = context.scene.session_uid  # results go to the scene solved
