@@ -41,33 +41,37 @@ FIRST_RAYS = 64
 def light_fates(scene, seed=0):
     """(L,2) for each light of the scene: the share of its rays that meet nothing, and the share
     that meet the back of a face (a light inside a closed object, a sun or sky outside a closed
-    room: none of it reaches a front side). A light FIRST_RAYS of whose rays meet a front side
-    is measured on them; the others on RAYS_PER_LIGHT."""
+    room: none of it reaches a front side). Every light's FIRST_RAYS are cast at once; a light
+    one of whose rays meets a front side is measured on them, the others on RAYS_PER_LIGHT."""
     lights = scene.lights
     if not len(lights):
         return np.zeros((0, 2))
     rng = np.random.default_rng(seed)
-    fates = []
-    for k in range(len(lights)):
-        fate = _fate(scene, k, FIRST_RAYS, rng)
-        fates.append(fate if sum(fate) < 1.0 else _fate(scene, k, RAYS_PER_LIGHT, rng))
-    return np.array(fates)
+    everyone = np.arange(len(lights))
+    fates = _fates(scene, everyone, FIRST_RAYS, rng)
+    for k in np.flatnonzero(fates.sum(axis=1) >= 1.0):
+        fates[k] = _fates(scene, np.array([k]), RAYS_PER_LIGHT, rng)[0]
+    return fates
 
 
-def _fate(scene, k, count, rng):
-    """(missed, back) of ``count`` rays of light k (``light_fates``)."""
+def _fates(scene, which, count, rng):
+    """(len(which), 2) (missed, back) of ``count`` rays of each of the lights ``which``
+    (``light_fates``), traced together."""
     lights, g = scene.lights, scene.geometry
-    first, last = lights.first[k], lights.first[k + 1]
-    power = lights.power[first:last].mean(axis=1)
-    rows = first + np.searchsorted(np.cumsum(power) / power.sum(), rng.random(count), side="right")
-    rows = np.minimum(rows, last - 1)
-    origins, directions = lights.unit_rays(rows, rng.random((4, count), dtype=np.float32), g)
+    rows = []
+    for k in which:
+        first, last = lights.first[k], lights.first[k + 1]
+        power = lights.power[first:last].mean(axis=1)
+        chosen = first + np.searchsorted(np.cumsum(power) / power.sum(), rng.random(count), side="right")
+        rows.append(np.minimum(chosen, last - 1))
+    rows = np.concatenate(rows)
+    origins, directions = lights.unit_rays(rows, rng.random((4, rows.size), dtype=np.float32), g)
     o, d = origins.astype(np.float32), directions.astype(np.float32)
     hit, _, _, _, normal = g.surface_tracer.first_hit_barycentric(np.ascontiguousarray(o.T), np.ascontiguousarray(d.T),
                                                                   lights.regions(rows, g))
     met = hit >= 0
     back = met & ~meets_front(d, normal)
-    return float(np.mean(~met)), float(np.mean(back))
+    return np.stack([(~met).reshape(len(which), count).mean(axis=1), back.reshape(len(which), count).mean(axis=1)], axis=1)
 
 
 # Rays the back-light check draws from the sources (by power), the bounces it follows, and the
