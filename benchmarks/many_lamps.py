@@ -65,7 +65,7 @@ def run(count, **settings):
     return estimate, time.perf_counter() - started, int(out.result.paths), float(out.result.seconds)
 
 
-def interior(patch_size=0.085):
+def interior(patch_size=0.16):
     """The window room (benchmarks.interior_scene) through the operator: (patches, operator
     seconds, corner pass seconds, solve seconds)."""
     import bpy

@@ -109,7 +109,10 @@ def chosen_lamps(tables, points, choice, u, value):
     ``choice`` (a ``lamp_choice.LampChoice``) draws by u[5] for the sample's anchor point, over
     the chance of drawing it: in expectation every lamp's light (``_lamps``) at the cost of one."""
     g = tables.geometry
-    lamp, chance = choice.choose(choice.weights(*points.anchor), points.local, u[5])
+    if len(choice) == 1:  # (one lamp: every sample its)
+        lamp, chance = np.zeros(points.rows.size, np.int64), np.ones(points.rows.size)
+    else:
+        lamp, chance = choice.choose(choice.weights(*points.anchor), points.local, u[5])
     towards, distance, v = choice.gather(lamp, points.world, points.normal, u[3:5])
     seen = ~choice.casts_shadow[lamp]
     live = np.flatnonzero(~seen & v.any(axis=0))

@@ -183,6 +183,8 @@ class LampChoice:
         ``normal`` (3,m) with uniforms ``u`` (2,m), as its ``gather`` does: (towards (3,m),
         distance (m,), irradiance unoccluded (3,m)); all the point, sphere, round spot, area
         lamps and suns at once, the others (a soft falloff, an elliptical spot) each by its own."""
+        if len(self) == 1:  # (one lamp: its own, as it is)
+            return self.lamps[0].gather(x, normal, u)
         m = lamp.size
         towards, distance, value = np.empty((3, m)), np.empty(m), np.zeros((3, m))
         kind = np.where(self.vectored[lamp], self.kind[lamp], -1)
@@ -220,10 +222,11 @@ class LampChoice:
     def _areas_at(self, k, x, normal, u):
         """``AreaLight.gather`` of area lamps ``k``: a uniform point of each."""
         a, b = u[0].astype(np.float64), u[1].astype(np.float64)
-        ellipse = self.ellipse[k]
-        r, phi = np.sqrt(a), TWO_PI * b
-        s = np.where(ellipse, r * np.cos(phi), 2.0 * a - 1.0)
-        t = np.where(ellipse, r * np.sin(phi), 2.0 * b - 1.0)
+        s, t = 2.0 * a - 1.0, 2.0 * b - 1.0
+        ellipse = np.flatnonzero(self.ellipse[k])
+        if ellipse.size:
+            r, phi = np.sqrt(a[ellipse]), TWO_PI * b[ellipse]
+            s[ellipse], t[ellipse] = r * np.cos(phi), r * np.sin(phi)
         points = self.centre[k].T + self.half_u[k].T * s + self.half_v[k].T * t
         towards, distance = direction_to(points, x)
         cos_y = np.maximum(-dot(self.axis[k].T, towards), 0.0)

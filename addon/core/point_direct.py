@@ -9,10 +9,11 @@ does for direct light, and keeps the solve for the rest:
 
     L = corners(H - M) + D
 
-D the direct light at every corner of the shading triangles (the lamps and suns by ``SAMPLES``
-stratified shadow rays shared among them, each ray to one lamp drawn by what it would give the
-corner unoccluded, ``lamp_choice``: the rays do not multiply with the lamps; each emitting
-material's patches by as many points chosen by power), M each patch's area-weighted mean of D's linear interpolation, H the solved (filtered)
+D the direct light at every corner of the shading triangles (the lamps by ``SAMPLES`` stratified
+shadow rays shared among them, each ray to one lamp drawn by what it would give the corner
+unoccluded, ``lamp_choice``: the rays do not multiply with the lamps; each sun by as many of
+its own; each emitting material's patches by as many points chosen by power), M each patch's
+area-weighted mean of D's linear interpolation, H the solved (filtered)
 light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``).
 Every patch's mean is still its solved
 value (float error; ``Surface.corner_values``' own guarantee), so the display moves no light,
@@ -50,7 +51,7 @@ import numpy as np
 
 from .adaptive_light import SAMPLE_DIMENSIONS, _emitters, _Points, _sky, chosen_lamps
 from .lamp_choice import LampChoice, patch_spheres
-from .lights import WorldLight
+from .lights import SunLight, WorldLight
 from .names import EXIT_RANDOM, FINITE
 from .sample_rounds import Part, Spent, rounds, sampled
 from .sampling import SourceTable
@@ -197,8 +198,8 @@ class _Corners:
 
 
 def _sources(scene, light_group, patch_group, groups, sky=False):
-    """[(group, add, paired)] each group's lamps and suns, one of them drawn for each sample by
-    what they would give its point (``lamp_choice``), each emitting group (and each world:
+    """[(group, add, paired)] each group's lamps, one of them drawn for each sample by what they
+    would give its point (``lamp_choice``; each sun apart: ``_lamp_sources``), each emitting group (and each world:
     ``sky``) as ``add(tables, points, u, value)`` adds its light at sample points
     (``adaptive_light``), in the order of the lights; ``paired``: a choice among lamps or
     emitting patches, whose error is measured on pairs of its strata (``sample_rounds.sampled``)."""
@@ -215,12 +216,27 @@ def _sources(scene, light_group, patch_group, groups, sky=False):
             lamps[group] = []
             parts.append((group, lamps[group], None))
         lamps[group].append(light)
-    parts = [(group, partial(chosen_lamps, choice=LampChoice(add)), len(add) > 1) if paired is None else (group, add, paired)
-             for group, add, paired in parts]
+    parts = [part for group, add, paired in parts
+             for part in (_lamp_sources(group, add) if paired is None else [(group, add, paired)])]
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
         parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine), True))
     return parts
+
+
+def _lamp_sources(group, lamps):
+    """[(group, add, paired)] a group's lamps: each sun a source of its own (its light is seldom
+    what it would be unoccluded: through a window, most corners of a room see none of it; drawn
+    with the lamps it took their samples: 2.6x the rays in the window room), the other lamps one
+    source, a lamp drawn for each sample (``lamp_choice``)."""
+    placed = [light for light in lamps if not isinstance(light, SunLight)]
+    out = []
+    for light in lamps:
+        if isinstance(light, SunLight) or len(placed) == 1:
+            out.append((group, partial(chosen_lamps, choice=LampChoice([light])), False))
+        elif light is placed[0]:
+            out.append((group, partial(chosen_lamps, choice=LampChoice(placed)), True))
+    return out
 
 
 def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline=None, spent=None):

@@ -509,3 +509,32 @@ def test_an_emitters_corner_light_is_unbiased_and_within_its_noise_rule_measured
     z = np.abs(shown - exact)[floor] / (point_direct.NOISE_SHARE * brightest[corner_patch])
     assert np.sqrt((z ** 2).mean()) < 1.0, np.sqrt((z ** 2).mean())
     assert sum(rays) < 512 * floor.sum() / 3, sum(rays) / floor.sum() * 3
+
+
+def test_a_sun_outside_a_closed_room_takes_its_own_rays_not_the_lamps(monkeypatch):
+    """The closed room with 8 point lamps and a sun outside it (none of whose light gets in):
+    the sun is sampled apart, 16 rays a corner that all find it hidden, and the lamps share
+    theirs as without it; drawn among the lamps by its light unoccluded, the strongest by far,
+    it took most of their samples and left their light noisy (the window room: 2.6x the rays).
+    The corners' light is the lamps' alone."""
+    from many_lamps import room_scene
+
+    from addon.core.lights import SunLight
+    from addon.core.tables import WalkTables
+
+    lamps = room_scene(8, patch_size=0.5, furniture=False, kinds=("point",))
+    sun = SunLight(np.array([0.3, 0.2, -0.93]) / np.linalg.norm([0.3, 0.2, -0.93]), np.full(3, 50.0))
+    sunlit = PatchScene(lamps.vertices, lamps.triangles, lamps.triangle_patch, lamps.reflectivity, lamps.emission,
+                        lights=[*lamps.lights.lights, sun])
+    surface = _surface(lamps)
+    rays = []
+    traced = WalkTables.outside_turn
+    monkeypatch.setattr(WalkTables, "outside_turn", lambda tables, trace, origins, *rest: rays.append(len(origins)) or traced(
+        tables, trace, origins, *rest))
+    alone = point_direct.corner_direct(surface, lamps, lamps.triangles, seed=10).corners
+    without = sum(rays)
+    rays.clear()
+    both = point_direct.corner_direct(surface, sunlit, sunlit.triangles, seed=10).corners
+    distinct = len(np.unique(surface.point.ravel().astype(np.int64) * lamps.patch_count + np.repeat(surface.triangle_patch, 3)))
+    assert sum(rays) <= without + point_direct.SAMPLES * distinct, (sum(rays), without, distinct)
+    np.testing.assert_allclose(both, alone, rtol=1e-5, atol=1e-6 * alone.max())
