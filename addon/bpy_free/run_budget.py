@@ -3,7 +3,7 @@
 What the user waits for is the meshing, the solve and the display's colours (the smooth light
 with each lamp's and emitter's direct light at the shading mesh's corners, ``core.point_direct``;
 the patches' means of the light drawn live). The display's part is forecast by timing its
-direct light at a few hundred corners (and patches) drawn at random (``point_direct.corner_seconds``,
+direct light at a few hundred corners (and patches) drawn at random (``corner_seconds``,
 ``live_seconds``), plus the smoothing at a measured pace a triangle. Under a time limit the solve
 gets what is left of it once the display's forecast is set aside (at least LEAST_SOLVE of what
 is left), and the display's retries (corners sampled again where noisy) stop at the limit: the
@@ -14,10 +14,15 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..core import methods, point_direct
+from ..core.lamp_choice import patch_spheres
 from ..core.names import GATHERED, TWO_WAY
+from ..core.sample_rounds import Spent
 from . import adaptive_patches, options
 
+PILOT_CORNERS = 512  # corners (or patches) a pilot of the display's direct light times
 # Seconds of the display a shading triangle beyond the direct light (the smoothing, the noise
 # filter, the polygon corners): 25-110 microseconds in the rooms measured (docs/performance.md).
 REST_PER_TRIANGLE = 5e-5
@@ -44,6 +49,41 @@ class Display:
         return self.corners + self.live + self.rest
 
 
+def corner_seconds(scene, triangles, triangle_patch, seed=0, corners=PILOT_CORNERS, light_group=None, patch_group=None,
+                   groups=0):
+    """(the seconds ``point_direct.corner_direct`` would take at the corners of ``triangles``
+    (T,3) of ``triangle_patch`` (T,) (with these groups), those of its first samples alone (the
+    least it takes within a deadline)), from the pass timed at up to ``corners`` of them drawn at
+    random; (0, 0) where the scene has no direct light to show."""
+    if not point_direct.has_direct(scene):
+        return 0.0, 0.0
+    P = scene.patch_count
+    keys = np.unique(np.asarray(triangles, np.int64).ravel() * P + np.repeat(np.asarray(triangle_patch, np.int64), 3))
+    chosen = keys[np.sort(np.random.default_rng(seed).choice(keys.size, min(corners, keys.size), replace=False))]
+    patch = chosen % P
+    position = scene.vertices[chosen // P]
+    position += point_direct.INWARD * (patch_spheres(scene)[0][patch] - position)
+    spent = Spent()
+    point_direct.direct_at(scene, position, patch, point_direct.SAMPLES, seed, light_group, patch_group, groups,
+                           spent=spent)
+    return spent.seconds * keys.size / chosen.size, spent.first * keys.size / chosen.size
+
+
+def live_seconds(scene, seed=0, patches=PILOT_CORNERS):
+    """(the seconds ``point_direct.live_means`` would take, those of its first samples alone),
+    from it timed at up to ``patches`` patches drawn at random; (0, 0) without live light."""
+    if not point_direct.has_live(scene):
+        return 0.0, 0.0
+    rows = np.sort(np.random.default_rng(seed).choice(scene.patch_count, min(patches, scene.patch_count), replace=False))
+    # (a patch's noise is measured against its solved light, which the reflected light adds to: the
+    # mean power a unit of area gets, times R / (1 - R) of the mean reflectivity R, as a closed room's)
+    R = float(np.average(scene.grey_reflectivity, weights=scene.patch_area))
+    light = np.full((scene.patch_count, 3), scene.total_power / scene.total_area * R / max(1.0 - R, 1e-3))
+    spent = Spent()
+    point_direct.live_means(scene, seed=seed, light=light, spent=spent, rows=rows)
+    return spent.seconds * scene.patch_count / rows.size, spent.first * scene.patch_count / rows.size
+
+
 def smooth_made(settings, scene):
     """Whether the run makes smooth colours (the pipeline's rule)."""
     return settings.output == "VERTEX" or (settings.output in ("BOTH", "TEXTURED")
@@ -65,13 +105,13 @@ def display_forecast(scene, patches, settings, groups=None) -> Display:
     """The Display forecast of a run of ``settings`` (its method resolved) on ``scene`` made of
     ``patches``; ``groups`` the run's per-source groups (each group's lamps sampled apart)."""
     seed = int(settings.seed)
-    live, live_least = point_direct.live_seconds(scene, seed) if live_made(settings, scene) else (0.0, 0.0)
+    live, live_least = live_seconds(scene, seed) if live_made(settings, scene) else (0.0, 0.0)
     if not smooth_made(settings, scene):
         return Display(live=live, least=live_least)
     shading = adaptive_patches.shading_arrays(patches, scene) or (scene.triangles, scene.triangle_patch)
     apart = {} if groups is None else dict(light_group=groups.light_group,
                                            patch_group=groups.patch_group(scene.patch_count), groups=groups.count)
-    corners, least = point_direct.corner_seconds(scene, *shading, seed=seed, **apart)
+    corners, least = corner_seconds(scene, *shading, seed=seed, **apart)
     rest = REST_PER_TRIANGLE * len(shading[0])
     return Display(corners, live, rest, least + live_least + rest)
 

@@ -53,7 +53,7 @@ from .adaptive_light import SAMPLE_DIMENSIONS, _emitters, _Points, _sky, chosen_
 from .lamp_choice import LampChoice, patch_spheres
 from .lights import SunLight, WorldLight
 from .names import EXIT_RANDOM, FINITE
-from .sample_rounds import Part, Spent, rounds, sampled
+from .sample_rounds import Part, rounds, sampled
 from .sampling import SourceTable
 from .tables import WalkTables
 from .visibility import buried_at
@@ -64,7 +64,6 @@ RETRIES = 2  # (16, 128, 1,024 samples)
 NOISE_SHARE = 0.04  # of the light of the patch's brightest corner: a standard error the eye would see
 OVERSHOOT = 2.0  # a patch's direct light's interpolated mean over its solved light beyond which it is not shown
 INWARD = 0.01  # of the way from a corner to its patch's centre
-PILOT_CORNERS = 512  # corners (or patches) a pilot of the pass times (corner_seconds, live_seconds)
 LIVE_MEAN_SAMPLES = 64  # points a patch for its mean of the live light (live_means), before the noisy ones' again
 # Sobol' dimensions of a corner's sample: a point of a lamp (2, read as u[3:5]), an emitting
 # patch (u[5]) and a point of it (u[6:9]).
@@ -104,47 +103,12 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     towards *= INWARD
     position += towards
     del towards
-    value = _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline)  # ([G,]n,3)
+    value = direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline)  # ([G,]n,3)
     _fill_buried(scene.geometry, position, patch, value)
     if not groups:  # (the whole's corners as written, float32: the memory of the largest scenes)
         value = value.astype(np.float32)
     corners = value[..., corner_key.ravel(), :].reshape(value.shape[:-2] + (-1, 3, 3))
     return CornerDirect(corners, patch_means(surface, corners))
-
-
-def corner_seconds(scene, triangles, triangle_patch, seed=0, corners=PILOT_CORNERS, light_group=None, patch_group=None,
-                   groups=0):
-    """(the seconds ``corner_direct`` would take at the corners of ``triangles`` (T,3) of
-    ``triangle_patch`` (T,) (with these groups), those of its first samples alone (the least
-    it takes within a deadline)), from the pass timed at up to ``corners`` of them drawn at
-    random; (0, 0) where ``has_direct`` is not."""
-    if not has_direct(scene):
-        return 0.0, 0.0
-    P = scene.patch_count
-    keys = np.unique(np.asarray(triangles, np.int64).ravel() * P + np.repeat(np.asarray(triangle_patch, np.int64), 3))
-    rng = np.random.default_rng(seed)
-    chosen = keys[np.sort(rng.choice(keys.size, min(corners, keys.size), replace=False))]
-    patch = chosen % P
-    position = scene.vertices[chosen // P]
-    position += INWARD * (patch_spheres(scene)[0][patch] - position)
-    spent = Spent()
-    _direct_at(scene, position, patch, SAMPLES, seed, light_group, patch_group, groups, spent=spent)
-    return spent.seconds * keys.size / chosen.size, spent.first * keys.size / chosen.size
-
-
-def live_seconds(scene, seed=0, patches=PILOT_CORNERS):
-    """(the seconds ``live_means`` would take, those of its first samples alone), from it timed
-    at up to ``patches`` patches drawn at random; (0, 0) where ``has_live`` is not."""
-    if not has_live(scene):
-        return 0.0, 0.0
-    rows = np.sort(np.random.default_rng(seed).choice(scene.patch_count, min(patches, scene.patch_count), replace=False))
-    # (a patch's noise is measured against its solved light, which the reflected light adds to: the
-    # mean power a unit of area gets, times R / (1 - R) of the mean reflectivity R, as a closed room's)
-    R = float(np.average(scene.grey_reflectivity, weights=scene.patch_area))
-    light = np.full((scene.patch_count, 3), scene.total_power / scene.total_area * R / max(1.0 - R, 1e-3))
-    spent = Spent()
-    live_means(scene, seed=seed, light=light, spent=spent, rows=rows)
-    return spent.seconds * scene.patch_count / rows.size, spent.first * scene.patch_count / rows.size
 
 
 def has_direct(scene):
@@ -239,7 +203,7 @@ def _lamp_sources(group, lamps):
     return out
 
 
-def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline=None, spent=None):
+def direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline=None, spent=None):
     """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
     group's lamps and each emitting group apart (``_part_at``), added up into its group's row;
     retries within ``deadline`` (``sample_rounds``)."""
