@@ -2,7 +2,7 @@
 estimate against the real time.
 
     python -m benchmarks.many_lamps                  # -> benchmarks/results/many_lamps.{md,json}
-    python -m benchmarks.many_lamps --interior       # the window room of benchmarks.interior_scene at
+    python -m benchmarks.many_lamps --interior       # the three rooms of benchmarks.interior_scene at
                                                      # ~11,000 patches through the operator (bpy)
 
 The room of tests/core/many_lamps.py (6 x 5 x 3 m, three boxes of furniture) lit by 1, 10, 100 and
@@ -65,8 +65,11 @@ def run(count, **settings):
     return estimate, time.perf_counter() - started, int(out.result.paths), float(out.result.seconds)
 
 
-def interior(patch_size=0.16):
-    """The window room (benchmarks.interior_scene) through the operator: (patches, operator
+INTERIORS = (("window_room", 0.16), ("lamp_room", 0.17), ("loft", 0.2))  # (about 11,000 patches each)
+
+
+def interior(name, patch_size):
+    """An interior of benchmarks.interior_scene through the operator: (patches, operator
     seconds, corner pass seconds, solve seconds)."""
     import bpy
 
@@ -77,7 +80,7 @@ def interior(patch_size=0.16):
     import addon
 
     addon.register()
-    interior_scene.build("window_room")
+    interior_scene.build(name)
     source_objects()
     settings = bpy.context.scene.radiosity
     settings.patch_size, settings.threads = patch_size, 2
@@ -94,6 +97,7 @@ def interior(patch_size=0.16):
     started = time.perf_counter()
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     seconds = time.perf_counter() - started
+    point_direct.corner_direct = direct
     return settings.last_patches, seconds, sum(spent), None
 
 
@@ -104,8 +108,10 @@ def main(argv=None):
     args = parser.parse_args(argv)
     rows = []
     if args.interior:
-        patches, seconds, corners, _ = interior()
-        rows.append({"case": "window room", "patches": patches, "operator": seconds, "corner_pass": corners})
+        for name, size in INTERIORS:
+            patches, seconds, corners, _ = interior(name, size)
+            rows.append({"case": name, "patches": patches, "operator": seconds, "corner_pass": corners})
+            print(args.tag, rows[-1], flush=True)
     else:
         for count in COUNTS:
             seconds, rays = corner_pass(count)
