@@ -24,6 +24,7 @@ import numpy as np
 
 from .light_directions import cone_directions, direction_to, dot
 from .lights import AreaLight, PointLight, SunLight
+from .near_choice import patch_centres
 
 TWO_PI = 2.0 * np.pi
 
@@ -269,8 +270,6 @@ def _mask(cosine, cos_outer, cos_inner):
 def patch_spheres(scene):
     """((P,3) a world point in the middle of each patch, (P,) the radius of a sphere about it that
     holds the patch's triangles)."""
-    from .near_choice import patch_centres
-
     centre = patch_centres(scene)
     corners = scene.vertices[scene.triangles]  # (T,3,3)
     reach = np.linalg.norm(corners - centre[scene.triangle_patch][:, None, :], axis=2).max(axis=1)

@@ -86,7 +86,8 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     ``triangles`` (T,3) (of ``scene.vertices``; ``surface`` is ``smoothing.Surface.of`` them)
     from every lamp and sun and emitting patch of ``scene``. Given
     ``groups`` > 0, ``light_group`` (L,) the group of each light and ``patch_group`` (P,) of
-    each emitting patch: each group's light apart (they add up to the whole). ``deadline`` (a
+    each emitting patch: each group's light apart, its lamps drawn among themselves (their sum
+    is the whole's light; the whole's own draws all its lamps at once). ``deadline`` (a
     ``time.perf_counter()`` reading): the noisy corners sampled again as time allows
     (``sample_rounds``)."""
     if not has_direct(scene):
