@@ -15,6 +15,7 @@ import numpy as np
 
 from ..core import principled
 from . import SceneError
+from . import images
 from .images import image_average, linear_pixels
 
 DEFAULT_GREY = (0.8, 0.8, 0.8)  # an object without a material
@@ -381,8 +382,7 @@ def slot_tables(obj, notes):
         R[k], E[k], more = material_colours(material, per_patch)
         scale, offset, lobe = transport_terms(material)
         if texture is not None and not (np.all(scale == 1) and np.all(offset == 0)):
-            pixels = texture[0]
-            texture = ((pixels * scale + offset).astype(pixels.dtype, copy=False), *texture[1:])
+            texture = (images.scaled(texture[0], scale, offset), *texture[1:])
         textures.append(texture)
         attributes.append(attribute)
         emission_textures.append(emission)

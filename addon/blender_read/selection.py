@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import SceneError, objects as object_reading
+from . import SceneError, images, objects as object_reading
 from .lights import LightError, read_lights, read_world
 
 #: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
@@ -38,10 +38,11 @@ def read_selection(context):
     settings = getattr(context.scene, "radiosity", None)
     clamp = bool(getattr(settings, "clamp_reflectivity", False))
     depsgraph = context.evaluated_depsgraph_get()
-    objects = _read_objects(context, depsgraph, candidates, others, settings, notes)
-    for o in objects:
-        _check_materials(o, clamp, notes)
-    lights = _read_lights(context, depsgraph, notes)
+    with images.one_read():  # (an image is read once however many sockets and objects use it)
+        objects = _read_objects(context, depsgraph, candidates, others, settings, notes)
+        for o in objects:
+            _check_materials(o, clamp, notes)
+        lights = _read_lights(context, depsgraph, notes)
     groups = {o.session_uid: o.lightgroup for o in context.view_layer.objects}
     for o in objects:  # (an instance takes its parent's light group)
         o.lightgroup = groups.get(o.uid, "") or ""

@@ -209,7 +209,8 @@ DETAIL = Choice("detail", "--detail", "OFF", (
 
 SEED = Number("seed", "--seed", 0, 0, 2**31 - 1, "Seed", "Random seed (same seed, same result)", integer=True)
 TIME_LIMIT = Number("time_limit", "--time-limit", 0.0, 0.0, None, "Time limit",
-                    "Stop after this many seconds (0: no limit); the paths done so far are kept", unit="s")
+                    "The whole run in this many seconds (0: no limit): meshing, the solve and the colours; the solve "
+                    "stops in time for the colours and its paths done so far are kept", unit="s")
 THREADS = Number("threads", "--threads", 0, 0, 64, "Threads",
                  "Threads for the ray tracing (0: automatic). Same seed and threads give the same result",
                  integer=True)

@@ -17,7 +17,7 @@ from ..core.covered import seen_parts
 from ..core.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
-from . import adaptive_patches, options, relit, solve_refinement, trim
+from . import adaptive_patches, options, relit, run_budget, solve_refinement, trim
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
 
@@ -67,6 +67,7 @@ class SolveOutput:
     back_warning: str | None = None  # light absorbed on back sides in view of the selection (back_light_warning)
     sources_out: object = None  # relit.SourceResults of a per-source solve, else None
     live_lamps: bool = False  # the textured light leaves the lamps' direct light to the renderer
+    seconds: float = 0.0  # the whole run's (meshing, solve, colours)
 
     def blocked_fraction(self):
         """Share of the emitted power absorbed on the back side of faces."""
@@ -223,9 +224,11 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
     f = forecast_for(scene, settings, target, bounces, should_stop)
-    # (what the settings need, the Detail's refining solves included; a time limit may end the run first)
-    needed = building + solve_refinement.predicted_seconds(patches, f.seconds)
-    seconds = min(needed, building + settings.max_seconds) if f.time_limited else needed
+    display = run_budget.display_forecast(scene, patches, settings)  # (the colours' time: their direct light)
+    # (what the settings need, the Detail's refining solves included; a time limit ends the whole run first)
+    needed = building + solve_refinement.predicted_seconds(patches, f.seconds) + display.seconds
+    limited = bool(settings.max_seconds) and needed > settings.max_seconds
+    seconds = max(settings.max_seconds, building + display.least) if limited else needed
     return {
         "objects": sum(o.receives for o in patches.objects),
         "others": sum(not o.receives for o in patches.objects),
@@ -244,7 +247,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
         "rays_per_second": float(f.rays_per_second),
         "seconds": seconds,
         "seconds_needed": needed,
-        "time_limited": f.time_limited,
+        "time_limited": limited,
+        "display_seconds": display.seconds,
         "pilot_seconds": f.pilot_seconds,
         "bounces": float(bounces),
         "path_length": float(p.expected_path_length),
@@ -266,6 +270,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     ``on_prediction(prediction, patch_count, patches)`` is called once the patches
     are known, before the first path.
     """
+    started, limit = time.perf_counter(), settings.max_seconds  # (a time limit holds for the whole run: run_budget)
     trim.fix_mmap_threshold()
     patches = make_patches(objects, settings.patch_size, layers=True)
     patches, settings = solve_refinement.refined(objects, patches, settings, progress, should_stop, on_prediction)
@@ -278,39 +283,30 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     settings = method_for(scene, settings, target, relit.measured_choice_groups(groups))
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
+    budget = run_budget.Budget.of(started, limit, scene, patches, settings, groups)
     result = solve(
-        scene,
-        settings.estimator,
-        paths=int(settings.paths) if settings.paths else None,
-        target_mse=target,
-        threshold=settings.threshold,
-        seed=int(settings.seed),
-        exit_point=settings.exit_point,
-        sampling=settings.sampling,
-        stop_rule=settings.stop_rule if target is not None else "predicted",
-        progress=progress,
-        should_stop=should_stop,
-        max_seconds=settings.max_seconds or None,
-        threads=settings.threads or None,
-        cluster=settings.cluster or None,
-        direct_light=direct_light_for(scene, settings),
-        method=settings.method,
-        per_source=groups is not None, groups=groups, error_scale=options.ERROR_SCALE, direct_apart=settings.live_lamps,
-    )
+        scene, settings.estimator, paths=int(settings.paths) if settings.paths else None, target_mse=target,
+        threshold=settings.threshold, seed=int(settings.seed), exit_point=settings.exit_point, sampling=settings.sampling,
+        stop_rule=settings.stop_rule if target is not None else "predicted", progress=progress, should_stop=should_stop,
+        max_seconds=budget.solve_seconds(), threads=settings.threads or None, cluster=settings.cluster or None,
+        direct_light=direct_light_for(scene, settings), method=settings.method, per_source=groups is not None,
+        groups=groups, error_scale=options.ERROR_SCALE, direct_apart=settings.live_lamps)
     trim.give_back()
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
     out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
     out.sources_out = relit.source_results(scene, patches, result, groups) if groups is not None else None
-    _write_colours(out, scene, result, settings)
+    _write_colours(out, scene, result, settings, budget.deadline())
     relit.add_object_values(out, settings)
+    out.seconds = time.perf_counter() - started
     return out
 
 
-def _write_colours(out, scene, result, settings):
+def _write_colours(out, scene, result, settings, deadline=None):
     """The colours ``out`` carries to the objects: per patch and per point, the light arriving
-    (textured output), and the extra outputs (light only, indirect), per object that receives."""
+    (textured output), and the extra outputs (light only, indirect), per object that receives;
+    the direct light's retries within ``deadline``."""
     patches = out.patches
     # Light is written as at least 0: an estimate below it is noise about a value near 0 (the two-way
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
@@ -332,7 +328,7 @@ def _write_colours(out, scene, result, settings):
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
         shading = adaptive_patches.shading_arrays(patches, scene)
         smooth = _smooth_corners if out.sources_out is None else relit.SmoothSources(out, _at_polygon_corners).corners
-        for name, corners in smooth(scene, result, light=textured, shading=shading, live=out.live_lamps):
+        for name, corners in smooth(scene, result, light=textured, shading=shading, live=out.live_lamps, deadline=deadline):
             made[name] = _at_polygon_corners(patches, scene, corners, shading, least=0.0)
             del corners  # (let go of before the next is made)
     elif both:
@@ -343,7 +339,7 @@ def _write_colours(out, scene, result, settings):
                          f"{shown}: choose Smooth colours to make them")
     out.light_domain = "CORNER" if "light" in made else "FACE"
     flat_light = None if not textured or "light" in made else np.maximum(result.irradiance - (  # (lamps drawn live)
-        point_direct.live_light(scene, result) if out.live_lamps else 0.0), 0.0)
+        point_direct.live_light(scene, result, deadline) if out.live_lamps else 0.0), 0.0)
     for k, o in enumerate(patches.objects):
         rows = patches.combined.patch_slice(k)
         out.face_colours.append(radiosity[rows] if o.receives else None)
@@ -371,7 +367,7 @@ def _at_polygon_corners(patches, scene, corners, shading=None, least=None):
     return out
 
 
-def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=np.float32):
+def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=np.float32, deadline=None):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``Surface.arriving_light``) at every
     corner of the scene's triangles, smooth (``live``: the lamps', suns', emitters' and world's direct light left out); then ("smooth", (T,3,3)): the reflected light, its
     tile noise filtered within its measured variance, joined across objects (not across hidden
@@ -379,13 +375,14 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
     emission, flat; both with the direct light's shape within each patch (core point_direct).
     Made one at a time (a generator), so that the caller lets go of one before the next is made; given as
     ``dtype`` (float32: as written). ``shading``: the (triangles, patch of each) to make them on, if not the
-    scene's (a refined mesh's, with every polygon corner: adaptive_patches.shading_arrays)."""
+    scene's (a refined mesh's, with every polygon corner: adaptive_patches.shading_arrays); ``deadline``:
+    the direct light's retries within it (core sample_rounds)."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                    **seen_parts(scene, triangles, triangle_patch))
-    arriving = point_direct.arriving(surface, scene, result, live) if light else None  # (filters first: with the
-    reflected = surface.filter_light(result.reflected, result.reflected_variance)  # direct light held, the peak)
-    direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed)
+    arriving = point_direct.arriving(surface, scene, result, live, deadline) if light else None  # (filters first:
+    reflected = surface.filter_light(result.reflected, result.reflected_variance)  # with the direct light held, the peak)
+    direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline)
     if light:
         yield "light", point_direct.light_corners(surface, scene, arriving, direct, live, dtype)
     corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True), dtype=dtype)

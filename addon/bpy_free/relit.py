@@ -130,15 +130,16 @@ def source_results(scene, patches, result, groups):
     return SourceResults(result.per_source, groups, listed)
 
 
-def source_corners(scene, result, light=False, shading=None, live=False):
+def source_corners(scene, result, light=False, shading=None, live=False, deadline=None):
     """Like pipeline._smooth_corners for a per-source ``result``: ("light", (S,T,3,3)) with
     ``light`` (``live``: the lamps' direct light left out), then ("smooth", (S,T,3,3)): each group's smooth values, the total's noise-filter
     weights, clips and corner scales held (core relighting.smooth_sources), adding up to the
-    total's; on the ``shading`` triangles (a refined mesh's) where given."""
+    total's; on the ``shading`` triangles (a refined mesh's) where given; the direct light's
+    retries within ``deadline``."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                    **seen_parts(scene, triangles, triangle_patch))
-    yield from smooth_sources(surface, scene, result, light, triangles=triangles, live=live)
+    yield from smooth_sources(surface, scene, result, light, triangles=triangles, live=live, deadline=deadline)
 
 
 def weights(meta, current):
@@ -204,9 +205,9 @@ class SmoothSources:
     def __init__(self, out, at_polygon_corners):
         self.out, self.at_polygon_corners = out, at_polygon_corners
 
-    def corners(self, scene, result, light=False, shading=None, live=False):
+    def corners(self, scene, result, light=False, shading=None, live=False, deadline=None):
         results = self.out.sources_out
-        for name, per_group in source_corners(scene, result, light, shading, live):
+        for name, per_group in source_corners(scene, result, light, shading, live, deadline):
             per_object = [self.at_polygon_corners(self.out.patches, scene, corners, shading) for corners in per_group]
             results.smooth[name] = [None if parts[0] is None else np.stack(parts) for parts in zip(*per_object)]
             yield name, per_group.sum(axis=0)

@@ -71,10 +71,12 @@ class Refined:
 
 class _Points:
     """A block of sample points of patches ``rows``: unit-space origins (pushed off), normals,
-    offsets, surface points and their world positions."""
+    offsets, surface points and their world positions; ``anchor`` (world points (k,3), their
+    normals (k,3), the radius each stands for) and each sample's one of them ``local`` where
+    lamps are chosen for them (``chosen_lamps``)."""
 
-    def __init__(self, g, rows, u):
-        self.rows = rows
+    def __init__(self, g, rows, u, anchor=None, local=None):
+        self.rows, self.anchor, self.local = rows, anchor, local
         self.x = patch_point_rows(g, rows, u[2], u[0].copy(), u[1].copy()).astype(np.float64)
         self.normal = g.patch_normal_rows.take(rows, axis=1).astype(np.float64)
         self.offset = g.ray_offsets(rows, np.float64)
@@ -100,6 +102,26 @@ def _lamps(tables, points, lamps, u, value):
                 seen[live] = (hit < 0) | (t >= reach * SEEN_BEFORE)
             v = v * seen
         value += v
+
+
+def chosen_lamps(tables, points, choice, u, value):
+    """Adds to ``value`` the light of one lamp or sun a sample (a shadow ray each), the one
+    ``choice`` (a ``lamp_choice.LampChoice``) draws by u[5] for the sample's anchor point, over
+    the chance of drawing it: in expectation every lamp's light (``_lamps``) at the cost of one."""
+    g = tables.geometry
+    if len(choice) == 1:  # (one lamp: every sample its)
+        lamp, chance = np.zeros(points.rows.size, np.int64), np.ones(points.rows.size)
+    else:
+        lamp, chance = choice.choose(choice.weights(*points.anchor), points.local, u[5])
+    towards, distance, v = choice.gather(lamp, points.world, points.normal, u[3:5])
+    seen = ~choice.casts_shadow[lamp]
+    live = np.flatnonzero(~seen & v.any(axis=0))
+    if live.size:
+        hit, _, _, t = _trace(tables, points.x[:, live], towards[:, live], g.region_of(points.rows[live]))
+        cosine = np.einsum("in,in->n", points.normal[:, live], towards[:, live])
+        reach = distance[live] / g.diagonal - points.offset_of(live) * cosine
+        seen[live] = (hit < 0) | (t >= reach * SEEN_BEFORE)
+    value += v * (seen / chance)
 
 
 def _sky(tables, points, worlds, u, value):

@@ -9,16 +9,20 @@ does for direct light, and keeps the solve for the rest:
 
     L = corners(H - M) + D
 
-D the direct light at every corner of the shading triangles (each lamp and the sun by
-``SAMPLES`` stratified shadow rays, each emitting material's patches by as many points chosen by
-power), M each patch's area-weighted mean of D's linear interpolation, H the solved (filtered)
+D the direct light at every corner of the shading triangles (the lamps by ``SAMPLES`` stratified
+shadow rays shared among them, each ray to one lamp drawn by what it would give the corner
+unoccluded, ``lamp_choice``: the rays do not multiply with the lamps; each sun by as many of
+its own; each emitting material's patches by as many points chosen by power), M each patch's
+area-weighted mean of D's linear interpolation, H the solved (filtered)
 light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``).
 Every patch's mean is still its solved
 value (float error; ``Surface.corner_values``' own guarantee), so the display moves no light,
 and the solve's noise stays where it was; what D adds is the light's shape within the patch.
 The sky stays in H - M (soft light, which a point estimate would need many rays for).
 
-Beside an emitter a corner's light is heavy-tailed: a corner whose standard error passes
+Beside an emitter a corner's light is heavy-tailed: a corner whose standard error (measured on
+pairs of neighbouring strata where a sample draws one of several lamps or emitting patches:
+``sample_rounds.paired_error``) passes
 NOISE_SHARE of its patch's brightest corner's light is sampled again with MORE_SAMPLES times the
 samples (RETRIES times). (Giving up on the patches still above it, their smooth display beside
 their neighbours' shaped one, drew blocks on the Cornell box's walls by its light.) Where M
@@ -45,20 +49,21 @@ from functools import partial
 
 import numpy as np
 
-from .adaptive_light import SAMPLE_DIMENSIONS, _emitters, _lamps, _Points, _sky
-from .lights import WorldLight
+from .adaptive_light import SAMPLE_DIMENSIONS, _emitters, _Points, _sky, chosen_lamps
+from .lamp_choice import LampChoice, patch_spheres
+from .lights import SunLight, WorldLight
 from .names import EXIT_RANDOM, FINITE
-from .sampling import SourceTable, stratified_by_patch
+from .sample_rounds import Part, rounds, sampled
+from .sampling import SourceTable
 from .tables import WalkTables
 from .visibility import buried_at
 
-SAMPLES = 16  # shadow rays a corner, per lamp and per emitting material
+SAMPLES = 16  # shadow rays a corner, for the lamps (a group's) and per emitting material
 MORE_SAMPLES = 8  # times the samples where a corner's light is noisier than NOISE_SHARE
 RETRIES = 2  # (16, 128, 1,024 samples)
 NOISE_SHARE = 0.04  # of the light of the patch's brightest corner: a standard error the eye would see
 OVERSHOOT = 2.0  # a patch's direct light's interpolated mean over its solved light beyond which it is not shown
 INWARD = 0.01  # of the way from a corner to its patch's centre
-BLOCK_SAMPLES = 1 << 15  # samples traced at a time (about 500 bytes of temporaries each)
 LIVE_MEAN_SAMPLES = 64  # points a patch for its mean of the live light (live_means), before the noisy ones' again
 # Sobol' dimensions of a corner's sample: a point of a lamp (2, read as u[3:5]), an emitting
 # patch (u[5]) and a point of it (u[6:9]).
@@ -75,12 +80,16 @@ class CornerDirect:
     means: np.ndarray
 
 
-def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0):
+def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0,
+                  deadline=None):
     """The direct light (``CornerDirect``; None where ``has_direct`` is not) at the corners of
     ``triangles`` (T,3) (of ``scene.vertices``; ``surface`` is ``smoothing.Surface.of`` them)
     from every lamp and sun and emitting patch of ``scene``. Given
     ``groups`` > 0, ``light_group`` (L,) the group of each light and ``patch_group`` (P,) of
-    each emitting patch: each group's light apart (they add up to the whole)."""
+    each emitting patch: each group's light apart, its lamps drawn among themselves (their sum
+    is the whole's light; the whole's own draws all its lamps at once). ``deadline`` (a
+    ``time.perf_counter()`` reading): the noisy corners sampled again as time allows
+    (``sample_rounds``)."""
     if not has_direct(scene):
         return None
     P = scene.patch_count
@@ -95,7 +104,7 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     towards *= INWARD
     position += towards
     del towards
-    value = _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups)  # ([G,]n,3)
+    value = direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline)  # ([G,]n,3)
     _fill_buried(scene.geometry, position, patch, value)
     if not groups:  # (the whole's corners as written, float32: the memory of the largest scenes)
         value = value.astype(np.float32)
@@ -138,10 +147,11 @@ def _unit_points(g, position, patch):
 
 class _Corners:
     """A block of corners as ``adaptive_light``'s lamps and emitters read sample points: unit-space
-    origins (pushed off), normals, offsets, surface points and world positions."""
+    origins (pushed off), normals, offsets, surface points and world positions; ``anchor`` and
+    ``local`` as ``adaptive_light._Points``'."""
 
-    def __init__(self, g, rows, surface_unit, world):
-        self.rows = rows
+    def __init__(self, g, rows, surface_unit, world, anchor=None, local=None):
+        self.rows, self.anchor, self.local = rows, anchor, local
         self.normal = g.patch_normal_rows.take(rows, axis=1).astype(np.float64)
         self.offset = g.ray_offsets(rows, np.float64)
         self.surface = surface_unit
@@ -153,86 +163,86 @@ class _Corners:
 
 
 def _sources(scene, light_group, patch_group, groups, sky=False):
-    """[(group, add)] each lamp and sun and each emitting group (and each world: ``sky``) as
-    ``add(tables, points, u, value)`` adds its light at sample points (``adaptive_light``)."""
+    """[(group, add, paired)] each group's lamps, one of them drawn for each sample by what they
+    would give its point (``lamp_choice``; each sun apart: ``_lamp_sources``), each emitting group (and each world:
+    ``sky``) as ``add(tables, points, u, value)`` adds its light at sample points
+    (``adaptive_light``), in the order of the lights; ``paired``: a choice among lamps or
+    emitting patches, whose error is measured on pairs of its strata (``sample_rounds.sampled``)."""
     power = scene.patch_area * scene.emission.mean(axis=1)
     emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
-    parts = [(light_group[k] if groups else 0,
-              partial(_sky, worlds=[light]) if isinstance(light, WorldLight) else partial(_lamps, lamps=[light]))
-             for k, light in enumerate(scene.lights.lights) if sky or not isinstance(light, WorldLight)]
+    parts, lamps = [], {}
+    for k, light in enumerate(scene.lights.lights):
+        group = int(light_group[k]) if groups else 0
+        if isinstance(light, WorldLight):
+            if sky:
+                parts.append((group, partial(_sky, worlds=[light]), False))
+            continue
+        if group not in lamps:  # (a group's lamps one source, where its first lamp is)
+            lamps[group] = []
+            parts.append((group, lamps[group], None))
+        lamps[group].append(light)
+    parts = [part for group, add, paired in parts
+             for part in (_lamp_sources(group, add) if paired is None else [(group, add, paired)])]
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
-        parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine)))
+        parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine), True))
     return parts
 
 
-def _direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups):
+def _lamp_sources(group, lamps):
+    """[(group, add, paired)] a group's lamps: each sun a source of its own (its light is seldom
+    what it would be unoccluded: through a window, most corners of a room see none of it; drawn
+    with the lamps it took their samples: 2.6x the rays in the window room), the other lamps one
+    source, a lamp drawn for each sample (``lamp_choice``)."""
+    placed = [light for light in lamps if not isinstance(light, SunLight)]
+    out = []
+    for light in lamps:
+        if isinstance(light, SunLight) or len(placed) == 1:
+            out.append((group, partial(chosen_lamps, choice=LampChoice([light])), False))
+        elif light is placed[0]:
+            out.append((group, partial(chosen_lamps, choice=LampChoice(placed)), True))
+    return out
+
+
+def direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline=None, spent=None):
     """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
-    lamp and each emitting group apart (``_part_at``), added up into its group's row."""
+    group's lamps and each emitting group apart (``_part_at``), added up into its group's row;
+    retries within ``deadline`` (``sample_rounds``)."""
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     out = np.zeros((max(groups, 1), len(patch), 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 28,))))
+    sources = _sources(scene, light_group, patch_group, groups)
     with tables.numpy_turn:
-        for group, add in _sources(scene, light_group, patch_group, groups):
-            out[group] += _part_at(tables, position, patch, samples, rng, add)
+        parts = [_part_at(tables, position, patch, rng, add, paired) for _, add, paired in sources]
+        means = rounds(parts, len(patch), samples, RETRIES, MORE_SAMPLES, deadline, spent)
+    for (group, _, _), mean in zip(sources, means):
+        out[group] += mean
     return out if groups else out[0]
 
 
-def _part_at(tables, position, patch, samples, rng, add):
-    """(n,3) one lamp's or emitting group's light (``add(tables, points, u, value)``) at the
-    points: the mean of ``samples`` stratified samples, again (``_retried``) where a corner's
-    standard error passes NOISE_SHARE of its patch's brightest corner's light (beside an
-    emitter the light is heavy-tailed)."""
+def _part_at(tables, position, patch, rng, add, paired=False):
+    """The ``sample_rounds.Part`` of one group's lamps or one emitting group
+    (``add(tables, points, u, value)``) at the points: a corner is noisy where its standard
+    error passes NOISE_SHARE of its patch's brightest corner's light (beside an emitter the
+    light is heavy-tailed)."""
     g = tables.geometry
 
     def sample(rows, count):
         def points(block, local, u):
             at = rows[block]
             unit = _unit_points(g, position[at], patch[at])[:, local]
-            return _Corners(g, patch[at][local], unit, position[at].T[:, local])
-        return _sampled(tables, len(rows), count, rng, add, points, DIMENSIONS, np.float32)  # (as shown)
+            anchor = (position[at], g.patch_normal_rows.take(patch[at], axis=1).T.astype(np.float64), 0.0)
+            return _Corners(g, patch[at][local], unit, position[at].T[:, local], anchor, local)
+        return sampled(tables, len(rows), count, rng, add, points, DIMENSIONS, np.float32, paired)  # (as shown)
 
-    return _retried(sample, len(patch), samples, lambda value, error: _noisy(patch, value, error))
+    def noise(value, error):
+        grey = value.sum(axis=1)
+        brightest = np.zeros(patch.max(initial=0) + 1)
+        np.maximum.at(brightest, patch, grey)
+        allowed = NOISE_SHARE * brightest[patch]
+        return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
 
-
-def _retried(sample, n, samples, too_noisy):
-    """(n,3) ``sample(rows, samples)``'s means of n points or patches, those whose error
-    ``too_noisy(mean, error)`` flags sampled again with MORE_SAMPLES times as many samples,
-    RETRIES times at most."""
-    mean, error = sample(np.arange(n), samples)
-    for _ in range(RETRIES):
-        again = np.flatnonzero(too_noisy(mean, error))
-        if not again.size:
-            break
-        samples *= MORE_SAMPLES
-        mean[again], error[again] = sample(again, samples)
-    return mean
-
-
-def _noisy(patch, value, error):
-    """(n,) bool: the corners whose standard error passes NOISE_SHARE of their patch's brightest."""
-    grey = value.sum(axis=1)
-    brightest = np.zeros(patch.max(initial=0) + 1)
-    np.maximum.at(brightest, patch, grey)
-    return error > NOISE_SHARE * brightest[patch]
-
-
-def _sampled(tables, n, samples, rng, add, points, dimensions, dtype=np.float64):
-    """((n,3) the mean of ``samples`` stratified samples of each of n points or patches, (n,) its
-    standard error (channels summed)); ``points(block, local, u)`` a block's sample points
-    (``local`` each sample's row in the block), BLOCK_SAMPLES samples at a time."""
-    mean, error = np.empty((n, 3), dtype), np.empty(n, dtype)
-    step = max(1, BLOCK_SAMPLES // samples)
-    for start in range(0, n, step):
-        block = slice(start, min(n, start + step))
-        local = np.repeat(np.arange(block.stop - block.start), samples)
-        u = stratified_by_patch(local, block.stop - block.start, dimensions, rng, dtype=np.float32)
-        value = np.zeros((3, local.size))
-        add(tables, points(block, local, u), u=u, value=value)
-        value = value.reshape(3, -1, samples)
-        mean[block] = value.mean(axis=2).T
-        error[block] = value.sum(axis=0).std(axis=1, ddof=1) / np.sqrt(samples)
-    return mean, error
+    return Part(sample, noise)
 
 
 def _fill_buried(g, position, patch, value):
@@ -314,11 +324,11 @@ def _add_kept(out, corners, scale, triangle_patch, block=1 << 16):
         out[rows] += corners[rows] * scale[triangle_patch[rows]][:, None, :]
 
 
-def arriving(surface, scene, result, live=False):
+def arriving(surface, scene, result, live=False, deadline=None):
     """(P,3) the light arriving (``Surface.arriving_light``: noise filtered); ``live``: less
-    the lamps', suns', emitting patches' and world's (``live_means``), which the renderer draws
-    itself."""
-    irradiance = result.irradiance - live_light(scene, result) if live else result.irradiance
+    the lamps', suns', emitting patches' and world's (``live_light``, within ``deadline``),
+    which the renderer draws itself."""
+    irradiance = result.irradiance - live_light(scene, result, deadline) if live else result.irradiance
     return surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity)
 
 
@@ -330,43 +340,60 @@ def light_corners(surface, scene, light, direct, live=False, dtype=np.float64):
     return shown(surface, light, None if live else direct, dtype=dtype)
 
 
-def live_light(scene, result):
+def live_light(scene, result, deadline=None):
     """(P,3) each patch's mean of the light a renderer draws live (every source's direct light):
     the solve's own, where its chunks gathered it apart (``SolveResult.direct_irradiance``: what
     is left of the total is then the reflected light with its own noise alone), else
-    ``live_means``, an estimate of its own (the light left carries the noise of both)."""
+    ``live_means`` (within ``deadline``), an estimate of its own (the light left carries the noise of both)."""
     if result.direct_irradiance is not None:
         return result.direct_irradiance
-    return live_means(scene, seed=result.seed, light=result.irradiance)
+    return live_means(scene, seed=result.seed, light=result.irradiance, deadline=deadline)
 
 
-def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0):
+def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0,
+               deadline=None, spent=None, rows=None):
     """([G,]P,3) each patch's mean of the light a renderer draws live where the lamps, suns,
     emitting materials and the world light the surfaces themselves (``LIVE`` results): their
     direct light, from ``samples`` stratified points over the patch's visible part, every lamp
     and emitting group looked at from each (the world along one cosine ray). A patch whose mean's standard error passes NOISE_SHARE of its solved
     ``light`` (P,3), or of the mean itself, is sampled again with MORE_SAMPLES times as many
-    points, RETRIES times (beside an emitter the light is heavy-tailed). Given ``groups`` > 0,
-    ``light_group`` (L,) and ``patch_group`` (P,): each group's (``corner_direct``)."""
+    points, RETRIES times (beside an emitter the light is heavy-tailed), within ``deadline``.
+    Given ``groups`` > 0, ``light_group`` (L,) and ``patch_group`` (P,): each group's
+    (``corner_direct``). ``rows``: those patches' alone, (n,3) (a pilot's)."""
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
-    out = np.zeros((max(groups, 1), scene.patch_count, 3))
+    rows = np.arange(scene.patch_count) if rows is None else np.asarray(rows, np.int64)
+    out = np.zeros((max(groups, 1), len(rows), 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 27,))))
+    spheres = patch_spheres(scene) if has_lamps(scene) else None
+    sources = _sources(scene, light_group, patch_group, groups, sky=True)
     with tables.numpy_turn:
-        for group, add in _sources(scene, light_group, patch_group, groups, sky=True):
-            out[group] += _means_of(tables, samples, rng, add, light)
+        parts = [_means_of(tables, rows, rng, add, None if light is None else light[rows], spheres, paired)
+                 for _, add, paired in sources]
+        means = rounds(parts, len(rows), samples, RETRIES, MORE_SAMPLES, deadline, spent)
+    for (group, _, _), mean in zip(sources, means):
+        out[group] += mean
     return out if groups else out[0]
 
 
-def _means_of(tables, samples, rng, add, light):
-    """(P,3) one source's mean light over each patch (``live_means``), noisy patches again."""
+def _means_of(tables, patches, rng, add, light, spheres, paired=False):
+    """The ``sample_rounds.Part`` of one source's mean light over each of ``patches``
+    (``live_means``); ``spheres`` (``lamp_choice.patch_spheres``) the patches' anchors where
+    lamps are chosen."""
     g = tables.geometry
 
+    def points(rows, local, u):
+        anchor = None if spheres is None else (spheres[0][rows], g.patch_normal_rows.take(rows, axis=1).T.astype(
+            np.float64), spheres[1][rows])
+        return _Points(g, rows[local], u, anchor, local)
+
     def sample(rows, count):
-        return _sampled(tables, len(rows), count, rng, add, lambda block, local, u: _Points(g, rows[block][local], u),
-                        SAMPLE_DIMENSIONS)
+        rows = patches[rows]
+        return sampled(tables, len(rows), count, rng, add, lambda block, local, u: points(rows[block], local, u),
+                       SAMPLE_DIMENSIONS, paired=paired)
 
-    def too_noisy(mean, error):
+    def noise(mean, error):
         shown_light = mean.sum(axis=1) if light is None else np.maximum(light.sum(axis=1), mean.sum(axis=1))
-        return error > NOISE_SHARE * shown_light
+        allowed = NOISE_SHARE * shown_light
+        return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
 
-    return _retried(sample, g.patch_count, samples, too_noisy)
+    return Part(sample, noise)

@@ -230,7 +230,7 @@ def combine(per_source, parts, weights):
     return _combine(flat, w).reshape(parts.shape[1:])
 
 
-def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triangles=None, live=False):
+def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triangles=None, live=False, deadline=None):
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
     they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
@@ -240,7 +240,7 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     ``surface`` is ``smoothing.Surface.of`` the scene's triangles (or ``triangles``, (T,3) of its
     vertices); ``result`` a per-source solve's SolveResult. Made in float64, given as ``dtype``
     (float32: half the memory, as they are written; their sum then the whole's to float32
-    rounding)."""
+    rounding). ``deadline``: the direct light's retries within it (``point_direct``)."""
     per_source = result.per_source
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
@@ -251,14 +251,15 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
             drawn = per_source.direct_irradiance  # (the solve's own: point_direct.live_light)
             if drawn is None:
                 drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
-                                                patch_group=per_source.patch_group, groups=per_source.count)
+                                                patch_group=per_source.patch_group, groups=per_source.count,
+                                                deadline=deadline)
             irradiance, total = irradiance - drawn, total - drawn.sum(axis=0)
         arriving, fill = surface.arriving_light(total, result.irradiance_variance, scene.reflectivity,
                                                 return_filter=True)
     filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
     direct = point_direct.corner_direct(surface, scene, triangles,
                                         seed=result.seed, light_group=per_source.light_group,
-                                        patch_group=per_source.patch_group, groups=per_source.count)
+                                        patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline)
     whole = _summed(direct)
     if light:
         shaped, shaped_whole = (None, None) if live else (direct, whole)

@@ -8,6 +8,7 @@ from bpy.app.handlers import persistent
 
 from . import live_view
 from ..bpy_free import pipeline
+from ..blender_read import images
 from ..blender_read.selection import read_selection
 from ..blender_write.results import write_results
 from ..bpy_free import worker
@@ -40,7 +41,7 @@ def _run_stats(output):
     return {
         "last_paths": int(r.paths),
         "last_rays": int(r.rays),
-        "last_seconds": float(r.seconds),
+        "last_seconds": float(output.seconds or r.seconds),  # (the whole run's: meshing, solve, colours)
         "last_mean_path_length": float(r.mean_path_length),
         "last_predicted_mse": float(r.predicted_mse),
         "last_measured_mse": measured if measured == measured else -1.0,  # NaN -> -1
@@ -152,6 +153,7 @@ class RADIOSITY_OT_solve(bpy.types.Operator):
             self._error(f"Reading the selection failed ({type(exc).__name__}: {exc}); "
                         "the scene is unchanged")
             return {"CANCELLED"}
+        images.release()  # (the run's arrays hold its images' pixels: the copies kept for a next read go)
         settings = context.scene.radiosity.solve_settings()
         self._notes = notes
         self._scene_uid = context.scene.session_uid  # results go to the scene solved

@@ -212,10 +212,13 @@ def test_a_per_source_solve_cancelled_before_its_first_chunk_keeps_the_emission_
 
 
 @pytest.mark.parametrize("case", [METHODS[0], METHODS[7]], ids=[IDS[0], IDS[7]])
-def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_flat_ones(case):
+def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_flat_ones(case, monkeypatch):
     """smooth_sources: each group's smooth radiosity and light arriving, made with the whole's
     noise-filter weights, clips and corner scales, add up to what the pipeline shows for the solve
-    (float error); recombined with new weights they are the same linear map of the relit values."""
+    with the groups' direct light at the corners added up (float error; each group draws its own
+    lamps' rays, the whole all of them at once: the same light within their noise, as
+    test_point_direct checks); recombined with new weights they are the same linear map of the
+    relit values."""
     from addon.bpy_free import pipeline
     from addon.core import point_direct, smoothing
     from addon.core.relighting import combine, per_source_emission, smooth_sources
@@ -224,7 +227,13 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     r = solve_case(scene, case, paths=40_000, seed=3, per_source=True)
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
     parts = dict(smooth_sources(surface, scene, r, light=True))
-    whole = dict(pipeline._smooth_corners(scene, r, light=True))
+    grouped = point_direct.corner_direct(surface, scene, scene.triangles, seed=r.seed, light_group=r.per_source.light_group,
+                                         patch_group=r.per_source.patch_group, groups=r.per_source.count)
+    summed = grouped.corners.sum(axis=0).astype(np.float32)  # (as the whole's is kept)
+    with monkeypatch.context() as patched:
+        patched.setattr(point_direct, "corner_direct", lambda *args, **kwargs: point_direct.CornerDirect(
+            summed.copy(), point_direct.patch_means(surface, summed)))
+        whole = dict(pipeline._smooth_corners(scene, r, light=True))
     for name in ("light", "smooth"):  # (float32 rounding: the pipeline keeps the whole's direct light as written)
         assert parts[name].shape == (6,) + whole[name].shape
         np.testing.assert_allclose(parts[name].sum(axis=0), whole[name], rtol=0, atol=1e-6 * whole[name].max())

@@ -147,7 +147,8 @@ def test_image_texture_uses_the_average_linear_colour_and_says_so(blender):
     image.pixels.foreach_set(pixels.ravel())
     stored = np.empty(32, np.float32)
     image.pixels.foreach_get(stored)  # 8-bit quantised
-    expected = images.srgb_to_linear(stored.reshape(8, 4)[:, :3].astype(float)).mean(axis=0)
+    # (the mean of the linear pixels as kept for the patches' texture lookups, float32)
+    expected = images.srgb_to_linear(stored.reshape(8, 4)[:, :3].astype(float)).astype(np.float32).mean(axis=0, dtype=float)
     tex = tree.nodes.new("ShaderNodeTexImage")
     tex.image = image
     tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])

@@ -65,3 +65,27 @@ def test_a_nearly_white_room_below_the_limit_is_warned_with_a_finite_time(blende
     assert value["bounces"] == pytest.approx(1e5, rel=0.01)
     assert f"bounces about {value['bounces']:,.0f} times" in value["warning"] and "refused" in value["warning"]
     assert value["pilot_seconds"] < 10
+
+
+def test_the_estimate_is_within_2x_of_the_runs_real_time_its_colours_included(blender):
+    """The test room with its emitting panel, a point lamp and an area lamp, 2 cm patches, the
+    default settings (the textured output: the smooth light with every lamp's and emitter's direct
+    light at the corners): the estimate's time is within 2x of the run's real time (meshing, solve
+    and colours), and the run says that time (SolveOutput.seconds). (Before, the estimate left
+    the colours out.)"""
+    import time
+
+    build_test_scene()
+    for name, kind, location, energy in (("Bulb", "POINT", (0.7, 0.3, 0.6), 30.0), ("Panel", "AREA", (0.3, 0.7, 0.9), 40.0)):
+        lamp = bpy.data.objects.new(name, bpy.data.lights.new(name, kind))
+        lamp.data.energy, lamp.location = energy, location
+        bpy.context.scene.collection.objects.link(lamp)
+    s = blender.scene.radiosity
+    s.patch_size, s.threads, s.seed = 0.02, 2, 0
+    value = estimate.compute(blender)
+    objects, _ = read_selection(blender)
+    started = time.perf_counter()
+    out = pipeline.run_solve(objects, s.solve_settings())
+    wall = time.perf_counter() - started
+    assert 0.5 <= value["seconds"] / wall <= 2.0, (value["seconds"], wall, value["display_seconds"], out.result.seconds)
+    assert 0 < wall - out.seconds < 0.05

@@ -1,0 +1,146 @@
+"""A run's time: the display's colours forecast, and a time limit kept over the whole run.
+
+What the user waits for is the meshing, the solve and the display's colours (the smooth light
+with each lamp's and emitter's direct light at the shading mesh's corners, ``core.point_direct``;
+the patches' means of the light drawn live). The display's part is forecast by timing its
+direct light at a few hundred corners (and patches) drawn at random (``corner_seconds``,
+``live_seconds``), plus the smoothing at a measured pace a triangle. Under a time limit the solve
+gets what is left of it once the display's forecast is set aside (at least LEAST_SOLVE of what
+is left), and the display's retries (corners sampled again where noisy) stop at the limit: the
+first samples of every corner are the least it needs and always run.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core import methods, point_direct
+from ..core.lamp_choice import patch_spheres
+from ..core.names import GATHERED, TWO_WAY
+from ..core.sample_rounds import Spent
+from . import adaptive_patches, options
+
+PILOT_CORNERS = 512  # corners (or patches) a pilot of the display's direct light times
+# Seconds of the display a shading triangle beyond the direct light (the smoothing, the noise
+# filter, the polygon corners): 25-110 microseconds in the rooms measured (docs/performance.md).
+REST_PER_TRIANGLE = 5e-5
+# Of the time left when the solve starts, the least it keeps (the display's retries give way).
+LEAST_SOLVE = 0.5
+# Of the smoothing's forecast, the share that comes after the direct light (its deadline is
+# the run's less this).
+AFTER_DIRECT = 0.5
+
+
+@dataclass(frozen=True)
+class Display:
+    """The display's forecast seconds: the corners' direct light, the live light's patch means,
+    the rest (smoothing); ``least`` what it takes at the least (the direct light's first samples
+    and the rest: its retries stop at a deadline)."""
+
+    corners: float = 0.0
+    live: float = 0.0
+    rest: float = 0.0
+    least: float = 0.0
+
+    @property
+    def seconds(self):
+        return self.corners + self.live + self.rest
+
+
+def corner_seconds(scene, triangles, triangle_patch, seed=0, corners=PILOT_CORNERS, light_group=None, patch_group=None,
+                   groups=0):
+    """(the seconds ``point_direct.corner_direct`` would take at the corners of ``triangles``
+    (T,3) of ``triangle_patch`` (T,) (with these groups), those of its first samples alone (the
+    least it takes within a deadline)), from the pass timed at up to ``corners`` of them drawn at
+    random; (0, 0) where the scene has no direct light to show."""
+    if not point_direct.has_direct(scene):
+        return 0.0, 0.0
+    P = scene.patch_count
+    keys = np.unique(np.asarray(triangles, np.int64).ravel() * P + np.repeat(np.asarray(triangle_patch, np.int64), 3))
+    chosen = keys[np.sort(np.random.default_rng(seed).choice(keys.size, min(corners, keys.size), replace=False))]
+    patch = chosen % P
+    position = scene.vertices[chosen // P]
+    position += point_direct.INWARD * (patch_spheres(scene)[0][patch] - position)
+    spent = Spent()
+    point_direct.direct_at(scene, position, patch, point_direct.SAMPLES, seed, light_group, patch_group, groups,
+                           spent=spent)
+    return spent.seconds * keys.size / chosen.size, spent.first * keys.size / chosen.size
+
+
+def live_seconds(scene, seed=0, patches=PILOT_CORNERS):
+    """(the seconds ``point_direct.live_means`` would take, those of its first samples alone),
+    from it timed at up to ``patches`` patches drawn at random; (0, 0) without live light."""
+    if not point_direct.has_live(scene):
+        return 0.0, 0.0
+    rows = np.sort(np.random.default_rng(seed).choice(scene.patch_count, min(patches, scene.patch_count), replace=False))
+    # (a patch's noise is measured against its solved light, which the reflected light adds to: the
+    # mean power a unit of area gets, times R / (1 - R) of the mean reflectivity R, as a closed room's)
+    R = float(np.average(scene.grey_reflectivity, weights=scene.patch_area))
+    light = np.full((scene.patch_count, 3), scene.total_power / scene.total_area * R / max(1.0 - R, 1e-3))
+    spent = Spent()
+    point_direct.live_means(scene, seed=seed, light=light, spent=spent, rows=rows)
+    return spent.seconds * scene.patch_count / rows.size, spent.first * scene.patch_count / rows.size
+
+
+def smooth_made(settings, scene):
+    """Whether the run makes smooth colours (the pipeline's rule)."""
+    return settings.output == "VERTEX" or (settings.output in ("BOTH", "TEXTURED")
+                                           and scene.patch_count <= options.SMOOTH_MAX_PATCHES)
+
+
+def live_made(settings, scene):
+    """Whether the run takes the live light's patch means by their own samples
+    (``point_direct.live_means``): live lamps in the textured output, where the solve did not
+    gather the direct light apart (the two-way iteration and the gathered walk do)."""
+    if settings.output != "TEXTURED" or not settings.live_lamps or not point_direct.has_live(scene):
+        return False
+    gathers = settings.method == TWO_WAY or methods.direct_light_for(settings.method, settings.direct_light,
+                                                                     scene.lights) == GATHERED
+    return not gathers
+
+
+def display_forecast(scene, patches, settings, groups=None) -> Display:
+    """The Display forecast of a run of ``settings`` (its method resolved) on ``scene`` made of
+    ``patches``; ``groups`` the run's per-source groups (each group's lamps sampled apart)."""
+    seed = int(settings.seed)
+    live, live_least = live_seconds(scene, seed) if live_made(settings, scene) else (0.0, 0.0)
+    if not smooth_made(settings, scene):
+        return Display(live=live, least=live_least)
+    shading = adaptive_patches.shading_arrays(patches, scene) or (scene.triangles, scene.triangle_patch)
+    apart = {} if groups is None else dict(light_group=groups.light_group,
+                                           patch_group=groups.patch_group(scene.patch_count), groups=groups.count)
+    corners, least = corner_seconds(scene, *shading, seed=seed, **apart)
+    rest = REST_PER_TRIANGLE * len(shading[0])
+    return Display(corners, live, rest, least + live_least + rest)
+
+
+class Budget:
+    """A run's time limit (``max_seconds``, None: none) from ``started`` (a perf_counter
+    reading), the display's forecast set aside for it."""
+
+    def __init__(self, started, max_seconds, display=None):
+        self.started, self.max_seconds, self.display = started, max_seconds, display or Display()
+
+    @classmethod
+    def of(cls, started, limit, scene, patches, settings, groups=None):
+        """The Budget of a run started at ``started`` with the time limit ``limit`` (0 or None:
+        none): a forecast of its display where it has one."""
+        if not limit:
+            return cls(started, None)
+        return cls(started, limit, display_forecast(scene, patches, settings, groups))
+
+    def solve_seconds(self):
+        """The solve's time limit (None: none): what is left less the least the display takes
+        (its retries take what the solve leaves), at least LEAST_SOLVE of it."""
+        if self.max_seconds is None:
+            return None
+        left = self.started + self.max_seconds - time.perf_counter()
+        return max(left - self.display.least, LEAST_SOLVE * left, 1e-3)
+
+    def deadline(self):
+        """The perf_counter reading the display's retries end by (None: none)."""
+        if self.max_seconds is None:
+            return None
+        return self.started + self.max_seconds - AFTER_DIRECT * self.display.rest

@@ -1,0 +1,59 @@
+"""Rounds of samples within a deadline (addon/core/sample_rounds.py): the first round always, then
+the noisiest points of every source first, as many as the pace each source has shown leaves
+time for; without a deadline, every noisy point, every round."""
+import numpy as np
+
+from addon.core import sample_rounds
+
+
+class _Clock:
+    """A clock that moves only when a fake source samples (its pace a sample)."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+
+def _part(clock, pace, noise, log):
+    """A source whose means are 0, whose errors are ``noise`` (n,) over the allowed until sampled
+    again (then 0), and whose samples cost ``pace`` seconds each on ``clock``."""
+    error = np.asarray(noise, np.float64).copy()
+
+    def sample(rows, count):
+        clock.now += pace * rows.size * count
+        log.append((pace, rows.copy(), count))
+        out = error[rows].copy()
+        error[rows] = 0.0
+        return np.zeros((rows.size, 3)), out
+
+    return sample_rounds.Part(sample, lambda mean, err: err)
+
+
+def test_a_deadline_takes_the_noisiest_points_of_every_source_first_and_the_first_round_always(monkeypatch):
+    clock = _Clock()
+    monkeypatch.setattr(sample_rounds.time, "perf_counter", clock)
+    log = []
+    cheap = _part(clock, 1e-3, [0.5, 3.0, 9.0, 2.0], log)  # (error over the allowed; above 1: noisy)
+    dear = _part(clock, 4e-3, [5.0, 0.2, 1.5, 8.0], log)
+    spent = sample_rounds.Spent()
+    # first round: 16 samples each, 4 x 16 x (1e-3 + 4e-3) = 0.32 s; the second round's 128 samples
+    # cost 0.128 s a point of the cheap source, 0.512 of the dear one: the 1.0 s left takes the
+    # cheap one's 9.0 and the dear one's 8.0 (0.64 s), not the dear one's 5.0 (0.512 more would pass
+    # it), then the cheap one's 3.0 and 2.0 (0.256); the third round's 1,024 samples fit nowhere
+    sample_rounds.rounds([cheap, dear], 4, 16, retries=2, more=8, deadline=1.32, spent=spent)
+    assert [(pace, count) for pace, _, count in log[:2]] == [(1e-3, 16), (4e-3, 16)]
+    again = {pace: rows.tolist() for pace, rows, count in log[2:]}
+    assert again == {1e-3: [1, 2, 3], 4e-3: [3]}
+    assert clock.now <= 1.32 + 1e-12 and spent.samples == 8 * 16 + 4 * 128
+    assert abs(spent.first - 0.32) < 1e-12 and abs(spent.seconds - clock.now) < 1e-12
+
+
+def test_without_a_deadline_every_noisy_point_is_sampled_again_each_round(monkeypatch):
+    clock = _Clock()
+    monkeypatch.setattr(sample_rounds.time, "perf_counter", clock)
+    log = []
+    part = _part(clock, 1e-3, [0.5, 3.0, 9.0, 2.0], log)
+    sample_rounds.rounds([part], 4, 16, retries=2, more=8)
+    assert [(rows.tolist(), count) for _, rows, count in log] == [([0, 1, 2, 3], 16), ([1, 2, 3], 128)]
