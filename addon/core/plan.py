@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .error_model import mse_to_relative_rms, predict
+from .error_model import MAX_PATHS, mse_to_relative_rms, predict
 from .names import MEASURED, SCALE_PAPER
 
 # A chunk aims at about this many rays: enough wavefront steps that its last short ones cost
@@ -49,7 +49,7 @@ def chunk_plan(scene, method, estimator, *, paths=None, target_mse=None, thresho
     measured_rule = stop_rule == MEASURED or (not method.predicted and target_mse is not None)
     if measured_rule:
         planned = method.planned_paths(prediction.paths_for(target_mse))
-        cap = paths if paths is not None else MEASURED_CAP_FACTOR * planned
+        cap = paths if paths is not None else min(MEASURED_CAP_FACTOR * planned, MAX_PATHS)
     else:
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
