@@ -96,7 +96,7 @@ def method_for(scene, settings: SolveSettings, target, groups=None) -> SolveSett
         settings.seed), sampling=settings.sampling, threads=settings.threads or None)
     chosen = methods.choose(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
                             target_mse=target, threshold=settings.threshold, max_seconds=settings.max_seconds or None,
-                            **pilot)
+                            direct_light=settings.direct_light, **pilot)
     return replace(settings, method=chosen)
 
 
