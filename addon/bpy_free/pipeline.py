@@ -17,7 +17,7 @@ from ..core.covered import seen_parts
 from ..core.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
-from . import adaptive_patches, options, relit, solve_refinement, trim
+from . import adaptive_patches, options, reach, relit, solve_refinement, trim
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
 
@@ -254,7 +254,7 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
         "target_mse": target,
         "predicted_mse": float(p.predicted_mse),
         "other_estimator": other,
-        "warning": slow_warning(needed, patches, settings, bounces),
+        "warning": reach.out_of_reach(f.short_of_target, scene, settings) or slow_warning(needed, patches, settings, bounces),
         "sources": sources_text(scene),
         "notes": notes,
     }
