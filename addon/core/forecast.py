@@ -138,9 +138,7 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
         expected = float(plan.cap)
     elif variance == variance:
         target = target_now(target_mse, error_scale, plan.prediction, r.mean_reflected)
-        expected = paths_to_target(1, variance, target, plan.chunk, plan.cap)
-        if not variance <= target * plan.cap:  # (nothing reflected, or more paths than the cap)
-            short = math.sqrt(variance / (target * plan.cap)) if target > 0 else math.inf
+        expected, short = paths_to_target(1, variance, target, plan.chunk, plan.cap), short_of(variance, target, plan.cap)
     else:  # at least the chunks the measured rule needs, at most the cap
         expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
     seconds = setup + per_path * expected
@@ -150,6 +148,14 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
                     rays_per_path=rays_per_path, seconds_per_path=per_path, setup_seconds=setup,
                     pilot_chunk=pilot_chunk, pilot_chunks=r.chunks, pilot_seconds=time.perf_counter() - start,
                     measured=measured, time_limited=limited, short_of_target=short)
+
+
+def short_of(variance, target, cap):
+    """The relative error a run of ``variance`` per path ends at after ``cap`` paths, over the
+    ``target`` MSE's: 1 where it meets the target first; inf where nothing is reflected."""
+    if variance <= target * cap:
+        return 1.0
+    return math.sqrt(variance / (target * cap)) if target > 0 else math.inf
 
 
 def measured_choice(scene, estimator, candidates, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None,
