@@ -37,13 +37,16 @@ def use(rule):
     plan.MEASURED_STOP_Z, plan.MEASURED_STOP_CHUNKS = rule
 
 
+EVERY = ("auto", "walk", "two_way", "jacobi")
 CASES = [  # (name, scene maker, methods, relative targets)
-    ("small source, middle (384 patches, R 0.8)", small_source_box, ("auto", "walk"), (0.05, 0.02)),
-    ("small source, corner (384 patches, R 0.8)", lambda: small_source_box(corner=True), ("auto", "walk"), (0.05,)),
-    ("small source, corner (384 patches, R 0.8)", lambda: small_source_box(corner=True), ("walk",), (0.02,)),
-    ("bright box (216 patches, R 0.95)", bright_box, ("auto", "walk"), (0.10, 0.05)),
-    ("colour box (96 patches)", colour_box, ("auto", "walk"), (0.05, 0.02)),
-    ("grey room (384 patches, R 0.5)", grey_room, ("auto", "walk"), (0.05, 0.02)),
+    ("small source, middle (384 patches, R 0.8)", small_source_box, EVERY, (0.05,)),
+    ("small source, middle (384 patches, R 0.8)", small_source_box, ("auto", "walk"), (0.02,)),
+    ("small source, corner (96 patches, R 0.8)", lambda: small_source_box(n=4, corner=True), EVERY, (0.05, 0.02)),
+    ("small source, corner (384 patches, R 0.8)", lambda: small_source_box(corner=True), EVERY, (0.05,)),
+    ("small source, corner (384 patches, R 0.8)", lambda: small_source_box(corner=True), ("walk", "two_way"), (0.02,)),
+    ("bright box (216 patches, R 0.95)", bright_box, EVERY, (0.10, 0.05)),
+    ("colour box (96 patches)", colour_box, EVERY, (0.05, 0.02)),
+    ("grey room (384 patches, R 0.5)", grey_room, EVERY, (0.05, 0.02)),
 ]
 
 

@@ -106,7 +106,8 @@ class ClusterAddress(Text):
 METHOD = Choice("method", "--method", "auto", (
     ("auto", "Automatic", "The two-way iteration where each patch gets enough rays for it to pay (scenes of up "
      f"to {automatic.patches_text()} patches, at error targets that need some rays a patch), else the paper's random "
-     "walks, which need fewer rays at a few a patch. The estimate says which"),
+     "walks, which need fewer rays at a few a patch and where the light lands on few patches (a narrow spot). "
+     "The estimate says which"),
     ("walk", "Random walks (paper)", "The paper's shooting random walks, with its estimators: their predicted path "
      "counts and relative efficiency hold for them"),
     ("two_way", "Two-way iteration", "Beyond the paper: the direct light gathered by shadow rays, then the light "

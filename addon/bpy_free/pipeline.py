@@ -17,7 +17,7 @@ from ..core.covered import seen_parts
 from ..core.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
-from . import adaptive_patches, options, relit, run_budget, solve_refinement, trim
+from . import adaptive_patches, options, reach, relit, run_budget, solve_refinement, trim
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
 
@@ -97,7 +97,7 @@ def method_for(scene, settings: SolveSettings, target, groups=None) -> SolveSett
         settings.seed), sampling=settings.sampling, threads=settings.threads or None)
     chosen = methods.choose(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
                             target_mse=target, threshold=settings.threshold, max_seconds=settings.max_seconds or None,
-                            **pilot)
+                            direct_light=settings.direct_light, **pilot)
     return replace(settings, method=chosen)
 
 
@@ -258,7 +258,7 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
         "target_mse": target,
         "predicted_mse": float(p.predicted_mse),
         "other_estimator": other,
-        "warning": slow_warning(needed, patches, settings, bounces),
+        "warning": reach.out_of_reach(f.short_of_target, scene, settings) or slow_warning(needed, patches, settings, bounces),
         "sources": sources_text(scene),
         "notes": notes,
     }

@@ -162,7 +162,7 @@ class Batches:
             variance = self._spread(k)
             variance *= np.square(self.scene.total_power / self.scene.patch_area)
             variance /= (self.chunks - 1) * self.paths
-            return variance
+            return np.minimum(variance, np.finfo(dtype).max, out=variance)  # (very bright sources: no inf in float32)
 
         with np.errstate(over="ignore"):
             out = self._columns(column, dtype)

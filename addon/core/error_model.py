@@ -21,6 +21,9 @@ import numpy as np
 
 from .names import BIASED_INFINITE, ESTIMATORS, FINITE
 
+# No run plans more paths than this (2^50, about 1.1e15): years of tracing on any machine or
+# cluster, and counts stay exact integers in float64.
+MAX_PATHS = 1 << 50
 
 def mse_scale(Phi_T, A_T, A_ave):
     """Phi_T^2 / (A_T A_ave), the factor common to formulas (2) and (3)."""
@@ -85,8 +88,15 @@ class Prediction:
         return self.mse_per_path / paths if paths > 0 else math.inf
 
     def paths_for(self, target_mse):
-        """Paths needed for ``target_mse`` (at least 1)."""
-        return max(1, math.ceil(self.mse_per_path / target_mse))
+        """Paths needed for ``target_mse`` (at least 1); ValueError, in one line, where that is
+        more than MAX_PATHS (an absolute target far below the scene's light)."""
+        needed = self.mse_per_path / target_mse
+        if not needed <= MAX_PATHS:
+            raise ValueError(
+                f"target_mse {target_mse:.3g} would take about {needed:.3g} paths by the paper's formulas for sources of power "
+                f"{self.Phi_T:.3g}, more than any run can trace ({MAX_PATHS:.3g}): give a larger target_mse, or one "
+                "relative to the scene's light (relative_rms_to_mse)")
+        return max(1, math.ceil(needed))
 
 
 def _is_whole(value):

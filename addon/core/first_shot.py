@@ -123,7 +123,7 @@ class Gathering:
         self.cosine_share = cosine_share(scene, bool(self.worlds))
         # (P,) each receiver's: beside an emitter (near_choice's form factor bound), up to 1
         self.cosine_shares = np.full(scene.patch_count, self.cosine_share)
-        if self.near is not None and self.near.active and self.cosine_share < 1:
+        if self.near is not None and self.near.form is not None and self.cosine_share < 1:
             near = np.clip(COSINE_SHARE_PER_FORM * self.near.form, COSINE_SHARE_LEAST, 1.0)
             self.cosine_shares = np.maximum(self.cosine_shares, near)
         # P_s / A_s of each emitting patch (_emitter_weight), A_j / n_j of each patch (ReflectedPoints).

@@ -57,6 +57,7 @@ class Forecast:
     pilot_seconds: float
     measured: bool
     time_limited: bool = False  # the time limit ends the run before ``seconds``
+    short_of_target: float = 1.0  # the relative error the path cap ends the run at, over the target's (1: met)
 
     @property
     def rays_per_second(self):
@@ -132,11 +133,12 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
         rays_per_path, setup = guess, 0.0
         per_path = max(guess / (raw_rate(scene, seed=seed) * SOLVE_SHARE_OF_RAW_RATE * workers),
                        seconds / (pilot_chunk * min(workers, pilot_chunks)))
+    short = 1.0
     if paths is not None or not plan.measured_rule:
         expected = float(plan.cap)
     elif variance == variance:
         target = target_now(target_mse, error_scale, plan.prediction, r.mean_reflected)
-        expected = paths_to_target(1, variance, target, plan.chunk, plan.cap)
+        expected, short = paths_to_target(1, variance, target, plan.chunk, plan.cap), short_of(variance, target, plan.cap)
     else:  # at least the chunks the measured rule needs, at most the cap
         expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
     seconds = setup + per_path * expected
@@ -145,7 +147,15 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
                     chunk=plan.chunk, chunks=expected / plan.chunk, variance_per_path=variance,
                     rays_per_path=rays_per_path, seconds_per_path=per_path, setup_seconds=setup,
                     pilot_chunk=pilot_chunk, pilot_chunks=r.chunks, pilot_seconds=time.perf_counter() - start,
-                    measured=measured, time_limited=limited)
+                    measured=measured, time_limited=limited, short_of_target=short)
+
+
+def short_of(variance, target, cap):
+    """The relative error a run of ``variance`` per path ends at after ``cap`` paths, over the
+    ``target`` MSE's: 1 where it meets the target first; inf where nothing is reflected."""
+    if variance <= target * cap:
+        return 1.0
+    return math.sqrt(variance / (target * cap)) if target > 0 else math.inf
 
 
 def measured_choice(scene, estimator, candidates, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None,

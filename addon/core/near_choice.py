@@ -83,7 +83,8 @@ class NearChoice:
         self.emitter_share = float(choice[emitters].sum())  # P_E
         K = min(emitters.size, MAX_TABLE // max(P, 1))
         self.active = K >= 2 and self.emitter_share > 0
-        if not self.active:
+        self.form = None  # (P,) below, wherever there is a cluster: a lone small emitter's receivers read it too
+        if K < 1 or self.emitter_share <= 0:
             return
         centres = patch_centres(scene)
         if emitters.size > K:  # (contiguous runs of a space-filling curve: compact clusters)

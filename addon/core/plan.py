@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .error_model import mse_to_relative_rms, predict
+from .error_model import MAX_PATHS, mse_to_relative_rms, predict
 from .names import MEASURED, SCALE_PAPER
 
 # A chunk aims at about this many rays: enough wavefront steps that its last short ones cost
@@ -49,7 +49,7 @@ def chunk_plan(scene, method, estimator, *, paths=None, target_mse=None, thresho
     measured_rule = stop_rule == MEASURED or (not method.predicted and target_mse is not None)
     if measured_rule:
         planned = method.planned_paths(prediction.paths_for(target_mse))
-        cap = paths if paths is not None else MEASURED_CAP_FACTOR * planned
+        cap = paths if paths is not None else min(MEASURED_CAP_FACTOR * planned, MAX_PATHS)
     else:
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
@@ -83,7 +83,7 @@ def target_now(target_mse, error_scale, prediction, mean_reflected):
     """The MSE a measured stop holds a run to: ``target_mse`` on the paper's scale; on the
     measured scale the same error relative to the run's own mean reflected radiosity b_now,
     target_mse (b_now / b_ave)^2 (the paper's b_ave: what target_mse was made relative to).
-    NaN (never met) before any path; 0 while nothing is reflected (met by no error at all)."""
+    NaN (never met) before any path; 0 while nothing is reflected (meets_target waits for light)."""
     if error_scale == SCALE_PAPER:
         return target_mse
     return target_mse * (mean_reflected / prediction.mean_reflected_radiosity) ** 2
@@ -100,9 +100,11 @@ def relative_error(mse, error_scale, prediction, mean_reflected):
 
 def meets_target(total, target_mse):
     """Whether a run's batches (``Batches``) meet ``target_mse`` by the measured stop rule. (The
-    batch estimate costs passes over the patches: read only where the rule is used.)"""
+    batch estimate costs passes over the patches: read only where the rule is used.) Never while
+    nothing is reflected: no error about no light measures nothing (a gathering that has not yet
+    found a narrow spot's cone)."""
     return total.chunks >= MEASURED_STOP_CHUNKS and total.measured_mse() <= target_mse \
-        and target_bound(total) <= target_mse
+        and target_bound(total) <= target_mse and total.mean_reflected() > 0
 
 
 def target_bound(total):

@@ -14,7 +14,8 @@ import numpy as np
 from .geometry_build import build_geometry
 from .glossy import GlossyLobe
 from .lights import Lights
-from .validation import PatchError, material_rows, validate_light_numbers, validate_lights, validate_materials
+from .validation import (PatchError, material_rows, validate_light_numbers, validate_lights, validate_materials,
+                         validate_power_scale)
 
 SAME = object()  # with_materials: keep the scene's own
 
@@ -60,7 +61,8 @@ class PatchScene:
         )
         with np.errstate(over="ignore", invalid="ignore"):
             power = self.patch_area[:, None] * self.emission
-        if not np.isfinite(power.sum()):
+            finite = np.isfinite(power.sum())
+        if not finite:
             raise PatchError(
                 "emission times area overflows: the emitted power is not a finite number "
                 f"(largest emission {self.emission.max():.3g}); use smaller units of power",
@@ -76,6 +78,7 @@ class PatchScene:
         validate_lights(self.lights)
         if lights and not (self.source_power > 0).any():
             raise ValueError("the scene has no source: every emission is zero and no light gives power")
+        validate_power_scale(self.total_power, self.patch_area)
 
     # --- materials -------------------------------------------------------------------------
     def with_materials(self, reflectivity, emission, lights=None, glossy=SAME):

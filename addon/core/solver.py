@@ -23,7 +23,7 @@ from .batches import Batches
 from .cluster import ClusterRunner, WalkParameters
 from .cluster_connect import cluster_address
 from .diagnostics import check_bounces
-from .error_model import check_estimator, check_positive
+from .error_model import MAX_PATHS, check_estimator, check_positive
 from .names import (
     AUTO,
     ERROR_SCALES,
@@ -178,6 +178,8 @@ def _check_amounts(estimator, threshold, paths, target_mse, max_seconds, threads
         check_positive(name, value, integer=integer)
     if paths is None and target_mse is None:
         raise ValueError("give paths (a path count) or target_mse (an error target)")
+    if paths is not None and paths > MAX_PATHS:
+        raise ValueError(f"paths must be at most {MAX_PATHS:,} (2^50: more than any run can trace); got {paths!r}")
 
 
 def _check(scene, estimator, threshold, target_mse, seed, exit_point, stop_rule, sampling, speedups, method, error_scale):

@@ -21,6 +21,11 @@ MIN_DIAGONAL, MAX_DIAGONAL = 1e-12, 1e12
 # bounces on the patch's neighbourhood: such a run would never end in practice, so it is refused.
 MAX_GREY_REFLECTIVITY = 1.0 - 2.0**-24
 
+# The sources' power over the smallest patch's area (the largest value a patch's estimate can
+# carry) is held at most this: its square, summed over millions of patches and divided by
+# 1 - R, stays far below float64's largest number (1.8e308).
+MAX_POWER_DENSITY = 1e100
+
 # A triangle whose area is below this fraction of diagonal**2 is degenerate.
 RELATIVE_DEGENERATE_AREA = 1e-14
 
@@ -207,6 +212,18 @@ def validate_lights(lights):
     if lights.aim[1] <= 0 or not np.isfinite(lights.aim[1]) or not np.isfinite(lights.aim[0]).all():
         raise ValueError(f"the lights' aim sphere must have a finite centre and a positive radius; got {lights.aim}")
 
+
+
+def validate_power_scale(total_power, patch_area):
+    """ValueError, in one line, where the sources' power over the smallest patch's area passes
+    MAX_POWER_DENSITY: the squares the error estimates are made of would overflow."""
+    smallest = float(np.min(patch_area, initial=np.inf, where=patch_area > 0))
+    density = total_power / smallest
+    if not density <= MAX_POWER_DENSITY:
+        raise ValueError(
+            f"the sources' power ({total_power:.3g}) over the smallest patch's area ({smallest:.3g}) is {density:.3g}, "
+            f"above {MAX_POWER_DENSITY:g}: the squares of the light's estimates would overflow; scale the emission "
+            "and the lights' power down (the light is linear in them)")
 
 
 def _indices(array):

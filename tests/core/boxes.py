@@ -70,6 +70,24 @@ def small_source_box(n=8, reflectivity=0.8, corner=False):
     return scene, rectangle_form_factors(origin, u, v)
 
 
+def spot_box(degrees, n=16, reflectivity=0.6, soft_falloff=False, radius=0.1, size=(4.0, 3.0, 2.5)):
+    """A closed 4 x 3 x 2.5 room of n x n patches a face lit only by a spot lamp of a cone of
+    ``degrees`` (Blender's spot size; blend 0.15) and ``radius``, 5 cm under the middle of the
+    ceiling (above a corner of four floor patches), aimed down. PatchScene."""
+    import math
+
+    from addon.core.lights import PointLight, Spot
+
+    origin, u, v, _ = box_rectangles(size, n)
+    vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)
+    cos_outer = math.cos(math.radians(degrees) / 2)
+    spot = Spot(np.array([0.0, 0.0, -1.0]), cos_outer, cos_outer + 0.15 * (1 - cos_outer))
+    lamp = PointLight(np.array([size[0] / 2, size[1] / 2, size[2] - 0.05]), np.full(3, 100.0), radius=radius, spot=spot,
+                      name="Spot", soft_falloff=soft_falloff)
+    P = origin.shape[0]
+    return PatchScene(vertices, triangles, triangle_patch, np.full(P, reflectivity), np.zeros(P), lights=[lamp])
+
+
 def colour_box():
     """A closed box of 4 x 4 patches a face, each face its own colour, the ceiling emitting 1.
     (PatchScene, F)."""

@@ -153,3 +153,35 @@ def test_patch_errors_carry_the_patch_indices(mesh):
         make(mesh, R=with_value(24, [2, 9], 1.0))
     assert list(info.value.patches) == [2, 9]
     assert isinstance(info.value, ValueError)
+
+
+@pytest.mark.parametrize("method", ["walk", "two_way", "jacobi", "auto"])
+@pytest.mark.parametrize("stop_rule", ["predicted", "measured"])
+def test_an_absolute_target_no_run_could_reach_is_refused_before_it_runs(mesh, method, stop_rule, monkeypatch):
+    """Sources of 1e30 with an absolute target of 1e-4 would plan about 1e63 paths (it ran until
+    killed): one ValueError naming the target and the paths, before a single chunk. The same
+    sources with a relative target solve as any scene does."""
+    from addon.core import predict, relative_rms_to_mse
+    from addon.core.methods.base import Method
+
+    scene = make(mesh, E=np.r_[np.zeros(4), np.full(4, 1e30), np.zeros(16)])
+    monkeypatch.setattr(Method, "create", lambda *a, **k: pytest.fail("a chunk's state was built"))
+    with pytest.raises(ValueError, match=r"target_mse 0\.0001 would take about 3\.\d+e\+63 paths .* more than any run"):
+        solve(scene, target_mse=1e-4, method=method, stop_rule=stop_rule, threads=1)
+    monkeypatch.undo()
+    r = solve(scene, target_mse=relative_rms_to_mse(predict(scene), 0.05), method=method, stop_rule=stop_rule, seed=1,
+              threads=1)
+    assert r.paths > 0 and np.isfinite(r.radiosity).all() and np.isfinite(r.irradiance_variance).all()
+
+
+def test_more_paths_than_any_run_could_trace_are_refused(mesh):
+    with pytest.raises(ValueError, match=r"paths must be at most 1,125,899,906,842,624"):
+        solve(make(mesh), paths=10**20)
+
+
+@pytest.mark.parametrize("emission", [1e160, 1e300])
+def test_sources_whose_squares_overflow_are_refused_in_one_line(mesh, emission):
+    """Emission of 1e160 made the paper's formula square 1e160 (a bare OverflowError from
+    predict); now the scene is refused, naming the power and what to do."""
+    with pytest.raises(ValueError, match=r"the sources' power .* above 1e\+100: .*overflow; scale the emission"):
+        make(mesh, E=np.r_[np.zeros(4), np.full(4, emission), np.zeros(16)])

@@ -6,6 +6,14 @@ whose chunks grow to them at the stop rule's balance, ``two_way.balanced_chunk``
 limit, in chunks of the usual size), in a scene of at most AUTO_MAX_PATCHES
 patches; elsewhere the walk needs fewer rays to the same error.
 
+It does not pay where the light the sources send lands on few patches (a narrow spot lamp, a
+small source in a corner, a lamp a few centimetres from the ceiling): its rays are allotted by
+area and reflectivity, so the few patches that reflect most of the light shoot it with few rays,
+and its gathered direct light finds a narrow spot's light rarely. ``concentration`` measures that
+from rays cast from the sources, and above MAX_CONCENTRATION the walk runs, where it can shoot
+every light (a lamp with soft falloff or no shadow is gathered by the walk too, which is no
+better).
+
 With per-source results the two-way iteration carries every group's share on every ray, and its
 cost grows with the groups while the walk's hardly does (benchmarks/results/relight.md): where
 the rule above picks the two-way iteration, a pilot of each with per-source results
@@ -14,9 +22,14 @@ cheaper runs (not under a time limit below MEASURED_MIN_SECONDS, which the pilot
 """
 from __future__ import annotations
 
+import numpy as np
+
 from ..grouping import source_groups
-from ..names import FINITE, TWO_WAY, WALK
+from ..names import EXIT_RANDOM, FINITE, GATHERED, TWO_WAY, WALK
 from ..plan import chunk_plan
+from ..rays import cast, leave_sources, region_of
+from ..tables import WalkTables
+from ..two_way import allotment_weight
 from .two_way import TwoWay
 
 # The largest scene Automatic runs the two-way iteration in: a two-way chunk holds several (C,P)
@@ -31,6 +44,16 @@ MEASURED_MIN_SECONDS = 60.0
 # the pilots' cost ratio spread by about a quarter over seeds in the Cornell box (the rule's
 # choice stays where the two are close).
 MEASURED_MARGIN = 1.3
+# Above this concentration of the first reflected light the walk runs: in rooms lit by one spot
+# lamp the two-way iteration took 0.6-0.9 of the walk's time to 5% at 6.4 (a 75-degree cone) and
+# about the same at 10.9 (60 degrees), 3.4x the walk's at 20 (45 degrees), 3.9x at 16 (a point
+# lamp 5 cm under the ceiling) and ran to its path cap at 280 (10 degrees); ordinary rooms and
+# the Cornell box measure 1.4-4 (benchmarks/results/concentration.md).
+MAX_CONCENTRATION = 12.0
+# ... measured with this many rays from the sources, from a stream of its own (the scene alone
+# decides, whatever the seed).
+CONCENTRATION_RAYS = 1 << 13
+CONCENTRATION_STREAM = (1 << 62) + 2
 
 
 def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None, per_source=False,
@@ -45,6 +68,9 @@ def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e
                        max_seconds=max_seconds).chunk  # (the chunks its run would have)
     if not two_way.pays(scene.patch_count, chunk):
         return WALK
+    shoots = pilot.get("direct_light") != GATHERED and not scene.lights.gathered_only()
+    if shoots and concentration(scene) > MAX_CONCENTRATION:
+        return WALK
     groups = pilot.get("groups")
     if not per_source or (groups if groups is not None else source_groups(scene)).count <= 1:
         return TWO_WAY  # (one group is the total: nothing more to carry)
@@ -54,6 +80,30 @@ def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e
 
     return measured_choice(scene, estimator, (TWO_WAY, WALK), paths=paths, target_mse=target_mse, threshold=threshold,
                            max_seconds=max_seconds, per_source=True, margin=MEASURED_MARGIN, **pilot)[0]
+
+
+def concentration(scene, rays=CONCENTRATION_RAYS):
+    """How much more noise the two-way iteration's first generation shoots the first reflection
+    with than rays allotted by its power would: sum_j q_j^2 / w_j, q_j each patch's share of the
+    power the sources' light reflects where it first lands and w_j its share of the two-way
+    iteration's rays (two_way.allotment_weight). 1 where the light lands as the rays are allotted;
+    the patch count over k where it lands evenly on k of them. From ``rays`` rays cast from the
+    sources, q_j^2 from their counts unbiased (c_j (c_j - 1)); 0 where none lands on a front."""
+    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(0, spawn_key=(CONCENTRATION_STREAM,))))
+    source = tables.sources.sample(rays, rng)
+    u = rng.random((tables.uniforms_per_ray, rays), dtype=np.float32)
+    with tables.numpy_turn:
+        hits = cast(tables, *leave_sources(tables, source, u), region_of(tables, source))
+    counts = np.bincount(hits.patch[hits.front], minlength=scene.patch_count).astype(np.float64)
+    reflected = scene.grey_reflectivity * counts
+    if rays < 2 or not reflected.sum() > 0:
+        return 0.0
+    weight = allotment_weight(scene.patch_area, scene.reflectivity.max(axis=1), scene.geometry)
+    share = weight / weight.sum()
+    lit = counts > 1  # (buried patches, which no ray meets, have no share)
+    pairs = np.sum(scene.grey_reflectivity[lit] ** 2 * counts[lit] * (counts[lit] - 1) / share[lit])
+    return float(pairs / (rays * (rays - 1)) / (reflected.sum() / rays) ** 2)
 
 
 def patches_text():
