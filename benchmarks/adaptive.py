@@ -156,7 +156,7 @@ def refinement_steps(details, seed=0):
 
     from addon.blender_read.selection import read_selection
     from addon.bpy_free.patches import make_patches
-    from addon.core.adaptive_light import DETAILS, refine_by_direct_light
+    from addon.core.refine.adaptive_light import DETAILS, refine_by_direct_light
 
     objects, _ = read_selection(bpy.context)
     patches = make_patches(objects, 0.0)

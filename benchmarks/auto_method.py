@@ -33,7 +33,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 
 from addon.core import solve  # noqa: E402
 from addon.core.methods import choose, two_way  # noqa: E402
-from addon.core.error_model import predict  # noqa: E402
+from addon.core.estimate.error_model import predict  # noqa: E402
 
 DIVISIONS = (20, 40, 60, 90, 120, 190, 270)
 PATHS_A_PATCH = (4, 16, 64, 256)

@@ -23,7 +23,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from addon.core import principled  # noqa: E402
+from addon.core.materials import principled  # noqa: E402
 from benchmarks import picture_metrics as pm  # noqa: E402
 
 OUT = ROOT / "out" / "brightness"

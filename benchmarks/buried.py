@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from addon.core import PatchScene, solve  # noqa: E402
-from addon.core.geometry_build import build_geometry  # noqa: E402
+from addon.core.scene.geometry_build import build_geometry  # noqa: E402
 
 SIZE = np.array([5.0, 4.0, 2.75])
 THICKNESS = 0.4

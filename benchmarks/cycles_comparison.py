@@ -61,7 +61,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from addon.core import PatchScene, solve  # noqa: E402
-from addon.core.reference import rectangle_form_factors  # noqa: E402
+from addon.core.estimate.reference import rectangle_form_factors  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 REFERENCE_FILE = RESULTS / "cycles_comparison_reference.npz"
@@ -592,7 +592,7 @@ def report(command, refs, settings, records, table, out, png_name, total_seconds
 def first_bounce_share():
     """Exact split of the finite estimator's per-path variance (table 1) in this room: the share
     due to the first bounce from the light alone (a multinomial count of first hits)."""
-    from addon.core.reference import path_variances
+    from addon.core.estimate.reference import path_variances
 
     origin, u, v, light = room_rectangles()
     F = rectangle_form_factors(origin, u, v)

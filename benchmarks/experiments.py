@@ -127,7 +127,7 @@ class Reference:
 
 def raycast_form_factors_halves(sample, rays_per_patch, seed=0, cache=True):
     """Two independent ray-cast estimates of F (each with rays_per_patch/2 rays per patch)."""
-    from addon.core.reference import form_factors_raycast
+    from addon.core.estimate.reference import form_factors_raycast
 
     key = _cache_key("ff2", geometry_key(sample), rays_per_patch, seed)
     path = CACHE / f"ff_{key}.npz"
@@ -153,7 +153,7 @@ def direct_reference(F1, F2, reflectivity, emission, area, rays, seconds):
     with twice the variance of their mean, so B(F1) - B(F2) has four times the variance of
     the error of B((F1 + F2)/2).
     """
-    from addon.core.reference import solve_radiosity_system
+    from addon.core.estimate.reference import solve_radiosity_system
 
     F = 0.5 * (F1.astype(np.float64) + F2.astype(np.float64))
     B = solve_radiosity_system(F, reflectivity, emission)

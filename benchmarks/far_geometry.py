@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "tests" / "core"))
 from boxes import box_rectangles, rectangles_to_mesh  # noqa: E402
 
 from addon.core import PatchScene, solve  # noqa: E402
-from addon.core.lights import PointLight  # noqa: E402
+from addon.core.lights.lights import PointLight  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 R = 0.5

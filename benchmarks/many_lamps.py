@@ -34,8 +34,8 @@ def corner_pass(count):
     import numpy as np
     from many_lamps import room_scene
 
-    from addon.core import point_direct, smoothing
-    from addon.core.tables import WalkTables
+    from addon.core.display import point_direct, smoothing
+    from addon.core.methods.tables import WalkTables
 
     scene = room_scene(count, patch_size=0.0)
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
@@ -75,7 +75,7 @@ def interior(name, patch_size):
 
     from benchmarks import interior_scene
     from benchmarks.picture import source_objects
-    from addon.core import point_direct
+    from addon.core.display import point_direct
 
     import addon
 

@@ -70,7 +70,7 @@ def child(paths, threads, use_tracemalloc, scene_name):
     out["after_scene"] = peak_rss()
     # The Embree scene the solve traces, built once per geometry: the default walk's, the
     # patches' grids (addon/core/patch_grids.py); the patches' triangles are not built.
-    from addon.core.tables import WalkTables
+    from addon.core.methods.tables import WalkTables
 
     out["traced_triangles"] = WalkTables(scene, "finite", 1e-3, "random").tracer.triangle_count
     out["after_bvh"] = peak_rss()
@@ -92,7 +92,7 @@ def child(paths, threads, use_tracemalloc, scene_name):
     out["current_after_solve"] = current_rss()
     out["rays"] = result.rays
     out["chunks"] = result.chunks
-    from addon.core.plan import chunk_paths_for
+    from addon.core.estimate.plan import chunk_paths_for
 
     out["max_chunk"] = chunk_paths_for(result.prediction.expected_path_length, 10**15)
     print(json.dumps(out))
@@ -163,7 +163,7 @@ def main(argv=None):
             f"{traced['traced_peak'] / MIB:.1f} | {traced['traced_after'] / MIB:.2f} |"
         )
     peaks = [p["after_solve"] for p, _ in rows]
-    from addon.core import plan
+    from addon.core.estimate import plan
 
     # The smallest run whose chunks have the maximum size (smaller runs split into MIN_CHUNKS).
     max_chunk = rows[0][0]["max_chunk"]

@@ -21,7 +21,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "core"))
 
-from addon.core import near_choice, solve  # noqa: E402
+from addon.core.lights.lights import near_choice  # noqa: E402
+from addon.core import solve
 
 OUT = ROOT / "benchmarks" / "results" / "near_choice.md"
 ROUNDS = 4

@@ -141,7 +141,7 @@ def run_fig12(c, threads, out):
         refl = np.full(P, R)
         ref = ex.direct_reference(F1, F2, refl, emission, area, rays=P * c["rays_per_patch"], seconds=ff_seconds)
         scene = base.scene.with_materials(refl, emission)
-        from addon.core.reference import path_variances
+        from addon.core.estimate.reference import path_variances
 
         var_finite, var_infinite = path_variances(0.5 * (F1 + F2), refl, emission, area)
         entry = {"reference_mse": ref.mse, "configs": {},

@@ -330,7 +330,7 @@ def mesh_triangles(objects):
 
 def first_hits(corners, origins, directions):
     """(triangle index (-1 none), distance) of each ray's first hit (Embree)."""
-    from addon.core.raytrace import RayTracer
+    from addon.core.scene.raytrace import RayTracer
 
     tracer = RayTracer(corners)
     hit, _, _, t, _ = tracer.first_hit_barycentric(origins.astype(np.float32), directions.astype(np.float32))
@@ -373,7 +373,7 @@ def junctions(points, normals, owner, corners, triangle_owner, reach=0.1, direct
     """Pixels whose surface point lies within ``reach`` of another object along the surface:
     probes in ``directions`` tangent directions from just above the point (edges where boxes
     meet: a wall and the ceiling, furniture on the floor)."""
-    from addon.core.raytrace import RayTracer
+    from addon.core.scene.raytrace import RayTracer
 
     tracer = RayTracer(corners)
     n = normals / np.linalg.norm(normals, axis=1, keepdims=True)

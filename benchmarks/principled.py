@@ -112,7 +112,7 @@ def principled_material(bpy, name, inputs):
 
 def core_inputs(inputs):
     """core.principled.PrincipledInputs of a material's input dictionary."""
-    from addon.core.principled import PrincipledInputs
+    from addon.core.materials.principled import PrincipledInputs
 
     names = {"Base Color": "base", "Metallic": "metallic", "Roughness": "roughness", "IOR": "ior",
              "Specular IOR Level": "specular_ior_level", "Specular Tint": "specular_tint",
@@ -131,7 +131,7 @@ def core_inputs(inputs):
 def furnace(samples, resolution, log=print):
     import bpy
 
-    from addon.core.principled import principled_albedo
+    from addon.core.materials.principled import principled_albedo
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
@@ -335,7 +335,7 @@ def ours(pieces, paths, seed, terms=True):
 
 
 def room(samples, paths, lambertian=False, matte=(), log=print):
-    from addon.core.principled import principled_albedo
+    from addon.core.materials.principled import principled_albedo
 
     pieces = build_room(lambertian, matte)
     baked = [cycles_irradiance(pieces, samples, seed) for seed in (1, 2)]
@@ -385,7 +385,7 @@ def closed_box(samples, log=print):
     colour, at Filter Glossy 1 (Cycles' default) and 0."""
     import bpy
 
-    from addon.core.principled import principled_albedo
+    from addon.core.materials.principled import principled_albedo
 
     rows = []
     for blur in (1.0, 0.0):

@@ -37,7 +37,7 @@ METHODS = [("walk, shot", dict()), ("walk, gathered", dict(direct_light="gathere
 
 def scenes(divisions):
     import sample_scenes
-    from addon.core.lights import AreaLight, PointLight, Spot
+    from addon.core.lights.lights import AreaLight, PointLight, Spot
 
     base = sample_scenes.build("cornell_box", divisions=divisions, closed=True).scene
     lo, hi = base.vertices.min(axis=0), base.vertices.max(axis=0)
@@ -96,8 +96,8 @@ def solve_table(divisions, paths, reps):
 
 def relight_table(patch_counts, source_counts):
     from addon.core import relight
-    from addon.core.grouping import PER_SOURCE_MAX
-    from addon.core.relighting import PerSource
+    from addon.core.estimate.grouping import PER_SOURCE_MAX
+    from addon.core.relight.relighting import PerSource
 
     rng = np.random.default_rng(0)
     lines = ["| patches | sources | radiosity ms | radiosity and irradiance ms | radiosity ms, float32 results | "

@@ -30,7 +30,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 
 def scene_of(divisions, sources):
     import sample_scenes
-    from addon.core.lights import PointLight
+    from addon.core.lights.lights import PointLight
 
     base = sample_scenes.build("cornell_box", divisions=divisions, closed=True).scene
     lo, hi = base.vertices.min(axis=0), base.vertices.max(axis=0)
@@ -43,7 +43,7 @@ def scene_of(divisions, sources):
 
 def made(kind, surface, scene, result):
     from addon.bpy_free import pipeline
-    from addon.core.relighting import smooth_sources
+    from addon.core.relight.relighting import smooth_sources
 
     if kind == "whole":
         return dict(pipeline._smooth_corners(scene, result, light=True))
@@ -60,7 +60,8 @@ def peak(kind, surface, scene, result):
 
 
 def row(divisions, sources):
-    from addon.core import smoothing, solve
+    from addon.core.display import smoothing
+    from addon.core import solve
 
     scene = scene_of(divisions, sources)
     result = solve(scene, paths=300_000, seed=0, threads=2, per_source=True)

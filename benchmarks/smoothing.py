@@ -33,7 +33,7 @@ R_FACES, E_FACES = [0.3, 0.6, 0.7, 0.5, 0.4, 0.65], [0, 1.0, 0, 0, 0, 0]
 
 def cases(quick):
     from addon.core import PatchScene
-    from addon.core.reference import rectangle_form_factors
+    from addon.core.estimate.reference import rectangle_form_factors
     from boxes import box_rectangles, rectangles_to_mesh, small_source_box, colour_box
 
     def box(n):
@@ -51,7 +51,7 @@ def cases(quick):
 
 def edge_patches(scene):
     """Patches touching another face of the box (a crease), by welded points."""
-    from addon.core import smoothing
+    from addon.core.display import smoothing
     s = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch)
     point = s.point.ravel()
     patch = np.repeat(s.triangle_patch, 3)
@@ -60,8 +60,9 @@ def edge_patches(scene):
 
 
 def noise_rows(quick):
-    from addon.core import smoothing, solve
-    from addon.core.reference import solve_radiosity_system
+    from addon.core.display import smoothing
+    from addon.core import solve
+    from addon.core.estimate.reference import solve_radiosity_system
     rows = []
     for name, (scene, F) in cases(quick):
         exact = solve_radiosity_system(F, scene.reflectivity, scene.emission) - scene.emission
@@ -100,7 +101,7 @@ def jump_rows():
     """Residual jumps of the corner values (largest spread at one point / peak value) against
     iterations, where a continuous answer exists."""
     import test_smoothing as ts
-    from addon.core import smoothing
+    from addon.core.display import smoothing
     a, b, values = ts._two_wall_pieces()
     V, T, TP = ts._combine(a, b)
     two = (V, T, TP, np.concatenate(values))
@@ -126,7 +127,7 @@ def jump_rows():
 def cost(n):
     """Seconds and peak memory of the three steps on an n x n grid of quads (2 triangles each),
     in this process (run as a subprocess, one size each)."""
-    from addon.core import smoothing
+    from addon.core.display import smoothing
     i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
     pts = np.stack([i.ravel() * 0.01, j.ravel() * 0.01, np.zeros(i.size)], 1)
     a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()

@@ -24,8 +24,8 @@ sys.path.insert(0, str(ROOT / "tests" / "core"))
 from boxes import bright_box, colour_box, grey_room, small_source_box  # noqa: E402
 
 from addon.core import predict, relative_rms_to_mse, solve  # noqa: E402
-from addon.core import plan  # noqa: E402
-from addon.core.reference import area_weighted_mse, solve_radiosity_system  # noqa: E402
+from addon.core.estimate import plan  # noqa: E402
+from addon.core.estimate.reference import area_weighted_mse, solve_radiosity_system  # noqa: E402
 
 SEEDS = range(12)
 NEW = (plan.MEASURED_STOP_Z, plan.MEASURED_STOP_CHUNKS)

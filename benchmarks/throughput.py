@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from addon.core import Speedups, predict, solve
-from addon.core.sampling import cosine_directions, points_on_patches
+from addon.core.lights.sampling import cosine_directions, points_on_patches
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -46,7 +46,7 @@ def sample_rays(scene, count, seed=0):
 def walk_tracer(scene, exit_point="random"):
     """The Embree scene a walk traces: the patches' grids where the scene has them
     (addon/core/patch_grids.py), else the patches' triangles."""
-    from addon.core.tables import WalkTables
+    from addon.core.methods.tables import WalkTables
 
     return WalkTables(scene, "finite", 1e-3, exit_point).tracer
 
@@ -144,7 +144,7 @@ def expected_rays_per_path(scene, estimator, method="walk", threshold=1e-3, exit
     """About the rays a path of ``method`` costs, to size a run to its seconds: the paper's
     expected path length for the walk, the two-way iteration's own count
     (``two_way.rays_per_path``, and its first reflection's rays with the hit exit)."""
-    from addon.core import two_way
+    from addon.core.methods import two_way_iteration as two_way
 
     length = predict(scene, estimator, threshold=threshold).expected_path_length
     if method != "two_way":
@@ -249,9 +249,9 @@ def breakdown(scene, estimator, rounds=4, **kw):
     host's other cores use the shared cache meanwhile), not what the numpy work reads. Where
     the processor's counters can be read (``benchmarks.counters``), also the lines Embree
     fetches from memory a ray: inside the walk, back to back and after pauses; else NaN."""
-    from addon.core.tables import WalkTables
-    from addon.core.walk import walk_chunk
-    from addon.core.plan import chunk_paths_for
+    from addon.core.methods.tables import WalkTables
+    from addon.core.methods.walk_stages import walk_chunk
+    from addon.core.estimate.plan import chunk_paths_for
 
     from .counters import Counters
 
@@ -350,9 +350,9 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
     before groups). Each round brackets one solve of each kind, in alternating order, between
     two raw measurements. Returns {paths: (ratio grouped, ratio one by one, seconds grouped,
     chunks per group)}, medians over the rounds."""
-    from addon.core import plan
+    from addon.core.estimate import plan
     from addon.core.methods.walk import ShotWalk
-    from addon.core.tables import WalkTables
+    from addon.core.methods.tables import WalkTables
 
     solve(scene, "finite", paths=20_000, threads=threads)  # warm up
     length = predict(scene, "finite").expected_path_length

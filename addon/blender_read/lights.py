@@ -19,7 +19,7 @@ import math
 import bpy
 import numpy as np
 
-from ..core.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
+from ..core.lights.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
 from .images import linear_pixels
 
 POINT_INTENSITY = 1.0 / (4.0 * math.pi**2)  # per watt

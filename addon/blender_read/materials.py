@@ -13,7 +13,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ..core import principled
+from ..core.materials import principled
 from . import SceneError
 from . import images
 from .images import image_average, linear_pixels

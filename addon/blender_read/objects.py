@@ -11,7 +11,7 @@ import numpy as np
 from ..blender_write.results import is_result_object
 from ..bpy_free.patches import ObjectArrays
 from ..bpy_free.surface_layers import SourceLayers
-from ..core import meshing
+from ..core.mesh import meshing
 from . import SceneError
 from .materials import slot_tables
 

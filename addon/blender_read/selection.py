@@ -167,7 +167,7 @@ def _checked_textures(o, clamp, notes):
 
 def light_labels(context, lights):
     """Each light's Blender light group (the world's for the world), None where it has none."""
-    from ..core.lights import WorldLight
+    from ..core.lights.lights import WorldLight
 
     def group(light):
         owner = context.scene.world if isinstance(light, WorldLight) else context.scene.objects.get(light.name)

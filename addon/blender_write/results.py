@@ -8,7 +8,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ..core import meshing
+from ..core.mesh import meshing
 from . import materials as textured
 
 COLLECTION_NAME = "Radiosity"

@@ -10,9 +10,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..core import meshing
-from ..core.adaptive import patch_mesh, shading_triangulation
-from ..core.adaptive_light import DETAILS, refine_by_direct_light
+from ..core.mesh import meshing
+from ..core.refine.adaptive import patch_mesh, shading_triangulation
+from ..core.refine.adaptive_light import DETAILS, refine_by_direct_light
 from .cleaning import drop_zero_area_faces
 from .patches import MAX_PATCHES, Patches, _GEOMETRY_CACHE, _patch_glossy, _patch_material, patch_materials
 from .surface_layers import result_layers

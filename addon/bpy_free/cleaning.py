@@ -6,7 +6,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..core import RELATIVE_DEGENERATE_AREA, meshing
+from ..core import RELATIVE_DEGENERATE_AREA
+from ..core.mesh import meshing
 
 
 def degenerate_area(objects) -> float:

@@ -98,7 +98,7 @@ class ClusterAddress(Text):
         text = super().check(value)
         if not text:
             return text
-        from ..core.cluster_connect import cluster_address
+        from ..core.distributed.cluster_connect import cluster_address
 
         return cluster_address(text)
 

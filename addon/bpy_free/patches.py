@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import PatchScene, meshing
-from ..core.textures import patch_attribute_average, patch_texture_average
+from ..core import PatchScene
+from ..core.mesh import meshing
+from ..core.materials.textures import patch_attribute_average, patch_texture_average
 from .options import AUTOMATIC_PATCH_DIVISIONS
 from .surface_layers import SourceLayers, result_layers
 from .cleaning import check_finite_vertices, degenerate_area, drop_zero_area_faces

@@ -11,10 +11,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core import meshing, methods, point_direct, predict, relative_rms_to_mse, smoothing, solve
-from ..core.diagnostics import MAX_BOUNCES, check_bounces
-from ..core.covered import seen_parts
-from ..core.first_shot import direct_irradiance
+from ..core.mesh import meshing
+from ..core import methods, predict, relative_rms_to_mse, solve
+from ..core.display import point_direct, smoothing
+from ..core.scene.diagnostics import MAX_BOUNCES, check_bounces
+from ..core.display.covered import seen_parts
+from ..core.methods.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
 from . import adaptive_patches, options, reach, relit, run_budget, solve_refinement, trim

@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import smoothing
-from ..core.covered import seen_parts
-from ..core.grouping import PER_SOURCE_MAX, source_groups
-from ..core.lights import WorldLight
-from ..core.relighting import PerSource, relight, smooth_sources
+from ..core.display import smoothing
+from ..core.display.covered import seen_parts
+from ..core.estimate.grouping import PER_SOURCE_MAX, source_groups
+from ..core.lights.lights import WorldLight
+from ..core.relight.relighting import PerSource, relight, smooth_sources
 
 # Automatic keeps per-source results from 2 up to this many sources: the walks' solves then cost
 # 1.13-1.3x, the two-way iteration's 1.3x at 4 (benchmarks/results/relight.md); more cost more.
@@ -232,7 +232,7 @@ def add_object_values(out, settings):
         if "irradiance" in kinds or "irradiance_point" in kinds:
             values["irradiance"] = ps.irradiance[:, rows].astype(np.float32)
         if "irradiance_point" in kinds:
-            from ..core import meshing
+            from ..core.mesh import meshing
 
             values["irradiance_point"] = np.stack([meshing.point_average(patches.meshes[k], h).astype(np.float32)
                                                    for h in values.pop("irradiance")])

@@ -16,10 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core import methods, point_direct
-from ..core.lamp_choice import patch_spheres
+from ..core import methods
+from ..core.display import point_direct
+from ..core.lights.lamp_choice import patch_spheres
 from ..core.names import GATHERED, TWO_WAY
-from ..core.sample_rounds import Spent
+from ..core.display.sample_rounds import Spent
 from . import adaptive_patches, options
 
 PILOT_CORNERS = 512  # corners (or patches) a pilot of the display's direct light times

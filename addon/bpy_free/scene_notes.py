@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 
-from ..core.diagnostics import back_light, escaping_light, light_fates
+from ..core.scene.diagnostics import back_light, escaping_light, light_fates
 from .patches import Patches
 
 #: An object whose emitting faces send at least this share of their light out of the scene

@@ -11,9 +11,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import methods, solve
-from ..core.plan import MEASURED_STOP_CHUNKS, chunk_plan
-from ..core.adaptive_light import DETAILS
-from ..core.adaptive_solve import refine_by_solve
+from ..core.estimate.plan import MEASURED_STOP_CHUNKS, chunk_plan
+from ..core.refine.adaptive_light import DETAILS
+from ..core.refine.adaptive_solve import refine_by_solve
 from ..core.names import AUTO
 from . import adaptive_patches, options
 from .scene_notes import scene_and_notes

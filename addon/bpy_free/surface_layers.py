@@ -9,7 +9,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.textures import corner_layers
+from ..core.materials.textures import corner_layers
 
 
 @dataclass

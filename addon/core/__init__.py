@@ -9,14 +9,14 @@ The method is Sbert & Brusi's shooting random walk radiosity: the finite (Phi_T)
 the biased infinite one, with the paper's heuristic MSE formulas (2), (3) and the relative
 efficiency (4).
 """
-from .error_model import Prediction, mse_to_relative_rms, predict, relative_rms_to_mse
-from .relighting import PerSource, Relit, relight
-from .grouping import SourceGroups, source_groups
+from .estimate.error_model import Prediction, mse_to_relative_rms, predict, relative_rms_to_mse
+from .relight.relighting import PerSource, Relit, relight
+from .estimate.grouping import SourceGroups, source_groups
 from .names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE, GATHERED, SHOT
-from .scene import PatchScene
+from .scene.scene import PatchScene
 from .solver import SolveResult, solve
-from .speedups import Speedups
-from .validation import RELATIVE_DEGENERATE_AREA, PatchError
+from .methods.speedups import Speedups
+from .mesh.validation import RELATIVE_DEGENERATE_AREA, PatchError
 
 __all__ = [
     "PatchScene",

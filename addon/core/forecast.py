@@ -23,7 +23,14 @@ import numpy as np
 
 from . import methods
 from .names import SCALE_PAPER
-from .plan import MEASURED_STOP_CHUNKS, MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_plan, paths_to_target, target_now
+from .estimate.plan import (
+    MEASURED_STOP_CHUNKS,
+    MIN_CHUNK_PATHS,
+    MIN_MEASURED_CHUNKS,
+    chunk_plan,
+    paths_to_target,
+    target_now,
+)
 from .solver import solve
 
 # A pilot traces about this many rays (about a second on two threads) ...
@@ -74,7 +81,7 @@ def pilot_size(chunk, rays_per_path, budget=PILOT_RAYS):
 
 def raw_rate(scene, rays=1 << 14, seed=0):
     """Embree's rays per second on cosine rays from the patches (one thread)."""
-    from .sampling import cosine_directions, points_on_patches
+    from .lights.sampling import cosine_directions, points_on_patches
 
     g = scene.geometry
     rng = np.random.default_rng(seed)

@@ -19,11 +19,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import methods
-from .batches import Batches
-from .cluster import ClusterRunner, WalkParameters
-from .cluster_connect import cluster_address
-from .diagnostics import check_bounces
-from .error_model import MAX_PATHS, check_estimator, check_positive
+from .estimate.batches import Batches
+from .distributed.cluster import ClusterRunner, WalkParameters
+from .distributed.cluster_connect import cluster_address
+from .scene.diagnostics import check_bounces
+from .estimate.error_model import MAX_PATHS, check_estimator, check_positive
 from .names import (
     AUTO,
     ERROR_SCALES,
@@ -45,11 +45,11 @@ from .names import (
     STOP_TIME_LIMIT,
     WALK,
 )
-from .plan import chunk_plan, meets_target, paths_to_target, relative_error, target_bound, target_now
-from .runners import ThreadRunner
-from .grouping import check_per_source, source_groups
-from .speedups import Speedups
-from .tables import WalkTables
+from .estimate.plan import chunk_plan, meets_target, paths_to_target, relative_error, target_bound, target_now
+from .distributed.runners import ThreadRunner
+from .estimate.grouping import check_per_source, source_groups
+from .methods.speedups import Speedups
+from .methods.tables import WalkTables
 
 POLL_SECONDS = 0.05
 

@@ -17,8 +17,8 @@ from ..blender_write.results import write_results
 from ..bpy_free import options, pipeline, relit
 from ..bpy_free.patches import make_patches
 from ..bpy_free.scene_notes import scene_and_notes
-from ..core import relighting
-from ..core.relit_checks import REST_SHARE
+from ..core.relight import relighting
+from ..core.relight.relit_checks import REST_SHARE
 from . import relight as relight_ui
 from . import relight_keep
 

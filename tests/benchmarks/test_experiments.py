@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from addon.core import predict, solve
-from addon.core.reference import area_weighted_mse, form_factors_raycast, solve_radiosity_system
+from addon.core.estimate.reference import area_weighted_mse, form_factors_raycast, solve_radiosity_system
 from sample_scenes import cube_enclosure
 
 REFLECTIVITIES = (0.2, 0.5, 0.8)

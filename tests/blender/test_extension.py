@@ -15,7 +15,7 @@ from addon.blender_read.selection import read_selection
 from addon.bpy_free import patches, worker
 from addon.ui import panel
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
-from addon.core.meshing import concatenate, mesh_patches, triangle_areas
+from addon.core.mesh.meshing import concatenate, mesh_patches, triangle_areas
 
 from .conftest import build_test_scene, mesh_arrays, read_colours, result_objects
 

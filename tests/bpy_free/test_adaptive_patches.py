@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from addon.bpy_free import adaptive_patches, patches
-from addon.core.lights import PointLight
+from addon.core.lights.lights import PointLight
 
 from test_patches import box_object
 

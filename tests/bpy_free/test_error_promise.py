@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 from boxes import CEILING, FLOOR, box_rectangles, box_scene, rectangles_to_mesh, small_source_box
 
-from addon.core import PatchScene, plan, predict, relative_rms_to_mse, solve
-from addon.core.batches import Batches
-from addon.core.reference import area_weighted_mse, rectangle_form_factors, solve_radiosity_system
+from addon.core import PatchScene, predict, relative_rms_to_mse, solve
+from addon.core.estimate import plan
+from addon.core.estimate.batches import Batches
+from addon.core.estimate.reference import area_weighted_mse, rectangle_form_factors, solve_radiosity_system
 from addon.bpy_free.options import ERROR_SCALE, STOP_RULE
 from addon.bpy_free.pipeline import SolveSettings
 
@@ -162,7 +163,7 @@ def test_a_relit_error_speaks_of_the_same_scale_as_the_solves():
     target asked for; doubling every source leaves the relative error alone. Saved with the
     results (relit.relit_error from the stored numbers) it reads the same."""
     from addon.bpy_free.relit import relit_error
-    from addon.core.relighting import relight
+    from addon.core.relight.relighting import relight
 
     scene, _ = open_box()
     target = relative_rms_to_mse(predict(scene), 0.02)

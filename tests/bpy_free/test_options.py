@@ -15,7 +15,7 @@ import pytest
 
 from addon.bpy_free import options
 from addon.core import PatchScene, solve
-from addon.core.reference import rectangle_form_factors, solve_radiosity_system
+from addon.core.estimate.reference import rectangle_form_factors, solve_radiosity_system
 from boxes import box_rectangles, rectangles_to_mesh
 
 N = 3
@@ -112,7 +112,7 @@ def test_the_detail_option_on_the_command_line():
     assert checked(parser().parse_args([])).detail == "OFF"
     with pytest.raises(ValueError, match="--detail must be one of OFF, LOW, MEDIUM, HIGH; got 'finest'"):
         options.DETAIL.check("finest")
-    from addon.core.adaptive_light import DETAILS
+    from addon.core.refine.adaptive_light import DETAILS
 
     assert set(DETAILS) == {i for i, _, _ in options.DETAIL.items} - {"OFF"}
 

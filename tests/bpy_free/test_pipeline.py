@@ -8,10 +8,10 @@ import numpy as np
 from boxes import box_scene, open_box_with_card
 
 from addon.core import PatchScene, solve
-from addon.core.lights import WorldLight
+from addon.core.lights.lights import WorldLight
 from addon.bpy_free.pipeline import _smooth_light, light_account_text
-from addon.core.meshing import mesh_patches
-from addon.core.textures import patch_texture_average, sample_bilinear
+from addon.core.mesh.meshing import mesh_patches
+from addon.core.materials.textures import patch_texture_average, sample_bilinear
 
 
 def _shares(text):
@@ -181,7 +181,7 @@ def test_a_target_out_of_reach_is_said_before_the_run():
     and the same narrow spot without soft falloff (Automatic runs the walk), say nothing."""
     from addon.blender_read.selection import Selection
     from addon.bpy_free import pipeline
-    from addon.core.lights import PointLight, Spot
+    from addon.core.lights.lights import PointLight, Spot
     from test_patches import box_object
 
     def room(degrees, soft):

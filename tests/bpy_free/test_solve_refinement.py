@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from addon.bpy_free import adaptive_patches, pipeline, solve_refinement
-from addon.core import adaptive_light
-from addon.core.adaptive_light import Detail
+from addon.core.refine import adaptive_light
+from addon.core.refine.adaptive_light import Detail
 
 from test_adaptive_patches import room
 
@@ -167,7 +167,7 @@ def test_a_refining_solve_is_a_quarter_of_the_fewest_paths_the_final_solve_runs(
     """With an error target the refining solve runs MEASURED_STOP_CHUNKS chunks of a quarter of
     the final solve's chunk (a looser target stopped on its measured error ran many small chunks,
     more paths than the final solve); with a path count, a quarter of it."""
-    from addon.core.plan import MEASURED_STOP_CHUNKS
+    from addon.core.estimate.plan import MEASURED_STOP_CHUNKS
 
     monkeypatch.setattr(solve_refinement, "ROUNDS", 1)
     runs = []

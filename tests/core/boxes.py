@@ -6,7 +6,7 @@ so the contour-integral form factors are exact.
 import numpy as np
 
 from addon.core import PatchScene
-from addon.core.reference import rectangle_form_factors
+from addon.core.estimate.reference import rectangle_form_factors
 
 # Six faces of the box [0,sx]x[0,sy]x[0,sz] as (origin, u, v) in units of the size, with
 # u x v pointing into the box: floor, ceiling, x=0, x=sx, y=0, y=sy.
@@ -76,7 +76,7 @@ def spot_box(degrees, n=16, reflectivity=0.6, soft_falloff=False, radius=0.1, si
     ceiling (above a corner of four floor patches), aimed down. PatchScene."""
     import math
 
-    from addon.core.lights import PointLight, Spot
+    from addon.core.lights.lights import PointLight, Spot
 
     origin, u, v, _ = box_rectangles(size, n)
     vertices, triangles, triangle_patch = rectangles_to_mesh(origin, u, v)

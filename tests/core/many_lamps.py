@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from addon.core import PatchScene
-from addon.core.lights import AreaLight, PointLight, Spot
+from addon.core.lights.lights import AreaLight, PointLight, Spot
 
 ROOM = np.array([6.0, 5.0, 3.0])
 # furniture: (low corner, high corner), boxes standing on the floor

@@ -126,7 +126,7 @@ def fingerprint(result):
 
 def every_light():
     """The open box with a card, an emissive patch and a light of every kind."""
-    from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
+    from addon.core.lights.lights import AreaLight, PointLight, SunLight, WorldLight
 
     base = open_box_with_card()
     lights = [

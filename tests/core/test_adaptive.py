@@ -4,11 +4,13 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from addon.core import PatchScene, meshing, smoothing, solve
-from addon.core.adaptive import cells_of, patch_mesh, refine, shading_triangulation, split
-from addon.core.adaptive_light import DETAILS, Detail, refine_by_direct_light
-from addon.core.faces import starts_of, triangle_areas
-from addon.core.lights import PointLight, SunLight
+from addon.core import PatchScene, solve
+from addon.core.mesh import meshing
+from addon.core.display import smoothing
+from addon.core.refine.adaptive import cells_of, patch_mesh, refine, shading_triangulation, split
+from addon.core.refine.adaptive_light import DETAILS, Detail, refine_by_direct_light
+from addon.core.mesh.faces import starts_of, triangle_areas
+from addon.core.lights.lights import PointLight, SunLight
 
 # A closed box 4 x 3 x 2.5 of six quads, faces towards the inside.
 BOX = np.array([[0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0], [0, 0, 2.5], [4, 0, 2.5], [4, 3, 2.5], [0, 3, 2.5]], float)

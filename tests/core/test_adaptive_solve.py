@@ -4,11 +4,12 @@ answers hold on a mesh refined twice that way."""
 import numpy as np
 import pytest
 
-from addon.core import PatchScene, meshing, solve
-from addon.core.adaptive import cells_of, patch_mesh
-from addon.core.adaptive_light import DETAILS, Detail
-from addon.core.adaptive_solve import neighbours, refine_by_solve
-from addon.core.lights import PointLight
+from addon.core import PatchScene, solve
+from addon.core.mesh import meshing
+from addon.core.refine.adaptive import cells_of, patch_mesh
+from addon.core.refine.adaptive_light import DETAILS, Detail
+from addon.core.refine.adaptive_solve import neighbours, refine_by_solve
+from addon.core.lights.lights import PointLight
 
 from test_adaptive import assert_furnace, box_mesh, edge_uses
 

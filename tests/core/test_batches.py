@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from addon.core import solve
-from addon.core.reference import solve_radiosity_system
+from addon.core.estimate.reference import solve_radiosity_system
 from boxes import CEILING, FLOOR, LEFT, box_scene
 
 N = 6  # patches a side: 36 a face

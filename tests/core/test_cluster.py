@@ -17,8 +17,8 @@ from boxes import box_scene, rectangles_to_mesh
 
 from addon.core import GATHERED, PatchScene, solve
 from addon.core.names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE
-from addon.core.cluster import ClusterError
-from addon.core.plan import chunk_paths_for
+from addon.core.distributed.cluster import ClusterError
+from addon.core.estimate.plan import chunk_paths_for
 
 dask = pytest.importorskip("dask", reason="Dask is in requirements.txt: CI installs it")
 distributed = pytest.importorskip("distributed", reason="Dask's distributed is in requirements.txt: CI installs it")
@@ -73,7 +73,7 @@ def test_the_two_way_iteration_on_a_cluster_is_bitwise_the_local_one(client, sce
 
 
 def _worker_table_ids():
-    from addon.core import cluster
+    from addon.core.distributed import cluster
 
     return sorted(id(state.tables) for state in cluster._worker_states.values())
 
@@ -83,7 +83,7 @@ def _worker_table_ids():
 def test_per_source_results_on_a_cluster_are_bitwise_the_local_ones(client, scene, method, direct_light, exit_point):
     """The groups travel with the solve's parameters: every group's result, and its covariance,
     bit for bit the local solve's."""
-    from addon.core.lights import PointLight
+    from addon.core.lights.lights import PointLight
 
     lit = scene.with_materials(scene.reflectivity, scene.emission, [PointLight(np.array([0.3, 0.5, 0.4]), np.full(3, 0.05))])
     kw = dict(paths=40_000, seed=5, method=method, direct_light=direct_light, exit_point=exit_point, per_source=True)
@@ -166,7 +166,7 @@ def test_without_dask_the_cluster_option_says_how_to_install_it(scene, monkeypat
 
 
 def _worker_geometries():
-    from addon.core import cluster
+    from addon.core.distributed import cluster
 
     return {key: id(geometry) for key, geometry in cluster._worker_geometries.items()}
 
@@ -290,7 +290,7 @@ def test_a_malformed_address_is_one_line_and_no_connection_is_tried(scene, addre
 @pytest.mark.parametrize("address", ["localhost:8786", "tcp://scheduler.example.org:8786", "TLS://10.0.0.1:1",
                                      "tls://[::1]:8786", " tcp://127.0.0.1:8786 "])
 def test_the_address_forms_dask_takes_are_kept(address):
-    from addon.core.cluster_connect import cluster_address
+    from addon.core.distributed.cluster_connect import cluster_address
 
     scheme = "tls" if address.strip().lower().startswith("tls") else "tcp"
     assert cluster_address(address) == f"{scheme}://" + address.strip().split("://")[-1]
@@ -329,7 +329,7 @@ GREETINGS = [b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n", b"SSH-2.0
 
 @pytest.mark.parametrize("greeting", GREETINGS)
 def test_a_service_that_is_not_dask_is_one_line_within_the_timeout(scene, greeting, monkeypatch):
-    from addon.core import cluster_connect
+    from addon.core.distributed import cluster_connect
 
     monkeypatch.setattr(cluster_connect, "CONNECT_SECONDS", 2)  # (the silent one waits it out)
     server = _Server(greeting)
@@ -454,9 +454,9 @@ def test_a_missing_certificate_file_is_named(tls_cluster, scene):
 def test_a_cluster_solve_on_adaptive_patches_is_bitwise_the_local_one(client, method):
     """Patches refined where a lamp's direct light changes (core.adaptive): the cluster's solve
     of the refined scene is bit for bit the local one."""
-    from addon.core import meshing
-    from addon.core.adaptive_light import DETAILS, refine_by_direct_light
-    from addon.core.lights import PointLight
+    from addon.core.mesh import meshing
+    from addon.core.refine.adaptive_light import DETAILS, refine_by_direct_light
+    from addon.core.lights.lights import PointLight
 
     corners = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [0, 0, 1], [2, 0, 1], [2, 2, 1], [0, 2, 1]], float)
     faces = [[0, 1, 2, 3], [4, 7, 6, 5], [0, 4, 5, 1], [1, 5, 6, 2], [2, 6, 7, 3], [3, 7, 4, 0]]

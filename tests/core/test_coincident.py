@@ -1,7 +1,7 @@
 """core coincident: which coplanar triangles a hit must test, and what it counts there."""
 import numpy as np
 
-from addon.core.coincident import Contacts
+from addon.core.scene.coincident import Contacts
 
 
 def grid_triangles(n, z=0.0, flip=False):

@@ -6,8 +6,9 @@ import numpy as np
 from boxes import CEILING, FLOOR, box_rectangles, rectangles_to_mesh
 from overlap_boxes import solid_box
 
-from addon.core import PatchScene, smoothing
-from addon.core.covered import hidden_patches
+from addon.core import PatchScene
+from addon.core.display import smoothing
+from addon.core.display.covered import hidden_patches
 
 
 def _grid(origin, u, v, n):

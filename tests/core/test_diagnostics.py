@@ -5,8 +5,8 @@ import pytest
 from boxes import CEILING, FLOOR, box_rectangles, rectangles_to_mesh
 
 from addon.core import PatchScene, solve
-from addon.core.diagnostics import BACK_RAYS, back_light
-from addon.core.lights import PointLight, WorldLight
+from addon.core.scene.diagnostics import BACK_RAYS, back_light
+from addon.core.lights.lights import PointLight, WorldLight
 
 
 def _open_box(flip_floor=False, lights=(), inside_out=False, keep_ceiling=False):

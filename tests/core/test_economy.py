@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from addon.core import solve
-from addon.core.tables import WalkTables
-from addon.core.walk import walk_chunk
+from addon.core.methods.tables import WalkTables
+from addon.core.methods.walk_stages import walk_chunk
 from boxes import box_scene
 
 
@@ -48,7 +48,7 @@ def test_colour_walks_make_their_weights_for_the_patches_and_sources_asked():
     for the columns a step asks for (no (C,P) tables beside the scene's materials), equal to
     the whole tables' columns bit for bit; a light's emitters (P + its index) start with its
     power's weights."""
-    from addon.core.lights import PointLight
+    from addon.core.lights.lights import PointLight
 
     R = [[0.3, 0.5, 0.7], [0.6, 0.2, 0.4], [0.7, 0.7, 0.1], [0.5, 0.5, 0.5], [0.4, 0.6, 0.2], [0.0, 0.0, 0.0]]
     E = [[0, 0, 0], [1.0, 0.5, 2.0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0.5, 0.5, 0.5]]

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from addon.core import Speedups, solve
-from addon.core.tables import WalkTables
-from addon.core.reference import path_variances, solve_radiosity_system
+from addon.core.methods.tables import WalkTables
+from addon.core.estimate.reference import path_variances, solve_radiosity_system
 from boxes import box_scene
 
 SIZE = (1.0, 1.4, 0.8)

@@ -5,9 +5,9 @@ import pytest
 from boxes import box_scene
 
 from addon.core import GATHERED, solve
-from addon.core.first_shot import Gathering, gather_direct
-from addon.core.reference import solve_radiosity_system
-from addon.core.tables import WalkTables
+from addon.core.methods.first_shot import Gathering, gather_direct
+from addon.core.estimate.reference import solve_radiosity_system
+from addon.core.methods.tables import WalkTables
 
 R_FACES = [(0.7, 0.7, 0.7), (0.5, 0.5, 0.5), (0.8, 0.2, 0.2), (0.2, 0.8, 0.2), (0.6, 0.6, 0.6), (0.4, 0.4, 0.9)]
 E_FACES = [(0, 0, 0), (1, 1, 1), (0, 0, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0)]
@@ -69,8 +69,8 @@ def test_irradiance_is_what_the_reflected_light_comes_from_and_direct_light_alon
 
     from test_lights import _box, _solid_angles
 
-    from addon.core.first_shot import direct_irradiance
-    from addon.core.lights import PointLight
+    from addon.core.methods.first_shot import direct_irradiance
+    from addon.core.lights.lights import PointLight
 
     scene, exact = _box_with_one_emitter()
     r = solve(scene, paths=50_000, seed=5, direct_light=GATHERED)
@@ -98,7 +98,7 @@ def floor_lit_unevenly_and_a_wall(R_floor=0.5, R_wall=0.01):
     from boxes import rectangles_to_mesh
 
     from addon.core import PatchScene
-    from addon.core.lights import PointLight
+    from addon.core.lights.lights import PointLight
 
     origin = np.array([[0.0, 0.0, 0.0], [-0.1, 0.0, 0.3]])
     u, v = np.array([[1.0, 0, 0], [0, 1, 0]]), np.array([[0.0, 1, 0], [0, 0, 1]])
@@ -145,14 +145,14 @@ def test_cosine_rays_are_cast_in_proportion_to_the_emitters_share_of_the_area(mo
     cosine ray meets one (10 A_E / A_T, at least 0.1): the one-emitter box casts about a tenth
     as many, and its gathered estimate stays the direct solve (test above: the balance
     heuristic counts the share)."""
-    from addon.core.first_shot import cosine_share
+    from addon.core.methods.first_shot import cosine_share
 
     scene, _ = _box_with_one_emitter()
     assert cosine_share(scene, world=True) == 1.0
     assert cosine_share(scene, world=False) == pytest.approx(10 / 96)
     whole_face = scene.with_materials(scene.reflectivity, np.where(np.arange(96)[:, None] < 16, 1.0, 0.0) * np.ones(3))
     assert cosine_share(whole_face, world=False) == 1.0
-    from addon.core import first_shot
+    from addon.core.methods import first_shot
 
     traced = []
     trace = first_shot._trace
@@ -179,7 +179,7 @@ def test_an_emitter_seen_at_a_grazing_angle_from_far_away_is_seen_whole():
     from boxes import rectangles_to_mesh
 
     from addon.core import PatchScene
-    from addon.core.reference import rectangle_form_factors
+    from addon.core.estimate.reference import rectangle_form_factors
 
     origin = np.array([[0.0, 0.0, 1.0], [10.0, 0.0, 0.9]])
     u, v = np.array([[0, 1.0, 0], [0, 0, 0.099]]), np.array([[1.0, 0, 0], [0, 1.0, 0]])
@@ -198,7 +198,7 @@ def test_stratified_gathering_has_less_variance_than_independent_samples_and_the
     per patch, stratified samples' variance is under half of independent ones' in the mean over
     the lit patches (measured about a fifth; a ratio of two 63-degree variances, averaged over
     80 lit patches, is within a few percent), and the two means agree within 5 standard errors."""
-    from addon.core.first_shot import gather_samples
+    from addon.core.methods.first_shot import gather_samples
 
     scene, _ = _box_with_one_emitter()
     tables = WalkTables(scene, "finite", 1e-3, "random")
@@ -224,7 +224,7 @@ def test_a_patch_s_estimate_is_its_samples_mean_whatever_their_count():
     from boxes import rectangles_to_mesh
 
     from addon.core import PatchScene
-    from addon.core.lights import SunLight
+    from addon.core.lights.lights import SunLight
 
     origin = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
     u, v = np.array([[1.0, 0, 0], [1.0, 0, 0]]), np.array([[0.0, 1, 0], [0.0, 1, 0]])
@@ -245,7 +245,7 @@ def test_paths_leaving_from_the_gathering_samples_never_index_patch_tables_with_
     million. A patch table read with such an id in take's "wrap" mode steps down by P at a time
     (12 ms a call for a million ids against a 600-patch table): every patch index a walk step
     reads its normals with must be a patch's."""
-    from addon.core import rays
+    from addon.core.scene.scene import rays
 
     scene, _ = _box_with_one_emitter()
     real, seen = rays.patch_normals, []

@@ -7,10 +7,10 @@ import pytest
 
 from addon.core import predict, relative_rms_to_mse, solve
 from addon.core import forecast as fc
-from addon.core.diagnostics import MAX_BOUNCES, check_bounces, expected_bounces
+from addon.core.scene.diagnostics import MAX_BOUNCES, check_bounces, expected_bounces
 from addon.core.methods import TwoWay, choose as choose_method
 from addon.core.methods.automatic import MEASURED_MARGIN
-from addon.core.plan import MIN_MEASURED_CHUNKS
+from addon.core.estimate.plan import MIN_MEASURED_CHUNKS
 
 from boxes import box_scene, open_box_with_card
 
@@ -117,7 +117,7 @@ def _lamp_box(lamps):
     from boxes import box_rectangles, rectangles_to_mesh
 
     from addon.core import PatchScene
-    from addon.core.lights import PointLight
+    from addon.core.lights.lights import PointLight
 
     colours = np.array([(0.7, 0.7, 0.7), (0.5, 0.5, 0.5), (0.8, 0.3, 0.2), (0.2, 0.7, 0.3), (0.6, 0.6, 0.6), (0.4, 0.4, 0.8)])
     origin, u, v, face = box_rectangles((1, 1, 1), n=8)

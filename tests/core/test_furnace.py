@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from addon.core import solve
-from addon.core.reference import path_variances
+from addon.core.estimate.reference import path_variances
 from boxes import box_scene
 
 E, R = 1.0, 0.5

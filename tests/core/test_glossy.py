@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 from boxes import rectangles_to_mesh
 
-from addon.core import PatchScene, glossy, principled
-from addon.core.lights import SunLight
-from addon.core.reference import rectangle_form_factors
+from addon.core import PatchScene
+from addon.core.materials import glossy, principled
+from addon.core.lights.lights import SunLight
+from addon.core.estimate.reference import rectangle_form_factors
 from addon.core.solver import solve
 
 S = np.sqrt(0.5)
@@ -134,7 +135,7 @@ def test_a_mirror_floor_shows_the_wall_the_sky_it_reflects(method):
     reflecting evenly would give it half of that). Against (I - F R) X = 0.4 W F_wall,floor +
     F (R - g) H0: the 128 patches within 4.5 batch standard errors (mean squared z below 2);
     the floor reflecting evenly leaves the wall's mean more than 10 of its standard errors off."""
-    from addon.core.lights import WorldLight
+    from addon.core.lights.lights import WorldLight
 
     scene, F, R, g, origin = _floor_and_wall(0.4)
     W = 0.7

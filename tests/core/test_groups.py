@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 
 from addon.core import PatchScene, Speedups, solve
-from addon.core import plan, runners
+from addon.core.estimate import plan
+from addon.core.distributed import runners
 from addon.core.methods import walk as walk_method
-from addon.core.tables import WalkTables
-from addon.core.walk import walk_chunk, walk_chunks
-from addon.core.reference import path_variances
+from addon.core.methods.tables import WalkTables
+from addon.core.methods.walk_stages import walk_chunk, walk_chunks
+from addon.core.estimate.reference import path_variances
 from boxes import box_rectangles, box_scene, open_box_with_card, rectangles_to_mesh
 
 Z = 4.5  # two-sided normal bound, about 7e-6 per test (several per test, all far apart)
@@ -209,7 +210,7 @@ def test_sources_drawn_as_counts_join_the_wavefront_as_the_paths_would():
     counts per source (sampling.SourceRuns) instead of from every path's source: any window
     of the chunk-ordered paths adds exactly the counts of the sources in it, chunk by chunk,
     including sources that drew no path (a source of tiny power)."""
-    from addon.core.sampling import SourceRuns, draw_sources
+    from addon.core.lights.sampling import SourceRuns, draw_sources
 
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=3)
     emission = scene.emission.copy()

@@ -3,8 +3,8 @@ each looks at itself, a weight above 0 wherever a lamp can light a point (the es
 unbiased), a point lamp's weight its own light, and samples drawn by weight."""
 import numpy as np
 
-from addon.core.lamp_choice import LampChoice
-from addon.core.lights import AreaLight, PointLight, Spot, SunLight
+from addon.core.lights.lamp_choice import LampChoice
+from addon.core.lights.lights import AreaLight, PointLight, Spot, SunLight
 
 
 def _elliptical_spot():

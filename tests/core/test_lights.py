@@ -10,8 +10,8 @@ import pytest
 from boxes import box_rectangles, rectangles_to_mesh
 
 from addon.core import PatchScene, solve
-from addon.core.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
-from addon.core.reference import rectangle_form_factors, solve_radiosity_system
+from addon.core.lights.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
+from addon.core.estimate.reference import rectangle_form_factors, solve_radiosity_system
 
 Z = 5.0
 DIRECT_LIGHTS = ("shot", "gathered")  # every light, shot by the walk and gathered (first_shot)

@@ -43,7 +43,7 @@ CHILD = textwrap.dedent(
     import json, resource, sys, tracemalloc
     sys.path.insert(0, {root!r})
     import numpy as np
-    import addon.core.plan as plan
+    import addon.core.estimate.plan as plan
     from addon.core import predict, solve
 
     from sample_scenes import room_fig4
@@ -141,7 +141,8 @@ def _room_objects(n, side=4.0):
 def scaled_blocks(monkeypatch):
     """The blocks a million patches is computed in, as big a share of this room's patches and
     triangles (1/48 of them; 1/16 to 1/32 at a million)."""
-    from addon.core import faces, frames, geometry, patch_grids, validation
+    from addon.core.mesh import faces, frames, validation
+    from addon.core.scene.scene import geometry, patch_grids
 
     for module in (faces, geometry, validation):
         monkeypatch.setattr(module, "BLOCK_TRIANGLES", 1 << 12)
@@ -176,7 +177,7 @@ def test_the_operator_arrays_stay_within_a_per_patch_budget(scaled_blocks):
     from addon.bpy_free.scene_notes import scene_and_notes
     from addon.ui import live_view
     from addon.core import solve
-    from addon.core.tables import WalkTables
+    from addon.core.methods.tables import WalkTables
 
     objects, patch_size = _room_objects(128)
     patches._GEOMETRY_CACHE.clear()
@@ -219,9 +220,9 @@ def test_no_chunk_is_held_while_the_results_are_made(monkeypatch):
     from boxes import box_scene
 
     from addon.core import solve
-    from addon.core.batches import Batches
-    from addon.core.path_walk import PathWalk
-    from addon.core.tallies import ChunkTally
+    from addon.core.estimate.batches import Batches
+    from addon.core.methods.path_walk import PathWalk
+    from addon.core.estimate.tallies import ChunkTally
 
     scene, _, _ = box_scene([(0.8, 0.5, 0.3)] * 6, [(1, 1, 1)] + [(0, 0, 0)] * 5, n=6)
     alive = []

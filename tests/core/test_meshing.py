@@ -1,11 +1,11 @@
-"""Tests of addon.core.meshing (pure numpy, no bpy)."""
+"""Tests of addon.core.mesh.meshing (pure numpy, no bpy)."""
 
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from addon.core import meshing
-from addon.core.meshing import (
+from addon.core.mesh import meshing
+from addon.core.mesh.meshing import (
     concatenate,
     fan_triangulation,
     mesh_patches,
@@ -267,7 +267,7 @@ def test_random_convex_polygons_preserve_area_and_orientation(polys, patch_size)
 # ---------------------------------------------------------------------------
 
 from addon.core import PatchScene  # noqa: E402
-from addon.core.meshing import PLANAR_ANGLE_DEGREES, nonplanar_faces  # noqa: E402
+from addon.core.mesh.meshing import PLANAR_ANGLE_DEGREES, nonplanar_faces  # noqa: E402
 
 
 def accepted(m):
@@ -375,7 +375,7 @@ def test_saddle_grid_of_twisted_quads(patch_size):
 def test_cells_of_a_twisted_quads_bilinear_grid_are_twisted_too():
     """Why a twisted quad is not gridded: the cells of its bilinear grid are twisted too."""
     v, fs, cv = twisted_quad(lift=0.8)
-    from addon.core.subdivision import _grid_template
+    from addon.core.mesh.subdivision import _grid_template
 
     i, j, cells = _grid_template(2, 2)
     u, w = (i / 2)[:, None], (j / 2)[:, None]
@@ -414,8 +414,8 @@ def test_planar_faces_are_unchanged_by_rotation_and_float32_rounding():
 
 
 def test_tolerance_is_one_degree_and_cells_of_a_nearly_planar_quad_stay_flat():
-    from addon.core.meshing import PLANAR_COSINE
-    from addon.core.validation import MIN_PATCH_NORMAL_COSINE
+    from addon.core.mesh.meshing import PLANAR_COSINE
+    from addon.core.mesh.validation import MIN_PATCH_NORMAL_COSINE
 
     # a face within the tolerance, or a grid cell of one (within about twice it), is far
     # inside the core's limit on a patch's triangles

@@ -8,9 +8,9 @@ import pytest
 from pinned_cases import every_light, mixed_box
 
 from addon.core import solver
-from addon.core.runners import chunk_generator
-from addon.core.speedups import Speedups
-from addon.core.tables import WalkTables
+from addon.core.distributed.runners import chunk_generator
+from addon.core.methods.speedups import Speedups
+from addon.core.methods.tables import WalkTables
 from boxes import box_scene
 
 # (method, direct light): every method solve() runs, each with every direct light it takes.
@@ -61,7 +61,7 @@ def test_a_state_rebuilt_from_its_spec_runs_the_same_chunks(name, direct_light, 
     own) gives the chunks, bit for bit, that the solve's own state gives; a spec with another
     solve's split of the lost light is taken as that solve's."""
     from addon.core import methods
-    from addon.core.plan import chunk_plan
+    from addon.core.estimate.plan import chunk_plan
 
     scene = every_light()
     method = methods.create(name, direct_light)

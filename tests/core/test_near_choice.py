@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from boxes import LEFT, box_scene
 
-from addon.core import near_choice
-from addon.core.first_shot import Gathering, direct_irradiance
-from addon.core.lights import PointLight
-from addon.core.near_choice import NearChoice
+from addon.core.lights.lights import near_choice
+from addon.core.methods.first_shot import Gathering, direct_irradiance
+from addon.core.lights.lights import PointLight
+from addon.core.lights.near_choice import NearChoice
 
 
 def _strip_box(n=8, lights=()):
@@ -101,8 +101,8 @@ def test_the_patches_beside_a_lone_small_emitter_cast_cosine_rays_too():
     the target delivered). Now they cast cosine rays as beside two emitters (their form factor
     bound), and the tail goes: the top 1% hold under a third of it, no sample over 15 times."""
     from boxes import small_source_box
-    from addon.core.first_shot import gather_direct
-    from addon.core.tables import WalkTables
+    from addon.core.methods.first_shot import gather_direct
+    from addon.core.methods.tables import WalkTables
 
     scene, F = small_source_box(n=4, corner=True)
     truth = F @ scene.emission[:, 0]

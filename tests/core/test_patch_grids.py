@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from boxes import box_rectangles, box_scene, rays_to_triangle_points, rectangles_to_mesh
 
-from addon.core import patch_grids as PG
-from addon.core.tables import WalkTables
-from addon.core.frames import parallelogram_corners
-from addon.core.geometry_build import build_geometry
+from addon.core.scene.scene import patch_grids as PG
+from addon.core.methods.tables import WalkTables
+from addon.core.mesh.frames import parallelogram_corners
+from addon.core.scene.geometry_build import build_geometry
 
 
 def _rotation(seed):
@@ -328,7 +328,7 @@ def test_random_exits_on_the_grids_are_the_walks_on_the_triangles(estimator, cou
     triangle Embree reports, not which patch or side a ray meets (but for rays within float32's
     rounding of a side, none of which these walks cast)."""
     from addon.core import PatchScene, Speedups
-    from addon.core.walk import walk_chunk
+    from addon.core.methods.walk_stages import walk_chunk
 
     g = _mixed_box(n=4, rotation=_rotation(2))
     corners = g.triangle_corners.astype(np.float64).reshape(-1, 3)

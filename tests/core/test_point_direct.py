@@ -7,8 +7,9 @@ import pytest
 from boxes import rectangles_to_mesh
 from overlap_boxes import slab_room
 
-from addon.core import PatchScene, point_direct, smoothing
-from addon.core.lights import AreaLight, PointLight, WorldLight
+from addon.core import PatchScene
+from addon.core.display import point_direct, smoothing
+from addon.core.lights.lights import AreaLight, PointLight, WorldLight
 
 LAMP = np.array([0.4, 0.55, 0.8])
 
@@ -207,7 +208,7 @@ def test_live_lamps_leave_each_patch_its_solved_light_less_the_lamps_mean_and_gr
     corners is its solved light less live_means (float error); per source group, the parts add
     up to it."""
     from addon.core import solve
-    from addon.core.relighting import smooth_sources
+    from addon.core.relight.relighting import smooth_sources
 
     def lamps(lamp):
         return [PointLight(lamp, np.ones(3)), AreaLight(lamp + [0.3, 0.0, 0.05], np.array([0.1, 0.0, 0.0]),
@@ -303,7 +304,7 @@ def test_live_lamps_take_the_solves_own_direct_light_out_where_it_was_gathered_a
     from boxes import small_source_box
 
     from addon.core import solve
-    from addon.core.reference import solve_radiosity_system
+    from addon.core.estimate.reference import solve_radiosity_system
 
     scene, F = small_source_box(n=6, reflectivity=0.3)
     exact = solve_radiosity_system(F, scene.reflectivity, scene.emission)
@@ -346,7 +347,7 @@ def _exact_lamps_light(lights, x, normal):
     """(n,3) every lamp's light at points ``x`` (n,3) of ``normal`` (n,3) with nothing in the way:
     a point lamp's, a sphere's (wholly above the horizon: as its centre's) and a spot's I cos / d^2
     (times the mask), an area lamp's exitance times the point-to-polygon form factor (0 behind it)."""
-    from addon.core.lights import AreaLight
+    from addon.core.lights.lights import AreaLight
 
     out = np.zeros((len(x), 3))
     for light in lights:
@@ -379,7 +380,7 @@ def test_forty_point_lamps_and_spots_are_exact_at_every_corner_for_one_lamps_ray
     corner as for one lamp (each lamp looked at by 16 of its own traced 40 times as many)."""
     from many_lamps import room_scene
 
-    from addon.core.tables import WalkTables
+    from addon.core.methods.tables import WalkTables
 
     scene = room_scene(40, patch_size=0.5, furniture=False, kinds=("point", "spot"), grey=True)
     surface, points, normal = _room_corners(scene)
@@ -489,7 +490,7 @@ def test_an_emitters_corner_light_is_unbiased_and_within_its_noise_rule_measured
     fewer than 512 rays a corner (the error as if the samples were independent saw the choice
     among the cube's patches as noise: 1,033 rays a corner, a root mean square of 0.07; in the
     loft, a third of the corners sampled 1,024 times)."""
-    from addon.core.tables import WalkTables
+    from addon.core.methods.tables import WalkTables
 
     scene, surface, points, floor, exact = _glowing_cube()
     with monkeypatch.context() as patched:
@@ -519,8 +520,8 @@ def test_a_sun_outside_a_closed_room_takes_its_own_rays_not_the_lamps(monkeypatc
     The corners' light is the lamps' alone."""
     from many_lamps import room_scene
 
-    from addon.core.lights import SunLight
-    from addon.core.tables import WalkTables
+    from addon.core.lights.lights import SunLight
+    from addon.core.methods.tables import WalkTables
 
     lamps = room_scene(8, patch_size=0.5, furniture=False, kinds=("point",))
     sun = SunLight(np.array([0.3, 0.2, -0.93]) / np.linalg.norm([0.3, 0.2, -0.93]), np.full(3, 50.0))

@@ -3,7 +3,7 @@ integrals over outgoing directions and known limits."""
 import numpy as np
 import pytest
 
-from addon.core import principled as pr
+from addon.core.materials import principled as pr
 
 
 def brute_force(roughness, mu, eta, f0, n_theta=1200, n_phi=720):

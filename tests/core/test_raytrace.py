@@ -2,7 +2,7 @@
 coordinates, and Embree's geometric normal has our orientation."""
 import numpy as np
 
-from addon.core.sampling import cosine_directions, points_on_patches
+from addon.core.lights.sampling import cosine_directions, points_on_patches
 from boxes import box_scene
 
 

@@ -15,7 +15,7 @@ from test_stress import Z, _exact_box, _rotation
 from test_two_way_stress import T
 
 from addon.core import PatchScene, solve
-from addon.core.lights import PointLight
+from addon.core.lights.lights import PointLight
 
 PATHS = 100_000
 
@@ -179,7 +179,7 @@ def _lit_open_box(far):
     itself, and 1 m triangles at the points ``far`` (n,3) around it: a sky of far objects."""
     from boxes import open_box_with_card
 
-    from addon.core.lights import AreaLight, SunLight, WorldLight
+    from addon.core.lights.lights import AreaLight, SunLight, WorldLight
 
     base = open_box_with_card()
     V, Tr, TP = base.vertices, base.triangles, base.triangle_patch

@@ -20,9 +20,9 @@ import pytest
 from boxes import CEILING, box_rectangles, box_scene, rectangles_to_mesh
 
 from addon.core import PatchScene, relight, solve, source_groups
-from addon.core.relighting import resolve
-from addon.core import grouping
-from addon.core.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
+from addon.core.relight.relighting import resolve
+from addon.core.estimate import grouping
+from addon.core.lights.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
 
 R_FACES = np.array([(0.7, 0.7, 0.7), (0.5, 0.5, 0.5), (0.8, 0.3, 0.2), (0.2, 0.7, 0.3), (0.6, 0.6, 0.6), (0.4, 0.4, 0.8)])
 # Every method and exit point: (method, direct_light, exit_point, estimator)
@@ -220,8 +220,8 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     test_point_direct checks); recombined with new weights they are the same linear map of the
     relit values."""
     from addon.bpy_free import pipeline
-    from addon.core import point_direct, smoothing
-    from addon.core.relighting import combine, per_source_emission, smooth_sources
+    from addon.core.display import point_direct, smoothing
+    from addon.core.relight.relighting import combine, per_source_emission, smooth_sources
 
     scene = open_box()
     r = solve_case(scene, case, paths=40_000, seed=3, per_source=True)

@@ -11,9 +11,9 @@ import pytest
 from test_relighting import IDS, METHODS, Z, case_kwargs, every_light, joint_noise_z, open_box, solve_case
 
 from addon.core import relight
-from addon.core.lights import PointLight
-from addon.core.relighting import resolve
-from addon.core.relit_checks import REST_SHARE
+from addon.core.lights.lights import PointLight
+from addon.core.relight.relighting import resolve
+from addon.core.relight.relit_checks import REST_SHARE
 
 CASES = [METHODS[0], METHODS[3], METHODS[7]]
 

@@ -3,7 +3,7 @@ the noisiest points of every source first, as many as the pace each source has s
 time for; without a deadline, every noisy point, every round."""
 import numpy as np
 
-from addon.core import sample_rounds
+from addon.core.display import sample_rounds
 
 
 class _Clock:

@@ -1,7 +1,13 @@
 """The sampling primitives: sources by power, uniform points, cosine directions."""
 import numpy as np
 
-from addon.core.sampling import SourceTable, choose_triangles, source_weights, cosine_directions, points_on_triangles
+from addon.core.lights.sampling import (
+    SourceTable,
+    choose_triangles,
+    source_weights,
+    cosine_directions,
+    points_on_triangles,
+)
 from boxes import box_scene
 
 
@@ -89,7 +95,7 @@ def test_parallelogram_and_triangle_patches_sample_alike():
     """Rectangles made of two triangles are sampled as parallelograms; the same rectangle
     split into four triangles goes through the triangle path: both uniform on the patch."""
     from addon.core import PatchScene
-    from addon.core.sampling import points_on_patches
+    from addon.core.lights.sampling import points_on_patches
 
     # Patch 0: rectangle [0,2]x[0,1] as two triangles; patch 1: rectangle [0,2]x[2,3] as
     # four triangles around its centre; patch 2: a lone triangle.
@@ -117,7 +123,7 @@ def test_channel_sum_is_numpys_sum_bit_for_bit():
     """Source powers (and colour walks' mean emission) add the three channels as
     (v0 + v1) + v2, which is what values.sum(axis=1) computes: the same numbers to the bit, so
     the sources drawn do not change."""
-    from addon.core.sampling import channel_sum
+    from addon.core.lights.sampling import channel_sum
 
     rng = np.random.default_rng(3)
     for dtype in (np.float64, np.float32):
@@ -141,7 +147,7 @@ def test_sobol_points_are_joe_and_kuos_and_nets():
     """The table's first points are scipy's; the first 2^m points of every dimension fall one in
     each interval of 2^-m, and dimensions 0 and 1 together one in each of the 2^m boxes of
     every shape 2^-a x 2^-(m-a) (a (0,m,2)-net)."""
-    from addon.core.sampling import SOBOL
+    from addon.core.lights.sampling import SOBOL
 
     u = SOBOL.rows(1024)[:, :1024] * 2.0**-32
     assert (u[:, :8].T * 64).tolist() == SOBOL_FIRST_8
@@ -159,7 +165,7 @@ def test_stratified_points_are_uniform_evenly_spread_and_independent_between_pat
     dimension); over 4,000 draws, one sample's coordinate is uniform (chi-square over 16 bins
     within 5 standard deviations of its mean) and uncorrelated with another patch's (within 5
     standard errors of zero)."""
-    from addon.core.sampling import stratified_by_patch
+    from addon.core.lights.sampling import stratified_by_patch
 
     patch = np.repeat(np.arange(3, dtype=np.int32), [8, 0, 5])
     rng = np.random.default_rng(7)
@@ -178,7 +184,7 @@ def test_stratified_points_are_uniform_evenly_spread_and_independent_between_pat
 def test_shifted_points_wrap_into_float32_below_one():
     """A point plus its shift, modulo 1, as float32: exactly the float64 remainder where float32
     holds it, and never 1.0 where a float64 just below 1 would round up to it."""
-    from addon.core.sampling import shifted_float32
+    from addon.core.lights.sampling import shifted_float32
 
     point = np.array([0.25, 0.75, 0.5, 1 - 2.0**-53, 0.0, 1 - 2.0**-30])
     shift = np.array([0.5, 0.5, 0.5 - 2.0**-40, 0.0, 1 - 2.0**-53, 0.5])

@@ -10,9 +10,10 @@ S seeds the mean ratio plus Z of its standard errors must stay below 1. The dete
 import numpy as np
 import pytest
 
-from addon.core import PatchScene, meshing, solve
-from addon.core import smoothing
-from addon.core.reference import rectangle_form_factors, solve_radiosity_system
+from addon.core import PatchScene, solve
+from addon.core.mesh import meshing
+from addon.core.display import smoothing
+from addon.core.estimate.reference import rectangle_form_factors, solve_radiosity_system
 from boxes import box_rectangles, rectangles_to_mesh, small_source_box
 
 Z = 4.5
@@ -345,7 +346,7 @@ def test_patches_no_path_reached_are_filtered_not_kept_black():
 def test_polygon_corners_read_the_value_of_their_patchs_triangle_corner():
     """Quads fanned into two triangles each: every polygon corner reads the value its patch's
     triangles hold at that point; a corner that is no corner of its patch's triangles is refused."""
-    from addon.core.smoothing import polygon_corner_values
+    from addon.core.display.smoothing import polygon_corner_values
 
     rng = np.random.default_rng(5)
     quads = rng.permutation(40).reshape(10, 4)  # (10 patches, their 4 points)
@@ -371,7 +372,7 @@ def test_a_bright_patch_beside_dim_ones_never_pushes_a_corner_to_black():
     from boxes import box_rectangles, rectangles_to_mesh
 
     from addon.core import PatchScene, solve
-    from addon.core.lights import PointLight
+    from addon.core.lights.lights import PointLight
 
     origin, u, v, _ = box_rectangles((1, 1, 1), n=4)
     V, T, TP = rectangles_to_mesh(origin, u, v)
@@ -470,7 +471,7 @@ def _lamp_box_parts():
     from boxes import box_rectangles, rectangles_to_mesh
 
     from addon.core import PatchScene, solve
-    from addon.core.lights import PointLight
+    from addon.core.lights.lights import PointLight
 
     origin, u, v, _ = box_rectangles((1, 1, 1), n=4)
     V, T, TP = rectangles_to_mesh(origin, u, v)
@@ -552,8 +553,8 @@ def test_a_partly_buried_patch_keeps_its_light_on_the_part_seen(seen):
     whole patch instead (``seen=False``, as before), the part seen is 20% too dark, the buried
     part taking its share of the slope."""
     from overlap_boxes import slab_scene, visible_rectangles
-    from addon.core.covered import seen_parts
-    from addon.core.visibility import CELLS
+    from addon.core.display.covered import seen_parts
+    from addon.core.scene.visibility import CELLS
 
     scene, origin, u, v, inner = slab_scene(0.5, 1.0)
     values = np.exp(-4.0 * np.linalg.norm(origin + 0.5 * (u + v) - 1.0, axis=1))[:, None] * np.array([1.0, 0.8, 0.6])
@@ -585,7 +586,7 @@ def test_the_visible_corner_weights_are_the_same_a_few_cells_at_a_time(monkeypat
     blocks of 100 cells give the same weights as one block, and each partly buried patch's
     weights add up to its visible area (f_j times its area)."""
     from overlap_boxes import slab_scene
-    from addon.core import covered
+    from addon.core.display import covered
 
     scene = slab_scene(0.5, 1.0)[0]
     args = (scene.geometry, scene.vertices, scene.triangles, scene.triangle_patch)

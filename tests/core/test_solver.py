@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from addon.core import predict, solve
-from addon.core.plan import chunk_paths_for
+from addon.core.estimate.plan import chunk_paths_for
 from boxes import box_scene
 
 
@@ -135,7 +135,7 @@ def test_batch_estimate_is_made_only_where_it_is_used(scene, monkeypatch):
     """The batch MSE costs passes over the patches: a run without progress under the predicted
     rule makes it once, for its result; with progress, once per chunk; and it is the
     area-weighted mean of the per-patch batch variances either way."""
-    from addon.core.batches import Batches
+    from addon.core.estimate.batches import Batches
 
     made = []
     real = Batches.measured_mse
@@ -161,8 +161,8 @@ def test_batch_estimate_is_made_only_where_it_is_used(scene, monkeypatch):
 def test_measured_stop_rule_reads_the_estimate_once_a_group(scene, monkeypatch, estimator):
     """Under the measured rule the estimate is read after each task's chunks are all added:
     the run stops as soon as it meets the target there, on whole chunks."""
-    from addon.core import plan
-    from addon.core.batches import Batches
+    from addon.core.estimate import plan
+    from addon.core.estimate.batches import Batches
 
     made = []
     real = Batches.measured_mse
@@ -190,7 +190,7 @@ def test_batch_estimate_of_a_colour_scene_is_the_mean_over_channels():
 def test_measured_mse_is_the_area_weighted_mean_of_the_variance(scene, monkeypatch, block):
     """The batch estimate's MSE, summed a block of patches at a time, is the area- and
     channel-mean of each patch's batch-means variance of the mean (to rounding)."""
-    from addon.core import batches
+    from addon.core.estimate import batches
 
     monkeypatch.setattr(batches, "MSE_BLOCK", block)
     r = solve(scene, "finite", paths=40_000, seed=5)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from addon.core import solve
-from addon.core.reference import area_weighted_mse, solve_radiosity_system
-from addon.core.sampling import SourceTable, source_weights
+from addon.core.estimate.reference import area_weighted_mse, solve_radiosity_system
+from addon.core.lights.sampling import SourceTable, source_weights
 from boxes import box_scene
 
 

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from addon.core import PatchScene, solve
-from addon.core.reference import path_variances, rectangle_form_factors, solve_radiosity_system
-from addon.core.plan import chunk_paths_for
+from addon.core.estimate.reference import path_variances, rectangle_form_factors, solve_radiosity_system
+from addon.core.estimate.plan import chunk_paths_for
 from boxes import box_rectangles, box_scene, rectangles_to_mesh
 
 Z = 4.5
@@ -227,7 +227,7 @@ def test_1e8_paths_equal_their_two_halves_and_the_exact_solution(monkeypatch):
     sums of its chunks' tallies taken in two halves (the first and second half of its chunks,
     recorded as the run makes them); the radiosity matches table 1 at a noise of ~1e-4, and the
     batch variance agrees with table 1's."""
-    import addon.core.runners as runners
+    import addon.core.distributed.runners as runners
 
     R = 0.2
     scene, F, _ = box_scene([R] * 6, [0, 1.0, 0, 0, 0, 0], SIZE, n=1)
@@ -464,7 +464,7 @@ def test_first_rays_leave_uniformly_from_sources_beside_triangle_patches(exit_po
     the black light: the card is hit by first rays only, each with the exact form factor F,
     and a path's first point must be uniform on the light for that (a fixed point would give
     another F)."""
-    from addon.core.path_walk import WAVEFRONT_PATHS
+    from addon.core.methods.path_walk import WAVEFRONT_PATHS
 
     origin = np.array([[0.0, 0, 0], [0.05, 0.05, 0.4], [5.0, 5, -3]])
     u = np.array([[1.0, 0, 0], [0, 0.3, 0], [0.2, 0, 0]])

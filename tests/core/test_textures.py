@@ -1,8 +1,8 @@
 """Image textures averaged over each patch's UV footprint (addon/core/textures.py)."""
 import numpy as np
 
-from addon.core.meshing import mesh_patches
-from addon.core.textures import SAMPLES, corner_layers, patch_texture_average, sample_bilinear
+from addon.core.mesh.meshing import mesh_patches
+from addon.core.materials.textures import SAMPLES, corner_layers, patch_texture_average, sample_bilinear
 
 
 def _square(uv_scale=1.0):

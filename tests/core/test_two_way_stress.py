@@ -15,8 +15,8 @@ from boxes import box_rectangles, rectangles_to_mesh
 from test_stress import SIZE, _exact_box, _rotation, _sliver_fan
 
 from addon.core import PatchScene, solve
-from addon.core.first_shot import FATE_RAYS
-from addon.core.reference import rectangle_form_factors
+from addon.core.methods.first_shot import FATE_RAYS
+from addon.core.estimate.reference import rectangle_form_factors
 
 T = 5.5
 PATHS = 100_000

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from addon.core import PatchScene, solve
-from addon.core.validation import CoincidentFacesWarning
+from addon.core.mesh.validation import CoincidentFacesWarning
 from boxes import box_rectangles, box_scene, rectangles_to_mesh
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from addon.core import predict, solve
-from addon.core.reference import area_weighted_mse, path_variances, solve_radiosity_system
+from addon.core.estimate.reference import area_weighted_mse, path_variances, solve_radiosity_system
 from boxes import box_scene
 
 SEEDS = range(24)

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from addon.core import PatchScene, solve
-from addon.core.geometry_build import build_geometry
-from addon.core.reference import path_variances, rectangle_form_factors, solve_radiosity_system
-from addon.core.sampling import patch_point_rows
-from addon.core import visibility
+from addon.core.scene.geometry_build import build_geometry
+from addon.core.estimate.reference import path_variances, rectangle_form_factors, solve_radiosity_system
+from addon.core.lights.sampling import patch_point_rows
+from addon.core.scene.scene import visibility
 from boxes import rectangles_to_mesh
 from overlap_boxes import slab_room, slab_scene, solid_box, visible_rectangles
 

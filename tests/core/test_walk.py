@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from addon.core import Speedups, predict
-from addon.core.tables import WalkTables
-from addon.core.walk import walk_chunk
+from addon.core.methods.tables import WalkTables
+from addon.core.methods.walk_stages import walk_chunk
 from boxes import box_scene
 
 
@@ -64,8 +64,9 @@ def test_hit_points_keep_clear_of_edges(classes, traced):
     past the edge, behind the adjacent wall), and points away from the edges are the hit
     points. With classes (as in big scenes) the triangles' edge thresholds are read per patch
     class."""
-    from addon.core import PatchScene, rays
-    from addon.core.frames import RELATIVE_EDGE_INSET
+    from addon.core import PatchScene
+    from addon.core.scene.scene import rays
+    from addon.core.mesh.frames import RELATIVE_EDGE_INSET
     from boxes import box_rectangles, rays_to_triangle_points, rectangles_to_mesh
 
     origin, u, v, face = box_rectangles((1.0, 1.0, 1.0), n=2)
@@ -129,7 +130,7 @@ def test_walks_on_threads_take_turns_at_their_numpy_work(monkeypatch):
     another thread's whole walk has run) lets that other walk take its turns meanwhile."""
     import threading
 
-    from addon.core import tallies
+    from addon.core.estimate import tallies
     from boxes import box_scene
 
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
@@ -178,8 +179,8 @@ def test_chunk_wide_work_does_not_wait_for_a_turn(monkeypatch):
     them) run without the numpy turn, so that two threads' numpy work overlaps, unless the
     chunk is small; the paper's walk takes turns (the test above). benchmarks/turns.py and the
     rule's comment give the measurements."""
-    from addon.core import two_way, walk
-    from addon.core.first_shot import Gathering
+    from addon.core.methods import two_way_iteration as two_way, walk_stages as walk
+    from addon.core.methods.first_shot import Gathering
     from addon.core.methods import jacobi, two_way as method, walk as walk_method
 
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)

@@ -24,12 +24,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..grouping import source_groups
+from ..estimate.grouping import source_groups
 from ..names import EXIT_RANDOM, FINITE, GATHERED, TWO_WAY, WALK
-from ..plan import chunk_plan
-from ..rays import cast, leave_sources, region_of
-from ..tables import WalkTables
-from ..two_way import allotment_weight
+from ..estimate.plan import chunk_plan
+from ..scene.rays import cast, leave_sources, region_of
+from .tables import WalkTables
+from .two_way_iteration import allotment_weight
 from .two_way import TwoWay
 
 # The largest scene Automatic runs the two-way iteration in: a two-way chunk holds several (C,P)

@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..first_shot import FATE_RAYS, FATE_STREAM, Gathering
-from ..rays import cast as ray_cast, leave_sources, region_of
-from ..plan import chunk_paths_for
+from .first_shot import FATE_RAYS, FATE_STREAM, Gathering
+from ..scene.rays import cast as ray_cast, leave_sources, region_of
+from ..estimate.plan import chunk_paths_for
 
 # A method beyond the paper's formulas plans its chunks for this fraction of the paths they
 # predict for the target: it needs several times fewer (docs/performance.md).

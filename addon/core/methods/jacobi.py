@@ -8,8 +8,8 @@ GROUP_PATHS_JACOBI first rays a group.
 """
 from __future__ import annotations
 
-from .. import walk as stages
-from ..jacobi import jacobi_chunk, jacobi_chunks
+from . import walk_stages as stages
+from .jacobi_iteration import jacobi_chunk, jacobi_chunks
 from ..names import JACOBI
 from .base import Integrator
 from .walk import Walk, chunks_per_group

@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import math
 
-from .. import walk as stages
-from ..first_shot import Gathering, pilot_irradiance
+from . import walk_stages as stages
+from .first_shot import Gathering, pilot_irradiance
 from ..names import GATHERED, TWO_WAY
-from ..plan import MEASURED_STOP_CHUNKS, MIN_MEASURED_CHUNKS, chunk_paths_for
-from ..two_way import GENERATION_RAYS, direct_samples, rays_per_path, two_way_chunk
+from ..estimate.plan import MEASURED_STOP_CHUNKS, MIN_MEASURED_CHUNKS, chunk_paths_for
+from .two_way_iteration import GENERATION_RAYS, direct_samples, rays_per_path, two_way_chunk
 from .base import GatheringIntegrator, Method, solve_gathering, spec_gathering
 
 # The two-way iteration needs this many first-generation rays a patch in a chunk: with fewer,

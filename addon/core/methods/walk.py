@@ -9,11 +9,11 @@ measured. Small chunks of the shot walk are traced together in groups (one wavef
 """
 from __future__ import annotations
 
-from .. import walk as stages
-from ..first_shot import gather_samples
-from ..gathered_walk import gathered_chunk
+from . import walk_stages as stages
+from .first_shot import gather_samples
+from .gathered_walk import gathered_chunk
 from ..names import GATHERED, SHOT, WALK
-from ..two_way import rays_per_path as gathered_rays_per_path
+from .two_way_iteration import rays_per_path as gathered_rays_per_path
 from .base import GatheringIntegrator, Integrator, Method, solve_gathering, spec_gathering
 
 # Grouped chunks: up to GROUP_MAX_CHUNKS chunks (a power of two, so that a run of MIN_CHUNKS

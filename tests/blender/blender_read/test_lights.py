@@ -8,7 +8,7 @@ import pytest
 
 from addon.blender_read import SceneError, lights as lights_io
 from addon.blender_read.selection import read_selection
-from addon.core.lights import AreaLight, PointLight, SunLight, WorldLight
+from addon.core.lights.lights import AreaLight, PointLight, SunLight, WorldLight
 
 from ..conftest import box_arrays, build_test_scene, make_object, principled, result_objects
 

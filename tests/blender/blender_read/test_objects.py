@@ -9,7 +9,7 @@ from addon.bpy_free import pipeline
 from addon.blender_read.selection import read_selection
 from addon.bpy_free import patches, worker
 from addon.bpy_free.cleaning import degenerate_area
-from addon.core import meshing
+from addon.core.mesh import meshing
 
 from ..conftest import make_object, mesh_arrays, read_colours, result_objects
 from ..test_extension import configure

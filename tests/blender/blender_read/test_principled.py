@@ -9,7 +9,7 @@ from addon.blender_read import images
 from addon.blender_read.materials import _LAYERS_COUNTED as LAYERS, material_colours, surface_terms, transport_terms
 from addon.blender_read.selection import read_selection
 from addon.bpy_free import pipeline
-from addon.core import principled as core
+from addon.core.materials import principled as core
 
 from ..conftest import box_arrays, make_object, read_colours, result_objects
 from ..test_extension import configure

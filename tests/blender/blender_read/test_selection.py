@@ -758,7 +758,7 @@ def _mixed_objects(context):
 
 
 def test_patch_count_is_the_meshings_count_without_meshing(blender):
-    from addon.core import meshing
+    from addon.core.mesh import meshing
 
     objects = _mixed_objects(blender)
     for size in (10.0, 1.0, 0.5, 0.31, 0.25, 0.1, 0.037):

@@ -1,0 +1,399 @@
+"""Direct light at the shown mesh's corners: the light's shape inside a patch.
+
+A patch's solved light is its mean over the patch, and the smooth display (``smoothing``)
+interpolates means: a lamp's hot spot narrower than a patch, or the edge of the sun's patch
+through a window, comes out as wide as the patches. The light straight from a lamp, the sun or
+an emitting patch is cheap at a point (a point lamp's or the sun's at a point is one shadow ray,
+exact), so the display takes it point by point, as the classic two-pass methods' final gather
+does for direct light, and keeps the solve for the rest:
+
+    L = corners(H - M) + D
+
+D the direct light at every corner of the shading triangles (the lamps by ``SAMPLES`` stratified
+shadow rays shared among them, each ray to one lamp drawn by what it would give the corner
+unoccluded, ``lamp_choice``: the rays do not multiply with the lamps; each sun by as many of
+its own; each emitting material's patches by as many points chosen by power), M each patch's
+area-weighted mean of D's linear interpolation, H the solved (filtered)
+light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``).
+Every patch's mean is still its solved
+value (float error; ``Surface.corner_values``' own guarantee), so the display moves no light,
+and the solve's noise stays where it was; what D adds is the light's shape within the patch.
+The sky stays in H - M (soft light, which a point estimate would need many rays for).
+
+Beside an emitter a corner's light is heavy-tailed: a corner whose standard error (measured on
+pairs of neighbouring strata where a sample draws one of several lamps or emitting patches:
+``sample_rounds.paired_error``) passes
+NOISE_SHARE of its patch's brightest corner's light is sampled again with MORE_SAMPLES times the
+samples (RETRIES times). (Giving up on the patches still above it, their smooth display beside
+their neighbours' shaped one, drew blocks on the Cornell box's walls by its light.) Where M
+passes H (the interpolation of a peak above its mean, or the solve's noise) the patch's D is
+scaled down to H, its shape kept: H - M is never negative, and the display one smoothing of it
+(the negative part smoothed apart had spread below black and cost a third smoothing's memory);
+where M passes OVERSHOOT times H (a corner a centimetre from an emitter) it shows corners(H)
+alone.
+
+With live lamps (``arriving``, ``light_corners``) the renderer draws the lamps', suns', emitting
+materials' and the world's own light pixel by pixel, and the light shown is H less each patch's
+mean of it (``live_means``), smooth.
+
+A corner is evaluated a hundredth of the way from its point towards its patch's centre (inside
+the patch: a point on the edge shared with a wall standing on it would graze the wall). A
+corner inside another object (a floor's corner under a box; ``visibility.buried_at``) takes the
+mean of its patch's corners that are not: the camera never sees it, and a dark corner would
+spread a dark rim onto the visible part.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from ..refine.adaptive_light import SAMPLE_DIMENSIONS, _emitters, _Points, _sky, chosen_lamps
+from ..lights.lamp_choice import LampChoice, patch_spheres
+from ..lights.lights import SunLight, WorldLight
+from ..names import EXIT_RANDOM, FINITE
+from .sample_rounds import Part, rounds, sampled
+from ..lights.sampling import SourceTable
+from ..methods.tables import WalkTables
+from ..scene.visibility import buried_at
+
+SAMPLES = 16  # shadow rays a corner, for the lamps (a group's) and per emitting material
+MORE_SAMPLES = 8  # times the samples where a corner's light is noisier than NOISE_SHARE
+RETRIES = 2  # (16, 128, 1,024 samples)
+NOISE_SHARE = 0.04  # of the light of the patch's brightest corner: a standard error the eye would see
+OVERSHOOT = 2.0  # a patch's direct light's interpolated mean over its solved light beyond which it is not shown
+INWARD = 0.01  # of the way from a corner to its patch's centre
+LIVE_MEAN_SAMPLES = 64  # points a patch for its mean of the live light (live_means), before the noisy ones' again
+# Sobol' dimensions of a corner's sample: a point of a lamp (2, read as u[3:5]), an emitting
+# patch (u[5]) and a point of it (u[6:9]).
+DIMENSIONS = (0, 1, 2, 3, 4, 5, 6, 7, 8)
+
+
+@dataclass
+class CornerDirect:
+    """Direct light at the corners of the shading triangles: ``corners`` (T,3,3) (or (G,T,3,3)
+    per source group), and each patch's mean of its linear interpolation ``means`` (P,3) (or
+    (G,P,3))."""
+
+    corners: np.ndarray
+    means: np.ndarray
+
+
+def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0,
+                  deadline=None):
+    """The direct light (``CornerDirect``; None where ``has_direct`` is not) at the corners of
+    ``triangles`` (T,3) (of ``scene.vertices``; ``surface`` is ``smoothing.Surface.of`` them)
+    from every lamp and sun and emitting patch of ``scene``. Given
+    ``groups`` > 0, ``light_group`` (L,) the group of each light and ``patch_group`` (P,) of
+    each emitting patch: each group's light apart, its lamps drawn among themselves (their sum
+    is the whole's light; the whole's own draws all its lamps at once). ``deadline`` (a
+    ``time.perf_counter()`` reading): the noisy corners sampled again as time allows
+    (``sample_rounds``)."""
+    if not has_direct(scene):
+        return None
+    P = scene.patch_count
+    keys, first, corner_key = np.unique(surface.point.ravel().astype(np.int64) * P + np.repeat(surface.triangle_patch, 3),
+                                        return_index=True, return_inverse=True)
+    patch = keys % P
+    del keys
+    position = scene.vertices[np.asarray(triangles).ravel()[first]]
+    del first
+    towards = surface.patch_centroid[patch]  # (in place: four (n,3) temporaries were most of this stage's memory)
+    towards -= position
+    towards *= INWARD
+    position += towards
+    del towards
+    value = direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline)  # ([G,]n,3)
+    _fill_buried(scene.geometry, position, patch, value)
+    if not groups:  # (the whole's corners as written, float32: the memory of the largest scenes)
+        value = value.astype(np.float32)
+    corners = value[..., corner_key.ravel(), :].reshape(value.shape[:-2] + (-1, 3, 3))
+    return CornerDirect(corners, patch_means(surface, corners))
+
+
+def has_direct(scene):
+    """Whether ``scene`` has a lamp or a sun or an emitting patch (the sky alone stays smooth)."""
+    return bool(scene.emission.any()) or has_lamps(scene)
+
+
+def has_live(scene):
+    """Whether ``scene`` has light a renderer draws live (``live_means``): a lamp, a sun, an
+    emitting patch or the world."""
+    return bool(scene.emission.any()) or bool(scene.lights.lights)
+
+
+def has_lamps(scene):
+    """Whether ``scene`` has a lamp or a sun (a light other than the world)."""
+    return any(not isinstance(light, WorldLight) for light in scene.lights.lights)
+
+
+def patch_means(surface, corners):
+    """([G,]P,3) each patch's area-weighted mean of the linear interpolation of ``corners``
+    ([G,]T,3,3)."""
+    if corners.ndim == 4:
+        return np.stack([patch_means(surface, part) for part in corners])
+    return np.stack([surface._patch_means(np.ascontiguousarray(corners[:, :, c], dtype=np.float64).ravel())
+                     for c in range(3)], axis=1)
+
+
+def _unit_points(g, position, patch):
+    """(3,n) unit-space points of world ``position`` (n,3) of ``patch``, in its region's frame."""
+    unit = (position - g.centre) / g.diagonal
+    if g.regions is not None:
+        unit -= g.regions.centre[g.regions.of(patch)]
+    return unit.T
+
+
+class _Corners:
+    """A block of corners as ``adaptive_light``'s lamps and emitters read sample points: unit-space
+    origins (pushed off), normals, offsets, surface points and world positions; ``anchor`` and
+    ``local`` as ``adaptive_light._Points``'."""
+
+    def __init__(self, g, rows, surface_unit, world, anchor=None, local=None):
+        self.rows, self.anchor, self.local = rows, anchor, local
+        self.normal = g.patch_normal_rows.take(rows, axis=1).astype(np.float64)
+        self.offset = g.ray_offsets(rows, np.float64)
+        self.surface = surface_unit
+        self.x = surface_unit + self.normal * self.offset
+        self.world = world
+
+    def offset_of(self, live):
+        return self.offset[live] if np.ndim(self.offset) else self.offset
+
+
+def _sources(scene, light_group, patch_group, groups, sky=False):
+    """[(group, add, paired)] each group's lamps, one of them drawn for each sample by what they
+    would give its point (``lamp_choice``; each sun apart: ``_lamp_sources``), each emitting group (and each world:
+    ``sky``) as ``add(tables, points, u, value)`` adds its light at sample points
+    (``adaptive_light``), in the order of the lights; ``paired``: a choice among lamps or
+    emitting patches, whose error is measured on pairs of its strata (``sample_rounds.sampled``)."""
+    power = scene.patch_area * scene.emission.mean(axis=1)
+    emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
+    parts, lamps = [], {}
+    for k, light in enumerate(scene.lights.lights):
+        group = int(light_group[k]) if groups else 0
+        if isinstance(light, WorldLight):
+            if sky:
+                parts.append((group, partial(_sky, worlds=[light]), False))
+            continue
+        if group not in lamps:  # (a group's lamps one source, where its first lamp is)
+            lamps[group] = []
+            parts.append((group, lamps[group], None))
+        lamps[group].append(light)
+    parts = [part for group, add, paired in parts
+             for part in (_lamp_sources(group, add) if paired is None else [(group, add, paired)])]
+    for group in np.unique(emitter_group[power > 0]):
+        mine = np.where(emitter_group == group, power, 0.0)
+        parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine), True))
+    return parts
+
+
+def _lamp_sources(group, lamps):
+    """[(group, add, paired)] a group's lamps: each sun a source of its own (its light is seldom
+    what it would be unoccluded: through a window, most corners of a room see none of it; drawn
+    with the lamps it took their samples: 2.6x the rays in the window room), the other lamps one
+    source, a lamp drawn for each sample (``lamp_choice``)."""
+    placed = [light for light in lamps if not isinstance(light, SunLight)]
+    out = []
+    for light in lamps:
+        if isinstance(light, SunLight) or len(placed) == 1:
+            out.append((group, partial(chosen_lamps, choice=LampChoice([light])), False))
+        elif light is placed[0]:
+            out.append((group, partial(chosen_lamps, choice=LampChoice(placed)), True))
+    return out
+
+
+def direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline=None, spent=None):
+    """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
+    group's lamps and each emitting group apart (``_part_at``), added up into its group's row;
+    retries within ``deadline`` (``sample_rounds``)."""
+    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
+    out = np.zeros((max(groups, 1), len(patch), 3))
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 28,))))
+    sources = _sources(scene, light_group, patch_group, groups)
+    with tables.numpy_turn:
+        parts = [_part_at(tables, position, patch, rng, add, paired) for _, add, paired in sources]
+        means = rounds(parts, len(patch), samples, RETRIES, MORE_SAMPLES, deadline, spent)
+    for (group, _, _), mean in zip(sources, means):
+        out[group] += mean
+    return out if groups else out[0]
+
+
+def _part_at(tables, position, patch, rng, add, paired=False):
+    """The ``sample_rounds.Part`` of one group's lamps or one emitting group
+    (``add(tables, points, u, value)``) at the points: a corner is noisy where its standard
+    error passes NOISE_SHARE of its patch's brightest corner's light (beside an emitter the
+    light is heavy-tailed)."""
+    g = tables.geometry
+
+    def sample(rows, count):
+        def points(block, local, u):
+            at = rows[block]
+            unit = _unit_points(g, position[at], patch[at])[:, local]
+            anchor = (position[at], g.patch_normal_rows.take(patch[at], axis=1).T.astype(np.float64), 0.0)
+            return _Corners(g, patch[at][local], unit, position[at].T[:, local], anchor, local)
+        return sampled(tables, len(rows), count, rng, add, points, DIMENSIONS, np.float32, paired)  # (as shown)
+
+    def noise(value, error):
+        grey = value.sum(axis=1)
+        brightest = np.zeros(patch.max(initial=0) + 1)
+        np.maximum.at(brightest, patch, grey)
+        allowed = NOISE_SHARE * brightest[patch]
+        return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
+
+    return Part(sample, noise)
+
+
+def _fill_buried(g, position, patch, value):
+    """Gives each corner inside another object (``visibility.buried_at``) the mean of its patch's
+    corners that are not (0 where none is), in place; ``value`` ([G,]n,3)."""
+    buried_patches = g.buried
+    if buried_patches is None:
+        return
+    candidates = np.flatnonzero(np.isin(patch, np.concatenate([buried_patches.patch, buried_patches.whole])))
+    if not candidates.size:
+        return
+    rows = patch[candidates]
+    pushed = _unit_points(g, position[candidates], rows) + g.patch_normal_rows.take(rows, axis=1) * g.ray_offsets(rows, np.float64)
+    inside = candidates[buried_at(g, pushed, rows)]
+    if not inside.size:
+        return
+    seen = np.ones(len(patch), bool)
+    seen[inside] = False
+    count = np.bincount(patch, weights=seen, minlength=g.patch_count)
+    for part in value.reshape((-1,) + value.shape[-2:]):
+        for c in range(3):
+            total = np.bincount(patch, weights=part[:, c] * seen, minlength=g.patch_count)
+            part[inside, c] = np.divide(total, count, out=np.zeros_like(total), where=count > 0)[patch[inside]]
+
+
+def scaled(surface, direct, factor, in_place=False):
+    """``direct`` times per-patch ``factor`` (P,3) (a reflectivity: the reflected light's share);
+    ``in_place``: ``direct`` itself, changed (the memory of a copy)."""
+    if not in_place:
+        return CornerDirect(direct.corners * factor[surface.triangle_patch][:, None, :], direct.means * factor)
+    direct.corners *= factor[surface.triangle_patch][:, None, :]
+    direct.means *= factor
+    return direct
+
+
+def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float64):
+    """(T,3,3) the corners shown for per-patch ``values`` (P,3) whose direct part is ``direct``
+    (None: ``Surface.corner_values`` alone): corners(values - M) + D (the module's docstring),
+    D scaled on the patches where M passes the value (``_fitted``). With ``parts`` (S,P,3), each
+    group's values as linear maps of the whole's make them (adding up to ``values``), and
+    ``part_direct`` their CornerDirect, also (S,T,3,3) each group's corners, adding up to the
+    whole's. Made in float64, given as ``dtype`` (the parts; the whole too where there are none:
+    float32, as they are written, half the memory)."""
+    maps = parts is not None
+    if direct is None:
+        if not maps:
+            return surface.corner_values(values, dtype=dtype)
+        whole, apply = surface.corner_values(values, return_filter=True)
+        return whole, apply(parts, dtype)
+    scale = _fitted(values, direct.means)
+    shown_corners, apply = surface.corner_values(values - direct.means * scale, return_filter=True) if maps else (
+        surface.corner_values(values - direct.means * scale, dtype=dtype), None)
+    _add_kept(shown_corners, direct.corners, scale, surface.triangle_patch)
+    if not maps:
+        return shown_corners
+    each = apply(parts - part_direct.means * scale, dtype)
+    for part, corners in zip(each, part_direct.corners):
+        _add_kept(part, corners, scale, surface.triangle_patch)
+    return shown_corners, each
+
+
+def _fitted(values, means):
+    """(P,3) each patch's scale of its direct light: 1, or its value over its direct light's
+    interpolated mean where that is more (the shape kept, the mean the patch's: nothing of the
+    rest below 0), 0 where the mean passes OVERSHOOT times the value."""
+    scale = np.divide(values, means, out=np.ones_like(values), where=means > values)
+    scale[(means > OVERSHOOT * values).any(axis=1)] = 0.0
+    return scale
+
+
+def _add_kept(out, corners, scale, triangle_patch, block=1 << 16):
+    """``out`` (T,3,3) += ``corners`` (T,3,3) times their patch's ``scale`` (P,3), a block of
+    triangles at a time (a scaled copy of the corners was the largest array of the smoothing)."""
+    if (scale == 1).all():
+        out += corners
+        return
+    for start in range(0, len(corners), block):
+        rows = slice(start, start + block)
+        out[rows] += corners[rows] * scale[triangle_patch[rows]][:, None, :]
+
+
+def arriving(surface, scene, result, live=False, deadline=None):
+    """(P,3) the light arriving (``Surface.arriving_light``: noise filtered); ``live``: less
+    the lamps', suns', emitting patches' and world's (``live_light``, within ``deadline``),
+    which the renderer draws itself."""
+    irradiance = result.irradiance - live_light(scene, result, deadline) if live else result.irradiance
+    return surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity)
+
+
+def light_corners(surface, scene, light, direct, live=False, dtype=np.float64):
+    """(T,3,3) the light arriving ``light`` (``arriving``) shown at the corners with the direct
+    light's shape (``shown``, given as ``dtype``; ``direct`` the CornerDirect of every source);
+    ``live``: smooth alone (the renderer draws every lamp's, sun's, emitter's and the world's own
+    light)."""
+    return shown(surface, light, None if live else direct, dtype=dtype)
+
+
+def live_light(scene, result, deadline=None):
+    """(P,3) each patch's mean of the light a renderer draws live (every source's direct light):
+    the solve's own, where its chunks gathered it apart (``SolveResult.direct_irradiance``: what
+    is left of the total is then the reflected light with its own noise alone), else
+    ``live_means`` (within ``deadline``), an estimate of its own (the light left carries the noise of both)."""
+    if result.direct_irradiance is not None:
+        return result.direct_irradiance
+    return live_means(scene, seed=result.seed, light=result.irradiance, deadline=deadline)
+
+
+def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0,
+               deadline=None, spent=None, rows=None):
+    """([G,]P,3) each patch's mean of the light a renderer draws live where the lamps, suns,
+    emitting materials and the world light the surfaces themselves (``LIVE`` results): their
+    direct light, from ``samples`` stratified points over the patch's visible part, every lamp
+    and emitting group looked at from each (the world along one cosine ray). A patch whose mean's standard error passes NOISE_SHARE of its solved
+    ``light`` (P,3), or of the mean itself, is sampled again with MORE_SAMPLES times as many
+    points, RETRIES times (beside an emitter the light is heavy-tailed), within ``deadline``.
+    Given ``groups`` > 0, ``light_group`` (L,) and ``patch_group`` (P,): each group's
+    (``corner_direct``). ``rows``: those patches' alone, (n,3) (a pilot's)."""
+    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
+    rows = np.arange(scene.patch_count) if rows is None else np.asarray(rows, np.int64)
+    out = np.zeros((max(groups, 1), len(rows), 3))
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 27,))))
+    spheres = patch_spheres(scene) if has_lamps(scene) else None
+    sources = _sources(scene, light_group, patch_group, groups, sky=True)
+    with tables.numpy_turn:
+        parts = [_means_of(tables, rows, rng, add, None if light is None else light[rows], spheres, paired)
+                 for _, add, paired in sources]
+        means = rounds(parts, len(rows), samples, RETRIES, MORE_SAMPLES, deadline, spent)
+    for (group, _, _), mean in zip(sources, means):
+        out[group] += mean
+    return out if groups else out[0]
+
+
+def _means_of(tables, patches, rng, add, light, spheres, paired=False):
+    """The ``sample_rounds.Part`` of one source's mean light over each of ``patches``
+    (``live_means``); ``spheres`` (``lamp_choice.patch_spheres``) the patches' anchors where
+    lamps are chosen."""
+    g = tables.geometry
+
+    def points(rows, local, u):
+        anchor = None if spheres is None else (spheres[0][rows], g.patch_normal_rows.take(rows, axis=1).T.astype(
+            np.float64), spheres[1][rows])
+        return _Points(g, rows[local], u, anchor, local)
+
+    def sample(rows, count):
+        rows = patches[rows]
+        return sampled(tables, len(rows), count, rng, add, lambda block, local, u: points(rows[block], local, u),
+                       SAMPLE_DIMENSIONS, paired=paired)
+
+    def noise(mean, error):
+        shown_light = mean.sum(axis=1) if light is None else np.maximum(light.sum(axis=1), mean.sum(axis=1))
+        allowed = NOISE_SHARE * shown_light
+        return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
+
+    return Part(sample, noise)

@@ -1,0 +1,412 @@
+"""Smooth display of per-patch light: corner values without seams, and a noise filter.
+
+Both work on the scene's triangles as the solver sees them (world positions, the patch of each
+triangle), whatever object each came from.
+
+Welding. Corners are joined by position, not by vertex index: two vertices closer than ``weld``
+on every axis are one point (eight grids of cell 2*weld, shifted by half a cell on each axis, and
+their cells' minimum labels propagated to a fixed point), so pieces of different objects that touch
+share their corners. Points more than 2*sqrt(3)*weld apart are never joined in one step.
+
+Creases. Every corner carries its patch's normal (the area-weighted mean of the patch's triangle
+normals). A corner's value is built only from the corners at its point whose normal is within
+``crease_angle`` of its own: a wall and the ceiling keep their own values at their shared edge,
+and back-to-back faces never mix. Points whose normals all lie within half the angle of their mean
+are smooth (every pair compatible) and take one sum per point; only the other points ("crease
+points") are handled pair by pair, so memory stays linear in the triangles.
+
+Mean preservation (``corner_values``). The corners start as the area-weighted average of the
+compatible corners around them (a continuous field). Then, ``iterations`` times, each patch's
+missing light (its value less the area-weighted mean of the linear interpolation over its
+triangles) is spread the same way, continuously, over the corners around it (over-relaxed by 1.5,
+values clipped at 0). A last step scales each patch's corners by value / mean, which makes every
+patch's mean exactly its value (float error) whatever the iteration count and whatever the mesh;
+what the iterations buy is small jumps left by that last step where a continuous answer exists
+(benchmarks/results/smoothing.md); a sharp step of light across a smooth joint has no
+non-negative continuous answer, and keeps part of its step. Where light falls off faster than a
+patch can follow, the continuous answer swings corners up and down row after row (bands): where
+the iterations turn a patch's corners against the plain average's, it and its neighbours keep
+the plain average, scaled, in every channel if in one (``_ringing``). Every step keeps values
+non-negative (averages of non-negative values, a clip at 0, a non-negative scale); negative
+values (a signed estimator's noise) count as 0, non-finite ones are refused.
+
+Noise (``filter_noise``): ``noise_filter``.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from .noise_filter import NOISE_CUTOFF, NoiseFilter, _checked, _sum
+from ..mesh.welding import run_starts, weld_points
+
+CREASE_ANGLE = 30.0  # degrees, as Blender's auto smooth
+WELD_FRACTION = 1e-4  # of the median patch's side
+ITERATIONS = 10
+# A patch rings where its corners' deviations from its value, after the iterations, correlate
+# below -RINGING with the plain average's (turned against it, not a rounding's sign).
+RINGING = 0.5
+RINGING_BLOCK = 1 << 16  # corners compared at a time (a few hundred kB of temporaries)
+SIGNIFICANT = 1e-3  # nor where the iterations moved its corners by less than this share of its value (RMS)
+RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
+
+
+# A corner's value never falls below this share of the darkest patch meeting at it (a valley may
+# dip below its patches, as a smooth surface through their means must; black it may not).
+LOWEST_SHARE = 0.5
+
+
+@dataclass
+class Surface(NoiseFilter):
+    """The scene's triangles as one welded surface, built once for any number of value sets.
+
+    point          (T,3) welded point of every triangle corner
+    triangle_area  (T,)  area of each triangle
+    patch_area     (P,)  area of each patch
+    patch_normal   (P,3) unit normal of each patch (the normal each of its corners carries)
+    patch_centroid (P,3) area-weighted centre of each patch
+    """
+    point: np.ndarray
+    triangle_patch: np.ndarray
+    triangle_area: np.ndarray
+    patch_area: np.ndarray
+    patch_normal: np.ndarray
+    patch_centroid: np.ndarray
+    cos_crease: float
+    smooth_point: np.ndarray  # (n,) bool: every pair of corners at the point compatible
+    pairs: tuple  # (corner, other corner) flat indices, compatible, at crease points
+    hidden: np.ndarray | None = None  # (P,) bool: patches no camera sees, which no neighbour's corners read
+    # (T*3,) each corner's weight in its patch's mean over the part seen (covered.visible_corner_weights), and
+    # (P,) that part's area; None: every patch seen whole (a third of each triangle's area a corner)
+    visible: np.ndarray | None = None
+    visible_area: np.ndarray | None = None
+
+    @property
+    def patch_count(self):
+        return len(self.patch_area)
+
+    @classmethod
+    def of(cls, vertices, triangles, triangle_patch, patch_count=None, crease_angle=CREASE_ANGLE, weld=None, hidden=None,
+           visible=None):
+        """``vertices`` (V,3) world positions, ``triangles`` (T,3) vertex indices, ``triangle_patch``
+        (T,) patch of each triangle; ``weld`` a length (default WELD_FRACTION of the median
+        patch's side, at least float32 rounding of the coordinates); ``hidden`` (P,) bool the
+        patches no camera sees (``covered.hidden_patches``: under a box, behind a panel that
+        touches them), whose light, nothing or little, joins no visible neighbour's corners;
+        ``visible`` (T,3) each corner's weight in its patch's mean over the part seen (partly
+        buried patches: ``covered.visible_corner_weights``), the mean every patch's corners keep."""
+        vertices = np.asarray(vertices, np.float64)
+        triangles = np.asarray(triangles)
+        triangle_patch = np.asarray(triangle_patch)
+        if not 0.0 <= crease_angle <= 180.0:
+            raise ValueError(f"crease angle {crease_angle} is not between 0 and 180 degrees")
+        P = int(patch_count if patch_count is not None else (triangle_patch.max() + 1 if len(triangle_patch) else 0))
+        first = vertices[triangles[:, 0]]
+        cross = np.cross(vertices[triangles[:, 1]] - first, vertices[triangles[:, 2]] - first)
+        triangle_area = 0.5 * np.linalg.norm(cross, axis=1)
+        patch_area = np.bincount(triangle_patch, weights=triangle_area, minlength=P)
+        normal = np.stack([np.bincount(triangle_patch, weights=cross[:, k], minlength=P) for k in range(3)], axis=1)
+        length = np.linalg.norm(normal, axis=1, keepdims=True)
+        patch_normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
+        if weld is None:
+            side = np.sqrt(np.median(patch_area[patch_area > 0])) if (patch_area > 0).any() else 1.0
+            extent = np.abs(vertices).max() if len(vertices) else 1.0
+            weld = max(WELD_FRACTION * side, 4 * np.finfo(np.float32).eps * extent)
+        centroid = np.zeros((P, 3))
+        for k in range(3):  # over axes, not elements
+            centre = vertices[triangles, k].mean(axis=1) * triangle_area
+            centroid[:, k] = np.bincount(triangle_patch, weights=centre, minlength=P)
+        del centre, first, cross
+        centroid = np.divide(centroid, patch_area[:, None], out=np.zeros((P, 3)),
+                             where=patch_area[:, None] > 0)
+        point = weld_points(vertices, weld)[triangles]
+        cos_crease = float(np.cos(np.radians(crease_angle)))
+        smooth_point, pairs = _crease_pairs(point, triangle_patch, patch_normal, cos_crease)
+        hidden = None if hidden is None or not np.any(hidden) else np.asarray(hidden, bool)
+        if visible is not None:
+            visible = np.asarray(visible, np.float64).reshape(-1)
+            visible_area = np.bincount(np.repeat(triangle_patch, 3), weights=visible, minlength=P)
+        return cls(point, triangle_patch, triangle_area, patch_area, patch_normal, centroid, cos_crease,
+                   smooth_point, pairs, hidden, visible, None if visible is None else visible_area)
+
+    # -- corner values -------------------------------------------------------------------------
+    def _averaging(self):
+        """What step (a) needs, fixed for the surface: per corner weight, the reciprocal of the
+        compatible weight around it (0 where it is zero), the crease corners and their pairs
+        renumbered among them."""
+        point = self.point.ravel()
+        w = np.repeat(self.triangle_area if self.hidden is None else self.triangle_area * ~self.hidden[self.triangle_patch], 3)
+        total = np.bincount(point, weights=w, minlength=len(self.smooth_point))[point]
+        crease = np.flatnonzero(~self.smooth_point[point])
+        c, o = self.pairs
+        local = np.searchsorted(crease, c)
+        if len(crease):
+            total[crease] = np.bincount(local, weights=w[o], minlength=len(crease))
+        inverse = np.divide(1.0, total, out=np.zeros_like(total), where=total > 0)
+        return point, w, inverse, crease, local, o
+
+    def _average_corners(self, x, averaging):
+        """(a): every corner's value (T*3,) the area-weighted mean of the compatible corners at
+        its point; 0 where they all have zero area."""
+        point, w, inverse, crease, local, o = averaging
+        wx = w * x
+        out = np.bincount(point, weights=wx, minlength=len(self.smooth_point))[point]
+        if len(crease):
+            out[crease] = np.bincount(local, weights=wx[o], minlength=len(crease))
+        out *= inverse
+        return out
+
+    def _corner_lowest(self, x, averaging):
+        """(T*3,) the lowest of the compatible corners' values ``x`` at each corner's point."""
+        point, _, _, crease, local, o = averaging
+        around = np.full(len(self.smooth_point), np.inf)
+        np.minimum.at(around, point, x)
+        lowest = around[point]
+        if len(crease):
+            pairs = np.full(len(crease), np.inf)
+            np.minimum.at(pairs, local, x[o])
+            lowest[crease] = pairs
+        return lowest
+
+    def _patch_means(self, x):
+        """Area-weighted mean (P,) of the linear interpolation of corner values (T*3,) over each
+        patch (over the part seen, where ``visible`` is given)."""
+        if self.visible is not None:
+            tri = (x * self.visible).reshape(-1, 3).sum(axis=1)
+            sums = _sum(self.triangle_patch, tri, self.patch_count)
+            return np.divide(sums, self.visible_area, out=np.zeros_like(sums), where=self.visible_area > 0)
+        tri = x[0::3] + x[1::3]  # (a triangle's three corners added in order: as sum(axis=1) adds them, 8x faster)
+        tri += x[2::3]
+        tri *= self.triangle_area / 3.0
+        sums = _sum(self.triangle_patch, tri, self.patch_count)
+        return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
+
+    def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64):
+        """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
+        compatible corners, the area-weighted mean of each patch's linear interpolation equal to
+        its value (negative values taken as 0), non-negative. With ``return_filter``, also
+        ``apply`` (``LinearCorners``): the same steps with these values' clips, floors and final
+        scales held fixed, a linear map of (P,k) or (S,P,k) values to (T,3,k) or (S,T,3,k) corners
+        whose value at ``patch_values`` is these corners (float error), so that parts of the
+        values (each source's) give corners that add up to these. Made in float64 a channel at
+        a time, given as ``dtype``."""
+        # a signed estimator's slightly negative patches show as black: light is never negative
+        checked = _checked(patch_values, self.patch_count, "patch values")
+        values = np.maximum(checked, 0.0)
+        corner_patch = np.repeat(self.triangle_patch, 3)
+        averaging = self._averaging()
+        out = np.empty((len(self.triangle_patch), 3, values.shape[1]), dtype)
+        records, plain_scales = [], []
+        rings = np.zeros(self.patch_count, bool)
+        for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
+            channel = np.ascontiguousarray(values[:, k])
+            record = {} if return_filter else None
+            x, plain_scale, ringing = self._corner_channel(channel, corner_patch, averaging, iterations, record)
+            out[:, :, k] = x.reshape(-1, 3)
+            del x  # (not held through the next channel's steps)
+            records.append(record)
+            plain_scales.append(plain_scale)
+            rings |= ringing
+        # patches that ring in any channel take the plain average in every one (no colour fringes);
+        # it is made again here (one averaging pass) rather than kept from each channel's steps
+        flat_out = out.reshape(-1, values.shape[1])
+        for k, (record, plain_scale) in enumerate(zip(records, plain_scales)):
+            if rings.any():
+                plain = self._average_corners(np.ascontiguousarray(values[:, k])[corner_patch], averaging)
+                _put_rings(flat_out[:, k], plain, plain_scale, rings, corner_patch)
+            if record is not None:
+                record["rings"], record["plain_scale"] = rings, plain_scale
+        if not return_filter:
+            return out
+        return out, LinearCorners(self, checked > 0, corner_patch, averaging, int(iterations), records)
+
+    def _corner_channel(self, values, corner_patch, averaging, iterations, record=None):
+        """One channel's corners (T*3,), the scales (P,) of its plain average (no iterations) and
+        its ringing patches (P,) bool (``_ringing``); ``record`` (a dict), where given, keeps the
+        floored corners of each step, the floors' patches, the final scales and the flat corners."""
+        x = self._average_corners(values[corner_patch], averaging)
+        floor = LOWEST_SHARE * self._corner_lowest(self._seen_values(values, corner_patch), averaging)
+        floor[np.isinf(floor)] = 0.0  # (a point only hidden patches meet)
+        if record is not None:
+            record["lowest"] = self._corner_lowest_patch(values, corner_patch, averaging)
+            record["floored"] = []
+        for _ in range(int(iterations)):
+            # each patch's missing light, spread continuously over the corners around it
+            missing = (values - self._patch_means(x))[corner_patch]
+            x += RELAXATION * self._average_corners(missing, averaging)
+            if record is not None:
+                record["floored"].append(np.flatnonzero(x < floor))
+            # a bright patch beside dim ones would push its neighbours' far corners down to black:
+            # never below a share of the darkest patch meeting there (the last scale keeps means)
+            np.maximum(x, floor, out=x)
+        del floor  # (a (T*3,) array less while the plain average is made)
+        x, scale, flat = self._scale_to(values, x, corner_patch)
+        # (no iterations, made again rather than kept through them: what ringing falls back to)
+        plain, plain_scale, _ = self._scale_to(values, self._average_corners(values[corner_patch], averaging), corner_patch)
+        if record is not None:
+            record["scale"], record["flat"] = scale, flat
+        return x, plain_scale, self._ringing(values, x, plain, corner_patch)
+
+    def _scale_to(self, values, x, corner_patch):
+        """Corners ``x`` (T*3,) scaled in place to each patch's value (exact at last; a patch
+        whose corners all came to zero keeps its own value, flat): (x, scales (P,), flat corners)."""
+        means = self._patch_means(x)
+        scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
+        x *= scale[corner_patch]
+        flat = np.flatnonzero((means <= 0)[corner_patch])
+        x[flat] = values[corner_patch[flat]]
+        return x, scale, flat
+
+    def _ringing(self, values, x, plain, corner_patch):
+        """(P,) bool: the patches whose corners the iterations turned against the plain average's
+        (their deviations from the patch's value correlated below -RINGING), and the patches
+        around them: light falling off faster than a patch can follow, where keeping every mean
+        swings corners up and down row after row (bands); they keep the plain average."""
+        agree, own_size, plain_size = (np.zeros(self.patch_count) for _ in range(3))
+        for start in range(0, len(x), RINGING_BLOCK):  # (a block of corners at a time: no (T*3,) temporaries)
+            rows = slice(start, start + RINGING_BLOCK)
+            patches = corner_patch[rows]
+            own, other = x[rows] - values[patches], plain[rows] - values[patches]
+            agree += _sum(patches, own * other, self.patch_count)
+            own_size += _sum(patches, own * own, self.patch_count)
+            plain_size += _sum(patches, other * other, self.patch_count)
+        # (where the iterations moved nothing that matters, the correlation is a rounding's sign)
+        counts = np.bincount(corner_patch, minlength=self.patch_count)
+        moved = own_size > counts * np.square(SIGNIFICANT * values)
+        ringing = moved & (agree < -RINGING * np.sqrt(own_size * plain_size))
+        # and the patches around them, so that the steep part is plain on both sides of each corner
+        point = self.point.ravel()
+        touched = np.zeros(len(self.smooth_point), bool)
+        blocks = [slice(start, start + RINGING_BLOCK) for start in range(0, len(x), RINGING_BLOCK)]
+        for rows in blocks:
+            touched[point[rows][ringing[corner_patch[rows]]]] = True
+        rings = np.zeros(self.patch_count, bool)
+        for rows in blocks:
+            rings[corner_patch[rows][touched[point[rows]]]] = True
+        return rings
+
+    def _seen_values(self, values, corner_patch):
+        """(T*3,) each corner's patch value, inf at hidden patches' (no floor is a share of them)."""
+        x = values[corner_patch]
+        return x if self.hidden is None else np.where(self.hidden[corner_patch], np.inf, x)
+
+    def _corner_lowest_patch(self, values, corner_patch, averaging):
+        """(T*3,) the patch of the lowest of the compatible corners' values at each corner's
+        point (``_corner_lowest``'s, as a patch: what the floor is a share of)."""
+        point, _, _, crease, local, o = averaging
+        x = self._seen_values(values, corner_patch)
+        order = np.lexsort((x, point))
+        first = order[run_starts(point[order])]
+        lowest_corner = np.empty(len(self.smooth_point), np.int64)
+        lowest_corner[point[first]] = first
+        lowest = lowest_corner[point]
+        if len(crease):
+            order = np.lexsort((x[o], local))
+            first = order[run_starts(local[order])]
+            lowest[crease[local[first]]] = o[first]
+        return corner_patch[lowest]
+
+
+class LinearCorners:
+    """``Surface.corner_values`` with the clips, floors and scales of one set of values held
+    fixed: ``apply(x)``, x (P,k) or (S,P,k), gives (T,3,k) or (S,T,3,k) corners, linear in x."""
+
+    def __init__(self, surface, positive, corner_patch, averaging, iterations, records):
+        self.surface, self.positive, self.corner_patch = surface, positive, corner_patch
+        self.averaging, self.iterations, self.records = averaging, iterations, records
+
+    def __call__(self, x, dtype=np.float64):
+        """The corners of ``x`` (P,k) or (S,P,k), made in float64, given as ``dtype``."""
+        x = np.asarray(x, np.float64)
+        if x.shape[-2:] != self.positive.shape:
+            raise ValueError(f"the corners take values of shape (P, k) = {self.positive.shape} (or (S, P, k)); got {x.shape}")
+        if x.ndim == 3:
+            out = np.empty((len(x), len(self.surface.triangle_patch), 3, x.shape[2]), dtype)
+            for s, part in enumerate(x):  # (one part's float64 steps at a time)
+                out[s] = self(part)
+            return out
+        surface, cp = self.surface, self.corner_patch
+        values = np.where(self.positive, x, 0.0)  # (the whole's negative patches count as 0)
+        out = np.empty((len(surface.triangle_patch), 3, values.shape[1]), dtype)
+        for k, record in enumerate(self.records):  # over colour channels, not elements
+            v = np.ascontiguousarray(values[:, k])
+            corner = surface._average_corners(v[cp], self.averaging)
+            plain = corner.copy()
+            for floored in record["floored"]:
+                corner += RELAXATION * surface._average_corners((v - surface._patch_means(corner))[cp], self.averaging)
+                corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
+            corner *= record["scale"][cp]
+            corner[record["flat"]] = v[cp[record["flat"]]]
+            _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
+            out[:, :, k] = corner.reshape(-1, 3)
+        return out
+
+
+def _put_rings(out, plain, scale, rings, corner_patch, block=RINGING_BLOCK):
+    """``out`` (T*3,) = the plain average ``plain`` x its ``scale`` (P,) at the corners of the
+    patches ``rings`` (P,) bool: a block of corners at a time (no (T*3,) index)."""
+    for start in range(0, len(plain), block):
+        at = np.flatnonzero(rings[corner_patch[start:start + block]]) + start
+        out[at] = plain[at] * scale[corner_patch[at]]
+
+
+def _crease_pairs(point, triangle_patch, patch_normal, cos_crease):
+    """(smooth point flags (n,), compatible (corner, other) pairs at the other points); a
+    corner's normal is its patch's."""
+    p = point.ravel()
+    cp = np.repeat(triangle_patch, 3)
+    n = int(p.max()) + 1 if len(p) else 0
+    mean = np.stack([np.bincount(p, weights=patch_normal[cp, k], minlength=n) for k in range(3)], axis=1)
+    length = np.linalg.norm(mean, axis=1, keepdims=True)
+    mean = np.divide(mean, length, out=np.zeros_like(mean), where=length > 0)
+    dot = np.zeros(len(p))
+    for k in range(3):  # over axes, not elements
+        dot += patch_normal[cp, k] * mean[p, k]
+    half = np.cos(0.5 * np.arccos(np.clip(cos_crease, -1.0, 1.0)))
+    lowest = np.full(n, np.inf)
+    np.minimum.at(lowest, p, dot)
+    del dot
+    smooth = (lowest >= half) & (length[:, 0] > 0)
+    corners = np.flatnonzero(~smooth[p])
+    if len(corners) == 0:
+        return smooth, (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    corners = corners[np.argsort(p[corners], kind="stable")]
+    starts = run_starts(p[corners])
+    sizes = np.diff(np.r_[starts, len(corners)])
+    square = sizes * sizes
+    first = np.repeat(starts, square)
+    size = np.repeat(sizes, square)
+    rank = np.arange(len(first)) - np.repeat(np.cumsum(square) - square, square)
+    c, o = corners[first + rank // size], corners[first + rank % size]
+    keep = np.einsum("ij,ij->i", patch_normal[cp[c]], patch_normal[cp[o]]) >= cos_crease
+    return smooth, (c[keep], o[keep])
+
+
+def corner_values(vertices, triangles, triangle_patch, patch_values, crease_angle=CREASE_ANGLE, iterations=ITERATIONS):
+    """Smooth per-corner values (T,3,k) of per-patch values (P,k) (``Surface.corner_values``)."""
+    surface = Surface.of(vertices, triangles, triangle_patch, len(patch_values), crease_angle)
+    return surface.corner_values(patch_values, iterations)
+
+
+def filter_noise(vertices, triangles, triangle_patch, patch_values, patch_variances, crease_angle=CREASE_ANGLE,
+                 cutoff=NOISE_CUTOFF):
+    """Noise-filtered per-patch values (P,k) (``Surface.filter_noise``)."""
+    surface = Surface.of(vertices, triangles, triangle_patch, len(patch_values), crease_angle)
+    return surface.filter_noise(patch_values, patch_variances, cutoff)
+
+
+def polygon_corner_values(corners, triangles, triangle_patch, corner_patch, corner_point):
+    """(n,3) the value at each polygon corner (its patch ``corner_patch`` (n,), its point
+    ``corner_point`` (n,), indices of the same arrays as ``triangles``), read from ``corners``
+    (T,3,3) at a corner of one of the patch's triangles at that point (every such corner holds the
+    same value: the patch's triangles share its normal, so one crease group at each point).
+    ValueError where a polygon corner is no corner of its patch's triangles."""
+    points = int(max(triangles.max(initial=0), np.max(corner_point, initial=0))) + 1
+    key = (np.asarray(triangle_patch, np.int64)[:, None] * points + triangles).ravel()
+    order = np.argsort(key, kind="stable")
+    wanted = np.asarray(corner_patch, np.int64) * points + corner_point
+    at = np.minimum(np.searchsorted(key, wanted, sorter=order), key.size - 1)
+    found = order[at]
+    if not np.array_equal(key[found], wanted):
+        raise ValueError("a polygon corner is not a corner of its patch's triangles")
+    return np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])[found]
+

@@ -1,0 +1,1 @@
+"""Where chunks run: this machine's threads, or a Dask cluster."""

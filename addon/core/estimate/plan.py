@@ -1,0 +1,113 @@
+"""How a solve splits its paths into chunks and when it stops: what every method shares.
+
+A method sizes its own chunks (``methods``); here are the sizes all start from, the stop rules'
+numbers, and the plan a solve makes of them: the paths it runs at most and a chunk's paths.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .error_model import MAX_PATHS, mse_to_relative_rms, predict
+from ..names import MEASURED, SCALE_PAPER
+
+# A chunk aims at about this many rays: enough wavefront steps that its last short ones cost
+# little, few enough that progress and the batch error estimate come often.
+RAYS_PER_CHUNK = 1 << 20
+MAX_CHUNK_PATHS = 1 << 19
+MIN_CHUNK_PATHS = 128
+# The batch estimate wants this many chunks in a run when the run is small.
+MIN_CHUNKS = 32
+# With stop_rule="measured": never stop on fewer chunks than this, nor run past this many
+# times the planned paths (unless paths= is given as the cap).
+MIN_MEASURED_CHUNKS = 8
+MEASURED_CAP_FACTOR = 64
+# With stop_rule="measured" the run stops once the measured MSE plus MEASURED_STOP_Z of its own
+# standard errors (Batches.mse_upper_bound) meets the target, on at least MEASURED_STOP_CHUNKS
+# chunks: the estimate alone, read after every chunk, stops on its first lucky low reading, and
+# few or heavy-tailed chunks make such readings common.
+MEASURED_STOP_Z = 2.0
+MEASURED_STOP_CHUNKS = 12
+
+
+@dataclass(frozen=True)
+class ChunkPlan:
+    """How a solve splits its paths: the paper's prediction, the stop rule, the most paths it
+    runs (``cap``) and the paths of a chunk."""
+
+    prediction: object
+    measured_rule: bool
+    cap: int
+    chunk: int
+
+
+def chunk_plan(scene, method, estimator, *, paths=None, target_mse=None, threshold=1e-3, stop_rule=None,
+               max_seconds=None):
+    """The chunk plan of a solve of ``method`` (a ``methods`` method) with these arguments. A
+    method whose error the paper's formulas do not predict stops on its measured error."""
+    prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
+    measured_rule = stop_rule == MEASURED or (not method.predicted and target_mse is not None)
+    if measured_rule:
+        planned = method.planned_paths(prediction.paths_for(target_mse))
+        cap = paths if paths is not None else min(MEASURED_CAP_FACTOR * planned, MAX_PATHS)
+    else:
+        planned = paths if paths is not None else prediction.paths_for(target_mse)
+        cap = planned
+    chunk = method.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None,
+                               guessed=measured_rule and paths is None)
+    return ChunkPlan(prediction, measured_rule, int(cap), int(chunk))
+
+
+def chunk_paths_for(expected_path_length, planned_paths, min_chunks=MIN_CHUNKS):
+    """A chunk of about RAYS_PER_CHUNK rays, at least ``min_chunks`` of them in the plan."""
+    by_rays = int(RAYS_PER_CHUNK / max(expected_path_length, 1.0))
+    by_batches = math.ceil(planned_paths / min_chunks)
+    return int(min(MAX_CHUNK_PATHS, max(MIN_CHUNK_PATHS, min(by_rays, by_batches))))
+
+
+def paths_to_target(paths, measured_mse, target_mse, chunk, cap):
+    """The paths a run stopping on its measured error is expected to end at, from its MSE after
+    ``paths`` (which falls as 1 / paths): whole chunks, at least MEASURED_STOP_CHUNKS, at most
+    ``cap``. NaN MSE (fewer than 2 chunks) or target: NaN; a target of 0 (nothing reflected yet)
+    with an error: the cap."""
+    if not measured_mse >= 0 or paths <= 0 or not target_mse >= 0:
+        return math.nan
+    if target_mse == 0 and measured_mse > 0:
+        return float(cap)
+    needed = paths * measured_mse / target_mse if measured_mse > 0 else 0.0
+    chunks = max(MEASURED_STOP_CHUNKS, math.ceil(needed / chunk))
+    return float(min(cap, chunks * chunk))
+
+
+def target_now(target_mse, error_scale, prediction, mean_reflected):
+    """The MSE a measured stop holds a run to: ``target_mse`` on the paper's scale; on the
+    measured scale the same error relative to the run's own mean reflected radiosity b_now,
+    target_mse (b_now / b_ave)^2 (the paper's b_ave: what target_mse was made relative to).
+    NaN (never met) before any path; 0 while nothing is reflected (meets_target waits for light)."""
+    if error_scale == SCALE_PAPER:
+        return target_mse
+    return target_mse * (mean_reflected / prediction.mean_reflected_radiosity) ** 2
+
+
+def relative_error(mse, error_scale, prediction, mean_reflected):
+    """An MSE as a relative RMS error on ``error_scale`` (no error: 0; NaN where unknown)."""
+    if error_scale == SCALE_PAPER:
+        return mse_to_relative_rms(prediction, mse)
+    if mse == 0:
+        return 0.0
+    return math.sqrt(mse) / mean_reflected if mse > 0 and mean_reflected > 0 else math.nan
+
+
+def meets_target(total, target_mse):
+    """Whether a run's batches (``Batches``) meet ``target_mse`` by the measured stop rule. (The
+    batch estimate costs passes over the patches: read only where the rule is used.) Never while
+    nothing is reflected: no error about no light measures nothing (a gathering that has not yet
+    found a narrow spot's cone)."""
+    return total.chunks >= MEASURED_STOP_CHUNKS and total.measured_mse() <= target_mse \
+        and target_bound(total) <= target_mse and total.mean_reflected() > 0
+
+
+def target_bound(total):
+    """The bound the measured stop rule holds to the target: the batches' MSE plus
+    MEASURED_STOP_Z of its standard errors."""
+    return total.mse_upper_bound(MEASURED_STOP_Z)

@@ -1,0 +1,1 @@
+"""What surfaces reflect: the Principled BSDF's diffuse energy, its glossy share, textures over patches."""

@@ -1,0 +1,158 @@
+"""The first reflection of the gathered direct light, as uneven over each patch as the light that
+landed on it (the hit exit of the two-way iteration, ``two_way``).
+
+The gathering samples (``first_shot``) are point sources of what they found
+(``gathered_walk.ReflectedPoints``). Their mean over each patch is the patch reflecting its light
+uniformly, which the first two-way generation carries; what is left of each sample (zero in sum
+over its patch) is shot from its point in cosine directions (``_shoot_left``), and the glossy
+share of a shadow ray's light along its lobe (``_shoot_glossy``, :mod:`.glossy`). Their
+irradiance joins the first generation's.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene import rays
+from ..mesh.faces import ranks_in_runs
+from .gathered_walk import ReflectedPoints
+from .jacobi_iteration import systematic_counts
+from ..lights.sampling import SOBOL, unit_floats
+
+# Rays of a chunk of n paths from the gathering samples: n FIRST_REFLECTION_RAYS.
+FIRST_REFLECTION_RAYS = 3.0
+# The first reflection's rays are cast this many at a time.
+RAY_BLOCK = 1 << 18
+
+
+def reflect_first(tables, gathering, state, samples, paths, rng, parts=None):
+    """The first reflection as uneven over each patch as the light that landed on it (hit exit).
+
+    Each sample k of patch j is a point source of what it found (power p_k,
+    gathered_walk.ReflectedPoints), sum_k p_k = R_j A_j H_j. The samples are uniform points of j,
+    m_j of them, so sources of power sum_k p_k / m_j at them are patch j reflecting R_j H_j
+    uniformly, which the first two-way generation carries (``state.reflected``). What is left
+    (zero in sum over each patch), c_k = p_k - sum / m_j, is shot from the samples: rays
+    allotted in proportion to |c_k|, each carrying an equal share of sum |c| with c_k's sign,
+    a patch's positive and negative rays in pairs of one direction (_paired_ranks). It is small
+    where the direct light is even over a patch; its irradiance (``state.correction``) joins
+    the first generation's. Per source (the samples' ``parts``), a ray carries each group's c_k.
+    A glossy share of the shadow rays' light (:mod:`.glossy`) is no part of p_k nor of the
+    uniform reflection: it is shot from the samples along its lobe (_shoot_glossy)."""
+    C, P = tables.channels, tables.patch_count
+    patch = samples[0]
+    state.reflected = state.reflectivity * state.irradiance
+    points = ReflectedPoints(gathering, tables.geometry, samples, rng)
+    K = points.count
+    power = points.power[:, :C].T
+    rows_power = power if parts is None else points.group_power(gathering, parts, state.groups, C)
+    spread = np.bincount(patch, minlength=P)  # m_j
+    glossy = points.glossy_rows
+    if glossy.size:  # (the lobe's light leaves no patch evenly)
+        lobe_patch = patch.take(points.samples_of(glossy))
+        lobe_power = np.stack([np.bincount(lobe_patch, weights=w, minlength=P) for w in rows_power[:, K:]])
+        state.reflected -= lobe_power / gathering.patch_area
+    correction = np.zeros((rows_power.shape[0], P))
+    total_power = max(float(points.power[:, :C].sum()) / C, 1e-300)
+    _shoot_left(tables, state, points, None if parts is None else rows_power[:, :K], power[:, :K], spread, correction,
+                paths, total_power, rng)
+    if glossy.size:
+        _shoot_glossy(tables, state, points, rows_power[:, K:], correction, paths, total_power, rng)
+    state.correction = correction / gathering.patch_area
+
+
+def _shoot_left(tables, state, points, rows_power, power, spread, correction, paths, total_power, rng):
+    """The first reflection's c_k (each sample's power less its patch's mean; of ``rows_power``
+    (S C,K; None: ``power``) the rays carry, of the total ``power`` (C,K) they are allotted by) shot from the
+    samples; their irradiance times the area added to ``correction``."""
+    P = tables.patch_count
+    patch = points.patch
+
+    def less_mean(rows):
+        mean = np.stack([np.bincount(patch, weights=p, minlength=P) for p in rows]) / np.maximum(spread, 1)
+        return rows - mean.take(patch, axis=1)
+
+    left = less_mean(power)  # c_k
+    rows_left = left if rows_power is None else less_mean(rows_power)
+    size = np.abs(left).mean(axis=0)  # what a sample's rays are allotted by
+    allotted = _allot(state, size, paths, total_power, rng)
+    if allotted is None:
+        return
+    total, count, sample = allotted
+    ray_patch = patch.take(sample)
+    rank, shift = _paired_ranks(ray_patch, (left.sum(axis=0) < 0).take(sample), P, rng)
+    table = SOBOL.rows(int(rank.max(initial=0)) + 1)[:2]
+    for start in range(0, count, RAY_BLOCK):
+        rows = slice(start, min(start + RAY_BLOCK, count))
+        k = sample[rows]
+        u = np.empty((4, k.size), dtype=np.float32)  # (a sample's point is its origin: u[2:4] the direction)
+        u[2:4] = _shifted_points(table, rank[rows], shift.take(ray_patch[rows], axis=1))
+        carried = rows_left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
+        _cast_carried(tables, state, points, k, u, carried, correction)
+
+
+def _shoot_glossy(tables, state, points, rows_power, correction, paths, total_power, rng):
+    """The glossy rows' power (``rows_power`` (S C,G)) shot from their samples along their lobes,
+    rays allotted in proportion to it (as _shoot_left's); irradiance times area into ``correction``."""
+    C = tables.channels
+    size = rows_power.reshape(-1, C, rows_power.shape[1]).sum(axis=0).mean(axis=0)
+    allotted = _allot(state, size, paths, total_power, rng)
+    if allotted is None:
+        return
+    total, count, row = allotted
+    for start in range(0, count, RAY_BLOCK):
+        g = row[start:start + RAY_BLOCK]
+        u = np.zeros((4, g.size), dtype=np.float32)  # (the lobe draws its own directions: ReflectedPoints)
+        carried = rows_power.take(g, axis=1) * (total / count / size.take(g))
+        _cast_carried(tables, state, points, g + points.count, u, carried, correction)
+
+
+def _allot(state, size, paths, total_power, rng):
+    """(total, count, row of each ray) of rays allotted to rows in proportion to ``size`` (n,),
+    FIRST_REFLECTION_RAYS a path for the share ``total / total_power`` (counted in ``state.rays``);
+    None where there is nothing to shoot."""
+    total = float(size.sum())
+    if total <= 0:
+        return None
+    count = max(1, int(np.rint(FIRST_REFLECTION_RAYS * paths * total / total_power)))
+    state.rays += count
+    return total, count, np.repeat(np.arange(size.size), systematic_counts(size, count, rng.random()))
+
+
+def _cast_carried(tables, state, points, rows, u, carried, correction):
+    """Rays from ``points``' rows ``rows`` (uniforms ``u``) carrying ``carried`` (S C,n) power
+    each: what meets a front into ``correction``, what escapes or meets a back into the accounts."""
+    origins, directions = points.unit_rays(rows, u, tables.geometry)
+    hits = rays.cast(tables, origins, directions, points.regions(rows, tables.geometry))
+    correction += _bincount(hits.patch, hits.front, carried, tables.patch_count)
+    state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
+    state.blocked += carried.compress((hits.hit >= 0) & ~hits.front, axis=1).sum(axis=1)
+
+
+def _paired_ranks(ray_patch, negative, P, rng):
+    """The first reflection's correction rays in pairs of one direction: each ray's rank among
+    its patch's rays of its sign ((n,) int64), and a random digital shift of each patch's
+    ((2,P) uint32). Ray r of a patch's rays that carry more than the patch's mean and ray r of
+    those that carry less take Sobol' point r of the patch's shift (each direction uniform,
+    each sign's set evenly spread): the two leave the patch in the same direction from nearby
+    points, and where they land on the same patch their shares, of opposite signs, cancel.
+    ``ray_patch`` is in patch order (the samples are), so a rank is a count of the rays before
+    it in its patch's run with its sign: no sort."""
+    position = ranks_in_runs(np.bincount(ray_patch, minlength=P))  # within its patch's run
+    negative_before = np.cumsum(negative) - negative  # in the whole list
+    negative_rank = negative_before - negative_before[np.arange(ray_patch.size) - position]
+    rank = np.where(negative, negative_rank, position - negative_rank)
+    return rank, rng.integers(0, 1 << 32, size=(2, P), dtype=np.uint32)
+
+
+def _shifted_points(table, rank, shift):
+    """(2, n) float32 in [0, 1): Sobol' points ``rank`` of ``table`` (2, m) uint32, each XORed
+    with its own ``shift`` (2, n)."""
+    points = table.take(rank, axis=1)
+    points ^= shift
+    return unit_floats(points, np.float32)
+
+
+def _bincount(patch, mask, weights, P):
+    """(C,P) sums of ``weights`` (C,n) over the masked columns, by patch."""
+    index = patch.compress(mask)
+    return np.stack([np.bincount(index, weights=w.compress(mask), minlength=P) for w in weights])

@@ -1,0 +1,1 @@
+"""Per-source results recombined with new strengths and colours, and sources re-solved alone."""

@@ -1,0 +1,171 @@
+"""The patch scene: validated arrays of geometry and materials, with the paper's grey quantities.
+
+Notation follows Sbert & Brusi: a patch i has area A_i, reflectivity R_i and emittance
+(emitted power per unit area) E_i; its power is Phi_i = E_i A_i and Phi_T = sum_i Phi_i.
+Colours are carried as three channels; the grey quantities the paper's formulas use are
+channel means (R_bar_i, E_bar_i), so that a grey scene is exactly the paper's.
+"""
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+
+from .geometry_build import build_geometry
+from ..materials.glossy import GlossyLobe
+from ..lights.lights import Lights
+from ..mesh.validation import (
+    PatchError,
+    material_rows,
+    validate_light_numbers,
+    validate_lights,
+    validate_materials,
+    validate_power_scale,
+)
+
+SAME = object()  # with_materials: keep the scene's own
+
+
+class PatchScene:
+    """Patches (groups of coplanar triangles) with their reflectivity and emittance.
+
+    Parameters
+    ----------
+    vertices : (V,3) float
+    triangles : (T,3) int, indices into ``vertices``; the normal follows the right-hand rule
+        and radiosity leaves the front side.
+    triangle_patch : (T,) int in [0, P): the patch each triangle belongs to.
+    reflectivity : (P,3) RGB or (P,) grey, each in [0, 1).
+    emission : (P,3) or (P,), the emittance E (power per unit area), >= 0.
+    lights : light sources beside the emissive patches (``lights``: point, spot, area, sun, world).
+    aim : (centre, radius) of the sphere sun and world light is aimed at (the part of the scene
+        whose light matters); default the bounding sphere of every patch.
+    glossy : (share (P,3), alpha (P,)) or a GlossyLobe: the share of each patch's reflectivity
+        that its first reflection of a source's light sends along a GGX lobe (``glossy``);
+        default none (every reflection Lambertian).
+
+    Degenerate triangles are dropped with a warning; everything else that is wrong raises
+    ``ValueError`` naming the problem and the offending indices.
+    """
+
+    def __init__(self, vertices, triangles, triangle_patch, reflectivity, emission, lights=(), aim=None, *, glossy=None,
+                 _geometry=None):
+        reflectivity_arr = np.asarray(reflectivity)
+        if reflectivity_arr.ndim not in (1, 2) or reflectivity_arr.shape[0] == 0:
+            raise ValueError(f"reflectivity must have shape (P,) or (P, 3) with P > 0; got {reflectivity_arr.shape}")
+        patch_count = material_rows(reflectivity_arr, emission, triangle_patch)
+        lights = tuple(lights.lights if isinstance(lights, Lights) else lights)
+        self.reflectivity, self.emission = validate_materials(reflectivity, emission, patch_count, require_emitter=not lights)
+        if isinstance(glossy, GlossyLobe):
+            glossy = (glossy.share, glossy.alpha)
+        self.glossy = None if glossy is None else GlossyLobe.checked(*glossy, self.reflectivity)
+        self.vertices = np.asarray(vertices, dtype=np.float64)
+        self.triangles = np.asarray(triangles)
+        self.triangle_patch = np.asarray(triangle_patch)
+        self.geometry = _geometry if _geometry is not None else build_geometry(
+            vertices, triangles, triangle_patch, patch_count
+        )
+        with np.errstate(over="ignore", invalid="ignore"):
+            power = self.patch_area[:, None] * self.emission
+            finite = np.isfinite(power.sum())
+        if not finite:
+            raise PatchError(
+                "emission times area overflows: the emitted power is not a finite number "
+                f"(largest emission {self.emission.max():.3g}); use smaller units of power",
+                np.flatnonzero(~np.isfinite(power).all(axis=1) | (power.max(axis=1) > 1e300)),
+            )
+        g = self.geometry
+        if aim is None:
+            aim = (g.centre, 0.5 * g.diagonal)
+        # Sun and world rays start beyond the whole scene, seen from the aim's centre.
+        reach = float(np.linalg.norm(np.asarray(aim[0], np.float64) - g.centre)) + g.diagonal
+        validate_light_numbers(lights)
+        self.lights = Lights(lights, aim, reach)
+        validate_lights(self.lights)
+        if lights and not (self.source_power > 0).any():
+            raise ValueError("the scene has no source: every emission is zero and no light gives power")
+        validate_power_scale(self.total_power, self.patch_area)
+
+    # --- materials -------------------------------------------------------------------------
+    def with_materials(self, reflectivity, emission, lights=None, glossy=SAME):
+        """A scene on the same patches with other materials (and the same lights and glossy
+        lobe unless given; the lobe's share held to the new reflectivity), sharing geometry and
+        ray tracer."""
+        return PatchScene(
+            self.vertices, self.triangles, self.triangle_patch, reflectivity, emission,
+            self.lights if lights is None else lights, self.lights.aim,
+            glossy=self.glossy if glossy is SAME else glossy, _geometry=self.geometry,
+        )
+
+    # --- sizes -----------------------------------------------------------------------------
+    @property
+    def patch_count(self):
+        return self.geometry.patch_count
+
+    @property
+    def triangle_count(self):
+        return self.geometry.triangle_count
+
+    @property
+    def patch_area(self):
+        return self.geometry.patch_area
+
+    @property
+    def patch_normal(self):
+        return self.geometry.patch_normal.astype(np.float64)
+
+    @cached_property
+    def total_area(self):
+        """A_T."""
+        return float(self.patch_area.sum())
+
+    # --- grey quantities of the paper ------------------------------------------------------
+    @cached_property
+    def grey_reflectivity(self):
+        """R_bar_i: the channel mean of each patch's reflectivity (the survival probability);
+        exactly R_i where the three channels are equal (a float mean of three equal numbers
+        may differ from them in the last bit)."""
+        R = self.reflectivity
+        mean = R.mean(axis=1)
+        grey = (R == R[:, :1]).all(axis=1)
+        mean[grey] = R[grey, 0]
+        return mean
+
+    @cached_property
+    def is_grey(self):
+        same = lambda a: bool((a == a[:, :1]).all())  # noqa: E731
+        return same(self.reflectivity) and same(self.emission) and same(self.lights.power)
+
+    @cached_property
+    def patch_power(self):
+        """Phi_i = A_i E_bar_i, the channel-mean power of each patch."""
+        return self.patch_area * self.emission.mean(axis=1)
+
+    @cached_property
+    def source_power(self):
+        """(S,3) the power of every source: the patches' A_i E_i, then the lights' emitters."""
+        return np.vstack([self.patch_area[:, None] * self.emission, self.lights.power])
+
+    @cached_property
+    def total_power(self):
+        """Phi_T: the patches' and the lights' (channel mean)."""
+        if not len(self.lights):
+            return float(self.patch_power.sum())
+        return float(self.patch_power.sum() + self.lights.power.mean(axis=1).sum())
+
+    @cached_property
+    def average_reflectivity(self):
+        """R_ave: the area-weighted average reflectivity (channel mean)."""
+        return float((self.patch_area * self.grey_reflectivity).sum() / self.total_area)
+
+    @property
+    def tracer(self):
+        """The ray tracer over this geometry (shared with scenes made by with_materials)."""
+        return self.geometry.tracer
+
+    def __repr__(self):
+        return (
+            f"PatchScene({self.patch_count} patches, {self.triangle_count} triangles, "
+            f"A_T={self.total_area:.6g}, Phi_T={self.total_power:.6g}, R_ave={self.average_reflectivity:.4g}"
+            + (f", {len(self.lights)} lights)" if len(self.lights) else ")")
+        )
