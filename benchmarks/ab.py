@@ -53,7 +53,7 @@ def same_scene(core, scene):
 
 def timed(core, scene, estimator, exit_point, threads, paths, seed, **arguments):
     cpu, wall = time.process_time(), time.perf_counter()
-    r = core.solve(scene, estimator, paths=paths, threads=threads, seed=seed, exit_point=exit_point, **arguments)
+    r = core.solve(scene, estimator=estimator, paths=paths, threads=threads, seed=seed, exit_point=exit_point, **arguments)
     return time.process_time() - cpu, time.perf_counter() - wall, r
 
 
@@ -67,7 +67,7 @@ def compare(new, base, scene_name, threads, rounds, methods=False):
                   for label, arguments, share in METHODS for x in ("random", "hit")]
     for label, estimator, exit_point, arguments, paths in cases:
         for core, scene in ((new, scene_new), (base, scene_base)):  # warm up: tables, grids, Embree scene
-            core.solve(scene, estimator, paths=paths // 10, threads=threads, exit_point=exit_point, **arguments)
+            core.solve(scene, estimator=estimator, paths=paths // 10, threads=threads, exit_point=exit_point, **arguments)
         ratios_cpu, ratios_wall, times = [], [], {"new": [], "base": []}
         for k in range(rounds):
             order = (("new", new, scene_new), ("base", base, scene_base))

@@ -35,7 +35,7 @@ is the wall time of the bake call: Cycles' session and scene sync, BVH build, th
 and the write into the image (scene construction in bpy and reading the pixels back are
 excluded). A fit t = a + b * samples estimates the fixed part a, reported separately.
 
-Ours: ``solve(scene, "finite", paths=N, threads=2)``, timed from the construction of the
+Ours: ``solve(scene, estimator="finite", paths=N, threads=2)``, timed from the construction of the
 PatchScene from arrays (validation, patch frames, Embree BVH) to the returned result.
 
 Both sides are measured alternately, level by level, in the same process, so both see the same
@@ -288,7 +288,7 @@ class CyclesBaker:
 def ours(paths, exit_point, seed, threads=THREADS, estimator="finite", sampling="independent"):
     wall, cpu = time.perf_counter(), time.process_time()
     scene = patch_scene()
-    result = solve(scene, estimator, paths=paths, seed=seed, exit_point=exit_point, threads=threads, sampling=sampling)
+    result = solve(scene, estimator=estimator, paths=paths, seed=seed, exit_point=exit_point, threads=threads, sampling=sampling)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     return result.radiosity.mean(axis=1), wall, cpu
 

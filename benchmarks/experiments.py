@@ -80,7 +80,7 @@ def cumulative_runs(scene, estimator, batches, seed, threshold=1e-3, threads=Non
     out = []
     for k, n in enumerate(batches):
         c0 = time.process_time()
-        r = solve(scene, estimator, paths=int(n), threshold=threshold, seed=int(seed) * 1000 + k,
+        r = solve(scene, estimator=estimator, paths=int(n), threshold=threshold, seed=int(seed) * 1000 + k,
                   threads=threads, exit_point=exit_point, **how)
         cpu += time.process_time() - c0
         total_paths += r.paths
@@ -174,7 +174,7 @@ def long_run_reference(sample, paths, seed=987654, threads=None, cache=True, lab
         z = np.load(path)
         return Reference(radiosity=z["B"], mse=float(z["mse"]), rays=int(z["rays"]), seconds=float(z["seconds"]),
                          method=f"finite run of {paths:,} paths")
-    r = solve(sample.scene, "finite", paths=int(paths), seed=seed, threads=threads, **paper_sampling())
+    r = solve(sample.scene, estimator="finite", paths=int(paths), seed=seed, threads=threads, **paper_sampling())
     if cache:
         CACHE.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, B=r.radiosity, mse=r.measured_mse, rays=r.rays, seconds=r.seconds)
@@ -209,7 +209,7 @@ def first_hit_distribution(scene, paths=2_000_000, seed=31, threads=None):
 
     P = scene.patch_count
     probe = scene.with_materials(np.full(P, 0.5), scene.emission.mean(axis=1))
-    r = solve(probe, "biased_infinite", paths=int(paths), threshold=0.9, seed=seed, threads=threads,
+    r = solve(probe, estimator="biased_infinite", paths=int(paths), threshold=0.9, seed=seed, threads=threads,
               **paper_sampling())
     power = r.reflected.mean(axis=1) * scene.patch_area / 0.5
     return power / power.sum()
@@ -280,7 +280,7 @@ def formula1_infinite_per_path(scene, paths=4_000_000, seed=41, threads=None):
 
     R = scene.grey_reflectivity
     squared = scene.with_materials(R**2, scene.emission.mean(axis=1))
-    sums = [float(solve(squared, "finite", paths=int(paths) // 2, seed=seed + k, threads=threads,
+    sums = [float(solve(squared, estimator="finite", paths=int(paths) // 2, seed=seed + k, threads=threads,
                         **paper_sampling()).reflected.mean(axis=1).sum()) for k in range(2)]
     total = 0.5 * (sums[0] + sums[1])
     return scene.total_power / scene.total_area * total, abs(sums[0] - sums[1]) / 2 / total

@@ -27,7 +27,7 @@ def measure(scene, paths, seed, arguments):
     from addon.core import solve
 
     start = time.perf_counter()
-    r = solve(scene, "finite", paths=paths, threads=2, seed=seed, exit_point="hit", **arguments)
+    r = solve(scene, estimator="finite", paths=paths, threads=2, seed=seed, exit_point="hit", **arguments)
     seconds = time.perf_counter() - start
     measured = ~scene.emission.any(axis=1)
     B, V = r.radiosity.mean(axis=1)[measured], r.reflected_variance.mean(axis=1)[measured]

@@ -81,7 +81,7 @@ def child(paths, threads, use_tracemalloc, scene_name):
 
         tracemalloc.start()
     t = time.perf_counter()
-    result = solve(scene, "finite", paths=paths, threads=threads, seed=1)
+    result = solve(scene, estimator="finite", paths=paths, threads=threads, seed=1)
     out["solve_seconds"] = time.perf_counter() - t
     if use_tracemalloc:
         current, peak = tracemalloc.get_traced_memory()

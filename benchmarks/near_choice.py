@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "core"))
 
-from addon.core.lights.lights import near_choice  # noqa: E402
+from addon.core.lights import near_choice  # noqa: E402
 from addon.core import solve
 
 OUT = ROOT / "benchmarks" / "results" / "near_choice.md"
@@ -56,7 +56,7 @@ def scenes():
 
 def measure(scene, paths, seed, options):
     t = time.perf_counter()
-    r = solve(scene, "finite", paths=paths, seed=seed, exit_point="hit", **options)
+    r = solve(scene, estimator="finite", paths=paths, seed=seed, exit_point="hit", **options)
     return r.measured_mse, r.rays + r.gather_rays, time.perf_counter() - t
 
 

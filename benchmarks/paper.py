@@ -545,7 +545,7 @@ def run_cornell(c, threads, out):
     res["colour_vs_grey"] = {}
     for name, sc in (("colour", sample.scene), ("grey", grey)):
         for est, key in (("finite", "finite"), ("biased_infinite", "biased")):
-            runs = [solve(sc, est, paths=c.get("check_paths", 640_000), seed=21 + k, threshold=1e-3, threads=threads,
+            runs = [solve(sc, estimator=est, paths=c.get("check_paths", 640_000), seed=21 + k, threshold=1e-3, threads=threads,
                           **ex.paper_sampling()) for k in range(3)]
             res["colour_vs_grey"][f"{name} {key}"] = float(np.mean([r.measured_mse / r.predicted_mse for r in runs]))
     lines = ["# Cornell box (`sample_scenes.cornell_box`, open front, RGB)", "",

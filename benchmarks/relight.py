@@ -97,7 +97,7 @@ def solve_table(divisions, paths, reps):
 def relight_table(patch_counts, source_counts):
     from addon.core import relight
     from addon.core.estimate.grouping import PER_SOURCE_MAX
-    from addon.core.relight.relighting import PerSource
+    from addon.core.estimate.per_source import PerSource
 
     rng = np.random.default_rng(0)
     lines = ["| patches | sources | radiosity ms | radiosity and irradiance ms | radiosity ms, float32 results | "

@@ -69,7 +69,7 @@ def stored(obj, sources, targets, rng):
     from addon.blender_read import sources as reading
     from addon.blender_write import relight_store
     from addon.bpy_free.relit import SourceResults
-    from addon.core.relight.relighting import PerSource
+    from addon.core.estimate.per_source import PerSource
 
     for s in range(sources):
         data = bpy.data.lights.new(f"Lamp {s}", "POINT")

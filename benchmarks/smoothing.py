@@ -72,7 +72,7 @@ def noise_rows(quick):
         for paths in ([20_000, 200_000] if quick else [20_000, 200_000, 2_000_000]):
             raw, out = [], {c: [] for c in (2.0, 3.0, 4.0)}
             for seed in range(SEEDS):
-                r = solve(scene, "finite", paths=paths, seed=500 + seed, threads=2)
+                r = solve(scene, estimator="finite", paths=paths, seed=500 + seed, threads=2)
                 x = r.reflected.reshape(exact.shape)
                 var = r.reflected_variance.reshape(exact.shape)
                 raw.append(x - exact)

@@ -99,7 +99,7 @@ def own_rays_factor(scene, estimator, threads, paths, rounds=5, every=4, limit=1
     tracer.first_hit = lambda o, d, *region: (keep(o, d), real_first(o, d, *region))[1]
     tracer.first_hit_barycentric = lambda o, d, *region: (keep(o, d), real_bary(o, d, *region))[1]
     try:
-        solve(scene, estimator, paths=paths, threads=threads, seed=99, **kw)
+        solve(scene, estimator=estimator, paths=paths, threads=threads, seed=99, **kw)
     finally:
         del tracer.first_hit, tracer.first_hit_barycentric
     total = sum(len(o) for o, _ in casts)
@@ -135,7 +135,7 @@ def solve_rate(scene, estimator, threads, paths, seed=1, **kw):
     A fixed path count, not a time limit: a run stopped by its time limit drops the chunks
     still in flight, whose rays would be traced but not counted."""
     cpu = time.process_time()
-    r = solve(scene, estimator, paths=paths, threads=threads, seed=seed, **kw)
+    r = solve(scene, estimator=estimator, paths=paths, threads=threads, seed=seed, **kw)
     cpu = time.process_time() - cpu
     return r.rays / r.seconds, r.rays / cpu
 
@@ -192,7 +192,7 @@ def paired_ratio(scene, estimator, threads, seconds, rounds=5, max_rounds=12, qu
     Returns the medians of the raw and solve rates, the median, lowest and highest per-round
     ratio, by wall clock and per CPU second, and the quiet and all rounds' counts."""
     rays_a_path = expected_rays_per_path(scene, estimator, **kw)
-    solve(scene, estimator, paths=20_000, threads=threads, **kw)  # warm up
+    solve(scene, estimator=estimator, paths=20_000, threads=threads, **kw)  # warm up
     tracer = walk_tracer(scene, kw.get("exit_point", "random"))
 
     def raw_now():
@@ -354,7 +354,7 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
     from addon.core.methods.walk import ShotWalk
     from addon.core.methods.tables import WalkTables
 
-    solve(scene, "finite", paths=20_000, threads=threads)  # warm up
+    solve(scene, estimator="finite", paths=20_000, threads=threads)  # warm up
     length = predict(scene, "finite").expected_path_length
     tables = WalkTables(scene, "finite", 1e-3, "random")
     out = {}
@@ -366,7 +366,7 @@ def short_runs(scene, threads, path_counts=SHORT_PATHS, rounds=5):
         for k in range(rounds):
             rates = {}
             for grouped in ((True, False) if k % 2 == 0 else (False, True)):
-                r = solve(scene, "finite", paths=paths, threads=threads, seed=k, speedups=Speedups(grouped_chunks=grouped))
+                r = solve(scene, estimator="finite", paths=paths, threads=threads, seed=k, speedups=Speedups(grouped_chunks=grouped))
                 rates[grouped] = r.rays / r.seconds
                 if grouped:
                     seconds.append(r.seconds)

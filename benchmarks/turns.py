@@ -46,7 +46,7 @@ def timed(scene, turns, paths, arguments, seed):
             walk.chunk_wide(self.tables, sum(sizes)), sizes, rng, abort)
     try:
         start = time.perf_counter()
-        result = solve(scene, "finite", paths=paths, threads=2, seed=seed, exit_point="hit", **arguments)
+        result = solve(scene, estimator="finite", paths=paths, threads=2, seed=seed, exit_point="hit", **arguments)
         return time.perf_counter() - start, result
     finally:
         walk.takes_turns, ShotWalk.run = rule, shot

@@ -17,6 +17,10 @@ from .cleaning import drop_zero_area_faces
 from .patches import MAX_PATCHES, Patches, _GEOMETRY_CACHE, _patch_glossy, _patch_material, patch_materials
 from .surface_layers import result_layers
 
+# Solves that refine the mesh after the direct light's refinement, at most (0: none; solve_refinement);
+# one measured best at equal time (docs/adaptive.md): a second cost its time and splits noise
+ROUNDS = 1
+
 OFF = "OFF"
 
 
@@ -96,8 +100,6 @@ def refinement_text(patches: Patches) -> str:
     steps = getattr(patches, "refinement", None)
     if not steps:
         return ""
-    from .solve_refinement import ROUNDS  # (it imports this module)
-
     seconds = sum(s["seconds"] for s in steps)
     text = (f"refined from {steps[0]['first']:,} in {len(steps)} step{'s' if len(steps) > 1 else ''} ({seconds:.1f} s), "
             f"at most {steps[0]['budget']:,}")

@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.mesh import meshing
-from ..core import methods, predict, relative_rms_to_mse, solve
+from ..core import predict, solve
 from ..core.display import point_direct, smoothing
 from ..core.scene.diagnostics import MAX_BOUNCES, check_bounces
 from ..core.display.covered import seen_parts
@@ -20,34 +19,9 @@ from ..core.methods.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
 from . import adaptive_patches, options, reach, relit, run_budget, solve_refinement, trim
+from .settings import SolveSettings, direct_light_for, method_for, prediction_for
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
-
-@dataclass
-class SolveSettings:
-    """A job's settings; the defaults are the panel's and the command line's (``options``)."""
-
-    estimator: str = options.ESTIMATOR.default
-    threshold: float = options.THRESHOLD.default
-    relative_rms: float = options.TARGET_ERROR.default / 100.0  # of the mean reflected radiosity
-    paths: int | None = None  # fixed path count instead of the error target
-    patch_size: float = options.PATCH_SIZE.default  # 0: automatic (patches.automatic_patch_size)
-    exit_point: str = options.EXIT_POINT.default
-    sampling: str = options.SAMPLING.default
-    stop_rule: str = options.STOP_RULE.default
-    seed: int = options.SEED.default
-    max_seconds: float | None = None
-    threads: int | None = None
-    output: str = options.OUTPUT.default
-    light_output: bool = options.LIGHT_OUTPUT.default
-    live_lamps: bool = options.LIVE_LAMPS.default  # textured: the lamps' direct light drawn by Blender
-    indirect_output: bool = options.INDIRECT_OUTPUT.default
-    cluster: str = options.CLUSTER.default  # a Dask scheduler address; empty: this machine's threads
-    direct_light: str = options.DIRECT_LIGHT.default  # "gathered": the first bounce by shadow rays (core first_shot)
-    method: str = options.METHOD.default  # "two_way": the core's two-way iteration (it gathers its direct light)
-    per_source: str = options.PER_SOURCE.default  # per-light results for relighting (relit.groups_for)
-    detail: str = options.DETAIL.default  # adaptive patches (adaptive_patches): OFF, LOW, MEDIUM, HIGH
-
 
 @dataclass
 class SolveOutput:
@@ -80,29 +54,6 @@ class SolveOutput:
         return float(np.sum(energy["blocked"])) / emitted if emitted > 0 else 0.0
 
 
-def prediction_for(scene, settings: SolveSettings):
-    """(prediction, target_mse) of the core for these settings, no tracing."""
-    base = predict(scene, settings.estimator, threshold=settings.threshold)
-    if settings.paths:
-        return predict(scene, settings.estimator, threshold=settings.threshold, paths=int(settings.paths)), None
-    target = relative_rms_to_mse(base, settings.relative_rms)
-    return predict(scene, settings.estimator, threshold=settings.threshold, target_mse=target), target
-
-
-def method_for(scene, settings: SolveSettings, target, groups=None) -> SolveSettings:
-    """The settings with the method "auto" replaced by what it runs on this scene (the core's
-    methods.choose: the two-way iteration where its chunks give every patch enough rays; with
-    per-source ``groups``, where its measured cost with them pays); ``target``: prediction_for's."""
-    if settings.method != AUTO:
-        return settings
-    pilot = {} if groups is None else dict(per_source=True, groups=groups, exit_point=settings.exit_point, seed=int(
-        settings.seed), sampling=settings.sampling, threads=settings.threads or None)
-    chosen = methods.choose(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None,
-                            target_mse=target, threshold=settings.threshold, max_seconds=settings.max_seconds or None,
-                            direct_light=settings.direct_light, **pilot)
-    return replace(settings, method=chosen)
-
-
 LIGHT_ATTRIBUTE = "Radiosity Light"
 INDIRECT_ATTRIBUTE = "Radiosity Indirect"
 INDIRECT_SAMPLES = 64  # gathering samples a patch for the direct light the indirect output leaves out
@@ -111,23 +62,6 @@ INDIRECT_SAMPLES = 64  # gathering samples a patch for the direct light the indi
 SLOW_SECONDS = 60.0
 #: Above this many expected bounces a path the warning says the reflectivity drives the time.
 LONG_BOUNCES = 1000.0
-
-
-def direct_light_for(scene, settings: SolveSettings) -> str:
-    """How the direct light is computed (``settings.method`` resolved): as the settings say, but
-    as the method has it where it has one alone (the two-way iteration gathers it), and
-    gathered where a light's cannot be shot (``Lights.gathered_only``; ``light_notes`` says so)."""
-    return methods.direct_light_for(settings.method, settings.direct_light, scene.lights)
-
-
-def forecast_for(scene, settings: SolveSettings, target, bounces, should_stop=None):
-    """The core's Forecast of the solve these settings run (``settings.method`` resolved): a
-    pilot of a few of its chunks on this machine."""
-    return forecast(scene, settings.estimator, paths=int(settings.paths) if settings.paths else None, target_mse=target,
-                    threshold=settings.threshold, stop_rule=settings.stop_rule if target is not None else "predicted",
-                    method=settings.method, direct_light=direct_light_for(scene, settings), exit_point=settings.exit_point,
-                    sampling=settings.sampling, threads=settings.threads or None, max_seconds=settings.max_seconds or None,
-                    seed=int(settings.seed), bounces=bounces, should_stop=should_stop, error_scale=options.ERROR_SCALE)
 
 
 def efficiency_sentence(relative_efficiency) -> str:
@@ -221,11 +155,11 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     building = time.perf_counter() - started  # (a run meshes again)
     automatic = settings.method == AUTO
     p, target = prediction_for(scene, settings)
-    settings = method_for(scene, settings, target)
+    settings = method_for(scene, settings)
     bounces = check_bounces(scene, settings.estimator, settings.threshold)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
-    f = forecast_for(scene, settings, target, bounces, should_stop)
+    f = forecast(scene, settings.core(scene), bounces=bounces, should_stop=should_stop)
     display = run_budget.display_forecast(scene, patches, settings)  # (the colours' time: their direct light)
     # (what the settings need, the Detail's refining solves included; a time limit ends the whole run first)
     needed = building + solve_refinement.predicted_seconds(patches, f.seconds) + display.seconds
@@ -282,17 +216,13 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     trim.give_back()
     prediction, target = prediction_for(scene, settings)
     groups = relit.groups_for(scene, patches, settings.per_source, notes)
-    settings = method_for(scene, settings, target, relit.measured_choice_groups(groups))
+    settings = method_for(scene, settings, relit.measured_choice_groups(groups))
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
     budget = run_budget.Budget.of(started, limit, scene, patches, settings, groups)
-    result = solve(
-        scene, settings.estimator, paths=int(settings.paths) if settings.paths else None, target_mse=target,
-        threshold=settings.threshold, seed=int(settings.seed), exit_point=settings.exit_point, sampling=settings.sampling,
-        stop_rule=settings.stop_rule if target is not None else "predicted", progress=progress, should_stop=should_stop,
-        max_seconds=budget.solve_seconds(), threads=settings.threads or None, cluster=settings.cluster or None,
-        direct_light=direct_light_for(scene, settings), method=settings.method, per_source=groups is not None,
-        groups=groups, error_scale=options.ERROR_SCALE, direct_apart=settings.live_lamps)
+    result = solve(scene, settings.core(scene, max_seconds=budget.solve_seconds(), per_source=groups is not None,
+                                        groups=groups, direct_apart=settings.live_lamps),
+                   progress=progress, should_stop=should_stop)
     trim.give_back()
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,

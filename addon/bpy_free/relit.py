@@ -18,7 +18,8 @@ from ..core.display import smoothing
 from ..core.display.covered import seen_parts
 from ..core.estimate.grouping import PER_SOURCE_MAX, source_groups
 from ..core.lights.lights import WorldLight
-from ..core.relight.relighting import PerSource, relight, smooth_sources
+from ..core.estimate.per_source import PerSource
+from ..core.relight.relighting import relight, smooth_sources
 
 # Automatic keeps per-source results from 2 up to this many sources: the walks' solves then cost
 # 1.13-1.3x, the two-way iteration's 1.3x at 4 (benchmarks/results/relight.md); more cost more.
@@ -115,7 +116,7 @@ class SourceResults:
         return {"names": list(ps.names),
                 "members": [[[kind, name, [float(x) for x in p]] for kind, name, p in group] for group in self.members],
                 "power": ps.power.tolist(), "covariance": ps.covariance.tolist(),  # (NaN below 2 chunks: JSON's NaN)
-                "scale": float(ps.scale), "target_mse": ps.target_mse,
+                "scale": float(ps.scale), "target_error": ps.target_error,
                 "reflected_means": None if ps.reflected_means is None else ps.reflected_means.tolist(),
                 "lit_batches": None if ps.lit_batches is None else ps.lit_batches.tolist(),
                 "sampled_share": None if ps.sampled_share is None else ps.sampled_share.tolist()}
@@ -170,11 +171,20 @@ def relit_error(meta, w):
     empty = np.zeros((S, 0, 3))
     # (None: the paper's b_ave, and no group's batches checked, as in results saved before them)
     means, lit, share = (meta.get(key) for key in ("reflected_means", "lit_batches", "sampled_share"))
-    ps = PerSource(tuple(meta["names"]), empty, empty, np.asarray(meta["power"], np.float64), covariance,
-                   float(meta["scale"]), meta["target_mse"], reflected_means=None if means is None else np.asarray(means, np.float64),
+    power = np.asarray(meta["power"], np.float64)
+    ps = PerSource(tuple(meta["names"]), empty, empty, power, covariance,
+                   float(meta["scale"]), _target_error(meta, power), reflected_means=None if means is None else np.asarray(means, np.float64),
                    lit_batches=None if lit is None else np.asarray(lit, np.int64),
                    sampled_share=None if share is None else np.asarray(share, np.float64))
     return relight(ps, w)
+
+
+def _target_error(meta, power):
+    """The solve's relative error target kept in ``meta`` (files saved before it was kept so kept
+    the paper's MSE: relative to b_ave, the scale times the power)."""
+    if "target_error" in meta or meta.get("target_mse") is None:
+        return meta.get("target_error")
+    return math.sqrt(meta["target_mse"]) / (float(meta["scale"]) * float(power.sum(axis=0).mean()))
 
 
 def error_text(relit):

@@ -15,12 +15,11 @@ from ..core.estimate.plan import MEASURED_STOP_CHUNKS, chunk_plan
 from ..core.refine.adaptive_light import DETAILS
 from ..core.refine.adaptive_solve import refine_by_solve
 from ..core.names import AUTO
-from . import adaptive_patches, options
+from . import adaptive_patches
+from .adaptive_patches import ROUNDS
+from .settings import method_for, prediction_for
 from .scene_notes import scene_and_notes
 
-# Solves that refine the mesh at most (0: the direct light's refinement alone); one measured best at
-# equal time (docs/adaptive.md): a second cost its time and splits noise
-ROUNDS = 1
 LOOSER = 2.0  # their error, about the user's target times this (a quarter of the paths)
 SHARE = 0.2  # of a time limit, each refining solve's at most
 # Of a time limit: refining steps start only within the first REFINING (each rebuilds the scene and
@@ -32,8 +31,6 @@ def refined(objects, patches, settings, progress=None, should_stop=None, on_pred
     """(patches refined as ``settings.detail`` says: by the direct light, then by up to ROUNDS
     looser solves, the settings for the final solve: what is left of a time limit, and the
     method the refining solves ran where "auto" asked for a choice)."""
-    from . import pipeline  # (pipeline imports this module)
-
     first_count = patches.combined.patch_count
     patches = adaptive_patches.refined(objects, patches, settings.detail, settings.seed, layers=True,
                                        should_stop=should_stop)
@@ -47,21 +44,17 @@ def refined(objects, patches, settings, progress=None, should_stop=None, on_pred
             break
         scene, _ = scene_and_notes(patches)
         if method is None:  # (chosen for the user's target: a looser one would choose otherwise)
-            method = pipeline.method_for(scene, settings, pipeline.prediction_for(scene, settings)[1]).method
+            method = method_for(scene, settings).method
         resolved = replace(settings, method=method)
-        chunk = _chunk(scene, resolved, pipeline.direct_light_for(scene, resolved))
+        chunk = _chunk(scene, resolved)
         loose = _loose(resolved, chunk)
-        prediction, target = pipeline.prediction_for(scene, loose)
+        prediction, _ = prediction_for(scene, loose)
         if on_prediction is not None:  # (the live view draws this step's mesh)
             on_prediction(prediction, int(scene.patch_count), patches)
         step_started = time.perf_counter()
-        result = solve(scene, loose.estimator, paths=int(loose.paths) if loose.paths else None, target_mse=target,
-                       threshold=loose.threshold, seed=_seed(settings.seed, round_), exit_point=loose.exit_point,
-                       sampling=loose.sampling, stop_rule=loose.stop_rule if target is not None else "predicted",
-                       progress=progress, should_stop=should_stop, max_seconds=loose.max_seconds or None,
-                       threads=loose.threads or None, cluster=loose.cluster or None,
-                       direct_light=pipeline.direct_light_for(scene, loose), method=loose.method,
-                       chunk_paths=None if chunk is None else _quarter(chunk), error_scale=options.ERROR_SCALE)
+        core = loose.core(scene, seed=_seed(settings.seed, round_),
+                          chunk_paths=None if chunk is None else _quarter(chunk))
+        result = solve(scene, core, progress=progress, should_stop=should_stop)
         if result.stopped == "cancelled":
             break
         cells, step = refine_by_solve(patches.cells, patches.meshes, result.irradiance, result.irradiance_variance,
@@ -78,16 +71,12 @@ def refined(objects, patches, settings, progress=None, should_stop=None, on_pred
     return patches, _final(settings, method, started)
 
 
-def _chunk(scene, settings, direct_light):
+def _chunk(scene, settings):
     """The chunk of the solve at the user's error target (None with a path count)."""
     if settings.paths:
         return None
-    from . import pipeline
-
-    target = pipeline.prediction_for(scene, settings)[1]
-    return chunk_plan(scene, methods.create(settings.method, direct_light), settings.estimator, target_mse=target,
-                      threshold=settings.threshold, stop_rule=settings.stop_rule,
-                      max_seconds=settings.max_seconds or None).chunk
+    core = settings.core(scene)
+    return chunk_plan(scene, methods.create(settings.method, core.direct_light), core).chunk
 
 
 def _quarter(chunk):

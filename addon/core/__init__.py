@@ -10,7 +10,8 @@ the biased infinite one, with the paper's heuristic MSE formulas (2), (3) and th
 efficiency (4).
 """
 from .estimate.error_model import Prediction, mse_to_relative_rms, predict, relative_rms_to_mse
-from .relight.relighting import PerSource, Relit, relight
+from .estimate.per_source import PerSource
+from .relight.relighting import Relit, relight
 from .estimate.grouping import SourceGroups, source_groups
 from .names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE, GATHERED, SHOT
 from .scene.scene import PatchScene

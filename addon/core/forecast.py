@@ -22,7 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import methods
-from .names import SCALE_PAPER
+from .chunks import run as run_chunks
+from .estimate.grouping import groups_for
+from .names import PREDICTED
 from .estimate.plan import (
     MEASURED_STOP_CHUNKS,
     MIN_CHUNK_PATHS,
@@ -31,7 +33,6 @@ from .estimate.plan import (
     paths_to_target,
     target_now,
 )
-from .solver import solve
 
 # A pilot traces about this many rays (about a second on two threads) ...
 PILOT_RAYS = 1 << 20
@@ -95,17 +96,16 @@ def raw_rate(scene, rays=1 << 14, seed=0):
     return rays / max(time.perf_counter() - start, 1e-9)
 
 
-def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, stop_rule="measured", method="walk",
-             direct_light=None, exit_point="random", sampling="independent", threads=None, max_seconds=None, seed=0,
-             bounces=None, budget=PILOT_RAYS, should_stop=None, per_source=False, groups=None, error_scale=SCALE_PAPER):
-    """The Forecast of ``solve(scene, estimator, ...)`` with these arguments (``method`` a
-    method, not "auto"; ``bounces`` the expected bounces of a path, diagnostics.check_bounces;
-    ``per_source``, ``groups``: the pilot keeps each group's light apart, as the run will; on the
-    measured ``error_scale`` the target is the pilot's own mean's, as the run's will be).
-    ``should_stop()`` ends the pilot early (a run starting): the forecast is then from what it has."""
-    chosen = methods.create(method, direct_light)
-    plan = chunk_plan(scene, chosen, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
-                      stop_rule=stop_rule, max_seconds=max_seconds)
+def forecast(scene, settings, *, bounces=None, budget=PILOT_RAYS, should_stop=None):
+    """The Forecast of ``solve(scene, settings)`` (``settings.method`` a method, not "auto";
+    ``bounces`` the expected bounces of a path, diagnostics.check_bounces; with per-source results
+    the pilot keeps each group's light apart, as the run will; on the measured error scale the
+    target is the pilot's own mean's, as the run's will be). ``should_stop()`` ends the pilot early
+    (a run starting): the forecast is then from what it has."""
+    chosen = methods.create(settings.method, settings.direct_light)
+    plan = chunk_plan(scene, chosen, settings)
+    pilot_settings = settings.but(direct_light=chosen.direct_light, max_seconds=None, cluster=None,
+                                  groups=groups_for(scene, settings.per_source, settings.groups))
     bounces = bounces if bounces is not None else plan.prediction.expected_path_length
     guess = chosen.rays_per_path(bounces)
     pilot_chunk, pilot_chunks = pilot_size(plan.chunk, guess, budget)
@@ -114,11 +114,10 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
     def run(chunk, chunks, limit):
         """(result, seconds to its last finished chunk, or all it took if it finished none)."""
         began, finished = time.perf_counter(), []
-        r = solve(scene, estimator, paths=chunk * chunks, threshold=threshold, seed=seed, exit_point=exit_point,
-                  sampling=sampling, threads=threads, direct_light=chosen.direct_light, method=method, chunk_paths=chunk,
-                  per_source=per_source, groups=groups,
-                  progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
-                  should_stop=lambda: time.perf_counter() - began > limit or bool(should_stop and should_stop()))
+        r = run_chunks(scene, pilot_settings.but(paths=chunk * chunks, chunk_paths=chunk, target_error=None,
+                                                stop_rule=PREDICTED), chosen,
+                       progress=lambda fraction, stats: finished.append(time.perf_counter() - began),
+                       should_stop=lambda: time.perf_counter() - began > limit or bool(should_stop and should_stop()))
         everything = time.perf_counter() - began
         return r, finished[-1] if finished and r.chunks < chunks else everything
 
@@ -138,18 +137,18 @@ def forecast(scene, estimator, *, paths=None, target_mse=None, threshold=1e-3, s
     else:  # not a chunk in PILOT_SECONDS (paths of many bounces): the bounces and Embree's raw rate,
         # and at least the time the pilot's chunks took without finishing
         rays_per_path, setup = guess, 0.0
-        per_path = max(guess / (raw_rate(scene, seed=seed) * SOLVE_SHARE_OF_RAW_RATE * workers),
+        per_path = max(guess / (raw_rate(scene, seed=settings.seed) * SOLVE_SHARE_OF_RAW_RATE * workers),
                        seconds / (pilot_chunk * min(workers, pilot_chunks)))
     short = 1.0
-    if paths is not None or not plan.measured_rule:
+    if settings.paths is not None or not plan.measured_rule:
         expected = float(plan.cap)
     elif variance == variance:
-        target = target_now(target_mse, error_scale, plan.prediction, r.mean_reflected)
+        target = target_now(plan, settings.target_error, settings.error_scale, r.mean_reflected)
         expected, short = paths_to_target(1, variance, target, plan.chunk, plan.cap), short_of(variance, target, plan.cap)
     else:  # at least the chunks the measured rule needs, at most the cap
-        expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(target_mse))))
+        expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(plan.target_mse))))
     seconds = setup + per_path * expected
-    limited = max_seconds is not None and seconds > max_seconds
+    limited = settings.max_seconds is not None and seconds > settings.max_seconds
     return Forecast(paths=expected, rays=expected * rays_per_path, seconds=seconds,
                     chunk=plan.chunk, chunks=expected / plan.chunk, variance_per_path=variance,
                     rays_per_path=rays_per_path, seconds_per_path=per_path, setup_seconds=setup,
@@ -165,21 +164,17 @@ def short_of(variance, target, cap):
     return math.sqrt(variance / (target * cap)) if target > 0 else math.inf
 
 
-def measured_choice(scene, estimator, candidates, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None,
-                    direct_light=None, stop_rule=None, budget=PILOT_RAYS, margin=1.0, **kwargs):
+def measured_choice(scene, settings, candidates, *, budget=PILOT_RAYS, margin=1.0):
     """(the cheapest of ``candidates`` (method names), {name: Forecast}): a pilot of each
-    (``forecast``, ``kwargs`` its other arguments) measures its time to the same error on this
-    machine: the forecast seconds to ``target_mse``, else the variance per path times the
-    seconds per path; the first candidate unless another costs less than 1 / ``margin`` of it.
-    A pilot that measured no error (not two chunks in PILOT_SECONDS: per source, rays cost
-    more than the budget assumes) is run again on an eighth of the budget; a candidate that
-    still measured none is dearer than one that did; none measured: the first."""
-    stop_rule = stop_rule or ("measured" if target_mse is not None else "predicted")
-
+    (``forecast`` of ``settings`` with that method) measures its time to the same error on this
+    machine: the forecast seconds to the target, else the variance per path times the seconds
+    per path; the first candidate unless another costs less than 1 / ``margin`` of it. A pilot
+    that measured no error (not two chunks in PILOT_SECONDS: per source, rays cost more than the
+    budget assumes) is run again on an eighth of the budget; a candidate that still measured none
+    is dearer than one that did; none measured: the first."""
     def pilot(name, rays):
-        return forecast(scene, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
-                        max_seconds=max_seconds, method=name, stop_rule=stop_rule, budget=rays,
-                        direct_light=methods.direct_light_for(name, direct_light, scene.lights), **kwargs)
+        direct_light = methods.direct_light_for(name, settings.direct_light, scene.lights)
+        return forecast(scene, settings.but(method=name, direct_light=direct_light), budget=rays)
 
     forecasts = {}
     for name in candidates:
@@ -189,7 +184,8 @@ def measured_choice(scene, estimator, candidates, *, paths=None, target_mse=None
     measured = [name for name in candidates if forecasts[name].measured]
     if not measured:
         return candidates[0], forecasts
-    cost = {name: cost_at_same_error(forecasts[name], target_mse) for name in measured}
+    targeted = settings.target_error is not None
+    cost = {name: cost_at_same_error(forecasts[name], targeted) for name in measured}
     cheapest = min(measured, key=cost.get)
     first = candidates[0]
     if first in cost and cost[first] <= margin * cost[cheapest]:
@@ -197,7 +193,7 @@ def measured_choice(scene, estimator, candidates, *, paths=None, target_mse=None
     return cheapest, forecasts
 
 
-def cost_at_same_error(f, target_mse=None):
-    """What a Forecast's run costs at a given error: its seconds to ``target_mse``, else its
-    variance per path times its seconds per path (the seconds to a unit variance)."""
-    return f.seconds if target_mse is not None else f.variance_per_path * f.seconds_per_path
+def cost_at_same_error(f, targeted=False):
+    """What a Forecast's run costs at a given error: its seconds to its target (``targeted``),
+    else its variance per path times its seconds per path (the seconds to a unit variance)."""
+    return f.seconds if targeted else f.variance_per_path * f.seconds_per_path

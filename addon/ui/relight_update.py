@@ -1,10 +1,11 @@
 """``radiosity.update``'s work (bpy): the stale sources' results solved again, and only theirs,
-where a lamp moved, was reshaped or re-angled (core relighting.resolve, on the same patches, the
+where a lamp moved, was reshaped or re-angled (core relight.resolve, on the same patches, the
 other sources' results kept as they are); a full solve where the geometry changed, a lamp was
 added, the solve's results are not in memory (a reopened file) or Detail refined the patches."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import bpy
@@ -14,10 +15,12 @@ from ..blender_read import sources
 from ..blender_read.selection import read_selection
 from ..blender_write import relight_store
 from ..blender_write.results import write_results
-from ..bpy_free import options, pipeline, relit
+from ..bpy_free import pipeline, relit
+from ..bpy_free.settings import method_for, prediction_for
 from ..bpy_free.patches import make_patches
 from ..bpy_free.scene_notes import scene_and_notes
-from ..core.relight import relighting
+from ..core.estimate.per_source import group_power
+from ..core.relight.resolve import resolve
 from ..core.relight.relit_checks import REST_SHARE
 from . import relight as relight_ui
 from . import relight_keep
@@ -63,22 +66,24 @@ def _full(context, meta, why):
     return f"solved again ({why})"
 
 
-def relit_target(outcome, scene, groups, stale, prediction):
-    """The MSE a re-solve of the groups ``stale`` for the light as relit is held to (a group relit
-    past its share of the paths, or the light past the target), or None (the solve's target of
-    ``scene``, the scene as it is): the relit light's target times the square root of the share
-    the groups kept leave (REST_SHARE), relative to the re-solved light's own mean (its b_ave:
-    ``prediction``'s times its share of the power), so that the recombination meets the target."""
-    error = outcome.error
-    if not (outcome.unmeasured or outcome.over_target) or error.target_relative_rms is None:
+def resolve_target(outcome, scene, groups, stale, target):
+    """The relative error a re-solve of the groups ``stale`` alone is held to, relative to their
+    own light (the solve's ``target`` (None: a path count) is of the whole light): the error the
+    whole light's target allows them, or, where the relight asks (a group relit past its share
+    of the paths, or the light past the target), the relit target times the square root of the
+    share the groups kept leave (REST_SHARE), so that the recombination meets it."""
+    if target is None:
         return None
-    power = relighting.group_power(scene, groups).mean(axis=1)
+    error = outcome.error
+    if (outcome.unmeasured or outcome.over_target) and error.target_relative_rms is not None:
+        return math.sqrt(1.0 - REST_SHARE) * error.target_relative_rms
+    power = group_power(scene, groups).mean(axis=1)
     share = power[[groups.names.index(name) for name in stale]].sum() / power.sum()
-    return (1.0 - REST_SHARE) * (error.target_relative_rms * prediction.mean_reflected_radiosity * share) ** 2
+    return target / share if share > 0 else target
 
 
 def _partial(context, meta, stale, last, outcome):
-    """Re-solves the groups ``stale`` alone on the scene as it is (to ``relit_target`` where the
+    """Re-solves the groups ``stale`` alone on the scene as it is (to ``resolve_target`` where the
     relight asks), keeps the others, writes."""
     scene = context.scene
     result, settings, patch_size = last
@@ -90,12 +95,12 @@ def _partial(context, meta, stale, last, outcome):
     groups = relit.groups_for(core_scene, patches, "ON", [])
     if list(groups.names) != list(meta["names"]):
         return _full(context, meta, "the sources changed")
-    prediction, target = pipeline.prediction_for(core_scene, settings)
-    relit_mse = None if target is None else relit_target(outcome, core_scene, groups, stale, prediction)
-    target = target if relit_mse is None else relit_mse
-    settings = pipeline.method_for(core_scene, settings, target)
-    per_source = relighting.resolve(core_scene, result.per_source, stale, groups=groups,
-                                    **solve_kwargs(core_scene, settings, target))
+    prediction, target = prediction_for(core_scene, settings)
+    settings = method_for(core_scene, settings)
+    # (a seed of its own: the re-solve is independent of the solve)
+    core = settings.core(core_scene, seed=int(settings.seed) + 1,
+                         target_error=resolve_target(outcome, core_scene, groups, stale, settings.core().target_error))
+    per_source = resolve(core_scene, result.per_source, stale, core.but(groups=groups))
     total = per_source.radiosity.sum(axis=0)
     # (the smoothing's filter weights come from the solve's variances: the re-solved light's own are not kept)
     result = replace(result, per_source=per_source, radiosity=total, irradiance=per_source.irradiance.sum(axis=0),
@@ -110,18 +115,6 @@ def _partial(context, meta, stale, last, outcome):
     relight_keep.keep(scene, created, out, _snapshot(scene, meta, stale), settings)
     relight_ui.relight(scene)
     return f"{', '.join(stale)} solved again, the other sources' results kept"
-
-
-def solve_kwargs(scene, settings, target):
-    """The core solve's arguments of ``settings`` (as pipeline.run_solve gives them), with a
-    seed of its own (the re-solve is independent of the solve)."""
-    return dict(estimator=settings.estimator, paths=int(settings.paths) if settings.paths else None,
-                target_mse=target, threshold=settings.threshold, seed=int(settings.seed) + 1,
-                exit_point=settings.exit_point, sampling=settings.sampling,
-                stop_rule=settings.stop_rule if target is not None else "predicted",
-                max_seconds=settings.max_seconds or None, threads=settings.threads or None,
-                cluster=settings.cluster or None, direct_light=pipeline.direct_light_for(scene, settings),
-                method=settings.method, error_scale=options.ERROR_SCALE)
 
 
 def _snapshot(scene, meta, stale):

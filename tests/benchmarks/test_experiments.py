@@ -63,7 +63,7 @@ def _measure(enclosure, R, estimator, seeds, threshold=1e-3):
     scene, B_ref, ref_mse = _reference(enclosure, R)
     errors, rays = [], []
     for s in range(seeds):
-        r = solve(scene, estimator, paths=PATHS, seed=1000 + s, threshold=threshold, threads=THREADS, **PAPER)
+        r = solve(scene, estimator=estimator, paths=PATHS, seed=1000 + s, threshold=threshold, threads=THREADS, **PAPER)
         errors.append(area_weighted_mse(r.radiosity, B_ref, scene.patch_area) - ref_mse)
         rays.append(r.rays)
     errors = np.array(errors)
@@ -119,7 +119,7 @@ def test_finite_rays_per_path_is_one_over_one_minus_r(enclosure, R):
     """Closed scene, uniform R: a path has exactly 1/(1-R) rays in expectation (geometric)."""
     scene, _, _ = _reference(enclosure, R)
     n = 50_000
-    r = solve(scene, "finite", paths=n, seed=7, threads=THREADS, **PAPER)
+    r = solve(scene, estimator="finite", paths=n, seed=7, threads=THREADS, **PAPER)
     expected = 1 / (1 - R)
     assert abs(r.mean_path_length / expected - 1) <= 0.05
     # and, as the expectation is exact here, within Z standard errors (sd of a geometric count
@@ -133,7 +133,7 @@ def test_finite_rays_per_path_is_one_over_one_minus_r(enclosure, R):
 def test_biased_path_length_is_below_the_papers_formula_by_at_most_one(enclosure, R, t):
     """Section 3.2: 1 + log t / log R_ave can exceed the experimental length by about 1."""
     scene, _, _ = _reference(enclosure, R)
-    r = solve(scene, "biased_infinite", paths=2_000, seed=3, threshold=t, threads=THREADS, **PAPER)
+    r = solve(scene, estimator="biased_infinite", paths=2_000, seed=3, threshold=t, threads=THREADS, **PAPER)
     formula = 1 + math.log(t) / math.log(R)
     assert formula - 1 <= r.mean_path_length <= formula
 

@@ -101,7 +101,7 @@ def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1, **solve_options
     solve_options.setdefault("method", METHOD.default)
     solve_options.setdefault("exit_point", EXIT_POINT.default)
     solve_options.setdefault("error_scale", ERROR_SCALE)
-    result = solve(scene, "finite", target_mse=target, seed=seed, threads=threads, **solve_options)
+    result = solve(scene, estimator="finite", target_mse=target, seed=seed, threads=threads, **solve_options)
     return names, meshes, c, result
 
 

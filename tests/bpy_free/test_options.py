@@ -86,7 +86,7 @@ def test_the_default_exit_point_is_closer_to_the_continuous_light(room, method):
     scene, continuous, uncertainty, _, measured = room
     default = _default_exit_point(method)
     other = "random" if default == "hit" else "hit"
-    runs = {exit_point: solve(scene, options.ESTIMATOR.default, paths=PATHS[method], seed=11, exit_point=exit_point,
+    runs = {exit_point: solve(scene, estimator=options.ESTIMATOR.default, paths=PATHS[method], seed=11, exit_point=exit_point,
                               method=method, threads=2) for exit_point in (default, other)}
     (d2, d_var, d_rms), (o2, o_var, o_rms) = (_relative_square(runs[x], continuous, measured) for x in (default, other))
     # A reference off by delta moves each mean square by at most 2 rms(e) rms(delta) (Cauchy-Schwarz).

@@ -122,7 +122,7 @@ def assert_furnace(mesh, method="walk", exit_point="hit", paths=200_000, seed=3)
     E, R = 1.0, 0.5
     P = mesh.patch_count
     scene = PatchScene(mesh.points, mesh.triangles, mesh.triangle_patch, np.full(P, R), np.full(P, E))
-    result = solve(scene, "finite", method=method, paths=paths, seed=seed, exit_point=exit_point)
+    result = solve(scene, estimator="finite", method=method, paths=paths, seed=seed, exit_point=exit_point)
     if method == "walk":
         A = scene.patch_area
         mean_b = (A * result.reflected[:, 0]).sum() / A.sum()
@@ -159,7 +159,7 @@ def test_energy_balance_on_a_refined_mesh():
     assert m.patch_count > P
     rscene = PatchScene(m.points, m.triangles, m.triangle_patch, np.full(m.patch_count, 0.5), np.zeros(m.patch_count),
                         lights=list(scene.lights.lights))
-    result = solve(rscene, "finite", paths=20_000, seed=2)
+    result = solve(rscene, estimator="finite", paths=20_000, seed=2)
     energy = result.energy
     emitted = float(np.sum(energy["emitted"]))
     assert float(np.sum(energy["escaped"])) == 0.0

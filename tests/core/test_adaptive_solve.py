@@ -118,7 +118,7 @@ def twice_refined():
         P = current.patch_count
         s = PatchScene(current.points, current.triangles, current.triangle_patch, np.full(P, 0.5), np.zeros(P),
                        lights=list(scene.lights.lights))
-        result = solve(s, "finite", paths=40_000, seed=10 + round_, direct_light="gathered")
+        result = solve(s, estimator="finite", paths=40_000, seed=10 + round_, direct_light="gathered")
         cells, step = refine_by_solve(cells, [current], result.irradiance, result.irradiance_variance, detail,
                                       s.geometry.diagonal, mesh.patch_count)
         current, _ = patch_mesh(cells[0])
@@ -139,7 +139,7 @@ def test_furnace_and_energy_balance_on_a_mesh_refined_twice_by_solves():
     P = refined.patch_count
     lit = PatchScene(refined.points, refined.triangles, refined.triangle_patch, np.full(P, 0.5), np.zeros(P),
                      lights=list(scene.lights.lights))
-    energy = solve(lit, "finite", paths=20_000, seed=2).energy
+    energy = solve(lit, estimator="finite", paths=20_000, seed=2).energy
     emitted = float(np.sum(energy["emitted"]))
     assert float(np.sum(energy["escaped"])) == 0.0
     assert float(np.sum(energy["absorbed"])) == pytest.approx(emitted, rel=1e-9)

@@ -27,7 +27,7 @@ def test_the_light_arriving_has_a_variance_from_the_same_batches(method):
     float32); where rho = 0 (the black floor, the red wall's green and blue), which the
     reflected light's variance cannot say, it is a finite, non-negative number too."""
     scene, F, face = _black_floor_box()
-    result = solve(scene, "finite", paths=20_000, seed=3, method=method, threads=1)
+    result = solve(scene, estimator="finite", paths=20_000, seed=3, method=method, threads=1)
     assert result.irradiance_variance.shape == (scene.patch_count, 3)
     rho = scene.reflectivity
     lit = rho > 0
@@ -48,7 +48,7 @@ def test_the_walks_light_on_black_patches_errs_by_its_measured_variance():
     scene, F, face = _black_floor_box()
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)
     H_exact = F @ B
-    result = solve(scene, "finite", paths=60_000, seed=3, method="walk", threads=1)
+    result = solve(scene, estimator="finite", paths=60_000, seed=3, method="walk", threads=1)
     floor = face == FLOOR
     z2 = (result.irradiance[floor] - H_exact[floor]) ** 2 / result.irradiance_variance[floor]
     mean_z2 = float(z2.mean(axis=1).mean())  # (the grey floor's three channels are one sample)
@@ -65,11 +65,11 @@ def test_the_variance_of_light_beyond_float32s_square_root_is_kept_whole():
     import warnings
 
     scene, _, _ = _black_floor_box()
-    unit = solve(scene, "finite", paths=20_000, seed=3, method="two_way", threads=1)
+    unit = solve(scene, estimator="finite", paths=20_000, seed=3, method="two_way", threads=1)
     bright_scene, _, _ = _black_floor_box(glow=1e30)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        bright = solve(bright_scene, "finite", paths=20_000, seed=3, method="two_way", threads=1)
+        bright = solve(bright_scene, estimator="finite", paths=20_000, seed=3, method="two_way", threads=1)
     assert unit.irradiance_variance.dtype == np.float32
     assert np.isfinite(bright.irradiance_variance).all()
     np.testing.assert_allclose(bright.irradiance_variance / 1e60, unit.irradiance_variance, rtol=1e-5,

@@ -49,8 +49,8 @@ def scene():
 @pytest.mark.parametrize("estimator", [FINITE, BIASED_INFINITE])
 @pytest.mark.parametrize("exit_point", [EXIT_RANDOM, EXIT_HIT])
 def test_a_cluster_solve_is_bitwise_the_local_one(client, scene, estimator, exit_point):
-    local = solve(scene, estimator, paths=60_000, seed=7, exit_point=exit_point, threads=2)
-    remote = solve(scene, estimator, paths=60_000, seed=7, exit_point=exit_point, cluster=client)
+    local = solve(scene, estimator=estimator, paths=60_000, seed=7, exit_point=exit_point, threads=2)
+    remote = solve(scene, estimator=estimator, paths=60_000, seed=7, exit_point=exit_point, cluster=client)
     assert np.array_equal(local.radiosity, remote.radiosity)
     assert np.array_equal(local.reflected_variance, remote.reflected_variance, equal_nan=True)
     assert (local.paths, local.rays, local.chunks) == (remote.paths, remote.rays, remote.chunks)
@@ -470,6 +470,6 @@ def test_a_cluster_solve_on_adaptive_patches_is_bitwise_the_local_one(client, me
     scene = PatchScene(refined.points, refined.triangles, refined.triangle_patch, np.full((Q, 3), 0.6), np.zeros((Q, 3)),
                        lights=lamp)
     kw = dict(paths=40_000, seed=9, method=method, direct_light=GATHERED if method == "walk" else None, exit_point=EXIT_HIT)
-    local, remote = solve(scene, FINITE, threads=2, **kw), solve(scene, FINITE, cluster=client, **kw)
+    local, remote = solve(scene, estimator=FINITE, threads=2, **kw), solve(scene, estimator=FINITE, cluster=client, **kw)
     assert np.array_equal(local.radiosity, remote.radiosity)
     assert np.array_equal(local.reflected_variance, remote.reflected_variance, equal_nan=True)

@@ -33,7 +33,7 @@ def test_the_sky_on_the_outside_of_an_open_box_is_out_of_view():
     source, patch, share, in_view = back_light(scene, np.ones(scene.patch_count, bool))
     assert share.sum() > 0.3 and not in_view.any()
     assert (source == scene.patch_count).all()  # the sky: the first (only) light's row
-    r = solve(scene, "finite", paths=1 << 14, seed=1)
+    r = solve(scene, estimator="finite", paths=1 << 14, seed=1)
     blocked = r.energy["blocked"].mean() / r.energy["emitted"].mean()
     # Each ray's share is 1/BACK_RAYS: a binomial proportion's sd; the solve's own error is smaller.
     sd = np.sqrt(share.sum() * (1 - share.sum()) / BACK_RAYS)

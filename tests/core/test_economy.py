@@ -17,7 +17,7 @@ def test_a_scene_that_reflects_nothing_traces_one_bounce(estimator, exit_point, 
     emission = [[0, 0, 0], [1.0, 0.5, 0.2], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]] if colour else [0, 1.0, 0, 0, 0, 0]
     scene, _, _ = box_scene([0.0] * 6, emission, (1.0, 1.4, 0.8), n=2)
     N = 20_000
-    r = solve(scene, estimator, paths=N, seed=3, exit_point=exit_point)
+    r = solve(scene, estimator=estimator, paths=N, seed=3, exit_point=exit_point)
     assert r.rays == N  # every path: one ray, then it ends
     ended = "absorbed" if estimator == "finite" else "threshold"
     assert r.path_ends[ended] == N
@@ -101,8 +101,8 @@ def test_patches_no_path_can_reach_cost_nothing(estimator, exit_point):
     plain = scene([room[:3], crate_out])
     with_inner = scene([room[:3], crate_out, inner])
     assert with_inner.patch_count == plain.patch_count + 96
-    a = solve(plain, estimator, paths=40_000, seed=81, exit_point=exit_point)
-    b = solve(with_inner, estimator, paths=40_000, seed=81, exit_point=exit_point)
+    a = solve(plain, estimator=estimator, paths=40_000, seed=81, exit_point=exit_point)
+    b = solve(with_inner, estimator=estimator, paths=40_000, seed=81, exit_point=exit_point)
     assert a.rays == b.rays and a.path_ends == b.path_ends
     np.testing.assert_array_equal(b.radiosity[: plain.patch_count], a.radiosity)
     assert not b.reflected[plain.patch_count :].any()

@@ -30,7 +30,7 @@ def open_scene():
 
 
 def test_biased_infinite_balance_is_exact(open_scene):
-    r = solve(open_scene, "biased_infinite", paths=50_000, threshold=1e-3, seed=1)
+    r = solve(open_scene, estimator="biased_infinite", paths=50_000, threshold=1e-3, seed=1)
     e = r.energy
     assert (e["escaped"] > 0).all() and (e["blocked"] > 0).all() and (e["undistributed"] > 0).all()
     np.testing.assert_allclose(e["absorbed"] + e["escaped"] + e["undistributed"], e["emitted"], rtol=1e-9)
@@ -42,7 +42,7 @@ def test_finite_balance(open_scene, counted):
     each step, as in small scenes, or its survivors sorted by patch, as in big ones.)"""
     grey = open_scene.with_materials(open_scene.grey_reflectivity, open_scene.emission.mean(axis=1))
     N = 200_000
-    r = solve(grey, "finite", paths=N, seed=2, speedups=Speedups(counted=counted))
+    r = solve(grey, estimator="finite", paths=N, seed=2, speedups=Speedups(counted=counted))
     assert r.speedups.counted == counted
     e = r.energy
     assert (e["escaped"] > 0).all() and (e["blocked"] > 0).all()
@@ -75,7 +75,7 @@ def test_colour_finite_balance(open_scene):
     R = open_scene.reflectivity
     difference = []
     for seed in range(10):
-        r = solve(open_scene, "finite", paths=40_000, seed=seed)
+        r = solve(open_scene, estimator="finite", paths=40_000, seed=seed)
         e = r.energy
         np.testing.assert_allclose(e["absorbed"] + e["escaped"] + e["undistributed"], e["emitted"], rtol=1e-9)
         # Incident power per patch and channel: I = b A / R.

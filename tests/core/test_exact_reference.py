@@ -42,7 +42,7 @@ def _coarse_average(fine_values, fine_area, n_fine, n_coarse=2):
 
 
 def _mean_over_seeds(scene, estimator, N, **kw):
-    runs = [solve(scene, estimator, paths=N, seed=s, **kw) for s in SEEDS]
+    runs = [solve(scene, estimator=estimator, paths=N, seed=s, **kw) for s in SEEDS]
     return runs, np.mean([r.reflected for r in runs], axis=0)
 
 
@@ -83,13 +83,13 @@ def test_colour_random_exit_matches_direct_solve(sorted_paths):
     scene, F, _ = box_scene(R, E, SIZE, n=2)
     assert WalkTables(scene, "finite", 1e-3, "random", speedups=speedups).speedups.sorted_paths == sorted_paths
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)
-    result = solve(scene, "finite", paths=600_000, seed=5, speedups=speedups)
+    result = solve(scene, estimator="finite", paths=600_000, seed=5, speedups=speedups)
     z = (result.reflected - (B - scene.emission)) / np.sqrt(result.reflected_variance)
     # 72 channel-patches, variances estimated from >= 32 batches (t with >= 31 d.o.f.):
     # P(max |t| > 5) < 2e-3.
     assert result.chunks >= 32
     assert np.abs(z).max() < 5.0, np.abs(z).max()
-    biased = solve(scene, "biased_infinite", paths=150_000, threshold=1e-9, seed=6, speedups=speedups)
+    biased = solve(scene, estimator="biased_infinite", paths=150_000, threshold=1e-9, seed=6, speedups=speedups)
     z = (biased.reflected - (B - scene.emission)) / np.sqrt(biased.reflected_variance)
     assert np.abs(z).max() < 5.0, np.abs(z).max()
 

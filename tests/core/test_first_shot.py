@@ -30,7 +30,7 @@ def test_gathered_first_shot_is_the_direct_solve(estimator):
     chunks: a t-distribution of 31 degrees of freedom, variance 31/29; bound 5 standard errors
     of a chi-square mean)."""
     scene, exact = _box_with_one_emitter()
-    r = solve(scene, estimator, paths=400_000, seed=1, direct_light=GATHERED, threshold=1e-6)
+    r = solve(scene, estimator=estimator, paths=400_000, seed=1, direct_light=GATHERED, threshold=1e-6)
     assert r.chunks == 32 and r.gather_rays > 0
     z = ((r.radiosity - exact) / np.sqrt(r.reflected_variance)).ravel()
     assert np.abs(z).max() < 5
@@ -134,7 +134,7 @@ def test_reflected_light_leaves_from_where_the_direct_light_landed():
     scene, exact, uniform, _ = floor_lit_unevenly_and_a_wall()
     R_wall = scene.reflectivity[1, 0]
     for exit_point, truth, other in (("hit", exact, uniform), ("random", uniform, exact)):
-        result = solve(scene, "biased_infinite", threshold=0.05, paths=400_000, seed=1,
+        result = solve(scene, estimator="biased_infinite", threshold=0.05, paths=400_000, seed=1,
                        direct_light=GATHERED, exit_point=exit_point)
         H, sd = result.irradiance[1, 0], np.sqrt(result.reflected_variance[1, 0]) / R_wall
         assert abs(H - truth) < 5 * sd < abs(H - other), exit_point
@@ -245,7 +245,7 @@ def test_paths_leaving_from_the_gathering_samples_never_index_patch_tables_with_
     million. A patch table read with such an id in take's "wrap" mode steps down by P at a time
     (12 ms a call for a million ids against a 600-patch table): every patch index a walk step
     reads its normals with must be a patch's."""
-    from addon.core.scene.scene import rays
+    from addon.core.scene import rays
 
     scene, _ = _box_with_one_emitter()
     real, seen = rays.patch_normals, []

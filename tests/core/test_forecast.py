@@ -8,7 +8,9 @@ import pytest
 from addon.core import predict, relative_rms_to_mse, solve
 from addon.core import forecast as fc
 from addon.core.scene.diagnostics import MAX_BOUNCES, check_bounces, expected_bounces
-from addon.core.methods import TwoWay, choose as choose_method
+from addon.core.methods import TwoWay
+from addon.core.settings import Settings
+from addon.core.solver import chosen_method
 from addon.core.methods.automatic import MEASURED_MARGIN
 from addon.core.estimate.plan import MIN_MEASURED_CHUNKS
 
@@ -49,7 +51,7 @@ def test_a_near_white_forecast_is_a_finite_time_for_the_runs_least_paths():
     a finite time, for at least the chunks the measured stop rule needs."""
     scene, _, _ = box_scene([0.9999] * 6, CEILING_LIGHT, n=2)
     target = relative_rms_to_mse(predict(scene), 0.05)
-    f = fc.forecast(scene, "finite", target_mse=target, method="walk", threads=2,
+    f = fc.forecast(scene, Settings.for_mse(scene, target, method="walk", threads=2, stop_rule="measured"),
                     bounces=check_bounces(scene, "finite", 1e-3))
     assert math.isfinite(f.seconds) and f.seconds > 0 and math.isfinite(f.rays) and f.rays >= f.paths * 1000
     assert f.pilot_seconds < 2 * fc.PILOT_SECONDS
@@ -65,7 +67,7 @@ def test_the_forecast_paths_are_within_2x_of_where_the_run_stops(relative_rms):
     target = relative_rms_to_mse(predict(scene), relative_rms)
     method = choose_method(scene, target_mse=target)
     assert method == "two_way"
-    f = fc.forecast(scene, "finite", target_mse=target, method=method, threads=2, seed=1)
+    f = fc.forecast(scene, Settings.for_mse(scene, target, method=method, threads=2, seed=1, stop_rule="measured"))
     r = solve(scene, target_mse=target, method=method, stop_rule="measured", threads=2, seed=0)
     assert r.stopped == "target"
     assert 0.5 <= f.paths / r.paths <= 2.0, (f.paths, r.paths)
@@ -128,10 +130,18 @@ def _lamp_box(lamps):
     return PatchScene(V, T, TP, colours[face], np.zeros((len(face), 3)), lights)
 
 
+def choose_method(scene, target_mse=None, **fields):
+    """The method Automatic runs for a solve of these settings (the solver's choice, pilots and all)."""
+    settings = Settings(method="auto", **fields)
+    return chosen_method(scene, settings if target_mse is None else Settings.for_mse(scene, target_mse, settings))
+
+
 def _fake_forecast(costs, calls):
-    """A forecast that records its arguments and returns, per method, (variance per path,
-    seconds per path) from ``costs`` (None: its pilot measured nothing)."""
-    def forecast(scene, estimator, **kw):
+    """A forecast that records its settings (and budget) and returns, per method, (variance per
+    path, seconds per path) from ``costs`` (None: its pilot measured nothing)."""
+    def forecast(scene, settings, budget=fc.PILOT_RAYS, **_):
+        kw = {f: getattr(settings, f) for f in settings.__dataclass_fields__}
+        kw["budget"] = budget
         calls.append(kw)
         cost = costs[kw["method"]]
         return fc.Forecast(paths=1e5, rays=1e6, seconds=1.0, chunk=1000, chunks=100.0,
@@ -190,8 +200,8 @@ def test_a_per_source_automatic_solve_runs_the_method_its_real_pilots_found_chea
     seen = []
     real = fc.forecast
 
-    def spy(*args, **kw):
-        seen.append((kw["method"], kw["per_source"], real(*args, **kw)))
+    def spy(scene, settings, **kw):
+        seen.append((settings.method, settings.per_source, real(scene, settings, **kw)))
         return seen[-1][2]
 
     monkeypatch.setattr(fc, "forecast", spy)

@@ -28,7 +28,7 @@ def furnace():
 def test_finite_furnace(furnace, exit_point):
     scene, F, _ = furnace
     N = 200_000
-    result = solve(scene, "finite", paths=N, seed=11, exit_point=exit_point)
+    result = solve(scene, estimator="finite", paths=N, seed=11, exit_point=exit_point)
     B = result.radiosity[:, 0]
     assert np.array_equal(result.radiosity[:, 0], result.radiosity[:, 2])
     A = scene.patch_area
@@ -76,7 +76,7 @@ def test_biased_furnace(furnace, exit_point):
     scene, F, _ = furnace
     t = 1e-3
     N = 100_000
-    result = solve(scene, "biased_infinite", paths=N, threshold=t, seed=12, exit_point=exit_point)
+    result = solve(scene, estimator="biased_infinite", paths=N, threshold=t, seed=12, exit_point=exit_point)
     A = scene.patch_area
     b_mean, b_var, score_per_path = _biased_expectation_and_variance(F, A, R, t)
     # Every path scores the same total: the area-weighted mean is exact to rounding.
@@ -93,7 +93,7 @@ def test_biased_path_length_definition(furnace):
     """Rays per path = 1 + hits that continue: with R = 0.5, t = 1e-3 the path is cut at the
     hit where 0.5^k < 1e-3, k = 10, after 10 rays (the paper's formula gives 10.97)."""
     scene, _, _ = furnace
-    result = solve(scene, "biased_infinite", paths=1000, threshold=1e-3, seed=1)
+    result = solve(scene, estimator="biased_infinite", paths=1000, threshold=1e-3, seed=1)
     assert result.mean_path_length == 10.0
     assert result.path_ends["threshold"] == 1000
 
@@ -114,7 +114,7 @@ def test_finite_furnace_of_triangle_patches(exit_point, sampling):
     scene = PatchScene(V, T, np.arange(P), np.full(P, R), np.full(P, E))
     assert not scene.geometry.any_parallelograms
     N = 200_000
-    result = solve(scene, "finite", paths=N, seed=12, exit_point=exit_point, sampling=sampling)
+    result = solve(scene, estimator="finite", paths=N, seed=12, exit_point=exit_point, sampling=sampling)
     A = scene.patch_area
     mean_b = (A * result.reflected[:, 0]).sum() / A.sum()
     sd = R * scene.total_power / A.sum() * (np.sqrt(R) / (1 - R)) / np.sqrt(N)

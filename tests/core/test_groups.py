@@ -195,8 +195,8 @@ def test_small_runs_group_their_chunks_and_report_every_chunk(estimator, exit_po
     assert walk_method.ShotWalk(per_source).group(100, 2.0) == 1
     fractions = []
     kw = dict(paths=20_000, seed=3, exit_point=exit_point)
-    a = solve(scene, estimator, threads=1, progress=lambda f, s: fractions.append(f), **kw)
-    b = solve(scene, estimator, threads=2, **kw)
+    a = solve(scene, estimator=estimator, threads=1, progress=lambda f, s: fractions.append(f), **kw)
+    b = solve(scene, estimator=estimator, threads=2, **kw)
     assert a.chunks == plan.MIN_CHUNKS and len(fractions) == a.chunks
     group = walk_method.ShotWalk(tables).group(20_000 // a.chunks, a.prediction.expected_path_length)
     assert group > 1 and groups[: a.chunks // group] == [group] * (a.chunks // group)  # the first run's tasks

@@ -63,7 +63,7 @@ def test_a_point_light_in_a_closed_box_is_the_direct_solve(estimator, direct_lig
     assert omega.sum() == pytest.approx(4 * math.pi, rel=1e-12)
     direct = R_FACES.repeat(9) * intensity * omega / scene.patch_area
     exact = solve_radiosity_system(F, scene.reflectivity, direct)[:, 0]
-    r = solve(scene, estimator, paths=600_000, seed=3, threshold=1e-6, direct_light=direct_light)
+    r = solve(scene, estimator=estimator, paths=600_000, seed=3, threshold=1e-6, direct_light=direct_light)
     assert r.chunks >= 32
     assert np.abs(_z(r, exact)).max() < Z
     np.testing.assert_allclose(r.energy["emitted"], 4 * math.pi * intensity, rtol=1e-12)
@@ -308,7 +308,7 @@ def test_every_kind_balances_its_energy(estimator, direct_light):
     ]
     scene = base.with_materials(base.reflectivity, base.emission, lights=lights)
     assert not scene.is_grey
-    r = solve(scene, estimator, paths=300_000, seed=11, threshold=1e-3, direct_light=direct_light)
+    r = solve(scene, estimator=estimator, paths=300_000, seed=11, threshold=1e-3, direct_light=direct_light)
     e = r.energy
     np.testing.assert_allclose(e["emitted"].mean(), scene.total_power, rtol=1e-9)
     np.testing.assert_allclose(e["absorbed"] + e["escaped"] + e["undistributed"], e["emitted"], rtol=1e-9)

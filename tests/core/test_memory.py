@@ -64,7 +64,7 @@ CHILD = textwrap.dedent(
     out = {{"patches": scene.patch_count, "chunk": chunk}}
     for name, paths in (("small", plan.MIN_CHUNKS * chunk), ("large", 4 * plan.MIN_CHUNKS * chunk)):
         tracemalloc.start()
-        result = solve(scene, "finite", paths=paths, threads=2, seed=1)
+        result = solve(scene, estimator="finite", paths=paths, threads=2, seed=1)
         traced = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         del result
@@ -142,7 +142,7 @@ def scaled_blocks(monkeypatch):
     """The blocks a million patches is computed in, as big a share of this room's patches and
     triangles (1/48 of them; 1/16 to 1/32 at a million)."""
     from addon.core.mesh import faces, frames, validation
-    from addon.core.scene.scene import geometry, patch_grids
+    from addon.core.scene import geometry, patch_grids
 
     for module in (faces, geometry, validation):
         monkeypatch.setattr(module, "BLOCK_TRIANGLES", 1 << 12)

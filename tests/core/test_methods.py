@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 from pinned_cases import every_light, mixed_box
 
+from addon.core import chunks
+from addon.core.settings import Settings
 from addon.core import solver
 from addon.core.distributed.runners import chunk_generator
 from addon.core.methods.speedups import Speedups
@@ -33,7 +35,7 @@ def test_a_solve_never_changes_the_tables_it_built(scene, monkeypatch, name, dir
             super().__init__(*args, **kwargs)
             built.append((self, dict(vars(self))))
 
-    monkeypatch.setattr(solver, "WalkTables", Recorded)
+    monkeypatch.setattr(chunks, "WalkTables", Recorded)
     r = solver.solve(scene, paths=20_000, seed=1, method=name, direct_light=direct_light, threads=2)
     assert r.paths == 20_000 and len(built) == 1
     tables, before = built[0]
@@ -66,7 +68,7 @@ def test_a_state_rebuilt_from_its_spec_runs_the_same_chunks(name, direct_light, 
     scene = every_light()
     method = methods.create(name, direct_light)
     tables = WalkTables(scene, "finite", 1e-3, exit_point)
-    state = method.create(scene, tables, 2_000, 7, chunk_plan(scene, method, "finite", paths=2_000).prediction)
+    state = method.create(scene, tables, 2_000, 7, chunk_plan(scene, method, Settings(paths=2_000)).prediction)
     again = method.rebuild(scene, WalkTables(scene, "finite", 1e-3, exit_point), state.spec)
     a = state.run([2_000, 500], chunk_generator(7, 0))
     b = again.run([2_000, 500], chunk_generator(7, 0))

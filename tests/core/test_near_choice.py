@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from boxes import LEFT, box_scene
 
-from addon.core.lights.lights import near_choice
+from addon.core.lights import near_choice
 from addon.core.methods.first_shot import Gathering, direct_irradiance
 from addon.core.lights.lights import PointLight
 from addon.core.lights.near_choice import NearChoice

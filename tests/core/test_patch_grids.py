@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from boxes import box_rectangles, box_scene, rays_to_triangle_points, rectangles_to_mesh
 
-from addon.core.scene.scene import patch_grids as PG
+from addon.core.scene import patch_grids as PG
 from addon.core.methods.tables import WalkTables
 from addon.core.mesh.frames import parallelogram_corners
 from addon.core.scene.geometry_build import build_geometry
@@ -284,7 +284,7 @@ def test_a_walk_on_a_mixed_furnace_is_unbiased(walk):
     tables = WalkTables(scene, "finite", 1e-3, exit_point, speedups=speedups)
     assert tables.grids is not None and tables.grids.triangle_count < scene.geometry.triangle_count // 2
     assert tables.speedups.counted == (walk == "counted")
-    result = solve(scene, "finite", paths=200_000, seed=5, exit_point=exit_point, speedups=speedups)
+    result = solve(scene, estimator="finite", paths=200_000, seed=5, exit_point=exit_point, speedups=speedups)
     assert result.chunks >= 32
     z = (result.reflected[:, 0] - 0.5 / (1 - 0.5)) / np.sqrt(result.reflected_variance[:, 0])
     assert np.abs(z).max() < 5.0, np.abs(z).max()

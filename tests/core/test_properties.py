@@ -73,7 +73,7 @@ def test_random_scenes_give_sane_balanced_results(scene_arrays, estimator, exit_
         assert "no area" in str(exc)
         return
     N = 400
-    r = solve(scene, estimator, paths=N, threshold=1e-4, seed=seed, exit_point=exit_point, threads=1)
+    r = solve(scene, estimator=estimator, paths=N, threshold=1e-4, seed=seed, exit_point=exit_point, threads=1)
     assert r.paths == N and r.stopped == "paths"
     assert np.isfinite(r.radiosity).all() and (r.reflected >= 0).all()
     assert sum(r.path_ends.values()) == N
@@ -165,7 +165,7 @@ def test_bad_arrays_are_refused_with_a_value_error_or_make_a_valid_scene(which, 
     assert np.isfinite(scene.emission).all() and (scene.emission >= 0).all() and scene.total_power > 0
     assert (scene.patch_area > 0).all() and np.isfinite(scene.patch_area).all()
     assert np.isfinite(scene.patch_normal).all()
-    r = solve(scene, "finite", paths=200, seed=0, threads=1)
+    r = solve(scene, estimator="finite", paths=200, seed=0, threads=1)
     assert np.isfinite(r.radiosity).all() and (r.reflected >= 0).all()
 
 
@@ -248,7 +248,7 @@ def test_any_closed_geometry_in_a_furnace_gives_e_over_one_minus_r(arrays, R, ex
             assert "no area" in str(exc)
             return
     N = 20_000
-    r = solve(scene, "finite", paths=N, seed=seed, exit_point=exit_point, threads=1)
+    r = solve(scene, estimator="finite", paths=N, seed=seed, exit_point=exit_point, threads=1)
     assert r.path_ends["escaped"] == 0, r.path_ends
     if slivers:
         # Near an edge of a sliver (dihedral angle down to ~1e-4) its two faces are closer than

@@ -20,7 +20,7 @@ import pytest
 from boxes import CEILING, box_rectangles, box_scene, rectangles_to_mesh
 
 from addon.core import PatchScene, relight, solve, source_groups
-from addon.core.relight.relighting import resolve
+from addon.core.relight.resolve import resolve
 from addon.core.estimate import grouping
 from addon.core.lights.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
 
@@ -75,7 +75,7 @@ def open_box(weights=None, n=4):
 
 def solve_case(scene, case, **kw):
     method, direct_light, exit_point, estimator = case
-    return solve(scene, estimator, method=method, direct_light=direct_light, exit_point=exit_point, threads=2, **kw)
+    return solve(scene, estimator=estimator, method=method, direct_light=direct_light, exit_point=exit_point, threads=2, **kw)
 
 
 def joint_noise_z(a, b, mse_a, mse_b, variance_b, area):
@@ -313,24 +313,24 @@ def test_a_moved_lamp_re_solved_alone_recombines_to_a_fresh_solve_of_the_moved_s
     assert np.array_equal(redone.covariance[:, kept][:, :, kept], ps.covariance[:, kept][:, :, kept])
     assert not redone.covariance[:, area, kept].any() and not redone.covariance[:, kept, area].any()
     assert redone.covariance[:, area, area].min() > 0
-    assert redone.scale == ps.scale and redone.target_mse == ps.target_mse
+    assert redone.scale == ps.scale and redone.target_error == ps.target_error
     np.testing.assert_array_equal(redone.patch_group, ps.patch_group)
 
 
 def test_only_the_named_groups_sources_are_traced(monkeypatch):
     """A spy on the solve resolve calls: it is given only the named groups' sources (the area
     lamp; then the emitting patches' group and the sun), every other light and emission left out."""
-    from addon.core import solver
+    from addon.core.relight import resolve as resolving
 
     seen = []
-    real = solver.solve
+    real = resolving.solve
 
-    def spy(scene, *args, **kwargs):
-        seen.append((scene, kwargs["groups"]))
-        return real(scene, *args, **kwargs)
+    def spy(scene, settings, **kwargs):
+        seen.append((scene, settings.groups))
+        return real(scene, settings, **kwargs)
 
     ps = solve(open_box(), paths=20_000, seed=1, per_source=True, threads=2).per_source
-    monkeypatch.setattr(solver, "solve", spy)
+    monkeypatch.setattr(resolving, "solve", spy)
     moved = _moved_box()
     resolve(moved, ps, ["area"], paths=20_000, seed=2, threads=2)
     scene, groups = seen[-1]

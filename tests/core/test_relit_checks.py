@@ -12,7 +12,7 @@ from test_relighting import IDS, METHODS, Z, case_kwargs, every_light, joint_noi
 
 from addon.core import relight
 from addon.core.lights.lights import PointLight
-from addon.core.relight.relighting import resolve
+from addon.core.relight.resolve import resolve
 from addon.core.relight.relit_checks import REST_SHARE
 
 CASES = [METHODS[0], METHODS[3], METHODS[7]]
@@ -85,9 +85,9 @@ def test_every_source_off_is_dark_not_an_error_of_0():
 
 def test_a_recombination_past_the_target_names_the_groups_whose_re_solve_would_meet_it():
     """The dimmest source alone at full strength, the rest off (as in test_relighting): past the
-    solve's target, and that source is the one to solve again; re-solved with the target scaled to
-    the light as relit (target_mse times the square of its power over the solve's, as Update's
-    scene at its strengths now gives it; the re-solved share of it), the recombination meets it.
+    solve's target, and that source is the one to solve again; re-solved to the same relative
+    error of its own light (the re-solved share of it, as Update holds it to), the recombination
+    meets it.
     At the solve's strengths nothing is past it."""
     scene = open_box()
     first = solve_case(scene, METHODS[0], paths=40_000, seed=1, per_source=True)
@@ -99,8 +99,8 @@ def test_a_recombination_past_the_target_names_the_groups_whose_re_solve_would_m
     alone[dimmest] = 1.0
     relit = relight(ps, alone)
     assert relit.past_target and relit.over_target == (ps.names[dimmest],)
-    as_relit = ps.target_mse * (ps.power[dimmest].sum() / ps.power.sum()) ** 2 * (1 - REST_SHARE)
-    redone = resolve(scene, ps, [ps.names[dimmest]], **case_kwargs(METHODS[0], target_mse=as_relit, seed=2,
+    as_relit = ps.target_error * math.sqrt(1 - REST_SHARE)
+    redone = resolve(scene, ps, [ps.names[dimmest]], **case_kwargs(METHODS[0], target_error=as_relit, seed=2,
                                                                  stop_rule="measured"))
     again = relight(redone, alone)
     assert again.over_target == () and not again.past_target, (again.relative_rms, again.target_relative_rms)

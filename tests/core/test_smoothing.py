@@ -259,7 +259,7 @@ def _filtered_errors(scene, F, paths):
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch)
     raw, filtered, errors, bounds = [], [], [], []
     for seed in range(SEEDS):
-        r = solve(scene, "finite", paths=paths, seed=300 + seed, threads=2)
+        r = solve(scene, estimator="finite", paths=paths, seed=300 + seed, threads=2)
         x = r.reflected.reshape(exact.shape)
         out, limit = surface.filter_noise(x, r.reflected_variance.reshape(exact.shape), bound=True)
         assert (np.abs(out - x) <= limit * (1 + 1e-12)).all()  # the stated bias bound holds

@@ -19,18 +19,18 @@ def scene():
 @pytest.mark.parametrize("estimator", ["finite", "biased_infinite"])
 @pytest.mark.parametrize("exit_point", ["random", "hit"])
 def test_bitwise_reproducible_whatever_the_threads(scene, estimator, exit_point):
-    runs = [solve(scene, estimator, paths=50_000, seed=7, threads=t, exit_point=exit_point) for t in (1, 2, 2)]
+    runs = [solve(scene, estimator=estimator, paths=50_000, seed=7, threads=t, exit_point=exit_point) for t in (1, 2, 2)]
     for r in runs[1:]:
         assert np.array_equal(r.radiosity, runs[0].radiosity)
         assert r.rays == runs[0].rays
-    other = solve(scene, estimator, paths=50_000, seed=8, threads=2, exit_point=exit_point)
+    other = solve(scene, estimator=estimator, paths=50_000, seed=8, threads=2, exit_point=exit_point)
     assert not np.array_equal(other.radiosity, runs[0].radiosity)
 
 
 def test_predicted_stop_rule_runs_the_predicted_paths(scene):
     target = 1e-4
     p = predict(scene, "finite", target_mse=target)
-    r = solve(scene, "finite", target_mse=target, seed=1)
+    r = solve(scene, estimator="finite", target_mse=target, seed=1)
     assert r.paths == p.paths and r.stopped == "target"
     assert r.predicted_mse == pytest.approx(p.mse_per_path / p.paths)
     assert r.predicted_mse <= target
@@ -38,24 +38,24 @@ def test_predicted_stop_rule_runs_the_predicted_paths(scene):
 
 def test_given_paths_end_as_paths_even_with_a_target(scene):
     """With both paths= and target_mse= under the predicted rule, paths= is what runs."""
-    r = solve(scene, "finite", paths=3_000, target_mse=1.0, seed=1)
+    r = solve(scene, estimator="finite", paths=3_000, target_mse=1.0, seed=1)
     assert r.paths == 3_000 and r.stopped == "paths"
 
 
 def test_numpy_numbers_are_accepted(scene):
-    r = solve(scene, "biased_infinite", paths=np.int64(2_000), threshold=np.float32(1e-3), seed=np.int64(3))
+    r = solve(scene, estimator="biased_infinite", paths=np.int64(2_000), threshold=np.float32(1e-3), seed=np.int64(3))
     assert r.paths == 2_000
     p = predict(scene, "finite", target_mse=np.float32(1e-4))
     assert p.paths == predict(scene, "finite", target_mse=float(np.float32(1e-4))).paths
     with pytest.raises(ValueError, match="paths"):
-        solve(scene, "finite", paths=np.float64(10.0))
+        solve(scene, estimator="finite", paths=np.float64(10.0))
     with pytest.raises(ValueError, match="paths"):
-        solve(scene, "finite", paths=np.bool_(True))
+        solve(scene, estimator="finite", paths=np.bool_(True))
 
 
 def test_measured_stop_rule_stops_at_the_target(scene):
     target = 2e-4
-    r = solve(scene, "biased_infinite", target_mse=target, stop_rule="measured", seed=2)
+    r = solve(scene, estimator="biased_infinite", target_mse=target, stop_rule="measured", seed=2)
     assert r.stopped == "target"
     assert r.measured_mse <= target
     assert r.chunks >= 8
@@ -63,7 +63,7 @@ def test_measured_stop_rule_stops_at_the_target(scene):
 
 def test_progress_reports_and_reaches_one(scene):
     seen = []
-    solve(scene, "finite", paths=100_000, seed=3, progress=lambda f, stats: seen.append((f, dict(stats))))
+    solve(scene, estimator="finite", paths=100_000, seed=3, progress=lambda f, stats: seen.append((f, dict(stats))))
     fractions = [f for f, _ in seen]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
     assert seen[-1][1]["paths"] == 100_000
@@ -77,7 +77,7 @@ def test_the_result_so_far_is_the_result_bit_for_bit(scene, grey):
     if grey:
         scene = scene.with_materials(np.repeat(scene.reflectivity.mean(axis=1, keepdims=True), 3, axis=1), scene.emission)
     last = {}
-    r = solve(scene, "finite", paths=20_000, seed=3, progress=lambda f, stats: last.update(stats))
+    r = solve(scene, estimator="finite", paths=20_000, seed=3, progress=lambda f, stats: last.update(stats))
     assert np.array_equal(last["radiosity"](), r.radiosity)
     assert np.array_equal(last["radiosity"](np.float32), r.radiosity.astype(np.float32))
 
@@ -91,7 +91,7 @@ def test_cancel_returns_complete_chunks(scene):
     def count(fraction, stats):
         calls["n"] += 1
 
-    r = solve(scene, "finite", paths=5_000_000, seed=4, progress=count, should_stop=stop_after_two_progress_calls)
+    r = solve(scene, estimator="finite", paths=5_000_000, seed=4, progress=count, should_stop=stop_after_two_progress_calls)
     assert r.stopped == "cancelled"
     assert 0 < r.paths < 5_000_000
     chunk = chunk_paths_for(predict(scene, "finite").expected_path_length, 5_000_000)
@@ -103,7 +103,7 @@ def test_cancel_returns_complete_chunks(scene):
 
 def test_time_limit(scene):
     start = time.perf_counter()
-    r = solve(scene, "finite", paths=50_000_000, seed=5, max_seconds=0.3)
+    r = solve(scene, estimator="finite", paths=50_000_000, seed=5, max_seconds=0.3)
     assert r.stopped == "time_limit"
     assert time.perf_counter() - start < 5.0
     assert r.paths < 50_000_000
@@ -111,7 +111,7 @@ def test_time_limit(scene):
 
 def test_zero_reflectivity_traces_one_bounce(scene):
     black = scene.with_materials(np.zeros(scene.patch_count), scene.emission)
-    r = solve(black, "finite", paths=10_000, seed=6)
+    r = solve(black, estimator="finite", paths=10_000, seed=6)
     assert r.rays == 10_000 and np.array_equal(r.radiosity, black.emission)
     p = predict(black, "finite", target_mse=1e-6)
     assert p.paths == 1 and p.mse_per_path == 0
@@ -123,8 +123,8 @@ def test_scale_and_position_do_not_matter(scale, offset):
     same scene scaled or moved far away gives the same radiosity within the noise."""
     base, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], (1.0, 1.4, 0.8), n=3)
     moved, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], (1.0, 1.4, 0.8), n=3, offset=(offset,) * 3, scale=scale)
-    a = solve(base, "finite", paths=200_000, seed=9)
-    b = solve(moved, "finite", paths=200_000, seed=10)
+    a = solve(base, estimator="finite", paths=200_000, seed=9)
+    b = solve(moved, estimator="finite", paths=200_000, seed=10)
     # Radiosity is power per area: scaling lengths by s scales B of the same emittance by 1.
     z = (a.reflected - b.reflected) / np.sqrt(a.reflected_variance + b.reflected_variance)
     assert np.abs(z[:, 0]).max() < 4.5
@@ -145,11 +145,11 @@ def test_batch_estimate_is_made_only_where_it_is_used(scene, monkeypatch):
         return real(self)
 
     monkeypatch.setattr(Batches, "measured_mse", counted)
-    r = solve(scene, "finite", paths=40_000, seed=2, threads=2)
+    r = solve(scene, estimator="finite", paths=40_000, seed=2, threads=2)
     assert r.chunks >= 32 and made == [r.chunks]
     made.clear()
     calls = []
-    p = solve(scene, "finite", paths=40_000, seed=2, threads=2, progress=lambda f, s: calls.append(s["measured_mse"]))
+    p = solve(scene, estimator="finite", paths=40_000, seed=2, threads=2, progress=lambda f, s: calls.append(s["measured_mse"]))
     assert made == list(range(1, p.chunks + 1)) + [p.chunks]
     assert p.measured_mse == r.measured_mse == calls[-1]
     variance = p.reflected_variance.mean(axis=1)  # per patch, over channels
@@ -168,7 +168,7 @@ def test_measured_stop_rule_reads_the_estimate_once_a_group(scene, monkeypatch, 
     real = Batches.measured_mse
     monkeypatch.setattr(Batches, "measured_mse", lambda self: (made.append(self.chunks), real(self))[1])
     target = 3 * predict(scene, estimator, paths=200_000).predicted_mse
-    r = solve(scene, estimator, target_mse=target, stop_rule="measured", seed=5, threads=1)
+    r = solve(scene, estimator=estimator, target_mse=target, stop_rule="measured", seed=5, threads=1)
     assert r.stopped == "target" and r.measured_mse <= target
     # Read at MIN_MEASURED_CHUNKS chunks and after, once per task, then for the result.
     assert made[-2:] == [r.chunks, r.chunks] and made[0] >= plan.MIN_MEASURED_CHUNKS
@@ -180,7 +180,7 @@ def test_batch_estimate_of_a_colour_scene_is_the_mean_over_channels():
     E = [[0, 0, 0], [1.0, 0.5, 2.0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]]
     colour, _, _ = box_scene(R, E, (1.0, 1.4, 0.8), n=2)
     assert not colour.is_grey
-    r = solve(colour, "finite", paths=20_000, seed=4, threads=1)
+    r = solve(colour, estimator="finite", paths=20_000, seed=4, threads=1)
     variance = r.reflected_variance.mean(axis=1)
     expected = float((variance * colour.patch_area).sum() / colour.total_area)
     assert r.measured_mse == pytest.approx(expected, rel=1e-12)
@@ -193,7 +193,7 @@ def test_measured_mse_is_the_area_weighted_mean_of_the_variance(scene, monkeypat
     from addon.core.estimate import batches
 
     monkeypatch.setattr(batches, "MSE_BLOCK", block)
-    r = solve(scene, "finite", paths=40_000, seed=5)
+    r = solve(scene, estimator="finite", paths=40_000, seed=5)
     weight = scene.patch_area / scene.patch_area.sum()
     expected = float((r.reflected_variance * weight[:, None]).sum() / 3)
     assert r.measured_mse == pytest.approx(expected, rel=1e-12)

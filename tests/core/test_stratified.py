@@ -76,7 +76,7 @@ def test_first_ray_uniforms_are_uniform():
 @pytest.mark.parametrize("estimator, kw", [("finite", {}), ("biased_infinite", {"threshold": 1e-9})])
 def test_stratified_is_unbiased(box, estimator, kw):
     scene, B = box
-    r = solve(scene, estimator, paths=400_000, seed=3, sampling="stratified", **kw)
+    r = solve(scene, estimator=estimator, paths=400_000, seed=3, sampling="stratified", **kw)
     assert r.chunks >= 32 and r.sampling == "stratified"
     z = (r.reflected[:, 0] - (B[:, 0] - scene.emission[:, 0])) / np.sqrt(r.reflected_variance[:, 0])
     # 96 patches, variances from >= 32 batches (t, >= 31 d.o.f.): P(max |t| > 5) < 3e-3
@@ -90,7 +90,7 @@ def test_stratified_hit_exit_agrees_with_independent_sampling(box, estimator):
     their batch variances (t with >= 31 d.o.f. each; 96 patches: P(max |z| > 5) < 3e-3)."""
     scene, _ = box
     runs = [
-        solve(scene, estimator, paths=300_000, seed=5, sampling=sampling, exit_point="hit", threshold=1e-9)
+        solve(scene, estimator=estimator, paths=300_000, seed=5, sampling=sampling, exit_point="hit", threshold=1e-9)
         for sampling in ("independent", "stratified")
     ]
     assert all(r.chunks >= 32 for r in runs)
@@ -104,7 +104,7 @@ def test_stratified_lowers_the_error(box):
     mse = {}
     for sampling in ("independent", "stratified"):
         mse[sampling] = np.array(
-            [area_weighted_mse(solve(scene, "finite", paths=50_000, seed=s, sampling=sampling).radiosity, B, scene.patch_area) for s in range(10)]
+            [area_weighted_mse(solve(scene, estimator="finite", paths=50_000, seed=s, sampling=sampling).radiosity, B, scene.patch_area) for s in range(10)]
         )
     gap = mse["independent"].mean() - mse["stratified"].mean()
     se = np.sqrt(mse["independent"].var(ddof=1) / 10 + mse["stratified"].var(ddof=1) / 10)
@@ -113,8 +113,8 @@ def test_stratified_lowers_the_error(box):
 
 def test_stratified_is_reproducible_across_threads(box):
     scene, _ = box
-    a = solve(scene, "biased_infinite", paths=30_000, seed=4, threads=1, sampling="stratified")
-    b = solve(scene, "biased_infinite", paths=30_000, seed=4, threads=2, sampling="stratified")
+    a = solve(scene, estimator="biased_infinite", paths=30_000, seed=4, threads=1, sampling="stratified")
+    b = solve(scene, estimator="biased_infinite", paths=30_000, seed=4, threads=2, sampling="stratified")
     assert np.array_equal(a.radiosity, b.radiosity)
     with pytest.raises(ValueError, match="sampling"):
-        solve(scene, "finite", paths=10, sampling="sobol")
+        solve(scene, estimator="finite", paths=10, sampling="sobol")

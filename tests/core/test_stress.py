@@ -52,7 +52,7 @@ def test_finite_furnace_near_one(R, N):
     E = 1.0
     scene, F, _ = box_scene([R] * 6, [E] * 6, SIZE, n=2)
     fractions = []
-    r = solve(scene, "finite", paths=N, seed=61, threads=2, progress=lambda f, s: fractions.append(f))
+    r = solve(scene, estimator="finite", paths=N, seed=61, threads=2, progress=lambda f, s: fractions.append(f))
     _sane(r, scene)
     assert r.stopped == "paths" and r.paths == N
     assert r.path_ends["escaped"] == 0 and r.path_ends["blocked"] == 0 and r.path_ends["absorbed"] == N
@@ -80,11 +80,11 @@ def test_cancel_and_time_limit_interrupt_a_chunk_of_endless_paths(how):
     scene, _, _ = box_scene([0.99999] * 6, [1.0] * 6, SIZE, n=1)
     start = time.perf_counter()
     if how == "cancel":
-        r = solve(scene, "finite", paths=10_000, seed=1, threads=2,
+        r = solve(scene, estimator="finite", paths=10_000, seed=1, threads=2,
                   should_stop=lambda: time.perf_counter() - start > 0.3)
         assert r.stopped == "cancelled"
     else:
-        r = solve(scene, "finite", paths=10_000, seed=1, threads=2, max_seconds=0.3)
+        r = solve(scene, estimator="finite", paths=10_000, seed=1, threads=2, max_seconds=0.3)
         assert r.stopped == "time_limit"
     assert time.perf_counter() - start < 3.0
     # No chunk finished: the result says so (no paths) rather than inventing one.
@@ -137,7 +137,7 @@ def test_biased_furnace_extreme_thresholds(R, t, N):
     area-weighted mean, the path length and the energy balance are exact."""
     E = 1.0
     scene, _, _ = box_scene([R] * 6, [E] * 6, SIZE, n=2)
-    r = solve(scene, "biased_infinite", paths=N, threshold=t, seed=62, threads=2)
+    r = solve(scene, estimator="biased_infinite", paths=N, threshold=t, seed=62, threads=2)
     _sane(r, scene)
     K = _cut_step(R, t)
     assert r.mean_path_length == K and r.rays == K * N
@@ -154,7 +154,7 @@ def test_biased_tiny_threshold_matches_the_direct_solve():
     1's infinite-estimator variance (with colour and unequal reflectivities)."""
     scene, F, _ = box_scene([0.3, 0.6, 0.7, 0.5, 0.4, 0.65], [0, 1.0, 0, 0, 0, 0], SIZE, n=2)
     N = 100_000
-    r = solve(scene, "biased_infinite", paths=N, threshold=1e-9, seed=63, threads=2)
+    r = solve(scene, estimator="biased_infinite", paths=N, threshold=1e-9, seed=63, threads=2)
     _sane(r, scene)
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)
     _, var = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
@@ -188,7 +188,7 @@ def test_scaled_rotated_and_moved_box_matches_the_exact_solution(scale, offset, 
     R, E = np.asarray(R_faces)[face], np.asarray(E_faces)[face]
     scene = PatchScene(V, T, TP, R, E)
     N = 100_000
-    r = solve(scene, "finite", paths=N, seed=64, threads=2, exit_point=exit_point)
+    r = solve(scene, estimator="finite", paths=N, seed=64, threads=2, exit_point=exit_point)
     _sane(r, scene)
     assert r.path_ends["escaped"] == 0 and r.path_ends["blocked"] == 0
     if exit_point == "random":
@@ -197,7 +197,7 @@ def test_scaled_rotated_and_moved_box_matches_the_exact_solution(scale, offset, 
         z = (r.reflected[:, 0] - b) / np.sqrt(var / N)
     else:
         # The same box at unit scale, with the same seed: compare within both runs' batch noise.
-        unit = solve(PatchScene(*rectangles_to_mesh(origin, u, v), R, E), "finite", paths=N, seed=65,
+        unit = solve(PatchScene(*rectangles_to_mesh(origin, u, v), R, E), estimator="finite", paths=N, seed=65,
                      threads=2, exit_point="hit")
         z = (r.reflected[:, 0] - unit.reflected[:, 0]) / np.sqrt(
             r.reflected_variance[:, 0] + unit.reflected_variance[:, 0])
@@ -248,7 +248,7 @@ def test_1e8_paths_equal_their_two_halves_and_the_exact_solution(monkeypatch):
         return tallies
 
     monkeypatch.setattr(runners, "run_chunks", locked_run)
-    full = solve(scene, "finite", paths=N, seed=66, threads=2)
+    full = solve(scene, estimator="finite", paths=N, seed=66, threads=2)
     assert full.paths == N and full.chunks == chunk_count
     hits = _incident(full, scene)
     np.testing.assert_allclose(hits, np.round(hits), rtol=0, atol=1e-3)  # no rounding crept in
@@ -305,7 +305,7 @@ def test_sliver_triangles_sample_and_trace_correctly():
     np.testing.assert_allclose(scene.patch_area, np.linalg.norm(np.cross(u, v), axis=1), rtol=1e-12)
     assert scene.triangle_count == 12 * len(origin)
     N = 100_000
-    r = solve(scene, "finite", paths=N, seed=71, threads=2)
+    r = solve(scene, estimator="finite", paths=N, seed=71, threads=2)
     _sane(r, scene)
     assert r.path_ends["escaped"] == 0 and r.path_ends["blocked"] == 0
     z = (r.reflected[:, 0] - b) / np.sqrt(var / N)
@@ -319,7 +319,7 @@ def test_mirrored_box_with_reversed_winding_is_the_same_box():
     V, T, TP = rectangles_to_mesh(origin, u, v)
     scene = PatchScene(V * [-1, 1, 1], T[:, ::-1], TP, R, E)
     N = 100_000
-    r = solve(scene, "finite", paths=N, seed=72, threads=2)
+    r = solve(scene, estimator="finite", paths=N, seed=72, threads=2)
     assert r.path_ends["escaped"] == 0 and r.path_ends["blocked"] == 0
     z = (r.reflected[:, 0] - b) / np.sqrt(var / N)
     assert np.abs(z).max() < Z, np.abs(z).max()
@@ -339,7 +339,7 @@ def test_duplicated_coincident_face_splits_its_light():
     with pytest.warns(UserWarning, match=r"lie exactly on top of others \(duplicated faces\), on patches 0, 24"):
         scene = PatchScene(V, T2, TP2, np.r_[R, R[floor]], np.r_[E, E[floor]])
     N = 100_000
-    r = solve(scene, "finite", paths=N, seed=73, threads=2)
+    r = solve(scene, estimator="finite", paths=N, seed=73, threads=2)
     _sane(r, scene)
     A = scene.patch_area
     pair = (A[floor] * r.reflected[floor, 0] + A[P] * r.reflected[P, 0]) / A[floor]
@@ -367,7 +367,7 @@ def test_back_to_back_coincident_faces_are_reported_and_absorb():
     with pytest.warns(UserWarning, match=r"duplicated faces.*on patches 24, 25.*seen from behind absorbs it"):
         scene = PatchScene(V2, T2, TP2, np.r_[R, 0.5, 0.5], np.r_[E, 0.0, 0.0])
     N = 50_000
-    r = solve(scene, "finite", paths=N, seed=79, threads=2)
+    r = solve(scene, estimator="finite", paths=N, seed=79, threads=2)
     _sane(r, scene)
     assert r.path_ends["escaped"] == 0
     assert r.path_ends["blocked"] > 0.05 * N
@@ -386,8 +386,8 @@ def test_non_manifold_fin_inside_a_box():
     E = np.where(np.r_[face, -1] == 1, 1.0, 0.0)
     scene = PatchScene(V, T, TP, R, E)
     N = 100_000
-    a = solve(scene, "finite", paths=N, seed=74, threads=2)
-    c = solve(scene, "biased_infinite", paths=N, threshold=1e-12, seed=75, threads=2)
+    a = solve(scene, estimator="finite", paths=N, seed=74, threads=2)
+    c = solve(scene, estimator="biased_infinite", paths=N, threshold=1e-12, seed=75, threads=2)
     for r in (a, c):
         _sane(r, scene)
         assert r.path_ends["escaped"] == 0
@@ -402,7 +402,7 @@ def test_open_scene_everything_escapes():
     V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     scene = PatchScene(V, [[0, 1, 2], [0, 2, 3]], [0, 0], [0.5], [2.0])
     for estimator in ("finite", "biased_infinite"):
-        r = solve(scene, estimator, paths=10_000, seed=76)
+        r = solve(scene, estimator=estimator, paths=10_000, seed=76)
         assert r.path_ends["escaped"] == 10_000 and r.rays == 10_000
         assert np.array_equal(r.radiosity, scene.emission)
         np.testing.assert_allclose(r.energy["escaped"], r.energy["emitted"], rtol=1e-12)
@@ -422,7 +422,7 @@ def test_single_sided_plane_seen_from_behind_absorbs():
                                   np.array([[0.0, 1, 0], [1.0, 0, 0]]))  # the card turned to face down
     F = down[0, 1]
     N = 100_000
-    r = solve(scene, "finite", paths=N, seed=77)
+    r = solve(scene, estimator="finite", paths=N, seed=77)
     assert np.array_equal(r.reflected, np.zeros((2, 3)))
     assert r.path_ends["blocked"] + r.path_ends["escaped"] == N
     assert abs(r.path_ends["blocked"] - N * F) < Z * math.sqrt(N * F * (1 - F))
@@ -448,7 +448,7 @@ def test_flipped_normals_give_no_light_and_say_where_it_went(emitter_inside):
         TP = np.r_[TP, 6, 6]
         R, E = np.r_[R, 0.0], np.r_[np.zeros(6), 1.0]
     scene = PatchScene(V, T, TP, R, E)
-    r = solve(scene, "finite", paths=20_000, seed=78)
+    r = solve(scene, estimator="finite", paths=20_000, seed=78)
     assert np.array_equal(r.reflected, np.zeros_like(r.reflected))
     where = "blocked" if emitter_inside else "escaped"
     assert r.path_ends[where] == 20_000
@@ -476,7 +476,7 @@ def test_first_rays_leave_uniformly_from_sources_beside_triangle_patches(exit_po
     assert not scene.geometry.all_parallelograms
     F = rectangle_form_factors(origin[:2], u[:2], v[:2])[0, 1]
     N = 1_000_000  # chunks of more paths than a wavefront: most paths start in later steps
-    r = solve(scene, "finite", paths=N, seed=83, exit_point=exit_point, sampling=sampling)
+    r = solve(scene, estimator="finite", paths=N, seed=83, exit_point=exit_point, sampling=sampling)
     assert N / r.chunks > WAVEFRONT_PATHS
     hits = r.reflected[1, 0] * scene.patch_area[1] / 0.5 / (scene.total_power / N)
     # Binomial count of first rays reaching the card (stratified sampling can only do better).

@@ -8,7 +8,7 @@ import pytest
 from types import SimpleNamespace
 
 from addon.core import PatchScene, Speedups
-from addon.core.scene.scene import rays
+from addon.core.scene import rays
 from addon.core.scene.geometry import leave_shapes
 from addon.core.methods.tables import WalkTables, patch_classes, unique_keys
 from addon.core.methods.walk_stages import walk_chunks

@@ -8,6 +8,7 @@ import pytest
 from boxes import CEILING, box_rectangles, box_scene, rectangles_to_mesh, small_source_box
 from test_first_shot import R_FACES, _box_with_one_emitter, floor_lit_unevenly_and_a_wall
 
+from addon.core.settings import Settings
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
 from addon.core.estimate import plan
 from addon.core.methods import two_way_iteration as two_way
@@ -237,8 +238,8 @@ def test_automatic_method_takes_the_two_way_iteration_only_where_each_patch_gets
     P = scene.patch_count
     few = 8 * plan.MIN_CHUNK_PATHS  # a plan of 8 minimal chunks: far under 4 rays a patch
     assert tw.first_generation_rays(P, tw.TwoWay().chunk_paths(P, 2.0, few)) < tw.TWO_WAY_RAYS_PER_PATCH
-    assert automatic.choose(scene, paths=few) == "walk"
-    assert automatic.choose(scene, paths=200_000) == "two_way"
+    assert automatic.choose(scene, Settings(paths=few)) == "walk"
+    assert automatic.choose(scene, Settings(paths=200_000)) == "two_way"
     for paths, method in ((few, "walk"), (20_000, "two_way")):
         auto = solve(scene, paths=paths, seed=2, method="auto", threads=2)
         own = solve(scene, paths=paths, seed=2, method=method, threads=2)
@@ -281,7 +282,7 @@ def test_a_guessed_plan_grows_the_two_way_chunks_to_the_balance_of_the_stop_rule
     # a solve at a loose target runs such chunks, and the automatic choice reads them
     scene, _ = _box_with_one_emitter()
     target = 1e-4
-    chosen = plan.chunk_plan(scene, tw.TwoWay(), "finite", target_mse=target)
+    chosen = plan.chunk_plan(scene, tw.TwoWay(), Settings.for_mse(scene, target))
     assert chosen.chunk >= tw.balanced_chunk(scene.patch_count, tw.TwoWay().planned_paths(chosen.prediction.paths_for(target)))
     r = solve(scene, target_mse=target, seed=1, method="auto")
     assert r.method == "two_way" and r.stopped == "target" and r.paths == r.chunks * chosen.chunk
@@ -327,9 +328,9 @@ def test_automatic_method_takes_the_walk_past_its_measured_scene_size(monkeypatc
     """Past AUTO_MAX_PATCHES (the largest scene the rule was measured on, and memory: a million
     patches stay under 1 GiB with the walk) "auto" takes the walk, whatever the rays a patch."""
     scene, _ = _box_with_one_emitter()
-    assert automatic.choose(scene, paths=200_000) == "two_way"
+    assert automatic.choose(scene, Settings(paths=200_000)) == "two_way"
     monkeypatch.setattr(automatic, "AUTO_MAX_PATCHES", scene.patch_count - 1)
-    assert automatic.choose(scene, paths=200_000) == "walk"
+    assert automatic.choose(scene, Settings(paths=200_000)) == "walk"
 
 
 def test_under_a_time_limit_two_way_chunks_stay_the_usual_size(monkeypatch):
@@ -341,8 +342,8 @@ def test_under_a_time_limit_two_way_chunks_stay_the_usual_size(monkeypatch):
     assert usual < tw.TwoWay().chunk_paths(50_000, 2.5, 10**9)
     scene, _ = _box_with_one_emitter()
     monkeypatch.setattr(plan, "RAYS_PER_CHUNK", 1_000)  # usual chunks of under 4 rays a patch here
-    assert automatic.choose(scene, paths=200_000) == "two_way"
-    assert automatic.choose(scene, paths=200_000, max_seconds=60) == "walk"
+    assert automatic.choose(scene, Settings(paths=200_000)) == "two_way"
+    assert automatic.choose(scene, Settings(paths=200_000, max_seconds=60)) == "walk"
     r = solve(scene, paths=200_000, seed=1, method="auto", max_seconds=60, threads=2)
     assert r.method == "walk"
     limited = solve(scene, paths=20_000, seed=1, method="two_way", max_seconds=60, threads=2)
@@ -406,7 +407,7 @@ def test_automatic_runs_the_walk_where_a_narrow_spot_lights_few_patches(degrees)
     assert r.method == "walk" and r.stopped == "target" and r.relative_error <= 0.05
     wide = spot_box(75)
     assert 2 < automatic.concentration(wide) < automatic.MAX_CONCENTRATION
-    assert automatic.choose(wide, target_mse=relative_rms_to_mse(predict(wide), 0.05)) == "two_way"
+    assert automatic.choose(wide, Settings(target_error=0.05)) == "two_way"
 
 
 def test_concentration_is_the_patch_count_over_the_patches_lit_and_near_one_where_light_is_even():
@@ -423,8 +424,8 @@ def test_concentration_is_the_patch_count_over_the_patches_lit_and_near_one_wher
     even = 0.25 / (weight[0] / weight.sum())  # (patch 0: a floor patch)
     assert 0.9 * even < automatic.concentration(pin) < 1.1 * even
     soft = spot_box(10, soft_falloff=True)
-    assert automatic.choose(soft, target_mse=relative_rms_to_mse(predict(soft), 0.05)) == "two_way"
-    assert automatic.choose(pin, target_mse=relative_rms_to_mse(predict(pin), 0.05), direct_light="gathered") == "two_way"
+    assert automatic.choose(soft, Settings(target_error=0.05)) == "two_way"
+    assert automatic.choose(pin, Settings(target_error=0.05, direct_light="gathered")) == "two_way"
 
 
 def test_a_run_that_found_no_light_does_not_stop_on_its_target():

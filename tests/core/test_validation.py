@@ -126,14 +126,16 @@ def test_solve_arguments(mesh):
         (dict(paths=10, exit_point="middle"), r"exit_point"),
         (dict(paths=10, estimator="biased_infinite", threshold=0.0), r"threshold"),
         (dict(paths=10, estimator="biased_infinite", threshold=1.0), r"threshold"),
-        (dict(paths=10, stop_rule="measured"), r"needs a target_mse"),
+        (dict(paths=10, stop_rule="measured"), r"needs a target_error"),
+        (dict(target_error=-0.1), r"target_error must be a positive number"),
+        (dict(paths=10, colour=1), r"no solve setting named 'colour'"),
         (dict(paths=10, threads=0), r"threads"),
         (dict(paths=10, seed=-1), r"seed"),
         (dict(paths=10, max_seconds=-1), r"max_seconds"),
     ]:
         estimator = kwargs.pop("estimator", "finite")
         with pytest.raises(ValueError, match=message):
-            solve(scene, estimator, **kwargs)
+            solve(scene, estimator=estimator, **kwargs)
 
 
 def test_with_materials_shares_geometry_and_tracer(mesh):

@@ -21,7 +21,7 @@ def runs():
     scene, F, _ = box_scene([0.3, 0.6, 0.7, 0.5, 0.4, 0.65], [0, 1.0, 0, 0, 0, 0], (1.0, 1.4, 0.8), n=2)
     B = solve_radiosity_system(F, scene.reflectivity, scene.emission)
     N = 20_000
-    results = [solve(scene, "finite", paths=N, seed=s, threads=1) for s in SEEDS]
+    results = [solve(scene, estimator="finite", paths=N, seed=s, threads=1) for s in SEEDS]
     var, _ = path_variances(F, scene.grey_reflectivity, scene.emission[:, 0], scene.patch_area)
     expected = float((scene.patch_area * var).sum() / scene.total_area / N)
     return scene, B, results, expected, N

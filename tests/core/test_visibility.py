@@ -12,7 +12,7 @@ from addon.core import PatchScene, solve
 from addon.core.scene.geometry_build import build_geometry
 from addon.core.estimate.reference import path_variances, rectangle_form_factors, solve_radiosity_system
 from addon.core.lights.sampling import patch_point_rows
-from addon.core.scene.scene import visibility
+from addon.core.scene import visibility
 from boxes import rectangles_to_mesh
 from overlap_boxes import slab_room, slab_scene, solid_box, visible_rectangles
 
@@ -105,7 +105,7 @@ def test_direct_solve_of_the_overlapping_room(lit_room):
     scene, inner, F, A, B, var = lit_room
     np.testing.assert_allclose(F.sum(axis=1), 1.0, atol=1e-12)  # the visible rectangles close the room
     N = 200_000
-    runs = [solve(scene, "finite", paths=N, seed=s) for s in SEEDS]
+    runs = [solve(scene, estimator="finite", paths=N, seed=s) for s in SEEDS]
     b = np.mean([r.reflected[inner, 0] for r in runs], axis=0)
     z = (b - (B - scene.emission[inner, 0])) / np.sqrt(var / (N * len(SEEDS)))
     assert np.abs(z).max() < 4.0, np.abs(z).max()

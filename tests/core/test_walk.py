@@ -65,7 +65,7 @@ def test_hit_points_keep_clear_of_edges(classes, traced):
     points. With classes (as in big scenes) the triangles' edge thresholds are read per patch
     class."""
     from addon.core import PatchScene
-    from addon.core.scene.scene import rays
+    from addon.core.scene import rays
     from addon.core.mesh.frames import RELATIVE_EDGE_INSET
     from boxes import box_rectangles, rays_to_triangle_points, rectangles_to_mesh
 

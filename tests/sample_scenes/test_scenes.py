@@ -110,7 +110,7 @@ def test_rays_hit_front_faces(name, kwargs, closed):
     room and 30% in the closed box (measured), so a bound of 3% tells the two apart."""
     solve = pytest.importorskip("addon.core").solve
     sample = build(name, **kwargs)
-    r = solve(sample.scene, "finite", paths=20_000, seed=5, threads=1)
+    r = solve(sample.scene, estimator="finite", paths=20_000, seed=5, threads=1)
     if closed:
         assert r.path_ends["escaped"] == 0
     assert r.path_ends["blocked"] <= 0.03 * r.paths

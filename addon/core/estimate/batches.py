@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from ..relight.relighting import GroupBatches
+from .per_source import GroupBatches
 
 # measured_mse sums this many patches at a time.
 MSE_BLOCK = 1 << 16
@@ -29,7 +29,7 @@ class Batches:
 
     def __init__(self, scene, tables, increments=False):
         C, P = tables.channels, scene.patch_count
-        # Per source: each group's sums too (relighting.GroupBatches), or None.
+        # Per source: each group's sums too (per_source.GroupBatches), or None.
         self.groups = None if tables.groups is None else GroupBatches(scene, tables, tables.groups.whole)
         self.scene = scene
         self.channels = C
@@ -162,7 +162,7 @@ class Batches:
             variance = self._spread(k)
             variance *= np.square(self.scene.total_power / self.scene.patch_area)
             variance /= (self.chunks - 1) * self.paths
-            return np.minimum(variance, np.finfo(dtype).max, out=variance)  # (very bright sources: no inf in float32)
+            return variance
 
         with np.errstate(over="ignore"):
             out = self._columns(column, dtype)

@@ -251,3 +251,15 @@ def world_group(scene, groups):
     if len(found) > 1:
         raise ValueError("per-source results take the world lights in one group; they are in several")
     return found.pop() if found else -1
+
+
+def groups_for(scene, per_source, groups):
+    """The SourceGroups a per-source solve tallies (None: no per-source results); ValueError in
+    one line where they cannot be."""
+    if not per_source:
+        if groups is not None:
+            raise ValueError("groups are for per-source results: give per_source=True with them")
+        return None
+    groups = source_groups(scene) if groups is None else groups
+    check_per_source(scene, groups)
+    return groups

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .error_model import MAX_PATHS, mse_to_relative_rms, predict
+from .error_model import MAX_PATHS, mse_to_relative_rms, predict, relative_rms_to_mse
 from ..names import MEASURED, SCALE_PAPER
 
 # A chunk aims at about this many rays: enough wavefront steps that its last short ones cost
@@ -32,30 +32,41 @@ MEASURED_STOP_CHUNKS = 12
 
 @dataclass(frozen=True)
 class ChunkPlan:
-    """How a solve splits its paths: the paper's prediction, the stop rule, the most paths it
-    runs (``cap``) and the paths of a chunk."""
+    """How a solve splits its paths: the paper's prediction, the target as the paper's MSE
+    (``target_mse``, None without one), the stop rule, the most paths it runs (``cap``) and the
+    paths of a chunk."""
 
     prediction: object
+    target_mse: float | None
     measured_rule: bool
     cap: int
     chunk: int
 
 
-def chunk_plan(scene, method, estimator, *, paths=None, target_mse=None, threshold=1e-3, stop_rule=None,
-               max_seconds=None):
-    """The chunk plan of a solve of ``method`` (a ``methods`` method) with these arguments. A
-    method whose error the paper's formulas do not predict stops on its measured error."""
-    prediction = predict(scene, estimator, target_mse=target_mse, threshold=threshold)
-    measured_rule = stop_rule == MEASURED or (not method.predicted and target_mse is not None)
+def paper_target(scene, settings):
+    """The paper's MSE of ``settings.target_error`` on ``scene`` (None without a target): the
+    one place the relative target becomes an MSE, which formulas (2)/(3) take."""
+    if settings.target_error is None:
+        return None
+    return relative_rms_to_mse(predict(scene, settings.estimator, threshold=settings.threshold), settings.target_error)
+
+
+def chunk_plan(scene, method, settings):
+    """The chunk plan of a solve of ``method`` (a ``methods`` method) with ``settings`` (a
+    settings.Settings). A method whose error the paper's formulas do not predict stops on its
+    measured error."""
+    target_mse, paths = paper_target(scene, settings), settings.paths
+    prediction = predict(scene, settings.estimator, target_mse=target_mse, threshold=settings.threshold)
+    measured_rule = settings.stop_rule == MEASURED or (not method.predicted and target_mse is not None)
     if measured_rule:
         planned = method.planned_paths(prediction.paths_for(target_mse))
         cap = paths if paths is not None else min(MEASURED_CAP_FACTOR * planned, MAX_PATHS)
     else:
         planned = paths if paths is not None else prediction.paths_for(target_mse)
         cap = planned
-    chunk = method.chunk_paths(scene.patch_count, prediction.expected_path_length, planned, max_seconds is not None,
-                               guessed=measured_rule and paths is None)
-    return ChunkPlan(prediction, measured_rule, int(cap), int(chunk))
+    chunk = method.chunk_paths(scene.patch_count, prediction.expected_path_length, planned,
+                               settings.max_seconds is not None, guessed=measured_rule and paths is None)
+    return ChunkPlan(prediction, target_mse, measured_rule, int(cap), int(chunk))
 
 
 def chunk_paths_for(expected_path_length, planned_paths, min_chunks=MIN_CHUNKS):
@@ -79,14 +90,14 @@ def paths_to_target(paths, measured_mse, target_mse, chunk, cap):
     return float(min(cap, chunks * chunk))
 
 
-def target_now(target_mse, error_scale, prediction, mean_reflected):
-    """The MSE a measured stop holds a run to: ``target_mse`` on the paper's scale; on the
-    measured scale the same error relative to the run's own mean reflected radiosity b_now,
-    target_mse (b_now / b_ave)^2 (the paper's b_ave: what target_mse was made relative to).
-    NaN (never met) before any path; 0 while nothing is reflected (meets_target waits for light)."""
+def target_now(plan, target_error, error_scale, mean_reflected):
+    """The MSE a measured stop holds a run to: the plan's paper MSE on the paper's scale; on the
+    measured scale the same relative error of the run's own mean reflected radiosity b_now,
+    (target_error b_now)^2. NaN (never met) before any path; 0 while nothing is reflected
+    (meets_target waits for light)."""
     if error_scale == SCALE_PAPER:
-        return target_mse
-    return target_mse * (mean_reflected / prediction.mean_reflected_radiosity) ** 2
+        return plan.target_mse
+    return (target_error * mean_reflected) ** 2
 
 
 def relative_error(mse, error_scale, prediction, mean_reflected):

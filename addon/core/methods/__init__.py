@@ -13,7 +13,6 @@ algorithm module (``core/walk.py``, ``core/jacobi.py``, ``core/two_way.py``, ``c
 from __future__ import annotations
 
 from ..names import AUTO, GATHERED, METHODS, SHOT
-from .automatic import choose
 from .base import GatheringSpec, Integrator, Method
 from .jacobi import Jacobi
 from .two_way import TwoWay
@@ -21,7 +20,7 @@ from .walk import Walk
 
 KINDS = {kind.name: kind for kind in (Walk, Jacobi, TwoWay)}
 
-__all__ = ["AUTO", "GatheringSpec", "Integrator", "Method", "choose", "create", "direct_light_for"]
+__all__ = ["AUTO", "GatheringSpec", "Integrator", "Method", "create", "direct_light_for"]
 
 
 def create(name, direct_light=None):

@@ -17,8 +17,8 @@ better).
 With per-source results the two-way iteration carries every group's share on every ray, and its
 cost grows with the groups while the walk's hardly does (benchmarks/results/relight.md): where
 the rule above picks the two-way iteration, a pilot of each with per-source results
-(``forecast.measured_choice``) measures their time to the same error on this machine, and the
-cheaper runs (not under a time limit below MEASURED_MIN_SECONDS, which the pilots would eat).
+(``forecast.measured_choice``, which the solver runs on the candidates ``choose`` names) measures
+their time to the same error on this machine, and the cheaper runs (not under a time limit below MEASURED_MIN_SECONDS, which the pilots would eat).
 """
 from __future__ import annotations
 
@@ -56,30 +56,26 @@ CONCENTRATION_RAYS = 1 << 13
 CONCENTRATION_STREAM = (1 << 62) + 2
 
 
-def choose(scene, estimator=FINITE, *, paths=None, target_mse=None, threshold=1e-3, max_seconds=None, per_source=False,
-           **pilot):
-    """The method (its name) Automatic runs for a solve with these arguments; with
-    ``per_source``, measured where the two-way iteration would otherwise run (``pilot``: the
-    solve's groups, direct_light, exit_point, sampling, threads, seed for the pilots)."""
+def choose(scene, settings):
+    """The method (its name) Automatic runs for a solve with ``settings`` (a settings.Settings),
+    or, with per-source results where the two-way iteration would otherwise run, the candidates
+    (a tuple of names, the rule's first) whose pilots on this machine decide
+    (``forecast.measured_choice``, with MEASURED_MARGIN)."""
     if scene.patch_count > AUTO_MAX_PATCHES:
         return WALK
     two_way = TwoWay()
-    chunk = chunk_plan(scene, two_way, estimator, paths=paths, target_mse=target_mse, threshold=threshold,
-                       max_seconds=max_seconds).chunk  # (the chunks its run would have)
+    chunk = chunk_plan(scene, two_way, settings.but(stop_rule=None)).chunk  # (the chunks its run would have)
     if not two_way.pays(scene.patch_count, chunk):
         return WALK
-    shoots = pilot.get("direct_light") != GATHERED and not scene.lights.gathered_only()
+    shoots = settings.direct_light != GATHERED and not scene.lights.gathered_only()
     if shoots and concentration(scene) > MAX_CONCENTRATION:
         return WALK
-    groups = pilot.get("groups")
-    if not per_source or (groups if groups is not None else source_groups(scene)).count <= 1:
+    groups = settings.groups
+    if not settings.per_source or (groups if groups is not None else source_groups(scene)).count <= 1:
         return TWO_WAY  # (one group is the total: nothing more to carry)
-    if max_seconds is not None and max_seconds < MEASURED_MIN_SECONDS:
+    if settings.max_seconds is not None and settings.max_seconds < MEASURED_MIN_SECONDS:
         return TWO_WAY
-    from ..forecast import measured_choice  # (the forecast runs solves)
-
-    return measured_choice(scene, estimator, (TWO_WAY, WALK), paths=paths, target_mse=target_mse, threshold=threshold,
-                           max_seconds=max_seconds, per_source=True, margin=MEASURED_MARGIN, **pilot)[0]
+    return TWO_WAY, WALK
 
 
 def concentration(scene, rays=CONCENTRATION_RAYS):

@@ -1,5 +1,5 @@
 """What a recombination's error cannot say, from the statistics a per-source solve keeps
-(``relighting.PerSource``): each group's batches with light and its share of the samples.
+(``estimate.per_source.PerSource``): each group's batches with light and its share of the samples.
 
 A group's batch variance is its own error only where its light is in 2 batches or more (the
 rule the whole solve's error follows); a group that drew no path has 0 light and 0 variance, an
@@ -20,13 +20,6 @@ SHARE_ROUNDING = 1e-9
 # A recombination past its target: the groups left are held to this share of the target MSE and the
 # re-solved ones to the rest (an even split: re-solved to the whole target, they would put it past again).
 REST_SHARE = 0.5
-
-
-def power_share(power):
-    """(S,) each group's share of (S,3) ``power`` summed over the channels: its share of a solve's
-    samples, which draw sources (and gather toward them) in proportion to it."""
-    total = power.sum(axis=1)
-    return total / total.sum() if total.sum() > 0 else np.zeros(len(total))
 
 
 def relative_error(per_source, weights, scale):

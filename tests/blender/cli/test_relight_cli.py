@@ -49,7 +49,7 @@ def test_relight_on_a_saved_file_saves_what_the_operator_gives(blender, tmp_path
 
 
 def test_relight_traces_no_ray_from_the_command_line(blender, tmp_path, monkeypatch):
-    from addon.core.scene.scene import raytrace
+    from addon.core.scene import raytrace
 
     _solved_file(blender, tmp_path)
 

@@ -86,7 +86,7 @@ def _attributes(kind="color"):
 
 @pytest.mark.parametrize("output,light", [("TEXTURED", False), ("BOTH", True), ("VERTEX", True), ("FACE", False)])
 def test_relight_traces_no_ray_and_rewrites_every_output_the_run_wrote(blender, monkeypatch, output, light):
-    from addon.core.scene.scene import raytrace
+    from addon.core.scene import raytrace
 
     settings = rs.build(blender, output)
     settings.light_output = light
