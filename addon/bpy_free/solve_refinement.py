@@ -16,7 +16,6 @@ from ..core.refine.adaptive_light import DETAILS
 from ..core.refine.adaptive_solve import refine_by_solve
 from ..core.names import AUTO
 from . import adaptive_patches
-from .adaptive_patches import ROUNDS
 from .settings import method_for, prediction_for
 from .scene_notes import scene_and_notes
 
@@ -28,17 +27,18 @@ REFINING, FINAL = 0.4, 0.5
 
 
 def refined(objects, patches, settings, progress=None, should_stop=None, on_prediction=None):
-    """(patches refined as ``settings.detail`` says: by the direct light, then by up to ROUNDS
+    """(patches refined as ``settings.detail`` says: by the direct light, then by up to
+    ``adaptive_patches.ROUNDS``
     looser solves, the settings for the final solve: what is left of a time limit, and the
     method the refining solves ran where "auto" asked for a choice)."""
     first_count = patches.combined.patch_count
     patches = adaptive_patches.refined(objects, patches, settings.detail, settings.seed, layers=True,
                                        should_stop=should_stop)
-    if settings.detail == adaptive_patches.OFF or not ROUNDS or patches.cells is None:
+    if settings.detail == adaptive_patches.OFF or not adaptive_patches.ROUNDS or patches.cells is None:
         return patches, settings
     started, method = time.perf_counter(), None
     budget = int(DETAILS[settings.detail].budget * first_count)
-    for round_ in range(ROUNDS):
+    for round_ in range(adaptive_patches.ROUNDS):
         late = settings.max_seconds and time.perf_counter() - started > REFINING * settings.max_seconds
         if late or (should_stop is not None and should_stop()) or patches.combined.patch_count + 3 > budget:
             break
@@ -132,6 +132,6 @@ def _geometry_key(cells):
 def predicted_seconds(patches, final_seconds):
     """The predicted time of the refining solves and the final one: each refining solve about
     1 / LOOSER**2 of the final's paths on a mesh no larger (a time limit: its share)."""
-    if not getattr(patches, "refinement", None) or not ROUNDS:
+    if not getattr(patches, "refinement", None) or not adaptive_patches.ROUNDS:
         return final_seconds
-    return final_seconds * (1.0 + ROUNDS / LOOSER ** 2)
+    return final_seconds * (1.0 + adaptive_patches.ROUNDS / LOOSER ** 2)

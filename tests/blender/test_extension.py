@@ -584,8 +584,7 @@ def test_worker_thread_cancels_between_batches(blender):
     build_test_scene()
     configure(blender)
     objects, _ = read_selection(blender)
-    settings = blender.scene.radiosity.solve_settings()
-    settings.paths = 50_000_000  # far more than the test waits for
+    settings = blender.scene.radiosity.solve_settings().but(paths=50_000_000)  # far more than the test waits for
     job = worker.SolveJob(objects, settings).start()
     deadline = 60
     import time
@@ -605,9 +604,8 @@ def test_worker_reports_core_errors_as_messages(blender):
     build_test_scene()
     configure(blender)
     objects, _ = read_selection(blender)
-    settings = blender.scene.radiosity.solve_settings()
-    settings.estimator = "biased_infinite"
-    settings.threshold = 2.0  # outside (0, 1): the core refuses
+    # a threshold outside (0, 1): the core refuses
+    settings = blender.scene.radiosity.solve_settings().but(estimator="biased_infinite", threshold=2.0)
     job = worker.SolveJob(objects, settings)
     job.run()
     assert job.output is None and "threshold" in job.error and job.traceback is None
@@ -770,8 +768,7 @@ def test_live_view_data_refines_while_solving_and_writes_nothing(blender):
     build_test_scene()
     configure(blender)
     objects, _ = read_selection(blender)
-    settings = blender.scene.radiosity.solve_settings()
-    settings.relative_rms = 0.02
+    settings = blender.scene.radiosity.solve_settings().but(relative_rms=0.02)
     job = worker.SolveJob(objects, settings)
     job.live_view = True
     seen = []

@@ -98,7 +98,7 @@ def test_zip_installs_and_enables_in_the_bpy_module(tmp_path):
     with zipfile.ZipFile(zip_path) as z:
         names = z.namelist()
     assert "blender_manifest.toml" in names and "__init__.py" in names
-    assert "core/__init__.py" in names and "core/meshing.py" in names
+    assert "core/__init__.py" in names and "core/mesh/meshing.py" in names
     assert any(n.startswith("wheels/embreex-") for n in names)
     assert not any("__pycache__" in n for n in names)
 

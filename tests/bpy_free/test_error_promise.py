@@ -175,8 +175,11 @@ def test_a_relit_error_speaks_of_the_same_scale_as_the_solves():
     assert relight(r.per_source, 2 * np.ones(r.per_source.count)).relative_rms == pytest.approx(same.relative_rms, rel=1e-9)
     ps = r.per_source
     meta = {"names": list(ps.names), "power": ps.power.tolist(), "covariance": ps.covariance.tolist(),
-            "scale": ps.scale, "target_mse": ps.target_mse, "reflected_means": ps.reflected_means.tolist()}
+            "scale": ps.scale, "target_error": ps.target_error, "reflected_means": ps.reflected_means.tolist()}
     assert relit_error(meta, np.ones((ps.count, 3))).relative_rms == pytest.approx(same.relative_rms, rel=1e-9)
+    # results saved before the target was kept as a relative error kept the paper's MSE: read the same
+    old = {k: v for k, v in meta.items() if k != "target_error"} | {"target_mse": target}
+    assert relit_error(old, np.ones((ps.count, 3))).target_relative_rms == pytest.approx(0.02, rel=1e-9)
     paper = solve(scene, target_mse=target, seed=1, stop_rule="measured", threads=1, method="two_way", per_source=True)
     assert paper.per_source.reflected_means is None
     assert relight(paper.per_source, np.ones(paper.per_source.count)).relative_rms == pytest.approx(paper.relative_error, rel=1e-6)

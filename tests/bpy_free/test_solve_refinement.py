@@ -21,7 +21,7 @@ def roomy(monkeypatch):
     """Medium with room left after the direct light's refinement (the test room's lamp takes
     all of Medium's own budget), and two refining solves (the product's one, and a repeat)."""
     monkeypatch.setitem(adaptive_light.DETAILS, "MEDIUM", Detail(levels=2, contrast=0.25, budget=6.0))
-    monkeypatch.setattr(solve_refinement, "ROUNDS", 2)
+    monkeypatch.setattr(adaptive_patches, "ROUNDS", 2)
 
 
 def settings(**more):
@@ -44,7 +44,7 @@ def test_refining_solves_split_and_the_final_solve_meets_the_target():
 
 
 def test_without_refining_solves_the_direct_light_refinement_alone(monkeypatch):
-    monkeypatch.setattr(solve_refinement, "ROUNDS", 0)
+    monkeypatch.setattr(adaptive_patches, "ROUNDS", 0)
     out = pipeline.run_solve(room(), settings())
     assert not any(s.get("solve") for s in out.patches.refinement)
 
@@ -108,7 +108,7 @@ def test_the_estimate_shows_the_patch_budget_and_the_refining_solves():
     first = pipeline.make_patches(objects, 0.2).combined.patch_count
     assert value["refinement"].startswith(f"refined from {first:,} ")
     assert value["refinement"].endswith(f"at most {int(6.0 * first):,} after up to 2 refining solves")
-    solve_refinement.ROUNDS = 1  # (the product's; the fixture's monkeypatch puts it back)
+    adaptive_patches.ROUNDS = 1  # (the product's; the fixture's monkeypatch puts it back)
     assert adaptive_patches.refinement_text(adaptive_patches.refined(objects, pipeline.make_patches(objects, 0.2),
                                                                      "MEDIUM", 3)).endswith("after a refining solve")
 
@@ -169,14 +169,14 @@ def test_a_refining_solve_is_a_quarter_of_the_fewest_paths_the_final_solve_runs(
     more paths than the final solve); with a path count, a quarter of it."""
     from addon.core.estimate.plan import MEASURED_STOP_CHUNKS
 
-    monkeypatch.setattr(solve_refinement, "ROUNDS", 1)
+    monkeypatch.setattr(adaptive_patches, "ROUNDS", 1)
     runs = []
     solve = solve_refinement.solve
-    monkeypatch.setattr(solve_refinement, "solve", lambda *a, **k: runs.append((k, solve(*a, **k))) or runs[-1][1])
+    monkeypatch.setattr(solve_refinement, "solve", lambda *a, **k: runs.append((a[1], solve(*a, **k))) or runs[-1][1])
     out = pipeline.run_solve(room(), settings())
-    (kwargs, refining), = runs
-    assert kwargs["target_mse"] is None and refining.chunks == MEASURED_STOP_CHUNKS
-    assert refining.paths == MEASURED_STOP_CHUNKS * kwargs["chunk_paths"]
+    (core, refining), = runs
+    assert core.target_error is None and refining.chunks == MEASURED_STOP_CHUNKS
+    assert refining.paths == MEASURED_STOP_CHUNKS * core.chunk_paths
     assert 4 * refining.paths <= out.result.paths * 1.01 and out.result.stopped == "target"
     runs.clear()
     pipeline.run_solve(room(), settings(paths=40_000))

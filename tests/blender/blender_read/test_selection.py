@@ -357,9 +357,7 @@ def test_quitting_while_solving_stops_the_worker(tmp_path, hook):
         "room = make_object('Room', v, f, [principled('Glow', (0.99999,) * 3, (1, 1, 1), 1.0)])\n"
         "room.select_set(True)\n"
         "objects, _ = read_selection(bpy.context)\n"
-        "settings = bpy.context.scene.radiosity.solve_settings()\n"
-        "settings.paths = 10**6\n"
-        "settings.threads = 2\n"
+        "settings = bpy.context.scene.radiosity.solve_settings().but(paths=10**6, threads=2)\n"
         "job = worker.SolveJob(objects, settings).start()\n"
         "worker.set_running_job(job)\n"
         "time.sleep(1.0)\n"
@@ -432,10 +430,8 @@ def test_furnace_through_blender_with_ngons_modifiers_mirror_and_linked_duplicat
     configure(blender)
     blender.scene.radiosity.patch_size = 0.5
     objects, notes = read_selection(blender)
-    settings = blender.scene.radiosity.solve_settings()
-    settings.paths = 200_000
-    settings.threads = 2
-    settings.method = "walk"  # (the band below is the walk's: its hits per path)
+    # (the walk: the band below is the walk's, its hits per path)
+    settings = blender.scene.radiosity.solve_settings().but(paths=200_000, threads=2, method="walk")
     output = pipeline.run_solve(objects, settings)
     r = output.result
     assert r.path_ends["escaped"] == 0 and r.path_ends["blocked"] == 0

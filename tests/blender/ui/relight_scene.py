@@ -104,15 +104,16 @@ def solve(monkeypatch, seed):
 def spy_solves(monkeypatch):
     """The group names of every core solve from here on."""
     from addon.core import solver
+    from addon.core.relight import resolve
 
     calls = []
     original = solver.solve
 
-    def spy(scene, *args, **kwargs):
-        groups = kwargs.get("groups")
+    def spy(scene, settings=None, **kwargs):
+        groups = solver.Settings.of(settings).groups
         calls.append(tuple(groups.names) if groups is not None else None)
-        return original(scene, *args, **kwargs)
+        return original(scene, settings, **kwargs)
 
-    monkeypatch.setattr(solver, "solve", spy)
+    monkeypatch.setattr(resolve, "solve", spy)
     monkeypatch.setattr("addon.bpy_free.pipeline.solve", spy)
     return calls
