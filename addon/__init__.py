@@ -23,9 +23,9 @@ _registered_modules = []
 
 def _glue_modules():
     from .ui import estimate
-    from .ui import operators, panel, properties, relight
+    from .ui import operators, panel, properties, relight, relight_update
 
-    return [properties, operators, panel, estimate, relight]
+    return [properties, operators, panel, estimate, relight, relight_update]
 
 
 def register():

@@ -44,7 +44,7 @@ def solve(target, seed, rule):
 
     from addon.bpy_free import options
     from addon.core.methods import two_way
-    from addon.ui import operators
+    from addon.blender_write import solve_job
 
     settings = bpy.context.scene.radiosity
     for option in options.SETTINGS:
@@ -55,8 +55,9 @@ def solve(target, seed, rule):
     if rule == "plan":  # (the chunks the plan alone gives, as before)
         two_way.TwoWay.chunk_paths = lambda self, *a, guessed=False, **k: chunk_paths(self, *a, **k)
     try:
-        if "FINISHED" not in bpy.ops.radiosity.solve(quiet_errors=True):
-            raise RuntimeError(operators.LAST_ERROR)
+        finished = solve_job.run(bpy.context)
+        if finished.status != "FINISHED":
+            raise RuntimeError(finished.error)
     finally:
         two_way.TwoWay.chunk_paths = chunk_paths
     return settings.last_estimator, settings.last_paths, settings.last_rays, settings.last_seconds, settings.last_relative_error

@@ -142,10 +142,12 @@ def child(layout, n, target_error, method, use_tracemalloc):
     import addon
     from addon.bpy_free import pipeline
     from addon.blender_read.selection import read_selection
-    from addon.blender_write.results import is_result_object, write_results
+    from addon.blender_read.objects import is_result_object
+    from addon.blender_write.results import write_results
     from addon.bpy_free import worker
-    from addon.ui import live_view, operators
-    from addon.core import solver
+    from addon.blender_write import solve_job
+    from addon.ui import live_view
+    from addon.core import chunks
 
     mark("bpy imported")
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -167,20 +169,20 @@ def child(layout, n, target_error, method, use_tracemalloc):
             return result
         return wrapped
 
-    operators.read_selection = after("objects read", read_selection)
+    solve_job.read_selection = after("objects read", read_selection)
     pipeline.make_patches = after("patches meshed", pipeline.make_patches)
     pipeline.scene_and_notes = after("scene arrays", pipeline.scene_and_notes)
-    solver.WalkTables = after("tables and BVH", solver.WalkTables)
+    chunks.WalkTables = after("tables and BVH", chunks.WalkTables)
     pipeline.solve = after("solve (with live view)", pipeline.solve)
     # (SolveJob.run, not run_solve: a wrapper's arguments would keep the objects' arrays alive)
     worker.SolveJob.run = after("colours computed", worker.SolveJob.run)
     live = {"version": None, "arrays": None, "bytes": 0}
 
     def write_without_live_view(*args, **kwargs):
-        live["arrays"] = None  # the modal run removes its live view before writing (operators._cleanup)
+        live["arrays"] = None  # the modal run removes its live view before writing (the operator's _cleanup)
         return write_results(*args, **kwargs)
 
-    operators.write_results = after("colours written", write_without_live_view)
+    solve_job.write_results = after("colours written", write_without_live_view)
 
     def draw_live(job):
         """What the live view's draw handler makes, after every batch (a window-less stand-in)."""
@@ -192,11 +194,10 @@ def child(layout, n, target_error, method, use_tracemalloc):
             live["version"] = version
             live["bytes"] = sum(a.nbytes for a in live["arrays"]) + radiosity.nbytes
 
-    worker.PROGRESS_LISTENER = draw_live
     t = time.perf_counter()
-    done = bpy.ops.radiosity.solve()
+    finished = solve_job.run(bpy.context, progress_listener=draw_live)  # (what the operator runs)
     out["seconds"] = time.perf_counter() - t
-    assert done == {"FINISHED"}, (done, operators.LAST_ERROR)
+    assert finished.status == "FINISHED", finished.error
     out["live_bytes"] = live["bytes"]
     radiosity = bpy.context.scene.radiosity
     out["patches"] = int(radiosity.last_patches)
@@ -209,7 +210,7 @@ def child(layout, n, target_error, method, use_tracemalloc):
     live["arrays"] = None
     from addon.bpy_free import patches
 
-    patches._GEOMETRY_CACHE.clear()
+    patches.GEOMETRY_CACHE.clear()
     pipeline.RAY_RATES.clear()
     for op in bpy.context.window_manager.operators:
         getattr(op, "_job", None) and setattr(op, "_job", None)

@@ -213,7 +213,7 @@ def source_objects():
     """Every mesh that is not a result, selected (the command line's --select-all)."""
     import bpy
 
-    from addon.blender_write.results import is_result_object
+    from addon.blender_read.objects import is_result_object
 
     bpy.context.view_layer.update()  # (a view layer lists its objects once updated)
     objects = []
@@ -250,7 +250,7 @@ def product(colours, seed=0, width=interior_scene.RESOLUTION[0], **overrides):
 
     from addon.cli import preview
     from addon.cli.run import release_solve_memory
-    from addon.ui import operators
+    from addon.blender_write import solve_job
 
     scene = bpy.context.scene
     sources = source_objects()
@@ -258,13 +258,12 @@ def product(colours, seed=0, width=interior_scene.RESOLUTION[0], **overrides):
     for name, value in overrides.items():  # (given as text on the command line: read as the setting's type)
         current = getattr(settings, name)
         setattr(settings, name, type(current)(value) if isinstance(value, str) and not isinstance(current, str) else value)
-    operators.LAST_ERROR = ""
     wall = time.perf_counter()
-    result = bpy.ops.radiosity.solve(quiet_errors=True)
+    finished = solve_job.run(bpy.context)  # (what the panel's operator runs)
     release_solve_memory()
     solve = time.perf_counter() - wall
-    if "FINISHED" not in result:
-        raise RuntimeError(f"the solve failed: {operators.LAST_ERROR}")
+    if finished.status != "FINISHED":
+        raise RuntimeError(f"the solve failed: {finished.error}")
     show_results(True)
     changes = preview.preview_settings(scene, sources, width, PREVIEW_SAMPLES, 0.0)
     hidden = [(o, o.hide_render) for o in sources]

@@ -39,7 +39,8 @@ def grid(n):
     """A mesh of n x n quads (each a patch) as a result object; returns it."""
     import bpy
 
-    from addon.blender_write.results import SOURCE_PROPERTY, result_collection
+    from addon.blender_read.objects import SOURCE_PROPERTY
+    from addon.blender_write.results import result_collection
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     xs = np.linspace(0, 1, n + 1, dtype=np.float32)

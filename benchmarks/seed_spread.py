@@ -50,6 +50,8 @@ def _read(collection, name, size, dtype=np.float32):
 def main():
     import bpy
 
+    from addon.blender_write import solve_job
+
     ap = argparse.ArgumentParser()
     ap.add_argument("--only", default="", help="keep this lamp alone (no sky, no other lamp)")
     ap.add_argument("--seeds", type=int, default=4)
@@ -67,7 +69,7 @@ def main():
             pic.source_objects()
             settings = pic.prepare_product(scene, "FACE", seed)
             settings.method, settings.light_output = method, True
-            assert "FINISHED" in bpy.ops.radiosity.solve(quiet_errors=True)
+            assert solve_job.run(bpy.context).status == "FINISHED"
             runs[method, seed] = (inside_light(info), settings.last_relative_error, settings.last_seconds)
             print(method, seed, settings.last_estimator, settings.last_relative_error, settings.last_seconds, flush=True)
     methods = args.methods.split(",")

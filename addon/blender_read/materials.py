@@ -266,7 +266,7 @@ def transport_terms(material):
 
 
 def _material_inputs(material, blur):
-    node = _shader_node(material)
+    node = shader_node(material)
     if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
         return None
     what = f"material '{material.name}'"
@@ -310,11 +310,11 @@ def _principled_note(node, p, what):
 
 #: The socket of each shader that gives the base colour, and the emission colour and strength.
 _BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
-_EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
+EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
              "ShaderNodeEmission": ("Color", "Strength")}
 
 
-def _shader_node(material):
+def shader_node(material):
     """The surface shader node of a material that uses nodes, or None."""
     if material is None or material.node_tree is None:
         return None
@@ -326,7 +326,7 @@ def _shader_node(material):
 def material_attribute(material):
     """The name of the colour attribute driving a material's base colour ('' for the active
     one), or None."""
-    node = _shader_node(material)
+    node = shader_node(material)
     if node is None or node.bl_idname not in _BASE or not node.inputs[_BASE[node.bl_idname]].is_linked:
         return None
     link = node.inputs[_BASE[node.bl_idname]].links[0]
@@ -341,7 +341,7 @@ def material_attribute(material):
 
 def material_texture(material):
     """The image texture of a material's base colour, read per patch (``texture_of``), or None."""
-    node = _shader_node(material)
+    node = shader_node(material)
     if node is None or node.bl_idname not in _BASE:
         return None
     return texture_of(node.inputs[_BASE[node.bl_idname]])
@@ -351,10 +351,10 @@ def material_emission_texture(material):
     """(pixels, affine, UV map, strength) of an image texture driving a material's emission
     colour (Principled 'Emission Color', or an Emission node's 'Color'), its strength a plain
     value; or None."""
-    node = _shader_node(material)
-    if node is None or node.bl_idname not in _EMISSION:
+    node = shader_node(material)
+    if node is None or node.bl_idname not in EMISSION:
         return None
-    colour, strength = (node.inputs.get(name) for name in _EMISSION[node.bl_idname])
+    colour, strength = (node.inputs.get(name) for name in EMISSION[node.bl_idname])
     if colour is None or strength is None or strength.is_linked:
         return None
     texture = texture_of(colour)
@@ -373,12 +373,12 @@ def slot_tables(obj, notes):
     for k, material in enumerate(materials):
         texture, attribute = material_texture(material), material_attribute(material)
         emission = material_emission_texture(material)
-        node = _shader_node(material)
+        node = shader_node(material)
         per_patch = set()
         if texture is not None or attribute is not None:
             per_patch.add(_BASE[node.bl_idname])
         if emission is not None:
-            per_patch.add(_EMISSION[node.bl_idname][0])
+            per_patch.add(EMISSION[node.bl_idname][0])
         R[k], E[k], more = material_colours(material, per_patch)
         scale, offset, lobe = transport_terms(material)
         if texture is not None and not (np.all(scale == 1) and np.all(offset == 0)):

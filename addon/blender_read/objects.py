@@ -8,12 +8,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..blender_write.results import is_result_object
 from ..bpy_free.patches import ObjectArrays
 from ..bpy_free.surface_layers import SourceLayers
 from ..core.mesh import meshing
 from . import SceneError
 from .materials import slot_tables
+
+SOURCE_PROPERTY = "radiosity_source"  # custom property marking our result objects (blender_write.results)
+
+
+def is_result_object(obj) -> bool:
+    """Whether ``obj`` is one of our result objects (never read as a source)."""
+    return obj is not None and SOURCE_PROPERTY in obj.keys()
+
 
 #: Object types whose evaluated geometry becomes a mesh (curves, text, surfaces and metaballs
 #: as Blender tessellates them for display and render).

@@ -10,9 +10,9 @@ import hashlib
 import bpy
 import numpy as np
 
-from ..blender_write.results import is_result_object
+from .objects import is_result_object
 from .lights import world_gives_light
-from .materials import _EMISSION, _shader_node
+from .materials import EMISSION, shader_node
 from .objects import SOURCE_TYPES
 
 # The lamp settings besides strength and colour that shape its light (by type).
@@ -45,7 +45,7 @@ def lamp_signature(obj):
     return _digest((_rounded(v for row in obj.matrix_world for v in row), shape))
 
 
-def _background(world):
+def background_node(world):
     tree = world.node_tree
     if tree is None:
         return None
@@ -54,7 +54,7 @@ def _background(world):
 
 def world_emission(world):
     """(3,) the world's background colour x strength (an image: its strength)."""
-    node = _background(world)
+    node = background_node(world)
     if node is None:
         return np.array(world.color[:3], np.float64)
     colour = np.ones(3) if node.inputs["Color"].is_linked else np.array(node.inputs["Color"].default_value[:3])
@@ -67,7 +67,7 @@ def world_signature(world):
     tree = world.node_tree
     if tree is None:
         return "no nodes"
-    background = _background(world)
+    background = background_node(world)
     parts = []
     for node in sorted(tree.nodes, key=lambda n: n.name):
         image = getattr(node, "image", None)
@@ -88,10 +88,10 @@ def _value(socket):
 
 def material_emission(material):
     """(3,) the material's emission colour x strength (a linked factor counts as 1)."""
-    node = _shader_node(material) if material is not None else None
-    if node is None or node.bl_idname not in _EMISSION:
+    node = shader_node(material) if material is not None else None
+    if node is None or node.bl_idname not in EMISSION:
         return np.zeros(3)
-    colour, strength = (node.inputs[name] for name in _EMISSION[node.bl_idname])
+    colour, strength = (node.inputs[name] for name in EMISSION[node.bl_idname])
     c = np.ones(3) if colour.is_linked else np.array(colour.default_value[:3], np.float64)
     return c * (1.0 if strength.is_linked else float(strength.default_value))
 
@@ -177,7 +177,7 @@ def geometry_signature(scene, names):
             digest.update(co.tobytes())
             digest.update(np.int64(len(mesh.polygons)).tobytes())
             for material in mesh.materials:
-                node = _shader_node(material) if material is not None else None
+                node = shader_node(material) if material is not None else None
                 base = node.inputs[0] if node is not None and len(node.inputs) else None
                 digest.update(repr(_value(base) if base is not None else None).encode())
     return digest.hexdigest()

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..blender_read.materials import _shader_node, surface_terms
+from ..blender_read.materials import shader_node, surface_terms
 
 TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
 LIVE_PROPERTY = "radiosity_live_lamps"  # marks copies whose own shader the lamps light (textured_material)
@@ -34,7 +34,7 @@ FLAT_SWITCH = "radiosity.show_patches"
 
 # The shader's base colour socket, and its emission colour and strength sockets.
 _BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
-_EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
+EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
              "ShaderNodeEmission": ("Color", "Strength")}
 
 
@@ -50,8 +50,8 @@ def can_copy(material):
         return False, None
     if bpy.app.version < (5, 0, 0) and not material.use_nodes:
         return False, None
-    node = _shader_node(material)
-    if node is None or (node.bl_idname not in _BASE and node.bl_idname not in _EMISSION):
+    node = shader_node(material)
+    if node is None or (node.bl_idname not in _BASE and node.bl_idname not in EMISSION):
         kind = "nothing" if node is None else f"'{node.name}' ({node.bl_idname})"
         return False, (f"material '{material.name}': its surface is {kind}, not a Principled, Diffuse or Emission "
                        "shader; its result shows the baked 'Radiosity' colours, without its textures")
@@ -72,7 +72,7 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     if material.animation_data is not None:
         material.animation_data_clear()
     tree = material.node_tree
-    shader = tree.nodes[_shader_node(source).name]
+    shader = tree.nodes[shader_node(source).name]
     nodes, links = tree.nodes, tree.links
     x, y = shader.location.x + 300, shader.location.y
 
@@ -136,12 +136,12 @@ def _plus_emission(material, shader, total, live, lit_live, location):
 def follow_emission(copy, source):
     """A live copy's own shader's emission (``LIVE_EMITS_PROPERTY``: it lights the others in
     the render) set to its source's now, where the source's inputs are values (Relight)."""
-    node, own = _shader_node(source), None
+    node, own = shader_node(source), None
     if node is not None and copy.node_tree is not None:
         own = copy.node_tree.nodes.get(node.name)
     if own is None or own.bl_idname != node.bl_idname:
         return
-    for name in _EMISSION.get(node.bl_idname, ()):
+    for name in EMISSION.get(node.bl_idname, ()):
         if not node.inputs[name].is_linked and not own.inputs[name].is_linked:
             own.inputs[name].default_value = node.inputs[name].default_value
 
@@ -248,9 +248,9 @@ def _ray_depth(tree, operation, location):
 
 def _emits(shader):
     """Whether the shader has an emission whose strength is not a plain 0."""
-    if shader.bl_idname not in _EMISSION:
+    if shader.bl_idname not in EMISSION:
         return False
-    strength = shader.inputs[_EMISSION[shader.bl_idname][1]]
+    strength = shader.inputs[EMISSION[shader.bl_idname][1]]
     return strength.is_linked or strength.default_value != 0
 
 
@@ -259,7 +259,7 @@ def _emitted(tree, shader, location):
     where it emits nothing."""
     if not _emits(shader):
         return None
-    colour, strength = (shader.inputs[name] for name in _EMISSION[shader.bl_idname])
+    colour, strength = (shader.inputs[name] for name in EMISSION[shader.bl_idname])
     emitted = tree.nodes.new("ShaderNodeVectorMath")
     emitted.operation = "SCALE"
     emitted.label = "Emission"

@@ -12,7 +12,8 @@ import uuid
 
 import numpy as np
 
-from .results import result_collection, is_result_object
+from ..blender_read.objects import is_result_object
+from .results import result_collection
 
 META_PROPERTY = "radiosity_relight"
 DOMAINS = {"flat": "FACE", "irradiance": "FACE", "smooth": "CORNER", "light": "CORNER", "irradiance_point": "POINT"}

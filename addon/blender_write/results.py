@@ -10,6 +10,7 @@ import numpy as np
 
 from ..core.mesh import meshing
 from . import materials as textured
+from ..blender_read.objects import SOURCE_PROPERTY, is_result_object
 
 COLLECTION_NAME = "Radiosity"
 ATTRIBUTE_NAME = "Radiosity"
@@ -17,14 +18,9 @@ PATCH_ATTRIBUTE_NAME = "Radiosity Patches"  # the flat per-patch colours when bo
 LIGHT_ATTRIBUTE_NAME = "Radiosity Light"  # the light arriving, which the textured materials multiply
 OUR_ATTRIBUTES = (ATTRIBUTE_NAME, PATCH_ATTRIBUTE_NAME, LIGHT_ATTRIBUTE_NAME, "Radiosity Indirect")
 MATERIAL_NAME = "Radiosity Result"
-SOURCE_PROPERTY = "radiosity_source"  # custom property marking result objects
 COLLECTION_PROPERTY = "radiosity_results"  # custom property marking a scene's results collection
 RESULT_SUFFIX = " Radiosity"
 MATERIAL_PROPERTY = "radiosity_result_material"  # marks the material we made
-
-
-def is_result_object(obj) -> bool:
-    return obj is not None and SOURCE_PROPERTY in obj.keys()
 
 
 def result_material(flat_attribute=ATTRIBUTE_NAME, live=False):

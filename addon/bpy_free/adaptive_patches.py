@@ -14,7 +14,7 @@ from ..core.mesh import meshing
 from ..core.refine.adaptive import patch_mesh, shading_triangulation
 from ..core.refine.adaptive_light import DETAILS, refine_by_direct_light
 from .cleaning import drop_zero_area_faces
-from .patches import MAX_PATCHES, Patches, _GEOMETRY_CACHE, _patch_glossy, _patch_material, patch_materials
+from .patches import MAX_PATCHES, Patches, GEOMETRY_CACHE, glossy_of_patches, material_of_patches, patch_materials
 from .surface_layers import result_layers
 
 # Solves that refine the mesh after the direct light's refinement, at most (0: none; solve_refinement);
@@ -81,12 +81,12 @@ def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False
     materials = [patch_materials(o, m) for o, m in zip(objects, meshes)]
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
     emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
-    _GEOMETRY_CACHE.store(geometry_key, meshes, combined)
+    GEOMETRY_CACHE.store(geometry_key, meshes, combined)
     names = {n: i for i, n in enumerate(patches.material_names)}  # (per-light groups read each patch's)
-    patch_material = np.concatenate([_patch_material(o, m, names) for o, m in zip(objects, meshes)])
+    patch_material = np.concatenate([material_of_patches(o, m, names) for o, m in zip(objects, meshes)])
     out = replace(patches, meshes=meshes, combined=combined, reflectivity=reflectivity, emission=emission,
                   geometry_key=geometry_key, refinement=steps, patch_material=patch_material,
-                  material_names=tuple(names), cells=list(cells), glossy=_patch_glossy(objects, meshes))
+                  material_names=tuple(names), cells=list(cells), glossy=glossy_of_patches(objects, meshes))
     if layers:
         out.layers = [result_layers(o, m) if o.receives else None for o, m in zip(objects, meshes)]
     else:

@@ -100,7 +100,7 @@ class Patches:
     def patch_scene(self):
         """The core scene; geometry, sampling tables and the Embree scene are built once per
         geometry and reused when only materials (or estimator, target, seed) change."""
-        return _GEOMETRY_CACHE.scene(self)
+        return GEOMETRY_CACHE.scene(self)
 
 
 class _GeometryCache:
@@ -185,7 +185,7 @@ class _GeometryCache:
             self._entries.clear()
 
 
-_GEOMETRY_CACHE = _GeometryCache()
+GEOMETRY_CACHE = _GeometryCache()
 
 
 def patch_count(objects, patch_size) -> float:
@@ -267,11 +267,11 @@ def make_patches(objects, patch_size, layers=False) -> Patches:
 
 def _make_patches(objects, patch_size, count) -> Patches:
     key = _GeometryCache.key(objects, patch_size)
-    cached = _GEOMETRY_CACHE.meshes(key)
+    cached = GEOMETRY_CACHE.meshes(key)
     if cached is not None:
         meshes, combined = cached
         return _with_materials(objects, meshes, combined, key)
-    _GEOMETRY_CACHE.make_room(count)
+    GEOMETRY_CACHE.make_room(count)
     min_area = degenerate_area(objects)  # the scene's: what the core drops, across all objects
     meshes = [
         meshing.mesh_patches(
@@ -288,7 +288,7 @@ def _make_patches(objects, patch_size, count) -> Patches:
     combined = meshing.concatenate(meshes)
     if combined.patch_count == 0:
         raise ValueError("the selected objects have no faces")
-    _GEOMETRY_CACHE.store(key, meshes, combined)
+    GEOMETRY_CACHE.store(key, meshes, combined)
     return _with_materials(objects, meshes, combined, key)
 
 
@@ -297,14 +297,14 @@ def _with_materials(objects, meshes, combined, key) -> Patches:
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
     emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
     out = Patches([ObjectInfo.of(o) for o in objects], meshes, combined, reflectivity, emission, key)
-    out.glossy = _patch_glossy(objects, meshes)
+    out.glossy = glossy_of_patches(objects, meshes)
     names = {}
-    out.patch_material = np.concatenate([_patch_material(o, m, names) for o, m in zip(objects, meshes)])
+    out.patch_material = np.concatenate([material_of_patches(o, m, names) for o, m in zip(objects, meshes)])
     out.material_names, out.object_lightgroups = tuple(names), tuple(o.lightgroup for o in objects)
     return out
 
 
-def _patch_glossy(objects, meshes):
+def glossy_of_patches(objects, meshes):
     """(share (P,3), alpha (P,)) of every patch's glossy lobe, its face's; None where none has one."""
     if all(o.face_glossy is None for o in objects):
         return None
@@ -314,7 +314,7 @@ def _patch_glossy(objects, meshes):
     return (rows[:, :3], rows[:, 3]) if rows[:, :3].any() else None
 
 
-def _patch_material(o, mesh, names):
+def material_of_patches(o, mesh, names):
     """(P,) int32: the material of each patch of ``o`` (its object's name without one) as its
     place in ``names`` (a dict, added to)."""
     if o.face_slot is None or not len(o.slot_names):

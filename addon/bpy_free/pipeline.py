@@ -229,13 +229,13 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
                       sources=sources_text(scene))
     out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
     out.sources_out = relit.source_results(scene, patches, result, groups) if groups is not None else None
-    _write_colours(out, scene, result, settings, budget.deadline())
+    write_colours(out, scene, result, settings, budget.deadline())
     relit.add_object_values(out, settings)
     out.seconds = time.perf_counter() - started
     return out
 
 
-def _write_colours(out, scene, result, settings, deadline=None):
+def write_colours(out, scene, result, settings, deadline=None):
     """The colours ``out`` carries to the objects: per patch and per point, the light arriving
     (textured output), and the extra outputs (light only, indirect), per object that receives;
     the direct light's retries within ``deadline``."""

@@ -24,11 +24,13 @@ class SolveJob:
     measured_mse) updated between batches; ``cancel()`` stops the solve at the
     next batch.  When ``done`` is set, either ``output`` or ``error`` holds the
     outcome (``error`` is a message for the user, ``traceback`` for developers).
+    ``progress_listener(job)`` is called after each batch (the command line's progress line).
     """
 
-    def __init__(self, objects, settings: SolveSettings):
+    def __init__(self, objects, settings: SolveSettings, progress_listener=None):
         self.objects = objects
         self.settings = settings
+        self.progress_listener = progress_listener
         self._lock = threading.Lock()
         self._cancel = threading.Event()
         self.done = threading.Event()
@@ -86,8 +88,8 @@ class SolveJob:
                 trim.give_back()
         with self._lock:
             self.progress = {"fraction": float(fraction), **stats}
-        if PROGRESS_LISTENER is not None:
-            PROGRESS_LISTENER(self)
+        if self.progress_listener is not None:
+            self.progress_listener(self)
 
     def _on_prediction(self, prediction, patch_count, patches=None):
         self.prediction = prediction
@@ -126,9 +128,6 @@ LIVE_SECONDS = 0.5
 # From this many patches, the memory freed between two refreshes of the live view is given back
 # to the system at each (trim.give_back, a few ms): at a million patches it was 100-300 MiB.
 TRIM_PATCHES = 1 << 18
-
-# Called with the job after each batch (the command line's progress line), or None.
-PROGRESS_LISTENER = None
 
 # The job of the running modal solve, if any (one at a time).
 _running: SolveJob | None = None

@@ -34,22 +34,22 @@ def apply(scene, strengths, colours, known=()):
     world or an emissive material, and listing the ``known`` names (nothing changed then)."""
     import bpy
 
-    from ..blender_read.sources import _background
-    from ..blender_read.materials import _EMISSION, _shader_node
+    from ..blender_read.sources import background_node
+    from ..blender_read.materials import EMISSION, shader_node
 
     targets = {}
     for name in {**strengths, **colours}:
         obj = scene.objects.get(name)
         world = scene.world if scene.world is not None and scene.world.name == name else None
         material = bpy.data.materials.get(name)
-        node = _shader_node(material) if material is not None else None
+        node = shader_node(material) if material is not None else None
         if obj is not None and obj.type == "LIGHT":
             targets[name] = (obj.data, "energy", "color")
-        elif world is not None and _background(world) is not None:
-            background = _background(world)
+        elif world is not None and background_node(world) is not None:
+            background = background_node(world)
             targets[name] = (background.inputs["Strength"], "default_value", (background.inputs["Color"], "default_value"))
-        elif node is not None and node.bl_idname in _EMISSION:
-            colour, strength = (node.inputs[n] for n in _EMISSION[node.bl_idname])
+        elif node is not None and node.bl_idname in EMISSION:
+            colour, strength = (node.inputs[n] for n in EMISSION[node.bl_idname])
             targets[name] = (strength, "default_value", (colour, "default_value"))
         else:
             raise ValueError(f"no lamp, world or emissive material named {name!r} in the scene{listed(known)}")

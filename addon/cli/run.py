@@ -4,8 +4,6 @@ panel's operator (``radiosity.solve``, synchronous), then save the .blend and re
 
 from __future__ import annotations
 
-import contextlib
-import io
 import os
 import sys
 import time
@@ -139,7 +137,7 @@ def _sources(args):
     import bpy
 
     from ..blender_read.objects import source_objects
-    from ..blender_write.results import is_result_object
+    from ..blender_read.objects import is_result_object
 
     if args.select_all:
         for o in bpy.context.view_layer.objects:
@@ -172,42 +170,33 @@ def _settings(args, scene_name, own_scene):
 
 
 def _solve(args, settings, interrupt, exposure):
-    """Solve through the operator, with a warning first for a costly setting and the progress
-    line on a terminal; the status of a failure, else None (the preview's exposure appended to
-    ``exposure`` from the arrays written)."""
+    """Solve the selection (``blender_write.solve_job``, as the panel's operator does), with a
+    warning first for a costly setting and the progress line on a terminal; the status of a
+    failure, else None (the preview's exposure appended to ``exposure`` from the arrays written)."""
     import bpy
 
-    from ..bpy_free import worker
-    from ..ui import operators
+    from ..blender_write import solve_job
 
     _warn_before(settings, interrupt)
-    operators.LAST_ERROR = ""
     progress = ProgressLine(sys.stderr) if (not args.quiet and sys.stderr.isatty()) else None
     interrupt.progress = progress
-    worker.PROGRESS_LISTENER = progress
 
     def before_writing(output):
         if not args.no_preview:  # from the arrays written: reading Blender's back would copy them
             exposure.append(preview.preview_exposure(output))
         release_solve_memory()  # writing the colours needs the patches, not the core's scene
 
-    operators.OUTPUT_LISTENER = before_writing
-    reports = io.StringIO()  # the operator's reports, after the progress line, on lines of their own
     try:
-        with contextlib.redirect_stdout(reports):
-            result = bpy.ops.radiosity.solve(quiet_errors=True)
-    except RuntimeError as exc:  # an error the operator did not keep quiet
-        return fail(one_line(exc))
+        finished = solve_job.run(bpy.context, progress_listener=progress, before_writing=before_writing)
     finally:
-        worker.PROGRESS_LISTENER = None
-        operators.OUTPUT_LISTENER = None
         if progress is not None:
             progress.end()
         interrupt.check()
-        sys.stdout.write(for_command_line(reports.getvalue()))
     release_solve_memory()
-    if "FINISHED" not in result:
-        return fail(operators.LAST_ERROR or "the solve did not finish")
+    if finished.status != "FINISHED":
+        return fail(finished.error or "the solve did not finish")
+    for kind, text in finished.messages:  # (the operator's reports, as Blender prints them)
+        print(f"{kind.capitalize()}: {for_command_line(text)}")
     return None
 
 
@@ -273,7 +262,7 @@ def release_solve_memory():
 
     from ..bpy_free import patches, trim
 
-    patches._GEOMETRY_CACHE.clear()
+    patches.GEOMETRY_CACHE.clear()
     gc.collect()
     trim.give_back()
 

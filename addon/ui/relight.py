@@ -1,6 +1,6 @@
 """Relighting in Blender: ``radiosity.relight`` recombines the stored per-source results with
 the sources' current strengths and colours (no ray traced), live from a depsgraph handler;
-``radiosity.update`` re-solves what is stale; the panel's list of sources (bpy)."""
+the panel's list of sources (bpy); ``relight_update`` re-solves what is stale."""
 
 from __future__ import annotations
 
@@ -139,27 +139,6 @@ class RADIOSITY_OT_relight(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class RADIOSITY_OT_update(bpy.types.Operator):
-    """Solve again what is stale: the moved, reshaped or re-angled lamps' own results only where
-    that is all that changed, else (geometry changed, a lamp added) a full solve"""
-
-    bl_idname = "radiosity.update"
-    bl_label = "Update"
-    bl_options = {"REGISTER", "UNDO"}
-
-    def execute(self, context):
-        from . import relight_update
-
-        context.evaluated_depsgraph_get()
-        try:
-            message = relight_update.update(context)
-        except ValueError as exc:
-            self.report({"ERROR"}, f"Radiosity: {exc}")
-            return {"CANCELLED"}
-        self.report({"INFO"}, f"Radiosity: {message}")
-        return {"FINISHED"}
-
-
 # -- live --------------------------------------------------------------------------------------
 _SOURCE_TYPES = (bpy.types.Light, bpy.types.World, bpy.types.Material, bpy.types.NodeTree)
 
@@ -275,7 +254,7 @@ def on_load(_):
             pass
 
 
-classes = (RADIOSITY_OT_relight, RADIOSITY_OT_update, VIEW3D_PT_radiosity_relight)
+classes = (RADIOSITY_OT_relight, VIEW3D_PT_radiosity_relight)
 
 
 def register():

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..blender_read import sources
 from ..blender_read.selection import read_selection
-from ..blender_write import relight_store
+from ..blender_write import relight_keep, relight_store, solve_job
 from ..blender_write.results import write_results
 from ..bpy_free import pipeline, relit
 from ..bpy_free.settings import method_for, prediction_for
@@ -23,7 +23,6 @@ from ..core.estimate.per_source import group_power
 from ..core.relight.resolve import resolve
 from ..core.relight.relit_checks import REST_SHARE
 from . import relight as relight_ui
-from . import relight_keep
 
 
 def update(context):
@@ -57,13 +56,12 @@ def _select(context, meta):
 
 
 def _full(context, meta, why):
-    from . import operators
-
     _select(context, meta)
-    operators.LAST_ERROR = ""
-    if bpy.ops.radiosity.solve("EXEC_DEFAULT", quiet_errors=True) != {"FINISHED"}:
-        raise ValueError(operators.LAST_ERROR or "the solve did not finish")
-    return f"solved again ({why})"
+    finished = solve_job.run(context)
+    if finished.status != "FINISHED":
+        raise ValueError(finished.error or "the solve did not finish")
+    said = next((text for kind, text in reversed(finished.messages) if kind == "INFO"), "")
+    return f"solved again ({why})" + (f"; {said}" if said else "")
 
 
 def resolve_target(outcome, scene, groups, stale, target):
@@ -109,7 +107,7 @@ def _partial(context, meta, stale, last, outcome):
                                settings_relative_rms=None if settings.paths else settings.relative_rms,
                                sources=pipeline.sources_text(core_scene))
     out.sources_out = relit.source_results(core_scene, patches, result, groups)
-    pipeline._write_colours(out, core_scene, result, settings)
+    pipeline.write_colours(out, core_scene, result, settings)
     relit.add_object_values(out, settings)
     created = write_results(context, out, settings.output, scene=scene)
     relight_keep.keep(scene, created, out, _snapshot(scene, meta, stale), settings)
@@ -126,3 +124,35 @@ def _snapshot(scene, meta, stale):
         for kind, member, _power, solved, signature in group:
             out[(kind, member)] = now[(kind, member)] if name in stale else (np.asarray(solved), signature)
     return out
+
+
+class RADIOSITY_OT_update(bpy.types.Operator):
+    """Solve again what is stale: the moved, reshaped or re-angled lamps' own results only where
+    that is all that changed, else (geometry changed, a lamp added) a full solve"""
+
+    bl_idname = "radiosity.update"
+    bl_label = "Update"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        context.evaluated_depsgraph_get()
+        try:
+            message = update(context)
+        except ValueError as exc:
+            self.report({"ERROR"}, f"Radiosity: {exc}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Radiosity: {message}")
+        return {"FINISHED"}
+
+
+classes = (RADIOSITY_OT_update,)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

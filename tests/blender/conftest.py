@@ -122,3 +122,21 @@ def result_objects():
     return sorted(
         (o for o in bpy.data.objects if "radiosity_source" in o.keys()), key=lambda o: o["radiosity_source"]
     )
+
+
+def solve_outputs(monkeypatch):
+    """The outputs (pipeline.SolveOutput) of every solve the operator or the command line runs from
+    here on (blender_write.solve_job.run's), in a list that grows as they finish."""
+    from addon.blender_write import solve_job
+
+    outputs = []
+    run = solve_job.run
+
+    def recorded(*args, **kwargs):
+        finished = run(*args, **kwargs)
+        if finished.output is not None:
+            outputs.append(finished.output)
+        return finished
+
+    monkeypatch.setattr(solve_job, "run", recorded)
+    return outputs

@@ -73,7 +73,7 @@ def test_cancel_with_detail_leaves_the_scene_as_before(blender):
     s.target_error = 0.05  # millions of paths: still running when Esc comes
     before = _snapshot()
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
+    assert op._start(blender) is None
     assert _drive(op, blender, cancel=True) == {"CANCELLED"}
     assert not result_objects() and "Radiosity" not in bpy.data.collections
     assert _snapshot() == before and s.last_paths == 0

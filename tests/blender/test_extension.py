@@ -47,10 +47,10 @@ def _trace():
             ops.append(op)
         except KeyError:
             pass
-    from addon.ui import operators, properties, relight
+    from addon.ui import operators, properties, relight, relight_update
 
-    registered = [c.__name__ for c in (*properties.classes, *operators.classes, *panel.classes, *relight.classes)
-                  if c.is_registered]
+    registered = [c.__name__ for c in (*properties.classes, *operators.classes, *panel.classes, *relight.classes,
+                                       *relight_update.classes) if c.is_registered]
     return {
         "types": names,
         "registered": registered,
@@ -73,8 +73,8 @@ def test_register_and_unregister_leave_no_trace():
         assert "VIEW3D_PT_radiosity" in during["types"]
         assert "RADIOSITY_OT_solve" in during["types"]
         assert during["registered"] == ["RadiositySettings", "RADIOSITY_OT_solve", "RADIOSITY_OT_cancel", "RADIOSITY_OT_explain",
-                                        "VIEW3D_PT_radiosity", "RADIOSITY_OT_relight", "RADIOSITY_OT_update",
-                                        "VIEW3D_PT_radiosity_relight"]
+                                        "VIEW3D_PT_radiosity", "RADIOSITY_OT_relight", "VIEW3D_PT_radiosity_relight",
+                                        "RADIOSITY_OT_update"]
         assert during["scene_prop"] and during["ops"] == ["solve", "cancel", "relight", "update"]
         # the estimate's and the live relight's
         assert during["depsgraph_handlers"] == before["depsgraph_handlers"] + 2
@@ -626,14 +626,12 @@ def _modal_operator():
     from addon.ui.operators import RADIOSITY_OT_solve as Op
 
     class ModalStandIn:
-        _job = None
+        _started = None
         _timer = None
-        _notes = ()
-        _start_job = Op._start_job
+        _live = None
+        _start = Op._start
         _cleanup = Op._cleanup
-        _finish = Op._finish
-        _error = Op._error
-        quiet_errors = False
+        _reported = Op._reported
         modal = Op.modal
 
         def __init__(self):
@@ -650,7 +648,7 @@ def _drive(op, context, cancel=False, seconds=60):
 
     t0 = time.perf_counter()
     if cancel:
-        while op._job.snapshot()["paths"] == 0 and time.perf_counter() - t0 < seconds:
+        while op._started.job.snapshot()["paths"] == 0 and time.perf_counter() - t0 < seconds:
             time.sleep(0.01)
         assert op.modal(context, FakeEvent("ESC", "PRESS")) == {"RUNNING_MODAL"}
     while time.perf_counter() - t0 < seconds:
@@ -668,12 +666,12 @@ def test_modal_solve_cancel_leaves_the_scene_as_before(blender):
     s.target_error = 0.05  # millions of paths: still running when Esc comes
     before = _snapshot()
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
-    assert worker.running_job() is op._job
+    assert op._start(blender) is None
+    assert worker.running_job() is op._started.job
     assert not bpy.ops.radiosity.solve.poll()  # one solve at a time
     assert _drive(op, blender, cancel=True) == {"CANCELLED"}
     assert worker.running_job() is None
-    assert op._job.output.result.stopped == "cancelled"
+    assert op._started.job.output.result.stopped == "cancelled"
     assert ("INFO", "Radiosity cancelled: the scene is unchanged") in op.reports
     assert not result_objects() and "Radiosity" not in bpy.data.collections
     assert _snapshot() == before and s.last_paths == 0
@@ -683,7 +681,7 @@ def test_modal_solve_writes_the_same_result_as_the_synchronous_one(blender):
     build_test_scene()
     configure(blender)
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
+    assert op._start(blender) is None
     assert _drive(op, blender) == {"FINISHED"}
     assert worker.running_job() is None
     threaded = {o.name: read_colours(o.data, "Radiosity")[1].copy() for o in result_objects()}

@@ -29,7 +29,7 @@ def box_object(name="Box", size=1.0, reflectivity=0.5):
 
 
 def test_materials_change_reuses_meshes_geometry_and_tracer():
-    patches._GEOMETRY_CACHE.clear()
+    patches.GEOMETRY_CACHE.clear()
     first = patches.make_patches([box_object(reflectivity=0.5)], patch_size=0.25)
     scene_a = first.patch_scene()
     tracer = scene_a.tracer
@@ -42,7 +42,7 @@ def test_materials_change_reuses_meshes_geometry_and_tracer():
 
 
 def test_geometry_or_patch_size_change_rebuilds_and_the_last_two_are_kept():
-    patches._GEOMETRY_CACHE.clear()
+    patches.GEOMETRY_CACHE.clear()
     make = lambda size=1.0, patch=0.25: patches.make_patches([box_object(size=size)], patch_size=patch).patch_scene()  # noqa: E731
     base = make()
     finer = make(patch=0.2)

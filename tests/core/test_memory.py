@@ -180,7 +180,7 @@ def test_the_operator_arrays_stay_within_a_per_patch_budget(scaled_blocks):
     from addon.core.methods.tables import WalkTables
 
     objects, patch_size = _room_objects(128)
-    patches._GEOMETRY_CACHE.clear()
+    patches.GEOMETRY_CACHE.clear()
     try:
         made, mesh_held, mesh_peak = _traced(lambda: patches.make_patches(objects, patch_size))
         del objects
@@ -206,7 +206,7 @@ def test_the_operator_arrays_stay_within_a_per_patch_budget(scaled_blocks):
         T = scene.triangle_count
         assert (positions.nbytes + colours.nbytes) / T == LIVE_VIEW_BYTES
     finally:
-        patches._GEOMETRY_CACHE.clear()
+        patches.GEOMETRY_CACHE.clear()
 
 
 def test_no_chunk_is_held_while_the_results_are_made(monkeypatch):

@@ -27,7 +27,7 @@ from ..scene.rays import meets_front
 from ..mesh.faces import triangle_areas
 from ..lights.sampling import patch_point_rows
 from ..materials.textures import locate
-from ..scene.visibility import PROBES, _tangents
+from ..scene.visibility import PROBES, tangents
 
 COVER_SHARE = 1.0  # of the patch's side
 BLOCK = 1 << 17  # visible cells located at a time (visible_corner_weights)
@@ -87,7 +87,7 @@ def hidden_patches(geometry):
     near = COVER_SHARE * np.sqrt(g.patch_area) / g.diagonal  # (unit space)
     hidden |= back & (t < near)
     rows = np.flatnonzero(back & ~hidden)
-    tangent, bitangent = _tangents(normal[:, rows])
+    tangent, bitangent = tangents(normal[:, rows])
     for theta, phi in PROBES[1:]:
         if not rows.size:
             break

@@ -67,7 +67,7 @@ class NoiseFilter:
         such neighbour keeps its own. (For values that show nowhere,
         such as the light arriving at a black patch, but join their neighbours' corners.) With
         ``return_filter``, also the fill as a linear map of (P,k) or (S,P,k) (``LinearFilter``)."""
-        values = _checked(patch_values, self.patch_count, "patch values")
+        values = checked_rows(patch_values, self.patch_count, "patch values")
         missing = np.asarray(missing, bool).reshape(values.shape)
         if not missing.any():
             return (values, LinearFilter.identity(values.shape)) if return_filter else values
@@ -76,8 +76,8 @@ class NoiseFilter:
         own, pair = np.ones_like(values), np.zeros((len(p), values.shape[1]))
         for c in range(values.shape[1]):  # over channels, not elements
             give = missing[p, c] & ~missing[q, c]
-            weight = _sum(p[give], self.patch_area[q[give]], self.patch_count)
-            total = _sum(p[give], self.patch_area[q[give]] * values[q[give], c], self.patch_count)
+            weight = sums_by(p[give], self.patch_area[q[give]], self.patch_count)
+            total = sums_by(p[give], self.patch_area[q[give]] * values[q[give], c], self.patch_count)
             fill = missing[:, c] & (weight > 0)
             out[fill, c] = total[fill] / weight[fill]
             if return_filter:
@@ -90,7 +90,7 @@ class NoiseFilter:
         estimator's noise about 0). With ``return_filter``, also ``apply`` (``Chain``): linear,
         the whole's negative patches 0 in every part, so that parts add up to the whole's
         filtered values."""
-        values = _checked(patch_values, self.patch_count, "patch values")
+        values = checked_rows(patch_values, self.patch_count, "patch values")
         filtered = self.filter_noise(np.maximum(values, 0.0), patch_variances, return_filter=return_filter)
         if not return_filter:
             return filtered
@@ -104,7 +104,7 @@ class NoiseFilter:
         samples (a heavy-tailed estimate): there it is the neighbours' (``fill_from_neighbours``).
         With ``return_filter``, also ``apply`` (``Chain``): the same steps as a linear map, the
         fill's and the filter's weights those of these values."""
-        irradiance = _checked(irradiance, self.patch_count, "irradiance")
+        irradiance = checked_rows(irradiance, self.patch_count, "irradiance")
         black = np.asarray(reflectivity) <= 0
         light = np.maximum(irradiance, 0.0)
         variance = np.asarray(variance, np.float64)
@@ -128,7 +128,7 @@ class NoiseFilter:
         fixed, a linear map of (P,k) or (S,P,k) arrays (``LinearFilter``) whose value at
         ``patch_values`` is the filtered values (float error), so that parts of the values
         (each source's) filter to parts that add up to the filtered whole."""
-        values = _checked(patch_values, self.patch_count, "patch values")
+        values = checked_rows(patch_values, self.patch_count, "patch values")
         var = np.asarray(patch_variances, np.float64).reshape(values.shape)
         known = np.isfinite(var).all(axis=1) & (var >= 0).all(axis=1)
         largest = float(np.abs(values).max()) if values.size else 0.0
@@ -186,9 +186,9 @@ class NoiseFilter:
                 w = k[block] / var[qb, c]
                 for i in range(3):
                     wd = w * design[i]
-                    rhs[lo:hi, i] += _sum(local, wd * values[qb, c], hi - lo)
+                    rhs[lo:hi, i] += sums_by(local, wd * values[qb, c], hi - lo)
                     for j in range(i, 3):
-                        m[lo:hi, i, j] += _sum(local, wd * design[j], hi - lo)
+                        m[lo:hi, i, j] += sums_by(local, wd * design[j], hi - lo)
             for i, j in ((1, 0), (2, 0), (2, 1)):
                 m[:, i, j] = m[:, j, i]
             own = np.where(known, 1.0 / var[:, c], 0.0)
@@ -254,7 +254,7 @@ class LinearFilter:
         P = len(x)
         out = x.copy()
         for c in range(x.shape[1]):  # over colour channels, not elements
-            fit = self.own[:, c] * x[:, c] + _sum(self.p, self.pair[:, c] * x[self.q, c], P)
+            fit = self.own[:, c] * x[:, c] + sums_by(self.p, self.pair[:, c] * x[self.q, c], P)
             out[:, c] += self.share[:, c] * (fit - x[:, c])
         return out
 
@@ -300,7 +300,7 @@ def _unmeasured_from_neighbours(var, p, q):
     give = (~zero[q]) & zero[p] & np.isfinite(var[q]).all(axis=1)
     count = np.bincount(p[give], minlength=len(var))
     for c in range(var.shape[1]):
-        total = _sum(p[give], var[q[give], c], len(var))
+        total = sums_by(p[give], var[q[give], c], len(var))
         out[:, c] = np.where(zero & (count > 0), total / np.maximum(count, 1), var[:, c])
     return out
 
@@ -310,12 +310,14 @@ def _blocks(n, size=FIT_BLOCK):
     return [slice(start, min(n, start + size)) for start in range(0, n, size)]
 
 
-def _sum(index, weights, n):
+def sums_by(index, weights, n):
     """np.bincount's sums as floats, also when there is nothing to sum."""
     return np.bincount(index, weights=weights, minlength=n).astype(np.float64, copy=False)
 
 
-def _checked(values, P, what):
+def checked_rows(values, P, what):
+    """``values`` as (P, k) float64 rows, one a patch; ValueError naming ``what`` where they are not
+    one a patch or not finite."""
     values = np.asarray(values, np.float64)
     values = values.reshape(len(values), -1) if values.ndim != 2 else values
     if len(values) != P:

@@ -49,7 +49,7 @@ from functools import partial
 
 import numpy as np
 
-from ..refine.adaptive_light import SAMPLE_DIMENSIONS, _emitters, _Points, _sky, chosen_lamps
+from ..methods.direct_points import SAMPLE_DIMENSIONS, Points, chosen_lamps, emitters_at, sky_at
 from ..lights.lamp_choice import LampChoice, patch_spheres
 from ..lights.lights import SunLight, WorldLight
 from ..names import EXIT_RANDOM, FINITE
@@ -133,7 +133,7 @@ def patch_means(surface, corners):
     ([G,]T,3,3)."""
     if corners.ndim == 4:
         return np.stack([patch_means(surface, part) for part in corners])
-    return np.stack([surface._patch_means(np.ascontiguousarray(corners[:, :, c], dtype=np.float64).ravel())
+    return np.stack([surface.corner_means(np.ascontiguousarray(corners[:, :, c], dtype=np.float64).ravel())
                      for c in range(3)], axis=1)
 
 
@@ -148,7 +148,7 @@ def _unit_points(g, position, patch):
 class _Corners:
     """A block of corners as ``adaptive_light``'s lamps and emitters read sample points: unit-space
     origins (pushed off), normals, offsets, surface points and world positions; ``anchor`` and
-    ``local`` as ``adaptive_light._Points``'."""
+    ``local`` as ``methods.direct_points.Points``'."""
 
     def __init__(self, g, rows, surface_unit, world, anchor=None, local=None):
         self.rows, self.anchor, self.local = rows, anchor, local
@@ -175,7 +175,7 @@ def _sources(scene, light_group, patch_group, groups, sky=False):
         group = int(light_group[k]) if groups else 0
         if isinstance(light, WorldLight):
             if sky:
-                parts.append((group, partial(_sky, worlds=[light]), False))
+                parts.append((group, partial(sky_at, worlds=[light]), False))
             continue
         if group not in lamps:  # (a group's lamps one source, where its first lamp is)
             lamps[group] = []
@@ -185,7 +185,7 @@ def _sources(scene, light_group, patch_group, groups, sky=False):
              for part in (_lamp_sources(group, add) if paired is None else [(group, add, paired)])]
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
-        parts.append((group, partial(_emitters, scene=scene, emitters=SourceTable(mine), power=mine), True))
+        parts.append((group, partial(emitters_at, scene=scene, emitters=SourceTable(mine), power=mine), True))
     return parts
 
 
@@ -384,7 +384,7 @@ def _means_of(tables, patches, rng, add, light, spheres, paired=False):
     def points(rows, local, u):
         anchor = None if spheres is None else (spheres[0][rows], g.patch_normal_rows.take(rows, axis=1).T.astype(
             np.float64), spheres[1][rows])
-        return _Points(g, rows[local], u, anchor, local)
+        return Points(g, rows[local], u, anchor, local)
 
     def sample(rows, count):
         rows = patches[rows]

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .noise_filter import NOISE_CUTOFF, NoiseFilter, _checked, _sum
+from .noise_filter import NOISE_CUTOFF, NoiseFilter, checked_rows, sums_by
 from ..mesh.welding import run_starts, weld_points
 
 CREASE_ANGLE = 30.0  # degrees, as Blender's auto smooth
@@ -167,17 +167,17 @@ class Surface(NoiseFilter):
             lowest[crease] = pairs
         return lowest
 
-    def _patch_means(self, x):
+    def corner_means(self, x):
         """Area-weighted mean (P,) of the linear interpolation of corner values (T*3,) over each
         patch (over the part seen, where ``visible`` is given)."""
         if self.visible is not None:
             tri = (x * self.visible).reshape(-1, 3).sum(axis=1)
-            sums = _sum(self.triangle_patch, tri, self.patch_count)
+            sums = sums_by(self.triangle_patch, tri, self.patch_count)
             return np.divide(sums, self.visible_area, out=np.zeros_like(sums), where=self.visible_area > 0)
         tri = x[0::3] + x[1::3]  # (a triangle's three corners added in order: as sum(axis=1) adds them, 8x faster)
         tri += x[2::3]
         tri *= self.triangle_area / 3.0
-        sums = _sum(self.triangle_patch, tri, self.patch_count)
+        sums = sums_by(self.triangle_patch, tri, self.patch_count)
         return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
 
     def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64):
@@ -190,7 +190,7 @@ class Surface(NoiseFilter):
         values (each source's) give corners that add up to these. Made in float64 a channel at
         a time, given as ``dtype``."""
         # a signed estimator's slightly negative patches show as black: light is never negative
-        checked = _checked(patch_values, self.patch_count, "patch values")
+        checked = checked_rows(patch_values, self.patch_count, "patch values")
         values = np.maximum(checked, 0.0)
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
@@ -231,7 +231,7 @@ class Surface(NoiseFilter):
             record["floored"] = []
         for _ in range(int(iterations)):
             # each patch's missing light, spread continuously over the corners around it
-            missing = (values - self._patch_means(x))[corner_patch]
+            missing = (values - self.corner_means(x))[corner_patch]
             x += RELAXATION * self._average_corners(missing, averaging)
             if record is not None:
                 record["floored"].append(np.flatnonzero(x < floor))
@@ -249,7 +249,7 @@ class Surface(NoiseFilter):
     def _scale_to(self, values, x, corner_patch):
         """Corners ``x`` (T*3,) scaled in place to each patch's value (exact at last; a patch
         whose corners all came to zero keeps its own value, flat): (x, scales (P,), flat corners)."""
-        means = self._patch_means(x)
+        means = self.corner_means(x)
         scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
         x *= scale[corner_patch]
         flat = np.flatnonzero((means <= 0)[corner_patch])
@@ -266,9 +266,9 @@ class Surface(NoiseFilter):
             rows = slice(start, start + RINGING_BLOCK)
             patches = corner_patch[rows]
             own, other = x[rows] - values[patches], plain[rows] - values[patches]
-            agree += _sum(patches, own * other, self.patch_count)
-            own_size += _sum(patches, own * own, self.patch_count)
-            plain_size += _sum(patches, other * other, self.patch_count)
+            agree += sums_by(patches, own * other, self.patch_count)
+            own_size += sums_by(patches, own * own, self.patch_count)
+            plain_size += sums_by(patches, other * other, self.patch_count)
         # (where the iterations moved nothing that matters, the correlation is a rounding's sign)
         counts = np.bincount(corner_patch, minlength=self.patch_count)
         moved = own_size > counts * np.square(SIGNIFICANT * values)
@@ -332,7 +332,7 @@ class LinearCorners:
             corner = surface._average_corners(v[cp], self.averaging)
             plain = corner.copy()
             for floored in record["floored"]:
-                corner += RELAXATION * surface._average_corners((v - surface._patch_means(corner))[cp], self.averaging)
+                corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner))[cp], self.averaging)
                 corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
             corner *= record["scale"][cp]
             corner[record["flat"]] = v[cp[record["flat"]]]

@@ -296,7 +296,7 @@ def _shadow_rays(tables, gathering, patch, source, x, normal, u, value, directio
         live |= lit.any(axis=0) & ~unshadowed
     live = np.flatnonzero(live)
     if live.size:
-        hit, hit_patch, front, t = _trace(tables, x[:, live], towards[:, live], g.region_of(patch[live]))
+        hit, hit_patch, front, t = trace(tables, x[:, live], towards[:, live], g.region_of(patch[live]))
         # Seen if nothing is met before the point looked at; on an emitting patch, also if the
         # patch is met first. (A patch's points lie a ray offset off it: at grazing angles a ray
         # to a point near its far edge passes the point and misses the patch. Asking for the
@@ -364,7 +364,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, 
     towards = add_sphere_points(g.patch_normal_rows.take(patch, axis=1), u[5], u[6])
     towards = towards.astype(np.float64)
     towards /= np.sqrt(np.einsum("in,in->n", towards, towards))  # (normal + a sphere point: cosine distributed)
-    hit, source, front, t = _trace(tables, x, towards, g.region_of(patch))
+    hit, source, front, t = trace(tables, x, towards, g.region_of(patch))
     met = np.flatnonzero(front & (hit >= 0) & (gathering.emission[:, source].any(axis=0)) & (source != patch))
     if met.size:
         s = source[met]
@@ -382,7 +382,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, 
     return patch.size
 
 
-def _trace(tables, origins, directions, region=None):
+def trace(tables, origins, directions, region=None):
     """Shadow or cosine rays (3,n rows, unit space; ``region``: their origins' region frames,
     where the scene has regions): (triangle, patch, front, distance)."""
     o = np.ascontiguousarray(origins.T, dtype=np.float32)

@@ -225,7 +225,7 @@ def buried_at(g, origins, patch):
     VOTES of the probes it is inside more solids than it enters (:func:`windings` >= 1). Probes
     are cast only for points still undecided."""
     normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
-    tangent, bitangent = _tangents(normal)
+    tangent, bitangent = tangents(normal)
     inside, outside = np.zeros(patch.size, np.int32), np.zeros(patch.size, np.int32)
     undecided = np.arange(patch.size)
     for theta, phi in PROBES:
@@ -272,7 +272,7 @@ def windings(g, origins, directions, patch):
     return count
 
 
-def _tangents(normal):
+def tangents(normal):
     """Two unit tangents (3,n) of each normal (3,n) float64."""
     axis = np.zeros_like(normal)
     axis[np.argmin(np.abs(normal), axis=0), np.arange(normal.shape[1])] = 1.0

@@ -9,7 +9,8 @@ import bpy
 
 from addon.blender_read import images
 from addon.blender_read.selection import read_selection
-from addon.ui import estimate, operators
+from addon.blender_write import solve_job
+from addon.ui import estimate
 
 from ..conftest import build_test_scene, make_object, box_arrays, result_objects
 from ..test_extension import _snapshot, configure
@@ -97,8 +98,9 @@ def test_an_image_too_large_for_the_memory_is_refused_in_one_line_naming_it(blen
 
         monkeypatch.setattr(images, "_converted", no_memory, raising=False)
     before = _snapshot()
-    assert bpy.ops.radiosity.solve(quiet_errors=True) == {"CANCELLED"}
-    error = operators.LAST_ERROR
+    finished = solve_job.run(bpy.context)
+    error = finished.error
+    assert finished.status == "CANCELLED"
     assert "image 'Big' is 512 x 512 pixels" in error and "\n" not in error and "Nothing was changed" in error, error
     assert not result_objects() and _snapshot() == before
     assert estimate.compute(blender)["error"] == error

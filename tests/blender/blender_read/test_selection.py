@@ -34,12 +34,12 @@ def _unchanged_after_error(context, match):
 
 
 def _run_sync(context):
-    """The operator's synchronous path with its reports captured: (state, reports)."""
-    op = _modal_operator()
-    started = op._start_job(context, threaded=False)
-    if started is not None:
-        return started, op.reports
-    return op._finish(context), op.reports
+    """The operator's synchronous path (blender_write.solve_job.run) with its reports captured:
+    (state, reports)."""
+    from addon.blender_write import solve_job
+
+    finished = solve_job.run(context)
+    return {finished.status}, finished.messages
 
 
 def _select(*names):
@@ -232,7 +232,7 @@ def test_a_target_not_reached_at_the_path_cap_is_said(blender):
     """A run whose measured error is still above the target when it reaches its path cap says so
     in a warning with the error it reached (the operator's reports after writing, from the
     run's statistics); a run that met its target does not."""
-    from addon.ui import operators
+    from addon.blender_write import solve_job
 
     build_test_scene()
     configure(blender)
@@ -242,22 +242,13 @@ def test_a_target_not_reached_at_the_path_cap_is_said(blender):
                                                   "last_relative_error", "last_target_error", "last_stopped",
                                                   "last_light_account")}
 
-    class Op:
-        _notes = ()
-
-        def __init__(self):
-            self.reports = []
-
-        def report(self, kind, text):
-            self.reports.append((next(iter(kind)), text))
-
     class Output:
         notes, back_warning = [], None
 
     def warnings_for(**changes):
-        op = Op()
-        operators._after_writing(op, s, Output(), {**stats, **changes})
-        return [text for kind, text in op.reports if kind == "WARNING"]
+        started = solve_job.Started(None, [], 0, {}, {})
+        return [text for kind, text in solve_job.after_writing(s, started, Output(), {**stats, **changes})
+                if kind == "WARNING"]
 
     assert s.last_stopped == "target" and not any("not reached" in w for w in warnings_for())
     missed = warnings_for(last_stopped="paths", last_relative_error=2.5 * s.last_target_error)
@@ -273,9 +264,9 @@ def _start_long_job(context):
     configure(context)
     context.scene.radiosity.target_error = 0.05  # millions of paths: still running when we act
     op = _modal_operator()
-    assert op._start_job(context, threaded=True) is None
+    assert op._start(context) is None
     t0 = time.perf_counter()
-    while op._job.snapshot()["paths"] == 0 and time.perf_counter() - t0 < 60:
+    while op._started.job.snapshot()["paths"] == 0 and time.perf_counter() - t0 < 60:
         time.sleep(0.01)
     return op
 
@@ -287,21 +278,21 @@ def test_object_deleted_while_solving_a_completed_run_is_not_written(blender):
     s.target_error = 0.05
     s.time_limit = 1.5  # the run completes by itself (time limit) after the deletion
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
+    assert op._start(blender) is None
     bpy.data.objects.remove(bpy.data.objects["Block"], do_unlink=True)
     state = _drive(op, blender)
     assert state == {"CANCELLED"}
-    assert op._job.output is not None and op._job.output.result.paths > 0  # a complete run...
+    assert op._started.job.output is not None and op._started.job.output.result.paths > 0  # a complete run...
     assert any(kind == "ERROR" and "'Block' was deleted while solving" in text for kind, text in op.reports)
     assert not result_objects()  # ...that is not written for a scene that no longer exists
-    assert not op._job.alive and worker.running_job() is None
+    assert not op._started.job.alive and worker.running_job() is None
 
 
 @pytest.mark.parametrize("blender_cancels_the_modal", [True, False])
 def test_new_file_while_solving_stops_the_worker_and_writes_nothing(blender, blender_cancels_the_modal):
     build_test_scene()
     op = _start_long_job(blender)
-    job = op._job
+    job = op._started.job
     bpy.ops.wm.read_homefile(use_empty=True)  # load_pre: the worker is stopped
     assert not job.alive and job.cancelled and worker.running_job() is None
     if blender_cancels_the_modal:  # what Blender does to running modal operators on a load
@@ -319,9 +310,9 @@ def test_a_finished_job_from_the_previous_file_is_not_written(blender):
     build_test_scene()
     configure(blender)
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
-    op._job.join(timeout=60)
-    assert op._job.output is not None and op._job.output.result.stopped == "target"
+    assert op._start(blender) is None
+    op._started.job.join(timeout=60)
+    assert op._started.job.output is not None and op._started.job.output.result.stopped == "target"
     worker.set_running_job(None)
     bpy.ops.wm.read_homefile(use_empty=True)
     build_test_scene()  # same names in the new file
@@ -518,7 +509,7 @@ def test_switching_scene_while_solving_writes_into_the_scene_solved(blender):
     configure(blender)
     solved = blender.scene
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
+    assert op._start(blender) is None
     other = bpy.data.scenes.new("Other")
     blender.window.scene = other  # the user switches scene while it runs
     assert bpy.context.scene == other
@@ -547,16 +538,16 @@ def test_escape_stops_a_batch_of_endless_paths_promptly(blender):
     configure(blender)
     before = _snapshot()
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
+    assert op._start(blender) is None
     time.sleep(0.3)
-    assert op._job.snapshot()["paths"] == 0 and op._job.alive
+    assert op._started.job.snapshot()["paths"] == 0 and op._started.job.alive
     t0 = time.perf_counter()
     from ..test_extension import FakeEvent
 
     assert op.modal(blender, FakeEvent("ESC", "PRESS")) == {"RUNNING_MODAL"}
     assert _drive(op, blender, seconds=10) == {"CANCELLED"}
     assert time.perf_counter() - t0 < 3.0
-    assert not op._job.alive and worker.running_job() is None
+    assert not op._started.job.alive and worker.running_job() is None
     assert not result_objects() and _snapshot() == before
 
 
@@ -657,7 +648,7 @@ def test_object_moved_while_solving_is_reported(blender):
     s.target_error = 0.05
     s.time_limit = 1.0
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
+    assert op._start(blender) is None
     block = bpy.data.objects["Block"]
     block.location = (0.1, 0.0, 0.0)  # the user moves it while the worker runs
     bpy.context.view_layer.update()  # matrix_world follows the location
@@ -666,14 +657,14 @@ def test_object_moved_while_solving_is_reported(blender):
     assert any("'Block' moved while solving" in text for text in warnings)
     assert not any("'Room'" in text and "moved" in text for text in warnings)
     assert len(result_objects()) == 3  # the complete result of the scene as it was is written
-    assert not op._job.alive and worker.running_job() is None
+    assert not op._started.job.alive and worker.running_job() is None
 
 
 def test_unmoved_objects_give_no_moved_warning(blender):
     build_test_scene()
     configure(blender)
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
+    assert op._start(blender) is None
     assert _drive(op, blender) == {"FINISHED"}
     assert not any("moved while solving" in text for _, text in op.reports)
 
@@ -718,7 +709,7 @@ def test_path_and_ray_counts_beyond_32_bits_are_stored_exactly(blender, monkeypa
 def test_a_failure_after_writing_keeps_the_results_and_finishes(blender, monkeypatch):
     """Whatever goes wrong once the results are written (statistics, reports), the operator
     finishes -- with its undo step -- and says so, instead of raising over a changed scene."""
-    from addon.ui import operators
+    from addon.blender_write import solve_job
 
     build_test_scene()
     configure(blender)
@@ -726,7 +717,7 @@ def test_a_failure_after_writing_keeps_the_results_and_finishes(blender, monkeyp
     def broken(_placements):
         raise RuntimeError("broken on purpose")
 
-    monkeypatch.setattr(operators, "_moved_sources", broken)
+    monkeypatch.setattr(solve_job, "_moved_sources", broken)
     state, reports = _run_sync(blender)
     assert state == {"FINISHED"}
     assert len(result_objects()) == 3 and blender.scene.radiosity.last_paths > 0

@@ -71,8 +71,8 @@ def test_both_leaves_the_smooth_light_out_above_its_patch_bound_and_says_so(blen
     s = blender.scene.radiosity
     s.output, s.patch_size, s.target_error, s.threads = "BOTH", 0.25, 5.0, 2
     notes = []
-    real = pipeline._write_colours
-    monkeypatch.setattr(pipeline, "_write_colours", lambda out, *a: (real(out, *a), notes.extend(out.notes))[0])
+    real = pipeline.write_colours
+    monkeypatch.setattr(pipeline, "write_colours", lambda out, *a: (real(out, *a), notes.extend(out.notes))[0])
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     (room,) = result_objects()
     assert [a.name for a in room.data.color_attributes] == ["Radiosity", "Radiosity Patches"]

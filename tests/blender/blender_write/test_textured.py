@@ -9,7 +9,7 @@ from addon.bpy_free import options
 from addon.cli.preview import render_preview
 
 from ..blender_read.test_lights import _lamp
-from ..conftest import box_arrays, make_object, mesh_arrays, principled, read_colours, result_objects
+from ..conftest import box_arrays, make_object, mesh_arrays, principled, read_colours, result_objects, solve_outputs
 
 SQUARES = 16  # checker squares a metre: four a 0.25 m patch's side
 
@@ -138,10 +138,7 @@ def test_a_material_without_a_known_surface_shader_falls_back_with_a_note(blende
     block = make_object("Block", [(0.2, 0.2, 0.1), (0.4, 0.2, 0.1), (0.4, 0.4, 0.1), (0.2, 0.4, 0.1)],
                         [(0, 1, 2, 3)], [glossy])
     block.select_set(True)
-    outputs = []
-    from addon.ui import operators
-
-    monkeypatch.setattr(operators, "OUTPUT_LISTENER", outputs.append)
+    outputs = solve_outputs(monkeypatch)
     results = _solve(blender)
     reports = outputs[0].notes  # (what the operator reports once the results are written)
     assert [m.name for m in results["Block"].data.materials] == ["Radiosity Result"]
@@ -153,10 +150,7 @@ def test_above_the_smooth_limit_the_textures_take_each_patch_s_own_light(blender
     """Past SMOOTH_MAX_PATCHES the light is written flat, one value a patch on the FACE domain
     (16 bytes a patch), and the material still reads the texture: a note says so."""
     monkeypatch.setattr(options, "SMOOTH_MAX_PATCHES", 4)
-    from addon.ui import operators
-
-    outputs = []
-    monkeypatch.setattr(operators, "OUTPUT_LISTENER", outputs.append)
+    outputs = solve_outputs(monkeypatch)
     _checker_floor()
     mesh = _solve(blender)["Floor"].data
     assert any(n.startswith("smooth colours left out at 16 patches (Textured makes them up to 4")
@@ -290,13 +284,10 @@ def test_a_source_attribute_named_as_ours_is_left_out_with_a_note(blender, monke
     """A floor carrying its own colour attribute 'Radiosity' (a copy of an old result, say): the
     result's 'Radiosity' is the solve's light, not the copy, and a note says the source's was
     left out."""
-    from addon.ui import operators
-
     floor, _ = _checker_floor()
     paint = floor.data.color_attributes.new("Radiosity", "FLOAT_COLOR", "POINT")
     paint.data.foreach_set("color", np.tile([0.0, 1.0, 0.0, 1.0], len(floor.data.vertices)).astype(np.float32))
-    outputs = []
-    monkeypatch.setattr(operators, "OUTPUT_LISTENER", outputs.append)
+    outputs = solve_outputs(monkeypatch)
     mesh = _solve(blender)["Floor"].data
     assert [a.name for a in mesh.color_attributes].count("Radiosity") == 1
     _, values = read_colours(mesh, "Radiosity")

@@ -14,7 +14,7 @@ import sys
 import bpy
 import pytest
 
-from ..conftest import build_test_scene, result_objects
+from ..conftest import build_test_scene, result_objects, solve_outputs
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 MIB = 1 << 20
@@ -93,16 +93,12 @@ def test_the_preview_renders_the_results_without_emission_sampling_and_restores_
 
 
 @pytest.mark.parametrize("output", ["BOTH", "FACE", "VERTEX"])
-def test_the_preview_exposure_from_the_arrays_is_the_one_read_back(blender, output):
-    from addon.ui import operators
+def test_the_preview_exposure_from_the_arrays_is_the_one_read_back(blender, output, monkeypatch):
     from addon.cli.preview import auto_exposure, preview_exposure
 
-    exposures = []
-    operators.OUTPUT_LISTENER = lambda out: exposures.append(preview_exposure(out))
-    try:
-        _solve(blender, output)
-    finally:
-        operators.OUTPUT_LISTENER = None
+    outputs = solve_outputs(monkeypatch)
+    _solve(blender, output)
+    exposures = [preview_exposure(out) for out in outputs]
     assert len(exposures) == 1 and exposures[0] != 0.0
     assert exposures[0] == auto_exposure()  # exactly: the same float32 values, the same median
 
@@ -116,4 +112,4 @@ def test_the_command_line_lets_go_of_the_solve_before_saving(blender, tmp_path):
                  "-o", str(tmp_path / "out.blend")]) == 0
     assert result_objects()
     # the meshed geometry and the core's scene with its ray tracer, which the panel keeps for a re-run
-    assert not patches._GEOMETRY_CACHE._entries
+    assert not patches.GEOMETRY_CACHE._entries

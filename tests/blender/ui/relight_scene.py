@@ -92,10 +92,9 @@ def joint_noise_z(a, b, mse_a, mse_b, variance_b, area):
 
 def solve(monkeypatch, seed):
     """Solves through the operator and returns the run's output (its variances)."""
-    from addon.ui import operators
+    from tests.blender.conftest import solve_outputs
 
-    kept = []
-    monkeypatch.setattr(operators, "OUTPUT_LISTENER", kept.append)
+    kept = solve_outputs(monkeypatch)
     bpy.context.scene.radiosity.seed = seed
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     return kept[-1]

@@ -9,7 +9,7 @@ import pytest
 from addon.ui import estimate
 from addon.bpy_free import pipeline
 from addon.blender_read.selection import read_selection
-from addon.ui import operators
+from addon.blender_write import solve_job
 
 from ..conftest import box_arrays, build_test_scene, make_object, principled
 
@@ -49,8 +49,9 @@ def test_a_near_white_room_is_refused_before_a_run_naming_the_bounces(blender):
     value = estimate.compute(blender)
     assert "bounces about 8,388,608 times" in value.get("error", ""), value  # (1 / (1 - R) in float32)
     before = set(bpy.data.objects.keys())
-    assert bpy.ops.radiosity.solve(quiet_errors=True) == {"CANCELLED"}
-    assert "refused above 1,000,000 bounces" in operators.LAST_ERROR and "\n" not in operators.LAST_ERROR
+    finished = solve_job.run(bpy.context)
+    assert finished.status == "CANCELLED"
+    assert "refused above 1,000,000 bounces" in finished.error and "\n" not in finished.error
     assert set(bpy.data.objects.keys()) == before
 
 

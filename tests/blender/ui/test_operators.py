@@ -130,15 +130,15 @@ def test_saving_during_a_solve_saves_the_previous_complete_result(blender, tmp_p
     old = _results()
     blender.scene.radiosity.target_error = 0.05  # a long run
     op = _modal_operator()
-    assert op._start_job(blender, threaded=True) is None
+    assert op._start(blender) is None
     t0 = time.perf_counter()
-    while op._job.snapshot()["paths"] == 0 and time.perf_counter() - t0 < 60:
+    while op._started.job.snapshot()["paths"] == 0 and time.perf_counter() - t0 < 60:
         time.sleep(0.01)
     path = str(tmp_path / "during.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
-    op._job.cancel()
+    op._started.job.cancel()
     assert _drive(op, blender) == {"CANCELLED"}
-    assert not op._job.alive
+    assert not op._started.job.alive
     bpy.ops.wm.open_mainfile(filepath=path)
     assert _results() == old
 

@@ -4,7 +4,7 @@ per-source results on the result objects (``blender_write.relight_store``)."""
 from __future__ import annotations
 
 from ..blender_read import sources
-from ..blender_write import relight_store
+from . import relight_store
 
 
 def snapshot(scene):
