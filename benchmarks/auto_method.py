@@ -15,7 +15,7 @@ so that past about 2^19 patches no plan gives a patch 4 first-generation rays). 
 patches / mean of the reflected radiosity from its batch means; the gain is the walk's error^2 x
 rays (and x seconds, 2 threads) over the two-way iteration's at the same plan: above 1 the
 two-way iteration reaches an error with fewer rays (less time). Exit point hit (the panel's
-default). ``method="auto"``'s choice (``methods.choose``) is shown beside each.
+default). ``method="auto"``'s choice (``solver.chosen_method``) is shown beside each.
 """
 from __future__ import annotations
 
@@ -32,7 +32,9 @@ sys.path.insert(0, str(ROOT))
 RESULTS = ROOT / "benchmarks" / "results"
 
 from addon.core import solve  # noqa: E402
-from addon.core.methods import choose, two_way  # noqa: E402
+from addon.core.methods import two_way  # noqa: E402
+from addon.core.settings import Settings  # noqa: E402
+from addon.core.solver import chosen_method  # noqa: E402
 from addon.core.estimate.error_model import predict  # noqa: E402
 
 DIVISIONS = (20, 40, 60, 90, 120, 190, 270)
@@ -55,7 +57,7 @@ def measure(divisions, paths_a_patch):
         chunk = two_way.TwoWay().chunk_paths(P, predict(scene).expected_path_length, paths)
         row = {"patches": P, "paths_a_patch": k, "paths": paths,
                "first_generation_rays": two_way.first_generation_rays(P, chunk),
-               "auto": choose(scene, paths=paths)}
+               "auto": chosen_method(scene, Settings(method="auto", paths=paths))}
         for method in ("walk", "two_way"):
             r = solve(scene, paths=paths, seed=1, threads=2, exit_point="hit", method=method)
             row[method] = {"error": error(r), "rays": r.rays, "seconds": r.seconds, "chunks": r.chunks}

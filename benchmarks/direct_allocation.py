@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT / "tests" / "core"))
 from boxes import bright_box, colour_box, grey_room, small_source_box  # noqa: E402
 
 from addon.core import predict, relative_rms_to_mse, solve  # noqa: E402
-from addon.core.methods import two_way_iteration as two_way
+from addon.core.methods import two_way
 from addon.core.estimate.reference import area_weighted_mse, solve_radiosity_system  # noqa: E402
 
 SEEDS = range(12)

@@ -236,8 +236,8 @@ def direct_only(paths, chunks=32):
     from addon.blender_read.selection import read_selection
     from addon.core.methods.first_shot import Gathering, gather_direct, pilot_irradiance
     from addon.core.methods.tables import WalkTables
-    from addon.core.methods.two_way_iteration import direct_samples
-    from addon.core.methods.walk_stages import FreeTurn
+    from addon.core.methods.two_way import direct_samples
+    from addon.core.methods.walk import FreeTurn
 
     objects, _ = read_selection(bpy.context)
     patches = patch_making.make_patches(objects, 1e6)

@@ -144,7 +144,7 @@ def expected_rays_per_path(scene, estimator, method="walk", threshold=1e-3, exit
     """About the rays a path of ``method`` costs, to size a run to its seconds: the paper's
     expected path length for the walk, the two-way iteration's own count
     (``two_way.rays_per_path``, and its first reflection's rays with the hit exit)."""
-    from addon.core.methods import two_way_iteration as two_way
+    from addon.core.methods import two_way
 
     length = predict(scene, estimator, threshold=threshold).expected_path_length
     if method != "two_way":
@@ -250,7 +250,7 @@ def breakdown(scene, estimator, rounds=4, **kw):
     the processor's counters can be read (``benchmarks.counters``), also the lines Embree
     fetches from memory a ray: inside the walk, back to back and after pauses; else NaN."""
     from addon.core.methods.tables import WalkTables
-    from addon.core.methods.walk_stages import walk_chunk
+    from addon.core.methods.walk import walk_chunk
     from addon.core.estimate.plan import chunk_paths_for
 
     from .counters import Counters

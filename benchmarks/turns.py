@@ -36,7 +36,7 @@ CASES = (
 
 def timed(scene, turns, paths, arguments, seed):
     from addon.core import solve
-    from addon.core.methods import walk_stages as walk
+    from addon.core.methods import walk
     from addon.core.methods.walk import ShotWalk
 
     rule, shot = walk.takes_turns, ShotWalk.run
@@ -57,7 +57,7 @@ def main(argv=None):
     parser.add_argument("--scenes", nargs="+", default=["small_room", "cornell", "room_fig4"])
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args(argv)
-    from addon.core.methods import walk_stages as walk
+    from addon.core.methods import walk
 
     rows = []
     for name in args.scenes:

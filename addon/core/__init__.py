@@ -16,7 +16,7 @@ from .estimate.grouping import SourceGroups, source_groups
 from .names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE, GATHERED, SHOT
 from .scene.scene import PatchScene
 from .solver import SolveResult, solve
-from .methods.speedups import Speedups
+from .methods.tables import Speedups
 from .mesh.validation import RELATIVE_DEGENERATE_AREA, PatchError
 
 __all__ = [

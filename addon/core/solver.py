@@ -17,7 +17,7 @@ from .estimate.error_model import MAX_PATHS, check_estimator, check_positive
 from .estimate.grouping import groups_for
 from .forecast import measured_choice
 from .methods import automatic
-from .methods.speedups import Speedups
+from .methods.tables import Speedups
 from .names import AUTO, ERROR_SCALES, EXIT_POINTS, GATHERED, MEASURED, SAMPLINGS, SHOT, STOP_RULES
 from .scene.diagnostics import check_bounces
 from .settings import Settings

@@ -193,7 +193,7 @@ def test_smooth_colours_agree_at_a_refinement_border():
     border = np.count_nonzero(sizes > 4)
     assert border >= 4  # (unsplit neighbours with a midpoint corner were there to compare)
     # each patch's mean light is still its own value
-    means = surface._patch_means(corners[:, :, 0].ravel())
+    means = surface.corner_means(corners[:, :, 0].ravel())
     np.testing.assert_allclose(means, values[:, 0], rtol=1e-9)
 
 

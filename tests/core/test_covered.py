@@ -61,7 +61,7 @@ def test_a_hidden_black_patch_pulls_no_visible_neighbours_corner_down():
     left_out = smoothing.Surface.of(*args, hidden=hidden)
     shown = left_out.corner_values(values)
     np.testing.assert_allclose(shown[ceiling], 1.0, rtol=1e-12)
-    means = np.stack([left_out._patch_means(np.ascontiguousarray(shown[..., c]).ravel()) for c in range(3)], axis=1)
+    means = np.stack([left_out.corner_means(np.ascontiguousarray(shown[..., c]).ravel()) for c in range(3)], axis=1)
     np.testing.assert_allclose(means, values, atol=1e-12)
     counted = smoothing.Surface.of(*args).corner_values(values)
     assert counted[ceiling].min() < 0.8 and counted[ceiling].max() > 1.1

@@ -6,7 +6,7 @@ import pytest
 
 from addon.core import solve
 from addon.core.methods.tables import WalkTables
-from addon.core.methods.walk_stages import walk_chunk
+from addon.core.methods.walk import walk_chunk
 from boxes import box_scene
 
 

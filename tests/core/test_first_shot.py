@@ -155,8 +155,8 @@ def test_cosine_rays_are_cast_in_proportion_to_the_emitters_share_of_the_area(mo
     from addon.core.methods import first_shot
 
     traced = []
-    trace = first_shot._trace
-    monkeypatch.setattr(first_shot, "_trace", lambda t, o, d, *region: traced.append(o.shape[1]) or trace(t, o, d, *region))
+    trace = first_shot.trace
+    monkeypatch.setattr(first_shot, "trace", lambda t, o, d, *region: traced.append(o.shape[1]) or trace(t, o, d, *region))
     tables = WalkTables(scene, "finite", 1e-3, "random")
     gathering = Gathering(scene, np.full(scene.patch_count, 4.0))
     with tables.numpy_turn:

@@ -16,7 +16,7 @@ from addon.core.estimate import plan
 from addon.core.distributed import runners
 from addon.core.methods import walk as walk_method
 from addon.core.methods.tables import WalkTables
-from addon.core.methods.walk_stages import walk_chunk, walk_chunks
+from addon.core.methods.walk import walk_chunk, walk_chunks
 from addon.core.estimate.reference import path_variances
 from boxes import box_rectangles, box_scene, open_box_with_card, rectangles_to_mesh
 

@@ -9,7 +9,7 @@ from test_first_shot import _box_with_one_emitter
 from test_lights import _box, _solid_angles
 
 from addon.core import solve
-from addon.core.methods.jacobi_iteration import systematic_counts
+from addon.core.lights.sampling import systematic_counts
 from addon.core.lights.lights import AreaLight, PointLight, SunLight, WorldLight
 from addon.core.estimate.reference import solve_radiosity_system
 

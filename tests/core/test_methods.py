@@ -11,7 +11,7 @@ from addon.core import chunks
 from addon.core.settings import Settings
 from addon.core import solver
 from addon.core.distributed.runners import chunk_generator
-from addon.core.methods.speedups import Speedups
+from addon.core.methods.tables import Speedups
 from addon.core.methods.tables import WalkTables
 from boxes import box_scene
 

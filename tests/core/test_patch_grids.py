@@ -328,7 +328,7 @@ def test_random_exits_on_the_grids_are_the_walks_on_the_triangles(estimator, cou
     triangle Embree reports, not which patch or side a ray meets (but for rays within float32's
     rounding of a side, none of which these walks cast)."""
     from addon.core import PatchScene, Speedups
-    from addon.core.methods.walk_stages import walk_chunk
+    from addon.core.methods.walk import walk_chunk
 
     g = _mixed_box(n=4, rotation=_rotation(2))
     corners = g.triangle_corners.astype(np.float64).reshape(-1, 3)

@@ -403,7 +403,7 @@ def test_light_falling_off_faster_than_a_patch_can_follow_shows_no_bands():
     values = np.exp(-x / 0.7)[:, None] * np.array([1.0, 0.8, 0.6])
     surface = smoothing.Surface.of(points, triangles, patch, len(quads))
     corners, apply = surface.corner_values(values, return_filter=True)
-    np.testing.assert_allclose(surface._patch_means(corners[..., 0].ravel()), values[:, 0], rtol=1e-9)
+    np.testing.assert_allclose(surface.corner_means(corners[..., 0].ravel()), values[:, 0], rtol=1e-9)
     corner_x = points[triangles][..., 0]  # (T,3)
     near = np.full(len(quads), np.inf)
     far = np.full(len(quads), -np.inf)
@@ -424,7 +424,7 @@ def test_light_falling_off_faster_than_a_patch_can_follow_shows_no_bands():
     corners, apply = surface.corner_values(values, return_filter=True)
     rings = [record["rings"] for record in apply.records]
     assert len(rings[0]) and all(np.array_equal(r, rings[0]) for r in rings[1:])
-    np.testing.assert_allclose(surface._patch_means(corners[..., 2].ravel()), values[:, 2], rtol=1e-9)
+    np.testing.assert_allclose(surface.corner_means(corners[..., 2].ravel()), values[:, 2], rtol=1e-9)
 
 
 def test_no_light_anywhere_filters_to_no_light():

@@ -11,7 +11,7 @@ from addon.core import PatchScene, Speedups
 from addon.core.scene import rays
 from addon.core.scene.geometry import leave_shapes
 from addon.core.methods.tables import WalkTables, patch_classes, unique_keys
-from addon.core.methods.walk_stages import walk_chunks
+from addon.core.methods.walk import walk_chunks
 from boxes import box_rectangles, box_scene, rectangles_to_mesh
 
 R_FACES = [0.3, 0.5, 0.7, 0.5, 0.6, 0.45]

@@ -11,14 +11,14 @@ from test_first_shot import R_FACES, _box_with_one_emitter, floor_lit_unevenly_a
 from addon.core.settings import Settings
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
 from addon.core.estimate import plan
-from addon.core.methods import two_way_iteration as two_way
+from addon.core.methods import two_way
 from addon.core.methods.first_shot import Gathering, pilot_irradiance
 from addon.core.methods import automatic
 from addon.core.methods import two_way as tw
 from addon.core.lights.lights import AreaLight, PointLight, SunLight, WorldLight
 from addon.core.estimate.reference import form_factors_raycast, rectangle_form_factors, solve_radiosity_system
 from addon.core.methods.tables import WalkTables
-from addon.core.methods.two_way_iteration import direct_samples
+from addon.core.methods.two_way import direct_samples
 
 Z = 5.0
 
@@ -302,16 +302,15 @@ def test_a_small_plan_runs_in_fewer_larger_chunks_than_the_walk_s():
 
 def test_chunks_traced_in_blocks_are_still_exact(monkeypatch):
     """A large chunk gathers and casts a block at a time (first_shot.SAMPLE_BLOCK,
-    two_way.RAY_BLOCK, first_reflection.RAY_BLOCK: its memory is a block's). With blocks of a few hundred samples and rays
+    generations.RAY_BLOCK: its memory is a block's). With blocks of a few hundred samples and rays
     every chunk here is tens of blocks, and the results still hold: the closed colour box is its
     discrete exact solution (z-scores as above), and with exit_point="hit" the unevenly lit
     floor's first reflection still leaves from where the light landed (the first reflection's
     rays in blocks too)."""
-    from addon.core.methods import first_reflection, first_shot, two_way_iteration as two_way
+    from addon.core.methods import first_shot, generations
 
     monkeypatch.setattr(first_shot, "SAMPLE_BLOCK", 500)
-    monkeypatch.setattr(two_way, "RAY_BLOCK", 700)
-    monkeypatch.setattr(first_reflection, "RAY_BLOCK", 700)
+    monkeypatch.setattr(generations, "RAY_BLOCK", 700)
     scene, exact = _box_with_one_emitter()
     r = solve(scene, paths=200_000, seed=1, method="two_way")
     assert _z_ok(_z(r, exact), r.chunks)
@@ -355,7 +354,7 @@ def test_paired_ranks_count_each_patch_and_sign_in_order():
     """A correction ray's rank is the number of rays before it with its patch and its sign (the
     rays come in patch order): ray r of a patch's positive shares and ray r of its negative ones
     take one Sobol' point. Checked against that count written as a loop."""
-    from addon.core.methods.first_reflection import _paired_ranks
+    from addon.core.methods.generations import _paired_ranks
 
     rng = np.random.default_rng(3)
     for P, n in ((1, 0), (4, 1), (6, 200), (50, 5000)):

@@ -4,7 +4,7 @@ import pytest
 
 from addon.core import Speedups, predict
 from addon.core.methods.tables import WalkTables
-from addon.core.methods.walk_stages import walk_chunk
+from addon.core.methods.walk import walk_chunk
 from boxes import box_scene
 
 
@@ -179,23 +179,23 @@ def test_chunk_wide_work_does_not_wait_for_a_turn(monkeypatch):
     them) run without the numpy turn, so that two threads' numpy work overlaps, unless the
     chunk is small; the paper's walk takes turns (the test above). benchmarks/turns.py and the
     rule's comment give the measurements."""
-    from addon.core.methods import two_way_iteration as two_way, walk_stages as walk
+    from addon.core.methods import jacobi, tables as walk_tables, two_way, walk
+    from addon.core.methods import generations
     from addon.core.methods.first_shot import Gathering
-    from addon.core.methods import jacobi, two_way as method, walk as walk_method
 
     scene, _, _ = box_scene([0.5] * 6, [0, 1.0, 0, 0, 0, 0], n=2)
     tables = WalkTables(scene, "finite", 1e-3, "hit")
-    big = walk.TURN_FREE_SIZE
-    assert not walk.takes_turns(tables, big) and walk.takes_turns(tables, big - 1)  # (small chunks' arrays are short)
-    chunks = method.TwoWayChunks(tables, Gathering(scene, two_way.direct_samples(big, scene)))
+    big = walk_tables.TURN_FREE_SIZE
+    assert not walk_tables.takes_turns(tables, big) and walk_tables.takes_turns(tables, big - 1)  # (small chunks' arrays are short)
+    chunks = two_way.TwoWayChunks(tables, Gathering(scene, two_way.direct_samples(big, scene)))
     held = []
-    real = two_way.generation
+    real = generations.generation
 
     def generation(t, *args):
         held.append(tables.numpy_turn.locked() or t.numpy_turn.locked())
         return real(t, *args)
 
-    monkeypatch.setattr(two_way, "generation", generation)
+    monkeypatch.setattr(two_way, "generation", generation)  # (the name the chunk calls)
     tally = chunks.run([big], np.random.default_rng(1))[0]
     assert held and not any(held) and tally.paths == big
     held.clear()
@@ -203,9 +203,10 @@ def test_chunk_wide_work_does_not_wait_for_a_turn(monkeypatch):
     assert held and all(held)
     # Jacobi iteration and the gathered walk run chunk-wide too; the paper's walk always takes turns.
     asked = []
-    monkeypatch.setattr(walk, "chunk_wide", lambda t, paths: asked.append(paths) or t)
+    for module in (walk, jacobi):
+        monkeypatch.setattr(module, "chunk_wide", lambda t, paths: asked.append(paths) or t)
     jacobi.Jacobi().create(scene, tables, big, 0, None).run([64], np.random.default_rng(1))
-    gathered = walk_method.Walk("gathered").create(scene, tables, big, 0, predict(scene))
+    gathered = walk.Walk("gathered").create(scene, tables, big, 0, predict(scene))
     gathered.run([64], np.random.default_rng(1))
-    walk_method.Walk().create(scene, tables, big, 0, None).run([64], np.random.default_rng(1))
+    walk.Walk().create(scene, tables, big, 0, None).run([64], np.random.default_rng(1))
     assert asked == [64, 64] and not tables.numpy_turn.locked()

@@ -49,7 +49,7 @@ from functools import partial
 
 import numpy as np
 
-from ..methods.direct_points import SAMPLE_DIMENSIONS, Points, chosen_lamps, emitters_at, sky_at
+from .direct_points import SAMPLE_DIMENSIONS, Points, chosen_lamps, emitters_at, sky_at
 from ..lights.lamp_choice import LampChoice, patch_spheres
 from ..lights.lights import SunLight, WorldLight
 from ..names import EXIT_RANDOM, FINITE
@@ -148,7 +148,7 @@ def _unit_points(g, position, patch):
 class _Corners:
     """A block of corners as ``adaptive_light``'s lamps and emitters read sample points: unit-space
     origins (pushed off), normals, offsets, surface points and world positions; ``anchor`` and
-    ``local`` as ``methods.direct_points.Points``'."""
+    ``local`` as ``direct_points.Points``'."""
 
     def __init__(self, g, rows, surface_unit, world, anchor=None, local=None):
         self.rows, self.anchor, self.local = rows, anchor, local

@@ -372,3 +372,18 @@ class SourceRuns:
         j = np.searchsorted(self.start, last, side="left")
         overlap = np.minimum(self.end[i:j], last) - np.maximum(self.start[i:j], first)
         live[self.chunk[i:j], self.source[i:j]] += overlap  # one run per chunk and source
+
+
+# Halton points 0..n-1 in bases 2, 3, 5, 7, (4, n) float64.
+HALTON = GrowingTable(lambda n: halton(np.arange(n), (2, 3, 5, 7)))
+
+
+def systematic_counts(power, rays, shift):
+    """Rays per patch for ``rays`` rays allotted in proportion to ``power`` (P,) by the points
+    (k + shift) / rays, k < rays, of [0, 1): floor or ceil of rays p_j each, rays p_j on average."""
+    cdf = np.cumsum(power)
+    edges = np.ceil(cdf / cdf[-1] * rays - shift).astype(np.int64)
+    # From the last patch with power on, every point is below: rays - shift would round to
+    # rays - 1 for a shift within 2^-53 of 1.
+    edges[cdf == cdf[-1]] = rays
+    return np.diff(edges, prepend=0)

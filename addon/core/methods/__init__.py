@@ -1,14 +1,17 @@
-"""The methods a solve runs, each a unit that owns its policy (``base.Method``).
+"""The methods a solve runs, each with its algorithm and its policy in one module (``base.Method``):
 
-    walk.py       the paper's shooting random walk, direct light shot or gathered
-    jacobi.py     stochastic Jacobi iteration
-    two_way.py    the two-way iteration (every ray shooting and gathering)
-    automatic.py  method="auto": which of the two-way iteration and the walk runs
+    walk.py        the paper's shooting random walk, a wavefront of named stages; direct light
+                   shot or gathered (path_walk.py, interchangeable.py: the stages' two states;
+                   estimators.py: the paper's two estimators)
+    jacobi.py      stochastic Jacobi iteration
+    two_way.py     the two-way iteration (every ray shooting and gathering; generations.py)
+    automatic.py   method="auto": which of the two-way iteration and the walk runs
+    first_shot.py  the direct light gathered by shadow rays (gathered_walk.py: the walk from it)
+    tables.py      what every chunk reads, the speed-ups, the numpy turns
 
-Each module declares its knobs at its top, plans its chunks and predicts what it can of its
+Each method declares its knobs at its top, plans its chunks and predicts what it can of its
 time and error; the solver, the forecast, the panel's words and a cluster's workers read them
-through ``create`` and the interface of ``base``. How a chunk is computed is the method's
-algorithm module (``core/walk.py``, ``core/jacobi.py``, ``core/two_way.py``, ``core/first_shot.py``).
+through ``create`` and the interface of ``base``.
 """
 from __future__ import annotations
 

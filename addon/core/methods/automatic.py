@@ -29,8 +29,7 @@ from ..names import EXIT_RANDOM, FINITE, GATHERED, TWO_WAY, WALK
 from ..estimate.plan import chunk_plan
 from ..scene.rays import cast, leave_sources, region_of
 from .tables import WalkTables
-from .two_way_iteration import allotment_weight
-from .two_way import TwoWay
+from .two_way import TwoWay, allotment_weight
 
 # The largest scene Automatic runs the two-way iteration in: a two-way chunk holds several (C,P)
 # arrays, and this bound keeps a two-way solve through the operator under 1 GiB, as the walk

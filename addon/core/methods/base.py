@@ -165,3 +165,13 @@ def fate_shares(tables, seed):
         return 1.0, 0.0
     share = blocked / (escaped + blocked)
     return 1.0 - share, share
+
+
+class Aborted(Exception):
+    """The walk was asked to stop; its partial chunk is discarded."""
+
+
+def check(abort):
+    """Raises Aborted once ``abort`` (a threading.Event, or None) is set."""
+    if abort is not None and abort.is_set():
+        raise Aborted

@@ -1,21 +1,30 @@
-"""Per-solve tables: a scene's materials, sources and geometry in the layouts the walk reads.
+"""Per-solve tables: a scene's materials, sources and geometry in the layouts the walk reads;
+the speed-ups a walk uses (``Speedups``); the numpy turns chunks take on several threads.
 
 Built once per solve and shared by all its chunks and threads. Gathers from them use
 ``take(..., mode="wrap")``: every index is valid by construction (a ray tracer's miss, -1, is
 only ever gathered to be masked out), and numpy's wrapping gather is about twice as fast as its
 checking one.
+
+The walk's speed-ups (``Speedups``): each named, chosen for a scene in one place, and switchable one by one.
+
+None of them changes what a walk estimates. Most change no bit of the result either (grids,
+patch classes, sorted paths, grouped chunks trace and score the same rays in another order or
+layout); the interchangeable and counted walks pair the same random numbers with paths in
+another order, so they give another sample of the same estimator. ``docs/performance.md`` says
+what each one buys.
 """
 from __future__ import annotations
 
 import copy
 import threading
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from ..names import EXIT_RANDOM, FINITE, INDEPENDENT, STRATIFIED
 from ..lights.sampling import SourceTable, channel_sum, source_weights
 from ..estimate.grouping import WalkGroups, world_group
-from .speedups import Speedups
 
 # At most this many patch classes (2^12 classes take 200 kB); more, and the classes are the
 # shapes alone, R_bar read per patch.
@@ -111,7 +120,7 @@ class WalkTables:
             self.class_edge_barycentric = g.shape_edge_barycentric[class_shape_index]
 
     def with_turn(self, turn):
-        """These tables with another numpy turn (walk.FreeTurn: none), everything else shared."""
+        """These tables with another numpy turn (FreeTurn: none), everything else shared."""
         tables = copy.copy(self)
         tables.numpy_turn = turn
         return tables
@@ -208,3 +217,99 @@ def unique_keys(key, key_count):
     keys = np.flatnonzero(present)
     rank = np.cumsum(present) - 1  # a present key's place among the keys present
     return keys, rank.take(key, mode="wrap")
+
+
+# -- the speed-ups --------------------------------------------------------------------------------
+# Interchangeable paths are counted per patch (one bincount a step) in scenes of at most this
+# many patches; above it the bincount's pass over the patches costs more than a sort.
+COUNTED_MAX_PATCHES = 1 << 12
+# Paths that carry weights or hit points go on sorted by patch in scenes of at least this many
+# patches (below it every table fits in cache and the sort gains nothing).
+SORT_MIN_PATCHES = 1 << 13
+# Patch classes pay where the per-patch tables outgrow the caches.
+CLASSES_MIN_PATCHES = 1 << 13
+
+
+@dataclass(frozen=True)
+class Speedups:
+    """Which speed-ups a walk uses. None: chosen for the scene (:meth:`resolve`); True or
+    False: on (where the scene and walk allow it) or off."""
+
+    interchangeable: bool | None = None  # grey finite random-exit paths are only their patch
+    counted: bool | None = None          # ... and counted per patch and outcome each step
+    sorted_paths: bool | None = None     # other walks go on grouped by patch each step
+    patch_classes: bool | None = None    # frames and R_bar read per class of alike patches
+    grids: bool | None = None            # Embree traces the grids patches tile, not their triangles
+    grouped_chunks: bool | None = None   # small chunks traced together as one wavefront
+
+    def resolve(self, scene, estimator, exit_point):
+        """These speed-ups with every None chosen for ``scene`` and the walk (all bool)."""
+        geometry = scene.geometry
+        P = scene.patch_count
+
+        def choose(name, allowed, wanted):
+            forced = getattr(self, name)
+            return bool(allowed and (wanted if forced is None else forced))
+
+        interchangeable = choose("interchangeable", estimator == FINITE and scene.is_grey and exit_point == EXIT_RANDOM, True)
+        return Speedups(
+            interchangeable=interchangeable,
+            counted=choose("counted", interchangeable, P <= COUNTED_MAX_PATCHES),
+            sorted_paths=choose("sorted_paths", not interchangeable, P >= SORT_MIN_PATCHES),
+            patch_classes=choose("patch_classes", geometry.all_parallelograms, P >= CLASSES_MIN_PATCHES),
+            grids=choose("grids", self.grids is not False and geometry.patch_grids is not None, True),
+            grouped_chunks=choose("grouped_chunks", True, True),
+        )
+
+    def without(self, name):
+        """These speed-ups with ``name`` off (a walk found the scene does not allow it)."""
+        return replace(self, **{name: False})
+
+    def names_on(self):
+        """The names of the speed-ups that are on."""
+        return tuple(f.name for f in fields(self) if getattr(self, f.name))
+
+
+# -- the numpy turns ------------------------------------------------------------------------------
+# Chunk-wide work takes no turns where a task's paths or the scene's patches reach this many
+# (benchmarks/turns.py: the two-way iteration with 1,250 paths a chunk took 1.14-1.22x the time
+# without turns that it took with them in the 600- and 2,504-patch rooms, 0.95x in the
+# 66,576-patch figure 4 room with 8,000 a chunk; in the empty room, with turns 0.82x the time
+# without at 1,250 paths a chunk, 0.90x at 7,800, 1.24x at 31,000).
+TURN_FREE_SIZE = 1 << 14
+
+
+def takes_turns(tables, paths):
+    """Whether chunk-wide work (the gathered walk, the generations of the Jacobi and two-way
+    iterations) takes turns at numpy for a task of ``paths`` paths. The paper's walks always do
+    (:func:`walk_chunks`: their steps' arrays are a wavefront's, small, and a turn a step keeps
+    the GIL from changing hands inside them); chunk-wide arrays span a whole chunk, numpy lets
+    go of the GIL inside most of their operations, and two threads' numpy work then runs side
+    by side (``benchmarks/turns.py``), unless both the task's paths and the scene's patches,
+    the lengths of its arrays, are below TURN_FREE_SIZE."""
+    return max(paths, tables.patch_count) < TURN_FREE_SIZE
+
+
+def chunk_wide(tables, paths):
+    """``tables`` for chunk-wide work on a task of ``paths`` paths: with a numpy turn that
+    never waits where it takes no turns (:func:`takes_turns`)."""
+    return tables if takes_turns(tables, paths) else tables.with_turn(FreeTurn())
+
+
+class FreeTurn:
+    """A numpy turn that never waits (:func:`takes_turns`): the lock's calls, doing nothing."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def acquire(self):
+        return True
+
+    def release(self):
+        pass
+
+    def locked(self):
+        return False

@@ -20,11 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .adaptive import cells_of, patch_mesh, split
-from ..methods.direct_points import SAMPLE_DIMENSIONS, Points, emitters_at, lamps_at, sky_at
+from ..display.direct_points import SAMPLE_DIMENSIONS, Points, emitters_at, lamps_at, sky_at
 from ..scene.geometry_build import build_geometry
 from ..lights.lights import WorldLight
 from ..names import EXIT_RANDOM, FINITE
-from ..lights.sampling import SourceTable, patch_point_rows, stratified_by_patch
+from ..lights.sampling import SourceTable, stratified_by_patch
 from ..scene.scene import PatchScene
 from ..methods.tables import WalkTables
 

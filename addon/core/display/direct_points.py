@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..lights.sampling import patch_point_rows
-from .first_shot import SEEN_BEFORE, trace
+from ..methods.first_shot import SEEN_BEFORE, trace
 
 # Sobol' dimensions of a sample: its point on the patch (2) and triangle (1), a point of a light
 # or a direction of the sky (2), an emitting patch (1) and its point (3).

@@ -1,5 +1,8 @@
-"""The first reflection of the gathered direct light, as uneven over each patch as the light that
-landed on it (the hit exit of the two-way iteration, ``two_way``).
+"""The two-way iteration's generations (``two_way``): the first reflection of the gathered direct
+light, then each generation's rays, every segment used both ways about the control variate.
+
+The first reflection (``reflect_first``), as uneven over each patch as the light that landed on it
+(the hit exit).
 
 The gathering samples (``first_shot``) are point sources of what they found
 (``gathered_walk.ReflectedPoints``). Their mean over each patch is the patch reflecting its light
@@ -7,20 +10,23 @@ uniformly, which the first two-way generation carries; what is left of each samp
 over its patch) is shot from its point in cosine directions (``_shoot_left``), and the glossy
 share of a shadow ray's light along its lobe (``_shoot_glossy``, :mod:`.glossy`). Their
 irradiance joins the first generation's.
+
+A generation (``generation``) allots its rays to patches by systematic sampling, casts them from
+shifted Halton points, and scores each segment's two estimates (``two_way`` says how).
 """
 from __future__ import annotations
+
 
 import numpy as np
 
 from ..scene import rays
 from ..mesh.faces import ranks_in_runs
 from .gathered_walk import ReflectedPoints
-from .jacobi_iteration import systematic_counts
-from ..lights.sampling import SOBOL, unit_floats
+from ..lights.sampling import HALTON, SOBOL, shifted_float32, systematic_counts, unit_floats
 
 # Rays of a chunk of n paths from the gathering samples: n FIRST_REFLECTION_RAYS.
 FIRST_REFLECTION_RAYS = 3.0
-# The first reflection's rays are cast this many at a time.
+# A generation's rays (and the first reflection's) are cast this many at a time.
 RAY_BLOCK = 1 << 18
 
 
@@ -156,3 +162,114 @@ def _bincount(patch, mask, weights, P):
     """(C,P) sums of ``weights`` (C,n) over the masked columns, by patch."""
     index = patch.compress(mask)
     return np.stack([np.bincount(index, weights=w.compress(mask), minlength=P) for w in weights])
+
+
+def reflected_power(area, reflected, groups=1):
+    """What a generation's rays are counted by: the power it reflects, sum_j A_j |dB_j| (an
+    estimate about a control variate can be below zero in places), in its strongest channel
+    (per source, of the groups' sum).
+    (Counted by the channels' mean, a saturated channel outlives the others between red walls
+    and the roulette's 1/chance lifted it generation after generation: in the closed Cornell
+    box one run in four had a chunk that put half the variance on five patches.)"""
+    if groups > 1:
+        reflected = reflected.reshape(groups, -1, reflected.shape[1]).sum(axis=0)
+    return float(_sums(np.abs(reflected), area).max())
+
+
+def leaving(area, reflected):
+    """(C,) the power each channel reflects, sum_j A_j dB_j."""
+    return _sums(reflected, area)
+
+
+def generation(tables, area, state, weight, count, rng):
+    """One two-way generation of ``count`` rays: their irradiance added to ``state``, its
+    reflection the next ``state.reflected``. The rays go out RAY_BLOCK at a time (a run of
+    patches' rays each), so that a large chunk's memory stays that of a block."""
+    P = tables.patch_count
+    expected = weight * (count / weight.sum())  # n_i
+    patch = np.repeat(np.arange(P, dtype=np.int32), systematic_counts(weight, count, rng.random()))
+    blocks = _ray_blocks(count, rng)  # (its first shift drawn here, as before blocks)
+    triangle_u = rng.random((1, count), dtype=np.float32) if tables.row_triangle is not None else None
+    state.rays += count
+    state.generations += 1
+    dB = state.reflected
+    beta = _sums(dB, area) / area.sum()  # (C,) the control variate
+    value = dB - beta[:, None]
+    density = expected / area
+    H = np.zeros_like(dB)
+    lost = np.zeros((2, P))  # rays from each patch that escaped, that met a back side
+    for rows, u in blocks:
+        if triangle_u is not None:
+            u = np.vstack([u, triangle_u[:, rows]])
+        _score_two_ways(tables, patch[rows], u, value, density, H, lost)
+    H /= area
+    sends = expected > 0  # (patches inside another object send no rays: none of beta reaches them)
+    if not sends.all():
+        expected = np.where(sends, expected, np.inf)
+    # A ray from i that escaped or met a back side saw 0 - beta: what i's rays kept of beta.
+    H += beta[:, None] * (1.0 - lost.sum(axis=0) / expected) * sends
+    H += state.correction
+    state.correction = 0.0
+    # What the rays from i that found nothing, or a back side, estimate of i's reflected power.
+    state.escaped += _sums(dB * area, lost[0] / expected)
+    state.blocked += _sums(dB * area, lost[1] / expected)
+    state.irradiance += H
+    state.reflected = state.reflectivity * H
+
+
+def _score_two_ways(tables, patch, u, value, density, H, lost):
+    """Casts one block of a generation's rays (from ``patch``, uniforms ``u``) and adds each
+    segment's two estimates to H (C,P, times the area), its lost rays to ``lost`` (2,P)."""
+    P = tables.patch_count
+    origins, directions = rays.leave_random(tables, patch, u)
+    hits = rays.cast(tables, origins, directions, tables.geometry.region_of(patch))
+    met = hits.front
+    i, j = patch.compress(met), hits.patch.compress(met)
+    # Segment i -> j adds dB_j s / A_i to H_i and dB_i s / A_j to H_j, s = 1 / (n_i/A_i + n_j/A_j).
+    s = density.take(i)
+    s += density.take(j)
+    np.reciprocal(s, out=s)
+    if value.shape[0] > tables.channels:  # (per source, many rows: both ends in one count a row)
+        _score_rows(np.concatenate((i, j)), np.concatenate((j, i)), np.concatenate((s, s)), value, H)
+    else:
+        gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
+        gathered *= s
+        shot *= s
+        for c in range(value.shape[0]):
+            H[c] += np.bincount(i, weights=gathered[c], minlength=P)
+            H[c] += np.bincount(j, weights=shot[c], minlength=P)
+    if not met.all():
+        lost[0] += np.bincount(patch.compress(hits.hit < 0), minlength=P)
+        lost[1] += np.bincount(patch.compress((hits.hit >= 0) & ~met), minlength=P)
+
+
+def _score_rows(to, source, s, value, H):
+    """Adds s value[:, source] to H[:, to] for every row of ``value`` (per-source rows)."""
+    carried = value.take(source, axis=1)
+    carried *= s
+    for row, weights in zip(H, carried):
+        row += np.bincount(to, weights=weights, minlength=row.size)
+
+
+def _ray_blocks(count, rng):
+    """The blocks of ``count`` rays, RAY_BLOCK at a time, one by one: (rows, a slice; u (4, n)
+    float32), u the Halton points 0..n-1 (bases 2, 3, 5, 7) shifted by one random vector modulo
+    1: each point uniform, together evenly spread; the rays of each patch take a run of them.
+    Each block has its own set and shift, so that the table stays a block's size; the first
+    shift is drawn now, the others as their blocks are reached."""
+    shift = rng.random(4)
+
+    def blocks():
+        for start in range(0, count, RAY_BLOCK):
+            n = min(RAY_BLOCK, count - start)
+            points = HALTON.rows(n)[:, :n] + (shift if start == 0 else rng.random(4))[:, None]
+            yield slice(start, start + n), shifted_float32(points)
+
+    return blocks()
+
+
+def _sums(values, weights):
+    """(C,) sum over patches of ``values`` (C,P) times ``weights`` (P,), without BLAS: a large
+    matrix product wakes BLAS's threads, which spin on after it and take the CPUs from the
+    solve's other threads."""
+    return np.einsum("cp,p->c", values, weights)
