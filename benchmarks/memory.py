@@ -8,7 +8,7 @@
 Every measurement runs in a fresh Python process, so its peak resident set (``ru_maxrss``) is its
 own. A child reports the peak resident set after the imports, after building the scene (meshing,
 validation, patch frames), after building the Embree BVH the solve traces (the default walk's: the
-patches' grids, addon/core/patch_grids.py), and after ``solve``; the solve's own
+patches' grids, addon/core/scene/patch_grids.py), and after ``solve``; the solve's own
 share is the last minus the one before. A second child per path count runs the same solve under
 ``tracemalloc``, whose peak counts the numpy and Python allocations made during the solve (not
 Embree's own, which are made once with the BVH, before it).
@@ -69,7 +69,7 @@ def child(paths, threads, use_tracemalloc, scene_name):
     out["triangles"] = scene.geometry.triangle_count
     out["after_scene"] = peak_rss()
     # The Embree scene the solve traces, built once per geometry: the default walk's, the
-    # patches' grids (addon/core/patch_grids.py); the patches' triangles are not built.
+    # patches' grids (addon/core/scene/patch_grids.py); the patches' triangles are not built.
     from addon.core.methods.tables import WalkTables
 
     out["traced_triangles"] = WalkTables(scene, "finite", 1e-3, "random").tracer.triangle_count

@@ -1,4 +1,4 @@
-"""Smooth display of patch values (addon/core/smoothing.py): what the noise filter does to the
+"""Smooth display of patch values (addon/core/display/smoothing.py): what the noise filter does to the
 error against exact solutions, the jumps the corner values leave, and the cost at a million patches.
 
     .venv/bin/python -m benchmarks.smoothing           # ~3 min, into benchmarks/results/smoothing.md

@@ -45,7 +45,7 @@ def sample_rays(scene, count, seed=0):
 
 def walk_tracer(scene, exit_point="random"):
     """The Embree scene a walk traces: the patches' grids where the scene has them
-    (addon/core/patch_grids.py), else the patches' triangles."""
+    (addon/core/scene/patch_grids.py), else the patches' triangles."""
     from addon.core.methods.tables import WalkTables
 
     return WalkTables(scene, "finite", 1e-3, exit_point).tracer
@@ -578,7 +578,7 @@ def main(argv=None):
         f"`python -m benchmarks.throughput {' '.join(sys.argv[1:])}`.",
         "Raw: embreex alone (first hits) on pre-drawn rays of the same kind over the same threads, on the scene the "
         "solve traces: the patches' grids, two triangles each, where the patches tile them, beside the other "
-        "patches' own triangles (*traced*; addon/core/patch_grids.py). Each round brackets one solve between two raw "
+        "patches' own triangles (*traced*; addon/core/scene/patch_grids.py). Each round brackets one solve between two raw "
         "measurements, so both see the same load; the ratio is the median of the per-round ratios, with the lowest "
         "and highest round beside it (the spread is the machine's noise: these machines are shared).",
         "",
@@ -650,7 +650,7 @@ def write_breakdown(args):
         "(the rest is numpy: random numbers, the frame gather, points and directions, the facing test,",
         "survival, scoring) and how fast Embree traces inside the walk compared with the raw run. Walks",
         "trace the patches' grids where the patches tile them (the raw run too:",
-        "addon/core/patch_grids.py), a scene of a few kB that stays in cache (the figure 4 room's",
+        "addon/core/scene/patch_grids.py), a scene of a few kB that stays in cache (the figure 4 room's",
         "196 triangles), and ask Embree for barycentrics, from which a hit's grid cell is its patch.",
         "",
         "The two replays and the processor's counters (lines from memory: fills from DRAM on AMD Zen 3",

@@ -1,5 +1,5 @@
-"""The pages tell the truth about the repository: the README's map names every module (and no
-module that is gone), every link leads to a file and heading that exist, every results file is
+"""The pages tell the truth about the repository: the README's map names every package, the
+code page every module (and no module that is gone), every link leads to a file and heading that exist, every results file is
 read by a page or a benchmark, and code and pages keep the why without a tracker's history."""
 from __future__ import annotations
 
@@ -19,37 +19,49 @@ HISTORY = re.compile(r"\b[Ii]ssues?\s+#?\d|\b[Ss]tops?\s+\d")
 LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")
 
 
-def _map_parts():
-    text = README.read_text()
-    assert "\n## Map of the code\n" in text and "\n`addon/`:" in text, "the README has no map of the code"
-    start = text.index("## Map of the code")
-    end = text.find("\n## ", start + 1)
-    section = text[start:] if end < 0 else text[start:end]
-    glue = section.index("\n`addon/`:")
-    return section[:glue], section[glue:]
+CODE = ROOT / "docs" / "code.md"
 
 
-def _named_modules(part, folders):
-    """The modules a part of the map names: by name, or with ``folders`` by their path too."""
+def _named(text, folders):
+    """The modules a page names: by name, or with ``folders`` by their path under a folder too."""
     folder = r"(?:[A-Za-z_][A-Za-z0-9_]*/)?" if folders else ""
-    return set(re.findall(rf"`({folder}[A-Za-z_][A-Za-z0-9_]*\.py)`", part))
+    return set(re.findall(rf"`({folder}[A-Za-z_][A-Za-z0-9_]*\.py)`", text))
 
 
-def _modules(package):
-    """The modules of a package as the map names them: the core's by name, the glue's by their
-    path under addon/ (its layer folders; the core has its own part of the map)."""
-    if package == "addon/core":
-        return {p.name for p in (ROOT / package).glob("*.py")}
-    return {p.relative_to(ROOT / package).as_posix() for p in (ROOT / package).rglob("*.py")
-            if p.relative_to(ROOT / package).parts[0] != "core"}
+def _section(text, start, end=None):
+    i = text.index(start)
+    j = text.index(end, i) if end else len(text)
+    return text[i:j]
 
 
-@pytest.mark.parametrize("package, part", [("addon/core", 0), ("addon", 1)])
-def test_the_readme_map_names_every_module_and_only_modules_that_exist(package, part):
-    named = _named_modules(_map_parts()[part], folders=package != "addon/core")
-    present = _modules(package)
-    assert present - named == set(), f"modules of {package}/ missing from the README's map"
-    assert named - present == set(), f"the README's map names modules {package}/ does not have"
+def test_the_code_page_names_every_module_and_only_modules_that_exist():
+    """docs/code.md's tables name every module of the core (by name, in its package's row) and of
+    the glue (by its folder's row), and no module that is gone."""
+    text = CODE.read_text()
+    core = _section(text, "## The core, bottom up", "## The glue, by layer")
+    for package in sorted(p for p in (ROOT / "addon" / "core").iterdir() if (p / "__init__.py").exists()):
+        row = next(line for line in core.splitlines() if line.startswith(f"| `core/{package.name}/` |"))
+        present = {p.name for p in package.glob("*.py")} - {"__init__.py"}
+        assert _named(row, False) == present, package.name
+    top = {p.name for p in (ROOT / "addon" / "core").glob("*.py")}
+    assert _named(_section(core, "At the top of the core"), False) == top
+    glue = _section(text, "## The glue, by layer", "## One solve")
+    for folder in sorted(p for p in (ROOT / "addon").iterdir() if (p / "__init__.py").exists() and p.name != "core"):
+        row = next(line for line in glue.splitlines() if line.startswith(f"| `{folder.name}/` |"))
+        assert _named(row, False) == {p.name for p in folder.glob("*.py")} - {"__init__.py"}, folder.name
+
+
+def test_the_readmes_map_names_every_package_of_the_core_and_every_folder_of_the_glue():
+    text = _section(README.read_text(), "## Map of the code")
+    named = set(re.findall(r"^\| `([a-z_]+)/` \|", text, flags=re.M))
+    core = {p.name for p in (ROOT / "addon" / "core").iterdir() if (p / "__init__.py").exists()}
+    glue = {p.name for p in (ROOT / "addon").iterdir() if (p / "__init__.py").exists()} - {"core"}
+    assert named == core | glue
+
+
+def test_following_one_solve_from_the_panel_to_the_colours_opens_at_most_twelve_modules():
+    steps = re.findall(r"^\d+\. `([a-z_/]+\.py)`", _section(CODE.read_text(), "## One solve"), flags=re.M)
+    assert 0 < len(steps) <= 12 and all((ROOT / "addon" / step).exists() for step in steps), steps
 
 
 def _slug(heading):
@@ -104,7 +116,7 @@ def test_every_results_file_is_read_by_a_page_or_a_benchmark():
 
 def test_the_readme_is_a_page_with_the_two_commands_and_the_main_jobs_picture():
     text = README.read_text()
-    assert len(text.splitlines()) < 200
+    assert len(text.splitlines()) <= 150
     assert "\n    bash tools/run.sh --scene cornell\n" in text
     assert "\n    bash tools/test.sh\n" in text
     assert "bash tools/test.sh" in (ROOT / ".ci" / "run").read_text()

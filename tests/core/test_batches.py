@@ -1,6 +1,6 @@
 """The light arriving at each patch (H in B = E + rho H) and its measured variance, also on black
 patches (rho = 0), where the reflected light's variance says nothing: what the textured output's
-smooth light is filtered with (addon/core/batches.py ``irradiance_variance``)."""
+smooth light is filtered with (addon/core/estimate/batches.py ``irradiance_variance``)."""
 import numpy as np
 import pytest
 

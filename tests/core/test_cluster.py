@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from boxes import box_scene, rectangles_to_mesh
 
-from addon.core import GATHERED, PatchScene, solve
+from addon.core import PatchScene, solve
+from addon.core.names import GATHERED
 from addon.core.names import BIASED_INFINITE, EXIT_HIT, EXIT_RANDOM, FINITE
 from addon.core.distributed.cluster import ClusterError
 from addon.core.estimate.plan import chunk_paths_for

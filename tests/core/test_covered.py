@@ -1,4 +1,4 @@
-"""Patches no camera sees (addon/core/covered.py) and the smooth colours that leave them out:
+"""Patches no camera sees (addon/core/display/covered.py) and the smooth colours that leave them out:
 the ceiling behind a light panel hung under it and the floor under a box with no bottom are
 hidden, the floor under a one-sided table top and the rest of the room are not; a hidden black
 patch pulls no visible neighbour's corner down (no dark rim, no ripples around a panel)."""

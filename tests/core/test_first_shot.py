@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from boxes import box_scene
 
-from addon.core import GATHERED, solve
+from addon.core import solve
+from addon.core.names import GATHERED
 from addon.core.methods.first_shot import Gathering, gather_direct
 from addon.core.estimate.reference import solve_radiosity_system
 from addon.core.methods.tables import WalkTables

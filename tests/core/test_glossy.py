@@ -1,4 +1,4 @@
-"""The glossy share of the first reflection sent along its lobe (addon/core/glossy.py): the lobe's
+"""The glossy share of the first reflection sent along its lobe (addon/core/materials/glossy.py): the lobe's
 directions as GGX makes them, and a sunlit floor's glossy light landing where its mirror image
 falls, against the exact irradiance of an open floor-and-wall scene."""
 import numpy as np

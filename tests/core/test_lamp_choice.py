@@ -1,4 +1,4 @@
-"""The display's choice among lamps (addon/core/lamp_choice.py): all lamps looked at at once as
+"""The display's choice among lamps (addon/core/lights/lamp_choice.py): all lamps looked at at once as
 each looks at itself, a weight above 0 wherever a lamp can light a point (the estimate stays
 unbiased), a point lamp's weight its own light, and samples drawn by weight."""
 import numpy as np

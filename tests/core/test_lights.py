@@ -1,4 +1,4 @@
-"""Lights as sources beside emissive patches (addon/core/lights.py), against exact references:
+"""Lights as sources beside emissive patches (addon/core/lights/lights.py), against exact references:
 solid angles and form factors for the first bounce and the direct solve of B = E + R F B for the
 rest; a sun on a plane (H cos theta); a uniform world over an open plane; energy balance with
 every kind; a furnace with a light inside. Bands are z-scores from each run's own batch

@@ -1,4 +1,4 @@
-"""Patches merged back into grids (addon/core/patch_grids.py): the ray tracer's scene for walks
+"""Patches merged back into grids (addon/core/scene/patch_grids.py): the ray tracer's scene for walks
 leaving from random points. A ray must score on the patch whose triangles it would have hit."""
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The direct light at the shown mesh's corners (addon/core/point_direct.py): exact for a point
+"""The direct light at the shown mesh's corners (addon/core/display/point_direct.py): exact for a point
 lamp at every corner a room's slabs leave in view, filled where a corner is inside a slab, the
 patches' means kept to float error, source groups adding up, and a lamp's hot spot shown closer
 to the exact light than the smooth patch means alone."""

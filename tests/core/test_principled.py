@@ -1,4 +1,4 @@
-"""The Principled BSDF's hemispherical albedo (addon/core/principled.py) against independent
+"""The Principled BSDF's hemispherical albedo (addon/core/materials/principled.py) against independent
 integrals over outgoing directions and known limits."""
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Per-source results and relighting (addon/core/grouping.py, relighting.py): each source
+"""Per-source results and relighting (addon/core/estimate/grouping.py, relighting.py): each source
 group's result from one solve, for every method, adds up to the solve's own; recombined with new
 strengths and colours it agrees with a fresh solve of the relit scene within their joint noise,
 for every source kind, tints and a source switched off; the error it reports from the groups'

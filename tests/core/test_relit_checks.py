@@ -1,4 +1,4 @@
-"""Recombinations whose error the solve's batches cannot give (addon/core/relit_checks.py,
+"""Recombinations whose error the solve's batches cannot give (addon/core/relight/relit_checks.py,
 ``unmeasured``): a source whose share of the paths was hidden by a far brighter one drew
 no path, so its own result is 0 with 0 batch variance; relit to most of the light, the error is
 unknown (NaN) and the group named, never "0%". Below its share, or with its light within the

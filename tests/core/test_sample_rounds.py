@@ -1,4 +1,4 @@
-"""Rounds of samples within a deadline (addon/core/sample_rounds.py): the first round always, then
+"""Rounds of samples within a deadline (addon/core/display/sample_rounds.py): the first round always, then
 the noisiest points of every source first, as many as the pace each source has shown leaves
 time for; without a deadline, every noisy point, every round."""
 import numpy as np

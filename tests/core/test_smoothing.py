@@ -1,4 +1,4 @@
-"""Smooth display of per-patch light (addon/core/smoothing.py): seamless across objects, creases
+"""Smooth display of per-patch light (addon/core/display/smoothing.py): seamless across objects, creases
 kept, each patch's mean preserved, non-negative, and a noise filter that lowers the error against
 exact references.
 

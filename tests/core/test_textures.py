@@ -1,4 +1,4 @@
-"""Image textures averaged over each patch's UV footprint (addon/core/textures.py)."""
+"""Image textures averaged over each patch's UV footprint (addon/core/materials/textures.py)."""
 import numpy as np
 
 from addon.core.mesh.meshing import mesh_patches
