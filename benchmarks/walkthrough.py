@@ -247,6 +247,7 @@ def walk_one(name, args, command):
     start, load = time.perf_counter(), os.getloadavg()[0]
     m = measure(name, args.reference_samples, args.views, args.eevee, args.unlive, args.warm_up)
     a, masks = analyse(m)
+    keep_images(m, masks, ROOT / "out" / "walkthrough_images" / f"{name}{'_quick' if args.quick else ''}.npz")
     sheet = args.out / f"walkthrough_{name}.png"
     report.contact_sheet(m, masks, sheet)
     a["run"] = {"command": command, "seconds": time.perf_counter() - start, "loads": [load, os.getloadavg()[0]],
@@ -255,6 +256,17 @@ def walk_one(name, args, command):
                 "sheet": sheet.name}
     (args.out / f"walkthrough_{name}.json").write_text(json.dumps(a, indent=1))
     return a
+
+
+def keep_images(m, masks, path):
+    """Every picture, the references' halves and the pixel maps as float16 (for a look afterwards)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arrays = {f"{kind}_{k}": image.astype(np.float16) for kind, shots in m["images"].items()
+              for k, (image, _) in enumerate(shots)}
+    for k, (r, mask) in enumerate(zip(m["refs"], masks)):
+        arrays.update({f"first_{k}": r["first"].astype(np.float16), f"second_{k}": r["second"].astype(np.float16),
+                       f"object_id_{k}": r["object_id"], f"mask_{k}": mask})
+    np.savez_compressed(path, names=np.array(m["walk"].info.meshes), **arrays)
 
 
 if __name__ == "__main__":

@@ -18,11 +18,13 @@ LEAST_WALK_PIXELS = 500  # ... over the walk
 # --------------------------------------------------------------------------- Cycles at the solve's time
 
 def line_through(line, samples, wall):
-    """The time line (seconds of 1 sample, seconds a further sample) moved to pass through the
-    last render measured (``samples`` took ``wall``), its slope kept: the fixed part of a render
-    (syncing the scene, the denoiser) is most of it at a few samples."""
-    _, per_sample = line
-    return (wall - (samples - 1) * per_sample, per_sample)
+    """The time line (seconds of 1 sample, seconds a further sample) scaled to pass through the
+    last render measured (``samples`` took ``wall``): a machine shared with other work runs every
+    part of a render slower or faster alike, and the fixed part (syncing the scene, the
+    denoiser) is most of a render at a few samples, so it is kept in proportion."""
+    first, per_sample = line
+    scale = wall / max(first + (samples - 1) * per_sample, 1e-9)
+    return (first * scale, per_sample * scale)
 
 
 def samples_within(seconds, line, most=1 << 16):

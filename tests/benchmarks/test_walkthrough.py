@@ -92,23 +92,23 @@ def test_walls_are_told_from_furniture_by_their_span():
 # --------------------------------------------------------------------------- samples at the solve's time
 
 def render_time(samples, view):
-    """A render's seconds: a fixed part (scene sync, denoiser) and a part a sample, varying by view."""
-    return 2.0 + 0.05 * samples * (1.0 + 0.3 * math.sin(view))
+    """A render's seconds: a fixed part (scene sync, denoiser) and a part a sample; from the
+    fifth view on the machine is busier (another job started) and everything is slower."""
+    return 2.0 + 0.05 * samples if view < 4 else 3.0 + 0.1 * samples
 
 
 @pytest.mark.parametrize("budget", [40.0, 120.0, 600.0])
 def test_the_ten_views_share_the_solves_time(budget):
-    line = (render_time(1, 0), (render_time(4, 0) - render_time(1, 0)) / 3)
+    line = (render_time(1, 0), (render_time(4, 0) - render_time(1, 0)) / 3)  # timed before, on a quiet machine
     spent, last, used = 0.0, None, []
     for k in range(10):
         n = wm.next_samples(budget, spent, 10 - k, line, last)
         wall = render_time(n, k)
         spent, last = spent + wall, (n, wall)
         used.append(n)
-    # the total misses by the last view's miss alone: its time a sample differs from the view
-    # before's by at most 0.05 x 0.3 x 2 seconds, and a sample's rounding
-    assert abs(spent - budget) <= 0.03 * max(used) + 0.05
-    assert min(used) >= 1 and len(set(used)) > 1  # tracked view by view, not fixed
+    # the views after the slowdown take what is left: the total within 1% (and a slow sample's rounding)
+    assert abs(spent - budget) <= 0.01 * budget + 0.1
+    assert used[-1] < used[0] and min(used) >= 1
 
 
 def test_a_budget_below_one_sample_gives_one_sample_and_the_cap_holds():
@@ -117,7 +117,7 @@ def test_a_budget_below_one_sample_gives_one_sample_and_the_cap_holds():
     assert wm.next_samples(1e6, 0.0, 1, line, most=64) == 64
     assert wm.next_samples(20.0, 30.0, 2, line) == 1  # over budget already
     assert wm.samples_within(3.0, (2.0, 0.05)) == 21
-    assert wm.line_through((2.0, 0.05), 21, 4.0) == pytest.approx((3.0, 0.05))
+    assert wm.line_through((2.0, 0.05), 21, 6.0) == pytest.approx((4.0, 0.1))  # twice as slow, every part
 
 
 # --------------------------------------------------------------------------- numbers from arrays
