@@ -187,12 +187,12 @@ def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=Tru
             "unlive_stats": unlive_stats, "samples": [s for _, _, s in cycles], "timing": timing}
 
 
-def analyse(m):
-    """The numbers of one interior (``measure``'s dict), JSON-ready."""
+def analyse(m, masks=None):
+    """The numbers of one interior (``measure``'s dict; its surface ``masks`` if known), JSON-ready."""
     walk, refs = m["walk"], m["refs"]
     names = walk.info.meshes
     emitters = [names.index(n) for n in walk.info.emitters]
-    masks = [pm.surface_mask(r["object_id"], emitters, r["lamp"]) for r in refs]
+    masks = masks or [pm.surface_mask(r["object_id"], emitters, r["lamp"]) for r in refs]
     kinds = {}
     for kind, shots in m["images"].items():
         sums = [wm.view_sums(image, r["first"], r["second"], r["object_id"], mask, len(names))
@@ -222,6 +222,8 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help=f"smoke run: 16 reference samples, 2 views, into {QUICK.relative_to(ROOT)}/")
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder of the reports and sheets")
     parser.add_argument("--replot", action="store_true", help="rewrite the reports from their .json")
+    parser.add_argument("--reanalyse", action="store_true", help="the numbers and sheets again from the pictures kept in "
+                        "out/walkthrough_images/ (and the .json's times): after a change to the measures")
     args = parser.parse_args(argv)
     names = args.interior or list(DEFAULT_INTERIORS)
     if not 1 <= args.views <= 10:
@@ -234,6 +236,8 @@ def main(argv=None):
     command = "python -m benchmarks.walkthrough " + " ".join(argv if argv is not None else sys.argv[1:])
     if args.replot:
         done = {n: json.loads((args.out / f"walkthrough_{n}.json").read_text()) for n in names}
+    elif args.reanalyse:
+        done = {n: reanalyse(n, args) for n in names}
     else:
         done = {n: walk_one(n, args, command.strip()) for n in names}
     for name, a in done.items():
@@ -254,6 +258,27 @@ def walk_one(name, args, command):
                 "reference_samples": args.reference_samples, "size": list(SIZE), "eevee_samples": shown.EEVEE_SAMPLES,
                 "baked_samples": shown.BAKED_SAMPLES, "preview_samples": pic.PREVIEW_SAMPLES, "target": pic.TARGET_ERROR,
                 "sheet": sheet.name}
+    (args.out / f"walkthrough_{name}.json").write_text(json.dumps(a, indent=1))
+    return a
+
+
+def reanalyse(name, args):
+    """``walk_one`` again from the kept pictures and the .json's run, times and statistics."""
+    saved = json.loads((args.out / f"walkthrough_{name}.json").read_text())
+    kept = np.load(ROOT / "out" / "walkthrough_images" / f"{name}{'_quick' if args.quick else ''}.npz")
+    count = len(saved["views"])
+    walk = scenes.build(name, count)
+
+    def image(key):
+        return kept[key].astype(np.float32)
+
+    refs = [{"first": image(f"first_{k}"), "second": image(f"second_{k}"), "object_id": kept[f"object_id_{k}"],
+             "seconds": saved["reference_seconds"][k]} for k in range(count)]
+    images = {kind: [(image(f"{kind}_{k}"), saved["kinds"][kind]["seconds"][k]) for k in range(count)] for kind in saved["kinds"]}
+    m = {"walk": walk, "refs": refs, "images": images, **{key: saved[key] for key in ("solve", "stats", "unlive_stats", "samples", "timing")}}
+    a, masks = analyse(m, [kept[f"mask_{k}"] for k in range(count)])
+    report.contact_sheet(m, masks, args.out / saved["run"]["sheet"])
+    a["run"] = saved["run"]
     (args.out / f"walkthrough_{name}.json").write_text(json.dumps(a, indent=1))
     return a
 

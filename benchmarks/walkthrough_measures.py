@@ -51,11 +51,13 @@ def view_sums(image, first, second, object_id, mask, count):
     y, r = pm.luminance(image)[mask], pm.luminance(ref)[mask]
     variance = pm.reference_variance(first, second)[mask]
     ids = np.asarray(object_id)[mask]
+    halves = [np.bincount(ids, pm.luminance(h)[mask], minlength=count).tolist() for h in (first, second)]
     return {"pixels": int(mask.sum()), "picture": float(y.sum()), "reference": float(r.sum()),
             "absolute": float(np.abs(y - r).sum()), "square": float(((y - r) ** 2).sum()), "variance": float(variance.sum()),
             "object_pixels": np.bincount(ids, minlength=count).tolist(),
             "object_picture": np.bincount(ids, y, minlength=count).tolist(),
-            "object_reference": np.bincount(ids, r, minlength=count).tolist()}
+            "object_reference": np.bincount(ids, r, minlength=count).tolist(),
+            "object_first": halves[0], "object_second": halves[1]}
 
 
 def reference_sums(first, second, mask):
@@ -68,10 +70,13 @@ def reference_sums(first, second, mask):
 
 def numbers(sums, names, least):
     """Error, RMS error with the reference's noise out, brightness and the worst object (at least
-    ``least`` pixels) of one view's or several views' summed ``sums``."""
+    ``least`` pixels) of one view's or several views' summed ``sums``; per object its brightness,
+    pixels and the reference's own uncertainty there (half its halves' difference over their mean)."""
     pixels = np.asarray(sums["object_pixels"], float)
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = np.asarray(sums["object_picture"]) / np.asarray(sums["object_reference"])
+        first, second = np.asarray(sums["object_first"]), np.asarray(sums["object_second"])
+        spread = np.abs(first - second) / (first + second)
     seen = np.flatnonzero((pixels >= least) & np.isfinite(ratio))
     mean_ref = sums["reference"] / max(sums["pixels"], 1)
     square = max(sums["square"] - sums["variance"], 0.0) / max(sums["pixels"], 1)
@@ -79,7 +84,7 @@ def numbers(sums, names, least):
     return {"error": sums["absolute"] / sums["reference"], "rms": float(np.sqrt(square)) / mean_ref,
             "brightness": sums["picture"] / sums["reference"],
             "worst": None if worst is None else [names[worst], float(ratio[worst])],
-            "objects": {names[i]: [float(ratio[i]), int(pixels[i])] for i in seen}}
+            "objects": {names[i]: [float(ratio[i]), int(pixels[i]), float(spread[i])] for i in seen}}
 
 
 def added(views):

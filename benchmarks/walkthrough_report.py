@@ -61,10 +61,11 @@ def object_table(a):
     """Each object's brightness over the walk (its pixels of every view), per kind."""
     kinds = kinds_of(a)
     objects = a["kinds"][kinds[0]]["walk"]["objects"]
-    lines = ["| object | pixels | " + " | ".join(SHORT[k] for k in kinds) + " |", "|---|---|" + "---|" * len(kinds)]
-    for name, (_, pixels) in sorted(objects.items(), key=lambda item: -item[1][1]):
+    lines = ["| object | pixels | the reference's own (±) | " + " | ".join(SHORT[k] for k in kinds) + " |",
+             "|---|---|---|" + "---|" * len(kinds)]
+    for name, (_, pixels, spread) in sorted(objects.items(), key=lambda item: -item[1][1]):
         ratios = [a["kinds"][k]["walk"]["objects"].get(name, [float("nan")])[0] for k in kinds]
-        lines.append(f"| {name} | {pixels:,} | " + " | ".join(f"{r:.2f}" for r in ratios) + " |")
+        lines.append(f"| {name} | {pixels:,} | {spread:.3f} | " + " | ".join(f"{r:.2f}" for r in ratios) + " |")
     return lines
 
 

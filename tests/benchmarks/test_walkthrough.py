@@ -143,8 +143,13 @@ def test_a_views_numbers_are_its_error_brightness_and_worst_object():
     assert n["error"] == pytest.approx(0.1 * 1 / 3)  # 0.1 on a third of the light
     assert n["brightness"] == pytest.approx(3.1 / 3)
     assert n["worst"] == ["left", pytest.approx(1.1)]
-    assert n["objects"]["right"] == [pytest.approx(1.0), object_id.size // 2]
+    assert n["objects"]["right"] == [pytest.approx(1.0), object_id.size // 2, 0.0]
     assert n["rms"] == pytest.approx(np.sqrt(0.5 * 0.1**2) / 1.5)
+    high, low = truth.copy(), truth.copy()
+    high[object_id == 1] *= 1.1
+    low[object_id == 1] *= 0.9  # the reference's halves 10% apart on the right object
+    n = wm.numbers(wm.view_sums(truth, high, low, object_id, mask, 2), ["left", "right"], 100)
+    assert n["objects"]["right"][2] == pytest.approx(0.1) and n["objects"]["left"][2] == 0.0
 
 
 def test_the_rms_error_takes_the_references_noise_out():
