@@ -1,15 +1,15 @@
-"""Which light EEVEE draws otherwise: EEVEE against the product's own Cycles preview, light by
-light, on the same results (the walkthrough's interiors and views).
+"""Which light EEVEE draws otherwise: EEVEE's picture of the results taken apart light by light,
+against Cycles' direct light of each on the original scene (the walkthrough's interiors and views).
 
     nice -n 10 .venv/bin/python -m benchmarks.walkthrough_parts --interior skylight_hall   # -> results/walkthrough_parts_<interior>.md
 
 Per interior, in one process: the solve at the panel's defaults (Live lamps), then each view drawn
-by EEVEE and by the product's preview with one light on at a time (the world, each lamp, the
-emitting meshes) and with none (the solved light alone, which both draw). A light's part of a
-picture is its picture less the one with none: its luminance summed over the surface pixels, over
-the reference's (``walkthrough.references``, cached; the reference has every light on). The preview
-draws the lights as Cycles does (its brightness and objects within a few percent of the reference:
-``walkthrough_<interior>.md``), so EEVEE's part over the preview's says how EEVEE draws that light.
+by EEVEE with one light on at a time (the world, each lamp, the emitting meshes) and with none (the
+stored light after a bounce alone, which EEVEE shows as it is), and by Cycles on the original scene
+with that light alone and no bounce (its direct light). EEVEE's part of a light is its picture with
+that light less the one with none; the light after a bounce is, in Cycles, the reference less every
+direct part, in EEVEE the picture with none. Each part is the luminance summed over the surface
+pixels of every view, over the reference's (``walkthrough.references``, cached; every light on).
 """
 from __future__ import annotations
 
@@ -27,8 +27,8 @@ from benchmarks import walkthrough as walking  # noqa: E402
 from benchmarks import walkthrough_displays as shown  # noqa: E402
 from benchmarks import walkthrough_scenes as scenes  # noqa: E402
 
-NONE = "none (the solved light alone)"
-KINDS = {"eevee": shown.eevee_image, "preview": lambda: shown.preview_image(walking.SIZE[0])}
+NONE = "the light after a bounce"
+DIRECT_SAMPLES = 64  # Cycles' direct light alone: little noise, and the parts are sums over many pixels
 
 
 def light_groups(walk):
@@ -42,19 +42,17 @@ def light_groups(walk):
 
 
 def emitting_nodes():
-    """The Principled nodes of the live result materials that emit (their own shader lights the others)."""
+    """The Principled nodes that emit: the sources' emitters, and the live result materials' copies."""
     import bpy
 
-    from addon.blender_write.materials import LIVE_EMITS_PROPERTY
-
-    return [node for m in bpy.data.materials if m.get(LIVE_EMITS_PROPERTY) and m.node_tree is not None
-            for node in m.node_tree.nodes if node.bl_idname == "ShaderNodeBsdfPrincipled"]
+    return [node for m in bpy.data.materials if m.node_tree is not None for node in m.node_tree.nodes
+            if node.bl_idname == "ShaderNodeBsdfPrincipled" and node.inputs["Emission Strength"].default_value > 0]
 
 
 @contextlib.contextmanager
 def only(walk, group):
     """Every light off but ``group`` (NONE: all off): lamps hidden, the world taken away, the
-    emitting result materials' strength 0; put back after."""
+    emitting materials' strength 0; put back after."""
     import bpy
 
     scene = bpy.context.scene
@@ -78,6 +76,17 @@ def only(walk, group):
             node.inputs["Emission Strength"].default_value = strength
 
 
+def direct_image(seed):
+    """Cycles' direct light on the original scene (no bounce), the lights on now."""
+    import bpy
+
+    scene = bpy.context.scene
+    pic.show_results(False)
+    pic.configure_cycles(scene, DIRECT_SAMPLES, seed=seed)
+    scene.cycles.max_bounces = 0
+    return pic.render_exr(scene)[0]
+
+
 def measure(name, views, reference_samples, log=print):
     """Per view: the reference's surface sum and, per kind and group, the picture's surface sum."""
     walk = scenes.build(name, views)
@@ -90,40 +99,46 @@ def measure(name, views, reference_samples, log=print):
         walking.set_view(walk, view)
         mask = pm.surface_mask(ref["object_id"], emitters, ref["lamp"])
         sums = {"reference": float(pm.luminance(0.5 * (ref["first"] + ref["second"]))[mask].sum())}
-        for kind, draw in KINDS.items():
-            for group in [NONE, *groups]:
-                with only(walk, group):
-                    sums[f"{kind}|{group}"] = float(pm.luminance(draw()[0])[mask].sum())
+        for group in [NONE, *groups]:
+            with only(walk, group):
+                sums[f"eevee|{group}"] = float(pm.luminance(shown.eevee_image()[0])[mask].sum())
+                if group != NONE:
+                    sums[f"cycles|{group}"] = float(pm.luminance(direct_image(k))[mask].sum())
         out.append(sums)
         log(f"{name}: view {k + 1} taken apart")
     return groups, out
 
 
 def page(name, groups, views, command):
-    """The markdown page: each light's part of the walk in the preview and in EEVEE."""
+    """The markdown page: each light's part of the walk in Cycles and in EEVEE."""
     total = {key: sum(v[key] for v in views) for key in views[0]}
     ref = total["reference"]
 
     def part(kind, group, sums):
-        return sums[f"{kind}|{group}"] - (0.0 if group == NONE else sums[f"{kind}|{NONE}"])
+        if kind == "eevee":
+            return sums[f"eevee|{group}"] - (0.0 if group == NONE else sums[f"eevee|{NONE}"])
+        if group == NONE:
+            return sums["reference"] - sum(sums[f"cycles|{g}"] for g in groups)
+        return sums[f"cycles|{group}"]
 
-    lines = [f"# EEVEE against the preview, light by light: {name}", "",
-             f"`{command}` ({len(views)} views; made by `benchmarks/walkthrough_parts.py`). Each light's part of the "
-             "picture (its picture less the one with every light off), summed over the surface pixels of every view, "
-             "over the reference's sum (every light on); the preview draws the lights as Cycles does.", "",
-             "| light | the preview's part | EEVEE's part | EEVEE over the preview |", "|---|---|---|---|"]
+    lines = [f"# EEVEE against Cycles, light by light: {name}", "",
+             f"`{command}` ({len(views)} views; made by `benchmarks/walkthrough_parts.py`). Each light's direct part of "
+             "the picture and the light after a bounce, summed over the surface pixels of every view, over the "
+             "reference's sum (every light on). EEVEE: a light's picture alone less the one with no light; the light "
+             "after a bounce is the stored light it shows. Cycles: a light's direct light alone on the original scene "
+             "(no bounce); the light after a bounce is the reference less those.", "",
+             "| light | Cycles' part | EEVEE's part | EEVEE over Cycles |", "|---|---|---|---|"]
     for group in [NONE, *groups]:
-        p, e = part("preview", group, total) / ref, part("eevee", group, total) / ref
+        p, e = part("cycles", group, total) / ref, part("eevee", group, total) / ref
         lines.append(f"| {group} | {p:.3f} | {e:.3f} | {e / p if p > 0 else float('nan'):.2f} |")
-    p_all = sum(part("preview", g, total) for g in [NONE, *groups]) / ref
     e_all = sum(part("eevee", g, total) for g in [NONE, *groups]) / ref
-    lines += [f"| all (the sum) | {p_all:.3f} | {e_all:.3f} | {e_all / p_all:.2f} |", "",
-              "View by view, EEVEE's part over the preview's:", "",
-              "| view | " + " | ".join(groups) + " |", "|---|" + "---|" * len(groups)]
+    lines += [f"| all (the sum) | 1.000 | {e_all:.3f} | {e_all:.2f} |", "",
+              "View by view, EEVEE's part over Cycles':", "",
+              "| view | " + " | ".join([NONE, *groups]) + " |", "|---|" + "---|" * (len(groups) + 1)]
     for k, sums in enumerate(views):
         cells = []
-        for group in groups:
-            p, e = part("preview", group, sums), part("eevee", group, sums)
+        for group in [NONE, *groups]:
+            p, e = part("cycles", group, sums), part("eevee", group, sums)
             cells.append(f"{e / p:.2f}" if p > 1e-3 * sums["reference"] else "-")
         lines.append(f"| {k + 1} | " + " | ".join(cells) + " |")
     return "\n".join(lines + [""])
@@ -134,11 +149,10 @@ def main(argv=None):
     parser.add_argument("--interior", default="skylight_hall", choices=scenes.NAMES)
     parser.add_argument("--views", type=int, default=10)
     parser.add_argument("--reference-samples", type=int, default=1024, help="the walkthrough's (its cache)")
-    parser.add_argument("--samples", type=int, default=16, help="EEVEE's and the preview's samples (the parts are sums "
-                        "over many pixels)")
+    parser.add_argument("--samples", type=int, default=shown.EEVEE_SAMPLES, help="EEVEE's samples")
     parser.add_argument("--out", type=Path, default=walking.RESULTS)
     args = parser.parse_args(argv)
-    shown.EEVEE_SAMPLES = pic.PREVIEW_SAMPLES = args.samples
+    shown.EEVEE_SAMPLES = args.samples
     groups, views = measure(args.interior, args.views, args.reference_samples)
     command = "python -m benchmarks.walkthrough_parts " + " ".join(argv if argv is not None else sys.argv[1:])
     path = args.out / f"walkthrough_parts_{args.interior}.md"
