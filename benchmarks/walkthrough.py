@@ -159,7 +159,7 @@ def shown_views(walk, kinds, log=print):
     return out
 
 
-def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=True, log=print):
+def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=True, seed=0, log=print):
     """One interior: references, the product's solve and its pictures of every view, Cycles at the
     solve's time; a dict of images per kind and view, times and statistics."""
     walk = scenes.build(name, views)
@@ -169,7 +169,7 @@ def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=Tru
     if warm_up:
         log(f"{name}: warming up (a solve not counted)")
         solve(seed=99)
-    solve_seconds, stats = solve(seed=0)
+    solve_seconds, stats = solve(seed=seed)
     log(f"{name}: the solve took {solve_seconds:.1f} s ({stats['patches']:,} patches, {stats['method']})")
     kinds = [k for k in SHOWN if eevee or k != "eevee"]
     clock = time.perf_counter()
@@ -181,7 +181,7 @@ def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=Tru
     images["cycles"] = [(image, wall) for image, wall, _ in cycles]
     unlive_stats = None
     if unlive:
-        _, unlive_stats = solve(seed=0, live_lamps=False)
+        _, unlive_stats = solve(seed=seed, live_lamps=False)
         images["baked_unlive"] = [(set_view(walk, v), SHOWN["baked"]())[1] for v in walk.views]
     return {"walk": walk, "refs": refs, "images": images, "solve": solve_seconds, "stats": stats,
             "unlive_stats": unlive_stats, "samples": [s for _, _, s in cycles], "timing": timing}
@@ -218,6 +218,7 @@ def main(argv=None):
                         "(software OpenGL here: its first render compiles shaders for a minute)")
     parser.add_argument("--unlive", action=argparse.BooleanOptionalAction, default=True, help="a second solve with "
                         "Live lamps off, its baked display")
+    parser.add_argument("--seed", type=int, default=0, help="the product's seed (its solves')")
     parser.add_argument("--warm-up", action=argparse.BooleanOptionalAction, default=True, help="a solve before the timed one")
     parser.add_argument("--quick", action="store_true", help=f"smoke run: 16 reference samples, 2 views, into {QUICK.relative_to(ROOT)}/")
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder of the reports and sheets")
@@ -249,14 +250,14 @@ def main(argv=None):
 def walk_one(name, args, command):
     """Measure, analyse and save one interior: its numbers (.json) and contact sheet (.png)."""
     start, load = time.perf_counter(), os.getloadavg()[0]
-    m = measure(name, args.reference_samples, args.views, args.eevee, args.unlive, args.warm_up)
+    m = measure(name, args.reference_samples, args.views, args.eevee, args.unlive, args.warm_up, args.seed)
     a, masks = analyse(m)
-    keep_images(m, masks, ROOT / "out" / "walkthrough_images" / f"{name}{'_quick' if args.quick else ''}.npz")
+    keep_images(m, masks, ROOT / "out" / "walkthrough_images" / f"{name}{image_tag(args)}.npz")
     sheet = args.out / f"walkthrough_{name}.png"
     report.contact_sheet(m, masks, sheet)
     a["run"] = {"command": command, "seconds": time.perf_counter() - start, "loads": [load, os.getloadavg()[0]],
                 "reference_samples": args.reference_samples, "size": list(SIZE), "eevee_samples": shown.EEVEE_SAMPLES,
-                "baked_samples": shown.BAKED_SAMPLES, "preview_samples": pic.PREVIEW_SAMPLES, "target": pic.TARGET_ERROR,
+                "baked_samples": shown.BAKED_SAMPLES, "seed": args.seed, "preview_samples": pic.PREVIEW_SAMPLES, "target": pic.TARGET_ERROR,
                 "sheet": sheet.name}
     (args.out / f"walkthrough_{name}.json").write_text(json.dumps(a, indent=1))
     return a
@@ -265,7 +266,7 @@ def walk_one(name, args, command):
 def reanalyse(name, args):
     """``walk_one`` again from the kept pictures and the .json's run, times and statistics."""
     saved = json.loads((args.out / f"walkthrough_{name}.json").read_text())
-    kept = np.load(ROOT / "out" / "walkthrough_images" / f"{name}{'_quick' if args.quick else ''}.npz")
+    kept = np.load(ROOT / "out" / "walkthrough_images" / f"{name}{image_tag(args)}.npz")
     count = len(saved["views"])
     walk = scenes.build(name, count)
 
@@ -281,6 +282,11 @@ def reanalyse(name, args):
     a["run"] = saved["run"]
     (args.out / f"walkthrough_{name}.json").write_text(json.dumps(a, indent=1))
     return a
+
+
+def image_tag(args):
+    """What tells a run's kept pictures from the default run's: quick, another seed."""
+    return ("_quick" if args.quick else "") + (f"_seed{args.seed}" if args.seed else "")
 
 
 def keep_images(m, masks, path):
