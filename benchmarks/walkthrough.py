@@ -101,22 +101,21 @@ def solve(seed=0, **overrides):
     Live lamps) as the command line runs it, over every source mesh: (wall seconds, statistics)."""
     import bpy
 
+    from addon.blender_write import solve_job
     from addon.bpy_free import options
     from addon.cli.run import release_solve_memory
-    from addon.ui import operators
 
     scene = bpy.context.scene
     pic.source_objects()
     settings = pic.prepare_product(scene, options.OUTPUT.default, seed)
     for name, value in overrides.items():
         setattr(settings, name, value)
-    operators.LAST_ERROR = ""
     wall = time.perf_counter()
-    result = bpy.ops.radiosity.solve(quiet_errors=True)
+    finished = solve_job.run(bpy.context)  # what the operator runs
     release_solve_memory()
     wall = time.perf_counter() - wall
-    if "FINISHED" not in result:
-        raise RuntimeError(f"the solve failed: {operators.LAST_ERROR}")
+    if finished.status != "FINISHED":
+        raise RuntimeError(f"the solve failed: {finished.error or finished.messages}")
     return wall, {"patches": settings.last_patches, "patch_size": settings.last_patch_size,
                   "error": settings.last_relative_error, "method": settings.last_estimator,
                   "solver_seconds": settings.last_seconds, "live_lamps": bool(settings.live_lamps)}

@@ -4,7 +4,6 @@ kind, view by view, object by object), the summary over the interiors, and the c
 """
 from __future__ import annotations
 
-import numpy as np
 
 from benchmarks import picture_metrics as pm
 

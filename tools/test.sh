@@ -4,4 +4,5 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 python="$(bash "$root/tools/env.sh")"
 cd "$root"
-exec "$python" -m pytest -q "$@"
+# Two workers, one per core; tests are independent (own temporary folders, free ports).
+exec "$python" -m pytest -q -n 2 "$@"

@@ -1,7 +1,6 @@
 """The walkthrough benchmark's pure parts, without a render: where its cameras stand, Cycles'
 samples for a share of the solve's time, the numbers from arrays, and its reports; and that its
 baked display finds the product's stored light in the result materials it makes."""
-import math
 
 import numpy as np
 import pytest
