@@ -28,6 +28,7 @@ ROWS_BYTES = 1 << 24  # raw pixels converted at a time
 
 _CACHE = OrderedDict()  # (image identity, fingerprint) -> (pixels (H,W,3) float32, read-only; average (3,))
 _LOCK = threading.Lock()  # (the estimate's thread and the run's may read the same image at once)
+_CONVERTING = {}  # cache key -> the lock of its conversion under way
 _READING = None  # during one read of the scene (``one_read``): image identity -> its Pixels
 
 
@@ -212,23 +213,43 @@ def _mapping_affine(node):
 
 
 def _made(made):
-    """(pixels, average) of a Pixels from the cache, else converted and kept (no bpy)."""
+    """(pixels, average) of a Pixels from the cache, else converted and kept (no bpy). Two
+    threads reading the same pixels (the estimate's, a run started meanwhile) convert them once."""
     key = (*made.key, _fingerprint(made.raw))
+    with _LOCK:
+        converting = _CONVERTING.setdefault(key, threading.Lock())
+    try:
+        with converting:
+            return _cached(key) or _kept(key, _converted_or_refused(made))
+    finally:
+        with _LOCK:
+            _CONVERTING.pop(key, None)
+
+
+def _cached(key):
     with _LOCK:
         if key in _CACHE:
             _CACHE.move_to_end(key)
             return _CACHE[key]
+    return None
+
+
+def _converted_or_refused(made):
     try:
         pixels = _converted(made.raw, made.height, made.width, made.channels, made.srgb)
     except MemoryError:
         raise SceneError(made.too_large()) from None
     pixels.flags.writeable = False
-    out = (pixels, pixels.reshape(-1, 3).mean(axis=0, dtype=np.float64))
+    return pixels, pixels.reshape(-1, 3).mean(axis=0, dtype=np.float64)
+
+
+def _kept(key, out):
+    """``out`` kept in the cache (the most recent up to CACHE_BYTES)."""
     with _LOCK:
         _CACHE[key] = out
         while sum(p.nbytes for p, _ in _CACHE.values()) > CACHE_BYTES and len(_CACHE) > 1:
             _CACHE.popitem(last=False)
-        if pixels.nbytes > CACHE_BYTES:
+        if out[0].nbytes > CACHE_BYTES:
             _CACHE.pop(key)
     return out
 

@@ -148,3 +148,33 @@ def test_an_image_too_large_for_the_memory_is_refused_in_one_line_naming_it(blen
     assert "image 'Big' is 512 x 512 pixels" in error and "\n" not in error and "Nothing was changed" in error, error
     assert not result_objects() and _snapshot() == before
     assert estimate.compute(blender)["error"] == error
+
+
+def test_two_threads_reading_the_same_pixels_at_once_convert_them_once(blender, monkeypatch):
+    """The estimate's thread converting an image when a run starts (the run's thread reads the
+    same pixels meanwhile): one conversion, the other thread waits for it and takes it."""
+    image = _textured_scene(size=64)
+    images.release()
+    calls = []
+    convert = images._converted
+
+    def slow(*args):
+        calls.append(threading.current_thread().name)
+        started.set()
+        assert go.wait(30)  # (held until the other thread asks for the same pixels)
+        return convert(*args)
+
+    started, go = threading.Event(), threading.Event()
+    monkeypatch.setattr(images, "_converted", slow)
+    first, second = images.pixels_of(image), images.pixels_of(image)  # (two reads of the scene)
+    out = {}
+    threads = [threading.Thread(target=lambda k=k, p=p: out.__setitem__(k, p.read()), name=f"reader {k}")
+               for k, p in enumerate((first, second))]
+    threads[0].start()
+    assert started.wait(30)
+    threads[1].start()
+    threads[1].join(0.5)  # (waiting for the first's conversion, not making its own)
+    go.set()
+    for thread in threads:
+        thread.join(30)
+    assert calls == ["reader 0"] and out[0][0] is out[1][0]
