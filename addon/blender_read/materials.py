@@ -238,10 +238,15 @@ def transport_terms(material):
 
 
 def _material_inputs(material, blur):
+    """The PrincipledInputs of a material's terms; its base colour read only where they depend
+    on it (metallic), so a dielectric's image is not read (nor converted) for them."""
     node = shader_node(material)
     if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
         return None
     what = f"material '{material.name}'"
+    fields = _principled_fields(node, [], what, blur)
+    if float(np.clip(fields["metallic"], 0.0, 1.0)) <= 1e-5:  # (core.principled leaves the metallic layer out)
+        return principled.PrincipledInputs(base=(0.0, 0.0, 0.0), **fields)
     return _principled_inputs(node, images.colour(_socket_colour(node, "Base Color", [], what), []), [], what, blur)
 
 
