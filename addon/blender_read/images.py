@@ -29,6 +29,7 @@ ROWS_BYTES = 1 << 24  # raw pixels converted at a time
 _CACHE = OrderedDict()  # (image identity, fingerprint) -> (pixels (H,W,3) float32, read-only; average (3,))
 _LOCK = threading.Lock()  # (the estimate's thread and the run's may read the same image at once)
 _CONVERTING = {}  # cache key -> the lock of its conversion under way
+_AVERAGES = {}  # image identity -> the average of its pixels as last read (``last_average``)
 _READING = None  # during one read of the scene (``one_read``): image identity -> its Pixels
 
 
@@ -75,6 +76,8 @@ class Pixels:
             if self._made is None:
                 self._made = _made(self)
                 self.raw = None
+                with _LOCK:
+                    _AVERAGES[self.key[:2]] = self._made[1]
             return self._made
 
     def too_large(self):
@@ -97,6 +100,14 @@ def colour(value, notes):
     if value.note is not None:
         notes.append(value.note + "(" + ", ".join(f"{c:.3g}" for c in average) + ") was used")
     return average
+
+
+def last_average(image):
+    """The average of an image's pixels as a read of the scene last found it (the run's, for
+    its results' materials), without reading them again; None where none has."""
+    with _LOCK:
+        average = _AVERAGES.get((image.session_uid, image.name_full))
+    return None if average is None else average.copy()
 
 
 def pixels_of(image):

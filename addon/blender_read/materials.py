@@ -192,14 +192,9 @@ def filter_glossy():
     return max(float(getattr(cycles, "blur_glossy", 1.0)), 0.0)
 
 
-def _principled_inputs(node, base, notes, what, blur=0.0):
-    """core.principled.PrincipledInputs of a Principled BSDF node, its base colour ``base``,
-    for light that reaches it by a diffuse bounce under Filter Glossy ``blur``."""
-    return principled.PrincipledInputs(base=tuple(float(v) for v in base), **_principled_fields(node, notes, what, blur))
-
-
 def _principled_fields(node, notes, what, blur):
-    """``_principled_inputs``' fields but the base colour, as a dict."""
+    """The fields of core.principled.PrincipledInputs of a Principled BSDF node but its base
+    colour (a dict), for light that reaches it by a diffuse bounce under Filter Glossy ``blur``."""
     def value(name, default):
         return _socket_float(node, name, notes, what, default) if name in node.inputs else default
 
@@ -247,7 +242,19 @@ def _material_inputs(material, blur):
     fields = _principled_fields(node, [], what, blur)
     if float(np.clip(fields["metallic"], 0.0, 1.0)) <= 1e-5:  # (core.principled leaves the metallic layer out)
         return principled.PrincipledInputs(base=(0.0, 0.0, 0.0), **fields)
-    return _principled_inputs(node, images.colour(_socket_colour(node, "Base Color", [], what), []), [], what, blur)
+    image = _linked_image(node.inputs["Base Color"])
+    base = images.last_average(image) if image is not None else None
+    if base is None:
+        base = images.colour(_socket_colour(node, "Base Color", [], what), [])
+    return principled.PrincipledInputs(base=tuple(float(v) for v in base), **fields)
+
+
+def _linked_image(socket):
+    """The image of the Image Texture node driving ``socket`` (through reroutes), or None."""
+    source = socket.links[0].from_node if socket.is_linked else None
+    while source is not None and source.bl_idname == "NodeReroute" and source.inputs[0].is_linked:
+        source = source.inputs[0].links[0].from_node
+    return source.image if source is not None and source.bl_idname == "ShaderNodeTexImage" else None
 
 
 #: The tail shared by Principled notes; notes that differ only in the material merge (``selection.merged_notes``).

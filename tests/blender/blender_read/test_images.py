@@ -65,18 +65,22 @@ def _where_pixels_are_worked(monkeypatch):
     return calls
 
 
-def test_a_textures_conversion_never_runs_on_the_main_thread_for_the_estimate_nor_the_run(blender, monkeypatch):
+@pytest.mark.parametrize("metallic", [0.0, 0.5])
+def test_a_textures_conversion_never_runs_on_the_main_thread_for_the_estimate_nor_the_run(blender, monkeypatch,
+                                                                                          metallic):
     """The panel's estimate (its timer reads the selection on Blender's main thread) and the
     operator's start (the same): an image texture and the world's environment image are copied
     there, and fingerprinted, converted and scaled by the material's terms on the estimate's
     thread and the run's, once each; the run's end (main thread) writes the textured result
-    without reading the image again (a dielectric's terms do not depend on its base colour).
+    without reading the image again (a dielectric's terms do not depend on its base colour, a
+    metal's take the average the run read).
     (Before, all of it on the main thread: a 4096 x 4096 texture held the interface 4.4 s the
     first time, and the run's end converted it again.)"""
     _textured_scene()
     sky = bpy.data.images.new("Sky", 64, 32)
     sky.pixels.foreach_set(np.random.default_rng(1).random(64 * 32 * 4, dtype=np.float32))
     _world_image(blender, "Sky", sky, 0.5)
+    bpy.data.materials["White"].node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = metallic
     configure(blender, output="TEXTURED")
     calls = _where_pixels_are_worked(monkeypatch)
     assert estimate._start() is None and not any(main for _, main in calls), calls
