@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 
 from ..core.lights.lights import AreaLight, PointLight, Spot, SunLight, WorldLight
-from .images import linear_pixels
+from .images import pixels_of
 
 POINT_INTENSITY = 1.0 / (4.0 * math.pi**2)  # per watt
 AREA_EXITANCE = 1.0 / math.pi  # per watt per square metre
@@ -145,6 +145,13 @@ def _spot_frame(axes, name):
 def read_world(scene, notes):
     """The world as a core WorldLight: its Background node's colour x strength (or the world
     colour without nodes), an environment image by its pixels; None where it gives no light."""
+    later = world_later(scene, notes)
+    return None if later is None else later()
+
+
+def world_later(scene, notes):
+    """``read_world`` as its nodes give it (bpy), a function that makes its WorldLight (no bpy:
+    any thread; an environment image's pixels read there); None where it gives no light."""
     world = scene.world
     if world is None:
         return None
@@ -155,9 +162,11 @@ def read_world(scene, notes):
         raise LightError(f"world '{world.name}' has a negative colour or strength")
     if not _gives_light(colour, strength, image):
         return None
+    name = world.name
     if image is not None:
-        return WorldLight(image=image_pixels(image, world.name) * strength, name=world.name)
-    return WorldLight(irradiance=colour * strength, name=world.name)
+        pixels = image_pixels(image, name)
+        return lambda: WorldLight(image=pixels() * strength, name=name)
+    return lambda: WorldLight(irradiance=colour * strength, name=name)
 
 
 def world_gives_light(scene):
@@ -207,16 +216,23 @@ def _background(world, notes):
 
 
 def image_pixels(image, world_name):
-    """(H, W, 3) linear pixels of an equirectangular image, top row first (Blender stores the
-    bottom row first). An image without pixels (a missing file) is a LightError naming it: the
-    sky's light is then unknown (Cycles renders it magenta), and no made-up sky is solved."""
-    pixels = linear_pixels(image, np.float64)
-    if pixels is None:
+    """A function giving the (H, W, 3) linear pixels of an equirectangular image, top row first
+    (Blender stores the bottom row first), in float64 (no bpy: any thread). An image without
+    pixels (a missing file) is a LightError naming it (here): the sky's light is then unknown
+    (Cycles renders it magenta), and no made-up sky is solved."""
+    made = pixels_of(image)
+    if made is None:
         path = bpy.path.abspath(image.filepath) if image.filepath else ""
         where = f"file not found: {path}" if path else "no file"
         raise LightError(f"world '{world_name}': its environment image '{image.name}' has no pixels ({where}); "
                          "find the file (File > External Data) or unlink the image")
-    if not np.isfinite(pixels).all() or (pixels < 0).any():
-        raise LightError(f"world '{world_name}': its environment image '{image.name}' has pixels that are "
-                         "negative or not finite")
-    return pixels[::-1]
+    name = image.name
+
+    def pixels():
+        linear = made.read()[0].astype(np.float64)
+        if not np.isfinite(linear).all() or (linear < 0).any():
+            raise LightError(f"world '{world_name}': its environment image '{name}' has pixels that are "
+                             "negative or not finite")
+        return linear[::-1]
+
+    return pixels

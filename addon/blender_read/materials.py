@@ -16,7 +16,7 @@ import numpy as np
 from ..core.materials import principled
 from . import SceneError
 from . import images
-from .images import image_average, linear_pixels
+from .images import texture_of
 
 DEFAULT_GREY = (0.8, 0.8, 0.8)  # an object without a material
 
@@ -26,19 +26,20 @@ def _text(colour):
 
 
 def _linked_colour(socket, node, name, notes, what, emitting=False):
-    """The colour of a socket driven by a link: an image's or a checker's average when that is
-    known, else the socket's own default; always with a note saying which. An emission colour
+    """The colour of a socket driven by a link: an image's average (an ``images.Average``, known
+    once its pixels are read) or a checker's when that is known, else the socket's own default;
+    always with a note saying which (none where ``notes`` is None). An emission colour
     (``emitting``) from an image without pixels is a SceneError: no made-up light is solved."""
+    quiet, notes = notes is None, [] if notes is None else notes
     default = np.array(socket.default_value[:3], dtype=np.float64)
     source = socket.links[0].from_node
     while source.bl_idname == "NodeReroute" and source.inputs[0].is_linked:
         source = source.inputs[0].links[0].from_node
     if source.bl_idname == "ShaderNodeTexImage" and source.image is not None:
-        average = image_average(source.image)
-        if average is not None:
-            notes.append(f"{what}: '{name}' comes from image '{source.image.name}'; "
-                         f"its average colour {_text(average)} was used")
-            return average
+        pixels = images.pixels_of(source.image)
+        if pixels is not None:
+            note = f"{what}: '{name}' comes from image '{source.image.name}'; its average colour "
+            return images.Average(pixels, None if quiet else note)
         if emitting:
             path = bpy.path.abspath(source.image.filepath) if source.image.filepath else ""
             raise SceneError(f"{what}: its '{name}' comes from image '{source.image.name}', which has no pixels "
@@ -61,64 +62,12 @@ def _linked_colour(socket, node, name, notes, what, emitting=False):
     return default
 
 
-def texture_of(socket):
-    """(pixels, affine (2,3), UV map name or '') of an image texture driving ``socket`` through
-    a UV map and at most one affine Mapping node, or None where it is anything else."""
-    if not socket.is_linked:
-        return None
-    node = socket.links[0].from_node
-    while node.bl_idname == "NodeReroute" and node.inputs[0].is_linked:
-        node = node.inputs[0].links[0].from_node
-    if node.bl_idname != "ShaderNodeTexImage" or node.image is None or node.projection != "FLAT":
-        return None
-    affine, uv_name = np.eye(2, 3), ""
-    vector = node.inputs["Vector"]
-    if vector.is_linked:
-        link = vector.links[0]
-        if link.from_node.bl_idname == "ShaderNodeMapping":
-            affine = _mapping_affine(link.from_node)
-            if affine is None or not link.from_node.inputs["Vector"].is_linked:
-                return None
-            link = link.from_node.inputs["Vector"].links[0]
-        if link.from_node.bl_idname == "ShaderNodeUVMap":
-            uv_name = link.from_node.uv_map
-        elif not (link.from_node.bl_idname == "ShaderNodeTexCoord" and link.from_socket.name == "UV"):
-            return None
-    pixels = linear_pixels(node.image)
-    if pixels is None:
-        return None
-    return pixels, affine, uv_name
-
-
-def _mapping_affine(node):
-    """The 2D affine map of a Mapping node (Point or Texture type, rotation about Z only, no
-    linked inputs), or None."""
-    if node.vector_type not in ("POINT", "TEXTURE"):
-        return None
-    inputs = {name: node.inputs[name] for name in ("Location", "Rotation", "Scale")}
-    if any(socket.is_linked for socket in inputs.values()):
-        return None
-    location = np.array(inputs["Location"].default_value[:2], dtype=np.float64)
-    rx, ry, rz = inputs["Rotation"].default_value[:3]
-    if abs(rx) > 1e-9 or abs(ry) > 1e-9:
-        return None
-    scale = np.array(inputs["Scale"].default_value[:2], dtype=np.float64)
-    rotation = np.array([[np.cos(rz), -np.sin(rz)], [np.sin(rz), np.cos(rz)]])
-    linear = rotation @ np.diag(scale)
-    if node.vector_type == "TEXTURE":  # the inverse of Point
-        if abs(np.linalg.det(linear)) < 1e-12:
-            return None
-        inverse = np.linalg.inv(linear)
-        return np.column_stack([inverse, -inverse @ location])
-    return np.column_stack([linear, location])
-
-
 def _socket_colour(node, name, notes, what, per_patch=(), emitting=False):
     socket = node.inputs.get(name)
     if socket is None:
         return np.zeros(3)
     if socket.is_linked:  # sockets read per patch need no note about their average
-        return _linked_colour(socket, node, name, [] if name in per_patch else notes, what, emitting)
+        return _linked_colour(socket, node, name, None if name in per_patch else notes, what, emitting)
     value = socket.default_value
     return np.array(value[:3], dtype=np.float64)
 
@@ -170,42 +119,61 @@ def material_colours(material, per_patch=()):
     Diffuse BSDF: colour.  Emission: colour x strength, no reflection.  No node tree: the viewport colour.  No
     material: grey 0.8.  Linked (textured) inputs use the socket's default and add a note.
     """
+    notes, later = material_reading(material, per_patch)
+    reflectivity, emission, *_ = later(notes)
+    return reflectivity, emission, notes
+
+
+def _known(reflectivity, emission):
+    return lambda _notes: (reflectivity, emission, np.ones(3), np.zeros(3), None)
+
+
+def material_reading(material, per_patch=()):
+    """(notes, later) of a material (``material_colours``) as its nodes give them (bpy), and
+    ``later(notes)`` -> (reflectivity, emission, scale, offset, lobe) (``transport_terms``) once
+    its images' averages are known (no bpy: any thread), their notes added to ``notes``."""
     notes = []
     if material is None:
-        return np.array(DEFAULT_GREY), np.zeros(3), notes
+        return notes, _known(np.array(DEFAULT_GREY), np.zeros(3))
     what = f"material '{material.name}'"
     tree = material.node_tree
     uses_nodes = tree is not None
     if uses_nodes and bpy.app.version < (5, 0, 0):
         uses_nodes = bool(material.use_nodes)
     if not uses_nodes:
-        return np.array(material.diffuse_color[:3], dtype=np.float64), np.zeros(3), notes
+        return notes, _known(np.array(material.diffuse_color[:3], dtype=np.float64), np.zeros(3))
     node = _surface_shader(tree)
     if node is None or node.bl_idname not in _SUPPORTED:
         found = next((n for n in tree.nodes if n.bl_idname in _SUPPORTED), None)
         kind = "nothing" if node is None else f"'{node.name}'"
         if found is None:
             notes.append(f"{what}: surface is {kind}, no Principled/Diffuse/Emission node; viewport colour used")
-            return np.array(material.diffuse_color[:3], dtype=np.float64), np.zeros(3), notes
+            return notes, _known(np.array(material.diffuse_color[:3], dtype=np.float64), np.zeros(3))
         notes.append(f"{what}: surface is {kind}; used node '{found.name}'")
         node = found
+    if node.bl_idname == "ShaderNodeBsdfDiffuse":
+        colour = _socket_colour(node, "Color", notes, what, per_patch)
+        return notes, lambda more: (images.colour(colour, more), np.zeros(3), np.ones(3), np.zeros(3), None)
+    base, fields = np.zeros(3), None
     if node.bl_idname == "ShaderNodeBsdfPrincipled":
         base = _socket_colour(node, "Base Color", notes, what, per_patch)
-        inputs = _principled_inputs(node, base, notes, what, filter_glossy())
+        fields = _principled_fields(node, notes, what, filter_glossy())
+        notes.extend(_principled_note(node, fields, what))
+    name, strength_name = EMISSION[node.bl_idname]
+    name = name if name in node.inputs else "Emission"
+    strength = _socket_float(node, strength_name, notes, what, 1.0)
+    emission = _socket_colour(node, name, notes, what, per_patch, emitting=strength != 0)
+
+    def later(more):
+        if fields is None:  # (an Emission node)
+            return np.zeros(3), images.colour(emission, more) * strength, np.ones(3), np.zeros(3), None
+        colour = images.colour(base, more)
+        inputs = principled.PrincipledInputs(base=tuple(float(v) for v in colour), **fields)
         scale, offset = principled.surface_terms(inputs)
-        reflectivity = scale * base + offset
-        notes.extend(_principled_note(node, inputs, what))
-        name = "Emission Color" if "Emission Color" in node.inputs else "Emission"
-        strength = _socket_float(node, "Emission Strength", notes, what, 1.0)
-        emission = _socket_colour(node, name, notes, what, per_patch, emitting=strength != 0) * strength
-    elif node.bl_idname == "ShaderNodeBsdfDiffuse":
-        reflectivity = _socket_colour(node, "Color", notes, what, per_patch)
-        emission = np.zeros(3)
-    else:  # Emission
-        reflectivity = np.zeros(3)
-        strength = _socket_float(node, "Strength", notes, what, 1.0)
-        emission = _socket_colour(node, "Color", notes, what, per_patch, emitting=strength != 0) * strength
-    return reflectivity, emission, notes
+        return (scale * colour + offset, images.colour(emission, more) * strength, scale, offset,
+                principled.glossy_terms(inputs))
+
+    return notes, later
 
 
 def _socket_rgb(node, name, notes, what):
@@ -224,14 +192,13 @@ def filter_glossy():
     return max(float(getattr(cycles, "blur_glossy", 1.0)), 0.0)
 
 
-def _principled_inputs(node, base, notes, what, blur=0.0):
-    """core.principled.PrincipledInputs of a Principled BSDF node, its base colour ``base``,
-    for light that reaches it by a diffuse bounce under Filter Glossy ``blur``."""
+def _principled_fields(node, notes, what, blur):
+    """The fields of core.principled.PrincipledInputs of a Principled BSDF node but its base
+    colour (a dict), for light that reaches it by a diffuse bounce under Filter Glossy ``blur``."""
     def value(name, default):
         return _socket_float(node, name, notes, what, default) if name in node.inputs else default
 
-    return principled.PrincipledInputs(
-        base=tuple(float(v) for v in base),
+    return dict(
         metallic=value("Metallic", 0.0),
         roughness=value("Roughness", 0.5),
         ior=value("IOR", 1.5),
@@ -266,11 +233,28 @@ def transport_terms(material):
 
 
 def _material_inputs(material, blur):
+    """The PrincipledInputs of a material's terms; its base colour read only where they depend
+    on it (metallic), so a dielectric's image is not read (nor converted) for them."""
     node = shader_node(material)
     if node is None or node.bl_idname != "ShaderNodeBsdfPrincipled":
         return None
     what = f"material '{material.name}'"
-    return _principled_inputs(node, _socket_colour(node, "Base Color", [], what), [], what, blur)
+    fields = _principled_fields(node, [], what, blur)
+    if float(np.clip(fields["metallic"], 0.0, 1.0)) <= 1e-5:  # (core.principled leaves the metallic layer out)
+        return principled.PrincipledInputs(base=(0.0, 0.0, 0.0), **fields)
+    image = _linked_image(node.inputs["Base Color"])
+    base = images.last_average(image) if image is not None else None
+    if base is None:
+        base = images.colour(_socket_colour(node, "Base Color", [], what), [])
+    return principled.PrincipledInputs(base=tuple(float(v) for v in base), **fields)
+
+
+def _linked_image(socket):
+    """The image of the Image Texture node driving ``socket`` (through reroutes), or None."""
+    source = socket.links[0].from_node if socket.is_linked else None
+    while source is not None and source.bl_idname == "NodeReroute" and source.inputs[0].is_linked:
+        source = source.inputs[0].links[0].from_node
+    return source.image if source is not None and source.bl_idname == "ShaderNodeTexImage" else None
 
 
 #: The tail shared by Principled notes; notes that differ only in the material merge (``selection.merged_notes``).
@@ -279,12 +263,13 @@ _LAYERS_COUNTED = ("reflection counted at its hemispherical albedo (the direct l
 
 
 def _principled_note(node, p, what):
-    """One note naming what a Principled BSDF has that is not modelled, or none."""
+    """One note naming what a Principled BSDF (its ``_principled_fields`` ``p``) has that is not
+    modelled, or none."""
     def used(name, cutoff=1e-5):
         socket = node.inputs.get(name)
         return socket is not None and (socket.is_linked or float(socket.default_value) > cutoff)
 
-    eta, _ = principled.specular_eta_f0(p.ior, p.specular_ior_level)
+    eta, _ = principled.specular_eta_f0(p["ior"], p["specular_ior_level"])
     counted = [name for name, on in (("coat", used("Coat Weight")), ("metallic", used("Metallic")),
                                      ("specular", eta != 1.0)) if on]
     missing = [("view-dependent highlights (shown as their average over view directions; with Live lamps, "
@@ -362,15 +347,12 @@ def material_emission_texture(material):
 
 
 def slot_tables(obj, notes):
-    """Reflectivity, emission, material name, base-colour texture, colour attribute, emission
-    texture (each or None) and surface terms (scale, offset) of each material slot (at least one
-    row). A base-colour texture's pixels come back as reflectivity (scale * colour + offset); a
-    colour attribute's colours are base colours, for the caller to map by the slot's terms."""
+    """Per material slot (at least one row): its material's name, base-colour texture, colour
+    attribute and emission texture (each or None; a texture's pixels as ``images.Pixels``) and
+    its ``later`` (``material_reading``), for ``slot_values``."""
     materials = [slot.material for slot in obj.material_slots] or [None]
-    R = np.empty((len(materials), 3))
-    E = np.empty((len(materials), 3))
-    textures, attributes, emission_textures, terms = [], [], [], []
-    for k, material in enumerate(materials):
+    textures, attributes, emission_textures, laters = [], [], [], []
+    for material in materials:
         texture, attribute = material_texture(material), material_attribute(material)
         emission = material_emission_texture(material)
         node = shader_node(material)
@@ -379,14 +361,30 @@ def slot_tables(obj, notes):
             per_patch.add(_BASE[node.bl_idname])
         if emission is not None:
             per_patch.add(EMISSION[node.bl_idname][0])
-        R[k], E[k], more = material_colours(material, per_patch)
-        scale, offset, lobe = transport_terms(material)
-        if texture is not None and not (np.all(scale == 1) and np.all(offset == 0)):
-            texture = (images.scaled(texture[0], scale, offset), *texture[1:])
+        more, later = material_reading(material, per_patch)
+        notes.extend(more)
         textures.append(texture)
         attributes.append(attribute)
         emission_textures.append(emission)
-        terms.append((scale, offset, lobe))
-        notes.extend(more)
+        laters.append(later)
     names = tuple("(no material)" if m is None else m.name for m in materials)
-    return R, E, names, tuple(textures), tuple(attributes), tuple(emission_textures), tuple(terms)
+    return names, tuple(textures), tuple(attributes), tuple(emission_textures), tuple(laters)
+
+
+def slot_values(laters, textures, emission_textures, notes, memo=None):
+    """Reflectivity (S,3), emission (S,3), base-colour and emission textures and surface terms
+    (scale, offset, lobe) of the slots of ``slot_tables`` (no bpy: any thread; their images read
+    here). A base-colour texture's pixels come back as reflectivity (scale * colour + offset)."""
+    R, E = np.empty((len(laters), 3)), np.empty((len(laters), 3))
+    made, emitted, terms = [], [], []
+    for k, (later, texture, emission) in enumerate(zip(laters, textures, emission_textures)):
+        R[k], E[k], scale, offset, lobe = later(notes)
+        if texture is not None:
+            pixels = texture[0].read()[0]
+            if not (np.all(scale == 1) and np.all(offset == 0)):
+                pixels = images.scaled(pixels, scale, offset, memo)
+            texture = (pixels, *texture[1:])
+        made.append(texture)
+        emitted.append(None if emission is None else (emission[0].read()[0], *emission[1:]))
+        terms.append((scale, offset, lobe))
+    return R, E, tuple(made), tuple(emitted), tuple(terms)

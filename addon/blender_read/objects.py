@@ -12,7 +12,7 @@ from ..bpy_free.patches import ObjectArrays
 from ..bpy_free.surface_layers import SourceLayers
 from ..core.mesh import meshing
 from . import SceneError
-from .materials import slot_tables
+from .materials import slot_tables, slot_values
 
 SOURCE_PROPERTY = "radiosity_source"  # custom property marking our result objects (blender_write.results)
 
@@ -127,38 +127,54 @@ def _mesh_materials(evaluated, mesh, triangles, name, notes):
     """The object's material slots (materials.slot_tables), with the UVs and colour attributes
     that their textures read per patch."""
     T = len(triangles)
-    R_slots, E_slots, slot_names, textures, attributes, emission_textures, terms = slot_tables(evaluated, notes)
+    slot_names, textures, attributes, emission_textures, laters = slot_tables(evaluated, notes)
     triangle_uv = None
     if any(t is not None for t in (*textures, *emission_textures)):
         triangle_uv, kept = _triangle_uv(mesh, T, (*textures, *emission_textures), name, notes)
         textures, emission_textures = kept[: len(textures)], kept[len(textures):]
-    # colour attributes are base colours: the light returned is scale * colour + offset
     colours = _attribute_colours(mesh, T, triangles, attributes, name, notes)
+    return {"slot_names": slot_names, "textures": textures, "emission_textures": emission_textures,
+            "triangle_uv": triangle_uv, "colours": colours, "laters": laters}
+
+
+def _with_materials(o, a, flipped, notes, memo):
+    """Gives object arrays ``o`` their materials' values from what ``_mesh_materials`` read
+    (``a``): no bpy, any thread (their images read here); ``flipped``: its winding reversed."""
+    R_slots, E_slots, textures, emission_textures, terms = slot_values(
+        a["laters"], a["textures"], a["emission_textures"], notes, memo)
+    # colour attributes are base colours: the light returned is scale * colour + offset
+    colours = tuple(None if c is None else (c[:, ::-1] if flipped else c) for c in a["colours"])
     slot_colours = tuple(None if c is None else c * scale + offset for c, (scale, offset, _) in zip(colours, terms))
     # each slot's glossy lobe (share, alpha), none: (0, 1)
     G_slots = np.array([(0.0, 0.0, 0.0, 1.0) if lobe is None else (*lobe[0], lobe[1]) for *_, lobe in terms])
-    return {"R_slots": R_slots, "E_slots": E_slots, "G_slots": G_slots, "slot_names": slot_names, "textures": textures,
-            "emission_textures": emission_textures, "triangle_uv": triangle_uv, "slot_colours": slot_colours}
+    o.face_reflectivity = _per_face(R_slots, o.face_slot)
+    o.face_emission = _per_face(E_slots, o.face_slot)
+    o.face_glossy = _per_face(G_slots, o.face_slot)
+    o.slot_textures = textures if o.triangle_uv is not None else ()
+    o.slot_emission_textures = emission_textures if o.triangle_uv is not None else ()
+    o.slot_colours = slot_colours if any(c is not None for c in slot_colours) else ()
+    o.later = None
+    return o
 
 
 def _in_world_space(a, matrix_world, name, uid) -> ObjectArrays:
     """ObjectArrays of a mesh's arrays ``a`` placed by ``matrix_world``, its winding kept
-    outward under a negative scale."""
-    corner_verts, triangles, triangle_uv, slot_colours = a["corner_verts"], a["triangles"], a["triangle_uv"], a["slot_colours"]
+    outward under a negative scale; its materials' values left for later (``with_materials``)."""
+    corner_verts, triangles, triangle_uv = a["corner_verts"], a["triangles"], a["triangle_uv"]
     M = np.array(matrix_world, dtype=np.float64)
     vertices = a["co"] @ M[:3, :3].T + M[:3, 3]
-    if np.linalg.det(M[:3, :3]) < 0:  # negative scale: keep normals outward
+    flipped = bool(np.linalg.det(M[:3, :3]) < 0)
+    if flipped:  # negative scale: keep normals outward
         corner_verts = meshing.reverse_faces(a["face_sizes"], corner_verts)
         triangles = triangles[:, ::-1].copy()
         if triangle_uv is not None:
             triangle_uv = triangle_uv[:, ::-1].copy()
-        slot_colours = tuple(None if c is None else c[:, ::-1].copy() for c in slot_colours)
         if a["layers"] is not None:
             a["layers"] = a["layers"].reversed()
     if a["layers"] is not None:
         a["layers"] = a["layers"].placed(M[:3, :3])
-    slot = np.clip(a["material_index"], 0, len(a["R_slots"]) - 1)
-    return ObjectArrays(
+    slot = np.clip(a["material_index"], 0, len(a["slot_names"]) - 1)
+    o = ObjectArrays(
         name=name,
         uid=int(uid),
         face_slot=slot,
@@ -168,15 +184,21 @@ def _in_world_space(a, matrix_world, name, uid) -> ObjectArrays:
         corner_verts=corner_verts,
         triangles=triangles,
         triangle_face=a["triangle_face"],
-        face_reflectivity=_per_face(a["R_slots"], slot),
-        face_emission=_per_face(a["E_slots"], slot),
-        face_glossy=_per_face(a["G_slots"], slot),
+        face_reflectivity=None,
+        face_emission=None,
         triangle_uv=triangle_uv,
-        slot_textures=a["textures"] if triangle_uv is not None else (),
-        slot_emission_textures=a["emission_textures"] if triangle_uv is not None else (),
-        slot_colours=slot_colours if any(c is not None for c in slot_colours) else (),
         layers=a["layers"],
     )
+    o.later = lambda target, notes, memo: _with_materials(target, a, flipped, notes, memo)
+    return o
+
+
+def with_materials(o, notes, memo=None):
+    """Object arrays ``o`` with their materials' values, where ``read_object`` left them for
+    later (no bpy: any thread; their images read here); their notes added to ``notes``."""
+    if o.later is not None:
+        o.later(o, notes, memo)
+    return o
 
 
 def source_layers(mesh, triangles) -> SourceLayers:

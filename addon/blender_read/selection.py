@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import SceneError, images, objects as object_reading
-from .lights import LightError, read_lights, read_world
+from .lights import LightError, read_lights, world_later
 
 #: With "Clamp bright colours" on, reflectivity above this is lowered to it (the random walks
 #: need R < 1; without the setting, a base colour of 1 or more is refused).
@@ -21,8 +21,11 @@ def _materials_where(o, bad_faces):
     return ", ".join(f"'{o.slot_names[k]}'" for k in slots) if len(slots) else "a material"
 
 
-def read_selection(context):
-    """(objects, notes) for the selected meshes; SceneError for bad input.
+def read_selection(context, later=False):
+    """(objects, notes) for the selected meshes; SceneError for bad input. With ``later``, what
+    needs no bpy (the images' pixels converted, the materials' values and their checks, the
+    world's sky) is left to ``objects.resolve(notes)``, which a thread may run (the panel's
+    estimate's, the run's) and which gives the notes.
 
     Raises, naming the objects and materials, when nothing usable is selected, when no
     selected face emits, or when materials hold values the solver cannot use: NaN,
@@ -40,20 +43,14 @@ def read_selection(context):
     depsgraph = context.evaluated_depsgraph_get()
     with images.one_read():  # (an image is read once however many sockets and objects use it)
         objects = _read_objects(context, depsgraph, candidates, others, settings, notes)
-        for o in objects:
-            _check_materials(o, clamp, notes)
-        lights = _read_lights(context, depsgraph, notes)
+        lights, world = _read_lights(context, depsgraph, notes)
     groups = {o.session_uid: o.lightgroup for o in context.view_layer.objects}
     for o in objects:  # (an instance takes its parent's light group)
         o.lightgroup = groups.get(o.uid, "") or ""
-    if not lights and not any(np.any(o.face_emission > 0) for o in objects):
-        raise SceneError(
-            "No emitter among the selected objects (nor the rest of the scene) and no light: give a material "
-            "an emission strength > 0 (Principled BSDF 'Emission Strength' or an Emission shader), add a "
-            "light, or give the world a colour"
-        )
-    # unique notes, in order; materials' Principled notes that say the same thing as one
-    return Selection(objects, lights, light_labels(context, lights)), merged_notes(list(dict.fromkeys(notes)))
+    labels = light_labels(context, lights) + ((getattr(context.scene.world, "lightgroup", "") or None,) if world else ())
+    selection = Selection(objects, lights, labels)
+    selection.pending = (clamp, world)
+    return (selection, notes) if later else (selection, selection.resolve(notes))
 
 
 def _read_objects(context, depsgraph, candidates, others, settings, notes):
@@ -117,15 +114,11 @@ def _check_materials(o, clamp, notes):
 
 
 def _read_lights(context, depsgraph, notes):
-    """The core's light sources of the scene's lamps and its world."""
+    """The core's light sources of the scene's lamps, and its world's (lights.world_later) or None."""
     try:
-        lights = read_lights(depsgraph, notes)
-        world = read_world(context.scene, notes)
+        return read_lights(depsgraph, notes), world_later(context.scene, notes)
     except LightError as exc:
         raise SceneError(str(exc)) from exc
-    if world is not None:
-        lights.append(world)
-    return lights
 
 
 def _checked_textures(o, clamp, notes):
@@ -185,6 +178,32 @@ class Selection(list):
         super().__init__(objects)
         self.lights = tuple(lights)
         self.light_labels = tuple(light_labels) if light_labels is not None else (None,) * len(self.lights)
+        self.pending = None  # read_selection(later=True): ('Clamp bright colours', the world's maker or None)
+
+    def resolve(self, notes=()):
+        """The read's notes (``notes`` and those found here, merged), the objects given their
+        materials' values and checked, the world's light made: no bpy, any thread (the images'
+        pixels converted here). SceneError for bad input (naming it, as ``read_selection``)."""
+        notes = list(notes)
+        if self.pending is not None:
+            clamp, world = self.pending
+            memo = {}  # (a texture scaled by the same terms for two objects is made once)
+            for o in self:
+                object_reading.with_materials(o, notes, memo)
+                _check_materials(o, clamp, notes)
+            if world is not None:
+                try:
+                    self.lights += (world(),)
+                except LightError as exc:
+                    raise SceneError(str(exc)) from exc
+            if not self.lights and not any(np.any(o.face_emission > 0) for o in self):
+                raise SceneError(
+                    "No emitter among the selected objects (nor the rest of the scene) and no light: give a "
+                    "material an emission strength > 0 (Principled BSDF 'Emission Strength' or an Emission "
+                    "shader), add a light, or give the world a colour")
+            self.pending = None
+        # unique notes, in order; materials' Principled notes that say the same thing as one
+        return merged_notes(list(dict.fromkeys(notes)))
 
 
 def merged_notes(notes):

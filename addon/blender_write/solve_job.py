@@ -52,17 +52,24 @@ def start(context, progress_listener=None):
     """The Started job of the context's selection and its scene's settings; JobError in one line
     where the selection cannot be read (the scene unchanged)."""
     try:
-        objects, notes = read_selection(context)
+        objects, notes = read_selection(context, later=True)  # (the rest on the job's thread: ``_resolve``)
     except ValueError as exc:
         raise JobError(str(exc)) from None
     except Exception as exc:  # noqa: BLE001 - an unforeseen scene: a message, never a traceback
         print(traceback.format_exc())
         raise JobError(f"Reading the selection failed ({type(exc).__name__}: {exc}); the scene is unchanged") from None
-    images.release()  # (the run's arrays hold its images' pixels: the copies kept for a next read go)
     scene = context.scene
     placements = _placements({o.uid for o in objects if o.uid is not None})
-    job = worker.SolveJob(objects, scene.radiosity.solve_settings(), progress_listener=progress_listener)
+    job = worker.SolveJob(objects, scene.radiosity.solve_settings(), progress_listener=progress_listener,
+                          prepare=lambda: _resolve(objects, notes))
     return Started(job, notes, scene.session_uid, relight_keep.snapshot(scene), placements)
+
+
+def _resolve(objects, notes):
+    """The job's first step (its thread, no bpy): the read of the selection finished (its images
+    converted, its materials checked), its notes kept in ``notes``."""
+    notes[:] = objects.resolve(notes)
+    images.release()  # (the run's arrays hold its images' pixels: the copies kept for a next read go)
 
 
 def run(context, progress_listener=None, before_writing=None):
@@ -113,6 +120,8 @@ def finish(context, started, before_writing=None):
 
 def _refused(job, output, started):
     """The Finished of a job whose results must not be written, or None."""
+    if job.refusal is not None:
+        return _cancelled(job.refusal)
     if job.error is not None:
         if job.traceback:
             print(job.traceback)

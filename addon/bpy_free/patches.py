@@ -58,6 +58,7 @@ class ObjectArrays:
     layers: SourceLayers | None = None  # UV maps and colour attributes the result keeps (selected objects)
     lightgroup: str = ""  # the object's Blender light group ("": none)
     face_glossy: np.ndarray | None = None  # (F,4) the glossy lobe's share (3) and alpha (core.glossy); None: none
+    later: object = None  # blender_read: what gives the material fields above their values (objects.with_materials)
 
 
 @dataclass(frozen=True)

@@ -27,8 +27,10 @@ class SolveJob:
     ``progress_listener(job)`` is called after each batch (the command line's progress line).
     """
 
-    def __init__(self, objects, settings: SolveSettings, progress_listener=None):
+    def __init__(self, objects, settings: SolveSettings, progress_listener=None, prepare=None):
         self.objects = objects
+        self.prepare = prepare  # what the job does first, on its thread (the rest of reading the scene)
+        self.refusal: str | None = None  # the scene's bad input ``prepare`` found: the message as it is
         self.settings = settings
         self.progress_listener = progress_listener
         self._lock = threading.Lock()
@@ -111,6 +113,12 @@ class SolveJob:
     def run(self):
         """The whole job in the calling thread (``start`` runs it on its own)."""
         try:
+            if self.prepare is not None:
+                try:
+                    self.prepare()
+                except ValueError as exc:  # bad input in the scene: its message as it is
+                    self.refusal = str(exc)
+                    raise
             self.output = run_solve(
                 self._hand_over_objects(), self.settings, self._on_progress, self._cancel.is_set, self._on_prediction
             )

@@ -2,7 +2,8 @@
 path length and relative efficiency, for the current selection and settings.
 
 The panel only reads a cache.  When the selection, the settings or the scene
-change, a timer reads the selection (main thread, arrays only) and a thread
+change, a timer reads the selection (main thread, arrays only: an image's raw
+pixels, not converted) and a thread converts the images, checks the materials,
 meshes and predicts (no ray tracing), so the interface never waits for it.
 The thread touches no bpy (not thread-safe): it only sets the cache, and a
 timer registered on the main thread polls it and redraws when it is done.
@@ -81,7 +82,7 @@ def _start():
         return 0.2  # one estimate at a time
     try:
         key = _key(context)
-        objects, _notes = read_selection(context)
+        objects, _notes = read_selection(context, later=True)
         settings = context.scene.radiosity.solve_settings()
     except ValueError as exc:
         STATE.value, STATE.key = {"error": str(exc)}, _key(context)
@@ -97,6 +98,7 @@ def _start():
 
     def run():
         try:
+            objects.resolve()  # (the images converted here, not on the main thread)
             # (its pilot stops when a run starts: the panel then shows the run, not the estimate)
             value = pipeline.estimate(objects, settings, should_stop=lambda: worker.running_job() is not None)
         except ValueError as exc:

@@ -58,7 +58,7 @@ def test_the_floor_texture_is_a_packed_image_on_a_uv_map_the_product_reads(inter
     texture = node.inputs["Base Color"].links[0].from_node
     assert texture.bl_idname == "ShaderNodeTexImage" and texture.image.packed_file is not None
     found = texture_of(node.inputs["Base Color"])
-    assert found is not None and found[0].std() > 0.01  # the product reads its pixels (not one colour)
+    assert found is not None and found[0].read()[0].std() > 0.01  # the product reads its pixels (not one colour)
     uv = np.empty(2 * len(floor.data.loops), np.float32)
     floor.data.uv_layers["UVMap"].data.foreach_get("uv", uv)
     co = np.array([floor.data.vertices[l.vertex_index].co[:] for l in floor.data.loops])

@@ -2,6 +2,8 @@
 and objects use them, the estimate's conversion reused by the next read where the pixels are the
 same (converted again where they changed), and an image too large for the memory refused in one
 line naming it, nothing changed."""
+import threading
+
 import numpy as np
 import pytest
 
@@ -14,6 +16,7 @@ from addon.ui import estimate
 
 from ..conftest import build_test_scene, make_object, box_arrays, result_objects
 from ..test_extension import _snapshot, configure
+from .test_lights import _world_image
 
 
 def _textured_scene(size=512):
@@ -47,6 +50,55 @@ def _conversions(monkeypatch):
 
     monkeypatch.setattr(images, "srgb_to_linear", counted)
     return calls
+
+
+def _where_pixels_are_worked(monkeypatch):
+    """A list of (what, on the main thread) that grows each time an image's raw pixels are
+    fingerprinted, converted or scaled by a material's terms."""
+    calls = []
+    for name in ("_fingerprint", "_converted", "scaled"):
+        def spy(*args, _name=name, _real=getattr(images, name), **kwargs):
+            calls.append((_name, threading.current_thread() is threading.main_thread()))
+            return _real(*args, **kwargs)
+
+        monkeypatch.setattr(images, name, spy)
+    return calls
+
+
+@pytest.mark.parametrize("metallic", [0.0, 0.5])
+def test_a_textures_conversion_never_runs_on_the_main_thread_for_the_estimate_nor_the_run(blender, monkeypatch,
+                                                                                          metallic):
+    """The panel's estimate (its timer reads the selection on Blender's main thread) and the
+    operator's start (the same): an image texture and the world's environment image are copied
+    there, and fingerprinted, converted and scaled by the material's terms on the estimate's
+    thread and the run's, once each; the run's end (main thread) writes the textured result
+    without reading the image again (a dielectric's terms do not depend on its base colour, a
+    metal's take the average the run read).
+    (Before, all of it on the main thread: a 4096 x 4096 texture held the interface 4.4 s the
+    first time, and the run's end converted it again.)"""
+    _textured_scene()
+    sky = bpy.data.images.new("Sky", 64, 32)
+    sky.pixels.foreach_set(np.random.default_rng(1).random(64 * 32 * 4, dtype=np.float32))
+    _world_image(blender, "Sky", sky, 0.5)
+    bpy.data.materials["White"].node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = metallic
+    configure(blender, output="TEXTURED")
+    calls = _where_pixels_are_worked(monkeypatch)
+    assert estimate._start() is None and not any(main for _, main in calls), calls
+    estimate.STATE.thread.join(120)
+    assert "error" not in estimate.STATE.value, estimate.STATE.value
+    assert not any(main for _, main in calls)
+    assert [what for what, _ in calls].count("_converted") == 2 and ("scaled", False) in calls  # (each image once)
+    del calls[:]
+    started = solve_job.start(blender)
+    assert not calls
+    started.job.start()
+    started.job.join(120)
+    assert started.job.error is None, started.job.error
+    assert sorted(set(calls)) == [("_fingerprint", False), ("scaled", False)]  # (the estimate's conversions kept)
+    del calls[:]
+    assert solve_job.finish(blender, started).status == "FINISHED" and not calls
+    assert bpy.data.materials.get("White Radiosity") is not None  # (the textured result was written)
+    assert not images._CACHE
 
 
 def test_an_image_used_by_two_objects_is_converted_once_a_read_and_once_for_the_estimate_and_the_run(
@@ -104,3 +156,33 @@ def test_an_image_too_large_for_the_memory_is_refused_in_one_line_naming_it(blen
     assert "image 'Big' is 512 x 512 pixels" in error and "\n" not in error and "Nothing was changed" in error, error
     assert not result_objects() and _snapshot() == before
     assert estimate.compute(blender)["error"] == error
+
+
+def test_two_threads_reading_the_same_pixels_at_once_convert_them_once(blender, monkeypatch):
+    """The estimate's thread converting an image when a run starts (the run's thread reads the
+    same pixels meanwhile): one conversion, the other thread waits for it and takes it."""
+    image = _textured_scene(size=64)
+    images.release()
+    calls = []
+    convert = images._converted
+
+    def slow(*args):
+        calls.append(threading.current_thread().name)
+        started.set()
+        assert go.wait(30)  # (held until the other thread asks for the same pixels)
+        return convert(*args)
+
+    started, go = threading.Event(), threading.Event()
+    monkeypatch.setattr(images, "_converted", slow)
+    first, second = images.pixels_of(image), images.pixels_of(image)  # (two reads of the scene)
+    out = {}
+    threads = [threading.Thread(target=lambda k=k, p=p: out.__setitem__(k, p.read()), name=f"reader {k}")
+               for k, p in enumerate((first, second))]
+    threads[0].start()
+    assert started.wait(30)
+    threads[1].start()
+    threads[1].join(0.5)  # (waiting for the first's conversion, not making its own)
+    go.set()
+    for thread in threads:
+        thread.join(30)
+    assert calls == ["reader 0"] and out[0][0] is out[1][0]
