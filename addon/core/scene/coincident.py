@@ -89,11 +89,15 @@ class Contacts:
         if hit.size == 0:
             return 0
         row = np.repeat(self.first[triangle] - np.cumsum(count) + count, count) + np.arange(hit.size)
-        w = points[hit] - self.origin[row]
-        v, u = np.einsum("ij,ij->i", w, self.to_v[row]), np.einsum("ij,ij->i", w, self.to_u[row])
-        inside = (v > INSIDE_MARGIN) & (u > INSIDE_MARGIN) & (u + v < 1 - INSIDE_MARGIN)
-        signs = np.where(self.same[row[inside]], 1.0, -1.0)
-        return np.bincount(hit[inside], weights=signs, minlength=len(triangle)).astype(np.int64)
+        w = points.take(hit, axis=0)
+        w -= self.origin.take(row, axis=0)
+        v = np.einsum("ij,ij->i", w, self.to_v.take(row, axis=0))
+        near = np.flatnonzero((v > INSIDE_MARGIN) & (v < 1 - INSIDE_MARGIN))  # (u only where v may be inside)
+        row, v = row.take(near), v.take(near)
+        u = np.einsum("ij,ij->i", w.take(near, axis=0), self.to_u.take(row, axis=0))
+        inside = (u > INSIDE_MARGIN) & (u + v < 1 - INSIDE_MARGIN)
+        signs = np.where(self.same.take(row.compress(inside)), 1.0, -1.0)
+        return np.bincount(hit.take(near).compress(inside), weights=signs, minlength=len(triangle)).astype(np.int64)
 
 
 def _overlapping(corners, normal, pairs):
