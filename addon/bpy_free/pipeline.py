@@ -220,16 +220,17 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
     budget = run_budget.Budget.of(started, limit, scene, patches, settings, groups)
-    result = solve(scene, settings.core(scene, max_seconds=budget.solve_seconds(), per_source=groups is not None,
-                                        groups=groups, direct_apart=settings.live_lamps),
-                   progress=progress, should_stop=should_stop)
-    trim.give_back()
+    with trim.roomy(scene.patch_count):  # (freed memory kept for the next chunk: no page faults)
+        result = solve(scene, settings.core(scene, max_seconds=budget.solve_seconds(), per_source=groups is not None,
+                                            groups=groups, direct_apart=settings.live_lamps),
+                       progress=progress, should_stop=should_stop)
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
     out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
     out.sources_out = relit.source_results(scene, patches, result, groups) if groups is not None else None
-    write_colours(out, scene, result, settings, budget.deadline())
+    with trim.roomy(scene.patch_count):
+        write_colours(out, scene, result, settings, budget.deadline())
     relit.add_object_values(out, settings)
     out.seconds = time.perf_counter() - started
     return out
