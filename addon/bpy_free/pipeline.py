@@ -212,8 +212,8 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     patches, settings = solve_refinement.refined(objects, patches, settings, progress, should_stop, on_prediction)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
-    scene, notes = scene_and_notes(patches)
-    trim.give_back()
+    with trim.roomy(patches.combined.patch_count):
+        scene, notes = scene_and_notes(patches)
     prediction, target = prediction_for(scene, settings)
     groups = relit.groups_for(scene, patches, settings.per_source, notes)
     settings = method_for(scene, settings, relit.measured_choice_groups(groups))

@@ -56,9 +56,9 @@ def give_back() -> bool:
 
 M_TRIM_THRESHOLD = -1
 TRIM_THRESHOLD = 128 << 10  # glibc's default, which a fixed mmap threshold leaves in place
-# Below this many patches a solve keeps what it frees for its next chunk (``roomy``): a chunk's
-# arrays (tens of MiB with per-source rows) were given back at every free and faulted in again
-# at the next allocation, a third of the 11k-patch room's solve time (docs/benchmarks: operator_stages).
+# Below this many patches building the scene, the solve and its colours keep what they free for
+# their next arrays (``roomy``): given back at every free, they were faulted in again at the next
+# allocation (benchmarks/results/operator_stages.md).
 ROOMY_MAX_PATCHES = 1 << 17
 ROOMY_BYTES = 64 << 20
 
