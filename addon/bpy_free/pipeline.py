@@ -151,7 +151,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     started = time.perf_counter()
     patches = adaptive_patches.refined(objects, make_patches(objects, settings.patch_size), settings.detail,
                                        settings.seed, should_stop=should_stop)
-    scene, notes = scene_and_notes(patches)
+    with trim.roomy(patches.combined.patch_count):  # (as the run builds it: the time it takes is the run's)
+        scene, notes = scene_and_notes(patches)
     building = time.perf_counter() - started  # (a run meshes again)
     automatic = settings.method == AUTO
     p, target = prediction_for(scene, settings)
@@ -159,7 +160,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     bounces = check_bounces(scene, settings.estimator, settings.threshold)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
-    f = forecast(scene, settings.core(scene), bounces=bounces, should_stop=should_stop)
+    with trim.roomy(scene.patch_count):  # (the pilot's memory as the run's, so its pace is the run's)
+        f = forecast(scene, settings.core(scene), bounces=bounces, should_stop=should_stop)
     display = run_budget.display_forecast(scene, patches, settings)  # (the colours' time: their direct light)
     # (what the settings need, the Detail's refining solves included; a time limit ends the whole run first)
     needed = building + solve_refinement.predicted_seconds(patches, f.seconds) + display.seconds
