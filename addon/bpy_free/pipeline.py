@@ -151,7 +151,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     started = time.perf_counter()
     patches = adaptive_patches.refined(objects, make_patches(objects, settings.patch_size), settings.detail,
                                        settings.seed, should_stop=should_stop)
-    scene, notes = scene_and_notes(patches)
+    with trim.roomy(patches.combined.patch_count):  # (as the run builds it: the time it takes is the run's)
+        scene, notes = scene_and_notes(patches)
     building = time.perf_counter() - started  # (a run meshes again)
     automatic = settings.method == AUTO
     p, target = prediction_for(scene, settings)
@@ -159,7 +160,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     bounces = check_bounces(scene, settings.estimator, settings.threshold)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
-    f = forecast(scene, settings.core(scene), bounces=bounces, should_stop=should_stop)
+    with trim.roomy(scene.patch_count):  # (the pilot's memory as the run's, so its pace is the run's)
+        f = forecast(scene, settings.core(scene), bounces=bounces, should_stop=should_stop)
     display = run_budget.display_forecast(scene, patches, settings)  # (the colours' time: their direct light)
     # (what the settings need, the Detail's refining solves included; a time limit ends the whole run first)
     needed = building + solve_refinement.predicted_seconds(patches, f.seconds) + display.seconds
@@ -212,24 +214,25 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     patches, settings = solve_refinement.refined(objects, patches, settings, progress, should_stop, on_prediction)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
-    scene, notes = scene_and_notes(patches)
-    trim.give_back()
+    with trim.roomy(patches.combined.patch_count):
+        scene, notes = scene_and_notes(patches)
     prediction, target = prediction_for(scene, settings)
     groups = relit.groups_for(scene, patches, settings.per_source, notes)
     settings = method_for(scene, settings, relit.measured_choice_groups(groups))
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
     budget = run_budget.Budget.of(started, limit, scene, patches, settings, groups)
-    result = solve(scene, settings.core(scene, max_seconds=budget.solve_seconds(), per_source=groups is not None,
-                                        groups=groups, direct_apart=settings.live_lamps),
-                   progress=progress, should_stop=should_stop)
-    trim.give_back()
+    with trim.roomy(scene.patch_count):  # (freed memory kept for the next chunk: no page faults)
+        result = solve(scene, settings.core(scene, max_seconds=budget.solve_seconds(), per_source=groups is not None,
+                                            groups=groups, direct_apart=settings.live_lamps),
+                       progress=progress, should_stop=should_stop)
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
     out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
     out.sources_out = relit.source_results(scene, patches, result, groups) if groups is not None else None
-    write_colours(out, scene, result, settings, budget.deadline())
+    with trim.roomy(scene.patch_count):
+        write_colours(out, scene, result, settings, budget.deadline())
     relit.add_object_values(out, settings)
     out.seconds = time.perf_counter() - started
     return out

@@ -8,6 +8,7 @@ Elsewhere (other C libraries, Windows, macOS) this does nothing. No bpy.
 from __future__ import annotations
 
 import ctypes
+from contextlib import contextmanager
 
 
 def _malloc_trim():
@@ -51,3 +52,31 @@ def give_back() -> bool:
         return False
     _MALLOC_TRIM(0)
     return True
+
+
+M_TRIM_THRESHOLD = -1
+TRIM_THRESHOLD = 128 << 10  # glibc's default, which a fixed mmap threshold leaves in place
+# Below this many patches building the scene, the solve and its colours keep what they free for
+# their next arrays (``roomy``): given back at every free, they were faulted in again at the next
+# allocation (benchmarks/results/operator_stages.md).
+ROOMY_MAX_PATCHES = 1 << 17
+ROOMY_BYTES = 64 << 20
+
+
+@contextmanager
+def roomy(patch_count):
+    """While it lasts, blocks up to ROOMY_BYTES come from the heaps, and up to that much freed
+    memory stays in them (glibc's mmap and trim thresholds), for a scene of at most
+    ROOMY_MAX_PATCHES patches (a bigger one's memory stays as fixed: its arrays go back when
+    freed); then the thresholds as before, and the freed memory given back (whatever the size)."""
+    roomy_now = _MALLOPT is not None and patch_count <= ROOMY_MAX_PATCHES
+    if roomy_now:
+        _MALLOPT(M_MMAP_THRESHOLD, ROOMY_BYTES)
+        _MALLOPT(M_TRIM_THRESHOLD, ROOMY_BYTES)
+    try:
+        yield
+    finally:
+        if roomy_now:
+            _MALLOPT(M_MMAP_THRESHOLD, MMAP_THRESHOLD)
+            _MALLOPT(M_TRIM_THRESHOLD, TRIM_THRESHOLD)
+        give_back()

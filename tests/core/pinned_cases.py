@@ -142,6 +142,16 @@ def every_light():
 SCENES["lights"] = every_light
 
 
+def glossy_lights():
+    """``every_light`` with a glossy lobe on every patch (a Principled surface's specular share)."""
+    base = every_light()
+    share = np.full((base.patch_count, 3), 0.1)
+    return base.with_materials(base.reflectivity, base.emission, glossy=(share, np.full(base.patch_count, 0.3)))
+
+
+SCENES["glossy_lights"] = glossy_lights
+
+
 def _method_cases():
     """Every method, direct light, exit point and stop rule solve() runs (the walk's shot cases
     are CASES): the gathered walk, stochastic Jacobi, the two-way iteration, Automatic, the
@@ -185,6 +195,10 @@ def _method_cases():
     add("cornell", method="two_way", paths=8_000, chunk_paths=1_000)
     add("fig1", paths=8_000, chunk_paths=500)
     add("fig1", direct_light="gathered", paths=8_000, chunk_paths=500)
+    # the panel's default: per-source results (relighting), the hit exit, a glossy lobe
+    add("lights", "finite", "hit", method="two_way", per_source=True)
+    add("glossy_lights", "finite", "hit", method="two_way", per_source=True)
+    add("glossy_lights", "finite", "hit", direct_light="gathered", per_source=True)
     return cases
 
 
@@ -195,5 +209,9 @@ def method_fingerprint(result):
     """fingerprint(), and what the method decides beyond the walk: which ran, its direct light,
     its gathering rays and the light arriving."""
     digest = hashlib.sha256(np.ascontiguousarray(result.irradiance).tobytes()).hexdigest()[:24]
-    return {**fingerprint(result), "irradiance": digest, "method": result.method,
-            "direct_light": result.direct_light, "gather_rays": int(result.gather_rays)}
+    found = {**fingerprint(result), "irradiance": digest, "method": result.method,
+             "direct_light": result.direct_light, "gather_rays": int(result.gather_rays)}
+    if result.per_source is not None:  # (each group's own light, and their covariance)
+        found["per_source"] = hashlib.sha256(np.ascontiguousarray(result.per_source.irradiance).tobytes()
+                                             + np.ascontiguousarray(result.per_source.covariance).tobytes()).hexdigest()[:24]
+    return found

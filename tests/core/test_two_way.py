@@ -438,3 +438,35 @@ def test_a_run_that_found_no_light_does_not_stop_on_its_target():
     r = solve(scene, target_mse=relative_rms_to_mse(predict(scene), 0.05), paths=200_000, seed=0, stop_rule="measured",
               method="two_way", exit_point="hit", error_scale="measured", threads=2)
     assert r.stopped == "paths" and r.mean_reflected > 0 and r.relative_error > 0.05
+
+
+@pytest.mark.parametrize("exit_point", ["random", "hit"])
+def test_an_abandoned_chunk_stops_between_its_stages(exit_point):
+    """A chunk asked to stop (a run that met its target abandons the chunks still running, and
+    waits for them) stops at the next stage: the shadow rays, the cosine rays, the first
+    reflection's rays and each generation ask, not only the generations."""
+    from addon.core.methods.base import Aborted
+    from addon.core.distributed.runners import chunk_generator
+
+    scene = _scene_with_every_light()
+    tables = WalkTables(scene, "finite", 1e-3, exit_point)
+    state = two_way.TwoWay().create(scene, tables, 20_000, 0, None)
+    calls = []
+
+    def check():
+        calls.append(len(calls))
+        raise Aborted
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("the chunk went on past a check")
+
+    from addon.core.methods import first_shot
+
+    original = (tw.reflect_first, tw.generation, first_shot._cosine_rays)
+    tw.reflect_first = tw.generation = first_shot._cosine_rays = must_not_run
+    try:
+        with pytest.raises(Aborted), tables.numpy_turn:
+            two_way.two_way_chunk(tables, state.gathering, 20_000, chunk_generator(0, 0), check)
+    finally:
+        tw.reflect_first, tw.generation, first_shot._cosine_rays = original
+    assert calls == [0]

@@ -161,7 +161,7 @@ class Gathering:
         return patch, scale.take(patch)
 
 
-def gather_direct(tables, gathering, rng, grouped=False):
+def gather_direct(tables, gathering, rng, grouped=False, check=None):
     """(3,P) an unbiased estimate of each patch's direct irradiance H (scene units), the rays
     it traced, and the samples it is made of (patch (n,), unit-space point (3,n), estimate of
     the irradiance there (3,n)): per patch j, ``gathering.samples[j]`` points on average, each with a shadow ray to a
@@ -174,7 +174,7 @@ def gather_direct(tables, gathering, rng, grouped=False):
     ``grouped`` (per-source results): each sample's estimate is also kept as its shadow ray's
     and its cosine ray's parts, each of one source group (grouping.SampleParts), a fourth item.
     With a glossy lobe (``gathering.glossy``) the samples hold a fourth item: the two rays'
-    parts (2,3,n) and unit directions (2,3,n float32)."""
+    parts (2,3,n) and unit directions (2,3,n float32). ``check()``: called between the two kinds of rays."""
     P = tables.patch_count
     patch, scale = gathering.draw(rng)
     x = np.empty((3, patch.size), dtype=np.float32)  # unit space (ReflectedPoints keeps them)
@@ -184,9 +184,8 @@ def gather_direct(tables, gathering, rng, grouped=False):
         parts.value if grouped else np.zeros((2, 3, patch.size)), np.zeros((2, 3, patch.size), dtype=np.float32))
     rays = 0
     for rows in _blocks(patch, SAMPLE_BLOCK):  # (a large chunk's memory stays that of a block)
-        rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng,
-                              None if parts is None else parts.block(rows),
-                              None if lobe is None else (lobe[0][:, :, rows], lobe[1][:, :, rows]))
+        rays += _gather_block(tables, gathering, patch[rows], x[:, rows], value[:, rows], rng, None if parts is None else
+                              parts.block(rows), None if lobe is None else (lobe[0][:, :, rows], lobe[1][:, :, rows]), check)
     value *= scale
     if lobe is not None and not grouped:
         lobe[0][:] *= scale
@@ -200,7 +199,7 @@ def gather_direct(tables, gathering, rng, grouped=False):
     return H, rays, samples
 
 
-def _gather_block(tables, gathering, patch, x32, value, rng, parts=None, lobe=None):
+def _gather_block(tables, gathering, patch, x32, value, rng, parts=None, lobe=None, check=None):
     """The samples of a run of whole patches: their points into ``x32`` (3,n), their estimates
     added to ``value`` (3,n) (and, given the block's ``parts``, (value (2,3,n), group (2,n),
     group of each shadow source), kept as its shadow and its cosine part; given ``lobe``
@@ -224,6 +223,7 @@ def _gather_block(tables, gathering, patch, x32, value, rng, parts=None, lobe=No
         rays += _shadow_rays(tables, gathering, patch, source, x, normal, u, shadow, directions[0])
         if parts is not None:
             parts[1][0] = parts[2].take(source)
+    check is None or check()  # (it raises to stop the chunk)
     if gathering.cosine_share > 0:
         rays += _cosine_rays(tables, gathering, patch, x, normal, u, cosine, groups=None if parts is None else parts[1][1],
                              directions=directions[1])
@@ -283,7 +283,7 @@ def _shadow_rays(tables, gathering, patch, source, x, normal, u, value, directio
         lit = np.zeros_like(value)
         light = source[at_light] - P
         x_world = g.to_world(surface[:, at_light].T, patch[at_light]).T
-        for k in np.unique(light):
+        for k in np.flatnonzero(np.bincount(light)):  # (the lights looked at: np.unique without its sort)
             here = light == k
             cols = at_light[here]
             t, dist, v = gathering.lights[k].gather(x_world[:, here], normal[:, cols], u[3:5, cols])

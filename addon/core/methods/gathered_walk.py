@@ -111,16 +111,24 @@ class ReflectedPoints:
         a sample's shadow and cosine parts each in its group, each part's glossy share in its
         glossy row."""
         diffuse, glossy = self._part_power(gathering, parts, C)
-        power = np.zeros((S, C, self.power.shape[0]))
+        N = self.power.shape[0]
+        power = np.zeros(S * C * N)
+        # (flat places, each met once a part: a plain gather and scatter, where indexing the
+        # (S,C,N) array by (group, :, row) took numpy's slow mixed path)
         for m in range(2):
             found = np.flatnonzero(parts.group[m] >= 0)
-            group = parts.group[m].take(found)
-            power[group, :, found] += diffuse[m].take(found, axis=1).T
+            at = parts.group[m].take(found) * np.int64(C * N)
+            for c in range(C):
+                place = at + (c * N) + found
+                power[place] += diffuse[m, c].take(found)
             if glossy is not None:
                 row = self.row_of[m].take(found)
-                there = row >= 0
-                power[group[there], :, row[there]] += glossy[m].take(found[there], axis=1).T
-        return power.reshape(S * C, -1)
+                there = np.flatnonzero(row >= 0)
+                at_row = at.take(there) + row.take(there)
+                for c in range(C):
+                    place = at_row + c * N
+                    power[place] += glossy[m, c].take(found.take(there))
+        return power.reshape(S * C, N)
 
     def mix(self, gathering, parts, offset):
         """The rows as a walk's sources of ids from ``offset`` on, each a grouping.Mix of its

@@ -30,7 +30,7 @@ FIRST_REFLECTION_RAYS = 3.0
 RAY_BLOCK = 1 << 18
 
 
-def reflect_first(tables, gathering, state, samples, paths, rng, parts=None):
+def reflect_first(tables, gathering, state, samples, paths, rng, parts=None, check=None):
     """The first reflection as uneven over each patch as the light that landed on it (hit exit).
 
     Each sample k of patch j is a point source of what it found (power p_k,
@@ -43,7 +43,8 @@ def reflect_first(tables, gathering, state, samples, paths, rng, parts=None):
     where the direct light is even over a patch; its irradiance (``state.correction``) joins
     the first generation's. Per source (the samples' ``parts``), a ray carries each group's c_k.
     A glossy share of the shadow rays' light (:mod:`.glossy`) is no part of p_k nor of the
-    uniform reflection: it is shot from the samples along its lobe (_shoot_glossy)."""
+    uniform reflection: it is shot from the samples along its lobe (_shoot_glossy). ``check()``, where
+    given, is called before each block of rays (it raises to stop)."""
     C, P = tables.channels, tables.patch_count
     patch = samples[0]
     state.reflected = state.reflectivity * state.irradiance
@@ -60,13 +61,14 @@ def reflect_first(tables, gathering, state, samples, paths, rng, parts=None):
     correction = np.zeros((rows_power.shape[0], P))
     total_power = max(float(points.power[:, :C].sum()) / C, 1e-300)
     _shoot_left(tables, state, points, None if parts is None else rows_power[:, :K], power[:, :K], spread, correction,
-                paths, total_power, rng)
+                paths, total_power, rng, check)
     if glossy.size:
+        check is None or check()
         _shoot_glossy(tables, state, points, rows_power[:, K:], correction, paths, total_power, rng)
     state.correction = correction / gathering.patch_area
 
 
-def _shoot_left(tables, state, points, rows_power, power, spread, correction, paths, total_power, rng):
+def _shoot_left(tables, state, points, rows_power, power, spread, correction, paths, total_power, rng, check=None):
     """The first reflection's c_k (each sample's power less its patch's mean; of ``rows_power``
     (S C,K; None: ``power``) the rays carry, of the total ``power`` (C,K) they are allotted by) shot from the
     samples; their irradiance times the area added to ``correction``."""
@@ -88,6 +90,7 @@ def _shoot_left(tables, state, points, rows_power, power, spread, correction, pa
     rank, shift = _paired_ranks(ray_patch, (left.sum(axis=0) < 0).take(sample), P, rng)
     table = SOBOL.rows(int(rank.max(initial=0)) + 1)[:2]
     for start in range(0, count, RAY_BLOCK):
+        check is None or check()
         rows = slice(start, min(start + RAY_BLOCK, count))
         k = sample[rows]
         u = np.empty((4, k.size), dtype=np.float32)  # (a sample's point is its origin: u[2:4] the direction)

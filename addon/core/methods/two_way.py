@@ -153,7 +153,9 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
     relative weights (times Phi_T / N). ``check()`` is called every generation (it raises to
     stop)."""
     C, area = tables.channels, gathering.patch_area
-    gathered = gather_direct(tables, gathering, rng, tables.groups is not None)
+    check = check or (lambda: None)
+    gathered = gather_direct(tables, gathering, rng, tables.groups is not None, check)
+    check()  # (between stages too: a run that has met its target waits for the chunks it abandons)
     H, gather_rays, samples = gathered[:3]
     H = H[:C]
     direct = H * gathering.patch_area  # (C,P) power arriving straight from the sources
@@ -168,14 +170,14 @@ def two_way_chunk(tables, gathering, paths, rng, check=None):
     if tables.exit_random:
         state.reflected = R * state.irradiance
     else:
-        reflect_first(tables, gathering, state, samples, paths, rng, None if tables.groups is None else gathered[3])
+        reflect_first(tables, gathering, state, samples, paths, rng, None if tables.groups is None else gathered[3], check)
+        check()
     first_power = reflected_power(area, state.reflected, state.groups)
     budget = GENERATION_RAYS * paths / max(first_power, 1e-300)  # rays per unit of reflected power
     weight = allotment_weight(area, tables.reflectivity.max(axis=0), tables.geometry)
     least = int(np.ceil(LEAST_RAYS * weight.size))
     while True:
-        if check is not None:
-            check()
+        check()
         count = budget * reflected_power(area, state.reflected, state.groups)
         if count <= 0:
             break

@@ -72,15 +72,32 @@ class Contacts:
         way, minus each facing the other way (holding the point strictly inside)."""
         count = self.first[triangle + 1] - self.first[triangle]
         out = np.ones(len(triangle), np.int64)
+        ends = np.cumsum(count)
+        if ends.size == 0 or ends[-1] == 0:
+            return out
+        # a block of hits at a time, about PAIR_BLOCK pairs each: a big slab's hits meet dozens of
+        # partners, and the pairs' arrays of a whole cast (millions) went out to memory and back
+        cuts = np.searchsorted(ends, np.arange(PAIR_BLOCK, ends[-1], PAIR_BLOCK), side="left")
+        for a, b in zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [len(triangle)]])):
+            if b > a:
+                out[a:b] += self._met(triangle[a:b], points[a:b], count[a:b])
+        return out
+
+    def _met(self, triangle, points, count):
+        """(n,) the coincident faces each hit meets, counted +1 facing the hit face's way, -1 the other."""
         hit = np.repeat(np.arange(len(triangle)), count)
         if hit.size == 0:
-            return out
+            return 0
         row = np.repeat(self.first[triangle] - np.cumsum(count) + count, count) + np.arange(hit.size)
-        w = points[hit] - self.origin[row]
-        v, u = np.einsum("ij,ij->i", w, self.to_v[row]), np.einsum("ij,ij->i", w, self.to_u[row])
-        inside = (v > INSIDE_MARGIN) & (u > INSIDE_MARGIN) & (u + v < 1 - INSIDE_MARGIN)
-        np.add.at(out, hit[inside], np.where(self.same[row[inside]], 1, -1))
-        return out
+        w = points.take(hit, axis=0)
+        w -= self.origin.take(row, axis=0)
+        v = np.einsum("ij,ij->i", w, self.to_v.take(row, axis=0))
+        near = np.flatnonzero((v > INSIDE_MARGIN) & (v < 1 - INSIDE_MARGIN))  # (u only where v may be inside)
+        row, v = row.take(near), v.take(near)
+        u = np.einsum("ij,ij->i", w.take(near, axis=0), self.to_u.take(row, axis=0))
+        inside = (u > INSIDE_MARGIN) & (u + v < 1 - INSIDE_MARGIN)
+        signs = np.where(self.same.take(row.compress(inside)), 1.0, -1.0)
+        return np.bincount(hit.take(near).compress(inside), weights=signs, minlength=len(triangle)).astype(np.int64)
 
 
 def _overlapping(corners, normal, pairs):
