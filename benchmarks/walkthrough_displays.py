@@ -61,12 +61,15 @@ def baked_material(material):
     """A copy of a result material showing its view-independent part alone, as emission: the
     colour its Emission shader of the solved light takes (``blender_write.materials.emission_output``:
     (base colour x scale + offset) x 'Radiosity Light' + emission, or 'Radiosity' for the flat
-    result material); its live shader and outputs dropped."""
+    result material: its EEVEE output's); its live shader and outputs dropped."""
     copy = material.copy()
     tree = copy.node_tree
-    mixes = [n for n in tree.nodes if n.bl_idname == "ShaderNodeMix" and n.data_type == "RGBA"]
-    if len(mixes) != 1:
-        raise RuntimeError(f"'{material.name}': not a result material of a known layout ({len(mixes)} colour mixes)")
+    shown = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.target in ("ALL", "EEVEE")]
+    emission = shown[0].inputs["Surface"].links[0].from_node if len(shown) == 1 else None
+    colour = emission.inputs["Color"].links if emission is not None and "Color" in emission.inputs else ()
+    mixes = [link.from_node for link in colour if link.from_node.bl_idname == "ShaderNodeMix"]
+    if len(mixes) != 1 or mixes[0].data_type != "RGBA":
+        raise RuntimeError(f"'{material.name}': not a result material of a known layout")
     for node in [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]:
         tree.nodes.remove(node)
     emission = tree.nodes.new("ShaderNodeEmission")
@@ -135,7 +138,8 @@ def emission_image(make):
 
 def eevee_image():
     """EEVEE over the results, the scene's lamps and world (Material Preview with Scene Lights and
-    Scene World): (image, seconds; the seconds of software OpenGL mean nothing)."""
+    Scene World; the results' EEVEE output is emission): (image, seconds; the seconds of software
+    OpenGL mean nothing)."""
     import bpy
 
     scene = bpy.context.scene

@@ -9,9 +9,11 @@ node groups), and shows
 
 through an Emission shader, ``light`` being a colour attribute of the result mesh (the smooth
 light arriving, H in B = E + rho H). With live lamps the copy keeps its own shader too, which
-the renderer lights; in Cycles the camera sees that shader, whose one bounce gathers the light
-of the results it meets (their shaders lit by the lamps plus their solved light after a bounce),
-and EEVEE sees the shader plus the solved light. The texture stays at its own resolution whatever the patch
+Cycles lights; the camera sees that shader, whose one bounce gathers the light of the results it
+meets (their shaders lit by the lamps plus their solved light after a bounce, BOUNCED_ATTRIBUTE:
+H less the light Cycles draws live). EEVEE sees the Emission shader alone: no lamp, world or
+probe of its own lights a result, so each part of the light counts once whatever its settings.
+The texture stays at its own resolution whatever the patch
 size; the patch's reflected radiosity is the area mean of (base colour x light) over it, up to
 how much the texture and the light vary together inside it. The user's material is never
 changed: a copy is made and cut down.
@@ -27,6 +29,7 @@ TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source ma
 LIVE_PROPERTY = "radiosity_live_lamps"  # marks copies whose own shader the lamps light (textured_material)
 LIVE_EMITS_PROPERTY = "radiosity_live_emits"  # marks live copies whose own emission lights the others
 TEXTURED_SUFFIX = " Radiosity"
+BOUNCED_ATTRIBUTE = "Radiosity Bounced Light"  # live: the light arriving less the light Cycles draws live
 IDENTITY = ((1.0, 1.0, 1.0), (0.0, 0.0, 0.0))  # (scale, offset): the base colour is the reflectivity
 # The panel's switch to the flat per-patch colours, read by every result material from the scene
 # (a View Layer attribute: looked up in the view layer, then the scene).
@@ -62,8 +65,8 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     """A new material showing ``source``'s base colour * scale + offset (``terms``, RGB each)
     times the colour attribute ``light_attribute``, plus its emission, or, where the panel's
     flat switch is on, the colour attribute ``flat_attribute``; ``can_copy(source)`` must
-    hold. The copy is cut down to what drives that, and marked as ours. ``live``: its own
-    shader is kept too, for the lamps to light (``_lit_by_lamps``)."""
+    hold. The copy is cut down to what drives that, and marked as ours. ``live``: so in EEVEE;
+    in Cycles its own shader for the lamps to light, with BOUNCED_ATTRIBUTE (``_lit_by_lamps``)."""
     material = source.copy()
     material.name = source.name + TEXTURED_SUFFIX
     for key in list(material.keys()):  # (a copy carries the source's custom properties)
@@ -84,46 +87,55 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     surface.inputs[1].default_value = tuple(float(v) for v in terms[0])
     surface.inputs[2].default_value = tuple(float(v) for v in terms[1])
 
-    light = nodes.new("ShaderNodeAttribute")
-    light.attribute_type = "GEOMETRY"
-    light.attribute_name = light_attribute
-    light.location = (x, y - 250)
-    lit = nodes.new("ShaderNodeVectorMath")
-    lit.operation = "MULTIPLY"
-    lit.location = (x + 200, y)
-    links.new(surface.outputs[0], lit.inputs[0])
-    links.new(light.outputs["Color"], lit.inputs[1])
-    total = lit.outputs[0]
-
-    lit_live = live and shader.bl_idname in _BASE
-    total = _plus_emission(material, shader, total, live, lit_live, (x, y))
-    emission = emission_output(tree, total, flat_attribute, (x + 600, y))
-    output = nodes.new("ShaderNodeOutputMaterial")
-    output.location = (x + 1200, y)
-    output.target = "ALL"
-    surface_shader, outputs = emission.outputs["Emission"], [output]
-    if lit_live:
-        output.target = "CYCLES"
-        surface_shader = _lit_by_lamps(tree, shader, emission, (x + 800, y))
-        outputs.append(_eevee_output(tree, shader, emission, (x + 1200, y - 400)))
+    outputs = []
+    if live and shader.bl_idname in _BASE:  # (Cycles: its own shader lit by the lamps, and the bounced light)
+        bounced = emission_output(tree, _times_light(tree, surface, BOUNCED_ATTRIBUTE, (x, y + 900)), flat_attribute,
+                                  (x + 600, y + 900))
+        outputs.append(_output(tree, "CYCLES", _lit_by_lamps(tree, shader, bounced, (x + 800, y + 900)),
+                               (x + 1200, y + 900)))
         material[LIVE_PROPERTY] = True
-    links.new(surface_shader, output.inputs["Surface"])
+    total = _plus_emission(material, shader, _times_light(tree, surface, light_attribute, (x, y)), live, (x, y))
+    emission = emission_output(tree, total, flat_attribute, (x + 600, y))
+    outputs.append(_output(tree, "EEVEE" if outputs else "ALL", emission.outputs["Emission"], (x + 1200, y)))
     _keep_only_upstream(tree, outputs)
-    output.is_active_output = True
     return material
 
 
-def _plus_emission(material, shader, total, live, lit_live, location):
-    """``total`` (a socket) plus the shader's emission colour x strength where it emits, but
-    where the live copy's own shader shows it (``lit_live``: it lights the others in the
-    render too); an emitting live copy is marked LIVE_EMITS_PROPERTY (sampled as a light)."""
+def _times_light(tree, surface, attribute, location):
+    """A socket: the output of ``surface`` (a node) times the colour attribute ``attribute``."""
+    x, y = location
+    light = tree.nodes.new("ShaderNodeAttribute")
+    light.attribute_type = "GEOMETRY"
+    light.attribute_name = attribute
+    light.location = (x, y - 250)
+    lit = tree.nodes.new("ShaderNodeVectorMath")
+    lit.operation = "MULTIPLY"
+    lit.location = (x + 200, y)
+    tree.links.new(surface.outputs[0], lit.inputs[0])
+    tree.links.new(light.outputs["Color"], lit.inputs[1])
+    return lit.outputs[0]
+
+
+def _output(tree, target, surface, location):
+    """A Material Output node for ``target`` (ALL, CYCLES, EEVEE) showing ``surface`` (a socket),
+    the active one for its target."""
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
+    output.location = location
+    output.target = target
+    tree.links.new(surface, output.inputs["Surface"])
+    output.is_active_output = True
+    return output
+
+
+def _plus_emission(material, shader, total, live, location):
+    """``total`` (a socket) plus the shader's emission colour x strength where it emits; an
+    emitting live copy is marked LIVE_EMITS_PROPERTY (its own shader lights the others in Cycles,
+    sampled as a light)."""
     tree, (x, y) = material.node_tree, location
     if not _emits(shader):
         return total
     if live:
         material[LIVE_EMITS_PROPERTY] = True
-    if lit_live:
-        return total
     emitted = _emitted(tree, shader, (x, y - 450))
     added = tree.nodes.new("ShaderNodeVectorMath")
     added.operation = "ADD"
@@ -182,25 +194,6 @@ def _shader_or_flat(tree, shader, emission, switch, location):
     links.new(added.outputs[0], mix.inputs[1])
     links.new(emission.outputs["Emission"], mix.inputs[2])
     return mix.outputs[0]
-
-
-def _eevee_output(tree, shader, emission, location):
-    """A live result's EEVEE output (its Light Path knows no ray depth): the source's own shader
-    lit by the lamps plus the solved light seen by the camera, or the flat colours alone."""
-    nodes, links = tree.nodes, tree.links
-    x, y = location
-    shown = nodes.new("ShaderNodeEmission")
-    shown.location = (x - 600, y)
-    links.new(emission.inputs["Color"].links[0].from_socket, shown.inputs["Color"])
-    path = nodes.new("ShaderNodeLightPath")
-    path.location = (x - 800, y)
-    links.new(path.outputs["Is Camera Ray"], shown.inputs["Strength"])
-    switch = _flat_switch(tree, (x - 400, y + 250))
-    output = nodes.new("ShaderNodeOutputMaterial")
-    output.location = location
-    output.target = "EEVEE"
-    links.new(_shader_or_flat(tree, shader, shown, switch, (x - 400, y)), output.inputs["Surface"])
-    return output
 
 
 def _seen_by(tree, shader, surface, location):

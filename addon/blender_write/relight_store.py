@@ -16,7 +16,8 @@ from ..blender_read.objects import is_result_object
 from .results import result_collection
 
 META_PROPERTY = "radiosity_relight"
-DOMAINS = {"flat": "FACE", "irradiance": "FACE", "smooth": "CORNER", "light": "CORNER", "irradiance_point": "POINT"}
+DOMAINS = {"flat": "FACE", "irradiance": "FACE", "smooth": "CORNER", "light": "CORNER", "irradiance_point": "POINT",
+           "bounced": "CORNER", "bounced_irradiance": "FACE"}
 _CACHE = {}  # token -> Stored
 
 

@@ -16,7 +16,10 @@ COLLECTION_NAME = "Radiosity"
 ATTRIBUTE_NAME = "Radiosity"
 PATCH_ATTRIBUTE_NAME = "Radiosity Patches"  # the flat per-patch colours when both are written
 LIGHT_ATTRIBUTE_NAME = "Radiosity Light"  # the light arriving, which the textured materials multiply
-OUR_ATTRIBUTES = (ATTRIBUTE_NAME, PATCH_ATTRIBUTE_NAME, LIGHT_ATTRIBUTE_NAME, "Radiosity Indirect")
+# live lamps: the light arriving less what the renderer draws live, which the Cycles output multiplies
+BOUNCED_ATTRIBUTE_NAME = textured.BOUNCED_ATTRIBUTE
+OUR_ATTRIBUTES = (ATTRIBUTE_NAME, PATCH_ATTRIBUTE_NAME, LIGHT_ATTRIBUTE_NAME, BOUNCED_ATTRIBUTE_NAME,
+                  "Radiosity Indirect")
 MATERIAL_NAME = "Radiosity Result"
 COLLECTION_PROPERTY = "radiosity_results"  # custom property marking a scene's results collection
 RESULT_SUFFIX = " Radiosity"
@@ -153,13 +156,13 @@ def write_extra(mesh, patch_mesh, name, face_values, output):
     return attr.name
 
 
-def write_light(mesh, values, domain):
-    """The light arriving, which the textured materials read: (C,3) a polygon corner each on
-    the CORNER domain, or (P,3) a patch each on the FACE domain (16 bytes a patch)."""
+def write_light(mesh, values, domain, name=LIGHT_ATTRIBUTE_NAME):
+    """The light arriving, which the textured materials read (or ``name``'s part of it): (C,3) a
+    polygon corner each on the CORNER domain, or (P,3) a patch each on the FACE domain (16 bytes a patch)."""
     if domain == "CORNER":
-        attr = mesh.color_attributes.new(LIGHT_ATTRIBUTE_NAME, "FLOAT_COLOR", "CORNER")
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
     else:
-        attr = mesh.attributes.new(LIGHT_ATTRIBUTE_NAME, "FLOAT_COLOR", "FACE")
+        attr = mesh.attributes.new(name, "FLOAT_COLOR", "FACE")
     attr.data.foreach_set("color", rgba(values))
 
 
@@ -210,8 +213,8 @@ def _show_colours(mesh, render_colour):
 
 def show_results_in_views(live=False):
     """Let the 3D views' solid shading colour objects by their colour attribute; with live
-    results, Material Preview lit by the scene's lamps and world (its studio light would light
-    them in their place)."""
+    results, Material Preview lit by the scene's lamps and world, as the render (the results'
+    EEVEE output is emission, which no light changes: the rest of the scene and the background)."""
     for screen in bpy.data.screens:
         for area in screen.areas:
             if area.type != "VIEW_3D":
@@ -229,8 +232,7 @@ def _result_object(output_data, index, output_mode, layers, light, notes, materi
     output, else ``material``)."""
     arrays, pm = output_data.patches.objects[index], output_data.patches.meshes[index]
     faces, points = output_data.face_colours[index], output_data.smooth_colours[index]
-    if not (np.isfinite(faces).all() and (points is None or np.isfinite(points).all())
-            and (light is None or np.isfinite(light).all())):
+    if not all(v is None or np.isfinite(v).all() for v in (faces, points, light, _bounced_of(output_data, index))):
         raise ValueError(f"the result for '{arrays.name}' is not finite")
     name = arrays.name + RESULT_SUFFIX
     mesh = build_mesh(name, pm)
@@ -255,6 +257,9 @@ def _fill_result(obj, output_data, index, output_mode, layers, light, notes, mat
     textured_output = output_mode == "TEXTURED" and light is not None and layers is not None
     if textured_output:
         write_light(mesh, light, output_data.light_domain)
+        bounced = _bounced_of(output_data, index)
+        if bounced is not None:
+            write_light(mesh, bounced, output_data.light_domain, BOUNCED_ATTRIBUTE_NAME)
     _show_colours(mesh, layers.render_colour if layers is not None else "")
     if textured_output:
         for slot_material in materials_for(layers.slot_names):
@@ -262,6 +267,12 @@ def _fill_result(obj, output_data, index, output_mode, layers, light, notes, mat
         mesh.polygons.foreach_set("material_index", layers.patch_slot.astype(np.int32))
     else:
         mesh.materials.append(material)
+
+
+def _bounced_of(output_data, index):
+    """Source ``index``'s light arriving less what the renderer draws live, or None (not live)."""
+    bounced = getattr(output_data, "bounced_colours", None)
+    return bounced[index] if bounced and getattr(output_data, "live_lamps", False) else None
 
 
 def write_results(context, output_data, output_mode, scene=None):
@@ -281,7 +292,7 @@ def write_results(context, output_data, output_mode, scene=None):
     smooth_written = output_mode in ("VERTEX", "BOTH", "TEXTURED") and any(
         p is not None for p in output_data.smooth_colours)
     flat_name = PATCH_ATTRIBUTE_NAME if smooth_written and output_mode != "VERTEX" else ATTRIBUTE_NAME
-    live = getattr(output_data, "live_lamps", False)  # (the lamps light the textured materials' own shaders)
+    live = getattr(output_data, "live_lamps", False)  # (the lamps light the textured materials' own shaders in Cycles)
     try:
         material = result_material(flat_name, live)
         for index, (arrays, faces) in enumerate(zip(output_data.patches.objects, output_data.face_colours)):

@@ -192,11 +192,11 @@ PER_SOURCE = Choice("per_source", "--per-light", "AUTO", (
 ), "Per-light results", "Keep each light's own result so that turning a lamp's strength or colour relights at once")
 LIVE_LAMPS = Flag("live_lamps", "--live-lamps", True, "Live lamps",
                   "Textured: the lamps', suns', emitting materials' and the world's own light on the results is "
-                  "drawn by the renderer, each pixel's (sharp hot spots and shadows, the material's highlights), and "
-                  "the solve gives the rest ('Radiosity Light' without it). On (default): right in Cycles' render of "
-                  "the scene at any bounces, as the preview and the saved file draw it, and in Material Preview, "
-                  "switched to the scene's lamps and world; off: all of the light from the solve, the same in any view "
-                  "(Material Preview's studio light too)")
+                  "drawn by Cycles, each pixel's (sharp hot spots and shadows, the material's highlights), and "
+                  "the solve gives the rest ('Radiosity Bounced Light'). On (default): right in Cycles' render of "
+                  "the scene at any bounces, as the preview and the saved file draw it; EEVEE and Material Preview "
+                  "show all of the light from the solve ('Radiosity Light'); off: all of the light from the solve, "
+                  "the same in any view (Material Preview's studio light too)")
 # --- Detail (adaptive patches) ---
 DETAIL = Choice("detail", "--detail", "OFF", (
     ("OFF", "Off", "Every patch the patch size: the same grid everywhere"),

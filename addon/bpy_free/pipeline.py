@@ -36,13 +36,15 @@ class SolveOutput:
     # smooth, a polygon corner each (light_domain "CORNER"), or (P_k,3) a patch each ("FACE"); or None
     light_colours: list = field(default_factory=list)
     light_domain: str = "CORNER"
+    # live lamps: the light arriving less what the renderer draws live (what Cycles' output adds), as light_colours
+    bounced_colours: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)  # attribute name -> [(P_k,3) per object], light and indirect
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
     sources: str = ""  # the sources that took part (sources_text)
     back_warning: str | None = None  # light absorbed on back sides in view of the selection (back_light_warning)
     sources_out: object = None  # relit.SourceResults of a per-source solve, else None
-    live_lamps: bool = False  # the textured light leaves the lamps' direct light to the renderer
+    live_lamps: bool = False  # Cycles' output leaves the lamps' direct light to the renderer (bounced_colours)
     seconds: float = 0.0  # the whole run's (meshing, solve, colours)
 
     def blocked_fraction(self):
@@ -258,7 +260,7 @@ def write_colours(out, scene, result, settings, deadline=None):
     for name, values in extras.items():
         out.extra[name] = [None if not o.receives else np.asarray(values[patches.combined.patch_slice(k)])
                            for k, o in enumerate(patches.objects)]
-    made = {}  # "smooth", "light" -> per object (C_k,3) at its polygon corners (None: not receiving)
+    made = {}  # "smooth", "light", "bounced" -> per object (C_k,3) at its polygon corners (None: not receiving)
     both = settings.output in ("BOTH", "TEXTURED")
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
         shading = adaptive_patches.shading_arrays(patches, scene)
@@ -273,16 +275,18 @@ def write_colours(out, scene, result, settings, deadline=None):
                          f"{options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory of the run); "
                          f"{shown}: choose Smooth colours to make them")
     out.light_domain = "CORNER" if "light" in made else "FACE"
-    flat_light = None if not textured or "light" in made else np.maximum(result.irradiance - (  # (lamps drawn live)
-        point_direct.live_light(scene, result, deadline) if out.live_lamps else 0.0), 0.0)
+    flat = {} if not textured or "light" in made else {"light": np.maximum(result.irradiance, 0.0)}
+    if flat and out.live_lamps:  # (lamps drawn live)
+        flat["bounced"] = np.maximum(result.irradiance - relit.drawn_light(out, scene, result, deadline), 0.0)
     for k, o in enumerate(patches.objects):
         rows = patches.combined.patch_slice(k)
         out.face_colours.append(radiosity[rows] if o.receives else None)
         out.smooth_colours.append(made["smooth"][k] if "smooth" in made else None)
-        if "light" in made:
-            out.light_colours.append(made["light"][k])
-        else:
-            out.light_colours.append(flat_light[rows] if flat_light is not None and o.receives else None)
+        for name, colours in (("light", out.light_colours), ("bounced", out.bounced_colours)):
+            if name in made:
+                colours.append(made[name][k])
+            else:
+                colours.append(flat[name][rows] if name in flat and o.receives else None)
 
 
 def _at_polygon_corners(patches, scene, corners, shading=None, least=None):
@@ -304,7 +308,8 @@ def _at_polygon_corners(patches, scene, corners, shading=None, least=None):
 
 def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=np.float32, deadline=None):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``Surface.arriving_light``) at every
-    corner of the scene's triangles, smooth (``live``: the lamps', suns', emitters' and world's direct light left out); then ("smooth", (T,3,3)): the reflected light, its
+    corner of the scene's triangles, and with ``live`` ("bounced", (T,3,3)) it less the lamps', suns', emitters' and
+    world's direct light, smooth (what the renderer draws live); then ("smooth", (T,3,3)): the reflected light, its
     tile noise filtered within its measured variance, joined across objects (not across hidden
     patches: core covered) and kept apart at creases (core smoothing), plus each patch's own
     emission, flat; both with the direct light's shape within each patch (core point_direct).
@@ -315,11 +320,14 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                    **seen_parts(scene, triangles, triangle_patch))
-    arriving = point_direct.arriving(surface, scene, result, live, deadline) if light else None  # (filters first:
+    arriving = point_direct.arriving(surface, scene, result, False, deadline) if light else None  # (filters first:
+    bounced = point_direct.arriving(surface, scene, result, True, deadline) if light and live else None
     reflected = surface.filter_light(result.reflected, result.reflected_variance)  # with the direct light held, the peak)
     direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline)
     if light:
-        yield "light", point_direct.light_corners(surface, scene, arriving, direct, live, dtype)
+        yield "light", point_direct.light_corners(surface, scene, arriving, direct, False, dtype)
+    if bounced is not None:
+        yield "bounced", point_direct.light_corners(surface, scene, bounced, direct, True, dtype)
     corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True), dtype=dtype)
     corners += scene.emission[triangle_patch][:, None, :]
     yield "smooth", corners

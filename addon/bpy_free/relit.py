@@ -4,7 +4,8 @@ group's outputs per result object, and their recombination with new strengths an
 
 A result object keeps, per group, the values its outputs are made of ("flat": each patch's
 radiosity, "irradiance": each patch's light arriving, "smooth" and "light": the smooth
-radiosity and light arriving at every polygon corner); an output is the sum of its groups'
+radiosity and light arriving at every polygon corner; with live lamps "bounced" and
+"bounced_irradiance", the light arriving less what the renderer draws live); an output is the sum of its groups'
 values times their weights, so relighting is one pass over them and traces no ray. No bpy.
 """
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.display import smoothing
+from ..core.display import point_direct, smoothing
 from ..core.display.covered import seen_parts
 from ..core.estimate.grouping import PER_SOURCE_MAX, source_groups
 from ..core.lights.lights import WorldLight
@@ -105,6 +106,7 @@ class SourceResults:
     arrays: list = field(default_factory=list)
     targets: list = field(default_factory=list)
     smooth: dict = field(default_factory=dict)  # (while the outputs are made) kind -> per object (S,C_k,3)
+    drawn: object = None  # (S,P,3) each group's light the renderer draws live, where flat bounced light is written
 
     @property
     def names(self):
@@ -141,6 +143,21 @@ def source_corners(scene, result, light=False, shading=None, live=False, deadlin
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                    **seen_parts(scene, triangles, triangle_patch))
     yield from smooth_sources(surface, scene, result, light, triangles=triangles, live=live, deadline=deadline)
+
+
+def drawn_light(out, scene, result, deadline=None):
+    """(P,3) each patch's mean of the light the renderer draws live (``point_direct.live_light``);
+    for a per-source solve the sum of each group's, which ``out.sources_out.drawn`` keeps (the
+    groups' flat bounced light then adds up to the whole's)."""
+    if out.sources_out is None:
+        return point_direct.live_light(scene, result, deadline)
+    ps = result.per_source
+    drawn = ps.direct_irradiance
+    if drawn is None:
+        drawn = point_direct.live_means(scene, seed=result.seed, light=result.irradiance, light_group=ps.light_group,
+                                        patch_group=ps.patch_group, groups=ps.count, deadline=deadline)
+    out.sources_out.drawn = drawn
+    return drawn.sum(axis=0)
 
 
 def weights(meta, current):
@@ -241,6 +258,8 @@ def add_object_values(out, settings):
         values = {"flat": ps.radiosity[:, rows].astype(np.float32)}
         if "irradiance" in kinds or "irradiance_point" in kinds:
             values["irradiance"] = ps.irradiance[:, rows].astype(np.float32)
+        if "bounced_irradiance" in kinds:
+            values["bounced_irradiance"] = (ps.irradiance[:, rows] - results.drawn[:, rows]).astype(np.float32)
         if "irradiance_point" in kinds:
             from ..core.mesh import meshing
 
@@ -264,6 +283,9 @@ def output_targets(settings, out):
     if output == "TEXTURED":
         corner = out.light_domain == "CORNER"
         targets.append(("Radiosity Light", "light" if corner else "irradiance", "CORNER" if corner else "FACE"))
+        if out.live_lamps:
+            targets.append(("Radiosity Bounced Light", "bounced" if corner else "bounced_irradiance",
+                            "CORNER" if corner else "FACE"))
     elif settings.light_output:
         targets.append(("Radiosity Light", "irradiance_point" if output == "VERTEX" else "irradiance",
                         "POINT" if output == "VERTEX" else "FACE_CORNERS"))

@@ -105,17 +105,17 @@ def _textured_emission():
         if not is_textured_material(material) or material.node_tree is None:
             continue
         source = bpy.data.materials.get(material[TEXTURED_PROPERTY])
-        node = next((n for n in material.node_tree.nodes if n.label == "Emission"), None)
         if source is not None and material.get(LIVE_EMITS_PROPERTY):
             follow_emission(material, source)  # (a live copy's own shader emits)
-        if source is None or node is None:
+        if source is None:
             continue
         emission = sources.material_emission(source)
         strength = float(np.max(emission)) if emission.any() else 0.0
-        if not node.inputs["Scale"].is_linked:
-            node.inputs["Scale"].default_value = strength
-        if not node.inputs[0].is_linked:
-            node.inputs[0].default_value = tuple(emission / strength) if strength > 0 else (0.0, 0.0, 0.0)
+        for node in [n for n in material.node_tree.nodes if n.label == "Emission"]:  # (live: EEVEE's and Cycles')
+            if not node.inputs["Scale"].is_linked:
+                node.inputs["Scale"].default_value = strength
+            if not node.inputs[0].is_linked:
+                node.inputs[0].default_value = tuple(emission / strength) if strength > 0 else (0.0, 0.0, 0.0)
 
 
 class RADIOSITY_OT_relight(bpy.types.Operator):

@@ -224,7 +224,7 @@ def test_live_lamps_leave_each_patch_its_solved_light_less_the_lamps_mean_and_gr
         result.irradiance_variance,
         scene.reflectivity))
     np.testing.assert_allclose(point_direct.patch_means(surface, live), arriving, rtol=1e-10, atol=1e-12)
-    parts = dict(smooth_sources(surface, scene, result, light=True, live=True))["light"]
+    parts = dict(smooth_sources(surface, scene, result, light=True, live=True))["bounced"]
     per_source = result.per_source
     drawn = point_direct.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
                                     patch_group=per_source.patch_group, groups=per_source.count)

@@ -94,8 +94,8 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
     they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
-    ("light", (S,T,3,3)) first with ``light``, the light arriving (``Surface.arriving_light``);
-    then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``) and
+    ("light", (S,T,3,3)) first with ``light``, the light arriving (``Surface.arriving_light``), and
+    with ``live`` too ("bounced", (S,T,3,3)) it less the sources' direct light (the renderer's), smooth alone; then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``) and
     smooth, plus each group's own emission, flat. Both show the direct light at the corners (``point_direct``), each group's own.
     ``surface`` is ``smoothing.Surface.of`` the scene's triangles (or ``triangles``, (T,3) of its
     vertices); ``result`` a per-source solve's SolveResult. Made in float64, given as ``dtype``
@@ -107,23 +107,25 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     triangles = scene.triangles if triangles is None else triangles
     if light:  # (the noise filters first, as the pipeline's: with the direct light's corners held, the peak)
         irradiance, total = per_source.irradiance, result.irradiance
-        if live:  # (the lamps', suns', emitters' and world's direct light left to the renderer: point_direct.light_corners)
-            drawn = per_source.direct_irradiance  # (the solve's own: point_direct.live_light)
-            if drawn is None:
-                drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
-                                                patch_group=per_source.patch_group, groups=per_source.count,
-                                                deadline=deadline)
-            irradiance, total = irradiance - drawn, total - drawn.sum(axis=0)
         arriving, fill = surface.arriving_light(total, result.irradiance_variance, scene.reflectivity,
                                                 return_filter=True)
+    if light and live:  # (the lamps', suns', emitters' and world's direct light left to the renderer: point_direct.light_corners)
+        drawn = per_source.direct_irradiance  # (the solve's own: point_direct.live_light)
+        if drawn is None:
+            drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
+                                            patch_group=per_source.patch_group, groups=per_source.count,
+                                            deadline=deadline)
+        bounced, bounced_fill = surface.arriving_light(total - drawn.sum(axis=0), result.irradiance_variance,
+                                                       scene.reflectivity, return_filter=True)
     filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
     direct = point_direct.corner_direct(surface, scene, triangles,
                                         seed=result.seed, light_group=per_source.light_group,
                                         patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline)
     whole = _summed(direct)
     if light:
-        shaped, shaped_whole = (None, None) if live else (direct, whole)
-        yield "light", point_direct.shown(surface, arriving, shaped_whole, fill(irradiance), shaped, dtype)[1]
+        yield "light", point_direct.shown(surface, arriving, whole, fill(irradiance), direct, dtype)[1]
+    if light and live:
+        yield "bounced", point_direct.shown(surface, bounced, None, bounced_fill(irradiance - drawn), None, dtype)[1]
     rho = scene.reflectivity
     _, smooth = point_direct.shown(surface, filtered, whole and point_direct.scaled(surface, whole, rho),
                                        noise(per_source.irradiance * rho), direct and point_direct.scaled(surface, direct, rho), dtype)

@@ -107,13 +107,44 @@ def test_relight_traces_no_ray_and_rewrites_every_output_the_run_wrote(blender, 
     after = _attributes()
     assert set(after) == set(before)
     targets = {t[0] for t in relight_store.meta_of(bpy.context.scene)["targets"]}
-    expected = {"FACE": {"Radiosity"}, "TEXTURED": {"Radiosity", "Radiosity Patches", "Radiosity Light"},
+    # (TEXTURED at the panel's defaults is live: the bounced light Cycles' output reads is relit too)
+    expected = {"FACE": {"Radiosity"}, "TEXTURED": {"Radiosity", "Radiosity Patches", "Radiosity Light",
+                                                    "Radiosity Bounced Light"},
                 "BOTH": {"Radiosity", "Radiosity Patches", "Radiosity Light"},
                 "VERTEX": {"Radiosity", "Radiosity Light"}}[output]
     assert targets == expected
     for key in after:
         if key[1] in targets:
             assert not np.allclose(after[key], before[key]), key  # every output the run wrote moved
+
+
+def test_live_flat_light_and_its_bounced_part_are_relit_as_the_solve_wrote_them(blender, monkeypatch):
+    """Textured above the smooth colours' patch bound, live (the panel's default): the light is
+    written a patch each ('Radiosity Light', FACE) and so is the part Cycles' output reads
+    ('Radiosity Bounced Light', each group's light less its direct light); at the solved
+    strengths relight writes both back as the solve did (its groups add up to the whole), and a
+    change moves both. Before, relight wrote the whole light into the attribute that held the
+    bounced part."""
+    from addon.bpy_free import options
+
+    monkeypatch.setattr(options, "SMOOTH_MAX_PATCHES", 4)
+    settings = rs.build(blender, "TEXTURED")
+    assert settings.live_lamps
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    targets = {tuple(t) for t in relight_store.meta_of(bpy.context.scene)["targets"]}
+    assert {("Radiosity Light", "irradiance", "FACE"), ("Radiosity Bounced Light", "bounced_irradiance", "FACE")} <= targets
+    before = _attributes()
+    bounced = {k: v for k, v in before.items() if k[1] == "Radiosity Bounced Light"}
+    light = {k: v for k, v in before.items() if k[1] == "Radiosity Light"}
+    assert bounced and all((bounced[(o, "Radiosity Bounced Light")] <= v + 1e-6).all() for (o, _), v in light.items())
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    for key, values in _attributes().items():
+        np.testing.assert_allclose(values, before[key], rtol=1e-5, atol=1e-6, err_msg=str(key))
+    rs.change(blender)
+    assert bpy.ops.radiosity.relight() == {"FINISHED"}
+    after = _attributes()
+    for key in list(bounced) + list(light):
+        assert not np.allclose(after[key], before[key]), key
 
 
 def test_relight_follows_each_weight_exactly(blender):
