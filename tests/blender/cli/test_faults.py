@@ -276,7 +276,7 @@ def test_the_progress_line_ends_cleanly_on_a_narrow_terminal(tmp_path):
     """On a terminal narrower than the progress text, the line is rewritten in place (no trail
     of progress rows), cleared at the end, and the run's warnings start rows of their own."""
     columns = 60
-    term = Terminal(["--scene", "cornell", "--error", "0.3", "--time-limit", "4", "--no-preview",
+    term = Terminal(["--scene", "cornell", "--error", "0.3", "--time-limit", "10", "--no-preview",
                      "-o", str(tmp_path / "t.blend")], str(tmp_path), columns=columns)
     try:
         status = term.wait(300)

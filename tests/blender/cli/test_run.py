@@ -279,7 +279,7 @@ def test_a_service_that_is_not_dask_is_one_line_and_nothing_is_written(tmp_path)
     address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
     try:
         proc = subprocess.run([sys.executable, "-m", "addon", "--scene", "cornell", "--cluster", address,
-                               "--no-preview", "-q", "-o", str(tmp_path / "c.blend")], cwd=str(tmp_path),
+                               "--error", "10", "--no-preview", "-q", "-o", str(tmp_path / "c.blend")], cwd=str(tmp_path),
                               capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONPATH": ROOT})
     finally:
         server.close()
