@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import predict, solve
-from ..core.display import point_direct, smoothing
+from ..core.display import direct_means, point_direct, smoothing
 from ..core.scene.diagnostics import MAX_BOUNCES, check_bounces
 from ..core.display.covered import seen_parts
 from ..core.methods.first_shot import direct_irradiance
@@ -221,8 +221,10 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         on_prediction(prediction, int(scene.patch_count), patches)
     budget = run_budget.Budget.of(started, limit, scene, patches, settings, groups)
     result = solve(scene, settings.core(scene, max_seconds=budget.solve_seconds(), per_source=groups is not None,
-                                        groups=groups, direct_apart=settings.live_lamps),
+                                        groups=groups, direct_apart=True),
                    progress=progress, should_stop=should_stop)
+    # (the display's direct light in place of the solve's, whose weak lamps are heavy-tailed: core direct_means)
+    result = direct_means.corrected(scene, result, budget.deadline())
     trim.give_back()
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
@@ -312,8 +314,12 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                    **seen_parts(scene, triangles, triangle_patch))
-    arriving = point_direct.arriving(surface, scene, result, live, deadline) if light else None  # (filters first:
-    reflected = surface.filter_light(result.reflected, result.reflected_variance)  # with the direct light held, the peak)
+    if result.direct_irradiance is not None:  # (the solve's noise is in its indirect part alone: core direct_means)
+        arriving = direct_means.arriving(surface, scene, result, live) if light else None
+        reflected = direct_means.reflected(surface, scene, result)
+    else:  # (filters first: with the direct light held, the peak)
+        arriving = point_direct.arriving(surface, scene, result, live, deadline) if light else None
+        reflected = surface.filter_light(result.reflected, result.reflected_variance)
     direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline)
     if light:
         yield "light", point_direct.light_corners(surface, scene, arriving, direct, live, dtype)

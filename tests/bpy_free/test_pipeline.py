@@ -92,7 +92,7 @@ def _centres(mesh):
 
 def _result(H, variance, reflectivity):
     return SimpleNamespace(reflected=reflectivity * H, reflected_variance=reflectivity ** 2 * variance,
-                           irradiance=H, irradiance_variance=variance, seed=0)
+                           irradiance=H, irradiance_variance=variance, seed=0, direct_irradiance=None)
 
 
 def _fine_samples(n=32):
