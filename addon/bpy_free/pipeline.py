@@ -320,7 +320,7 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
     else:  # (filters first: with the direct light held, the peak)
         arriving = point_direct.arriving(surface, scene, result, live, deadline) if light else None
         reflected = surface.filter_light(result.reflected, result.reflected_variance)
-    direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline)
+    direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline, light=result.irradiance)
     if light:
         yield "light", point_direct.light_corners(surface, scene, arriving, direct, live, dtype)
     corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True), dtype=dtype)

@@ -6,16 +6,17 @@ skylight) gets a thousandth of the rays, and its patches' light comes out heavy-
 of them far below it (the painting at half its light, the error estimate none the wiser). The
 display looks at every lamp by what it would give the point (``lamp_choice``), each sun apart,
 and samples a patch again where its mean is noisier than the eye would see
-(``point_direct.live_means``): its patch means of the direct light are the better estimate.
-Where the solve kept its gathered direct light apart (``SolveResult.direct_irradiance``), the
-display's light is the solve's indirect part, H - D_solve, plus the display's own direct means
-D; the reflected light and the radiosity change by the reflectivity times D - D_solve.
+(``point_direct.live_means``: SAMPLES points a patch, the noisy ones 8 and 64 times as many):
+its patch means of the direct light are the better estimate. Where the solve kept its gathered
+direct light apart (``SolveResult.direct_irradiance``), the display's light is the solve's
+indirect part, H - D_solve, plus the display's own direct means D; the reflected light and the
+radiosity change by the reflectivity times D - D_solve.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 
-from .point_direct import has_live, live_means
+from .point_direct import SAMPLES, has_live, live_means
 
 
 def corrected(scene, result, deadline=None):
@@ -28,7 +29,8 @@ def corrected(scene, result, deadline=None):
         return result
     grouped = ps is not None
     groups = {} if not grouped else {"light_group": ps.light_group, "patch_group": ps.patch_group, "groups": ps.count}
-    direct = live_means(scene, seed=result.seed, light=result.irradiance, deadline=deadline, **groups)
+    # (SAMPLES points a patch first, as a corner's: the noisy patches are sampled again, 8x then 64x)
+    direct = live_means(scene, samples=SAMPLES, seed=result.seed, light=result.irradiance, deadline=deadline, **groups)
     whole = direct.sum(axis=0) if grouped else direct
     change = whole - result.direct_irradiance
     reflected = result.reflected + scene.reflectivity * change

@@ -123,7 +123,8 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     filtered += _whole(held)
     direct = point_direct.corner_direct(surface, scene, triangles,
                                         seed=result.seed, light_group=per_source.light_group,
-                                        patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline)
+                                        patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline,
+                                        light=result.irradiance)
     whole = _summed(direct)
     if light:
         shaped, shaped_whole = (None, None) if live else (direct, whole)
