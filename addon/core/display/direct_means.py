@@ -1,45 +1,64 @@
-"""Each patch's direct light as the display estimates it, in place of the solve's.
+"""Each lamp's direct light on every patch as the display estimates it, in place of the solve's.
 
 The solve gathers the direct light with shadow rays to sources chosen by power: a weak lamp
 beside a sun whose power counts over the whole scene (a spot on a painting in a hall under a
 skylight) gets a thousandth of the rays, and its patches' light comes out heavy-tailed, most
 of them far below it (the painting at half its light, the error estimate none the wiser). The
-display looks at every lamp by what it would give the point (``lamp_choice``), each sun apart,
-and samples a patch again where its mean is noisier than the eye would see
-(``point_direct.live_means``: SAMPLES points a patch, the noisy ones 8 and 64 times as many):
-its patch means of the direct light are the better estimate. Where the solve kept its gathered
-direct light apart (``SolveResult.direct_irradiance``), the display's light is the solve's
-indirect part, H - D_solve, plus the display's own direct means D; the reflected light and the
-radiosity change by the reflectivity times D - D_solve.
+display looks at a lamp from MEAN_SAMPLES stratified points a patch (``point_direct.live_means``,
+no second round: a round taken only where the first was noisy keeps the patches whose first
+missed a rare bright sample low). Where the solve kept each source group's direct light apart
+(per-source results: ``PerSource.direct_irradiance``), every group of lamps alone (point, spot
+and area lamps: no sun, world or emitting material, which the solve's choice serves) has its
+direct light replaced by the display's; its light arriving, reflected light and radiosity
+change by that difference (times the reflectivity), and so do the whole's.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 
-from .point_direct import SAMPLES, has_live, live_means
+import numpy as np
+
+from .point_direct import live_means
+from ..lights.lights import AreaLight, PointLight
+
+MEAN_SAMPLES = 32  # stratified points a patch, each a shadow ray to a lamp of the group
+
+
+def lamp_groups(scene, per_source):
+    """(K,) the source groups of ``per_source`` made of point, spot and area lamps alone."""
+    lights = scene.lights.lights
+    kinds = np.zeros(per_source.count, np.int8)  # 1: a lamp in it, 2: anything else
+    for light, group in zip(lights, per_source.light_group):
+        kinds[group] |= 1 if isinstance(light, (PointLight, AreaLight)) else 2
+    if per_source.patch_group is not None:
+        emitting = np.asarray(per_source.patch_group)
+        kinds[np.unique(emitting[emitting >= 0])] |= 2
+    return np.flatnonzero(kinds == 1)
 
 
 def corrected(scene, result, deadline=None):
-    """``result`` (a SolveResult) with the display's direct light in place of the solve's: its
-    irradiance, reflected light, radiosity and direct part, and each source group's (its
-    ``per_source``); as it is where the solve did not keep its direct light apart or the scene
-    has none. The display's patch means' retries within ``deadline``."""
+    """``result`` (a per-source SolveResult with its groups' direct light apart) with each lamp
+    group's direct light the display's (the module's docstring), else as it is. The deadline is
+    not used: the display's means take one round."""
     ps = result.per_source
-    if result.direct_irradiance is None or not has_live(scene) or (ps is not None and ps.direct_irradiance is None):
+    if result.direct_irradiance is None or ps is None or ps.direct_irradiance is None or ps.light_group is None:
         return result
-    grouped = ps is not None
-    groups = {} if not grouped else {"light_group": ps.light_group, "patch_group": ps.patch_group, "groups": ps.count}
-    # (SAMPLES points a patch first, as a corner's: the noisy patches are sampled again, 8x then 64x)
-    direct = live_means(scene, samples=SAMPLES, seed=result.seed, light=result.irradiance, deadline=deadline, **groups)
-    whole = direct.sum(axis=0) if grouped else direct
-    change = whole - result.direct_irradiance
+    lamps = lamp_groups(scene, ps)
+    if not lamps.size:
+        return result
+    chosen = [scene.lights.lights[k] for k in np.flatnonzero(np.isin(ps.light_group, lamps))]
+    their_group = np.searchsorted(lamps, [ps.light_group[k] for k in np.flatnonzero(np.isin(ps.light_group, lamps))])
+    alone = scene.with_materials(scene.reflectivity, np.zeros_like(scene.emission), lights=chosen)
+    mine = live_means(alone, samples=MEAN_SAMPLES, seed=result.seed, light_group=np.asarray(their_group),
+                      patch_group=np.full(scene.patch_count, -1), groups=lamps.size, retries=0)
+    parts = np.zeros_like(ps.direct_irradiance)
+    parts[lamps] = mine - ps.direct_irradiance[lamps]
+    change = parts.sum(axis=0)
     reflected = result.reflected + scene.reflectivity * change
     out = replace(result, irradiance=result.irradiance + change, reflected=reflected, radiosity=scene.emission + reflected,
-                  direct_irradiance=whole)
-    if grouped:
-        parts = direct - ps.direct_irradiance
-        out.per_source = replace(ps, irradiance=ps.irradiance + parts, radiosity=ps.radiosity + scene.reflectivity * parts,
-                                 direct_irradiance=direct)
+                  direct_irradiance=result.direct_irradiance + change)
+    out.per_source = replace(ps, irradiance=ps.irradiance + parts, radiosity=ps.radiosity + scene.reflectivity * parts,
+                             direct_irradiance=ps.direct_irradiance + parts)
     return out
 
 

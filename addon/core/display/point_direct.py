@@ -354,7 +354,7 @@ def live_light(scene, result, deadline=None):
 
 
 def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0,
-               deadline=None, spent=None, rows=None):
+               deadline=None, spent=None, rows=None, retries=RETRIES):
     """([G,]P,3) each patch's mean of the light a renderer draws live where the lamps, suns,
     emitting materials and the world light the surfaces themselves (``LIVE`` results): their
     direct light, from ``samples`` stratified points over the patch's visible part, every lamp
@@ -362,7 +362,7 @@ def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group
     ``light`` (P,3), or of the mean itself, is sampled again with MORE_SAMPLES times as many
     points, RETRIES times (beside an emitter the light is heavy-tailed), within ``deadline``.
     Given ``groups`` > 0, ``light_group`` (L,) and ``patch_group`` (P,): each group's
-    (``corner_direct``). ``rows``: those patches' alone, (n,3) (a pilot's)."""
+    (``corner_direct``). ``rows``: those patches' alone, (n,3) (a pilot's); ``retries``: RETRIES, or 0 (unbiased)."""
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     rows = np.arange(scene.patch_count) if rows is None else np.asarray(rows, np.int64)
     out = np.zeros((max(groups, 1), len(rows), 3))
@@ -372,7 +372,7 @@ def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group
     with tables.numpy_turn:
         parts = [_means_of(tables, rows, rng, add, None if light is None else light[rows], spheres, paired)
                  for _, add, paired in sources]
-        means = rounds(parts, len(rows), samples, RETRIES, MORE_SAMPLES, deadline, spent)
+        means = rounds(parts, len(rows), samples, retries, MORE_SAMPLES, deadline, spent)
     for (group, _, _), mean in zip(sources, means):
         out[group] += mean
     return out if groups else out[0]
