@@ -22,8 +22,8 @@ The sky stays in H - M (soft light, which a point estimate would need many rays 
 
 Beside an emitter a corner's light is heavy-tailed: a corner whose standard error (measured on
 pairs of neighbouring strata where a sample draws one of several lamps or emitting patches:
-``sample_rounds.paired_error``) passes
-NOISE_SHARE of its patch's brightest corner's light is sampled again with MORE_SAMPLES times the
+``sample_rounds.paired_error``) passes NOISE_SHARE of its patch's brightest corner's light (or
+of the patch's solved light where that is more: noise beside more light is not seen) is sampled again with MORE_SAMPLES times the
 samples (RETRIES times). (Giving up on the patches still above it, their smooth display beside
 their neighbours' shaped one, drew blocks on the Cornell box's walls by its light.) Where M
 passes H (the interpolation of a peak above its mean, or the solve's noise) the patch's D is
