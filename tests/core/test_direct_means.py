@@ -81,3 +81,22 @@ def test_a_weak_spot_beside_a_shut_out_sun_lights_the_floor_with_all_its_light()
     assert abs(light / exact - 1) < band, (light / exact, band)
     smooth = _floor_light(mesh, out.smooth_colours[0]) / 0.5
     assert abs(smooth / exact - 1) < band, (smooth / exact, band)
+
+
+def test_only_groups_of_lamps_alone_take_the_displays_direct_light():
+    """Groups of a point lamp with an emitting material, of a sun, of an area lamp, of the world:
+    only the area lamp's group is lamps alone (the solve's choice serves suns, the world and
+    emitting patches; the display's one round would miss the sky through an opening)."""
+    from types import SimpleNamespace
+
+    from addon.core.display.direct_means import lamp_groups
+    from addon.core.lights.lights import AreaLight, WorldLight
+
+    lights = [PointLight(np.zeros(3), np.ones(3)), SunLight(np.array([0.0, 0.0, -1.0]), np.ones(3)),
+              AreaLight(np.zeros(3), np.array([0.1, 0, 0]), np.array([0, 0.1, 0]), np.array([0, 0, -1.0]), np.ones(3)),
+              WorldLight(np.ones(3))]
+    scene = SimpleNamespace(lights=SimpleNamespace(lights=lights))
+    groups = SimpleNamespace(count=4, light_group=np.array([0, 1, 2, 3]), patch_group=np.array([-1, 0, -1]))
+    np.testing.assert_array_equal(lamp_groups(scene, groups), [2])
+    groups.patch_group = None
+    np.testing.assert_array_equal(lamp_groups(scene, groups), [0, 2])
