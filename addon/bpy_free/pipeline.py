@@ -160,7 +160,8 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
     f = forecast(scene, settings.core(scene), bounces=bounces, should_stop=should_stop)
-    display = run_budget.display_forecast(scene, patches, settings)  # (the colours' time: their direct light)
+    groups = relit.groups_for(scene, patches, settings.per_source, [])
+    display = run_budget.display_forecast(scene, patches, settings, groups)  # (the colours' time: their direct light)
     # (what the settings need, the Detail's refining solves included; a time limit ends the whole run first)
     needed = building + solve_refinement.predicted_seconds(patches, f.seconds) + display.seconds
     limited = bool(settings.max_seconds) and needed > settings.max_seconds
@@ -224,7 +225,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
                                         groups=groups, direct_apart=True),
                    progress=progress, should_stop=should_stop)
     # (the display's direct light in place of the solve's, whose weak lamps are heavy-tailed: core direct_means)
-    result = direct_means.corrected(scene, result, budget.deadline())
+    result = direct_means.corrected(scene, result)
     trim.give_back()
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,

@@ -15,6 +15,7 @@ change by that difference (times the reflectivity), and so do the whole's.
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -36,23 +37,39 @@ def lamp_groups(scene, per_source):
     return np.flatnonzero(kinds == 1)
 
 
-def corrected(scene, result, deadline=None):
+def lamp_scene(scene, light_group, patch_group, count):
+    """(the scene with the lamps of the groups of lamps alone as its only lights and no emission,
+    sharing its geometry; (L',) each such lamp's group among them; (K,) those groups), for
+    ``light_group`` (L,) ``patch_group`` (P,) or None of ``count`` groups; None where no group
+    is lamps alone."""
+    lamps = lamp_groups(scene, SimpleNamespace(count=count, light_group=light_group, patch_group=patch_group))
+    if not lamps.size:
+        return None
+    mine = np.flatnonzero(np.isin(light_group, lamps))
+    alone = scene.with_materials(scene.reflectivity, np.zeros_like(scene.emission),
+                                 lights=[scene.lights.lights[k] for k in mine])
+    return alone, np.searchsorted(lamps, np.asarray(light_group)[mine]), lamps
+
+
+def lamp_means(made, seed=0, rows=None, spent=None):
+    """([K,]P,3) each group of lamps alone's direct light on every patch (or on ``rows``), from
+    ``lamp_scene``'s ``made``: MEAN_SAMPLES stratified points a patch, one round."""
+    alone, their_group, lamps = made
+    return live_means(alone, samples=MEAN_SAMPLES, seed=seed, light_group=their_group,
+                      patch_group=np.full(alone.patch_count, -1), groups=lamps.size, retries=0, rows=rows, spent=spent)
+
+
+def corrected(scene, result):
     """``result`` (a per-source SolveResult with its groups' direct light apart) with each lamp
-    group's direct light the display's (the module's docstring), else as it is. The deadline is
-    not used: the display's means take one round."""
+    group's direct light the display's (the module's docstring), else as it is."""
     ps = result.per_source
     if result.direct_irradiance is None or ps is None or ps.direct_irradiance is None or ps.light_group is None:
         return result
-    lamps = lamp_groups(scene, ps)
-    if not lamps.size:
+    made = lamp_scene(scene, ps.light_group, ps.patch_group, ps.count)
+    if made is None:
         return result
-    chosen = [scene.lights.lights[k] for k in np.flatnonzero(np.isin(ps.light_group, lamps))]
-    their_group = np.searchsorted(lamps, [ps.light_group[k] for k in np.flatnonzero(np.isin(ps.light_group, lamps))])
-    alone = scene.with_materials(scene.reflectivity, np.zeros_like(scene.emission), lights=chosen)
-    mine = live_means(alone, samples=MEAN_SAMPLES, seed=result.seed, light_group=np.asarray(their_group),
-                      patch_group=np.full(scene.patch_count, -1), groups=lamps.size, retries=0)
     parts = np.zeros_like(ps.direct_irradiance)
-    parts[lamps] = mine - ps.direct_irradiance[lamps]
+    parts[made[2]] = lamp_means(made, seed=result.seed) - ps.direct_irradiance[made[2]]
     change = parts.sum(axis=0)
     reflected = result.reflected + scene.reflectivity * change
     out = replace(result, irradiance=result.irradiance + change, reflected=reflected, radiosity=scene.emission + reflected,
@@ -60,7 +77,6 @@ def corrected(scene, result, deadline=None):
     out.per_source = replace(ps, irradiance=ps.irradiance + parts, radiosity=ps.radiosity + scene.reflectivity * parts,
                              direct_irradiance=ps.direct_irradiance + parts)
     return out
-
 
 def arriving(surface, scene, result, live=False):
     """(P,3) the light arriving shown for a ``result`` whose direct part is known: its indirect
