@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import predict, solve
-from ..core.display import point_direct, smoothing
+from ..core.display import direct_means, point_direct, smoothing
 from ..core.scene.diagnostics import MAX_BOUNCES, check_bounces
 from ..core.display.covered import seen_parts
 from ..core.methods.first_shot import direct_irradiance
@@ -162,9 +162,10 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     bounces = check_bounces(scene, settings.estimator, settings.threshold)
     other = "biased_infinite" if settings.estimator == "finite" else "finite"
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
-    with trim.roomy(scene.patch_count):  # (the pilot's memory as the run's, so its pace is the run's)
+    groups = relit.groups_for(scene, patches, settings.per_source, [])
+    with trim.roomy(scene.patch_count):  # (the pilots' memory as the run's, so their pace is the run's)
         f = forecast(scene, settings.core(scene), bounces=bounces, should_stop=should_stop)
-    display = run_budget.display_forecast(scene, patches, settings)  # (the colours' time: their direct light)
+        display = run_budget.display_forecast(scene, patches, settings, groups)  # (the colours' time: their direct light)
     # (what the settings need, the Detail's refining solves included; a time limit ends the whole run first)
     needed = building + solve_refinement.predicted_seconds(patches, f.seconds) + display.seconds
     limited = bool(settings.max_seconds) and needed > settings.max_seconds
@@ -226,8 +227,10 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     budget = run_budget.Budget.of(started, limit, scene, patches, settings, groups)
     with trim.roomy(scene.patch_count):  # (freed memory kept for the next chunk: no page faults)
         result = solve(scene, settings.core(scene, max_seconds=budget.solve_seconds(), per_source=groups is not None,
-                                            groups=groups, direct_apart=settings.live_lamps),
+                                            groups=groups, direct_apart=True),
                        progress=progress, should_stop=should_stop)
+    # (the display's direct light in place of the solve's, whose weak lamps are heavy-tailed: core direct_means)
+    result = direct_means.corrected(scene, result)
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
@@ -320,10 +323,15 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                    **seen_parts(scene, triangles, triangle_patch))
-    arriving = point_direct.arriving(surface, scene, result, False, deadline) if light else None  # (filters first:
-    bounced = point_direct.arriving(surface, scene, result, True, deadline) if light and live else None
-    reflected = surface.filter_light(result.reflected, result.reflected_variance)  # with the direct light held, the peak)
-    direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline)
+    if result.direct_irradiance is not None:  # (the solve's noise is in its indirect part alone: core direct_means)
+        arriving = direct_means.arriving(surface, scene, result, False) if light else None
+        bounced = direct_means.arriving(surface, scene, result, True) if light and live else None
+        reflected = direct_means.reflected(surface, scene, result)
+    else:  # (filters first: with the direct light held, the peak)
+        arriving = point_direct.arriving(surface, scene, result, False, deadline) if light else None
+        bounced = point_direct.arriving(surface, scene, result, True, deadline) if light and live else None
+        reflected = surface.filter_light(result.reflected, result.reflected_variance)
+    direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline, light=result.irradiance)
     if light:
         yield "light", point_direct.light_corners(surface, scene, arriving, direct, False, dtype)
     if bounced is not None:

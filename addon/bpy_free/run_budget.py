@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import methods
-from ..core.display import point_direct
+from ..core.display import direct_means, point_direct
 from ..core.lights.lamp_choice import patch_spheres
 from ..core.names import GATHERED, TWO_WAY
 from ..core.display.sample_rounds import Spent
@@ -36,8 +36,8 @@ AFTER_DIRECT = 0.5
 
 @dataclass(frozen=True)
 class Display:
-    """The display's forecast seconds: the corners' direct light, the live light's patch means,
-    the rest (smoothing); ``least`` what it takes at the least (the direct light's first samples
+    """The display's forecast seconds: the corners' direct light, the live light's patch means
+    (and the lamps' direct means of a per-light run: ``lamp_means_seconds``), the rest (smoothing); ``least`` what it takes at the least (the direct light's first samples
     and the rest: its retries stop at a deadline)."""
 
     corners: float = 0.0
@@ -64,9 +64,9 @@ def corner_seconds(scene, triangles, triangle_patch, seed=0, corners=PILOT_CORNE
     patch = chosen % P
     position = scene.vertices[chosen // P]
     position += point_direct.INWARD * (patch_spheres(scene)[0][patch] - position)
-    spent = Spent()
+    spent = Spent()  # (a corner's noise is measured against its patch's light, as the run's: ``solved_light``)
     point_direct.direct_at(scene, position, patch, point_direct.SAMPLES, seed, light_group, patch_group, groups,
-                           spent=spent)
+                           spent=spent, shown=solved_light(scene)[patch].sum(axis=1))
     return spent.seconds * keys.size / chosen.size, spent.first * keys.size / chosen.size
 
 
@@ -76,13 +76,17 @@ def live_seconds(scene, seed=0, patches=PILOT_CORNERS):
     if not point_direct.has_live(scene):
         return 0.0, 0.0
     rows = np.sort(np.random.default_rng(seed).choice(scene.patch_count, min(patches, scene.patch_count), replace=False))
-    # (a patch's noise is measured against its solved light, which the reflected light adds to: the
-    # mean power a unit of area gets, times R / (1 - R) of the mean reflectivity R, as a closed room's)
-    R = float(np.average(scene.grey_reflectivity, weights=scene.patch_area))
-    light = np.full((scene.patch_count, 3), scene.total_power / scene.total_area * R / max(1.0 - R, 1e-3))
     spent = Spent()
-    point_direct.live_means(scene, seed=seed, light=light, spent=spent, rows=rows)
+    point_direct.live_means(scene, seed=seed, light=solved_light(scene), spent=spent, rows=rows)
     return spent.seconds * scene.patch_count / rows.size, spent.first * scene.patch_count / rows.size
+
+
+def solved_light(scene):
+    """(P,3) a stand-in for each patch's solved light before the solve, which a point's noise is
+    measured against: the mean power a unit of area gets, times R / (1 - R) of the mean
+    reflectivity R, as a closed room's reflected light."""
+    R = float(np.average(scene.grey_reflectivity, weights=scene.patch_area))
+    return np.full((scene.patch_count, 3), scene.total_power / scene.total_area * R / max(1.0 - R, 1e-3))
 
 
 def smooth_made(settings, scene):
@@ -97,9 +101,28 @@ def live_made(settings, scene):
     gather the direct light apart (the two-way iteration and the gathered walk do)."""
     if settings.output != "TEXTURED" or not settings.live_lamps or not point_direct.has_live(scene):
         return False
-    gathers = settings.method == TWO_WAY or methods.direct_light_for(settings.method, settings.direct_light,
-                                                                     scene.lights) == GATHERED
-    return not gathers
+    return not gathers(settings, scene)
+
+
+def gathers(settings, scene):
+    """Whether the run's solve gathers its direct light (and keeps it apart)."""
+    return settings.method == TWO_WAY or methods.direct_light_for(settings.method, settings.direct_light,
+                                                                  scene.lights) == GATHERED
+
+
+def lamp_means_seconds(scene, settings, groups, seed=0, patches=PILOT_CORNERS):
+    """The seconds of the display's direct light of the groups of lamps alone on every patch
+    (``direct_means.lamp_means``: one round), from it timed at up to ``patches`` patches drawn at
+    random; 0 without per-source groups, a gathered direct light or such a group."""
+    if groups is None or not gathers(settings, scene):
+        return 0.0
+    made = direct_means.lamp_scene(scene, groups.light_group, groups.patch_group(scene.patch_count), groups.count)
+    if made is None:
+        return 0.0
+    rows = np.sort(np.random.default_rng(seed).choice(scene.patch_count, min(patches, scene.patch_count), replace=False))
+    spent = Spent()
+    direct_means.lamp_means(made, seed, rows=rows, spent=spent)
+    return spent.seconds * scene.patch_count / rows.size
 
 
 def display_forecast(scene, patches, settings, groups=None) -> Display:
@@ -107,6 +130,8 @@ def display_forecast(scene, patches, settings, groups=None) -> Display:
     ``patches``; ``groups`` the run's per-source groups (each group's lamps sampled apart)."""
     seed = int(settings.seed)
     live, live_least = live_seconds(scene, seed) if live_made(settings, scene) else (0.0, 0.0)
+    means = lamp_means_seconds(scene, settings, groups, seed)  # (one round: the least too)
+    live, live_least = live + means, live_least + means
     if not smooth_made(settings, scene):
         return Display(live=live, least=live_least)
     shading = adaptive_patches.shading_arrays(patches, scene) or (scene.triangles, scene.triangle_patch)

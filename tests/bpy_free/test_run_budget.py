@@ -35,3 +35,25 @@ def test_the_estimate_counts_the_colours_time_within_2x_of_the_run():
     assert 0.5 < estimate["seconds"] / wall < 2.0, (estimate["seconds"], wall, estimate["display_seconds"])
     assert estimate["display_seconds"] > 0.5 * estimate["seconds"]
     assert out.result.seconds < 0.5 * wall  # (the solve is the lesser part)
+
+
+def test_the_forecast_counts_the_lamps_direct_means_of_a_per_light_run():
+    """Two spots (per-light results: each a group of lamps alone, whose direct light the display
+    takes on every patch, core direct_means): the display's forecast counts that pass among what
+    it takes at the least (one round); without per-light groups there is none. (Before, it was
+    left out: the estimate and a time limit counted the corners and the smoothing alone.)"""
+    from many_lamps import room_objects
+
+    from addon.bpy_free import relit, run_budget
+    from addon.bpy_free.patches import make_patches
+    from addon.bpy_free.scene_notes import scene_and_notes
+
+    patches = make_patches(room_objects(2, kinds=("spot",)), 0.5)
+    scene, _ = scene_and_notes(patches)
+    groups = relit.groups_for(scene, patches, "AUTO", [])
+    settings = pipeline.SolveSettings(method="two_way", live_lamps=False)  # (gathered: its direct light kept apart)
+    assert groups is not None and groups.count == 2
+    with_groups = run_budget.display_forecast(scene, patches, settings, groups)
+    without = run_budget.display_forecast(scene, patches, settings)
+    assert with_groups.live > 0 and without.live == 0
+    assert with_groups.least >= with_groups.live

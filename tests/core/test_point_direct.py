@@ -539,3 +539,36 @@ def test_a_sun_outside_a_closed_room_takes_its_own_rays_not_the_lamps(monkeypatc
     distinct = len(np.unique(surface.point.ravel().astype(np.int64) * lamps.patch_count + np.repeat(surface.triangle_patch, 3)))
     assert sum(rays) <= without + point_direct.SAMPLES * distinct, (sum(rays), without, distinct)
     np.testing.assert_allclose(both, alone, rtol=1e-5, atol=1e-6 * alone.max())
+
+
+def test_an_area_lamps_noise_beside_ten_times_its_light_is_not_sampled_again(monkeypatch):
+    """The area lamp under the ceiling (its corners sampled again up to 1,024 rays where their
+    error passes NOISE_SHARE of the patch's brightest corner), with each patch's solved light ten
+    times the lamp's brightest corner's (a bright sky's, say): a corner's error is measured against
+    the light shown too, so the pass takes its first round alone (16 rays a corner, and fewer than
+    a third of the rays it takes alone), and every corner is still within 3 times NOISE_SHARE of
+    the light shown of the exact form factor."""
+    from addon.core.methods.tables import WalkTables
+
+    size = 0.4
+
+    def lamps(lamp):
+        return [AreaLight(lamp, np.array([size / 2, 0.0, 0.0]), np.array([0.0, size / 2, 0.0]), np.array([0.0, 0.0, 1.0]),
+                          np.ones(3))]
+    scene, lamp, _ = _lit_ceiling(lights=lamps, height=0.3)
+    surface = _surface(scene)
+    rays = []
+    traced = WalkTables.outside_turn
+    monkeypatch.setattr(WalkTables, "outside_turn", lambda tables, trace, origins, *rest: rays.append(len(origins)) or traced(
+        tables, trace, origins, *rest))
+    alone = point_direct.corner_direct(surface, scene, scene.triangles, seed=3)
+    without = sum(rays)
+    rays.clear()
+    bright = np.full((scene.patch_count, 3), 10.0 * alone.corners.max())
+    beside = point_direct.corner_direct(surface, scene, scene.triangles, seed=3, light=bright)
+    distinct = len(np.unique(surface.point.ravel().astype(np.int64) * scene.patch_count + np.repeat(surface.triangle_patch, 3)))
+    assert sum(rays) <= point_direct.SAMPLES * distinct < without / 3, (sum(rays), without, distinct)
+    points = _shown_points(scene, surface).reshape(-1, 3)
+    exact = np.array([_parallel_rectangle(lamp[:2] - p[:2], size, 0.3) for p in points])
+    shown = bright.sum(axis=1)[np.repeat(scene.triangle_patch, 3)]
+    assert (np.abs(beside.corners.sum(axis=2).ravel() - 3 * exact) / shown).max() < 3 * point_direct.NOISE_SHARE

@@ -228,7 +228,7 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
     parts = dict(smooth_sources(surface, scene, r, light=True))
     grouped = point_direct.corner_direct(surface, scene, scene.triangles, seed=r.seed, light_group=r.per_source.light_group,
-                                         patch_group=r.per_source.patch_group, groups=r.per_source.count)
+                                         patch_group=r.per_source.patch_group, groups=r.per_source.count, light=r.irradiance)
     summed = grouped.corners.sum(axis=0).astype(np.float32)  # (as the whole's is kept)
     with monkeypatch.context() as patched:
         patched.setattr(point_direct, "corner_direct", lambda *args, **kwargs: point_direct.CornerDirect(
@@ -244,7 +244,7 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     rho = scene.reflectivity
     ps = r.per_source
     direct = point_direct.corner_direct(surface, scene, scene.triangles, seed=r.seed, light_group=ps.light_group,
-                                        patch_group=ps.patch_group, groups=ps.count)
+                                        patch_group=ps.patch_group, groups=ps.count, light=r.irradiance)
     whole_direct = point_direct.CornerDirect(direct.corners.sum(axis=0), direct.means.sum(axis=0))
     relit_direct = point_direct.CornerDirect(np.einsum("stkc,sc->tkc", direct.corners, WEIGHTS)[None],
                                              np.einsum("spc,sc->pc", direct.means, WEIGHTS)[None])

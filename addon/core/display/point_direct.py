@@ -22,8 +22,8 @@ The sky stays in H - M (soft light, which a point estimate would need many rays 
 
 Beside an emitter a corner's light is heavy-tailed: a corner whose standard error (measured on
 pairs of neighbouring strata where a sample draws one of several lamps or emitting patches:
-``sample_rounds.paired_error``) passes
-NOISE_SHARE of its patch's brightest corner's light is sampled again with MORE_SAMPLES times the
+``sample_rounds.paired_error``) passes NOISE_SHARE of its patch's brightest corner's light (or
+of the patch's solved light where that is more: noise beside more light is not seen) is sampled again with MORE_SAMPLES times the
 samples (RETRIES times). (Giving up on the patches still above it, their smooth display beside
 their neighbours' shaped one, drew blocks on the Cornell box's walls by its light.) Where M
 passes H (the interpolation of a peak above its mean, or the solve's noise) the patch's D is
@@ -81,7 +81,7 @@ class CornerDirect:
 
 
 def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0,
-                  deadline=None):
+                  deadline=None, light=None):
     """The direct light (``CornerDirect``; None where ``has_direct`` is not) at the corners of
     ``triangles`` (T,3) (of ``scene.vertices``; ``surface`` is ``smoothing.Surface.of`` them)
     from every lamp and sun and emitting patch of ``scene``. Given
@@ -89,7 +89,8 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     each emitting patch: each group's light apart, its lamps drawn among themselves (their sum
     is the whole's light; the whole's own draws all its lamps at once). ``deadline`` (a
     ``time.perf_counter()`` reading): the noisy corners sampled again as time allows
-    (``sample_rounds``)."""
+    (``sample_rounds``). ``light`` (P,3): each patch's solved light, which a corner's noise is
+    also measured against (a source's noise beside much more light is not seen)."""
     if not has_direct(scene):
         return None
     P = scene.patch_count
@@ -104,7 +105,8 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     towards *= INWARD
     position += towards
     del towards
-    value = direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline)  # ([G,]n,3)
+    shown = None if light is None else np.asarray(light).sum(axis=1)[patch]
+    value = direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline, shown=shown)
     _fill_buried(scene.geometry, position, patch, value)
     if not groups:  # (the whole's corners as written, float32: the memory of the largest scenes)
         value = value.astype(np.float32)
@@ -204,27 +206,28 @@ def _lamp_sources(group, lamps):
     return out
 
 
-def direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline=None, spent=None):
+def direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline=None, spent=None,
+              shown=None):
     """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
     group's lamps and each emitting group apart (``_part_at``), added up into its group's row;
-    retries within ``deadline`` (``sample_rounds``)."""
+    retries within ``deadline`` (``sample_rounds``), of the points noisy beside ``shown`` (n,) too."""
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     out = np.zeros((max(groups, 1), len(patch), 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 28,))))
     sources = _sources(scene, light_group, patch_group, groups)
     with tables.numpy_turn:
-        parts = [_part_at(tables, position, patch, rng, add, paired) for _, add, paired in sources]
+        parts = [_part_at(tables, position, patch, rng, add, paired, shown) for _, add, paired in sources]
         means = rounds(parts, len(patch), samples, RETRIES, MORE_SAMPLES, deadline, spent)
     for (group, _, _), mean in zip(sources, means):
         out[group] += mean
     return out if groups else out[0]
 
 
-def _part_at(tables, position, patch, rng, add, paired=False):
+def _part_at(tables, position, patch, rng, add, paired=False, shown=None):
     """The ``sample_rounds.Part`` of one group's lamps or one emitting group
     (``add(tables, points, u, value)``) at the points: a corner is noisy where its standard
     error passes NOISE_SHARE of its patch's brightest corner's light (beside an emitter the
-    light is heavy-tailed)."""
+    light is heavy-tailed), or of the light ``shown`` (n,) at it where that is more."""
     g = tables.geometry
 
     def sample(rows, count):
@@ -239,7 +242,7 @@ def _part_at(tables, position, patch, rng, add, paired=False):
         grey = value.sum(axis=1)
         brightest = np.zeros(patch.max(initial=0) + 1)
         np.maximum.at(brightest, patch, grey)
-        allowed = NOISE_SHARE * brightest[patch]
+        allowed = NOISE_SHARE * (brightest[patch] if shown is None else np.maximum(brightest[patch], shown))
         return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
 
     return Part(sample, noise)
@@ -351,7 +354,7 @@ def live_light(scene, result, deadline=None):
 
 
 def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0,
-               deadline=None, spent=None, rows=None):
+               deadline=None, spent=None, rows=None, retries=RETRIES):
     """([G,]P,3) each patch's mean of the light a renderer draws live where the lamps, suns,
     emitting materials and the world light the surfaces themselves (``LIVE`` results): their
     direct light, from ``samples`` stratified points over the patch's visible part, every lamp
@@ -359,7 +362,7 @@ def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group
     ``light`` (P,3), or of the mean itself, is sampled again with MORE_SAMPLES times as many
     points, RETRIES times (beside an emitter the light is heavy-tailed), within ``deadline``.
     Given ``groups`` > 0, ``light_group`` (L,) and ``patch_group`` (P,): each group's
-    (``corner_direct``). ``rows``: those patches' alone, (n,3) (a pilot's)."""
+    (``corner_direct``). ``rows``: those patches' alone, (n,3) (a pilot's); ``retries``: RETRIES, or 0 (unbiased)."""
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     rows = np.arange(scene.patch_count) if rows is None else np.asarray(rows, np.int64)
     out = np.zeros((max(groups, 1), len(rows), 3))
@@ -369,7 +372,7 @@ def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group
     with tables.numpy_turn:
         parts = [_means_of(tables, rows, rng, add, None if light is None else light[rows], spheres, paired)
                  for _, add, paired in sources]
-        means = rounds(parts, len(rows), samples, RETRIES, MORE_SAMPLES, deadline, spent)
+        means = rounds(parts, len(rows), samples, retries, MORE_SAMPLES, deadline, spent)
     for (group, _, _), mean in zip(sources, means):
         out[group] += mean
     return out if groups else out[0]

@@ -105,34 +105,42 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
     triangles = scene.triangles if triangles is None else triangles
+    # (the solve's noise is in its indirect part alone where its direct part is known: display.direct_means)
+    drawn = per_source.direct_irradiance  # (S,P,3) or None
+    rho = scene.reflectivity
     if light:  # (the noise filters first, as the pipeline's: with the direct light's corners held, the peak)
-        irradiance, total = per_source.irradiance, result.irradiance
-        arriving, fill = surface.arriving_light(total, result.irradiance_variance, scene.reflectivity,
-                                                return_filter=True)
-    if light and live:  # (the lamps', suns', emitters' and world's direct light left to the renderer: point_direct.light_corners)
-        drawn = per_source.direct_irradiance  # (the solve's own: point_direct.live_light)
-        if drawn is None:
-            drawn = point_direct.live_means(scene, seed=result.seed, light=total, light_group=per_source.light_group,
-                                            patch_group=per_source.patch_group, groups=per_source.count,
-                                            deadline=deadline)
-        bounced, bounced_fill = surface.arriving_light(total - drawn.sum(axis=0), result.irradiance_variance,
-                                                       scene.reflectivity, return_filter=True)
-    filtered, noise = surface.filter_light(result.reflected, result.reflected_variance, return_filter=True)
+        if live and drawn is None:  # (the lamps', suns', emitters' and world's direct light left to the renderer)
+            drawn = point_direct.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
+                                            patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline)
+        held = 0.0 if drawn is None else drawn
+        rest, rest_fill = surface.arriving_light(result.irradiance - _whole(held), result.irradiance_variance, rho,
+                                                 return_filter=True)
+        rest_parts = rest_fill(per_source.irradiance - held)
+        arriving, parts = (rest, rest_parts) if drawn is None else (rest + drawn.sum(axis=0), rest_parts + drawn)
+    held = 0.0 if per_source.direct_irradiance is None else per_source.direct_irradiance * rho
+    filtered, noise = surface.filter_light(result.reflected - _whole(held), result.reflected_variance, return_filter=True)
+    filtered += _whole(held)
     direct = point_direct.corner_direct(surface, scene, triangles,
                                         seed=result.seed, light_group=per_source.light_group,
-                                        patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline)
+                                        patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline,
+                                        light=result.irradiance)
     whole = _summed(direct)
     if light:
-        yield "light", point_direct.shown(surface, arriving, whole, fill(irradiance), direct, dtype)[1]
-    if light and live:
-        yield "bounced", point_direct.shown(surface, bounced, None, bounced_fill(irradiance - drawn), None, dtype)[1]
-    rho = scene.reflectivity
+        yield "light", point_direct.shown(surface, arriving, whole, parts, direct, dtype)[1]
+    if light and live:  # (what Cycles' live output reads: the light less the direct light it draws)
+        yield "bounced", point_direct.shown(surface, rest, None, rest_parts, None, dtype)[1]
     _, smooth = point_direct.shown(surface, filtered, whole and point_direct.scaled(surface, whole, rho),
-                                       noise(per_source.irradiance * rho), direct and point_direct.scaled(surface, direct, rho), dtype)
+                                   noise(per_source.irradiance * rho - held) + held,
+                                   direct and point_direct.scaled(surface, direct, rho), dtype)
     emitting = per_source_emission(scene, per_source)
     for s in range(per_source.count):  # (a part at a time: no (S,T,3) copy)
         smooth[s] += emitting[s, surface.triangle_patch][:, None, :]
     yield "smooth", smooth
+
+
+def _whole(parts):
+    """The groups' (S,P,3) ``parts`` summed (0 stays 0)."""
+    return parts if np.ndim(parts) == 0 else parts.sum(axis=0)
 
 
 def _summed(direct):
