@@ -95,8 +95,8 @@ def _shoot_left(tables, state, points, rows_power, power, spread, correction, pa
         k = sample[rows]
         u = np.empty((4, k.size), dtype=np.float32)  # (a sample's point is its origin: u[2:4] the direction)
         u[2:4] = _shifted_points(table, rank[rows], shift.take(ray_patch[rows], axis=1))
-        carried = rows_left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
-        _cast_carried(tables, state, points, k, u, carried, correction)
+        # (signed power a ray: rows_left[:, k] times this)
+        _cast_carried(tables, state, points, k, u, (rows_left, k, total / count / size.take(k)), correction)
 
 
 def _shoot_glossy(tables, state, points, rows_power, correction, paths, total_power, rng):
@@ -111,8 +111,7 @@ def _shoot_glossy(tables, state, points, rows_power, correction, paths, total_po
     for start in range(0, count, RAY_BLOCK):
         g = row[start:start + RAY_BLOCK]
         u = np.zeros((4, g.size), dtype=np.float32)  # (the lobe draws its own directions: ReflectedPoints)
-        carried = rows_power.take(g, axis=1) * (total / count / size.take(g))
-        _cast_carried(tables, state, points, g + points.count, u, carried, correction)
+        _cast_carried(tables, state, points, g + points.count, u, (rows_power, g, total / count / size.take(g)), correction)
 
 
 def _allot(state, size, paths, total_power, rng):
@@ -128,13 +127,22 @@ def _allot(state, size, paths, total_power, rng):
 
 
 def _cast_carried(tables, state, points, rows, u, carried, correction):
-    """Rays from ``points``' rows ``rows`` (uniforms ``u``) carrying ``carried`` (S C,n) power
-    each: what meets a front into ``correction``, what escapes or meets a back into the accounts."""
+    """Rays from ``points``' rows ``rows`` (uniforms ``u``) carrying power ``carried`` = (values (S C,m),
+    columns (n,), factor (n,)): each ray values[:, column] times its factor. What meets a front goes into
+    ``correction``, what escapes or meets a back into the accounts; a row at a time (no (S C,n) temporary)."""
     origins, directions = points.unit_rays(rows, u, tables.geometry)
     hits = rays.cast(tables, origins, directions, points.regions(rows, tables.geometry))
-    correction += _bincount(hits.patch, hits.front, carried, tables.patch_count)
-    state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
-    state.blocked += carried.compress((hits.hit >= 0) & ~hits.front, axis=1).sum(axis=1)
+    values, columns, factor = carried
+    columns = columns.astype(np.intp, copy=False)
+    index = hits.patch.compress(hits.front).astype(np.intp)
+    escaped, back = hits.hit < 0, (hits.hit >= 0) & ~hits.front
+    lost = np.zeros((2, values.shape[0]))
+    for r, v in enumerate(values):
+        w = v.take(columns) * factor
+        correction[r] += np.bincount(index, weights=w.compress(hits.front), minlength=tables.patch_count)
+        lost[0, r], lost[1, r] = w.compress(escaped).sum(), w.compress(back).sum()
+    state.escaped += lost[0]
+    state.blocked += lost[1]
 
 
 def _paired_ranks(ray_patch, negative, P, rng):
@@ -159,12 +167,6 @@ def _shifted_points(table, rank, shift):
     points = table.take(rank, axis=1)
     points ^= shift
     return unit_floats(points, np.float32)
-
-
-def _bincount(patch, mask, weights, P):
-    """(C,P) sums of ``weights`` (C,n) over the masked columns, by patch."""
-    index = patch.compress(mask)
-    return np.stack([np.bincount(index, weights=w.compress(mask), minlength=P) for w in weights])
 
 
 def reflected_power(area, reflected, groups=1):
@@ -232,8 +234,8 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
     s = density.take(i)
     s += density.take(j)
     np.reciprocal(s, out=s)
-    if value.shape[0] > tables.channels:  # (per source, many rows: both ends in one count a row)
-        _score_rows(np.concatenate((i, j)), np.concatenate((j, i)), np.concatenate((s, s)), value, H)
+    if value.shape[0] > tables.channels:  # (per source, many rows: a row at a time)
+        _score_rows(i, j, s, value, H)
     else:
         gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
         gathered *= s
@@ -246,12 +248,16 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
         lost[1] += np.bincount(patch.compress((hits.hit >= 0) & ~met), minlength=P)
 
 
-def _score_rows(to, source, s, value, H):
-    """Adds s value[:, source] to H[:, to] for every row of ``value`` (per-source rows)."""
-    carried = value.take(source, axis=1)
-    carried *= s
-    for row, weights in zip(H, carried):
-        row += np.bincount(to, weights=weights, minlength=row.size)
+def _score_rows(i, j, s, value, H):
+    """Adds s value[:, j] to H[:, i] and s value[:, i] to H[:, j] for every row of ``value`` (per-source
+    rows), a row at a time: the ends at i counted first, then those at j added one by one in order
+    (np.add.at), the sums of one count over both ends to the bit, without (rows, 2n) temporaries
+    that leave the cache."""
+    i, j = i.astype(np.intp), j.astype(np.intp)
+    for row, v in zip(H, value):
+        ends = np.bincount(i, weights=v.take(j) * s, minlength=row.size)
+        np.add.at(ends, j, v.take(i) * s)
+        row += ends
 
 
 def _ray_blocks(count, rng):
