@@ -75,9 +75,12 @@ def _shoot_left(tables, state, points, rows_power, power, spread, correction, pa
     P = tables.patch_count
     patch = points.patch
 
-    def less_mean(rows):
-        mean = np.stack([np.bincount(patch, weights=p, minlength=P) for p in rows]) / np.maximum(spread, 1)
-        return rows - mean.take(patch, axis=1)
+    def less_mean(rows):  # (a row at a time: no (rows, K) temporaries)
+        left, count = np.empty_like(rows), np.maximum(spread, 1)
+        for out, p in zip(left, rows):
+            mean = np.bincount(patch, weights=p, minlength=P) / count
+            np.subtract(p, mean.take(patch), out=out)
+        return left
 
     left = less_mean(power)  # c_k
     rows_left = left if rows_power is None else less_mean(rows_power)
