@@ -57,10 +57,18 @@ class ReflectedPoints:
             self.alpha = gathering.glossy.alpha.take(patch.take(self.sample[self.count:]))
             self.rng = np.random.default_rng(rng.integers(1 << 63))
             power = np.hstack(rows)
-        self.power = np.ascontiguousarray(power.T)
+        self.rows = power  # (3,N) (the two-way iteration reads it so; the walk reads ``power``)
+        self._power = None
         self.patch = patch
         self.points = np.asarray(x, dtype=np.float32)
         self.normals = geometry.patch_normal_rows.take(patch, axis=1)
+
+    @property
+    def power(self):
+        """(N,3) each row's power (the walk's source table reads it so)."""
+        if self._power is None:
+            self._power = np.ascontiguousarray(self.rows.T)
+        return self._power
 
     @staticmethod
     def _shine(gathering, patch):
@@ -70,7 +78,7 @@ class ReflectedPoints:
     @property
     def glossy_rows(self):
         """(G,) the rows of the glossy shares (none: an empty array)."""
-        return np.arange(self.count, self.power.shape[0])
+        return np.arange(self.count, self.rows.shape[1])
 
     def samples_of(self, rows):
         """(n,) the sample each of ``rows`` leaves from."""
@@ -111,7 +119,7 @@ class ReflectedPoints:
         a sample's shadow and cosine parts each in its group, each part's glossy share in its
         glossy row."""
         diffuse, glossy = self._part_power(gathering, parts, C)
-        N = self.power.shape[0]
+        N = self.rows.shape[1]
         power = np.zeros(S * C * N)
         # (flat places, each met once a part: a plain gather and scatter, where indexing the
         # (S,C,N) array by (group, :, row) took numpy's slow mixed path)
@@ -137,7 +145,7 @@ class ReflectedPoints:
         group = np.maximum(parts.group, 0)
         if glossy is None:
             return Mix(offset, group, np.ascontiguousarray(diffuse.transpose(0, 2, 1)))
-        G = self.power.shape[0] - self.count
+        G = self.rows.shape[1] - self.count
         lobe_group, lobe = np.zeros((2, G), dtype=group.dtype), np.zeros((2, 3, G))
         for m in range(2):
             at = np.flatnonzero(self.row_of[m] >= 0)

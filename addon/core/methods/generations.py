@@ -50,7 +50,7 @@ def reflect_first(tables, gathering, state, samples, paths, rng, parts=None, che
     state.reflected = state.reflectivity * state.irradiance
     points = ReflectedPoints(gathering, tables.geometry, samples, rng)
     K = points.count
-    power = points.power[:, :C].T
+    power = points.rows[:C]
     rows_power = power if parts is None else points.group_power(gathering, parts, state.groups, C)
     spread = np.bincount(patch, minlength=P)  # m_j
     glossy = points.glossy_rows
@@ -59,7 +59,7 @@ def reflect_first(tables, gathering, state, samples, paths, rng, parts=None, che
         lobe_power = np.stack([np.bincount(lobe_patch, weights=w, minlength=P) for w in rows_power[:, K:]])
         state.reflected -= lobe_power / gathering.patch_area
     correction = np.zeros((rows_power.shape[0], P))
-    total_power = max(float(points.power[:, :C].sum()) / C, 1e-300)
+    total_power = max(float(power.sum()) / C, 1e-300)
     _shoot_left(tables, state, points, None if parts is None else rows_power[:, :K], power[:, :K], spread, correction,
                 paths, total_power, rng, check)
     if glossy.size:
