@@ -117,8 +117,7 @@ class Gathering:
         self.table = SourceTable(weights) if weights.any() else None
         self.choice = weights / weights.sum() if weights.any() else weights  # P_s
         self.near = near_choice(scene, self.choice) if self.table is not None else None
-        self.emission = scene.emission.T  # (3,P)
-        self.emits = scene.emission.any(axis=1)  # (P,) (what a cosine ray can find)
+        self.emission, self.emits = scene.emission.T, scene.emission.any(axis=1)  # (3,P); (P,) what a cosine ray can find
         self.reflectivity = scene.reflectivity.T  # (3,P)
         self.patch_area = scene.patch_area
         self.cosine_share = cosine_share(scene, bool(self.worlds))

@@ -115,28 +115,27 @@ class ReflectedPoints:
         return np.maximum(power - glossy, 0.0), glossy
 
     def group_power(self, gathering, parts, S, C):
-        """(S C, rows) each source group's part of every row's power (per-source results):
-        a sample's shadow and cosine parts each in its group, each part's glossy share in its
-        glossy row."""
-        diffuse, glossy = self._part_power(gathering, parts, C)
-        N = self.rows.shape[1]
-        power = np.zeros(S * C * N)
+        """(S C,K) each source group's part of every sample's diffuse power (per-source results):
+        a sample's shadow and cosine parts each in its group; and (G,) the group of each glossy
+        row (its part's; None without a lobe)."""
+        diffuse, _ = self._part_power(gathering, parts, C)
+        K = self.count
+        power = np.zeros(S * C * K)
         # (flat places, each met once a part: a plain gather and scatter, where indexing the
-        # (S,C,N) array by (group, :, row) took numpy's slow mixed path)
+        # (S,C,K) array by (group, :, sample) took numpy's slow mixed path)
         for m in range(2):
             found = np.flatnonzero(parts.group[m] >= 0)
-            at = parts.group[m].take(found) * np.int64(C * N)
+            at = parts.group[m].take(found) * np.int64(C * K)
             for c in range(C):
-                place = at + (c * N) + found
+                place = at + (c * K) + found
                 power[place] += diffuse[m, c].take(found)
-            if glossy is not None:
-                row = self.row_of[m].take(found)
-                there = np.flatnonzero(row >= 0)
-                at_row = at.take(there) + row.take(there)
-                for c in range(C):
-                    place = at_row + c * N
-                    power[place] += glossy[m, c].take(found.take(there))
-        return power.reshape(S * C, N)
+        if self.sample is None:
+            return power.reshape(S * C, K), None
+        group = np.full(self.rows.shape[1] - K, -1, dtype=np.int32)
+        for m in range(2):
+            there = np.flatnonzero(self.row_of[m] >= 0)
+            group[self.row_of[m].take(there) - K] = parts.group[m].take(there)
+        return power.reshape(S * C, K), group
 
     def mix(self, gathering, parts, offset):
         """The rows as a walk's sources of ids from ``offset`` on, each a grouping.Mix of its

@@ -51,20 +51,21 @@ def reflect_first(tables, gathering, state, samples, paths, rng, parts=None, che
     points = ReflectedPoints(gathering, tables.geometry, samples, rng)
     K = points.count
     power = points.rows[:C]
-    rows_power = power if parts is None else points.group_power(gathering, parts, state.groups, C)
+    # Per source: each group's part of the samples' diffuse power (S C,K), the group of each glossy row.
+    rows_power, lobe_group = (power[:, :K], None) if parts is None else points.group_power(gathering, parts, state.groups, C)
     spread = np.bincount(patch, minlength=P)  # m_j
     glossy = points.glossy_rows
+    lobe = _Lobe(power[:, K:], lobe_group, state.groups, P)
     if glossy.size:  # (the lobe's light leaves no patch evenly)
         lobe_patch = patch.take(points.samples_of(glossy))
-        lobe_power = np.stack([np.bincount(lobe_patch, weights=w, minlength=P) for w in rows_power[:, K:]])
-        state.reflected -= lobe_power / gathering.patch_area
+        state.reflected -= lobe.sums(lobe_patch, np.ones(glossy.size, dtype=bool), lobe.power) / gathering.patch_area
     correction = np.zeros((rows_power.shape[0], P))
     total_power = max(float(power.sum()) / C, 1e-300)
-    _shoot_left(tables, state, points, None if parts is None else rows_power[:, :K], power[:, :K], spread, correction,
+    _shoot_left(tables, state, points, None if parts is None else rows_power, power[:, :K], spread, correction,
                 paths, total_power, rng, check)
     if glossy.size:
         check is None or check()
-        _shoot_glossy(tables, state, points, rows_power[:, K:], correction, paths, total_power, rng)
+        _shoot_glossy(tables, state, points, lobe, correction, paths, total_power, rng)
     state.correction = correction / gathering.patch_area
 
 
@@ -102,11 +103,40 @@ def _shoot_left(tables, state, points, rows_power, power, spread, correction, pa
         _cast_carried(tables, state, points, k, u, (rows_left, k, total / count / size.take(k)), correction)
 
 
-def _shoot_glossy(tables, state, points, rows_power, correction, paths, total_power, rng):
-    """The glossy rows' power (``rows_power`` (S C,G)) shot from their samples along their lobes,
+class _Lobe:
+    """The glossy rows' power (``power`` (C,G)); per source, each row's group (``group`` (G,), -1:
+    none; else None) among S: a row's light is all of its group's (a part of one sample)."""
+
+    def __init__(self, power, group, S, P):
+        self.power, self.group, self.S, self.P = power, group, S, P
+        if group is not None:
+            self.power = np.where(group >= 0, power, 0.0)
+            self.key = np.maximum(group, 0).astype(np.intp) * P  # (each row's group's first place)
+
+    def sums(self, patch, mask, weights, rows=None):
+        """(S C,P) (or (C,P)) the masked ``weights`` (C,n) of rows ``rows`` (all: None) summed by
+        ``patch`` (n,), each group's channels its rows (as the rows (S C,n) with zeros elsewhere)."""
+        patch = patch.compress(mask).astype(np.intp)
+        if self.group is None:
+            return np.stack([np.bincount(patch, weights=w.compress(mask), minlength=self.P) for w in weights])
+        key = (self.key if rows is None else self.key.take(rows)).compress(mask) + patch
+        S, C = self.S, weights.shape[0]
+        sums = np.stack([np.bincount(key, weights=w.compress(mask), minlength=S * self.P) for w in weights])
+        return sums.reshape(C, S, self.P).transpose(1, 0, 2).reshape(S * C, self.P)
+
+    def lost(self, mask, weights, rows):
+        """(S C,) (or (C,)) the masked ``weights`` (C,n) of rows ``rows`` summed by row, each as
+        the (S C,n) rows' sum (zeros elsewhere; numpy's pairwise sum over the same values)."""
+        if self.group is None:
+            return np.array([w.compress(mask).sum() for w in weights])
+        group, kept = self.group.take(rows).compress(mask), [w.compress(mask) for w in weights]
+        return np.array([np.where(group == g, w, 0.0).sum() for g in range(self.S) for w in kept])
+
+
+def _shoot_glossy(tables, state, points, lobe, correction, paths, total_power, rng):
+    """The glossy rows' power (``lobe``, a _Lobe) shot from their samples along their lobes,
     rays allotted in proportion to it (as _shoot_left's); irradiance times area into ``correction``."""
-    C = tables.channels
-    size = rows_power.reshape(-1, C, rows_power.shape[1]).sum(axis=0).mean(axis=0)
+    size = lobe.power.mean(axis=0)
     allotted = _allot(state, size, paths, total_power, rng)
     if allotted is None:
         return
@@ -114,7 +144,12 @@ def _shoot_glossy(tables, state, points, rows_power, correction, paths, total_po
     for start in range(0, count, RAY_BLOCK):
         g = row[start:start + RAY_BLOCK]
         u = np.zeros((4, g.size), dtype=np.float32)  # (the lobe draws its own directions: ReflectedPoints)
-        _cast_carried(tables, state, points, g + points.count, u, (rows_power, g, total / count / size.take(g)), correction)
+        origins, directions = points.unit_rays(g + points.count, u, tables.geometry)
+        hits = rays.cast(tables, origins, directions, points.regions(g + points.count, tables.geometry))
+        w = lobe.power.take(g, axis=1) * (total / count / size.take(g))  # (C,n) power a ray
+        correction += lobe.sums(hits.patch, hits.front, w, g)
+        state.escaped += lobe.lost(hits.hit < 0, w, g)
+        state.blocked += lobe.lost((hits.hit >= 0) & ~hits.front, w, g)
 
 
 def _allot(state, size, paths, total_power, rng):
