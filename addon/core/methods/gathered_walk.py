@@ -35,13 +35,15 @@ class ReflectedPoints:
     def __init__(self, gathering, geometry, samples, rng):
         patch, x, value = samples[:3]
         factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
-        power = value * factor.take(patch, axis=1)
+        self.factor = factor.take(patch, axis=1)  # (3,K) each sample's (its parts' too: _part_power)
+        self.shine = None  # (3,K) each sample's glossy share times A / n (where there is a lobe)
+        power = value * self.factor
         self.count = patch.size
         self.sample = None  # each row's sample (None: row k is sample k, no glossy rows)
         lobe = samples[3] if len(samples) > 3 else None
         if lobe is not None:
             parts, directions = lobe
-            shine = self._shine(gathering, patch)
+            shine = self.shine = self._shine(gathering, patch)
             kept, rows = [], [power]
             self.row_of = np.full((2, self.count), -1)  # each part's glossy row (-1: none)
             for m in range(2):
@@ -107,11 +109,10 @@ class ReflectedPoints:
     def _part_power(self, gathering, parts, channels=3):
         """((2,C,K) each part's diffuse power, (2,C,K) its glossy power or None): a sample's
         shadow and cosine parts (grouping.SampleParts) times R A / n less their glossy share."""
-        factor = (gathering.reflectivity * gathering.area_per_sample).take(self.patch, axis=1)[:channels]
-        power = parts.value[:, :channels] * factor
+        power = parts.value[:, :channels] * self.factor[:channels]
         if self.sample is None:
             return power, None
-        glossy = parts.value[:, :channels] * self._shine(gathering, self.patch)[:channels]
+        glossy = parts.value[:, :channels] * self.shine[:channels]
         return np.maximum(power - glossy, 0.0), glossy
 
     def group_power(self, gathering, parts, S, C):
@@ -120,22 +121,22 @@ class ReflectedPoints:
         row (its part's; None without a lobe)."""
         diffuse, _ = self._part_power(gathering, parts, C)
         K = self.count
-        power = np.zeros(S * C * K)
-        # (flat places, each met once a part: a plain gather and scatter, where indexing the
-        # (S,C,K) array by (group, :, sample) took numpy's slow mixed path)
-        for m in range(2):
-            found = np.flatnonzero(parts.group[m] >= 0)
-            at = parts.group[m].take(found) * np.int64(C * K)
-            for c in range(C):
-                place = at + (c * K) + found
-                power[place] += diffuse[m, c].take(found)
+        power = np.empty((S, C, K))
+        # (a count a channel by (group, sample), the shadow parts then the cosine parts: the sums
+        # of adding them in turn, where indexing by (group, :, sample) took numpy's slow mixed path)
+        found = [np.flatnonzero(g >= 0) for g in parts.group]
+        key = np.concatenate([parts.group[m].take(f).astype(np.intp) * K + f for m, f in enumerate(found)])
+        for c in range(C):
+            weights = np.concatenate([diffuse[m, c].take(f) for m, f in enumerate(found)])
+            power[:, c] = np.bincount(key, weights=weights, minlength=S * K).reshape(S, K)
+        power = power.reshape(S * C, K)
         if self.sample is None:
-            return power.reshape(S * C, K), None
+            return power, None
         group = np.full(self.rows.shape[1] - K, -1, dtype=np.int32)
         for m in range(2):
             there = np.flatnonzero(self.row_of[m] >= 0)
             group[self.row_of[m].take(there) - K] = parts.group[m].take(there)
-        return power.reshape(S * C, K), group
+        return power, group
 
     def mix(self, gathering, parts, offset):
         """The rows as a walk's sources of ids from ``offset`` on, each a grouping.Mix of its
