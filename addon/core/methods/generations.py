@@ -173,12 +173,12 @@ def _cast_carried(tables, state, points, rows, u, carried, correction):
     values, columns, factor = carried
     columns = columns.astype(np.intp, copy=False)
     index = hits.patch.compress(hits.front).astype(np.intp)
-    escaped, back = hits.hit < 0, (hits.hit >= 0) & ~hits.front
+    escaped, back = np.flatnonzero(hits.hit < 0), np.flatnonzero((hits.hit >= 0) & ~hits.front)  # (few: no mask a row)
     lost = np.zeros((2, values.shape[0]))
     for r, v in enumerate(values):
         w = v.take(columns) * factor
         correction[r] += np.bincount(index, weights=w.compress(hits.front), minlength=tables.patch_count)
-        lost[0, r], lost[1, r] = w.compress(escaped).sum(), w.compress(back).sum()
+        lost[0, r], lost[1, r] = w.take(escaped).sum(), w.take(back).sum()
     state.escaped += lost[0]
     state.blocked += lost[1]
 
