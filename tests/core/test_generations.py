@@ -1,5 +1,5 @@
-"""The two-way iteration's per-source rows, counted a row at a time or sparsely, give the sums
-of the dense rows counted at once, to the bit (what the pins of per-source solves rest on)."""
+"""The two-way generations' per-source rows (generations), counted a row at a time or sparsely, give
+the sums of the dense rows counted at once, to the bit (what the pins of per-source solves rest on)."""
 import numpy as np
 import pytest
 
