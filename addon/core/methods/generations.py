@@ -13,6 +13,11 @@ irradiance joins the first generation's.
 
 A generation (``generation``) allots its rays to patches by systematic sampling, casts them from
 shifted Halton points, and scores each segment's two estimates (``two_way`` says how).
+
+Per source, every array has a row per group and channel (S C): they are counted a row at a time
+(a (S C, rays) temporary leaves the cache), and the glossy rows, each all one group's light, are
+kept as (C,G) with a group each (``_Lobe``); every sum meets the same values in the same order as
+the dense rows', so the results are theirs to the bit.
 """
 from __future__ import annotations
 
