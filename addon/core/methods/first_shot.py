@@ -117,7 +117,7 @@ class Gathering:
         self.table = SourceTable(weights) if weights.any() else None
         self.choice = weights / weights.sum() if weights.any() else weights  # P_s
         self.near = near_choice(scene, self.choice) if self.table is not None else None
-        self.emission = scene.emission.T  # (3,P)
+        self.emission, self.emits = scene.emission.T, scene.emission.any(axis=1)  # (3,P); (P,) what a cosine ray can find
         self.reflectivity = scene.reflectivity.T  # (3,P)
         self.patch_area = scene.patch_area
         self.cosine_share = cosine_share(scene, bool(self.worlds))
@@ -365,7 +365,7 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, 
     towards = towards.astype(np.float64)
     towards /= np.sqrt(np.einsum("in,in->n", towards, towards))  # (normal + a sphere point: cosine distributed)
     hit, source, front, t = trace(tables, x, towards, g.region_of(patch))
-    met = np.flatnonzero(front & (hit >= 0) & (gathering.emission[:, source].any(axis=0)) & (source != patch))
+    met = np.flatnonzero(front & (hit >= 0) & gathering.emits.take(source) & (source != patch))
     if met.size:
         s = source[met]
         cos_x = np.einsum("in,in->n", normal[:, met], towards[:, met])

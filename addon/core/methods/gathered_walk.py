@@ -35,13 +35,15 @@ class ReflectedPoints:
     def __init__(self, gathering, geometry, samples, rng):
         patch, x, value = samples[:3]
         factor = gathering.reflectivity * gathering.area_per_sample  # R_j A_j / n_j
-        power = value * factor.take(patch, axis=1)
+        self.factor = factor.take(patch, axis=1)  # (3,K) each sample's (its parts' too: _part_power)
+        self.shine = None  # (3,K) each sample's glossy share times A / n (where there is a lobe)
+        power = value * self.factor
         self.count = patch.size
         self.sample = None  # each row's sample (None: row k is sample k, no glossy rows)
         lobe = samples[3] if len(samples) > 3 else None
         if lobe is not None:
             parts, directions = lobe
-            shine = self._shine(gathering, patch)
+            shine = self.shine = self._shine(gathering, patch)
             kept, rows = [], [power]
             self.row_of = np.full((2, self.count), -1)  # each part's glossy row (-1: none)
             for m in range(2):
@@ -57,10 +59,18 @@ class ReflectedPoints:
             self.alpha = gathering.glossy.alpha.take(patch.take(self.sample[self.count:]))
             self.rng = np.random.default_rng(rng.integers(1 << 63))
             power = np.hstack(rows)
-        self.power = np.ascontiguousarray(power.T)
+        self.rows = power  # (3,N) (the two-way iteration reads it so; the walk reads ``power``)
+        self._power = None
         self.patch = patch
         self.points = np.asarray(x, dtype=np.float32)
         self.normals = geometry.patch_normal_rows.take(patch, axis=1)
+
+    @property
+    def power(self):
+        """(N,3) each row's power (the walk's source table reads it so)."""
+        if self._power is None:
+            self._power = np.ascontiguousarray(self.rows.T)
+        return self._power
 
     @staticmethod
     def _shine(gathering, patch):
@@ -70,7 +80,7 @@ class ReflectedPoints:
     @property
     def glossy_rows(self):
         """(G,) the rows of the glossy shares (none: an empty array)."""
-        return np.arange(self.count, self.power.shape[0])
+        return np.arange(self.count, self.rows.shape[1])
 
     def samples_of(self, rows):
         """(n,) the sample each of ``rows`` leaves from."""
@@ -99,36 +109,34 @@ class ReflectedPoints:
     def _part_power(self, gathering, parts, channels=3):
         """((2,C,K) each part's diffuse power, (2,C,K) its glossy power or None): a sample's
         shadow and cosine parts (grouping.SampleParts) times R A / n less their glossy share."""
-        factor = (gathering.reflectivity * gathering.area_per_sample).take(self.patch, axis=1)[:channels]
-        power = parts.value[:, :channels] * factor
+        power = parts.value[:, :channels] * self.factor[:channels]
         if self.sample is None:
             return power, None
-        glossy = parts.value[:, :channels] * self._shine(gathering, self.patch)[:channels]
+        glossy = parts.value[:, :channels] * self.shine[:channels]
         return np.maximum(power - glossy, 0.0), glossy
 
     def group_power(self, gathering, parts, S, C):
-        """(S C, rows) each source group's part of every row's power (per-source results):
-        a sample's shadow and cosine parts each in its group, each part's glossy share in its
-        glossy row."""
-        diffuse, glossy = self._part_power(gathering, parts, C)
-        N = self.power.shape[0]
-        power = np.zeros(S * C * N)
-        # (flat places, each met once a part: a plain gather and scatter, where indexing the
-        # (S,C,N) array by (group, :, row) took numpy's slow mixed path)
+        """(S C,K) each source group's part of every sample's diffuse power (per-source results):
+        a sample's shadow and cosine parts each in its group; and (G,) the group of each glossy
+        row (its part's; None without a lobe)."""
+        diffuse, _ = self._part_power(gathering, parts, C)
+        K = self.count
+        power = np.empty((S, C, K))
+        # (a count a channel by (group, sample), the shadow parts then the cosine parts: the sums
+        # of adding them in turn, where indexing by (group, :, sample) took numpy's slow mixed path)
+        found = [np.flatnonzero(g >= 0) for g in parts.group]
+        key = np.concatenate([parts.group[m].take(f).astype(np.intp) * K + f for m, f in enumerate(found)])
+        for c in range(C):
+            weights = np.concatenate([diffuse[m, c].take(f) for m, f in enumerate(found)])
+            power[:, c] = np.bincount(key, weights=weights, minlength=S * K).reshape(S, K)
+        power = power.reshape(S * C, K)
+        if self.sample is None:
+            return power, None
+        group = np.full(self.rows.shape[1] - K, -1, dtype=np.int32)
         for m in range(2):
-            found = np.flatnonzero(parts.group[m] >= 0)
-            at = parts.group[m].take(found) * np.int64(C * N)
-            for c in range(C):
-                place = at + (c * N) + found
-                power[place] += diffuse[m, c].take(found)
-            if glossy is not None:
-                row = self.row_of[m].take(found)
-                there = np.flatnonzero(row >= 0)
-                at_row = at.take(there) + row.take(there)
-                for c in range(C):
-                    place = at_row + c * N
-                    power[place] += glossy[m, c].take(found.take(there))
-        return power.reshape(S * C, N)
+            there = np.flatnonzero(self.row_of[m] >= 0)
+            group[self.row_of[m].take(there) - K] = parts.group[m].take(there)
+        return power, group
 
     def mix(self, gathering, parts, offset):
         """The rows as a walk's sources of ids from ``offset`` on, each a grouping.Mix of its
@@ -137,7 +145,7 @@ class ReflectedPoints:
         group = np.maximum(parts.group, 0)
         if glossy is None:
             return Mix(offset, group, np.ascontiguousarray(diffuse.transpose(0, 2, 1)))
-        G = self.power.shape[0] - self.count
+        G = self.rows.shape[1] - self.count
         lobe_group, lobe = np.zeros((2, G), dtype=group.dtype), np.zeros((2, 3, G))
         for m in range(2):
             at = np.flatnonzero(self.row_of[m] >= 0)

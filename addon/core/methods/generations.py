@@ -13,6 +13,11 @@ irradiance joins the first generation's.
 
 A generation (``generation``) allots its rays to patches by systematic sampling, casts them from
 shifted Halton points, and scores each segment's two estimates (``two_way`` says how).
+
+Per source, every array has a row per group and channel (S C): they are counted a row at a time
+(a (S C, rays) temporary leaves the cache), and the glossy rows, each all one group's light, are
+kept as (C,G) with a group each (``_Lobe``); every sum meets the same values in the same order as
+the dense rows', so the results are theirs to the bit.
 """
 from __future__ import annotations
 
@@ -50,21 +55,22 @@ def reflect_first(tables, gathering, state, samples, paths, rng, parts=None, che
     state.reflected = state.reflectivity * state.irradiance
     points = ReflectedPoints(gathering, tables.geometry, samples, rng)
     K = points.count
-    power = points.power[:, :C].T
-    rows_power = power if parts is None else points.group_power(gathering, parts, state.groups, C)
+    power = points.rows[:C]
+    # Per source: each group's part of the samples' diffuse power (S C,K), the group of each glossy row.
+    rows_power, lobe_group = (power[:, :K], None) if parts is None else points.group_power(gathering, parts, state.groups, C)
     spread = np.bincount(patch, minlength=P)  # m_j
     glossy = points.glossy_rows
+    lobe = _Lobe(power[:, K:], lobe_group, state.groups, P)
     if glossy.size:  # (the lobe's light leaves no patch evenly)
         lobe_patch = patch.take(points.samples_of(glossy))
-        lobe_power = np.stack([np.bincount(lobe_patch, weights=w, minlength=P) for w in rows_power[:, K:]])
-        state.reflected -= lobe_power / gathering.patch_area
+        state.reflected -= lobe.sums(lobe_patch, np.ones(glossy.size, dtype=bool), lobe.power) / gathering.patch_area
     correction = np.zeros((rows_power.shape[0], P))
-    total_power = max(float(points.power[:, :C].sum()) / C, 1e-300)
-    _shoot_left(tables, state, points, None if parts is None else rows_power[:, :K], power[:, :K], spread, correction,
+    total_power = max(float(power.sum()) / C, 1e-300)
+    _shoot_left(tables, state, points, None if parts is None else rows_power, power[:, :K], spread, correction,
                 paths, total_power, rng, check)
     if glossy.size:
         check is None or check()
-        _shoot_glossy(tables, state, points, rows_power[:, K:], correction, paths, total_power, rng)
+        _shoot_glossy(tables, state, points, lobe, correction, paths, total_power, rng)
     state.correction = correction / gathering.patch_area
 
 
@@ -75,9 +81,12 @@ def _shoot_left(tables, state, points, rows_power, power, spread, correction, pa
     P = tables.patch_count
     patch = points.patch
 
-    def less_mean(rows):
-        mean = np.stack([np.bincount(patch, weights=p, minlength=P) for p in rows]) / np.maximum(spread, 1)
-        return rows - mean.take(patch, axis=1)
+    def less_mean(rows):  # (a row at a time: no (rows, K) temporaries)
+        left, count = np.empty_like(rows), np.maximum(spread, 1)
+        for out, p in zip(left, rows):
+            mean = np.bincount(patch, weights=p, minlength=P) / count
+            np.subtract(p, mean.take(patch), out=out)
+        return left
 
     left = less_mean(power)  # c_k
     rows_left = left if rows_power is None else less_mean(rows_power)
@@ -95,15 +104,44 @@ def _shoot_left(tables, state, points, rows_power, power, spread, correction, pa
         k = sample[rows]
         u = np.empty((4, k.size), dtype=np.float32)  # (a sample's point is its origin: u[2:4] the direction)
         u[2:4] = _shifted_points(table, rank[rows], shift.take(ray_patch[rows], axis=1))
-        carried = rows_left.take(k, axis=1) * (total / count / size.take(k))  # (C,n) signed power a ray
-        _cast_carried(tables, state, points, k, u, carried, correction)
+        # (signed power a ray: rows_left[:, k] times this)
+        _cast_carried(tables, state, points, k, u, (rows_left, k, total / count / size.take(k)), correction)
 
 
-def _shoot_glossy(tables, state, points, rows_power, correction, paths, total_power, rng):
-    """The glossy rows' power (``rows_power`` (S C,G)) shot from their samples along their lobes,
+class _Lobe:
+    """The glossy rows' power (``power`` (C,G)); per source, each row's group (``group`` (G,), -1:
+    none; else None) among S: a row's light is all of its group's (a part of one sample)."""
+
+    def __init__(self, power, group, S, P):
+        self.power, self.group, self.S, self.P = power, group, S, P
+        if group is not None:
+            self.power = np.where(group >= 0, power, 0.0)
+            self.key = np.maximum(group, 0).astype(np.intp) * P  # (each row's group's first place)
+
+    def sums(self, patch, mask, weights, rows=None):
+        """(S C,P) (or (C,P)) the masked ``weights`` (C,n) of rows ``rows`` (all: None) summed by
+        ``patch`` (n,), each group's channels its rows (as the rows (S C,n) with zeros elsewhere)."""
+        patch = patch.compress(mask).astype(np.intp)
+        if self.group is None:
+            return np.stack([np.bincount(patch, weights=w.compress(mask), minlength=self.P) for w in weights])
+        key = (self.key if rows is None else self.key.take(rows)).compress(mask) + patch
+        S, C = self.S, weights.shape[0]
+        sums = np.stack([np.bincount(key, weights=w.compress(mask), minlength=S * self.P) for w in weights])
+        return sums.reshape(C, S, self.P).transpose(1, 0, 2).reshape(S * C, self.P)
+
+    def lost(self, mask, weights, rows):
+        """(S C,) (or (C,)) the masked ``weights`` (C,n) of rows ``rows`` summed by row, each as
+        the (S C,n) rows' sum (zeros elsewhere; numpy's pairwise sum over the same values)."""
+        if self.group is None:
+            return np.array([w.compress(mask).sum() for w in weights])
+        group, kept = self.group.take(rows).compress(mask), [w.compress(mask) for w in weights]
+        return np.array([np.where(group == g, w, 0.0).sum() for g in range(self.S) for w in kept])
+
+
+def _shoot_glossy(tables, state, points, lobe, correction, paths, total_power, rng):
+    """The glossy rows' power (``lobe``, a _Lobe) shot from their samples along their lobes,
     rays allotted in proportion to it (as _shoot_left's); irradiance times area into ``correction``."""
-    C = tables.channels
-    size = rows_power.reshape(-1, C, rows_power.shape[1]).sum(axis=0).mean(axis=0)
+    size = lobe.power.mean(axis=0)
     allotted = _allot(state, size, paths, total_power, rng)
     if allotted is None:
         return
@@ -111,8 +149,12 @@ def _shoot_glossy(tables, state, points, rows_power, correction, paths, total_po
     for start in range(0, count, RAY_BLOCK):
         g = row[start:start + RAY_BLOCK]
         u = np.zeros((4, g.size), dtype=np.float32)  # (the lobe draws its own directions: ReflectedPoints)
-        carried = rows_power.take(g, axis=1) * (total / count / size.take(g))
-        _cast_carried(tables, state, points, g + points.count, u, carried, correction)
+        origins, directions = points.unit_rays(g + points.count, u, tables.geometry)
+        hits = rays.cast(tables, origins, directions, points.regions(g + points.count, tables.geometry))
+        w = lobe.power.take(g, axis=1) * (total / count / size.take(g))  # (C,n) power a ray
+        correction += lobe.sums(hits.patch, hits.front, w, g)
+        state.escaped += lobe.lost(hits.hit < 0, w, g)
+        state.blocked += lobe.lost((hits.hit >= 0) & ~hits.front, w, g)
 
 
 def _allot(state, size, paths, total_power, rng):
@@ -128,13 +170,22 @@ def _allot(state, size, paths, total_power, rng):
 
 
 def _cast_carried(tables, state, points, rows, u, carried, correction):
-    """Rays from ``points``' rows ``rows`` (uniforms ``u``) carrying ``carried`` (S C,n) power
-    each: what meets a front into ``correction``, what escapes or meets a back into the accounts."""
+    """Rays from ``points``' rows ``rows`` (uniforms ``u``) carrying power ``carried`` = (values (S C,m),
+    columns (n,), factor (n,)): each ray values[:, column] times its factor. What meets a front goes into
+    ``correction``, what escapes or meets a back into the accounts; a row at a time (no (S C,n) temporary)."""
     origins, directions = points.unit_rays(rows, u, tables.geometry)
     hits = rays.cast(tables, origins, directions, points.regions(rows, tables.geometry))
-    correction += _bincount(hits.patch, hits.front, carried, tables.patch_count)
-    state.escaped += carried.compress(hits.hit < 0, axis=1).sum(axis=1)
-    state.blocked += carried.compress((hits.hit >= 0) & ~hits.front, axis=1).sum(axis=1)
+    values, columns, factor = carried
+    columns = columns.astype(np.intp, copy=False)
+    index = hits.patch.compress(hits.front).astype(np.intp)
+    escaped, back = np.flatnonzero(hits.hit < 0), np.flatnonzero((hits.hit >= 0) & ~hits.front)  # (few: no mask a row)
+    lost = np.zeros((2, values.shape[0]))
+    for r, v in enumerate(values):
+        w = v.take(columns) * factor
+        correction[r] += np.bincount(index, weights=w.compress(hits.front), minlength=tables.patch_count)
+        lost[0, r], lost[1, r] = w.take(escaped).sum(), w.take(back).sum()
+    state.escaped += lost[0]
+    state.blocked += lost[1]
 
 
 def _paired_ranks(ray_patch, negative, P, rng):
@@ -159,12 +210,6 @@ def _shifted_points(table, rank, shift):
     points = table.take(rank, axis=1)
     points ^= shift
     return unit_floats(points, np.float32)
-
-
-def _bincount(patch, mask, weights, P):
-    """(C,P) sums of ``weights`` (C,n) over the masked columns, by patch."""
-    index = patch.compress(mask)
-    return np.stack([np.bincount(index, weights=w.compress(mask), minlength=P) for w in weights])
 
 
 def reflected_power(area, reflected, groups=1):
@@ -232,8 +277,8 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
     s = density.take(i)
     s += density.take(j)
     np.reciprocal(s, out=s)
-    if value.shape[0] > tables.channels:  # (per source, many rows: both ends in one count a row)
-        _score_rows(np.concatenate((i, j)), np.concatenate((j, i)), np.concatenate((s, s)), value, H)
+    if value.shape[0] > tables.channels:  # (per source, many rows: a row at a time)
+        _score_rows(i, j, s, value, H)
     else:
         gathered, shot = value.take(j, axis=1), value.take(i, axis=1)
         gathered *= s
@@ -246,12 +291,16 @@ def _score_two_ways(tables, patch, u, value, density, H, lost):
         lost[1] += np.bincount(patch.compress((hits.hit >= 0) & ~met), minlength=P)
 
 
-def _score_rows(to, source, s, value, H):
-    """Adds s value[:, source] to H[:, to] for every row of ``value`` (per-source rows)."""
-    carried = value.take(source, axis=1)
-    carried *= s
-    for row, weights in zip(H, carried):
-        row += np.bincount(to, weights=weights, minlength=row.size)
+def _score_rows(i, j, s, value, H):
+    """Adds s value[:, j] to H[:, i] and s value[:, i] to H[:, j] for every row of ``value`` (per-source
+    rows), a row at a time: the ends at i counted first, then those at j added one by one in order
+    (np.add.at), the sums of one count over both ends to the bit, without (rows, 2n) temporaries
+    that leave the cache."""
+    i, j = i.astype(np.intp), j.astype(np.intp)
+    for row, v in zip(H, value):
+        ends = np.bincount(i, weights=v.take(j) * s, minlength=row.size)
+        np.add.at(ends, j, v.take(i) * s)
+        row += ends
 
 
 def _ray_blocks(count, rng):
