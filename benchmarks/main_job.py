@@ -83,12 +83,13 @@ def child(argv):
     return status
 
 
-def stages(folder, extra=()):
-    """One main job in a child process: ([(stage, wall s, CPU s)], load averages before and after, summary line)."""
+def stages(folder, code=ROOT):
+    """One main job in a child process, the extension's code from the checkout ``code``:
+    ([(stage, wall s, CPU s)], load averages before and after, summary line)."""
     load = os.getloadavg()[0]
-    command = [sys.executable, "-m", "benchmarks.main_job", "--child", "--scene", "cornell", "-q",
-               "-o", str(Path(folder) / "cornell.blend"), *extra]
-    done = subprocess.run(command, cwd=folder, env={**os.environ, "PYTHONPATH": str(ROOT)},
+    command = [sys.executable, str(Path(__file__).resolve()), "--child", "--scene", "cornell", "-q",
+               "-o", str(Path(folder) / "cornell.blend")]
+    done = subprocess.run(command, cwd=folder, env={**os.environ, "PYTHONPATH": str(ROOT), "MAIN_JOB_CODE": str(code)},
                           capture_output=True, text=True, check=True)
     rows = [json.loads(line[6:]) for line in done.stdout.splitlines() if line.startswith("STAGE ")]
     summary = next((line for line in done.stdout.splitlines() if line.startswith("cornell:")), "")
@@ -182,17 +183,17 @@ def pictures(blend, reference_samples, variants, log=print):
 # --------------------------------------------------------------------------- report
 
 def stage_table(runs):
-    names = list(dict.fromkeys(row[0] for rows, _, _ in runs for row in rows))
-    lines = ["| stage | " + " | ".join(f"run {k + 1}: wall / CPU s" for k in range(len(runs))) + " |",
+    names = list(dict.fromkeys(row[0] for _, rows, _, _ in runs for row in rows))
+    lines = ["| stage | " + " | ".join(f"{label}: wall / CPU s" for label, _, _, _ in runs) + " |",
              "|---|" + "---|" * len(runs)]
     for name in names:
         cells = []
-        for rows, _, _ in runs:
+        for _, rows, _, _ in runs:
             hits = [r for r in rows if r[0] == name]
             cells.append(f"{sum(r[1] for r in hits):.1f} / {sum(r[2] for r in hits):.1f}" if hits else "-")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     lines.append("| load average (1 min) before / after | "
-                 + " | ".join(f"{a:.1f} / {b:.1f}" for _, (a, b), _ in runs) + " |")
+                 + " | ".join(f"{a:.1f} / {b:.1f}" for _, _, (a, b), _ in runs) + " |")
     return lines
 
 
@@ -202,8 +203,8 @@ def report(runs, picture, own, reference_samples, command):
              "`python -m addon --scene cornell` in a child process, each step's wall and CPU seconds (every thread). "
              "The render is part of the preview's row; the solve's row includes writing the results.", ""]
     lines += stage_table(runs)
-    if runs:
-        lines += ["", f"The run's summary: `{runs[-1][2]}`"]
+    for label, _, _, summary in runs[-2:]:
+        lines += ["", f"{label}, the run's summary: `{summary}`"]
     if picture:
         lines += ["", "## The picture", "",
                   f"Against Cycles on the original scene at {WIDTH} x {WIDTH}, {reference_samples} samples in two halves "
@@ -222,11 +223,12 @@ def report(runs, picture, own, reference_samples, command):
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["--child"]:
-        from addon.cli.run import main as run_main  # noqa: F401 - the run's modules loaded before wrapping
-
+        sys.path.insert(0, os.environ.get("MAIN_JOB_CODE", str(ROOT)))  # (the checkout whose main job is timed)
         return child(argv[1:])
     parser = argparse.ArgumentParser(prog="python -m benchmarks.main_job")
     parser.add_argument("--runs", type=int, default=2, help="timed runs of the main job")
+    parser.add_argument("--before", metavar="DIR", help="a checkout of earlier code: its main job timed too, "
+                        "run by run alternating with this one")
     parser.add_argument("--no-pictures", action="store_true")
     parser.add_argument("--reference-samples", type=int, default=256)
     parser.add_argument("--out", default=str(RESULTS / "main_job.md"))
@@ -234,9 +236,10 @@ def main(argv=None):
     with tempfile.TemporaryDirectory(prefix="main_job_") as folder:
         runs = []
         for k in range(args.runs):
-            runs.append(stages(folder))
-            for name, wall, cpu in runs[-1][0]:
-                print(f"run {k + 1}: {name}: {wall:.1f} s wall, {cpu:.1f} s CPU", flush=True)
+            for label, code in ([("before", Path(args.before).resolve())] if args.before else []) + [("now", ROOT)]:
+                runs.append((f"{label}, run {k + 1}", *stages(folder, code)))
+                for name, wall, cpu in runs[-1][1]:
+                    print(f"{runs[-1][0]}: {name}: {wall:.1f} s wall, {cpu:.1f} s CPU", flush=True)
         picture, own = (None, None) if args.no_pictures else pictures(solved_box(folder), args.reference_samples,
                                                                      VARIANTS)
     if not args.no_pictures:
