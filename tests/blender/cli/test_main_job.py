@@ -18,7 +18,7 @@ def _readme_promise():
 
 
 def test_the_main_jobs_preview_and_target_are_what_the_readme_says(tmp_path):
-    """Fixed samples (no adaptive sampling: at a few samples it costs more than it saves),
+    """Fixed samples (no adaptive sampling: the count the README gives, on every pixel),
     OpenImageDenoise with the albedo and normal passes, one bounce; the Cornell sample's own target."""
     import bpy
 
