@@ -103,8 +103,8 @@ class SceneChanges:
 def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> SceneChanges:
     """Set the scene up to render the result objects' baked colours: Cycles without bounces
     (the light transport is in the colours; live lamps light their materials directly, and one
-    bounce gathers the results' light at each camera hit, then denoised by OpenImageDenoise with
-    the albedo and normal passes), otherwise no denoising; fixed samples; Standard view, the given exposure,
+    bounce gathers the results' light at each camera hit, then denoised with the albedo and
+    normal passes), otherwise no denoising; fixed samples; Standard view, the given exposure,
     a black world of its own (live results: the scene's, where it gives light, which the renderer
     draws on them), PNG output, and a camera if the scene has none. Returns the changes, for
     ``restore()``."""
@@ -176,8 +176,10 @@ def _results_seen(scene, changes):
             changes.set(material.cycles, "emission_sampling", "NONE")
     live = any(material.get(LIVE_PROPERTY) for material in materials)
     if live:
-        for name, value in (("use_denoising", True), ("denoiser", "OPENIMAGEDENOISE"),
-                            ("denoising_input_passes", "RGB_ALBEDO_NORMAL"), ("denoising_prefilter", "ACCURATE")):
+        # (the denoiser itself is left as the scene has it, OpenImageDenoise by default: setting it makes
+        # Cycles look for GPUs, which prints a warning on a machine without CUDA)
+        for name, value in (("use_denoising", True), ("denoising_input_passes", "RGB_ALBEDO_NORMAL"),
+                            ("denoising_prefilter", "ACCURATE")):
             changes.set(scene.cycles, name, value)
         # one bounce: the camera's hits gather the light of the results their rays meet, lit by the
         # lamps and showing their solved light after a bounce (materials._lit_by_lamps)
