@@ -54,8 +54,8 @@ def parser():
                    f"({RESOLUTION.range_text()}; default {RESOLUTION.default})"))
     p.add_argument("--samples", type=int, default=None, help=_literal(
         f"Cycles samples for the preview ({SAMPLES.range_text()}; default {LIVE_SAMPLES} with live lamps on textured "
-        f"results, {SAMPLES.default} with --no-live-lamps or another output: a live preview is a Monte Carlo render, "
-        "a baked one has no noise to average)"))
+        f"results, denoised: a Monte Carlo render; {SAMPLES.default} with --no-live-lamps or another output, which "
+        "has no noise to average)"))
     return p
 
 
@@ -74,9 +74,9 @@ def _literal(text):
 # The preview's own options (not settings of the solve).
 RESOLUTION = options.Number("resolution", "--resolution", 480, 16, 16384, "Resolution", "", unit="pixels", integer=True)
 SAMPLES = options.Number("samples", "--samples", 16, 1, 65536, "Samples", "", integer=True)
-# With live lamps the preview renders the lamps' light and a bounce: at the panel's 5% target, 64 samples
-# take the rest of the time Cycles alone would spend (benchmarks/results/picture_samples64.md).
-LIVE_SAMPLES = 64
+# With live lamps the preview renders the lamps' light and a bounce, denoised: the main job's picture at 16 samples
+# is as close to Cycles as at 64, in a quarter of the render (benchmarks/results/main_job.md).
+LIVE_SAMPLES = 16
 
 
 def checked(args):

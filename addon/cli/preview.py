@@ -103,7 +103,8 @@ class SceneChanges:
 def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> SceneChanges:
     """Set the scene up to render the result objects' baked colours: Cycles without bounces
     (the light transport is in the colours; live lamps light their materials directly, and one
-    bounce gathers the results' light at each camera hit, then denoised), otherwise no denoising, Standard view, the given exposure,
+    bounce gathers the results' light at each camera hit, then denoised with the albedo and
+    normal passes), otherwise no denoising; fixed samples; Standard view, the given exposure,
     a black world of its own (live results: the scene's, where it gives light, which the renderer
     draws on them), PNG output, and a camera if the scene has none. Returns the changes, for
     ``restore()``."""
@@ -130,6 +131,7 @@ def preview_settings(scene, sources, width=480, samples=16, exposure=0.0) -> Sce
     changes.set(render, "engine", "CYCLES")
     changes.set(scene.cycles, "device", "CPU")
     changes.set(scene.cycles, "samples", samples)
+    changes.set(scene.cycles, "use_adaptive_sampling", False)  # the samples asked for, every pixel (at 16 it stops none early)
     changes.set(scene.cycles, "max_bounces", 0)  # the light transport is baked in the colours
     changes.set(scene.cycles, "use_denoising", False)
     changes.set(render, "resolution_x", width)
@@ -174,7 +176,11 @@ def _results_seen(scene, changes):
             changes.set(material.cycles, "emission_sampling", "NONE")
     live = any(material.get(LIVE_PROPERTY) for material in materials)
     if live:
-        changes.set(scene.cycles, "use_denoising", True)
+        # (the denoiser itself is left as the scene has it, OpenImageDenoise by default: setting it makes
+        # Cycles look for GPUs, which prints a warning on a machine without CUDA)
+        for name, value in (("use_denoising", True), ("denoising_input_passes", "RGB_ALBEDO_NORMAL"),
+                            ("denoising_prefilter", "ACCURATE")):
+            changes.set(scene.cycles, name, value)
         # one bounce: the camera's hits gather the light of the results their rays meet, lit by the
         # lamps and showing their solved light after a bounce (materials._lit_by_lamps)
         for name, value in (("max_bounces", 1), ("glossy_bounces", 1), ("diffuse_bounces", 1),

@@ -117,15 +117,15 @@ def test_the_detail_option_on_the_command_line():
     assert set(DETAILS) == {i for i, _, _ in options.DETAIL.items} - {"OFF"}
 
 
-def test_the_preview_takes_more_samples_with_live_lamps_unless_told():
+def test_the_preview_takes_its_samples_by_live_lamps_unless_told():
     """The command line's preview: LIVE_SAMPLES with live lamps on textured results (the default:
-    the renderer draws the lamps' light and a bounce, a Monte Carlo render); 16 baked, with
+    the renderer draws the lamps' light and a bounce, a Monte Carlo render, denoised); 16 baked, with
     --no-live-lamps or another output (no noise to average); an explicit --samples wins either
     way, and is still checked against its range."""
     from addon.cli.arguments import LIVE_SAMPLES, SAMPLES, checked, parser
 
     assert options.LIVE_LAMPS.default is True
-    assert checked(parser().parse_args([])).samples == LIVE_SAMPLES == 64
+    assert checked(parser().parse_args([])).samples == LIVE_SAMPLES == 16
     assert checked(parser().parse_args(["--no-live-lamps"])).samples == SAMPLES.default == 16
     assert checked(parser().parse_args(["--colours", "vertex"])).samples == 16
     assert checked(parser().parse_args(["--live-lamps", "--samples", "8"])).samples == 8
