@@ -8,7 +8,7 @@ from __future__ import annotations
 from benchmarks import picture_metrics as pm
 
 #: Picture kinds as the reports name them, in their order.
-LABELS = {"eevee": "EEVEE (Material Preview: the scene's lamps and world)",
+LABELS = {"eevee": "EEVEE (Material Preview, with the scene's lamps and world on)",
           "baked": "baked display (stored light x surface, as emission: no lamps)",
           "attribute": "'Radiosity' attribute alone (Solid view, exporters)",
           "preview": "the product's own Cycles preview (live lamps, 1 bounce, denoised)",
