@@ -151,15 +151,16 @@ def eevee_image():
         return pic.render_exr(scene)
 
 
-def preview_image(width):
-    """The product's own preview of the current view (``cli.preview``'s settings, restored after)."""
+def preview_image(width, samples=None):
+    """The product's own preview of the current view (``cli.preview``'s settings, restored after;
+    ``samples``: the command line's default unless given)."""
     import bpy
 
     from addon.cli import preview
 
     scene = bpy.context.scene
     with results_only() as sources:
-        changes = preview.preview_settings(scene, sources, width, pic.PREVIEW_SAMPLES, 0.0)
+        changes = preview.preview_settings(scene, sources, width, samples or pic.PREVIEW_SAMPLES, 0.0)
         try:
             scene.render.threads_mode, scene.render.threads = "FIXED", pic.THREADS
             return pic.render_exr(scene)

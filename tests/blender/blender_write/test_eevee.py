@@ -16,6 +16,10 @@ from ..conftest import box_arrays, make_object, principled, result_objects
 SIZE = (64, 48)
 REFERENCE_SAMPLES = 256  # each of the reference's two independent halves
 Z = 3.0  # standard errors of the band about the reference
+# The product's Cycles view at 64 samples, so that its own error in an object's mean stays well under
+# the 3% compared (at the command line's 16, denoised at 64 x 48, the window room's ceiling is 1.051
+# of EEVEE's; at 64, 1.021).
+CYCLES_SAMPLES = 64
 
 
 def _quad(name, corners, material):
@@ -129,7 +133,7 @@ def _pictures(build):
         assert result_objects()
         solve_error = scene.radiosity.last_relative_error / 100.0  # (the run's measured relative RMS a patch)
         eevee = shown.eevee_image()[0]
-        cycles = shown.preview_image(SIZE[0])[0]
+        cycles = shown.preview_image(SIZE[0], CYCLES_SAMPLES)[0]
     finally:
         addon.unregister()
     count = len(names)
