@@ -212,11 +212,4 @@ class VIEW3D_PT_radiosity(bpy.types.Panel):
 classes = (VIEW3D_PT_radiosity,)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

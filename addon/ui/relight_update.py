@@ -148,11 +148,4 @@ class RADIOSITY_OT_update(bpy.types.Operator):
 classes = (RADIOSITY_OT_update,)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
