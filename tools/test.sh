@@ -4,6 +4,5 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 python="$(bash "$root/tools/env.sh")"
 cd "$root"
-# Two workers, one per core, the idle one taking tests from the busy one (worksteal: no long tail);
-# tests are independent (own temporary folders, free ports).
-exec "$python" -m pytest -q -n 2 --dist worksteal --durations=15 "$@"
+# Two workers, one per core; tests are independent (own temporary folders, free ports).
+exec "$python" -m pytest -q -n 2 --durations=15 "$@"
