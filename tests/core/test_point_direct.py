@@ -3,7 +3,6 @@ lamp at every corner a room's slabs leave in view, filled where a corner is insi
 patches' means kept to float error, source groups adding up, and a lamp's hot spot shown closer
 to the exact light than the smooth patch means alone."""
 import numpy as np
-import pytest
 from boxes import rectangles_to_mesh
 from overlap_boxes import slab_room
 
@@ -77,6 +76,14 @@ def _lit_ceiling(n=8, side=2.0, height=0.25, lights=None):
     lights = [PointLight(lamp, np.ones(3))] if lights is None else lights(lamp)
     return PatchScene(V, T, TP, np.full(n * n, 0.5), np.zeros(n * n), lights=lights), lamp, (origin, u, v)
 
+
+
+def _square_lamp_ceiling(size=0.4):
+    """``_lit_ceiling`` under a downward square area lamp of side ``size``, 0.3 m below it."""
+    def lamps(lamp):
+        return [AreaLight(lamp, np.array([size / 2, 0.0, 0.0]), np.array([0.0, size / 2, 0.0]), np.array([0.0, 0.0, 1.0]),
+                          np.ones(3))]
+    return _lit_ceiling(lights=lamps, height=0.3)
 
 def _ceiling_light(lamp, points):
     """A point lamp's light on the ceiling (normal -z) at ``points`` (...,3)."""
@@ -162,11 +169,7 @@ def test_an_area_lamps_corner_light_is_unbiased_and_within_its_noise_rule():
     stratified samples were independent: an overestimate) is NOISE_SHARE of its patch's
     brightest corner's light, so no corner is off by 3 times that."""
     size = 0.4
-
-    def lamps(lamp):
-        return [AreaLight(lamp, np.array([size / 2, 0.0, 0.0]), np.array([0.0, size / 2, 0.0]), np.array([0.0, 0.0, 1.0]),
-                          np.ones(3))]
-    scene, lamp, _ = _lit_ceiling(lights=lamps, height=0.3)
+    scene, lamp, _ = _square_lamp_ceiling(size)
     surface = _surface(scene)
     direct = point_direct.corner_direct(surface, scene, scene.triangles, seed=3)
     points = _shown_points(scene, surface).reshape(-1, 3)
@@ -551,11 +554,7 @@ def test_an_area_lamps_noise_beside_ten_times_its_light_is_not_sampled_again(mon
     from addon.core.methods.tables import WalkTables
 
     size = 0.4
-
-    def lamps(lamp):
-        return [AreaLight(lamp, np.array([size / 2, 0.0, 0.0]), np.array([0.0, size / 2, 0.0]), np.array([0.0, 0.0, 1.0]),
-                          np.ones(3))]
-    scene, lamp, _ = _lit_ceiling(lights=lamps, height=0.3)
+    scene, lamp, _ = _square_lamp_ceiling(size)
     surface = _surface(scene)
     rays = []
     traced = WalkTables.outside_turn
