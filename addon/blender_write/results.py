@@ -230,7 +230,7 @@ def _result_object(output_data, index, output_mode, layers, light, notes, materi
     """The result object of source ``index``: its mesh, the source's UV maps and colour
     attributes, the colours, and its materials (``materials_for(slot names)`` for the textured
     output, else ``material``)."""
-    arrays, pm = output_data.patches.objects[index], output_data.patches.meshes[index]
+    arrays, pm = output_data.patches.objects[index], written_mesh(output_data, index)
     faces, points = output_data.face_colours[index], output_data.smooth_colours[index]
     if not all(v is None or np.isfinite(v).all() for v in (faces, points, light, _bounced_of(output_data, index))):
         raise ValueError(f"the result for '{arrays.name}' is not finite")
@@ -247,7 +247,7 @@ def _result_object(output_data, index, output_mode, layers, light, notes, materi
 
 def _fill_result(obj, output_data, index, output_mode, layers, light, notes, materials_for, material):
     """What ``_result_object`` writes on its new object ``obj``."""
-    arrays, pm, mesh = output_data.patches.objects[index], output_data.patches.meshes[index], obj.data
+    arrays, pm, mesh = output_data.patches.objects[index], written_mesh(output_data, index), obj.data
     faces, points = output_data.face_colours[index], output_data.smooth_colours[index]
     if layers is not None:
         write_layers(mesh, layers, notes, arrays.name)
@@ -269,6 +269,12 @@ def _fill_result(obj, output_data, index, output_mode, layers, light, notes, mat
         mesh.materials.append(material)
 
 
+def written_mesh(output_data, index):
+    """The PatchMesh source ``index``'s result is written on: the display's cells where it split them."""
+    shown = getattr(output_data, "shown", None)
+    return output_data.patches.meshes[index] if shown is None else shown.meshes[index]
+
+
 def _bounced_of(output_data, index):
     """Source ``index``'s light arriving less what the renderer draws live, or None (not live)."""
     bounced = getattr(output_data, "bounced_colours", None)
@@ -287,7 +293,8 @@ def write_results(context, output_data, output_mode, scene=None):
     created = []
     made = {}  # source material name -> its textured copy (or None), made once a run
     notes = getattr(output_data, "notes", [])
-    layers_of = output_data.patches.layers or [None] * len(output_data.patches.objects)
+    layers_of = (getattr(output_data, "layers", None) or output_data.patches.layers
+                 or [None] * len(output_data.patches.objects))
     light_of = getattr(output_data, "light_colours", None) or [None] * len(layers_of)
     smooth_written = output_mode in ("VERTEX", "BOTH", "TEXTURED") and any(
         p is not None for p in output_data.smooth_colours)

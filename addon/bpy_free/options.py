@@ -197,6 +197,11 @@ LIVE_LAMPS = Flag("live_lamps", "--live-lamps", True, "Live lamps",
                   "the scene at any bounces, as the preview and the saved file draw it; EEVEE and Material Preview "
                   "show all of the light from the solve ('Radiosity Light'); off: all of the light from the solve, "
                   "the same in any view (Material Preview's studio light too)")
+DISPLAY_CELLS = Flag("display_cells", "--display-cells", True, "Display cells",
+                     "Smooth colours: the display's own smaller cells inside a patch where the direct light changes "
+                     "(a lamp's hot spot, a spot's cone, a shadow's edge), the light taken at their corners; the solve "
+                     "and each patch's mean stay as they are. On (default): the light's shape in EEVEE, Material "
+                     "Preview, Solid view and exporters; off: one polygon per patch")
 # --- Detail (adaptive patches) ---
 DETAIL = Choice("detail", "--detail", "OFF", (
     ("OFF", "Off", "Every patch the patch size: the same grid everywhere"),
@@ -241,7 +246,7 @@ CLUSTER = ClusterAddress("cluster", "--cluster", "", "Cluster",
                          "(DASK_DISTRIBUTED__COMM__TLS__CA_FILE, __CLIENT__CERT, __CLIENT__KEY)")
 
 SETTINGS = (METHOD, ESTIMATOR, THRESHOLD, TARGET_ERROR, PATCH_SIZE, DETAIL, EXIT_POINT, SAMPLING, DIRECT_LIGHT,
-            STOP_RULE, OUTPUT, LIVE_LAMPS, PER_SOURCE, SEED,
+            STOP_RULE, OUTPUT, LIVE_LAMPS, DISPLAY_CELLS, PER_SOURCE, SEED,
             TIME_LIMIT, THREADS, SCENE_OBJECTS, CLAMP, LIGHT_OUTPUT, INDIRECT_OUTPUT, CLUSTER)
 
 # Patch size 0: the selection's largest extent over this.

@@ -18,7 +18,7 @@ from ..core.display.covered import seen_parts
 from ..core.methods.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
-from . import adaptive_patches, options, reach, relit, run_budget, solve_refinement, trim
+from . import adaptive_patches, options, reach, relit, run_budget, shown_mesh, solve_refinement, trim
 from .settings import SolveSettings, direct_light_for, method_for, prediction_for
 from .patches import Patches, make_patches
 from .scene_notes import back_light_warning, light_kind, scene_and_notes
@@ -29,7 +29,7 @@ class SolveOutput:
     result: object  # core SolveResult
     prediction: object  # core Prediction for the run's settings
     target_mse: float | None
-    face_colours: list = field(default_factory=list)  # (P_k,3) per object
+    face_colours: list = field(default_factory=list)  # (P_k,3) per object (per polygon of its written mesh)
     # (C_k,3) per object, one a polygon corner: the smooth light (core smoothing), or None
     smooth_colours: list = field(default_factory=list)
     # the textured output's light arriving (H, without the surface's colour) per object: (C_k,3)
@@ -46,6 +46,10 @@ class SolveOutput:
     sources_out: object = None  # relit.SourceResults of a per-source solve, else None
     live_lamps: bool = False  # Cycles' output leaves the lamps' direct light to the renderer (bounced_colours)
     seconds: float = 0.0  # the whole run's (meshing, solve, colours)
+    # core display.refined.Shown: the meshes written where the display split cells (None: the patches'),
+    # and the source layers on them (the patches' layers where None)
+    shown: object = None
+    layers: list | None = None
 
     def blocked_fraction(self):
         """Share of the emitted power absorbed on the back side of faces."""
@@ -260,30 +264,35 @@ def write_colours(out, scene, result, settings, deadline=None):
         # the light arriving minus a gathered estimate of the direct light alone (noise of both)
         extras[INDIRECT_ATTRIBUTE] = np.maximum(
             result.irradiance - direct_irradiance(scene, INDIRECT_SAMPLES, int(settings.seed)), 0.0)
-    for name, values in extras.items():
-        out.extra[name] = [None if not o.receives else np.asarray(values[patches.combined.patch_slice(k)])
-                           for k, o in enumerate(patches.objects)]
+
     made = {}  # "smooth", "light", "bounced" -> per object (C_k,3) at its polygon corners (None: not receiving)
     both = settings.output in ("BOTH", "TEXTURED")
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
         shading = adaptive_patches.shading_arrays(patches, scene)
-        smooth = _smooth_corners if out.sources_out is None else relit.SmoothSources(out, _at_polygon_corners).corners
-        for name, corners in smooth(scene, result, light=textured, shading=shading, live=out.live_lamps, deadline=deadline):
-            made[name] = _at_polygon_corners(patches, scene, corners, shading, least=0.0)
+        surface, direct, out.shown = shown_mesh.display(out, scene, result, shading, deadline, settings.display_cells)
+        smooth = _smooth_corners if out.sources_out is None else relit.SmoothSources(out, shown_mesh.polygon_corners).corners
+        for name, corners in smooth(scene, result, light=textured, shading=shading, live=out.live_lamps, deadline=deadline,
+                                    surface=surface, direct=direct):
+            made[name] = shown_mesh.polygon_corners(out, scene, corners, shading, least=0.0)
             del corners  # (let go of before the next is made)
+        del surface, direct
+        out.layers = shown_mesh.layers_on(out)
     elif both:
         shown = "the textures times each patch's own light are shown" if textured else "the flat colours are shown"
         label = options.OUTPUT.item_label(settings.output)
         out.notes.append(f"smooth colours left out at {scene.patch_count:,} patches ({label} makes them up to "
                          f"{options.SMOOTH_MAX_PATCHES:,}: at a million they double the time and memory of the run); "
                          f"{shown}: choose Smooth colours to make them")
+    for name, values in extras.items():
+        out.extra[name] = [None if not o.receives else shown_mesh.per_polygon(out, k, np.asarray(values[patches.combined.patch_slice(k)]))
+                           for k, o in enumerate(patches.objects)]
     out.light_domain = "CORNER" if "light" in made else "FACE"
     flat = {} if not textured or "light" in made else {"light": np.maximum(result.irradiance, 0.0)}
     if flat and out.live_lamps:  # (lamps drawn live)
         flat["bounced"] = np.maximum(result.irradiance - relit.drawn_light(out, scene, result, deadline), 0.0)
     for k, o in enumerate(patches.objects):
         rows = patches.combined.patch_slice(k)
-        out.face_colours.append(radiosity[rows] if o.receives else None)
+        out.face_colours.append(shown_mesh.per_polygon(out, k, radiosity[rows]) if o.receives else None)
         out.smooth_colours.append(made["smooth"][k] if "smooth" in made else None)
         for name, colours in (("light", out.light_colours), ("bounced", out.bounced_colours)):
             if name in made:
@@ -292,24 +301,8 @@ def write_colours(out, scene, result, settings, deadline=None):
                 colours.append(flat[name][rows] if name in flat and o.receives else None)
 
 
-def _at_polygon_corners(patches, scene, corners, shading=None, least=None):
-    """Per object, the values (C_k,3) at its result mesh's polygon corners, read from the triangle
-    corners (T,3,3) of ``shading`` (triangles, patch of each) or else the scene's, as float32 (as
-    written; at least ``least`` where given); None for an object that receives no result."""
-    triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
-    point_start = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
-    out = []
-    for k, mesh in enumerate(patches.meshes):
-        if not patches.objects[k].receives:  # the rest of the scene: no results
-            out.append(None)
-            continue
-        out.append(smoothing.polygon_corner_values(
-            corners, triangles, triangle_patch, mesh.corner_patch + patches.combined.patch_offsets[k],
-            mesh.corner_verts + point_start[k]).astype(np.float32).clip(least, np.inf))
-    return out
-
-
-def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=np.float32, deadline=None):
+def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=np.float32, deadline=None, surface=None,
+                    direct=None):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``Surface.arriving_light``) at every
     corner of the scene's triangles, and with ``live`` ("bounced", (T,3,3)) it less the lamps', suns', emitters' and
     world's direct light, smooth (what the renderer draws live); then ("smooth", (T,3,3)): the reflected light, its
@@ -319,10 +312,14 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
     Made one at a time (a generator), so that the caller lets go of one before the next is made; given as
     ``dtype`` (float32: as written). ``shading``: the (triangles, patch of each) to make them on, if not the
     scene's (a refined mesh's, with every polygon corner: adaptive_patches.shading_arrays); ``deadline``:
-    the direct light's retries within it (core sample_rounds)."""
+    the direct light's retries within it (core sample_rounds). ``surface`` and ``direct``: the display's
+    own (shown_mesh.display: its finer cells), else made on the shading triangles."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
-    surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
-                                   **seen_parts(scene, triangles, triangle_patch))
+    if surface is None:
+        surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
+                                       **seen_parts(scene, triangles, triangle_patch))
+        direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline,
+                                            light=result.irradiance)
     if result.direct_irradiance is not None:  # (the solve's noise is in its indirect part alone: core direct_means)
         arriving = direct_means.arriving(surface, scene, result, False) if light else None
         bounced = direct_means.arriving(surface, scene, result, True) if light and live else None
@@ -331,13 +328,12 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
         arriving = point_direct.arriving(surface, scene, result, False, deadline) if light else None
         bounced = point_direct.arriving(surface, scene, result, True, deadline) if light and live else None
         reflected = surface.filter_light(result.reflected, result.reflected_variance)
-    direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline, light=result.irradiance)
     if light:
         yield "light", point_direct.light_corners(surface, scene, arriving, direct, False, dtype)
     if bounced is not None:
         yield "bounced", point_direct.light_corners(surface, scene, bounced, direct, True, dtype)
     corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True), dtype=dtype)
-    corners += scene.emission[triangle_patch][:, None, :]
+    corners += scene.emission[surface.triangle_patch][:, None, :]
     yield "smooth", corners
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -21,6 +22,7 @@ from ..core.estimate.grouping import PER_SOURCE_MAX, source_groups
 from ..core.lights.lights import WorldLight
 from ..core.estimate.per_source import PerSource
 from ..core.relight.relighting import relight, smooth_sources
+from . import shown_mesh
 
 # Automatic keeps per-source results from 2 up to this many sources: the walks' solves then cost
 # 1.13-1.3x, the two-way iteration's 1.3x at 4 (benchmarks/results/relight.md); more cost more.
@@ -133,16 +135,18 @@ def source_results(scene, patches, result, groups):
     return SourceResults(result.per_source, groups, listed)
 
 
-def source_corners(scene, result, light=False, shading=None, live=False, deadline=None):
+def source_corners(scene, result, light=False, shading=None, live=False, deadline=None, surface=None, direct=None):
     """Like pipeline._smooth_corners for a per-source ``result``: ("light", (S,T,3,3)) with
     ``light`` (``live``: the lamps' direct light left out), then ("smooth", (S,T,3,3)): each group's smooth values, the total's noise-filter
     weights, clips and corner scales held (core relighting.smooth_sources), adding up to the
     total's; on the ``shading`` triangles (a refined mesh's) where given; the direct light's
     retries within ``deadline``."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
-    surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
-                                   **seen_parts(scene, triangles, triangle_patch))
-    yield from smooth_sources(surface, scene, result, light, triangles=triangles, live=live, deadline=deadline)
+    if surface is None:
+        surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
+                                       **seen_parts(scene, triangles, triangle_patch))
+    yield from smooth_sources(surface, scene, result, light, triangles=triangles, live=live, deadline=deadline,
+                              direct=direct)
 
 
 def drawn_light(out, scene, result, deadline=None):
@@ -232,10 +236,10 @@ class SmoothSources:
     def __init__(self, out, at_polygon_corners):
         self.out, self.at_polygon_corners = out, at_polygon_corners
 
-    def corners(self, scene, result, light=False, shading=None, live=False, deadline=None):
+    def corners(self, scene, result, light=False, shading=None, live=False, deadline=None, surface=None, direct=None):
         results = self.out.sources_out
-        for name, per_group in source_corners(scene, result, light, shading, live, deadline):
-            per_object = [self.at_polygon_corners(self.out.patches, scene, corners, shading) for corners in per_group]
+        for name, per_group in source_corners(scene, result, light, shading, live, deadline, surface, direct):
+            per_object = [self.at_polygon_corners(self.out, scene, corners, shading) for corners in per_group]
             results.smooth[name] = [None if parts[0] is None else np.stack(parts) for parts in zip(*per_object)]
             yield name, per_group.sum(axis=0)
             del per_group
@@ -255,15 +259,16 @@ def add_object_values(out, settings):
             results.arrays.append(None)
             continue
         rows = patches.combined.patch_slice(k)
-        values = {"flat": ps.radiosity[:, rows].astype(np.float32)}
+        polygon = partial(shown_mesh.per_polygon, out, k)  # (per polygon of the mesh written)
+        values = {"flat": polygon(ps.radiosity[:, rows]).astype(np.float32)}
         if "irradiance" in kinds or "irradiance_point" in kinds:
-            values["irradiance"] = ps.irradiance[:, rows].astype(np.float32)
+            values["irradiance"] = polygon(ps.irradiance[:, rows]).astype(np.float32)
         if "bounced_irradiance" in kinds:
-            values["bounced_irradiance"] = (ps.irradiance[:, rows] - results.drawn[:, rows]).astype(np.float32)
+            values["bounced_irradiance"] = polygon(ps.irradiance[:, rows] - results.drawn[:, rows]).astype(np.float32)
         if "irradiance_point" in kinds:
             from ..core.mesh import meshing
 
-            values["irradiance_point"] = np.stack([meshing.point_average(patches.meshes[k], h).astype(np.float32)
+            values["irradiance_point"] = np.stack([meshing.point_average(shown_mesh.mesh_of(out, k), h).astype(np.float32)
                                                    for h in values.pop("irradiance")])
         for name, per_object in results.smooth.items():
             values[name] = per_object[k]

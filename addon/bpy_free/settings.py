@@ -30,6 +30,7 @@ class SolveSettings:
     output: str = options.OUTPUT.default
     light_output: bool = options.LIGHT_OUTPUT.default
     live_lamps: bool = options.LIVE_LAMPS.default  # textured: the lamps' direct light drawn by Blender
+    display_cells: bool = options.DISPLAY_CELLS.default  # smooth colours on cells split where the direct light changes
     indirect_output: bool = options.INDIRECT_OUTPUT.default
     cluster: str = options.CLUSTER.default  # a Dask scheduler address; empty: this machine's threads
     direct_light: str = options.DIRECT_LIGHT.default  # "gathered": the first bounce by shadow rays (core first_shot)

@@ -53,6 +53,7 @@ def draw_settings(layout, settings):
     row = layout.row()
     row.active = settings.output == "TEXTURED"
     row.prop(settings, "live_lamps")
+    layout.prop(settings, "display_cells")
     layout.prop(settings, "per_source")
     layout.prop(settings, "show_patches")
     row = layout.row(align=True)

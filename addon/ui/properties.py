@@ -73,6 +73,8 @@ class RadiositySettings(bpy.types.PropertyGroup):
                                     default=options.SCENE_OBJECTS.default, update=_changed)
     live_lamps: BoolProperty(name=options.LIVE_LAMPS.label, description=options.LIVE_LAMPS.description,
                              default=options.LIVE_LAMPS.default)
+    display_cells: BoolProperty(name=options.DISPLAY_CELLS.label, description=options.DISPLAY_CELLS.description,
+                                default=options.DISPLAY_CELLS.default)
     light_output: BoolProperty(name=options.LIGHT_OUTPUT.label, description=options.LIGHT_OUTPUT.description,
                                default=options.LIGHT_OUTPUT.default)
     indirect_output: BoolProperty(name=options.INDIRECT_OUTPUT.label, description=options.INDIRECT_OUTPUT.description,
@@ -121,6 +123,7 @@ class RadiositySettings(bpy.types.PropertyGroup):
             output=self.output,
             light_output=bool(self.light_output),
             live_lamps=bool(self.live_lamps),
+            display_cells=bool(self.display_cells),
             indirect_output=bool(self.indirect_output),
             cluster=self.cluster.strip(),
             per_source=self.per_source,

@@ -100,6 +100,15 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     del keys
     position = scene.vertices[np.asarray(triangles).ravel()[first]]
     del first
+    value = points_direct(surface, scene, position, patch, samples, seed, light_group, patch_group, groups, deadline, light)
+    corners = value[..., corner_key.ravel(), :].reshape(value.shape[:-2] + (-1, 3, 3))
+    return CornerDirect(corners, patch_means(surface, corners))
+
+
+def points_direct(surface, scene, position, patch, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0,
+                  deadline=None, light=None):
+    """([G,]n,3) the direct light at the points ``position`` (n,3, moved in place: INWARD) of
+    ``patch`` (n,), as ``corner_direct`` takes it at corners (float32 without groups)."""
     towards = surface.patch_centroid[patch]  # (in place: four (n,3) temporaries were most of this stage's memory)
     towards -= position
     towards *= INWARD
@@ -110,8 +119,7 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     _fill_buried(scene.geometry, position, patch, value)
     if not groups:  # (the whole's corners as written, float32: the memory of the largest scenes)
         value = value.astype(np.float32)
-    corners = value[..., corner_key.ravel(), :].reshape(value.shape[:-2] + (-1, 3, 3))
-    return CornerDirect(corners, patch_means(surface, corners))
+    return value
 
 
 def has_direct(scene):

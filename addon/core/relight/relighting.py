@@ -90,7 +90,8 @@ def combine(per_source, parts, weights):
     return _combine(flat, w).reshape(parts.shape[1:])
 
 
-def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triangles=None, live=False, deadline=None):
+def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triangles=None, live=False, deadline=None,
+                   direct=None):
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
     they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
@@ -120,10 +121,8 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     held = 0.0 if per_source.direct_irradiance is None else per_source.direct_irradiance * rho
     filtered, noise = surface.filter_light(result.reflected - _whole(held), result.reflected_variance, return_filter=True)
     filtered += _whole(held)
-    direct = point_direct.corner_direct(surface, scene, triangles,
-                                        seed=result.seed, light_group=per_source.light_group,
-                                        patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline,
-                                        light=result.irradiance)
+    if direct is None:  # (else the display's own: its finer cells')
+        direct = group_direct(surface, scene, result, triangles, deadline)
     whole = _summed(direct)
     if light:
         yield "light", point_direct.shown(surface, arriving, whole, parts, direct, dtype)[1]
@@ -136,6 +135,14 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     for s in range(per_source.count):  # (a part at a time: no (S,T,3) copy)
         smooth[s] += emitting[s, surface.triangle_patch][:, None, :]
     yield "smooth", smooth
+
+
+def group_direct(surface, scene, result, triangles, deadline=None):
+    """The per-source ``result``'s CornerDirect, each group's (G,T,3,3), at the corners of ``triangles``."""
+    per_source = result.per_source
+    return point_direct.corner_direct(surface, scene, triangles, seed=result.seed, light_group=per_source.light_group,
+                                      patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline,
+                                      light=result.irradiance)
 
 
 def _whole(parts):

@@ -1,0 +1,105 @@
+"""The meshes the display is written on: the solve's patches, or their cells split where the direct
+light changes (core display.refined), with what each output needs made for them: the direct light at
+their corners, the source's layers at their polygon corners, per-patch values per polygon."""
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import partial
+
+import numpy as np
+
+from ..core.display import point_direct, refined, smoothing
+from ..core.display.covered import seen_parts
+from ..core.relight.relighting import group_direct
+
+SEED_STEP = 7919  # the seed of each level's new points, apart from the corners' and each other's
+
+
+def display(out, scene, result, shading=None, deadline=None, refine=True):
+    """(the smoothing surface, the direct light at its corners (``point_direct.CornerDirect``, each
+    source group's for a per-source run), Shown or None) the colours are made on: the solve's
+    shading triangles, their cells split where ``refine`` and the direct light say so (``out.shown``)."""
+    triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
+    surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
+                                   **seen_parts(scene, triangles, triangle_patch))
+    grouped = out.sources_out is not None
+    direct = (group_direct(surface, scene, result, triangles, deadline) if grouped else
+              point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline,
+                                         light=result.irradiance))
+    if direct is None or not refine:
+        return surface, direct, None
+    ps = result.per_source if grouped else None
+
+    def at_points(position, patch, level):
+        groups = dict(light_group=ps.light_group, patch_group=ps.patch_group, groups=ps.count) if grouped else {}
+        return point_direct.points_direct(surface, scene, position, patch, seed=int(result.seed) + SEED_STEP * (level + 1),
+                                          deadline=deadline, light=result.irradiance, **groups)
+
+    made = refined.refine(surface, direct, scene, triangles, out.patches.meshes, [o.receives for o in out.patches.objects],
+                          result.irradiance, at_points)
+    return (surface, direct, None) if made is None else made
+
+
+def mesh_of(out, k):
+    """The PatchMesh object ``k``'s result is written on."""
+    shown = getattr(out, "shown", None)
+    return out.patches.meshes[k] if shown is None else shown.meshes[k]
+
+
+def per_polygon(out, k, values):
+    """Object ``k``'s per-patch ``values`` ([S,]P_k,3) per polygon of the mesh it is written on."""
+    shown = getattr(out, "shown", None)
+    return values if shown is None or values is None else shown.per_polygon(k, values)
+
+
+def polygon_corners(out, scene, corners, shading=None, least=None):
+    """Per object (None: not receiving), the values (C_k,3) at its written mesh's polygon corners, read from
+    the triangle corners (T,3,3) of the Shown, else of ``shading`` (triangles, patch of each) or the scene's,
+    as float32 clipped to at least ``least``."""
+    patches, shown = out.patches, getattr(out, "shown", None)
+    if shown is not None:
+        triangles, triangle_patch, starts = shown.triangles, shown.triangle_patch, shown.point_starts
+    else:
+        triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
+        starts = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
+    values = []
+    for k, o in enumerate(patches.objects):
+        if not o.receives:  # the rest of the scene: no results
+            values.append(None)
+            continue
+        offset = patches.combined.patch_offsets[k]
+        mesh = mesh_of(out, k)
+        corner_patch = shown.corner_patch(k, offset) if shown is not None else mesh.corner_patch + offset
+        values.append(smoothing.polygon_corner_values(corners, triangles, triangle_patch, corner_patch,
+                                                      mesh.corner_verts + starts[k]).astype(np.float32).clip(least, np.inf))
+    return values
+
+
+def layers_on(out):
+    """The source layers of each object (``patches.layers``) at its written mesh's polygon corners."""
+    layers, shown = out.patches.layers, getattr(out, "shown", None)
+    if shown is None or not layers:
+        return layers
+    made = []
+    for k, kept in enumerate(layers):
+        if kept is None or shown.origin[k] is None:
+            made.append(kept)
+            continue
+        corners, weights = refined.corner_weights(out.patches.meshes[k], shown.meshes[k], shown.origin[k])
+        mixed = partial(_mixed, corners=corners, weights=weights)
+        normals = None if kept.normals is None else mixed(kept.normals)
+        if normals is not None:
+            normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+        made.append(replace(kept, uv=tuple((name, mixed(v)) for name, v in kept.uv),
+                            colours=tuple((name, mixed(v)) for name, v in kept.colours), normals=normals,
+                            patch_slot=np.asarray(kept.patch_slot)[shown.origin[k]]))
+    return made
+
+
+def _mixed(values, corners, weights):
+    """(C',k) per fine polygon corner, of per coarse polygon corner ``values`` (C,k)."""
+    values = np.asarray(values)
+    out = values[corners[:, 0]] * weights[:, 0, None]
+    for j in (1, 2):
+        out += values[corners[:, j]] * weights[:, j, None]
+    return out.astype(values.dtype)

@@ -1,0 +1,163 @@
+"""The display's own finer cells (addon/core/display/refined.py): cells split where a lamp's light
+changes across a patch and nowhere it is flat, within the budget; the solve's smooth values
+interpolated exactly at the new points; every patch's mean its solved value; a point lamp's hot spot
+drawn far closer to the exact light than on the patches' own corners; layers carried linearly."""
+import numpy as np
+import pytest
+
+from addon.core import PatchScene
+from addon.core.display import point_direct, refined, smoothing
+from addon.core.lights.lights import PointLight, SunLight
+from addon.core.mesh.meshing import mesh_patches
+
+SIDE, PATCH = 2.0, 0.5  # a 2 m ceiling of 0.5 m patches (4 x 4)
+LAMP = np.array([1.1, 0.95, -0.3])  # 30 cm under it, off its grid's points
+
+
+def _ceiling(lights):
+    """A ceiling facing down (z = 0) meshed into 0.5 m patches, and its PatchScene."""
+    vertices = np.array([[0, 0, 0], [0, SIDE, 0], [SIDE, SIDE, 0], [SIDE, 0, 0]], float)
+    mesh = mesh_patches(vertices, np.array([4]), np.array([0, 1, 2, 3]), PATCH)
+    P = mesh.patch_count
+    scene = PatchScene(mesh.points, mesh.triangles, mesh.triangle_patch, np.full(P, 0.5), np.zeros(P), lights=lights)
+    assert np.allclose(smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch).patch_normal, [0, 0, -1])
+    return mesh, scene
+
+
+def _exact(points):
+    """The point lamp's irradiance I cos / r^2 at ``points`` (...,3) of the ceiling (normal -z), I = 1."""
+    towards = LAMP - points
+    return np.maximum(-towards[..., 2], 0.0) / np.linalg.norm(towards, axis=-1) ** 3
+
+
+def _display(mesh, scene, light, **limits):
+    """(coarse surface, coarse CornerDirect, refine's answer) with the module's limits changed."""
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    direct = point_direct.corner_direct(surface, scene, scene.triangles, seed=3, light=light)
+
+    def at_points(position, patch, level):
+        return point_direct.points_direct(surface, scene, position, patch, seed=11 + level, light=light)
+
+    saved = {name: getattr(refined, name) for name in limits}
+    try:
+        for name, value in limits.items():
+            setattr(refined, name, value)
+        made = refined.refine(surface, direct, scene, scene.triangles, [mesh], [True], light, at_points)
+    finally:
+        for name, value in saved.items():
+            setattr(refined, name, value)
+    return surface, direct, made
+
+
+def _patch_means_exact(scene, n=64):
+    """(P,3) each patch's exact mean irradiance (midpoint rule on n x n cells of it)."""
+    out = np.zeros((scene.patch_count, 3))
+    corners = scene.vertices[scene.triangles]
+    for p in range(scene.patch_count):
+        low = corners[scene.triangle_patch == p].reshape(-1, 3).min(axis=0)
+        high = corners[scene.triangle_patch == p].reshape(-1, 3).max(axis=0)
+        s = (np.arange(n) + 0.5) / n
+        x, y = np.meshgrid(low[0] + s * (high[0] - low[0]), low[1] + s * (high[1] - low[1]))
+        out[p] = _exact(np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)).mean()
+    return out
+
+
+def _shown_error(vertices, triangles, corners, samples=40):
+    """Mean absolute error, over the ceiling, of the display's linear interpolation of ``corners``
+    (T,3,3) on ``triangles`` against the exact light, at ``samples`` x ``samples`` points a triangle,
+    weighted by area."""
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    i, j = np.meshgrid(np.arange(samples), np.arange(samples), indexing="ij")
+    keep = i + j < samples
+    u, v = ((i[keep] + 1 / 3) / samples), ((j[keep] + 1 / 3) / samples)
+    w = 1 - u - v
+    points = a[:, None] * w[None, :, None] + b[:, None] * u[None, :, None] + c[:, None] * v[None, :, None]
+    shown = (corners[:, None, 0, 0] * w + corners[:, None, 1, 0] * u + corners[:, None, 2, 0] * v)
+    error = np.abs(shown - _exact(points)).mean(axis=1)
+    return float((error * area).sum() / area.sum())
+
+
+def test_a_hot_spot_splits_cells_near_the_lamp_and_is_drawn_far_closer_to_the_exact_light():
+    """A point lamp 30 cm under a ceiling of 50 cm patches: its hot spot is about as wide as a patch.
+    The patches' own corners draw it with a large error; the split cells (a budget the size of the hot
+    spot), smaller beside the lamp than in the far corner, draw it within a fifth of that. Both keep each patch's
+    exact mean (the solved light is here exact, so only the shape inside patches differs)."""
+    mesh, scene = _ceiling([PointLight(LAMP, np.ones(3))])
+    light = _patch_means_exact(scene)
+    surface, direct, made = _display(mesh, scene, light, BUDGET=16.0)  # (the whole ceiling is the hot spot here)
+    assert made is not None
+    fine_surface, fine_direct, shown = made
+    coarse = point_direct.shown(surface, light, direct)
+    fine = point_direct.shown(fine_surface, light, fine_direct)
+    np.testing.assert_allclose(surface.corner_means(coarse[..., 0].ravel()), light[:, 0], rtol=1e-9)
+    np.testing.assert_allclose(fine_surface.corner_means(fine[..., 0].ravel()), light[:, 0], rtol=1e-9)
+    before = _shown_error(scene.vertices, scene.triangles, coarse)
+    after = _shown_error(shown.vertices, shown.triangles, fine)
+    assert after < before / 5, (before, after)
+    # split where the light changes: the cells beside the lamp are small, the far corner's patch whole
+    polygon_patch = shown.origin[0]
+    far = np.argmax(np.linalg.norm(surface.patch_centroid - LAMP * [1, 1, 0], axis=1))
+    near = np.argmin(np.linalg.norm(surface.patch_centroid - LAMP * [1, 1, 0], axis=1))
+    assert (polygon_patch == far).sum() < (polygon_patch == near).sum() and (polygon_patch == near).sum() >= 16
+
+
+def test_the_new_points_direct_light_is_the_lamps_exact_light():
+    """Every corner of the split cells, new points included, gets the point lamp's I cos / r^2 (a
+    hundredth of the way to its patch's centre, as every corner)."""
+    mesh, scene = _ceiling([PointLight(LAMP, np.ones(3))])
+    _, _, (fine_surface, fine_direct, shown) = _display(mesh, scene, _patch_means_exact(scene))
+    points = shown.vertices[shown.triangles]
+    inward = points + point_direct.INWARD * (fine_surface.patch_centroid[shown.triangle_patch][:, None] - points)
+    np.testing.assert_allclose(fine_direct.corners[..., 0], _exact(inward), rtol=1e-4)
+
+
+def test_flat_light_splits_nothing():
+    """A sun straight down on the ceiling's back... a sun at an angle onto the ceiling's face: the same
+    light everywhere, nothing to split."""
+    sun = SunLight(np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0]), np.ones(3))
+    mesh, scene = _ceiling([sun])
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    direct = point_direct.corner_direct(surface, scene, scene.triangles, seed=3)
+    assert np.ptp(direct.corners[..., 0]) < 1e-6 * direct.corners[..., 0].max() and direct.corners.max() > 0
+    assert _display(mesh, scene, direct.means)[2] is None
+
+
+@pytest.mark.parametrize("budget", [0.5, 1.0, 2.0])
+def test_the_split_stays_within_its_budget_of_new_points(budget):
+    """New points at most the budget's share of the mesh's points, plus one level's rounding (a quad's
+    split makes about NEW_POINTS of them; balancing may split a neighbour with it)."""
+    mesh, scene = _ceiling([PointLight(LAMP, np.ones(3))])
+    made = _display(mesh, scene, _patch_means_exact(scene), BUDGET=budget)[2]
+    assert made is not None
+    new = len(made[2].vertices) - len(mesh.points)
+    assert 0 < new <= budget * len(mesh.points) + 4 * refined.NEW_POINTS + 8
+
+
+def test_interpolation_is_exact_for_light_linear_in_each_patch():
+    """Coarse corner values linear in position (a different plane per patch) come out at every fine
+    corner as that plane's value there: the interpolation is linear within each patch."""
+    mesh, scene = _ceiling([PointLight(LAMP, np.ones(3))])
+    fine_surface, _, shown = _display(mesh, scene, _patch_means_exact(scene))[2]
+    rng = np.random.default_rng(5)
+    planes = rng.uniform(0.5, 2.0, (scene.patch_count, 3))
+
+    def linear(points, patch):
+        return planes[patch, 0] + planes[patch, 1] * points[..., 0] + planes[patch, 2] * points[..., 1]
+
+    coarse = linear(scene.vertices[scene.triangles], scene.triangle_patch[:, None])[..., None].repeat(3, axis=-1)
+    fine = fine_surface.interpolated(coarse)
+    expected = linear(shown.vertices[shown.triangles], shown.triangle_patch[:, None])
+    np.testing.assert_allclose(fine[..., 0], expected, rtol=1e-12)
+
+
+def test_layers_at_the_new_polygon_corners_are_interpolated_linearly():
+    """A UV map linear over the ceiling, kept at the coarse polygon corners, is the same linear map at
+    every polygon corner of the split cells (``corner_weights``)."""
+    mesh, scene = _ceiling([PointLight(LAMP, np.ones(3))])
+    _, _, shown = _display(mesh, scene, _patch_means_exact(scene))[2]
+    uv = mesh.points[mesh.corner_verts][:, :2] * [0.5, 0.25]
+    corners, weights = refined.corner_weights(mesh, shown.meshes[0], shown.origin[0])
+    fine_uv = (uv[corners] * weights[..., None]).sum(axis=1)
+    np.testing.assert_allclose(fine_uv, shown.meshes[0].points[shown.meshes[0].corner_verts][:, :2] * [0.5, 0.25],
+                               atol=1e-12)
