@@ -54,6 +54,7 @@ STAGES = (
     ("colours (display)", "addon.bpy_free.pipeline", "write_colours", 0),
     ("display's direct light at corners", "addon.core.display.point_direct", "corner_direct", 1),
     ("light arriving at corners", "addon.core.display.point_direct", "arriving", 1),
+    ("the display's cells (their new points' light)", "addon.core.refine.display_cells", "refine", 1),
     ("writing results", "addon.blender_write.solve_job", "write_results", 0),
     ("relight keep", "addon.blender_write.relight_keep", "keep", 0),
 )

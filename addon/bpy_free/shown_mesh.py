@@ -1,17 +1,20 @@
 """The meshes the display is written on: the solve's patches, or their cells split where the direct
-light changes (core display.refined), with what each output needs made for them: the direct light at
+light changes (core refine.display_cells), with what each output needs made for them: the direct light at
 their corners, the source's layers at their polygon corners, per-patch values per polygon."""
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from functools import partial
 
 import numpy as np
 
-from ..core.display import point_direct, refined, smoothing
+from ..core.display import point_direct, smoothing
+from ..core.refine import display_cells
 from ..core.display.covered import seen_parts
 from ..core.relight.relighting import group_direct
 
+TIME_SHARE = 0.5  # of the time left before a deadline the new points may take (the rest: the smoothing, the writing)
 SEED_STEP = 7919  # the seed of each level's new points, apart from the corners' and each other's
 
 
@@ -23,11 +26,16 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                    **seen_parts(scene, triangles, triangle_patch))
     grouped = out.sources_out is not None
+    started = time.perf_counter()
     direct = (group_direct(surface, scene, result, triangles, deadline) if grouped else
               point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline,
                                          light=result.irradiance))
     if direct is None or not refine:
         return surface, direct, None
+    most = None
+    if deadline is not None:  # (new points as many as half the time left takes, at the corners' rate)
+        each = (time.perf_counter() - started) / max(2 * len(triangles), 1)  # (about 2 corners a triangle)
+        most = int(TIME_SHARE * max(deadline - time.perf_counter(), 0.0) / max(each, 1e-9))
     ps = result.per_source if grouped else None
 
     def at_points(position, patch, level):
@@ -35,8 +43,8 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
         return point_direct.points_direct(surface, scene, position, patch, seed=int(result.seed) + SEED_STEP * (level + 1),
                                           deadline=deadline, light=result.irradiance, **groups)
 
-    made = refined.refine(surface, direct, scene, triangles, out.patches.meshes, [o.receives for o in out.patches.objects],
-                          result.irradiance, at_points)
+    made = display_cells.refine(surface, direct, scene, triangles, out.patches.meshes, [o.receives for o in out.patches.objects],
+                                result.irradiance, at_points, most)
     return (surface, direct, None) if made is None else made
 
 
@@ -85,7 +93,7 @@ def layers_on(out):
         if kept is None or shown.origin[k] is None:
             made.append(kept)
             continue
-        corners, weights = refined.corner_weights(out.patches.meshes[k], shown.meshes[k], shown.origin[k])
+        corners, weights = display_cells.corner_weights(out.patches.meshes[k], shown.meshes[k], shown.origin[k])
         mixed = partial(_mixed, corners=corners, weights=weights)
         normals = None if kept.normals is None else mixed(kept.normals)
         if normals is not None:

@@ -69,8 +69,8 @@ def _material_state(material):
 
 def test_the_result_keeps_every_uv_map_and_colour_attribute_at_the_same_surface_points(blender):
     """Two UV maps (the second active for editing, the first for render) and a colour attribute
-    on points, all affine in position: at every corner of the result (16 patches, 64 corners)
-    each map and the colours equal the source's at that point, under the same names, with the
+    on points, all affine in position: at every corner of the result (16 patches, 64 corners, and the
+    display's smaller cells where the lamp's light changes) each map and the colours equal the source's at that point, under the same names, with the
     same maps active."""
     floor, _ = _checker_floor((("UVMap", (0.5, 0.5, 0.1, 0.2)), ("Detail", (3.0, 2.0, 0.0, 0.5))),
                               active="Detail", render="UVMap")
@@ -84,7 +84,7 @@ def test_the_result_keeps_every_uv_map_and_colour_attribute_at_the_same_surface_
     assert [l.name for l in mesh.uv_layers if l.active_render] == ["UVMap"]
     points, _, corners = mesh_arrays(mesh)
     xy = points[corners, :2].astype(np.float64)
-    assert len(corners) == 64
+    assert len(corners) >= 64
     for name, (a, b, c, d) in (("UVMap", (0.5, 0.5, 0.1, 0.2)), ("Detail", (3.0, 2.0, 0.0, 0.5))):
         uv = np.empty(len(corners) * 2, np.float32)
         mesh.uv_layers[name].uv.foreach_get("vector", uv)

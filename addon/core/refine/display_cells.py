@@ -21,10 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..refine.adaptive import cells_of, patch_mesh, split
-from .covered import visible_corner_weights
-from .point_direct import CornerDirect, patch_means
-from .smoothing import ITERATIONS, Surface
+from ..mesh.faces import triangle_areas
+from ..mesh.meshing import PatchMesh
+from .adaptive import cells_of, patch_mesh, split
+from ..display.covered import visible_corner_weights
+from ..display.point_direct import CornerDirect, patch_means
+from ..display.smoothing import ITERATIONS, Surface
 
 LEVELS = 3  # splits of a patch at most: an eighth of its side
 CHANGE = 0.25  # of the patch's light: a difference between corners the eye sees as a shape, not a shade
@@ -91,30 +93,11 @@ class RefinedSurface:
 
     def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64):
         """``smoothing.Surface.corner_values`` of the coarse surface at the fine corners (with
-        ``return_filter``, its ``apply`` too), each patch's mean kept (``_kept_means``)."""
+        ``return_filter``, its ``apply`` too): the same means, continuous as the coarse ones."""
         if not return_filter:
-            coarse = self.coarse.corner_values(patch_values, iterations, dtype=dtype)
-            fine, _ = self._kept_means(coarse)
-            return fine
-        coarse, apply = self.coarse.corner_values(patch_values, iterations, return_filter=True, dtype=dtype)
-        fine, scale = self._kept_means(coarse)
-        return fine, lambda parts, dtype=np.float64: self._scaled(self.interpolated(apply(parts, dtype)), scale)
-
-    def _kept_means(self, coarse):
-        """(fine corners (T',3,k), (P,k) the scale that made them): the coarse corners interpolated, each
-        patch's scaled to the coarse corners' mean (a fine triangle across the coarse triangles' diagonal
-        is not linear in them)."""
-        fine = self.interpolated(coarse)
-        scale = np.ones((self.coarse.patch_count, coarse.shape[-1]))
-        for c in range(coarse.shape[-1]):
-            want = self.coarse.corner_means(np.asarray(coarse[..., c], np.float64).ravel())
-            got = self.fine.corner_means(np.asarray(fine[..., c], np.float64).ravel())
-            np.divide(want, got, out=scale[:, c], where=got > 0)
-        return self._scaled(fine, scale), scale
-
-    def _scaled(self, fine, scale):
-        fine *= scale[self.fine.triangle_patch][:, None, :].astype(fine.dtype)
-        return fine
+            return self.interpolated(self.coarse.corner_values(patch_values, iterations, dtype=dtype))
+        corners, apply = self.coarse.corner_values(patch_values, iterations, return_filter=True, dtype=dtype)
+        return self.interpolated(corners), lambda parts, dtype=np.float64: self.interpolated(apply(parts, dtype))
 
     def interpolated(self, corners):
         """(..., T',3,k) the fine corners of coarse ``corners`` (..., T,3,k): linear within each patch."""
@@ -126,12 +109,13 @@ class RefinedSurface:
         return out.reshape(corners.shape[:-3] + (-1, 3, corners.shape[-1]))
 
 
-def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points):
+def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None):
     """(RefinedSurface, its CornerDirect, Shown), or None where no cell splits. ``coarse`` the
     ``smoothing.Surface`` of ``triangles`` (T,3) of the scene's vertices, ``direct`` the coarse
     CornerDirect (([G,]T,3,3)); ``meshes`` the objects' PatchMeshes in scene order, ``receives``
     whether each gets results; ``light`` (P,3) the light the patches show; ``at_points(position
-    (n,3), patch (n,), level)`` the direct light ([G,]n,3) at points (``point_direct.points_direct``)."""
+    (n,3), patch (n,), level)`` the direct light ([G,]n,3) at points (``point_direct.points_direct``);
+    ``most``: new points at most (a time limit's), beside the budget."""
     V = len(scene.vertices)
     triangles = np.asarray(triangles, np.int64)
     tp = np.asarray(coarse.triangle_patch, np.int64)
@@ -143,26 +127,35 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points)
     grey = np.asarray(light, np.float64).sum(axis=1)
     hidden = coarse.hidden if coarse.hidden is not None else np.zeros(scene.patch_count, bool)
     seen = ~hidden & (coarse.patch_area > 0)
+    kept = hidden.copy()  # (and partly buried patches: a new point inside another object has no light of its own)
+    if scene.geometry.buried is not None:
+        kept[np.concatenate([scene.geometry.buried.patch, scene.geometry.buried.whole]).astype(np.int64)] = True
     floor = FLOOR * (grey[seen].mean() if seen.any() else 0.0)
     threshold = CHANGE * np.maximum(grey, floor)
-    cells = {k: cells_of(meshes[k]) for k in splittable}
+    # (cells of the patches' triangles: a cell's triangles never cross its patch's, so the coarse light's linear
+    # interpolation at the new points keeps every patch's mean, in any triangulation of the cells' polygons)
+    cells = {k: cells_of(_triangle_mesh(meshes[k])) for k in splittable}
+    patch_of = {k: offsets[k] + np.asarray(meshes[k].triangle_patch, np.int64) for k in splittable}
     active = {k: np.ones(cells[k].count, bool) for k in splittable}
     budget = BUDGET * sum(len(meshes[k].points) for k in splittable)
+    budget = budget if most is None else min(budget, most)
     for level in range(LEVELS):
         made = sum(len(c.points) - len(meshes[k].points) for k, c in cells.items())
-        chosen = _chosen(cells, active, starts, offsets, meshes, table, threshold, hidden, budget - made)
+        chosen = _chosen(cells, active, starts, patch_of, meshes, table, threshold, kept, budget - made)
         if chosen is None:
             break
         for k, marked in chosen.items():
             before = cells[k]
             cells[k], parent = split(before, marked)
             active[k] = cells[k].level > before.level[parent]
-        _evaluate(table, [(k, c.corners[active[k]], offsets[k] + c.origin[active[k]]) for k, c in cells.items()],
+        _evaluate(table, [(k, c.corners[active[k]], patch_of[k][c.origin[active[k]]]) for k, c in cells.items()],
                   starts, meshes, cells, at_points, level)
-    refined = [k for k in splittable if cells[k].count > meshes[k].patch_count]
+    refined = [k for k in splittable if cells[k].level.max(initial=0) > 0]
     if not refined:
         return None
-    shown = _shown(meshes, {k: patch_mesh(cells[k]) for k in refined}, triangles, tp, starts, offsets)
+    made = {k: patch_mesh(cells[k]) for k in refined}
+    shown = _shown(meshes, {k: (mesh, patch_of[k][origin] - offsets[k]) for k, (mesh, origin) in made.items()},
+                   triangles, tp, starts, offsets)
     _evaluate(table, _shading_corners(shown, refined, offsets), starts, meshes, cells, at_points, LEVELS)
     fine = Surface.of(shown.vertices, shown.triangles, shown.triangle_patch, scene.patch_count,
                       hidden=coarse.hidden, visible=visible_corner_weights(scene.geometry, shown.vertices, shown.triangles,
@@ -172,6 +165,15 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points)
     surface = RefinedSurface(coarse, fine, shown, slots, weights)
     corners = _fine_corners(table, shown, coarse_vertex, meshes, starts, direct.corners.dtype)
     return surface, CornerDirect(corners, patch_means(fine, corners)), shown
+
+
+def _triangle_mesh(mesh):
+    """``mesh``'s triangles as a PatchMesh of their own (cells that split inside their patch's triangles)."""
+    triangles = np.asarray(mesh.triangles, np.int64)
+    points = np.asarray(mesh.points, np.float64)
+    return PatchMesh(points, np.full(len(triangles), 3, np.int32), triangles.ravel().astype(np.int32),
+                     np.asarray(mesh.patch_face)[np.asarray(mesh.triangle_patch)], triangles.astype(np.int32),
+                     np.arange(len(triangles), dtype=np.int32), triangle_areas(points, triangles))
 
 
 class _Table:
@@ -215,15 +217,15 @@ def _values(table, k, points, patch, starts, meshes):
     return out
 
 
-def _chosen(cells, active, starts, offsets, meshes, table, threshold, hidden, budget):
-    """{object: (L,) bool} the cells to split this level: active, unfrozen, seen cells whose
+def _chosen(cells, active, starts, patch_of, meshes, table, threshold, kept, budget):
+    """{object: (L,) bool} the cells to split this level: active, unfrozen cells of patches not ``kept`` whose
     corners' direct light differs by more than their patch's threshold, the largest first within
     ``budget`` new points; None where none."""
     found = []
     for k, c in cells.items():
         rows = np.flatnonzero(active[k] & ~c.frozen)
-        patch = offsets[k] + c.origin[rows]
-        rows, patch = rows[~hidden[patch]], patch[~hidden[patch]]
+        patch = patch_of[k][c.origin[rows]]
+        rows, patch = rows[~kept[patch]], patch[~kept[patch]]
         corners = c.corners[rows]
         has = corners >= 0
         value = np.zeros(corners.shape)

@@ -1,4 +1,4 @@
-"""The display's own finer cells (addon/core/display/refined.py): cells split where a lamp's light
+"""The display's own finer cells (addon/core/refine/display_cells.py): cells split where a lamp's light
 changes across a patch and nowhere it is flat, within the budget; the solve's smooth values
 interpolated exactly at the new points; every patch's mean its solved value; a point lamp's hot spot
 drawn far closer to the exact light than on the patches' own corners; layers carried linearly."""
@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from addon.core import PatchScene
-from addon.core.display import point_direct, refined, smoothing
+from addon.core.display import point_direct, smoothing
+from addon.core.refine import display_cells
 from addon.core.lights.lights import PointLight, SunLight
 from addon.core.mesh.meshing import mesh_patches
 
@@ -38,14 +39,14 @@ def _display(mesh, scene, light, **limits):
     def at_points(position, patch, level):
         return point_direct.points_direct(surface, scene, position, patch, seed=11 + level, light=light)
 
-    saved = {name: getattr(refined, name) for name in limits}
+    saved = {name: getattr(display_cells, name) for name in limits}
     try:
         for name, value in limits.items():
-            setattr(refined, name, value)
-        made = refined.refine(surface, direct, scene, scene.triangles, [mesh], [True], light, at_points)
+            setattr(display_cells, name, value)
+        made = display_cells.refine(surface, direct, scene, scene.triangles, [mesh], [True], light, at_points)
     finally:
         for name, value in saved.items():
-            setattr(refined, name, value)
+            setattr(display_cells, name, value)
     return surface, direct, made
 
 
@@ -113,8 +114,7 @@ def test_the_new_points_direct_light_is_the_lamps_exact_light():
 
 
 def test_flat_light_splits_nothing():
-    """A sun straight down on the ceiling's back... a sun at an angle onto the ceiling's face: the same
-    light everywhere, nothing to split."""
+    """A sun at an angle onto the ceiling's face: the same light everywhere, nothing to split."""
     sun = SunLight(np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0]), np.ones(3))
     mesh, scene = _ceiling([sun])
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
@@ -131,7 +131,7 @@ def test_the_split_stays_within_its_budget_of_new_points(budget):
     made = _display(mesh, scene, _patch_means_exact(scene), BUDGET=budget)[2]
     assert made is not None
     new = len(made[2].vertices) - len(mesh.points)
-    assert 0 < new <= budget * len(mesh.points) + 4 * refined.NEW_POINTS + 8
+    assert 0 < new <= budget * len(mesh.points) + 4 * display_cells.NEW_POINTS + 8
 
 
 def test_interpolation_is_exact_for_light_linear_in_each_patch():
@@ -157,7 +157,7 @@ def test_layers_at_the_new_polygon_corners_are_interpolated_linearly():
     mesh, scene = _ceiling([PointLight(LAMP, np.ones(3))])
     _, _, shown = _display(mesh, scene, _patch_means_exact(scene))[2]
     uv = mesh.points[mesh.corner_verts][:, :2] * [0.5, 0.25]
-    corners, weights = refined.corner_weights(mesh, shown.meshes[0], shown.origin[0])
+    corners, weights = display_cells.corner_weights(mesh, shown.meshes[0], shown.origin[0])
     fine_uv = (uv[corners] * weights[..., None]).sum(axis=1)
     np.testing.assert_allclose(fine_uv, shown.meshes[0].points[shown.meshes[0].corner_verts][:, :2] * [0.5, 0.25],
                                atol=1e-12)
