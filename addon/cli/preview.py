@@ -253,10 +253,11 @@ def preview_exposure(output) -> float:
     was made, else each patch's on every corner), as the float32 colours written."""
     import numpy as np
 
-    from ..blender_write.results import rgba
+    from ..blender_write.results import rgba, written_mesh
 
     values = []
-    for mesh, faces, smooth in zip(output.patches.meshes, output.face_colours, output.smooth_colours):
+    meshes = [written_mesh(output, k) for k in range(len(output.patches.meshes))]
+    for mesh, faces, smooth in zip(meshes, output.face_colours, output.smooth_colours):
         if faces is None:  # the rest of the scene: no results
             continue
         smooth_shown = smooth is not None  # (written: it is 'Radiosity')
