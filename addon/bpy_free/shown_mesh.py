@@ -15,6 +15,7 @@ from ..core.display.covered import seen_parts
 from ..core.relight.relighting import group_direct
 
 TIME_SHARE = 0.5  # of the time left before a deadline the new points may take (the rest: the smoothing, the writing)
+RETRY_TIME = 2.0  # the new points' retries end by this many times a corner's time a point
 SEED_STEP = 7919  # the seed of each level's new points, apart from the corners' and each other's
 
 
@@ -32,16 +33,20 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
                                          light=result.irradiance))
     if direct is None or not refine:
         return surface, direct, None
+    each = (time.perf_counter() - started) / max(2 * len(triangles), 1)  # (a corner's time: about 2 a triangle)
     most = None
     if deadline is not None:  # (new points as many as half the time left takes, at the corners' rate)
-        each = (time.perf_counter() - started) / max(2 * len(triangles), 1)  # (about 2 corners a triangle)
         most = int(TIME_SHARE * max(deadline - time.perf_counter(), 0.0) / max(each, 1e-9))
     ps = result.per_source if grouped else None
 
     def at_points(position, patch, level):
         groups = dict(light_group=ps.light_group, patch_group=ps.patch_group, groups=ps.count) if grouped else {}
+        # (retries within RETRY_TIME times a corner's time a point: new points are where the light changes, beside
+        # emitters too, where every point would take them all)
+        until = time.perf_counter() + RETRY_TIME * each * len(position)
         return point_direct.points_direct(surface, scene, position, patch, seed=int(result.seed) + SEED_STEP * (level + 1),
-                                          deadline=deadline, light=result.irradiance, **groups)
+                                          deadline=until if deadline is None else min(deadline, until),
+                                          light=result.irradiance, **groups)
 
     made = display_cells.refine(surface, direct, scene, triangles, out.patches.meshes, [o.receives for o in out.patches.objects],
                                 result.irradiance, at_points, most)

@@ -130,8 +130,13 @@ def test_the_split_stays_within_its_budget_of_new_points(budget):
     mesh, scene = _ceiling([PointLight(LAMP, np.ones(3))])
     made = _display(mesh, scene, _patch_means_exact(scene), BUDGET=budget)[2]
     assert made is not None
-    new = len(made[2].vertices) - len(mesh.points)
+    shown = made[2]
+    new = len(shown.vertices) - len(mesh.points)
     assert 0 < new <= budget * len(mesh.points) + 4 * display_cells.NEW_POINTS + 8
+    # a patch none of whose cells split nor took a neighbour's point is written as its own quad
+    polygons = np.bincount(shown.origin[0], minlength=scene.patch_count)
+    whole = np.flatnonzero(polygons == 1)
+    assert whole.size and (shown.meshes[0].face_sizes[np.isin(shown.origin[0], whole)] == 4).all()
 
 
 def test_interpolation_is_exact_for_light_linear_in_each_patch():

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..mesh.faces import triangle_areas
+from ..mesh.faces import ranks_in_runs, starts_of, triangle_areas
 from ..mesh.meshing import PatchMesh
 from .adaptive import cells_of, patch_mesh, split
 from ..display.covered import visible_corner_weights
@@ -32,6 +32,7 @@ LEVELS = 3  # splits of a patch at most: an eighth of its side
 CHANGE = 0.25  # of the patch's light: a difference between corners the eye sees as a shape, not a shade
 FLOOR = 0.2  # of the mean light: the least light a difference is measured against
 BUDGET = 1.0  # new points at most, a share of the split meshes' points (each costs a corner's rays)
+MOST = 16_384  # and at most this many: where patches are that many, a hot spot spans patches of its own
 NEW_POINTS = 3  # points a split quad adds, its four midpoints shared with neighbours
 FAR = np.int64(1) << np.int64(31)  # key of a new point: patch * FAR + its point in the object's cells
 
@@ -63,18 +64,14 @@ class Shown:
 class RefinedSurface:
     """``coarse`` (``smoothing.Surface`` of the solve's triangles) as the finer cells show it: its
     per-patch filters as they are, corner values its own interpolated at the fine corners, corner
-    means and welded points the fine surface's."""
+    means the fine triangles'."""
 
     def __init__(self, coarse, fine, shown, slots, weights):
         self.coarse, self.fine, self.shown = coarse, fine, shown
-        self.slots, self.weights = slots, weights  # (T'*3, 3) coarse corner slots and their weights
+        self.slots, self.weights = slots, weights  # (T'*3,) coarse corner slots; the new points' (``_slots``)
 
     def __getattr__(self, name):
         return getattr(self.coarse, name)
-
-    @property
-    def point(self):
-        return self.fine.point
 
     @property
     def triangle_patch(self):
@@ -103,9 +100,12 @@ class RefinedSurface:
         """(..., T',3,k) the fine corners of coarse ``corners`` (..., T,3,k): linear within each patch."""
         corners = np.asarray(corners)
         flat = corners.reshape(corners.shape[:-3] + (-1, corners.shape[-1]))
-        out = flat[..., self.slots[:, 0], :] * self.weights[:, 0, None].astype(flat.dtype)
+        out = flat[..., self.slots, :]  # (a new point's row is filled below)
+        rows, slots, weights = self.weights
+        mixed = flat[..., slots[:, 0], :] * weights[:, 0, None]
         for j in (1, 2):
-            out += flat[..., self.slots[:, j], :] * self.weights[:, j, None].astype(flat.dtype)
+            mixed += flat[..., slots[:, j], :] * weights[:, j, None]
+        out[..., rows, :] = mixed
         return out.reshape(corners.shape[:-3] + (-1, 3, corners.shape[-1]))
 
 
@@ -124,20 +124,17 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     offsets = np.cumsum([0] + [m.patch_count for m in meshes])
     splittable = [k for k, m in enumerate(meshes) if receives[k] and getattr(m, "shading_triangles", None) is None
                   and m.patch_count]
-    grey = np.asarray(light, np.float64).sum(axis=1)
-    hidden = coarse.hidden if coarse.hidden is not None else np.zeros(scene.patch_count, bool)
-    seen = ~hidden & (coarse.patch_area > 0)
-    kept = hidden.copy()  # (and partly buried patches: a new point inside another object has no light of its own)
-    if scene.geometry.buried is not None:
-        kept[np.concatenate([scene.geometry.buried.patch, scene.geometry.buried.whole]).astype(np.int64)] = True
-    floor = FLOOR * (grey[seen].mean() if seen.any() else 0.0)
-    threshold = CHANGE * np.maximum(grey, floor)
+    threshold, kept = _limits(coarse, scene, light)
     # (cells of the patches' triangles: a cell's triangles never cross its patch's, so the coarse light's linear
-    # interpolation at the new points keeps every patch's mean, in any triangulation of the cells' polygons)
-    cells = {k: cells_of(_triangle_mesh(meshes[k])) for k in splittable}
-    patch_of = {k: offsets[k] + np.asarray(meshes[k].triangle_patch, np.int64) for k in splittable}
+    # interpolation at the new points keeps every patch's mean, in any triangulation of the cells' polygons; only
+    # the patches whose light changes and LEVELS + 1 rings around them: the balance's splits stay among them)
+    rows = {k: _region(meshes[k], offsets[k] + np.asarray(meshes[k].triangle_patch, np.int64), table, starts[k],
+                       threshold, kept) for k in splittable}
+    splittable = [k for k in splittable if rows[k].size]
+    cells = {k: cells_of(_triangle_mesh(meshes[k], rows[k])) for k in splittable}
+    patch_of = {k: offsets[k] + np.asarray(meshes[k].triangle_patch, np.int64)[rows[k]] for k in splittable}
     active = {k: np.ones(cells[k].count, bool) for k in splittable}
-    budget = BUDGET * sum(len(meshes[k].points) for k in splittable)
+    budget = min(BUDGET * sum(len(meshes[k].points) for k in splittable), MOST)
     budget = budget if most is None else min(budget, most)
     for level in range(LEVELS):
         made = sum(len(c.points) - len(meshes[k].points) for k, c in cells.items())
@@ -154,12 +151,11 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     if not refined:
         return None
     made = {k: patch_mesh(cells[k]) for k in refined}
-    shown = _shown(meshes, {k: (mesh, patch_of[k][origin] - offsets[k]) for k, (mesh, origin) in made.items()},
+    shown = _shown(meshes, {k: _merged(meshes[k], mesh, patch_of[k][origin] - offsets[k]) for k, (mesh, origin) in made.items()},
                    triangles, tp, starts, offsets)
     _evaluate(table, _shading_corners(shown, refined, offsets), starts, meshes, cells, at_points, LEVELS)
-    fine = Surface.of(shown.vertices, shown.triangles, shown.triangle_patch, scene.patch_count,
-                      hidden=coarse.hidden, visible=visible_corner_weights(scene.geometry, shown.vertices, shown.triangles,
-                                                                           shown.triangle_patch))
+    fine = _Means(shown, scene.patch_count, visible_corner_weights(scene.geometry, shown.vertices, shown.triangles,
+                                                                   shown.triangle_patch))
     coarse_vertex = _coarse_vertices(shown, meshes, starts)
     slots, weights = _slots(shown, coarse_vertex, scene.vertices, triangles, tp, table)
     surface = RefinedSurface(coarse, fine, shown, slots, weights)
@@ -167,13 +163,64 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     return surface, CornerDirect(corners, patch_means(fine, corners)), shown
 
 
-def _triangle_mesh(mesh):
-    """``mesh``'s triangles as a PatchMesh of their own (cells that split inside their patch's triangles)."""
+def _limits(coarse, scene, light):
+    """((P,) the change of direct light between a cell's corners that splits it, (P,) bool the patches
+    kept whole: no camera sees them, or another object runs into them (a new point inside it has no light
+    of its own))."""
+    grey = np.asarray(light, np.float64).sum(axis=1)
+    hidden = coarse.hidden if coarse.hidden is not None else np.zeros(scene.patch_count, bool)
+    seen = ~hidden & (coarse.patch_area > 0)
+    kept = hidden.copy()
+    if scene.geometry.buried is not None:
+        kept[np.concatenate([scene.geometry.buried.patch, scene.geometry.buried.whole]).astype(np.int64)] = True
+    floor = FLOOR * (grey[seen].mean() if seen.any() else 0.0)
+    return CHANGE * np.maximum(grey, floor), kept
+
+
+def _region(mesh, patch, table, start, threshold, kept):
+    """(n,) the rows of ``mesh``'s triangles (their scene patches ``patch``) that may split: every
+    triangle of the patches where one's corners' direct light differs by more than its patch's
+    ``threshold``, and of LEVELS + 1 rings of patches around them (sharing a point)."""
     triangles = np.asarray(mesh.triangles, np.int64)
+    values = table.coarse(np.repeat(patch, 3), triangles.ravel() + start)
+    grey = (values.sum(axis=-1) if values.ndim == 2 else values.sum(axis=(0, -1))).reshape(-1, 3)
+    chosen = np.zeros(int(patch.max(initial=-1)) + 1, bool)
+    chosen[patch[(np.ptp(grey, axis=1) > threshold[patch]) & ~kept[patch]]] = True
+    if not chosen.any():
+        return np.zeros(0, np.int64)
+    for _ in range(LEVELS + 1):
+        near = np.zeros(len(mesh.points), bool)
+        near[triangles[chosen[patch]].ravel()] = True
+        chosen[patch[near[triangles].any(axis=1)]] = True
+    return np.flatnonzero(chosen[patch])
+
+
+def _triangle_mesh(mesh, rows):
+    """The ``rows`` of ``mesh``'s triangles as a PatchMesh of their own (cells that split inside their
+    patch's triangles), its points all of ``mesh``'s."""
+    triangles = np.asarray(mesh.triangles, np.int64)[rows]
     points = np.asarray(mesh.points, np.float64)
     return PatchMesh(points, np.full(len(triangles), 3, np.int32), triangles.ravel().astype(np.int32),
-                     np.asarray(mesh.patch_face)[np.asarray(mesh.triangle_patch)], triangles.astype(np.int32),
+                     np.asarray(mesh.patch_face)[np.asarray(mesh.triangle_patch)[rows]], triangles.astype(np.int32),
                      np.arange(len(triangles), dtype=np.int32), triangle_areas(points, triangles))
+
+
+class _Means:
+    """The fine triangles as ``Surface.corner_means`` reads them: areas, patches, the part seen."""
+
+    corner_means = Surface.corner_means
+
+    def __init__(self, shown, patch_count, visible=None):
+        self.triangle_patch = shown.triangle_patch
+        self.triangle_area = triangle_areas(shown.vertices, shown.triangles)
+        self.patch_area = np.bincount(self.triangle_patch, weights=self.triangle_area, minlength=patch_count)
+        self.visible = None if visible is None else np.asarray(visible, np.float64).reshape(-1)
+        self.visible_area = None if visible is None else np.bincount(np.repeat(self.triangle_patch, 3), weights=self.visible,
+                                                                     minlength=patch_count)
+
+    @property
+    def patch_count(self):
+        return len(self.patch_area)
 
 
 class _Table:
@@ -291,6 +338,50 @@ def _shown(meshes, made, triangles, tp, starts, offsets):
                  np.concatenate(patches), np.asarray(point_starts, np.int64))
 
 
+def _merged(coarse, fine, origin):
+    """(the cells' PatchMesh ``fine`` with every patch whose triangles none split nor took a point (or
+    that no cell covers) written as the ``coarse`` patch's own polygon, each polygon's coarse patch): the written mesh's
+    polygons a patch each where nothing changed (a quad, not its two triangles)."""
+    sizes = np.asarray(fine.face_sizes, np.int64)
+    P = coarse.patch_count
+    count = np.bincount(origin, minlength=P)
+    whole = (count == 0) | (count == np.bincount(np.asarray(coarse.triangle_patch, np.int64), minlength=P)) & (
+        np.bincount(origin, weights=sizes != 3, minlength=P) == 0)
+    keep = ~whole[origin]  # (the fine polygons written)
+    polygon_patch = np.concatenate([np.flatnonzero(whole), origin[keep]])
+    order = np.argsort(polygon_patch, kind="stable")
+    polygon_patch = polygon_patch[order]
+    coarse_sizes = np.asarray(coarse.face_sizes, np.int64)
+    coarse_starts, fine_starts = starts_of(coarse_sizes), starts_of(sizes)
+    source = np.concatenate([np.flatnonzero(whole), np.flatnonzero(keep)])[order]  # coarse patch, or fine polygon
+    is_coarse = np.concatenate([np.ones(whole.sum(), bool), np.zeros(keep.sum(), bool)])[order]
+    new_sizes = np.where(is_coarse, coarse_sizes[np.where(is_coarse, source, 0)], sizes[np.where(is_coarse, 0, source)])
+    first = np.where(is_coarse, coarse_starts[np.where(is_coarse, source, 0)], fine_starts[np.where(is_coarse, 0, source)])
+    rank = ranks_in_runs(new_sizes)
+    at = np.repeat(first, new_sizes) + rank
+    corner_verts = np.where(np.repeat(is_coarse, new_sizes), np.asarray(coarse.corner_verts, np.int64)[np.minimum(at, len(coarse.corner_verts) - 1)],
+                            np.asarray(fine.corner_verts, np.int64)[np.minimum(at, len(fine.corner_verts) - 1)])
+    # the shading triangles: a whole patch's own, a split one's cells'
+    renumber = np.full(len(sizes), -1, np.int64)
+    renumber[source[~is_coarse]] = np.flatnonzero(~is_coarse)
+    whole_number = np.full(P, -1, np.int64)
+    whole_number[source[is_coarse]] = np.flatnonzero(is_coarse)
+    ctp = np.asarray(coarse.triangle_patch, np.int64)
+    from_coarse = np.flatnonzero(whole[ctp])
+    ftp = np.asarray(fine.shading_triangle_patch, np.int64)
+    from_fine = np.flatnonzero(renumber[ftp] >= 0)
+    tris = np.concatenate([np.asarray(coarse.triangles, np.int64)[from_coarse], np.asarray(fine.shading_triangles, np.int64)[from_fine]])
+    tri_polygon = np.concatenate([whole_number[ctp[from_coarse]], renumber[ftp[from_fine]]])
+    tri_order = np.argsort(tri_polygon, kind="stable")
+    tris, tri_polygon = tris[tri_order], tri_polygon[tri_order]
+    area = np.bincount(tri_polygon, weights=triangle_areas(fine.points, tris), minlength=len(source))
+    mesh = PatchMesh(fine.points, new_sizes.astype(np.int32), corner_verts.astype(np.int32),
+                     np.asarray(coarse.patch_face)[polygon_patch].astype(np.int32), tris.astype(np.int32),
+                     tri_polygon.astype(np.int32), area)
+    mesh.shading_triangles, mesh.shading_triangle_patch = mesh.triangles, mesh.triangle_patch
+    return mesh, polygon_patch
+
+
 def _shading_corners(shown, refined, offsets):
     """[(object, points (n,3) in its cells, patch (n,))] the shading triangles' corners of the split objects."""
     out = []
@@ -325,21 +416,18 @@ def _fine_corners(table, shown, coarse_vertex, meshes, starts, dtype):
 
 
 def _slots(shown, coarse_vertex, vertices, triangles, tp, table):
-    """((T'*3,3) coarse corner slots, (T'*3,3) weights): each shown corner's linear interpolation
-    in its patch's coarse triangles (a coarse corner: itself)."""
+    """((T'*3,) each shown corner's coarse corner slot, -1 for a new point; (the new points' corners
+    (n,), their coarse triangle's three slots (n,3), their weights (n,3))): the linear interpolation
+    in its patch's coarse triangles."""
     point = shown.triangles.ravel()
     patch = np.repeat(shown.triangle_patch, 3)
     scene_vertex = coarse_vertex[point]
     own = scene_vertex >= 0
-    slots = np.zeros((len(point), 3), np.int64)
-    weights = np.zeros((len(point), 3))
-    slots[own] = table.coarse_slot[_found(table.coarse_keys, patch[own] * table.V + scene_vertex[own])][:, None]
-    weights[own, 0] = 1.0
+    slots = np.full(len(point), -1, np.int64)
+    slots[own] = table.coarse_slot[_found(table.coarse_keys, patch[own] * table.V + scene_vertex[own])]
     rest = np.flatnonzero(~own)
     tri, bary = containing(shown.vertices[point[rest]], patch[rest], vertices, triangles, tp)
-    slots[rest] = tri[:, None] * 3 + np.arange(3)
-    weights[rest] = bary
-    return slots, weights
+    return slots, (rest, tri[:, None] * 3 + np.arange(3), bary)
 
 
 def containing(x, patch, vertices, triangles, tp):
