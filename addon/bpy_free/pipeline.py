@@ -46,7 +46,7 @@ class SolveOutput:
     sources_out: object = None  # relit.SourceResults of a per-source solve, else None
     live_lamps: bool = False  # Cycles' output leaves the lamps' direct light to the renderer (bounced_colours)
     seconds: float = 0.0  # the whole run's (meshing, solve, colours)
-    # core refine.display_cells.Shown: the meshes written where the display split cells (None: the patches'),
+    # core refine.cell_meshes.Shown: the meshes written where the display split cells (None: the patches'),
     # and the source layers on them (the patches' layers where None)
     shown: object = None
     layers: list | None = None

@@ -10,7 +10,7 @@ from functools import partial
 import numpy as np
 
 from ..core.display import point_direct, smoothing
-from ..core.refine import display_cells
+from ..core.refine import cell_meshes, display_cells
 from ..core.display.covered import seen_parts
 from ..core.relight.relighting import group_direct
 
@@ -98,7 +98,7 @@ def layers_on(out):
         if kept is None or shown.origin[k] is None:
             made.append(kept)
             continue
-        corners, weights = display_cells.corner_weights(out.patches.meshes[k], shown.meshes[k], shown.origin[k])
+        corners, weights = cell_meshes.corner_weights(out.patches.meshes[k], shown.meshes[k], shown.origin[k])
         mixed = partial(_mixed, corners=corners, weights=weights)
         normals = None if kept.normals is None else mixed(kept.normals)
         if normals is not None:

@@ -7,7 +7,7 @@ import pytest
 
 from addon.core import PatchScene
 from addon.core.display import point_direct, smoothing
-from addon.core.refine import display_cells
+from addon.core.refine import cell_meshes, display_cells
 from addon.core.lights.lights import PointLight, SunLight
 from addon.core.mesh.meshing import mesh_patches
 
@@ -162,7 +162,7 @@ def test_layers_at_the_new_polygon_corners_are_interpolated_linearly():
     mesh, scene = _ceiling([PointLight(LAMP, np.ones(3))])
     _, _, shown = _display(mesh, scene, _patch_means_exact(scene))[2]
     uv = mesh.points[mesh.corner_verts][:, :2] * [0.5, 0.25]
-    corners, weights = display_cells.corner_weights(mesh, shown.meshes[0], shown.origin[0])
+    corners, weights = cell_meshes.corner_weights(mesh, shown.meshes[0], shown.origin[0])
     fine_uv = (uv[corners] * weights[..., None]).sum(axis=1)
     np.testing.assert_allclose(fine_uv, shown.meshes[0].points[shown.meshes[0].corner_verts][:, :2] * [0.5, 0.25],
                                atol=1e-12)
