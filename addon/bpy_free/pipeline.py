@@ -50,6 +50,7 @@ class SolveOutput:
     # and the source layers on them (the patches' layers where None)
     shown: object = None
     layers: list | None = None
+    corner_rows: list | None = None  # per object, the triangle corner each written polygon corner reads (shown_mesh)
 
     def blocked_fraction(self):
         """Share of the emitted power absorbed on the back side of faces."""

@@ -23,6 +23,9 @@ from ..core.names import GATHERED, TWO_WAY
 from ..core.display.sample_rounds import Spent
 from . import adaptive_patches, options
 
+# The display's cells (bpy_free shown_mesh) over the corners' direct light they add to: their new points'
+# light and the larger meshes made (0.5 in the 11k window room: results/operator_stages.md).
+CELLS_SHARE = 0.5
 PILOT_CORNERS = 512  # corners (or patches) a pilot of the display's direct light times
 # Seconds of the display a shading triangle beyond the direct light (the smoothing, the noise
 # filter, the polygon corners): 25-110 microseconds in the rooms measured (docs/performance.md).
@@ -138,6 +141,8 @@ def display_forecast(scene, patches, settings, groups=None) -> Display:
     apart = {} if groups is None else dict(light_group=groups.light_group,
                                            patch_group=groups.patch_group(scene.patch_count), groups=groups.count)
     corners, least = corner_seconds(scene, *shading, seed=seed, **apart)
+    if getattr(settings, "display_cells", False):  # (their new points, and the larger meshes written)
+        corners *= 1.0 + CELLS_SHARE
     rest = REST_PER_TRIANGLE * len(shading[0])
     return Display(corners, live, rest, least + live_least + rest)
 

@@ -68,24 +68,31 @@ def per_polygon(out, k, values):
 def polygon_corners(out, scene, corners, shading=None, least=None):
     """Per object (None: not receiving), the values (C_k,3) at its written mesh's polygon corners, read from
     the triangle corners (T,3,3) of the Shown, else of ``shading`` (triangles, patch of each) or the scene's,
-    as float32 clipped to at least ``least``."""
+    as float32 clipped to at least ``least``; which corner each reads found once a run (``out.corner_rows``)."""
+    if out.corner_rows is None:
+        out.corner_rows = _corner_rows(out, scene, shading)
+    flat = np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])
+    return [None if rows is None else flat[rows].astype(np.float32).clip(least, np.inf) for rows in out.corner_rows]
+
+
+def _corner_rows(out, scene, shading):
+    """Per object (None: not receiving), the triangle corner each polygon corner of its written mesh reads."""
     patches, shown = out.patches, getattr(out, "shown", None)
     if shown is not None:
         triangles, triangle_patch, starts = shown.triangles, shown.triangle_patch, shown.point_starts
     else:
         triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
         starts = np.cumsum([0] + [len(mesh.points) for mesh in patches.meshes])
-    values = []
+    rows = []
     for k, o in enumerate(patches.objects):
         if not o.receives:  # the rest of the scene: no results
-            values.append(None)
+            rows.append(None)
             continue
         offset = patches.combined.patch_offsets[k]
         mesh = mesh_of(out, k)
         corner_patch = shown.corner_patch(k, offset) if shown is not None else mesh.corner_patch + offset
-        values.append(smoothing.polygon_corner_values(corners, triangles, triangle_patch, corner_patch,
-                                                      mesh.corner_verts + starts[k]).astype(np.float32).clip(least, np.inf))
-    return values
+        rows.append(smoothing.polygon_corner_rows(triangles, triangle_patch, corner_patch, mesh.corner_verts + starts[k]))
+    return rows
 
 
 def layers_on(out):

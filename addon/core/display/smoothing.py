@@ -400,6 +400,13 @@ def polygon_corner_values(corners, triangles, triangle_patch, corner_patch, corn
     (T,3,3) at a corner of one of the patch's triangles at that point (every such corner holds the
     same value: the patch's triangles share its normal, so one crease group at each point).
     ValueError where a polygon corner is no corner of its patch's triangles."""
+    rows = polygon_corner_rows(triangles, triangle_patch, corner_patch, corner_point)
+    return np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])[rows]
+
+
+def polygon_corner_rows(triangles, triangle_patch, corner_patch, corner_point):
+    """(n,) the triangle corner (a row of (T*3,...) corners) ``polygon_corner_values`` reads for each
+    polygon corner: the same for every value set on these triangles."""
     points = int(max(triangles.max(initial=0), np.max(corner_point, initial=0))) + 1
     key = (np.asarray(triangle_patch, np.int64)[:, None] * points + triangles).ravel()
     order = np.argsort(key, kind="stable")
@@ -408,5 +415,4 @@ def polygon_corner_values(corners, triangles, triangle_patch, corner_patch, corn
     found = order[at]
     if not np.array_equal(key[found], wanted):
         raise ValueError("a polygon corner is not a corner of its patch's triangles")
-    return np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])[found]
-
+    return found
