@@ -110,15 +110,27 @@ def solve(seed=0, **overrides):
     settings = pic.prepare_product(scene, options.OUTPUT.default, seed)
     for name, value in overrides.items():
         setattr(settings, name, value)
+    noise = {}
     wall = time.perf_counter()
-    finished = solve_job.run(bpy.context)  # what the operator runs
+    finished = solve_job.run(bpy.context, before_writing=lambda output: noise.update(solve_noise(output)))  # what the operator runs
     release_solve_memory()
     wall = time.perf_counter() - wall
     if finished.status != "FINISHED":
         raise RuntimeError(f"the solve failed: {finished.error or finished.messages}")
     return wall, {"patches": settings.last_patches, "patch_size": settings.last_patch_size,
                   "error": settings.last_relative_error, "method": settings.last_estimator,
-                  "solver_seconds": settings.last_seconds, "live_lamps": bool(settings.live_lamps)}
+                  "solver_seconds": settings.last_seconds, "live_lamps": bool(settings.live_lamps), "object_noise": noise}
+
+
+def solve_noise(output):
+    """Each receiving object's own noise in a solve's output (``walkthrough_measures.object_noise``)."""
+    patches, result = output.patches, output.result
+    objects = []
+    for k, o in enumerate(patches.objects):
+        if o.receives:
+            rows = patches.combined.patch_slice(k)
+            objects.append((o.name, patches.meshes[k].patch_area, result.radiosity[rows], result.reflected_variance[rows]))
+    return wm.object_noise(objects)
 
 
 # --------------------------------------------------------------------------- one interior
