@@ -96,9 +96,10 @@ def references(walk, samples, log=print):
 
 # --------------------------------------------------------------------------- the product
 
-def solve(seed=0, **overrides):
+def solve(seed=0, before_writing=None, **overrides):
     """The panel's operator at its defaults (the error target ``pic.TARGET_ERROR``, textured output,
-    Live lamps) as the command line runs it, over every source mesh: (wall seconds, statistics)."""
+    Live lamps) as the command line runs it, over every source mesh: (wall seconds, statistics);
+    ``before_writing(output)`` is given the solve's output (``solve_job.run``'s)."""
     import bpy
 
     from addon.blender_write import solve_job
@@ -111,8 +112,14 @@ def solve(seed=0, **overrides):
     for name, value in overrides.items():
         setattr(settings, name, value)
     noise = {}
+
+    def kept(output):
+        noise.update(solve_noise(output))
+        if before_writing is not None:
+            before_writing(output)
+
     wall = time.perf_counter()
-    finished = solve_job.run(bpy.context, before_writing=lambda output: noise.update(solve_noise(output)))  # what the operator runs
+    finished = solve_job.run(bpy.context, before_writing=kept)  # what the operator runs
     release_solve_memory()
     wall = time.perf_counter() - wall
     if finished.status != "FINISHED":

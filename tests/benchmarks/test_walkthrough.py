@@ -239,6 +239,26 @@ def test_an_objects_own_noise_is_its_lights_spread_over_seeds():
     assert 1 - 3 * 0.15 < measured / np.median(said) < 1 + 3 * 0.15
 
 
+def test_a_tables_patches_fall_in_their_face_groups():
+    """A table top on a leg standing on the floor: the legs are the sides below the lit
+    underside; the legs' feet (on the floor: no light) do not count as an underside."""
+    from benchmarks.walkthrough_patches import face_groups
+
+    _, quads, _ = table_in_a_room()
+    top = quads[-48:]  # the table top's 6 faces: 4 x 4 patches on its top and underside, 4 on each side
+    low, high = np.array([0.7, 0.7, 0.0]), np.array([0.75, 0.75, 0.8])
+    feet = np.array([[low, [low[0], high[1], 0], [high[0], high[1], 0], [high[0], low[1], 0]]])  # facing down
+    side = np.array([[low, [high[0], low[1], 0], [high[0], low[1], 0.8], [low[0], low[1], 0.8]]])  # facing -y
+    quads = np.concatenate([top, feet, side])  # and a leg of its own
+    lit = np.ones(len(quads), bool)
+    lit[-2] = False  # the feet, on the floor
+    groups = face_groups(quads, lit)
+    normal_z = np.cross(top[:, 1] - top[:, 0], top[:, 3] - top[:, 0])[:, 2]
+    assert (groups[:len(top)][normal_z > 0] == "top").all() and (groups[:len(top)][normal_z < 0] == "underside").all()
+    assert (groups[:len(top)][normal_z == 0] == "sides").all() and (normal_z == 0).sum() == 16  # its edges
+    assert groups[-2] == "underside" and groups[-1] == "legs"
+
+
 # --------------------------------------------------------------------------- the reports
 
 def analysed():
