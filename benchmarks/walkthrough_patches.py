@@ -182,6 +182,7 @@ def page(a):
 
 
 def run(interior, names, seeds, samples, overrides, log=print):
+    """The interior built, solved at ``seeds`` seeds, its objects ``names`` baked twice: the page's numbers."""
     scenes.build(interior)
     solved = solves(names, seeds, overrides, log)
     quads = {n: solved[0][n]["quads"] for n in names}
