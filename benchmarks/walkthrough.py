@@ -96,9 +96,10 @@ def references(walk, samples, log=print):
 
 # --------------------------------------------------------------------------- the product
 
-def solve(seed=0, **overrides):
+def solve(seed=0, before_writing=None, **overrides):
     """The panel's operator at its defaults (the error target ``pic.TARGET_ERROR``, textured output,
-    Live lamps) as the command line runs it, over every source mesh: (wall seconds, statistics)."""
+    Live lamps) as the command line runs it, over every source mesh: (wall seconds, statistics);
+    ``before_writing(output)`` is given the solve's output (``solve_job.run``'s)."""
     import bpy
 
     from addon.blender_write import solve_job
@@ -110,15 +111,33 @@ def solve(seed=0, **overrides):
     settings = pic.prepare_product(scene, options.OUTPUT.default, seed)
     for name, value in overrides.items():
         setattr(settings, name, value)
+    noise = {}
+
+    def kept(output):
+        noise.update(solve_noise(output))
+        if before_writing is not None:
+            before_writing(output)
+
     wall = time.perf_counter()
-    finished = solve_job.run(bpy.context)  # what the operator runs
+    finished = solve_job.run(bpy.context, before_writing=kept)  # what the operator runs
     release_solve_memory()
     wall = time.perf_counter() - wall
     if finished.status != "FINISHED":
         raise RuntimeError(f"the solve failed: {finished.error or finished.messages}")
     return wall, {"patches": settings.last_patches, "patch_size": settings.last_patch_size,
                   "error": settings.last_relative_error, "method": settings.last_estimator,
-                  "solver_seconds": settings.last_seconds, "live_lamps": bool(settings.live_lamps)}
+                  "solver_seconds": settings.last_seconds, "live_lamps": bool(settings.live_lamps), "object_noise": noise}
+
+
+def solve_noise(output):
+    """Each receiving object's own noise in a solve's output (``walkthrough_measures.object_noise``)."""
+    patches, result = output.patches, output.result
+    objects = []
+    for k, o in enumerate(patches.objects):
+        if o.receives:
+            rows = patches.combined.patch_slice(k)
+            objects.append((o.name, patches.meshes[k].patch_area, result.radiosity[rows], result.reflected_variance[rows]))
+    return wm.object_noise(objects)
 
 
 # --------------------------------------------------------------------------- one interior

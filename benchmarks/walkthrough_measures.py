@@ -41,6 +41,23 @@ def next_samples(total, spent, views_left, line, last=None, most=1 << 16):
     return samples_within(max(total - spent, 0.0) / max(views_left, 1), line, most)
 
 
+# --------------------------------------------------------------------------- the solve's own noise
+
+def object_noise(objects):
+    """Each object's own noise in the solve: the standard deviation of its area-weighted mean light
+    over that mean, from its patches' measured variances (the patches' errors taken as independent,
+    the channels as moving together), a dict name -> float. ``objects``: (name, area (P,),
+    radiosity (P,3), variance (P,3)) of each object. A small dim object's light is noisier than the
+    solve's error over the scene says: its brightness in a picture is known no better than this."""
+    out = {}
+    for name, area, radiosity, variance in objects:
+        area = np.asarray(area, np.float64)
+        mean = float(np.sum(area * np.asarray(radiosity, np.float64).mean(axis=1)))
+        sd = np.sqrt(np.maximum(np.asarray(variance, np.float64), 0.0)).mean(axis=1)
+        out[name] = float(np.sqrt(np.sum((area * sd) ** 2)) / mean) if mean > 0 else float("nan")
+    return out
+
+
 # --------------------------------------------------------------------------- a view's numbers
 
 def view_sums(image, first, second, object_id, mask, count):

@@ -60,11 +60,14 @@ def object_table(a):
     """Each object's brightness over the walk (its pixels of every view), per kind."""
     kinds = kinds_of(a)
     objects = a["kinds"][kinds[0]]["walk"]["objects"]
-    lines = ["| object | pixels | the reference's own (±) | " + " | ".join(SHORT[k] for k in kinds) + " |",
-             "|---|---|---|" + "---|" * len(kinds)]
+    noise = a["stats"].get("object_noise")  # (runs before it was measured: no column)
+    own = " the product's own (±) |" if noise else ""
+    lines = [f"| object | pixels | the reference's own (±) |{own} " + " | ".join(SHORT[k] for k in kinds) + " |",
+             "|---|---|---|" + "---|" * (len(kinds) + bool(noise))]
     for name, (_, pixels, spread) in sorted(objects.items(), key=lambda item: -item[1][1]):
         ratios = [a["kinds"][k]["walk"]["objects"].get(name, [float("nan")])[0] for k in kinds]
-        lines.append(f"| {name} | {pixels:,} | {spread:.3f} | " + " | ".join(f"{r:.2f}" for r in ratios) + " |")
+        mine = f" {noise.get(name, float('nan')):.3f} |" if noise else ""
+        lines.append(f"| {name} | {pixels:,} | {spread:.3f} |{mine} " + " | ".join(f"{r:.2f}" for r in ratios) + " |")
     return lines
 
 

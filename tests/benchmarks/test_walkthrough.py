@@ -176,6 +176,89 @@ def test_the_walks_numbers_weigh_every_surface_pixel_alike():
     assert walk["walk"]["objects"]["left"][1] == object_id.size // 2 + 100
 
 
+# --------------------------------------------------------------------------- the solve's own noise
+
+def table_in_a_room():
+    """A 2 x 2 x 1.5 m room (inward quads, 0.25 m) lit by a ceiling square, a 4 cm thick table top
+    floating in it (outward quads): (PatchScene, quads (P,4,3), mask of the table top's underside)."""
+    from addon.core import PatchScene
+
+    def box(lower, upper, n, inward):
+        lower, upper, quads = np.asarray(lower, float), np.asarray(upper, float), []
+        for axis in range(3):
+            a, b = (axis + 1) % 3, (axis + 2) % 3
+            da, db = np.zeros(3), np.zeros(3)
+            da[a], db[b] = (upper[a] - lower[a]) / n[a], (upper[b] - lower[b]) / n[b]
+            for side in (0, 1):
+                for i in range(n[a]):
+                    for j in range(n[b]):
+                        o = lower.copy()
+                        o[axis] = upper[axis] if side else lower[axis]
+                        o = o + i * da + j * db
+                        q = [o, o + da, o + da + db, o + db]  # normal along +axis
+                        quads.append(q if (side == 1) != inward else q[::-1])
+        return np.array(quads)
+
+    room = box((0, 0, 0), (2, 2, 1.5), (8, 8, 6), inward=True)
+    quads = np.concatenate([room, box((0.6, 0.6, 0.8), (1.4, 1.4, 0.84), (4, 4, 1), inward=False)])
+    P, inside = len(quads), np.arange(len(quads)) < len(room)
+    centre = quads.mean(axis=1)
+    light = inside & (centre[:, 2] == 1.5) & (np.abs(centre[:, 0] - 1) < 0.3) & (np.abs(centre[:, 1] - 1) < 0.3)
+    R = np.where(light, 0.0, np.where(inside, 0.7, 0.3))[:, None].repeat(3, axis=1)
+    E = np.where(light, 5.0, 0.0)[:, None].repeat(3, axis=1)
+    triangles = (4 * np.arange(P)[:, None] + np.array([[0, 1, 2, 0, 2, 3]])).reshape(-1, 3)
+    scene = PatchScene(quads.reshape(-1, 3), triangles, np.repeat(np.arange(P), 2), R, E)
+    normal = np.cross(quads[:, 1] - quads[:, 0], quads[:, 3] - quads[:, 0])
+    return scene, quads, ~inside & (normal[:, 2] < 0)
+
+
+def test_an_objects_own_noise_is_the_sum_of_its_patches_variances():
+    area = np.array([1.0, 2.0, 1.0])
+    light = np.array([[1.0, 1.0, 1.0], [2.0, 2.0, 2.0], [0.0, 0.0, 0.0]])
+    variance = np.array([[0.04] * 3, [0.01] * 3, [0.09] * 3])
+    noise = wm.object_noise([("Bench", area, light, variance), ("Dark", area, 0 * light, variance)])
+    assert noise["Bench"] == pytest.approx(np.sqrt(0.2**2 + (2 * 0.1) ** 2 + 0.3**2) / 5.0)
+    assert np.isnan(noise["Dark"])  # no light: no relative noise
+
+
+def test_an_objects_own_noise_is_its_lights_spread_over_seeds():
+    """The underside of a table top in a lit room, solved by the two-way iteration with 24 seeds:
+    the spread of its mean light is what ``object_noise`` says from one solve's variances (their
+    median over the seeds). The sample deviation of 24 values has a relative standard error of
+    1/sqrt(46) = 0.15: three of them either side."""
+    from addon.core import solve
+
+    scene, quads, under = table_in_a_room()
+    area = np.linalg.norm(np.cross(quads[:, 1] - quads[:, 0], quads[:, 3] - quads[:, 0]), axis=1)[under]
+    means, said = [], []
+    for seed in range(24):
+        r = solve(scene, paths=40_000, seed=seed, method="two_way")
+        means.append(np.sum(area * r.radiosity[under].mean(axis=1)))
+        said.append(wm.object_noise([("Under", area, r.radiosity[under], r.reflected_variance[under])])["Under"])
+    measured = np.std(means, ddof=1) / np.mean(means)
+    assert 1 - 3 * 0.15 < measured / np.median(said) < 1 + 3 * 0.15
+
+
+def test_a_tables_patches_fall_in_their_face_groups():
+    """A table top on a leg standing on the floor: the legs are the sides below the lit
+    underside; the legs' feet (on the floor: no light) do not count as an underside."""
+    from benchmarks.walkthrough_patches import face_groups
+
+    _, quads, _ = table_in_a_room()
+    top = quads[-48:]  # the table top's 6 faces: 4 x 4 patches on its top and underside, 4 on each side
+    low, high = np.array([0.7, 0.7, 0.0]), np.array([0.75, 0.75, 0.8])
+    feet = np.array([[low, [low[0], high[1], 0], [high[0], high[1], 0], [high[0], low[1], 0]]])  # facing down
+    side = np.array([[low, [high[0], low[1], 0], [high[0], low[1], 0.8], [low[0], low[1], 0.8]]])  # facing -y
+    quads = np.concatenate([top, feet, side])  # and a leg of its own
+    lit = np.ones(len(quads), bool)
+    lit[-2] = False  # the feet, on the floor
+    groups = face_groups(quads, lit)
+    normal_z = np.cross(top[:, 1] - top[:, 0], top[:, 3] - top[:, 0])[:, 2]
+    assert (groups[:len(top)][normal_z > 0] == "top").all() and (groups[:len(top)][normal_z < 0] == "underside").all()
+    assert (groups[:len(top)][normal_z == 0] == "sides").all() and (normal_z == 0).sum() == 16  # its edges
+    assert groups[-2] == "underside" and groups[-1] == "legs"
+
+
 # --------------------------------------------------------------------------- the reports
 
 def analysed():
@@ -189,7 +272,7 @@ def analysed():
     return {"interior": "test_room", "views": views, "kinds": kinds,
             "reference_error": wm.reference_error([wm.reference_sums(*halves, mask)] * 2), "reference_seconds": [60.0, 60.0],
             "solve": 12.5, "stats": {"patches": 1234, "patch_size": 0.25, "error": 4.9, "method": "two-way", "live_lamps": True,
-                                     "solver_seconds": 10.0},
+                                     "solver_seconds": 10.0, "object_noise": {"Floor": 0.012, "Wall": 0.083}},
             "unlive_stats": None, "samples": [3, 4],
             "run": {"command": "python -m benchmarks.walkthrough", "seconds": 600.0, "loads": [2.0, 3.0], "reference_samples": 64,
                     "size": [240, 180], "eevee_samples": 16, "baked_samples": 16, "preview_samples": 64, "target": 5.0,
@@ -203,6 +286,9 @@ def test_the_pages_give_each_pictures_numbers():
     assert f"| {report.percent(eevee['error'])} | {report.percent(eevee['rms'])} | {eevee['brightness']:.2f} |" in page
     assert "2. window" in page and "walkthrough_test_room.json" in page and "(walkthrough_test_room.png)" in page
     assert "the solve took **12.5 s**" in page and "samples by view 3, 4" in page
+    assert "the product's own (±) |" in page and "| 0.083 |" in page  # each object's own noise in the solve
+    del a["stats"]["object_noise"]  # (a run from before it was measured)
+    assert "the product's own" not in report.interior_page(a)
     summary = report.summary_page({"test_room": a})
     assert "[test_room](walkthrough_test_room.md)" in summary and f"{eevee['brightness']:.2f}" in summary
 
