@@ -113,12 +113,15 @@ def one(scene_name, patch_size, seed):
     import bpy
 
     sys.path.insert(0, str(ROOT))
-    from benchmarks import interior_scene, picture
+    from benchmarks import interior_scene, picture, walkthrough_scenes
     from benchmarks.throughput import raw_rate
     from addon.blender_write import solve_job
 
     load = os.getloadavg()[0]
-    interior_scene.build(scene_name)
+    if scene_name in walkthrough_scenes.SCENES:
+        walkthrough_scenes.build(scene_name)
+    else:
+        interior_scene.build(scene_name)
     scene = bpy.context.scene
     picture.source_objects()
     settings = picture.prepare_product(scene, "TEXTURED", seed)

@@ -227,10 +227,11 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     budget = run_budget.Budget.of(started, limit, scene, patches, settings, groups)
     with trim.roomy(scene.patch_count):  # (freed memory kept for the next chunk: no page faults)
         result = solve(scene, settings.core(scene, max_seconds=budget.solve_seconds(), per_source=groups is not None,
-                                            groups=groups, direct_apart=True),
+                                            groups=groups, direct_apart=True,
+                                            replaced_direct=direct_means.replaced(scene, groups)),
                        progress=progress, should_stop=should_stop)
     # (the display's direct light in place of the solve's, whose weak lamps are heavy-tailed: core direct_means)
-    result = direct_means.corrected(scene, result)
+    result = direct_means.corrected(scene, result, None if settings.paths else settings.relative_rms)
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
