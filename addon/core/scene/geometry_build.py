@@ -11,7 +11,7 @@ import warnings
 
 import numpy as np
 
-from ..mesh.frames import RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET, local_offsets, parallelogram_frames
+from ..mesh.frames import RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET, local_offsets, parallelogram_frames, set_by_rounding
 from .geometry import Geometry
 from .regions import split_regions
 from ..mesh.triangles import BLOCK_TRIANGLES, UnitCorners, triangle_blocks, triangle_cross, triangle_normals
@@ -75,8 +75,10 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count, visible_par
         ray_offset, patch_ray_offset, patch_edge_inset = RELATIVE_RAY_OFFSET, None, None
         inset, offset = RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET
     else:
-        # Some patches are small beside the scene: parts far apart take frames of their own.
-        regions = split_regions(*patch_bounds(sorted_corners, tp_sorted, first, blocks, patch_count), side)
+        # Some patches are small beside the scene: parts far apart take frames of their own, where
+        # float32 would set some patch's offsets (elsewhere a frame changes none, and costs rays).
+        if set_by_rounding(side, largest).any():
+            regions = split_regions(*patch_bounds(sorted_corners, tp_sorted, first, blocks, patch_count), side)
         if regions is not None:
             sorted_corners = UnitCorners(V, T, centre, diagonal, order, frames=(regions.centre, regions.patch_region[tp]))
             patch_ray_offset, patch_edge_inset = local_offsets(side, regions.largest_coordinate()[regions.patch_region])
