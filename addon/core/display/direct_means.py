@@ -33,7 +33,7 @@ from ..names import SCALE_PAPER
 
 MEAN_SAMPLES = 32  # stratified points a patch, each a shadow ray to a lamp of the group (two halves)
 # The share of the target's MSE left for the display's direct light's error: its points cost a
-# shadow ray each, the solve's paths ten rays and more, so it is small (docs/benchmarks: flat_speed.md).
+# shadow ray each, the solve's paths ten rays and more, so it is small (benchmarks/results/flat_speed.md).
 REPLACED_SHARE = 0.1
 MOST_SAMPLES = 16 * MEAN_SAMPLES  # a patch's points at most, where the halves ask for more
 
