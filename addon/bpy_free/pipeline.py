@@ -164,7 +164,10 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
     groups = relit.groups_for(scene, patches, settings.per_source, [])
     with trim.roomy(scene.patch_count):  # (the pilots' memory as the run's, so their pace is the run's)
-        f = forecast(scene, settings.core(scene), bounces=bounces, should_stop=should_stop)
+        # (per source, the replaced direct light left out, as the run will: its error is the rest's)
+        core = settings.core(scene, per_source=groups is not None, groups=groups, direct_apart=True,
+                             replaced_direct=direct_means.replaced(scene, groups))
+        f = forecast(scene, core, bounces=bounces, should_stop=should_stop)
         display = run_budget.display_forecast(scene, patches, settings, groups)  # (the colours' time: their direct light)
     # (what the settings need, the Detail's refining solves included; a time limit ends the whole run first)
     needed = building + solve_refinement.predicted_seconds(patches, f.seconds) + display.seconds
