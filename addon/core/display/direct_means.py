@@ -97,7 +97,7 @@ def measured_means(scene, made, seed=0, target_mse=None):
         total, points = total + half * (a + b), points + 2 * half
         mse += (2 * half) ** 2 * pair_mse  # (times the pair's share squared, below)
         needed = 2 * half * pair_mse / target_mse if target_mse else 0.0
-        if k or needed <= points:
+        if k or not needed > points:  # (NaN: no target to hold to)
             break
         half = int(min(np.ceil(needed - points), MOST_SAMPLES - points) // 2)
         if half < 1:
