@@ -6,9 +6,10 @@
 alternation with this tree, round by round; the table gives both. Into
 benchmarks/results/operator_stages.md (``--out``).
 
-Each round runs in a fresh process: it builds the room (``interior_scene``), selects what the
-picture benchmark selects, sets the panel's defaults (5% error target, textured output) and runs
-``solve_job.run`` (what the operator runs). The stages are timed by wrapping the functions that
+Each round runs in a fresh process: it builds the room (``interior_scene``, or
+``walkthrough_scenes`` for its interiors: ``--scene studio_flat --patch-size 0``, the panel's
+own size), selects what the picture benchmark selects, sets the panel's defaults (5% error
+target, textured output) and runs ``solve_job.run`` (what the operator runs). The stages are timed by wrapping the functions that
 run them (reading the selection, meshing, the scene's arrays and Embree scenes, the prediction, the
 core solve and inside it Automatic's choice, the walk tables, the method's state and the chunks,
 the colours and inside them the display's direct light at corners, writing). Embree's own time
@@ -114,12 +115,15 @@ def one(scene_name, patch_size, seed):
     import bpy
 
     sys.path.insert(0, str(ROOT))
-    from benchmarks import interior_scene, picture
+    from benchmarks import interior_scene, picture, walkthrough_scenes
     from benchmarks.throughput import raw_rate
     from addon.blender_write import solve_job
 
     load = os.getloadavg()[0]
-    interior_scene.build(scene_name)
+    if scene_name in walkthrough_scenes.SCENES:
+        walkthrough_scenes.build(scene_name)
+    else:
+        interior_scene.build(scene_name)
     scene = bpy.context.scene
     picture.source_objects()
     settings = picture.prepare_product(scene, "TEXTURED", seed)
@@ -149,7 +153,9 @@ def one(scene_name, patch_size, seed):
     from addon.core.methods.tables import WalkTables
 
     tracer = WalkTables(core_scene, "finite", 1e-3, "hit").tracer
-    raw, raw_cpu = raw_rate(core_scene, result.threads, 1.0, tracer=tracer)
+    # (a scene of several regions traces a ray in each it may reach: no raw rate of one Embree scene)
+    raw, raw_cpu = (float("nan"),) * 2 if core_scene.geometry.regions is not None else \
+        raw_rate(core_scene, result.threads, 1.0, tracer=tracer)
     return {"seconds": seconds, "patches": int(core_scene.patch_count), "paths": int(result.paths),
             "rays": int(result.rays), "solve_rays": int(captured["embree"]["rays"]),
             "embree_seconds": captured["embree"]["seconds"], "raw_rate": raw, "raw_cpu_rate": raw_cpu, "threads": int(result.threads),

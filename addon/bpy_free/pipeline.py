@@ -169,7 +169,7 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     relative_efficiency = float(predict(scene, "biased_infinite", threshold=settings.threshold).relative_efficiency)
     groups = relit.groups_for(scene, patches, settings.per_source, [])
     with trim.roomy(scene.patch_count):  # (the pilots' memory as the run's, so their pace is the run's)
-        f = forecast(scene, settings.core(scene), bounces=bounces, should_stop=should_stop)
+        f = forecast(scene, run_core(scene, settings, groups), bounces=bounces, should_stop=should_stop)  # (as the run)
         display = run_budget.display_forecast(scene, patches, settings, groups)  # (the colours' time: their direct light)
     # (what the settings need, the Detail's refining solves included; a time limit ends the whole run first)
     needed = building + solve_refinement.predicted_seconds(patches, f.seconds) + display.seconds
@@ -210,6 +210,14 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     }
 
 
+def run_core(scene, settings: SolveSettings, groups, **changes):
+    """The core's Settings of a run of ``settings`` with per-source ``groups`` (or None): each
+    group's direct light apart, the lamps' left out of the error, which the display's replace
+    after the solve (core direct_means)."""
+    return settings.core(scene, per_source=groups is not None, groups=groups, direct_apart=True,
+                         replaced_direct=direct_means.replaced(scene, groups), **changes)
+
+
 def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None, on_prediction=None) -> SolveOutput:
     """Mesh, solve and compute the colours to write, for the given objects.
 
@@ -231,11 +239,10 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         on_prediction(prediction, int(scene.patch_count), patches)
     budget = run_budget.Budget.of(started, limit, scene, patches, settings, groups)
     with trim.roomy(scene.patch_count):  # (freed memory kept for the next chunk: no page faults)
-        result = solve(scene, settings.core(scene, max_seconds=budget.solve_seconds(), per_source=groups is not None,
-                                            groups=groups, direct_apart=True),
+        result = solve(scene, run_core(scene, settings, groups, max_seconds=budget.solve_seconds()),
                        progress=progress, should_stop=should_stop)
     # (the display's direct light in place of the solve's, whose weak lamps are heavy-tailed: core direct_means)
-    result = direct_means.corrected(scene, result)
+    result = direct_means.corrected(scene, result, None if settings.paths else settings.relative_rms)
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))

@@ -121,17 +121,19 @@ class _Run:
         self.measured = plan.measured_rule and plan.target_mse is not None  # (else the run stops on its paths)
         self.target_error, self.error_scale = settings.target_error, settings.error_scale
         self.done_rule = done_rule
+        self.replaced = settings.replaced_direct
 
     def target(self, total):
-        """The MSE the measured stop rule holds the run to now (None: it stops on its paths)."""
+        """The MSE the measured stop rule holds the run to now (None: it stops on its paths): the
+        target's, less the share left for a replaced direct light's own error (Batches.kept_share)."""
         if not self.measured:
             return None
-        return target_now(self.plan, self.target_error, self.error_scale, total.mean_reflected())
+        return total.kept_share() * target_now(self.plan, self.target_error, self.error_scale, total.mean_reflected())
 
     def chunks(self, scene, state, runner, seed, progress, should_stop, max_seconds):
         """(Batches of the chunks added, why the run stopped)."""
         plan, chunk = self.plan, self.chunk
-        total = Batches(scene, state.tables, increments=plan.measured_rule)
+        total = Batches(scene, state.tables, increments=plan.measured_rule, replaced=self.replaced)
         count = math.ceil(plan.cap / chunk)
         group = state.group(chunk, plan.prediction.expected_path_length)
         stopped, pending, next_chunk = None, deque(), 0

@@ -144,6 +144,8 @@ def forecast(scene, settings, *, bounces=None, budget=PILOT_RAYS, should_stop=No
         expected = float(plan.cap)
     elif variance == variance:
         target = target_now(plan, settings.target_error, settings.error_scale, r.mean_reflected)
+        if settings.replaced_direct is not None and r.per_source is not None and r.per_source.direct_irradiance is not None:
+            target *= 1.0 - settings.replaced_direct.share  # (what the run keeps is held to the rest: estimate.batches.Replaced)
         expected, short = paths_to_target(1, variance, target, plan.chunk, plan.cap), short_of(variance, target, plan.cap)
     else:  # at least the chunks the measured rule needs, at most the cap
         expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(plan.target_mse))))

@@ -23,8 +23,11 @@ class Settings:
     client or scheduler address (None: this machine's ``threads``); ``chunk_paths`` a chunk size
     instead of the plan's (the forecast's pilots); ``per_source`` each source group's result too
     (``groups``: estimate.grouping's, default each light and each emittance's patches);
-    ``direct_apart``: the gathered direct light's part kept apart; ``speedups`` a methods.speedups
-    Speedups (None: each scene's own)."""
+    ``direct_apart``: the gathered direct light's part kept apart; ``replaced_direct`` (an
+    estimate.batches.Replaced) the source groups whose direct light the caller replaces after the
+    solve, left out of its measured error, which is held to the target less the share left for
+    the replacement's (the caller adds the replacement's error); ``speedups`` a
+    methods.speedups Speedups (None: each scene's own)."""
 
     estimator: str = FINITE
     paths: int | None = None
@@ -45,6 +48,7 @@ class Settings:
     error_scale: str = SCALE_PAPER
     direct_apart: bool = False
     speedups: object = None
+    replaced_direct: object = None
 
     def but(self, **changes):
         """These settings with ``changes``."""

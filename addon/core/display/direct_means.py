@@ -11,6 +11,12 @@ missed a rare bright sample low). Where the solve kept each source group's direc
 and area lamps: no sun, world or emitting material, which the solve's choice serves) has its
 direct light replaced by the display's; its light arriving, reflected light and radiosity
 change by that difference (times the reflectivity), and so do the whole's.
+
+The solve's own estimate of that light is then not in the result: the solve leaves it out of its
+measured error (``replaced``: estimate.batches' Replaced) and holds the rest to the target less
+REPLACED_SHARE of its MSE. The display's means are two independent halves, whose difference
+measures their error; where it passes that share, more points (``measured_means``); it is added
+to the result's measured error (docs/errors.md, "What the target is measured on").
 """
 from __future__ import annotations
 
@@ -20,9 +26,16 @@ from types import SimpleNamespace
 import numpy as np
 
 from .point_direct import live_means
+from ..estimate.batches import Replaced
+from ..estimate.error_model import relative_rms_to_mse
 from ..lights.lights import AreaLight, PointLight
+from ..names import SCALE_PAPER
 
-MEAN_SAMPLES = 32  # stratified points a patch, each a shadow ray to a lamp of the group
+MEAN_SAMPLES = 32  # stratified points a patch, each a shadow ray to a lamp of the group (two halves)
+# The share of the target's MSE left for the display's direct light's error: its points cost a
+# shadow ray each, the solve's paths ten rays and more, so it is small (benchmarks/results/flat_speed.md).
+REPLACED_SHARE = 0.1
+MOST_SAMPLES = 16 * MEAN_SAMPLES  # a patch's points at most, where the halves ask for more
 
 
 def lamp_groups(scene, per_source):
@@ -51,29 +64,69 @@ def lamp_scene(scene, light_group, patch_group, count):
     return alone, np.searchsorted(lamps, np.asarray(light_group)[mine]), lamps
 
 
-def lamp_means(made, seed=0, rows=None, spent=None):
+def lamp_means(made, seed=0, rows=None, spent=None, samples=MEAN_SAMPLES):
     """([K,]P,3) each group of lamps alone's direct light on every patch (or on ``rows``), from
-    ``lamp_scene``'s ``made``: MEAN_SAMPLES stratified points a patch, one round."""
+    ``lamp_scene``'s ``made``: ``samples`` stratified points a patch, one round."""
     alone, their_group, lamps = made
-    return live_means(alone, samples=MEAN_SAMPLES, seed=seed, light_group=their_group,
+    return live_means(alone, samples=samples, seed=seed, light_group=their_group,
                       patch_group=np.full(alone.patch_count, -1), groups=lamps.size, retries=0, rows=rows, spent=spent)
 
 
-def corrected(scene, result):
+def replaced(scene, groups):
+    """The Replaced of a per-source solve of ``groups`` (estimate.grouping.SourceGroups, or
+    None): its groups of lamps alone, whose direct light ``corrected`` replaces; None if none."""
+    if groups is None:
+        return None
+    lamps = lamp_groups(scene, SimpleNamespace(count=groups.count, light_group=groups.light_group,
+                                               patch_group=groups.patch_group(scene.patch_count)))
+    return Replaced(tuple(int(k) for k in lamps), REPLACED_SHARE) if lamps.size else None
+
+
+def measured_means(scene, made, seed=0, target_mse=None):
+    """((K,P,3) each group of lamps alone's direct light on every patch, the MSE it brings the
+    result, weighted as the solve's measured MSE): two independent halves of MEAN_SAMPLES / 2
+    points, whose difference d gives each patch's variance of their mean, d^2 / 4; where that
+    MSE passes ``target_mse``, one more pair as large as it says is needed (MOST_SAMPLES in all
+    at most), each pair weighing by its points."""
+    weight = scene.patch_area / scene.total_area
+    total, points, mse, half = 0.0, 0, 0.0, MEAN_SAMPLES // 2
+    for k in range(2):
+        a, b = (lamp_means(made, seed=[int(seed), k, side], samples=half) for side in (0, 1))
+        gap = scene.reflectivity * (a - b).sum(axis=0)  # (P,3) the two halves' difference in the reflected light
+        pair_mse = float(np.einsum("p,pc->", weight, np.square(gap))) / (4 * gap.shape[1])
+        total, points = total + half * (a + b), points + 2 * half
+        mse += (2 * half) ** 2 * pair_mse  # (times the pair's share squared, below)
+        needed = 2 * half * pair_mse / target_mse if target_mse else 0.0
+        if k or not needed > points:  # (NaN: no target to hold to)
+            break
+        half = int(min(np.ceil(needed - points), MOST_SAMPLES - points) // 2)
+        if half < 1:
+            break
+    return total / points, mse / points**2
+
+
+def corrected(scene, result, target_error=None):
     """``result`` (a per-source SolveResult with its groups' direct light apart) with each lamp
-    group's direct light the display's (the module's docstring), else as it is."""
+    group's direct light the display's (the module's docstring) and its error added to the
+    measured one, else as it is. ``target_error``: the solve's, of which the display's means keep
+    to REPLACED_SHARE of the MSE."""
     ps = result.per_source
     if result.direct_irradiance is None or ps is None or ps.direct_irradiance is None or ps.light_group is None:
         return result
     made = lamp_scene(scene, ps.light_group, ps.patch_group, ps.count)
     if made is None:
         return result
+    target = None
+    if target_error:
+        target = REPLACED_SHARE * (relative_rms_to_mse(result.prediction, target_error) if result.error_scale == SCALE_PAPER
+                                   else (target_error * result.mean_reflected) ** 2)
+    means, mse = measured_means(scene, made, result.seed, target)
     parts = np.zeros_like(ps.direct_irradiance)
-    parts[made[2]] = lamp_means(made, seed=result.seed) - ps.direct_irradiance[made[2]]
+    parts[made[2]] = means - ps.direct_irradiance[made[2]]
     change = parts.sum(axis=0)
     reflected = result.reflected + scene.reflectivity * change
     out = replace(result, irradiance=result.irradiance + change, reflected=reflected, radiosity=scene.emission + reflected,
-                  direct_irradiance=result.direct_irradiance + change)
+                  direct_irradiance=result.direct_irradiance + change, measured_mse=result.measured_mse + mse)
     out.per_source = replace(ps, irradiance=ps.irradiance + parts, radiosity=ps.radiosity + scene.reflectivity * parts,
                              direct_irradiance=ps.direct_irradiance + parts)
     return out

@@ -11,10 +11,17 @@ its distance from the chunks before it. Area-weighted, each increment is one sca
 per-path variance, independent of the others for Gaussian tallies; their spread says how well
 the estimate is known (few chunks, heavy tails, error in one common mode), which a stop rule
 needs (mse_upper_bound).
+
+Where the caller replaces some source groups' direct light after the solve with an estimate of
+its own (``Replaced``: the display's lamp means), the solve's estimate of that part is not in the
+result: the sums of squares, the increments and so the measured error are of the rest, which the
+stop rule holds to the target less the share left for the replacement's own error; the caller
+adds that error once it has made the replacement (docs/errors.md, "What the target is measured on").
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -24,10 +31,20 @@ from .per_source import GroupBatches
 MSE_BLOCK = 1 << 16
 
 
-class Batches:
-    """Sums chunk tallies in chunk order, with what the batch error estimate needs."""
+@dataclass(frozen=True)
+class Replaced:
+    """Source ``groups`` whose direct light the caller puts in place of the solve's after it, and
+    the ``share`` of the target's MSE left for that estimate's error (the solve keeps the rest)."""
 
-    def __init__(self, scene, tables, increments=False):
+    groups: tuple
+    share: float
+
+
+class Batches:
+    """Sums chunk tallies in chunk order, with what the batch error estimate needs (``replaced``:
+    a Replaced, or None)."""
+
+    def __init__(self, scene, tables, increments=False, replaced=None):
         C, P = tables.channels, scene.patch_count
         # Per source: each group's sums too (per_source.GroupBatches), or None.
         self.groups = None if tables.groups is None else GroupBatches(scene, tables, tables.groups.whole)
@@ -54,16 +71,21 @@ class Batches:
         # Area-weighted Helmert increments of the sum of squares, one a chunk from the second on:
         # a pass over the patches a chunk, made only for a run that stops on its measured error.
         self.increments = [] if increments else None
+        self.replaced = replaced
+        self.left_out = None  # (C,P) the replaced groups' direct light summed, where chunks gather it apart
 
     def add(self, tally):
+        kept, left = self._kept(tally)
         if self.increments is not None and self.paths > 0:
-            self.increments.append(self._increment(tally))
+            self.increments.append(self._increment(tally.paths, kept))
         self.incident += tally.incident
+        if left is not None:
+            self.left_out = left if self.left_out is None else np.add(self.left_out, left, out=self.left_out)
         if tally.direct is not None:
             self.direct = tally.direct.copy() if self.direct is None else np.add(self.direct, tally.direct, out=self.direct)
         if self.groups is not None:
             self.groups.add(tally)
-        for c, row in enumerate(tally.incident):  # a channel at a time: a (P,) temporary, not (C,P)
+        for c, row in enumerate(kept):  # a channel at a time: a (P,) temporary, not (C,P)
             square = np.square(row)
             square /= tally.paths
             self.incident_sq[c] += square
@@ -77,6 +99,23 @@ class Batches:
         self.paths += tally.paths
         self.rays += tally.rays
         self.chunks += 1
+
+    def _kept(self, tally):
+        """((C,P) what of ``tally``'s incident power stays in the result, (C,P) the rest or None):
+        all of it, less the replaced groups' direct light where the chunk kept each group's apart."""
+        if self.replaced is None or tally.direct_groups is None:
+            return tally.incident, None
+        left = tally.direct_groups[list(self.replaced.groups)].sum(axis=0)
+        return tally.incident - left, left
+
+    def _kept_sum(self, k, rows):
+        """(rows,) the kept incident power of channel k summed over the chunks so far (a new array)."""
+        return self.incident[k, rows] - self.left_out[k, rows] if self.left_out is not None else self.incident[k, rows].copy()
+
+    def kept_share(self):
+        """The share of the target's MSE the solve's own error is held to: all of it, less the
+        replacement's share where its groups' direct light is left out of the sums."""
+        return 1.0 - self.replaced.share if self.left_out is not None else 1.0
 
     def _score(self, k, rows=slice(None)):
         """R_jk Phi_T / A_j of channel k at patches ``rows`` (all of them: (P,)), a new array."""
@@ -173,7 +212,7 @@ class Batches:
     def _spread(self, k, rows=slice(None)):
         """sum_k I_k^2 / n_k - I^2 / N of channel k at patches ``rows`` (all of them: (P,)), at
         least 0: N (chunks - 1) times the batch variance of I / N. (A new array, computed in place.)"""
-        spread = np.square(self.incident[k, rows])
+        spread = np.square(self._kept_sum(k, rows))
         spread /= self.paths
         np.subtract(self.incident_sq[k, rows], spread, out=spread)
         np.maximum(spread, 0.0, out=spread)
@@ -208,14 +247,15 @@ class Batches:
             self._mean_at = (self.chunks, reflected * scale)
         return self._mean_at[1]
 
-    def _increment(self, tally):
+    def _increment(self, n, kept):
         """sum over patches (and channels) of A_j / (C A_T) score^2 n N / (N + n) (I_k / n - I / N)^2:
-        what ``tally`` (n paths) adds to the area-weighted sum of squares of the chunks so far (N)."""
-        n, N = tally.paths, self.paths
+        what a chunk of n paths whose ``kept`` incident power (C,P) is I_k adds to the area-weighted
+        sum of squares of the chunks so far (N)."""
+        N = self.paths
         total = 0.0
         for k, rows, weight in self._squared_score_weights():
-            gap = tally.incident[k, rows] / n
-            gap -= self.incident[k, rows] / N
+            gap = kept[k, rows] / n
+            gap -= self._kept_sum(k, rows) / N
             np.square(gap, out=gap)
             total += float(np.einsum("i,i->", gap, weight))
         return total * (n * N / (N + n))

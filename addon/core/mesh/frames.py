@@ -52,6 +52,16 @@ def local_offsets(side, largest_coordinate):
     return offset, inset
 
 
+def set_by_rounding(side, largest_coordinate):
+    """(n,) bool: where float32's spacing of coordinates reaching ``largest_coordinate``, not the
+    patch's own ``side``, sets its ray offset or edge inset (``local_offsets``' lower bounds): the
+    patches a frame of their own would give offsets of their own size."""
+    spacing = np.spacing(np.asarray(largest_coordinate, np.float32)).astype(np.float64)
+    side = np.asarray(side, dtype=np.float64)
+    return (RAY_OFFSET_SPACINGS * spacing > np.minimum(RELATIVE_RAY_OFFSET, LOCAL_RAY_OFFSET * side)) | \
+        (EDGE_INSET_SPACINGS * spacing > np.minimum(RELATIVE_EDGE_INSET, LOCAL_EDGE_INSET * side))
+
+
 def edge_barycentric(corners, clearance=RELATIVE_HIT_EDGE_CLEARANCE):
     """(T,) float32: for (T,3,3) unit-space triangles, the barycentric coordinate below which a
     point may lie closer than ``clearance`` (a number, or (T,) one per triangle) to one of the

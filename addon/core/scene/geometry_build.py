@@ -11,7 +11,7 @@ import warnings
 
 import numpy as np
 
-from ..mesh.frames import RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET, local_offsets, parallelogram_frames
+from ..mesh.frames import RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET, local_offsets, parallelogram_frames, set_by_rounding
 from .geometry import Geometry
 from .regions import split_regions
 from ..mesh.triangles import BLOCK_TRIANGLES, UnitCorners, triangle_blocks, triangle_cross, triangle_normals
@@ -69,14 +69,14 @@ def build_geometry(vertices, triangles, triangle_patch, patch_count, visible_par
     del area
     largest = np.abs((V[np.unique(T)] - centre) / diagonal).max()
     side = np.sqrt(patch_area)
-    patch_ray_offset, patch_edge_inset = local_offsets(side, largest)
-    regions = None
+    patch_ray_offset, patch_edge_inset, regions = *local_offsets(side, largest), None
     if (patch_ray_offset == RELATIVE_RAY_OFFSET).all() and (patch_edge_inset == RELATIVE_EDGE_INSET).all():
         ray_offset, patch_ray_offset, patch_edge_inset = RELATIVE_RAY_OFFSET, None, None
         inset, offset = RELATIVE_EDGE_INSET, RELATIVE_RAY_OFFSET
     else:
-        # Some patches are small beside the scene: parts far apart take frames of their own.
-        regions = split_regions(*patch_bounds(sorted_corners, tp_sorted, first, blocks, patch_count), side)
+        # Parts far apart take frames of their own, where float32 would set some patch's offsets (regions.py).
+        if set_by_rounding(side, largest).any():
+            regions = split_regions(*patch_bounds(sorted_corners, tp_sorted, first, blocks, patch_count), side)
         if regions is not None:
             sorted_corners = UnitCorners(V, T, centre, diagonal, order, frames=(regions.centre, regions.patch_region[tp]))
             patch_ray_offset, patch_edge_inset = local_offsets(side, regions.largest_coordinate()[regions.patch_region])

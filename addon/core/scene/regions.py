@@ -6,8 +6,11 @@ places a point only to about 6e-8 of its distance from the origin: a 1 m room be
 empty gaps between them into regions, each part keeps its positions relative to its own centre
 (a *region frame*), where float32 is as fine as the part is small: the ray tracer holds one
 Embree scene per region and carries a ray into another region's frame in float64
-(:class:`.raytrace.RegionTracer`). Regions exist only where some patch is small beside the
-scene (frames.local_offsets); an ordinary scene is one frame, as before.
+(:class:`.raytrace.RegionTracer`). Regions exist only where float32's spacing of the scene's
+coordinates would set some patch's offsets (frames.set_by_rounding): a frame elsewhere changes no
+offset, and each region costs every ray that may reach it a box test and a trace (a room with a
+finely divided vase, its patches a thousandth of the room's size: benchmarks/results/flat_speed.md);
+an ordinary scene is one frame, as before.
 """
 from __future__ import annotations
 
