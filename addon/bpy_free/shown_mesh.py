@@ -15,7 +15,7 @@ from ..core.display.covered import seen_parts
 from ..core.relight.relighting import group_direct
 
 TIME_SHARE = 0.5  # of the time left before a deadline the new points may take (the rest: the smoothing, the writing)
-RETRY_TIME = 2.0  # the new points' retries end by this many times a corner's time a point
+NEW_POINT_RETRIES = 1  # a new point's noisy light sampled again once (8x the samples), a corner's twice
 SEED_STEP = 7919  # the seed of each level's new points, apart from the corners' and each other's
 
 
@@ -41,12 +41,10 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
 
     def at_points(position, patch, level):
         groups = dict(light_group=ps.light_group, patch_group=ps.patch_group, groups=ps.count) if grouped else {}
-        # (retries within RETRY_TIME times a corner's time a point: new points are where the light changes, beside
-        # emitters too, where every point would take them all)
-        until = time.perf_counter() + RETRY_TIME * each * len(position)
+        # (one retry, not two: new points are where the light changes, beside emitters too, where every point
+        # would take them all; a count, not a time: the same seed, the same colours)
         return point_direct.points_direct(surface, scene, position, patch, seed=int(result.seed) + SEED_STEP * (level + 1),
-                                          deadline=until if deadline is None else min(deadline, until),
-                                          light=result.irradiance, **groups)
+                                          deadline=deadline, light=result.irradiance, retries=NEW_POINT_RETRIES, **groups)
 
     made = display_cells.refine(surface, direct, scene, triangles, out.patches.meshes, [o.receives for o in out.patches.objects],
                                 result.irradiance, at_points, most)

@@ -106,16 +106,18 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
 
 
 def points_direct(surface, scene, position, patch, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0,
-                  deadline=None, light=None):
+                  deadline=None, light=None, retries=RETRIES):
     """([G,]n,3) the direct light at the points ``position`` (n,3, moved in place: INWARD) of
-    ``patch`` (n,), as ``corner_direct`` takes it at corners (float32 without groups)."""
+    ``patch`` (n,), as ``corner_direct`` takes it at corners (float32 without groups), the noisy ones
+    sampled again ``retries`` times."""
     towards = surface.patch_centroid[patch]  # (in place: four (n,3) temporaries were most of this stage's memory)
     towards -= position
     towards *= INWARD
     position += towards
     del towards
     shown = None if light is None else np.asarray(light).sum(axis=1)[patch]
-    value = direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline, shown=shown)
+    value = direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline, shown=shown,
+                      retries=retries)
     _fill_buried(scene.geometry, position, patch, value)
     if not groups:  # (the whole's corners as written, float32: the memory of the largest scenes)
         value = value.astype(np.float32)
@@ -215,7 +217,7 @@ def _lamp_sources(group, lamps):
 
 
 def direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline=None, spent=None,
-              shown=None):
+              shown=None, retries=RETRIES):
     """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
     group's lamps and each emitting group apart (``_part_at``), added up into its group's row;
     retries within ``deadline`` (``sample_rounds``), of the points noisy beside ``shown`` (n,) too."""
@@ -225,7 +227,7 @@ def direct_at(scene, position, patch, samples, seed, light_group, patch_group, g
     sources = _sources(scene, light_group, patch_group, groups)
     with tables.numpy_turn:
         parts = [_part_at(tables, position, patch, rng, add, paired, shown) for _, add, paired in sources]
-        means = rounds(parts, len(patch), samples, RETRIES, MORE_SAMPLES, deadline, spent)
+        means = rounds(parts, len(patch), samples, retries, MORE_SAMPLES, deadline, spent)
     for (group, _, _), mean in zip(sources, means):
         out[group] += mean
     return out if groups else out[0]

@@ -228,8 +228,9 @@ def shown_of(meshes, made, triangles, tp, starts, offsets):
             tris.append(triangles[rows] - starts[k] + fine_start)
             patches.append(tp[rows])
         fine_start += len(vertices[-1])
-    return Shown(out_meshes, origin, np.concatenate(vertices).astype(np.float64), np.concatenate(tris),
-                 np.concatenate(patches), np.asarray(point_starts, np.int64))
+    index = np.int32 if sum(len(v) for v in vertices) < 2**31 else np.int64  # (as the scene's: half the memory)
+    return Shown(out_meshes, origin, np.concatenate(vertices).astype(np.float64), np.concatenate(tris).astype(index),
+                 np.concatenate(patches).astype(np.int32), np.asarray(point_starts, np.int64))
 
 
 def found(sorted_keys, keys):

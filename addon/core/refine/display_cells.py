@@ -144,7 +144,7 @@ class _Table:
         self.new_values = flat[..., :0, :]
 
     def coarse(self, patch, vertex):
-        return self.coarse_values[..., found(self.coarse_keys, patch * self.V + vertex), :]
+        return self.coarse_values[..., found(self.coarse_keys, np.asarray(patch, np.int64) * self.V + vertex), :]
 
     def new(self, keys):
         return self.new_values[..., found(self.new_keys, keys), :]
@@ -235,8 +235,8 @@ def _coarse_vertices(shown, meshes, starts):
 
 def _fine_corners(table, shown, coarse_vertex, meshes, starts, dtype):
     """([G,]T',3,3) the direct light at the shown triangles' corners."""
-    point = shown.triangles.ravel()
-    patch = np.repeat(shown.triangle_patch, 3)
+    point = shown.triangles.ravel().astype(np.int64)
+    patch = np.repeat(shown.triangle_patch.astype(np.int64), 3)
     scene_vertex = coarse_vertex[point]
     own = scene_vertex >= 0
     out = np.empty(table.coarse_values.shape[:-2] + (len(point), 3), dtype)
@@ -250,11 +250,11 @@ def _slots(shown, coarse_vertex, vertices, triangles, tp, table):
     """((T'*3,) each shown corner's coarse corner slot, -1 for a new point; (the new points' corners
     (n,), their coarse triangle's three slots (n,3), their weights (n,3))): the linear interpolation
     in its patch's coarse triangles."""
-    point = shown.triangles.ravel()
-    patch = np.repeat(shown.triangle_patch, 3)
+    point = shown.triangles.ravel().astype(np.int64)
+    patch = np.repeat(shown.triangle_patch.astype(np.int64), 3)
     scene_vertex = coarse_vertex[point]
     own = scene_vertex >= 0
-    slots = np.full(len(point), -1, np.int64)
+    slots = np.full(len(point), -1, np.int32 if len(triangles) * 3 < 2**31 else np.int64)
     slots[own] = table.coarse_slot[found(table.coarse_keys, patch[own] * table.V + scene_vertex[own])]
     rest = np.flatnonzero(~own)
     tri, bary = containing(shown.vertices[point[rest]], patch[rest], vertices, triangles, tp)

@@ -7,6 +7,7 @@ import numpy as np
 
 from addon.bpy_free import pipeline
 from addon.blender_read.selection import read_selection
+from addon.blender_write.results import written_mesh
 from addon.bpy_free import patches, worker
 from addon.bpy_free.cleaning import degenerate_area
 from addon.core.mesh import meshing
@@ -50,8 +51,9 @@ def test_nurbs_sphere_and_displaced_grid_solve_and_write_results(blender):
     results = {o["radiosity_source"]: o for o in result_objects()}
     assert set(results) == {"Block", "Lamp", "Room", "Nurbs", "Bumpy"}
     for k, obj in enumerate(output.patches.objects):
-        mesh = output.patches.meshes[k]
-        # the result object is the patch mesh, its colours those of the patches
+        # the result object is the written mesh (the patches, split where the display split them), its colours those
+        # of its patches
+        mesh = written_mesh(output, k)
         co, sizes, corners = mesh_arrays(results[obj.name].data)
         np.testing.assert_array_equal(sizes, mesh.face_sizes)
         np.testing.assert_array_equal(corners, mesh.corner_verts)
@@ -85,7 +87,7 @@ def test_nurbs_sphere_and_displaced_grid_solve_and_write_results(blender):
     # the split objects are lit: their patches got light from the lamp
     for name in ("Nurbs", "Bumpy"):
         k = [o.name for o in output.patches.objects].index(name)
-        mesh = output.patches.meshes[k]
+        mesh = written_mesh(output, k)  # (the display's cells where it split them)
         assert 3 in mesh.face_sizes  # non-planar faces were cut into triangles
         assert np.average(output.face_colours[k].mean(axis=1), weights=mesh.patch_area) > 0
     assert not any("mix triangles" in note for note in output.notes)
