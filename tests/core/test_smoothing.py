@@ -595,3 +595,34 @@ def test_the_visible_corner_weights_are_the_same_a_few_cells_at_a_time(monkeypat
     assert np.array_equal(covered.visible_corner_weights(*args), whole)
     seen = np.bincount(scene.triangle_patch, weights=whole.sum(axis=1), minlength=scene.patch_count)
     np.testing.assert_allclose(seen, scene.patch_area, rtol=1e-12)
+
+
+def test_the_channels_and_parts_are_made_on_two_threads_bit_for_bit_as_on_one(monkeypatch):
+    """``corner_values`` (a channel a task) and its ``LinearCorners`` (a part's channel a task) on
+    two local threads: the first two channels wait for each other (a barrier of 2: they run at
+    once), and the corners and the parts' corners are bit for bit those of one thread."""
+    import threading
+
+    from addon.core.distributed import runners
+
+    V, T, TP, values = _random_mesh(3)
+    surface = smoothing.Surface.of(V, T, TP, len(values))
+    parts = np.random.default_rng(3).random((4,) + values.shape) * values
+    with runners.local_threads(1):
+        one, apply = surface.corner_values(values, return_filter=True)
+        one_parts = apply(parts, np.float32)
+    meet, made = threading.Barrier(2, timeout=20), []
+    channel = smoothing.Surface._corner_channel
+
+    def waiting(self, values, *rest):
+        if len(made) < 2:
+            made.append(threading.get_ident())
+            meet.wait()
+        return channel(self, values, *rest)
+
+    monkeypatch.setattr(smoothing.Surface, "_corner_channel", waiting)
+    with runners.local_threads(2):
+        two, apply = surface.corner_values(values, return_filter=True)
+        two_parts = apply(parts, np.float32)
+    assert len(set(made)) == 2
+    assert np.array_equal(one, two) and np.array_equal(one_parts, two_parts) and one_parts.shape == (4, len(T), 3, 3)

@@ -9,13 +9,16 @@ time for; the first round is the least the display needs and always runs.
 """
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
+from ..distributed.runners import local_thread_count, on_threads
 from ..lights.sampling import stratified_by_patch
+from ..methods.tables import FreeTurn
 
 BLOCK_SAMPLES = 1 << 15  # samples traced at a time (about 500 bytes of temporaries each)
 
@@ -99,20 +102,34 @@ def sampled(tables, n, samples, rng, add, points, dimensions, dtype=np.float64, 
     """((n,3) the mean of ``samples`` stratified samples of each of n points or patches, (n,) its
     standard error (channels summed)); ``add(tables, points, u, value)`` adds a source's light at
     sample points, ``points(block, local, u)`` a block's sample points (``local`` each sample's
-    row in the block), BLOCK_SAMPLES samples at a time. ``paired``: the error of a choice
-    stratified by u[5] (``paired_error``), else as if the samples were independent."""
+    row in the block), BLOCK_SAMPLES samples at a time, the blocks shared among the local threads
+    (``runners.on_threads``). ``paired``: the error of a choice stratified by u[5]
+    (``paired_error``), else as if the samples were independent. A block's random numbers are
+    drawn in the blocks' order whichever thread takes it: the same bits on any number of threads."""
     mean, error = np.empty((n, 3), dtype), np.empty(n, dtype)
     step = max(1, BLOCK_SAMPLES // samples)
-    for start in range(0, n, step):
-        block = slice(start, min(n, start + step))
-        local = np.repeat(np.arange(block.stop - block.start), samples)
-        u = stratified_by_patch(local, block.stop - block.start, dimensions, rng, dtype=np.float32)
-        value = np.zeros((3, local.size))
-        add(tables, points(block, local, u), u=u, value=value)
-        value = value.reshape(3, -1, samples)
-        mean[block] = value.mean(axis=2).T
-        grey = value.sum(axis=0)
-        error[block] = paired_error(grey, u[5].reshape(grey.shape)) if paired else grey.std(axis=1, ddof=1) / np.sqrt(samples)
+    blocks = iter(range(0, n, step))
+    lock = threading.Lock()
+    # (each thread traces with its own turn at numpy: the blocks' arrays are long, numpy lets go of the GIL)
+    mine = tables if min(local_thread_count(), -(-n // step)) <= 1 else tables.with_turn(FreeTurn())
+
+    def work():
+        while True:
+            with lock:  # (the next block and its draws together: block k always has the k-th draws)
+                start = next(blocks, None)
+                if start is None:
+                    return
+                block = slice(start, min(n, start + step))
+                local = np.repeat(np.arange(block.stop - block.start), samples)
+                u = stratified_by_patch(local, block.stop - block.start, dimensions, rng, dtype=np.float32)
+            value = np.zeros((3, local.size))
+            add(mine, points(block, local, u), u=u, value=value)
+            value = value.reshape(3, -1, samples)
+            mean[block] = value.mean(axis=2).T
+            grey = value.sum(axis=0)
+            error[block] = paired_error(grey, u[5].reshape(grey.shape)) if paired else grey.std(axis=1, ddof=1) / np.sqrt(samples)
+
+    on_threads(work, -(-n // step))
     return mean, error
 
 

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..distributed.runners import each
 from .noise_filter import NOISE_CUTOFF, NoiseFilter, checked_rows, sums_by
 from ..mesh.welding import run_starts, weld_points
 
@@ -195,17 +196,16 @@ class Surface(NoiseFilter):
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
         out = np.empty((len(self.triangle_patch), 3, values.shape[1]), dtype)
-        records, plain_scales = [], []
-        rings = np.zeros(self.patch_count, bool)
-        for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
-            channel = np.ascontiguousarray(values[:, k])
-            record = {} if return_filter else None
-            x, plain_scale, ringing = self._corner_channel(channel, corner_patch, averaging, iterations, record)
+        records = [{} if return_filter else None for _ in range(values.shape[1])]
+
+        def channel(k):  # (a colour channel a task, on the local threads: a channel's arrays at a time each)
+            x, plain_scale, ringing = self._corner_channel(np.ascontiguousarray(values[:, k]), corner_patch, averaging,
+                                                           iterations, records[k])
             out[:, :, k] = x.reshape(-1, 3)
-            del x  # (not held through the next channel's steps)
-            records.append(record)
-            plain_scales.append(plain_scale)
-            rings |= ringing
+            return plain_scale, ringing
+
+        plain_scales, ringing = zip(*each(channel, range(values.shape[1]))) if values.shape[1] else ((), ())
+        rings = np.logical_or.reduce(ringing, axis=0) if ringing else np.zeros(self.patch_count, bool)
         # patches that ring in any channel take the plain average in every one (no colour fringes);
         # it is made again here (one averaging pass) rather than kept from each channel's steps
         flat_out = out.reshape(-1, values.shape[1])
@@ -319,26 +319,28 @@ class LinearCorners:
         x = np.asarray(x, np.float64)
         if x.shape[-2:] != self.positive.shape:
             raise ValueError(f"the corners take values of shape (P, k) = {self.positive.shape} (or (S, P, k)); got {x.shape}")
-        if x.ndim == 3:
-            out = np.empty((len(x), len(self.surface.triangle_patch), 3, x.shape[2]), dtype)
-            for s, part in enumerate(x):  # (one part's float64 steps at a time)
-                out[s] = self(part)
-            return out
-        surface, cp = self.surface, self.corner_patch
-        values = np.where(self.positive, x, 0.0)  # (the whole's negative patches count as 0)
-        out = np.empty((len(surface.triangle_patch), 3, values.shape[1]), dtype)
-        for k, record in enumerate(self.records):  # over colour channels, not elements
-            v = np.ascontiguousarray(values[:, k])
-            corner = surface._average_corners(v[cp], self.averaging)
-            plain = corner.copy()
-            for floored in record["floored"]:
-                corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner))[cp], self.averaging)
-                corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
-            corner *= record["scale"][cp]
-            corner[record["flat"]] = v[cp[record["flat"]]]
-            _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
-            out[:, :, k] = corner.reshape(-1, 3)
-        return out
+        parts = x if x.ndim == 3 else x[None]
+        out = np.empty((len(parts), len(self.surface.triangle_patch), 3, parts.shape[2]), dtype)
+
+        def channel(job):  # (a part's colour channel a task, on the local threads: its float64 steps alone)
+            s, k = job
+            out[s, :, :, k] = self._channel(np.where(self.positive[:, k], parts[s, :, k], 0.0), k).reshape(-1, 3)
+
+        each(channel, [(s, k) for s in range(len(parts)) for k in range(len(self.records))])
+        return out if x.ndim == 3 else out[0]
+
+    def _channel(self, v, k):
+        """(T*3,) the corners of channel ``k``'s values ``v`` (P,) (the whole's negative patches 0)."""
+        surface, cp, record = self.surface, self.corner_patch, self.records[k]
+        corner = surface._average_corners(v[cp], self.averaging)
+        plain = corner.copy()
+        for floored in record["floored"]:
+            corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner))[cp], self.averaging)
+            corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
+        corner *= record["scale"][cp]
+        corner[record["flat"]] = v[cp[record["flat"]]]
+        _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
+        return corner
 
 
 def _put_rings(out, plain, scale, rings, corner_patch, block=RINGING_BLOCK):
