@@ -402,13 +402,17 @@ def polygon_corner_values(corners, triangles, triangle_patch, corner_patch, corn
     (T,3,3) at a corner of one of the patch's triangles at that point (every such corner holds the
     same value: the patch's triangles share its normal, so one crease group at each point).
     ValueError where a polygon corner is no corner of its patch's triangles."""
+    triangles, triangle_patch = np.asarray(triangles), np.asarray(triangle_patch, np.int64)
     points = int(max(triangles.max(initial=0), np.max(corner_point, initial=0))) + 1
-    key = (np.asarray(triangle_patch, np.int64)[:, None] * points + triangles).ravel()
+    corner_patch = np.asarray(corner_patch, np.int64)
+    # (the triangles of the patches asked alone: an object's, not the scene's, sorted at each call)
+    rows = np.flatnonzero((triangle_patch >= corner_patch.min(initial=0)) & (triangle_patch <= corner_patch.max(initial=-1)))
+    key = (triangle_patch[rows, None] * points + triangles[rows]).ravel()
     order = np.argsort(key, kind="stable")
-    wanted = np.asarray(corner_patch, np.int64) * points + corner_point
-    at = np.minimum(np.searchsorted(key, wanted, sorter=order), key.size - 1)
-    found = order[at]
-    if not np.array_equal(key[found], wanted):
+    wanted = corner_patch * points + corner_point
+    at = np.minimum(np.searchsorted(key, wanted, sorter=order), max(key.size - 1, 0))
+    found = order[at] if key.size else np.zeros(0, np.int64)
+    if found.size != wanted.size or not np.array_equal(key[found], wanted):
         raise ValueError("a polygon corner is not a corner of its patch's triangles")
-    return np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])[found]
+    return np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])[rows[found // 3] * 3 + found % 3]
 
