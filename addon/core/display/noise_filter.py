@@ -197,7 +197,7 @@ class NoiseFilter:
                     pair_weight[block, c] = k[block] / var[qb, c] * (
                         g[pb, 0] * design[0] + g[pb, 1] * design[1] + g[pb, 2] * design[2])
 
-        each(channel, range(values.shape[1]))
+        each(channel, range(values.shape[1]), 96 * len(values) + 100 * min(len(p), FIT_BLOCK))  # (M, rhs; a block)
         return out, ((own_weight, pair_weight) if operator else None)
 
     def _fit_channel(self, values, var, known, p, q, k, frame, operator):

@@ -49,6 +49,7 @@ RINGING = 0.5
 RINGING_BLOCK = 1 << 16  # corners compared at a time (a few hundred kB of temporaries)
 SIGNIFICANT = 1e-3  # nor where the iterations moved its corners by less than this share of its value (RMS)
 RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
+CHANNEL_BYTES = 48  # a channel's temporaries a corner (six float64 arrays): what a second one side by side adds
 
 
 # A corner's value never falls below this share of the darkest patch meeting at it (a valley may
@@ -204,7 +205,8 @@ class Surface(NoiseFilter):
             out[:, :, k] = x.reshape(-1, 3)
             return plain_scale, ringing
 
-        plain_scales, ringing = zip(*each(channel, range(values.shape[1]))) if values.shape[1] else ((), ())
+        made = each(channel, range(values.shape[1]), CHANNEL_BYTES * len(corner_patch))
+        plain_scales, ringing = zip(*made) if made else ((), ())
         rings = np.logical_or.reduce(ringing, axis=0) if ringing else np.zeros(self.patch_count, bool)
         # patches that ring in any channel take the plain average in every one (no colour fringes);
         # it is made again here (one averaging pass) rather than kept from each channel's steps
@@ -326,7 +328,7 @@ class LinearCorners:
             s, k = job
             out[s, :, :, k] = self._channel(np.where(self.positive[:, k], parts[s, :, k], 0.0), k).reshape(-1, 3)
 
-        each(channel, [(s, k) for s in range(len(parts)) for k in range(len(self.records))])
+        each(channel, [(s, k) for s in range(len(parts)) for k in range(len(self.records))], CHANNEL_BYTES * len(self.corner_patch))
         return out if x.ndim == 3 else out[0]
 
     def _channel(self, v, k):
