@@ -151,7 +151,7 @@ class Surface(NoiseFilter):
         its point; 0 where they all have zero area."""
         point, w, inverse, crease, local, o = averaging
         wx = w * x
-        out = np.bincount(point, weights=wx, minlength=len(self.smooth_point))[point]
+        out = np.bincount(point, weights=wx, minlength=len(self.smooth_point)).take(point, mode="wrap")  # (take: faster)
         if len(crease):
             out[crease] = np.bincount(local, weights=wx[o], minlength=len(crease))
         out *= inverse
@@ -178,7 +178,7 @@ class Surface(NoiseFilter):
             return np.divide(sums, self.visible_area, out=np.zeros_like(sums), where=self.visible_area > 0)
         tri = x[0::3] + x[1::3]  # (a triangle's three corners added in order: as sum(axis=1) adds them, 8x faster)
         tri += x[2::3]
-        tri *= self.triangle_area / 3.0
+        tri *= self.__dict__.setdefault("_third_area", self.triangle_area / 3.0)  # (made once)
         sums = sums_by(self.triangle_patch, tri, self.patch_count)
         return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
 
@@ -225,7 +225,7 @@ class Surface(NoiseFilter):
         """One channel's corners (T*3,), the scales (P,) of its plain average (no iterations) and
         its ringing patches (P,) bool (``_ringing``); ``record`` (a dict), where given, keeps the
         floored corners of each step, the floors' patches, the final scales and the flat corners."""
-        x = self._average_corners(values[corner_patch], averaging)
+        x = self._average_corners(values.take(corner_patch, mode="wrap"), averaging)
         floor = LOWEST_SHARE * self._corner_lowest(self._seen_values(values, corner_patch), averaging)
         floor[np.isinf(floor)] = 0.0  # (a point only hidden patches meet)
         if record is not None:
@@ -233,8 +233,7 @@ class Surface(NoiseFilter):
             record["floored"] = []
         for _ in range(int(iterations)):
             # each patch's missing light, spread continuously over the corners around it
-            missing = (values - self.corner_means(x))[corner_patch]
-            x += RELAXATION * self._average_corners(missing, averaging)
+            x += RELAXATION * self._average_corners((values - self.corner_means(x)).take(corner_patch, mode="wrap"), averaging)
             if record is not None:
                 record["floored"].append(np.flatnonzero(x < floor))
             # a bright patch beside dim ones would push its neighbours' far corners down to black:
@@ -243,7 +242,7 @@ class Surface(NoiseFilter):
         del floor  # (a (T*3,) array less while the plain average is made)
         x, scale, flat = self._scale_to(values, x, corner_patch)
         # (no iterations, made again rather than kept through them: what ringing falls back to)
-        plain, plain_scale, _ = self._scale_to(values, self._average_corners(values[corner_patch], averaging), corner_patch)
+        plain, plain_scale, _ = self._scale_to(values, self._average_corners(values.take(corner_patch, mode="wrap"), averaging), corner_patch)
         if record is not None:
             record["scale"], record["flat"] = scale, flat
         return x, plain_scale, self._ringing(values, x, plain, corner_patch)
@@ -253,7 +252,7 @@ class Surface(NoiseFilter):
         whose corners all came to zero keeps its own value, flat): (x, scales (P,), flat corners)."""
         means = self.corner_means(x)
         scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
-        x *= scale[corner_patch]
+        x *= scale.take(corner_patch, mode="wrap")
         flat = np.flatnonzero((means <= 0)[corner_patch])
         x[flat] = values[corner_patch[flat]]
         return x, scale, flat
@@ -334,12 +333,12 @@ class LinearCorners:
     def _channel(self, v, k):
         """(T*3,) the corners of channel ``k``'s values ``v`` (P,) (the whole's negative patches 0)."""
         surface, cp, record = self.surface, self.corner_patch, self.records[k]
-        corner = surface._average_corners(v[cp], self.averaging)
+        corner = surface._average_corners(v.take(cp, mode="wrap"), self.averaging)
         plain = corner.copy()
         for floored in record["floored"]:
-            corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner))[cp], self.averaging)
+            corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner)).take(cp, mode="wrap"), self.averaging)
             corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
-        corner *= record["scale"][cp]
+        corner *= record["scale"].take(cp, mode="wrap")
         corner[record["flat"]] = v[cp[record["flat"]]]
         _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
         return corner
@@ -412,8 +411,7 @@ def polygon_corner_values(corners, triangles, triangle_patch, corner_patch, corn
     key = (triangle_patch[rows, None] * points + triangles[rows]).ravel()
     order = np.argsort(key, kind="stable")
     wanted = corner_patch * points + corner_point
-    at = np.minimum(np.searchsorted(key, wanted, sorter=order), max(key.size - 1, 0))
-    found = order[at] if key.size else np.zeros(0, np.int64)
+    found = order[np.minimum(np.searchsorted(key, wanted, sorter=order), key.size - 1)] if key.size else wanted[:0]
     if found.size != wanted.size or not np.array_equal(key[found], wanted):
         raise ValueError("a polygon corner is not a corner of its patch's triangles")
     return np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])[rows[found // 3] * 3 + found % 3]
