@@ -600,7 +600,8 @@ def test_the_visible_corner_weights_are_the_same_a_few_cells_at_a_time(monkeypat
 def test_the_channels_and_parts_are_made_on_two_threads_bit_for_bit_as_on_one(monkeypatch):
     """``corner_values`` (a channel a task) and its ``LinearCorners`` (a part's channel a task) on
     two local threads: the first two channels wait for each other (a barrier of 2: they run at
-    once), and the corners and the parts' corners are bit for bit those of one thread."""
+    once), and the corners and the parts' corners are bit for bit those of one thread; so are
+    the noise filter's values and weights (its plane fit a channel a task)."""
     import threading
 
     from addon.core.distributed import runners
@@ -608,9 +609,11 @@ def test_the_channels_and_parts_are_made_on_two_threads_bit_for_bit_as_on_one(mo
     V, T, TP, values = _random_mesh(3)
     surface = smoothing.Surface.of(V, T, TP, len(values))
     parts = np.random.default_rng(3).random((4,) + values.shape) * values
+    variances = np.random.default_rng(4).random(values.shape) * 0.1 * values + 1e-3
     with runners.local_threads(1):
         one, apply = surface.corner_values(values, return_filter=True)
         one_parts = apply(parts, np.float32)
+        one_filtered, one_filter = surface.filter_noise(values, variances, return_filter=True)
     meet, made = threading.Barrier(2, timeout=20), []
     channel = smoothing.Surface._corner_channel
 
@@ -624,5 +627,9 @@ def test_the_channels_and_parts_are_made_on_two_threads_bit_for_bit_as_on_one(mo
     with runners.local_threads(2):
         two, apply = surface.corner_values(values, return_filter=True)
         two_parts = apply(parts, np.float32)
+        two_filtered, two_filter = surface.filter_noise(values, variances, return_filter=True)
     assert len(set(made)) == 2
     assert np.array_equal(one, two) and np.array_equal(one_parts, two_parts) and one_parts.shape == (4, len(T), 3, 3)
+    # (and the noise filter's plane fit, a channel a task: its values and its fixed weights)
+    assert np.array_equal(one_filtered, two_filtered) and np.array_equal(one_filter(parts), two_filter(parts))
+    assert not np.array_equal(one_filtered, values)
