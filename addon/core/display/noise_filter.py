@@ -23,7 +23,6 @@ that add up to the filtered whole.
 """
 import numpy as np
 
-from ..distributed.runners import each
 from ..mesh.welding import run_starts
 
 NOISE_CUTOFF = 3.0  # standard errors beyond which a neighbour is real detail, not noise
@@ -178,61 +177,48 @@ class NoiseFilter:
         a gradient across the neighbourhood moves no patch. Returns (fit, weights): with
         ``operator``, weights = (own (P,k), pair (n,k)), the fit as a sum over values (fit_p =
         own_p v_p + sum_q pair_pq v_q); else None. The pairs' sums are made FIT_BLOCK pairs at a
-        time (the pairs' temporaries were the peak memory of the largest scenes' smoothing), a
-        colour channel a task on the local threads (``runners.each``)."""
+        time (the pairs' temporaries were the peak memory of the largest scenes' smoothing)."""
+        P, C = values.shape
         frame = self._tangents()
+        ridge = 1e-3 * self.patch_area  # (a little ridge on the gradient keeps a row of neighbours solvable)
         out = values.copy()
         if operator:
-            own_weight, pair_weight = np.empty_like(values), np.empty((len(p), values.shape[1]))
-
-        def channel(c):
-            fit, solvable, g, own = self._fit_channel(values[:, c], var[:, c], known, p, q, k, frame, operator)
+            own_weight, pair_weight = np.empty_like(values), np.empty((len(p), C))
+        for c in range(C):  # over colour channels, not elements
+            m, rhs = np.zeros((P, 3, 3)), np.zeros((P, 3))
+            for block in _blocks(len(p)):
+                pb, qb = p[block], q[block]
+                lo, hi = int(pb[0]), int(pb[-1]) + 1  # (p sorted: the block's patches are a run)
+                local = pb - lo
+                design = self._design(pb, qb, frame)
+                w = k[block] / var[qb, c]
+                for i in range(3):
+                    wd = w * design[i]
+                    rhs[lo:hi, i] += sums_by(local, wd * values[qb, c], hi - lo)
+                    for j in range(i, 3):
+                        m[lo:hi, i, j] += sums_by(local, wd * design[j], hi - lo)
+            for i, j in ((1, 0), (2, 0), (2, 1)):
+                m[:, i, j] = m[:, j, i]
+            own = np.where(known, 1.0 / var[:, c], 0.0)
+            m[:, 0, 0] += own
+            rhs[:, 0] += own * values[:, c]
+            m[:, 1, 1] += ridge * m[:, 0, 0]
+            m[:, 2, 2] += ridge * m[:, 0, 0]
+            solvable = known & (m[:, 0, 0] > 0)
+            m[~solvable] = np.eye(3)
+            fit = np.linalg.solve(m, rhs[:, :, None])[:, 0, 0]
             out[:, c] = np.where(solvable, fit, values[:, c])
             if operator:
                 # a = g . rhs, g the first row of M's inverse (M is symmetric)
+                g = np.linalg.solve(m, np.broadcast_to(np.eye(3)[:, :1], (P, 3, 1)))[:, :, 0]
+                g[~solvable] = 0.0
                 own_weight[:, c] = np.where(solvable, g[:, 0] * own, 1.0)
                 for block in _blocks(len(p)):
                     pb, qb = p[block], q[block]
                     design = self._design(pb, qb, frame)
                     pair_weight[block, c] = k[block] / var[qb, c] * (
                         g[pb, 0] * design[0] + g[pb, 1] * design[1] + g[pb, 2] * design[2])
-
-        each(channel, range(values.shape[1]), 96 * len(values) + 100 * min(len(p), FIT_BLOCK))  # (M, rhs; a block)
         return out, ((own_weight, pair_weight) if operator else None)
-
-    def _fit_channel(self, values, var, known, p, q, k, frame, operator):
-        """One channel's plane fit (``_local_fit``): (the fit (P,), where it was solvable (P,),
-        with ``operator`` the first row of each patch's inverse normal matrix (P,3), 0 where not
-        (else None), its own weight (P,))."""
-        P = len(values)
-        m, rhs = np.zeros((P, 3, 3)), np.zeros((P, 3))
-        for block in _blocks(len(p)):
-            pb, qb = p[block], q[block]
-            lo, hi = int(pb[0]), int(pb[-1]) + 1  # (p sorted: the block's patches are a run)
-            local = pb - lo
-            design = self._design(pb, qb, frame)
-            w = k[block] / var[qb]
-            for i in range(3):
-                wd = w * design[i]
-                rhs[lo:hi, i] += sums_by(local, wd * values[qb], hi - lo)
-                for j in range(i, 3):
-                    m[lo:hi, i, j] += sums_by(local, wd * design[j], hi - lo)
-        for i, j in ((1, 0), (2, 0), (2, 1)):
-            m[:, i, j] = m[:, j, i]
-        own = np.where(known, 1.0 / var, 0.0)
-        m[:, 0, 0] += own
-        rhs[:, 0] += own * values
-        ridge = 1e-3 * self.patch_area  # (a little ridge on the gradient keeps a row of neighbours solvable)
-        m[:, 1, 1] += ridge * m[:, 0, 0]
-        m[:, 2, 2] += ridge * m[:, 0, 0]
-        solvable = known & (m[:, 0, 0] > 0)
-        m[~solvable] = np.eye(3)
-        fit = np.linalg.solve(m, rhs[:, :, None])[:, 0, 0]
-        if not operator:
-            return fit, solvable, None, own
-        g = np.linalg.solve(m, np.broadcast_to(np.eye(3)[:, :1], (P, 3, 1)))[:, :, 0]
-        g[~solvable] = 0.0
-        return fit, solvable, g, own
 
     def _tangents(self):
         """(t1, t2) (P,3) each: a frame of each patch's tangent plane."""

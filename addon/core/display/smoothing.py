@@ -36,7 +36,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..distributed.runners import each
 from .noise_filter import NOISE_CUTOFF, NoiseFilter, checked_rows, sums_by
 from ..mesh.welding import run_starts, weld_points
 
@@ -49,7 +48,6 @@ RINGING = 0.5
 RINGING_BLOCK = 1 << 16  # corners compared at a time (a few hundred kB of temporaries)
 SIGNIFICANT = 1e-3  # nor where the iterations moved its corners by less than this share of its value (RMS)
 RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
-CHANNEL_BYTES = 48  # a channel's temporaries a corner (six float64 arrays): what a second one side by side adds
 
 
 # A corner's value never falls below this share of the darkest patch meeting at it (a valley may
@@ -197,17 +195,17 @@ class Surface(NoiseFilter):
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
         out = np.empty((len(self.triangle_patch), 3, values.shape[1]), dtype)
-        records = [{} if return_filter else None for _ in range(values.shape[1])]
-
-        def channel(k):  # (a colour channel a task, on the local threads: a channel's arrays at a time each)
-            x, plain_scale, ringing = self._corner_channel(np.ascontiguousarray(values[:, k]), corner_patch, averaging,
-                                                           iterations, records[k])
+        records, plain_scales = [], []
+        rings = np.zeros(self.patch_count, bool)
+        for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
+            channel = np.ascontiguousarray(values[:, k])
+            record = {} if return_filter else None
+            x, plain_scale, ringing = self._corner_channel(channel, corner_patch, averaging, iterations, record)
             out[:, :, k] = x.reshape(-1, 3)
-            return plain_scale, ringing
-
-        made = each(channel, range(values.shape[1]), CHANNEL_BYTES * len(corner_patch))
-        plain_scales, ringing = zip(*made) if made else ((), ())
-        rings = np.logical_or.reduce(ringing, axis=0) if ringing else np.zeros(self.patch_count, bool)
+            del x  # (not held through the next channel's steps)
+            records.append(record)
+            plain_scales.append(plain_scale)
+            rings |= ringing
         # patches that ring in any channel take the plain average in every one (no colour fringes);
         # it is made again here (one averaging pass) rather than kept from each channel's steps
         flat_out = out.reshape(-1, values.shape[1])
@@ -320,28 +318,27 @@ class LinearCorners:
         x = np.asarray(x, np.float64)
         if x.shape[-2:] != self.positive.shape:
             raise ValueError(f"the corners take values of shape (P, k) = {self.positive.shape} (or (S, P, k)); got {x.shape}")
-        parts = x if x.ndim == 3 else x[None]
-        out = np.empty((len(parts), len(self.surface.triangle_patch), 3, parts.shape[2]), dtype)
-
-        def channel(job):  # (a part's colour channel a task, on the local threads: its float64 steps alone)
-            s, k = job
-            out[s, :, :, k] = self._channel(np.where(self.positive[:, k], parts[s, :, k], 0.0), k).reshape(-1, 3)
-
-        each(channel, [(s, k) for s in range(len(parts)) for k in range(len(self.records))], CHANNEL_BYTES * len(self.corner_patch))
-        return out if x.ndim == 3 else out[0]
-
-    def _channel(self, v, k):
-        """(T*3,) the corners of channel ``k``'s values ``v`` (P,) (the whole's negative patches 0)."""
-        surface, cp, record = self.surface, self.corner_patch, self.records[k]
-        corner = surface._average_corners(v.take(cp, mode="wrap"), self.averaging)
-        plain = corner.copy()
-        for floored in record["floored"]:
-            corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner)).take(cp, mode="wrap"), self.averaging)
-            corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
-        corner *= record["scale"].take(cp, mode="wrap")
-        corner[record["flat"]] = v[cp[record["flat"]]]
-        _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
-        return corner
+        if x.ndim == 3:
+            out = np.empty((len(x), len(self.surface.triangle_patch), 3, x.shape[2]), dtype)
+            for s, part in enumerate(x):  # (one part's float64 steps at a time)
+                out[s] = self(part)
+            return out
+        surface, cp = self.surface, self.corner_patch
+        values = np.where(self.positive, x, 0.0)  # (the whole's negative patches count as 0)
+        out = np.empty((len(surface.triangle_patch), 3, values.shape[1]), dtype)
+        for k, record in enumerate(self.records):  # over colour channels, not elements
+            v = np.ascontiguousarray(values[:, k])
+            corner = surface._average_corners(v.take(cp, mode="wrap"), self.averaging)
+            plain = corner.copy()
+            for floored in record["floored"]:
+                corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner)).take(cp, mode="wrap"),
+                                                                self.averaging)
+                corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
+            corner *= record["scale"].take(cp, mode="wrap")
+            corner[record["flat"]] = v[cp[record["flat"]]]
+            _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
+            out[:, :, k] = corner.reshape(-1, 3)
+        return out
 
 
 def _put_rings(out, plain, scale, rings, corner_patch, block=RINGING_BLOCK):

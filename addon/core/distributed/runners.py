@@ -1,5 +1,5 @@
 """Where a solve's chunks run: this machine's threads (a cluster runner offers the same calls);
-and the display's work on this machine's threads (``local_threads``, ``on_threads``).
+and the display's shadow rays on this machine's threads (``local_threads``, ``on_threads``).
 
 A runner takes tasks "chunks k, k+1, ... of sizes n_k" and returns futures of their tallies.
 Chunk k draws from its own stream, SeedSequence(seed, spawn_key=(k,)) (a group of chunks traced
@@ -54,9 +54,6 @@ class ThreadRunner:
             self._executor.shutdown(wait=True)
 
 
-# A task's temporaries beyond which ``each`` runs its tasks one at a time: two smoothing channels
-# side by side at 162,560 patches took 36 MiB more at the peak of the whole run (220 B a patch).
-SIDE_BY_SIDE_BYTES = 16 << 20
 # The threads the display's work takes here (None: the machine's), set by ``local_threads``.
 _LOCAL_THREADS = contextvars.ContextVar("local_threads", default=None)
 
@@ -98,21 +95,3 @@ def on_threads(work, most):
     for future in futures:
         future.result()
 
-
-def each(function, items, task_bytes=0):
-    """``[function(item) for item in items]``, the items shared among ``on_threads``' threads
-    (each result its item's, whichever thread made it); one at a time where a task's temporaries
-    ``task_bytes`` pass SIDE_BY_SIDE_BYTES (the largest scenes' memory before their speed)."""
-    items = list(items)
-    out, lock, taken = [None] * len(items), threading.Lock(), iter(range(len(items)))
-
-    def work():
-        while True:
-            with lock:
-                k = next(taken, None)
-            if k is None:
-                return
-            out[k] = function(items[k])
-
-    on_threads(work, len(items) if task_bytes <= SIDE_BY_SIDE_BYTES else 1)
-    return out
