@@ -293,16 +293,21 @@ class Surface(NoiseFilter):
         point (``_corner_lowest``'s, as a patch: what the floor is a share of)."""
         point, _, _, crease, local, o = averaging
         x = self._seen_values(values, corner_patch)
-        order = np.lexsort((x, point))
-        first = order[run_starts(point[order])]
-        lowest_corner = np.empty(len(self.smooth_point), np.int64)
-        lowest_corner[point[first]] = first
-        lowest = lowest_corner[point]
-        if len(crease):
-            order = np.lexsort((x[o], local))
-            first = order[run_starts(local[order])]
-            lowest[crease[local[first]]] = o[first]
+        lowest = _first_lowest(point, x, len(self.smooth_point))[point]
+        if len(crease):  # (a crease corner with no compatible pair, a patch of no normal, keeps its point's)
+            first = _first_lowest(local, x[o], len(crease))
+            lowest[crease[first < len(o)]] = o[first[first < len(o)]]
         return corner_patch[lowest]
+
+
+def _first_lowest(index, x, n):
+    """(n,) at each of n ``index`` values the first position of the least ``x`` there (a stable sort's)."""
+    least = np.full(n, np.inf)
+    np.minimum.at(least, index, x)
+    at = np.flatnonzero(x == least[index])
+    first = np.full(n, len(x), np.int64)
+    np.minimum.at(first, index[at], at)
+    return first
 
 
 class LinearCorners:
