@@ -170,15 +170,15 @@ class Surface(NoiseFilter):
     def corner_means(self, x):
         """Area-weighted mean (P,) of the linear interpolation of corner values (T*3,) over each
         patch (over the part seen, where ``visible`` is given)."""
-        if self.visible is not None:
-            tri = (x * self.visible).reshape(-1, 3).sum(axis=1)
-            sums = sums_by(self.triangle_patch, tri, self.patch_count)
-            return np.divide(sums, self.visible_area, out=np.zeros_like(sums), where=self.visible_area > 0)
-        tri = x[0::3] + x[1::3]  # (a triangle's three corners added in order: as sum(axis=1) adds them, 8x faster)
-        tri += x[2::3]
-        tri *= self.__dict__.setdefault("_third_area", self.triangle_area / 3.0)  # (made once)
+        seen = self.visible is not None
+        y = x * self.visible if seen else x
+        tri = y[0::3] + y[1::3]  # (a triangle's three corners added in order: as sum(axis=1) adds them, 8x faster)
+        tri += y[2::3]
+        if not seen:
+            tri *= self.__dict__.setdefault("_third_area", self.triangle_area / 3.0)  # (made once)
         sums = sums_by(self.triangle_patch, tri, self.patch_count)
-        return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
+        area = self.visible_area if seen else self.patch_area
+        return np.divide(sums, area, out=np.zeros_like(sums), where=area > 0)
 
     def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
