@@ -405,12 +405,12 @@ def polygon_corner_values(corners, triangles, triangle_patch, corner_patch, corn
     (T,3,3) at a corner of one of the patch's triangles at that point (every such corner holds the
     same value: the patch's triangles share its normal, so one crease group at each point).
     ValueError where a polygon corner is no corner of its patch's triangles."""
-    triangles, triangle_patch = np.asarray(triangles), np.asarray(triangle_patch, np.int64)
-    points = int(max(triangles.max(initial=0), np.max(corner_point, initial=0))) + 1
-    corner_patch = np.asarray(corner_patch, np.int64)
+    triangles, triangle_patch, corner_patch = np.asarray(triangles), np.asarray(triangle_patch), np.asarray(corner_patch, np.int64)
     # (the triangles of the patches asked alone: an object's, not the scene's, sorted at each call)
     rows = np.flatnonzero((triangle_patch >= corner_patch.min(initial=0)) & (triangle_patch <= corner_patch.max(initial=-1)))
-    key = (triangle_patch[rows, None] * points + triangles[rows]).ravel()
+    mine = triangles[rows]
+    points = int(max(mine.max(initial=0), np.max(corner_point, initial=0))) + 1
+    key = (triangle_patch[rows].astype(np.int64)[:, None] * points + mine).ravel()
     order = np.argsort(key, kind="stable")
     wanted = corner_patch * points + corner_point
     found = order[np.minimum(np.searchsorted(key, wanted, sorter=order), key.size - 1)] if key.size else wanted[:0]
