@@ -15,6 +15,7 @@ from ..core import predict, solve
 from ..core.display import direct_means, point_direct, smoothing
 from ..core.scene.diagnostics import MAX_BOUNCES, check_bounces
 from ..core.display.covered import seen_parts
+from ..core.distributed.runners import local_threads
 from ..core.methods.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
@@ -242,13 +243,14 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
         result = solve(scene, run_core(scene, settings, groups, max_seconds=budget.solve_seconds()),
                        progress=progress, should_stop=should_stop)
     # (the display's direct light in place of the solve's, whose weak lamps are heavy-tailed: core direct_means)
-    result = direct_means.corrected(scene, result, None if settings.paths else settings.relative_rms)
+    with local_threads(settings.threads):  # (the display's work on the threads the solve had)
+        result = direct_means.corrected(scene, result, None if settings.paths else settings.relative_rms)
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
     out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
     out.sources_out = relit.source_results(scene, patches, result, groups) if groups is not None else None
-    with trim.roomy(scene.patch_count):
+    with trim.roomy(scene.patch_count), local_threads(settings.threads):
         write_colours(out, scene, result, settings, budget.deadline())
     relit.add_object_values(out, settings)
     out.seconds = time.perf_counter() - started

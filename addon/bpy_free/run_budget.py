@@ -21,6 +21,7 @@ from ..core.display import direct_means, point_direct
 from ..core.lights.lamp_choice import patch_spheres
 from ..core.names import GATHERED, TWO_WAY
 from ..core.display.sample_rounds import Spent
+from ..core.distributed.runners import local_threads
 from . import adaptive_patches, options
 
 # The display's cells (bpy_free shown_mesh) over the corners' direct light they add to: their new points'
@@ -131,6 +132,12 @@ def lamp_means_seconds(scene, settings, groups, seed=0, patches=PILOT_CORNERS):
 def display_forecast(scene, patches, settings, groups=None) -> Display:
     """The Display forecast of a run of ``settings`` (its method resolved) on ``scene`` made of
     ``patches``; ``groups`` the run's per-source groups (each group's lamps sampled apart)."""
+    with local_threads(settings.threads):  # (timed on the threads the run's display takes)
+        return _forecast(scene, patches, settings, groups)
+
+
+def _forecast(scene, patches, settings, groups):
+    """``display_forecast``'s work."""
     seed = int(settings.seed)
     live, live_least = live_seconds(scene, seed) if live_made(settings, scene) else (0.0, 0.0)
     means = lamp_means_seconds(scene, settings, groups, seed)  # (one round: the least too)

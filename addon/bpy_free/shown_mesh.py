@@ -12,6 +12,7 @@ import numpy as np
 from ..core.display import point_direct, smoothing
 from ..core.refine import cell_meshes, display_cells
 from ..core.display.covered import seen_parts
+from ..core.mesh.faces import polygon_corner_rows
 from ..core.relight.relighting import group_direct
 
 TIME_SHARE = 0.5  # of the time left before a deadline the new points may take (the rest: the smoothing, the writing)
@@ -89,7 +90,7 @@ def _corner_rows(out, scene, shading):
         offset = patches.combined.patch_offsets[k]
         mesh = mesh_of(out, k)
         corner_patch = shown.corner_patch(k, offset) if shown is not None else mesh.corner_patch + offset
-        rows.append(smoothing.polygon_corner_rows(triangles, triangle_patch, corner_patch, mesh.corner_verts + starts[k]))
+        rows.append(polygon_corner_rows(triangles, triangle_patch, corner_patch, mesh.corner_verts + starts[k]))
     return rows
 
 

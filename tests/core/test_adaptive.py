@@ -9,7 +9,7 @@ from addon.core.mesh import meshing
 from addon.core.display import smoothing
 from addon.core.refine.adaptive import cells_of, patch_mesh, refine, shading_triangulation, split
 from addon.core.refine.adaptive_light import DETAILS, Detail, refine_by_direct_light
-from addon.core.mesh.faces import starts_of, triangle_areas
+from addon.core.mesh.faces import polygon_corner_values, starts_of, triangle_areas
 from addon.core.lights.lights import PointLight, SunLight
 
 # A closed box 4 x 3 x 2.5 of six quads, faces towards the inside.
@@ -178,7 +178,7 @@ def test_smooth_colours_agree_at_a_refinement_border():
     surface = smoothing.Surface.of(refined.points, triangles, triangle_patch, refined.patch_count)
     values = 1.0 + surface.patch_centroid @ np.array([[0.3, 0.1, 0.2], [0.2, 0.3, 0.1], [0.1, 0.2, 0.3]])
     corners = surface.corner_values(values, iterations=300)  # (converged: no leftover of the last scale)
-    at = smoothing.polygon_corner_values(corners, triangles, triangle_patch, refined.corner_patch,
+    at = polygon_corner_values(corners, triangles, triangle_patch, refined.corner_patch,
                                          refined.corner_verts)
     # polygon corners at one point on one face of the box (one normal): one value
     normal = np.round(surface.patch_normal[refined.corner_patch], 6)

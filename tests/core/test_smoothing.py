@@ -346,7 +346,7 @@ def test_patches_no_path_reached_are_filtered_not_kept_black():
 def test_polygon_corners_read_the_value_of_their_patchs_triangle_corner():
     """Quads fanned into two triangles each: every polygon corner reads the value its patch's
     triangles hold at that point; a corner that is no corner of its patch's triangles is refused."""
-    from addon.core.display.smoothing import polygon_corner_values
+    from addon.core.mesh.faces import polygon_corner_values
 
     rng = np.random.default_rng(5)
     quads = rng.permutation(40).reshape(10, 4)  # (10 patches, their 4 points)
@@ -595,3 +595,32 @@ def test_the_visible_corner_weights_are_the_same_a_few_cells_at_a_time(monkeypat
     assert np.array_equal(covered.visible_corner_weights(*args), whole)
     seen = np.bincount(scene.triangle_patch, weights=whole.sum(axis=1), minlength=scene.patch_count)
     np.testing.assert_allclose(seen, scene.patch_area, rtol=1e-12)
+
+
+def test_the_lowest_corners_patch_is_the_one_a_stable_sort_finds_ties_and_hidden_patches_included():
+    """The patch whose corner is the lowest at each point (what a floor is a share of), found
+    without a sort, against the stable sort by (point, value) it replaced: on the folded mesh
+    (crease points), values with ties, some patches hidden (inf), the same patch at every corner."""
+    from addon.core.mesh.welding import run_starts
+
+    V, T, TP, values = _random_mesh(2)
+    values = np.round(values, 1)  # (ties)
+    hidden = np.zeros(len(values), bool)
+    hidden[::7] = True
+    surface = smoothing.Surface.of(V, T, TP, len(values), hidden=hidden)
+    corner_patch = np.repeat(TP, 3)
+    averaging = surface._averaging()
+    point, _, _, crease, local, o = averaging
+    assert len(crease) > 0
+    for k in range(3):
+        x = np.where(hidden[corner_patch], np.inf, values[corner_patch, k])
+        order = np.lexsort((x, point))
+        first = order[run_starts(point[order])]
+        lowest_corner = np.empty(len(surface.smooth_point), np.int64)
+        lowest_corner[point[first]] = first
+        expected = lowest_corner[point]
+        order = np.lexsort((x[o], local))
+        first = order[run_starts(local[order])]
+        expected[crease[local[first]]] = o[first]
+        got = surface._corner_lowest_patch(np.ascontiguousarray(values[:, k]), corner_patch, averaging)
+        assert np.array_equal(got, corner_patch[expected])

@@ -36,7 +36,15 @@ class NoiseFilter:
     def neighbours(self, block=1 << 18):
         """Patch pairs (p, q), p != q, both directions, sorted by p: sharing a welded point,
         normals within the crease angle. Made a block of points at a time (``block`` candidate
-        pairs), so memory goes with the patches, not with the points' valences squared."""
+        pairs), so memory goes with the patches, not with the points' valences squared. Made once
+        a surface (the filters of the light arriving and the reflected light, the fills, read them)."""
+        made = self.__dict__.get("_neighbour_pairs")
+        if made is None:
+            made = self.__dict__["_neighbour_pairs"] = self._neighbours(block)
+        return made
+
+    def _neighbours(self, block):
+        """``neighbours``, made."""
         P = max(self.patch_count, 1)
         code = np.unique(self.point.ravel().astype(np.int64) * P + np.repeat(self.triangle_patch, 3))
         point, patch = code // P, code % P

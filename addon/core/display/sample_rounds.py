@@ -9,13 +9,16 @@ time for; the first round is the least the display needs and always runs.
 """
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
+from ..distributed.runners import local_thread_count, on_threads
 from ..lights.sampling import stratified_by_patch
+from ..methods.tables import FreeTurn
 
 BLOCK_SAMPLES = 1 << 15  # samples traced at a time (about 500 bytes of temporaries each)
 
@@ -99,21 +102,47 @@ def sampled(tables, n, samples, rng, add, points, dimensions, dtype=np.float64, 
     """((n,3) the mean of ``samples`` stratified samples of each of n points or patches, (n,) its
     standard error (channels summed)); ``add(tables, points, u, value)`` adds a source's light at
     sample points, ``points(block, local, u)`` a block's sample points (``local`` each sample's
-    row in the block), BLOCK_SAMPLES samples at a time. ``paired``: the error of a choice
-    stratified by u[5] (``paired_error``), else as if the samples were independent."""
+    row in the block), BLOCK_SAMPLES samples at a time, each block's points shared among the local
+    threads (``runners.on_threads``): a block's random numbers are drawn in the blocks' order and
+    a point's samples are its own, so the bits are the same on any number of threads, and the
+    samples in flight one block's. ``paired``: the error of a choice stratified by u[5]
+    (``paired_error``), else as if the samples were independent."""
     mean, error = np.empty((n, 3), dtype), np.empty(n, dtype)
     step = max(1, BLOCK_SAMPLES // samples)
-    for start in range(0, n, step):
-        block = slice(start, min(n, start + step))
-        local = np.repeat(np.arange(block.stop - block.start), samples)
-        u = stratified_by_patch(local, block.stop - block.start, dimensions, rng, dtype=np.float32)
-        value = np.zeros((3, local.size))
-        add(tables, points(block, local, u), u=u, value=value)
-        value = value.reshape(3, -1, samples)
-        mean[block] = value.mean(axis=2).T
-        grey = value.sum(axis=0)
-        error[block] = paired_error(grey, u[5].reshape(grey.shape)) if paired else grey.std(axis=1, ddof=1) / np.sqrt(samples)
+    threads = max(1, min(local_thread_count(), step, n))
+    pieces, lock = _pieces(n, step, samples, rng, dimensions, threads), threading.Lock()
+    # (each thread traces with its own turn at numpy: the blocks' arrays are long, numpy lets go of the GIL)
+    mine = tables if threads == 1 else tables.with_turn(FreeTurn())
+
+    def work():
+        while True:
+            with lock:  # (the blocks drawn in order)
+                piece = next(pieces, None)
+            if piece is None:
+                return
+            block, local, u = piece
+            value = np.zeros((3, local.size))
+            add(mine, points(block, local, u), u=u, value=value)
+            value = value.reshape(3, -1, samples)
+            mean[block] = value.mean(axis=2).T
+            grey = value.sum(axis=0)
+            error[block] = paired_error(grey, u[5].reshape(grey.shape)) if paired else grey.std(axis=1, ddof=1) / np.sqrt(samples)
+
+    on_threads(work, threads)
     return mean, error
+
+
+def _pieces(n, step, samples, rng, dimensions, parts):
+    """Blocks of ``step`` of n points, each one's uniforms drawn in turn (``stratified_by_patch``)
+    and its points in ``parts`` pieces: (rows, each sample's row in the piece, its uniforms)."""
+    for start in range(0, n, step):
+        count = min(n, start + step) - start
+        local = np.repeat(np.arange(count), samples)
+        u = stratified_by_patch(local, count, dimensions, rng, dtype=np.float32)
+        size = -(-count // parts)
+        for a in range(0, count, size):
+            b = min(count, a + size)
+            yield slice(start + a, start + b), local[a * samples:b * samples] - a, u[:, a * samples:b * samples]
 
 
 def paired_error(value, u):

@@ -149,7 +149,7 @@ class Surface(NoiseFilter):
         its point; 0 where they all have zero area."""
         point, w, inverse, crease, local, o = averaging
         wx = w * x
-        out = np.bincount(point, weights=wx, minlength=len(self.smooth_point))[point]
+        out = np.bincount(point, weights=wx, minlength=len(self.smooth_point)).take(point, mode="wrap")  # (take: faster)
         if len(crease):
             out[crease] = np.bincount(local, weights=wx[o], minlength=len(crease))
         out *= inverse
@@ -170,15 +170,15 @@ class Surface(NoiseFilter):
     def corner_means(self, x):
         """Area-weighted mean (P,) of the linear interpolation of corner values (T*3,) over each
         patch (over the part seen, where ``visible`` is given)."""
-        if self.visible is not None:
-            tri = (x * self.visible).reshape(-1, 3).sum(axis=1)
-            sums = sums_by(self.triangle_patch, tri, self.patch_count)
-            return np.divide(sums, self.visible_area, out=np.zeros_like(sums), where=self.visible_area > 0)
-        tri = x[0::3] + x[1::3]  # (a triangle's three corners added in order: as sum(axis=1) adds them, 8x faster)
-        tri += x[2::3]
-        tri *= self.triangle_area / 3.0
+        seen = self.visible is not None
+        y = x * self.visible if seen else x
+        tri = y[0::3] + y[1::3]  # (a triangle's three corners added in order: as sum(axis=1) adds them, 8x faster)
+        tri += y[2::3]
+        if not seen:
+            tri *= self.__dict__.setdefault("_third_area", self.triangle_area / 3.0)  # (made once)
         sums = sums_by(self.triangle_patch, tri, self.patch_count)
-        return np.divide(sums, self.patch_area, out=np.zeros_like(sums), where=self.patch_area > 0)
+        area = self.visible_area if seen else self.patch_area
+        return np.divide(sums, area, out=np.zeros_like(sums), where=area > 0)
 
     def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
@@ -223,7 +223,7 @@ class Surface(NoiseFilter):
         """One channel's corners (T*3,), the scales (P,) of its plain average (no iterations) and
         its ringing patches (P,) bool (``_ringing``); ``record`` (a dict), where given, keeps the
         floored corners of each step, the floors' patches, the final scales and the flat corners."""
-        x = self._average_corners(values[corner_patch], averaging)
+        x = self._average_corners(values.take(corner_patch, mode="wrap"), averaging)
         floor = LOWEST_SHARE * self._corner_lowest(self._seen_values(values, corner_patch), averaging)
         floor[np.isinf(floor)] = 0.0  # (a point only hidden patches meet)
         if record is not None:
@@ -231,8 +231,7 @@ class Surface(NoiseFilter):
             record["floored"] = []
         for _ in range(int(iterations)):
             # each patch's missing light, spread continuously over the corners around it
-            missing = (values - self.corner_means(x))[corner_patch]
-            x += RELAXATION * self._average_corners(missing, averaging)
+            x += RELAXATION * self._average_corners((values - self.corner_means(x)).take(corner_patch, mode="wrap"), averaging)
             if record is not None:
                 record["floored"].append(np.flatnonzero(x < floor))
             # a bright patch beside dim ones would push its neighbours' far corners down to black:
@@ -241,7 +240,7 @@ class Surface(NoiseFilter):
         del floor  # (a (T*3,) array less while the plain average is made)
         x, scale, flat = self._scale_to(values, x, corner_patch)
         # (no iterations, made again rather than kept through them: what ringing falls back to)
-        plain, plain_scale, _ = self._scale_to(values, self._average_corners(values[corner_patch], averaging), corner_patch)
+        plain, plain_scale, _ = self._scale_to(values, self._average_corners(values.take(corner_patch, mode="wrap"), averaging), corner_patch)
         if record is not None:
             record["scale"], record["flat"] = scale, flat
         return x, plain_scale, self._ringing(values, x, plain, corner_patch)
@@ -251,7 +250,7 @@ class Surface(NoiseFilter):
         whose corners all came to zero keeps its own value, flat): (x, scales (P,), flat corners)."""
         means = self.corner_means(x)
         scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
-        x *= scale[corner_patch]
+        x *= scale.take(corner_patch, mode="wrap")
         flat = np.flatnonzero((means <= 0)[corner_patch])
         x[flat] = values[corner_patch[flat]]
         return x, scale, flat
@@ -294,16 +293,21 @@ class Surface(NoiseFilter):
         point (``_corner_lowest``'s, as a patch: what the floor is a share of)."""
         point, _, _, crease, local, o = averaging
         x = self._seen_values(values, corner_patch)
-        order = np.lexsort((x, point))
-        first = order[run_starts(point[order])]
-        lowest_corner = np.empty(len(self.smooth_point), np.int64)
-        lowest_corner[point[first]] = first
-        lowest = lowest_corner[point]
-        if len(crease):
-            order = np.lexsort((x[o], local))
-            first = order[run_starts(local[order])]
-            lowest[crease[local[first]]] = o[first]
+        lowest = _first_lowest(point, x, len(self.smooth_point))[point]
+        if len(crease):  # (a crease corner with no compatible pair, a patch of no normal, keeps its point's)
+            first = _first_lowest(local, x[o], len(crease))
+            lowest[crease[first < len(o)]] = o[first[first < len(o)]]
         return corner_patch[lowest]
+
+
+def _first_lowest(index, x, n):
+    """(n,) at each of n ``index`` values the first position of the least ``x`` there (a stable sort's)."""
+    least = np.full(n, np.inf)
+    np.minimum.at(least, index, x)
+    at = np.flatnonzero(x == least[index])
+    first = np.full(n, len(x), np.int64)
+    np.minimum.at(first, index[at], at)
+    return first
 
 
 class LinearCorners:
@@ -329,12 +333,13 @@ class LinearCorners:
         out = np.empty((len(surface.triangle_patch), 3, values.shape[1]), dtype)
         for k, record in enumerate(self.records):  # over colour channels, not elements
             v = np.ascontiguousarray(values[:, k])
-            corner = surface._average_corners(v[cp], self.averaging)
+            corner = surface._average_corners(v.take(cp, mode="wrap"), self.averaging)
             plain = corner.copy()
             for floored in record["floored"]:
-                corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner))[cp], self.averaging)
+                corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner)).take(cp, mode="wrap"),
+                                                                self.averaging)
                 corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
-            corner *= record["scale"][cp]
+            corner *= record["scale"].take(cp, mode="wrap")
             corner[record["flat"]] = v[cp[record["flat"]]]
             _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
             out[:, :, k] = corner.reshape(-1, 3)
@@ -392,27 +397,3 @@ def filter_noise(vertices, triangles, triangle_patch, patch_values, patch_varian
     """Noise-filtered per-patch values (P,k) (``Surface.filter_noise``)."""
     surface = Surface.of(vertices, triangles, triangle_patch, len(patch_values), crease_angle)
     return surface.filter_noise(patch_values, patch_variances, cutoff)
-
-
-def polygon_corner_values(corners, triangles, triangle_patch, corner_patch, corner_point):
-    """(n,3) the value at each polygon corner (its patch ``corner_patch`` (n,), its point
-    ``corner_point`` (n,), indices of the same arrays as ``triangles``), read from ``corners``
-    (T,3,3) at a corner of one of the patch's triangles at that point (every such corner holds the
-    same value: the patch's triangles share its normal, so one crease group at each point).
-    ValueError where a polygon corner is no corner of its patch's triangles."""
-    rows = polygon_corner_rows(triangles, triangle_patch, corner_patch, corner_point)
-    return np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])[rows]
-
-
-def polygon_corner_rows(triangles, triangle_patch, corner_patch, corner_point):
-    """(n,) the triangle corner (a row of (T*3,...) corners) ``polygon_corner_values`` reads for each
-    polygon corner: the same for every value set on these triangles."""
-    points = int(max(triangles.max(initial=0), np.max(corner_point, initial=0))) + 1
-    key = (np.asarray(triangle_patch, np.int64)[:, None] * points + triangles).ravel()
-    order = np.argsort(key, kind="stable")
-    wanted = np.asarray(corner_patch, np.int64) * points + corner_point
-    at = np.minimum(np.searchsorted(key, wanted, sorter=order), key.size - 1)
-    found = order[at]
-    if not np.array_equal(key[found], wanted):
-        raise ValueError("a polygon corner is not a corner of its patch's triangles")
-    return found

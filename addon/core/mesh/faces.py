@@ -254,3 +254,30 @@ def count_patches(vertices, face_sizes, corner_verts, patch_size, face_triangles
         + float(np.sum(plan.n_u.astype(np.float64) * plan.n_v))
         + float(np.sum(n_t.astype(np.float64) ** 2))
     )
+
+
+def polygon_corner_values(corners, triangles, triangle_patch, corner_patch, corner_point):
+    """(n,3) the value at each polygon corner (its patch ``corner_patch`` (n,), its point
+    ``corner_point`` (n,), indices of the same arrays as ``triangles``), read from ``corners``
+    (T,3,3) at a corner of one of the patch's triangles at that point (every such corner holds the
+    same value: the patch's triangles share its normal, so one crease group at each point).
+    ValueError where a polygon corner is no corner of its patch's triangles."""
+    rows = polygon_corner_rows(triangles, triangle_patch, corner_patch, corner_point)
+    return np.asarray(corners).reshape(-1, np.asarray(corners).shape[-1])[rows]
+
+
+def polygon_corner_rows(triangles, triangle_patch, corner_patch, corner_point):
+    """(n,) the triangle corner (a row of (T*3,...) corners) ``polygon_corner_values`` reads for each
+    polygon corner: the same for every value set on these triangles."""
+    triangles, triangle_patch, corner_patch = np.asarray(triangles), np.asarray(triangle_patch), np.asarray(corner_patch, np.int64)
+    # (the triangles of the patches asked alone: an object's, not the scene's, sorted at each call)
+    rows = np.flatnonzero((triangle_patch >= corner_patch.min(initial=0)) & (triangle_patch <= corner_patch.max(initial=-1)))
+    mine = triangles[rows]
+    points = int(max(mine.max(initial=0), np.max(corner_point, initial=0))) + 1
+    key = (triangle_patch[rows].astype(np.int64)[:, None] * points + mine).ravel()
+    order = np.argsort(key, kind="stable")
+    wanted = corner_patch * points + corner_point
+    found = order[np.minimum(np.searchsorted(key, wanted, sorter=order), key.size - 1)] if key.size else wanted[:0]
+    if found.size != wanted.size or not np.array_equal(key[found], wanted):
+        raise ValueError("a polygon corner is not a corner of its patch's triangles")
+    return rows[found // 3] * 3 + found % 3

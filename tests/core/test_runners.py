@@ -1,0 +1,70 @@
+"""The display's work on this machine's threads (addon/core/distributed/runners.py): ``on_threads``
+runs a queue's worker on the threads ``local_threads`` allows (the threads setting; 1: the
+calling thread alone), raises a worker's error, and nests no pool inside a pool."""
+import threading
+
+import pytest
+
+from addon.core.distributed import runners
+
+
+def _queue(items, task):
+    """A worker taking ``items`` from a shared queue, ``task(item)`` each."""
+    lock, taken = threading.Lock(), iter(items)
+
+    def work():
+        while True:
+            with lock:
+                item = next(taken, None)
+            if item is None:
+                return
+            task(item)
+
+    return work
+
+
+def test_the_work_runs_on_two_threads_at_once():
+    """Two tasks that each wait for the other (a barrier of 2): they finish only if two threads
+    run them at once; every task is done once."""
+    meet, threads, done = threading.Barrier(2, timeout=20), set(), []
+
+    def task(k):
+        if k < 2:
+            meet.wait()
+        threads.add(threading.get_ident())
+        done.append(k)
+
+    with runners.local_threads(2):
+        runners.on_threads(_queue(range(7), task), 7)
+    assert len(threads) == 2 and sorted(done) == list(range(7))
+
+
+def test_one_thread_runs_every_task_on_the_calling_thread():
+    seen = []
+    with runners.local_threads(1):
+        assert runners.local_thread_count() == 1
+        runners.on_threads(_queue(range(5), lambda k: seen.append(threading.get_ident())), 5)
+    assert seen == [threading.get_ident()] * 5
+    with runners.local_threads(2):  # (one task: no pool)
+        runners.on_threads(_queue(range(3), lambda k: seen.append(threading.get_ident())), 1)
+    assert set(seen) == {threading.get_ident()}
+
+
+def test_a_workers_error_is_raised_and_no_pool_starts_inside_a_pool():
+    inner = []
+
+    def task(k):
+        inner.append(runners.local_thread_count())
+        if k == 3:
+            raise ValueError("task 3")
+
+    with runners.local_threads(2), pytest.raises(ValueError, match="task 3"):
+        runners.on_threads(_queue(range(6), task), 6)
+    assert inner and set(inner) == {1}
+
+
+def test_the_threads_setting_of_0_or_none_is_the_machines_as_the_solves():
+    with runners.local_threads(0):
+        assert runners.local_thread_count() == runners.machine_threads() >= 1
+    with runners.local_threads(3):
+        assert runners.local_thread_count() == 3
