@@ -253,6 +253,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     with trim.roomy(scene.patch_count), local_threads(settings.threads):
         write_colours(out, scene, result, settings, budget.deadline())
     relit.add_object_values(out, settings)
+    shown_mesh.let_go(out)
     out.seconds = time.perf_counter() - started
     return out
 

@@ -122,3 +122,11 @@ def _mixed(values, corners, weights):
     for j in (1, 2):
         out += values[corners[:, j]] * weights[:, j, None]
     return out.astype(values.dtype)
+
+
+def let_go(out):
+    """Drops what only the colours needed (the shown triangles, the polygon corners' rows) once they are
+    made: the meshes written and each polygon's patch stay (a preview renders beside them)."""
+    out.corner_rows = None
+    if getattr(out, "shown", None) is not None:
+        out.shown = replace(out.shown, vertices=None, triangles=None, triangle_patch=None)
