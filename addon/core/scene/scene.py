@@ -1,7 +1,11 @@
 """The patch scene: validated arrays of geometry and materials, with the paper's grey quantities.
 
 Notation follows Sbert & Brusi: a patch i has area A_i, reflectivity R_i and emittance
-(emitted power per unit area) E_i; its power is Phi_i = E_i A_i and Phi_T = sum_i Phi_i.
+(emitted power per unit area) E_i. An emitting patch emits E_i from its front and from its
+back, as Cycles' emission leaves both sides of a face: its power is Phi_i = s_i E_i A_i with
+s_i = 2 sides (``emitting_sides``), or 1 where nothing lies behind it (its back faces out of
+the scene's bounding box, as a closed room's lit wall does: that light would all escape), and
+Phi_T = sum_i Phi_i (beside the lights'). Its radiosity B_i is its front's.
 Colours are carried as three channels; the grey quantities the paper's formulas use are
 channel means (R_bar_i, E_bar_i), so that a grey scene is exactly the paper's.
 """
@@ -24,6 +28,10 @@ from ..mesh.validation import (
 )
 
 SAME = object()  # with_materials: keep the scene's own
+# The most sides an emitting patch emits E from (Cycles' emission closure: |cos| of either side).
+EMITTING_SIDES = 2
+# A box corner this share of the diagonal behind an emitting patch's plane is behind it.
+BEHIND_TOLERANCE = 1e-6
 
 
 class PatchScene:
@@ -36,7 +44,8 @@ class PatchScene:
         and radiosity leaves the front side.
     triangle_patch : (T,) int in [0, P): the patch each triangle belongs to.
     reflectivity : (P,3) RGB or (P,) grey, each in [0, 1).
-    emission : (P,3) or (P,), the emittance E (power per unit area), >= 0.
+    emission : (P,3) or (P,), the emittance E (power per unit area), >= 0, from the front
+        and the back of the patch (``emitting_sides``).
     lights : light sources beside the emissive patches (``lights``: point, spot, area, sun, world).
     aim : (centre, radius) of the sphere sun and world light is aimed at (the part of the scene
         whose light matters); default the bounding sphere of every patch.
@@ -66,7 +75,7 @@ class PatchScene:
             vertices, triangles, triangle_patch, patch_count
         )
         with np.errstate(over="ignore", invalid="ignore"):
-            power = self.patch_area[:, None] * self.emission
+            power = EMITTING_SIDES * self.patch_area[:, None] * self.emission
             finite = np.isfinite(power.sum())
         if not finite:
             raise PatchError(
@@ -137,14 +146,38 @@ class PatchScene:
         return same(self.reflectivity) and same(self.emission) and same(self.lights.power)
 
     @cached_property
+    def back_emits(self):
+        """(P,) bool: the emitting patches whose back has something to light, some of the
+        scene's bounding box lying behind their plane. The others (on the box's boundary,
+        facing in) emit from their front alone: what their back emits would all escape."""
+        back = np.zeros(self.patch_count, dtype=bool)
+        emitting = np.flatnonzero(self.emission.any(axis=1))
+        if not emitting.size:
+            return back
+        g = self.geometry
+        normal = g.patch_normal[emitting].astype(np.float64)
+        point = g.to_world(g.corners[g.patch_first_triangle[emitting]][:, 0, :], emitting)
+        low, high = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        # The box's farthest corner behind each plane: the low or high end of each axis.
+        behind = (np.where(normal > 0, low, high) - point) * normal
+        back[emitting] = behind.sum(axis=1) < -BEHIND_TOLERANCE * g.diagonal
+        return back
+
+    @cached_property
+    def emitting_sides(self):
+        """(P,) s_i: 2 where the patch's back emits too (``back_emits``), else 1."""
+        return 1.0 + self.back_emits
+
+    @cached_property
     def patch_power(self):
-        """Phi_i = A_i E_bar_i, the channel-mean power of each patch."""
-        return self.patch_area * self.emission.mean(axis=1)
+        """Phi_i = s_i A_i E_bar_i, the channel-mean power of each patch (its sides')."""
+        return self.emitting_sides * self.patch_area * self.emission.mean(axis=1)
 
     @cached_property
     def source_power(self):
-        """(S,3) the power of every source: the patches' A_i E_i, then the lights' emitters."""
-        return np.vstack([self.patch_area[:, None] * self.emission, self.lights.power])
+        """(S,3) the power of every source: the patches' s_i A_i E_i (their sides'), then the
+        lights' emitters."""
+        return np.vstack([(self.emitting_sides * self.patch_area)[:, None] * self.emission, self.lights.power])
 
     @cached_property
     def total_power(self):
