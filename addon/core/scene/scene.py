@@ -16,6 +16,8 @@ from functools import cached_property
 import numpy as np
 
 from .geometry_build import build_geometry
+from .visibility import buried_at
+from ..lights.sampling import patch_point_rows
 from ..materials.glossy import GlossyLobe
 from ..lights.lights import Lights
 from ..mesh.validation import (
@@ -30,8 +32,10 @@ from ..mesh.validation import (
 SAME = object()  # with_materials: keep the scene's own
 # The most sides an emitting patch emits E from (Cycles' emission closure: |cos| of either side).
 EMITTING_SIDES = 2
-# A box corner this share of the diagonal behind an emitting patch's plane is behind it.
-BEHIND_TOLERANCE = 1e-6
+# A vertex this share of the diagonal behind an emitting patch's plane is behind it; planes
+# within PLANE_GRAIN (normal, depth over the diagonal) of each other are tested as one.
+BEHIND_TOLERANCE = 1e-4
+PLANE_GRAIN = 1e-6
 
 
 class PatchScene:
@@ -147,20 +151,31 @@ class PatchScene:
 
     @cached_property
     def back_emits(self):
-        """(P,) bool: the emitting patches whose back has something to light, some of the
-        scene's bounding box lying behind their plane. The others (on the box's boundary,
-        facing in) emit from their front alone: what their back emits would all escape."""
+        """(P,) bool: the emitting patches whose back has something to light: some vertex of
+        the scene lies behind their plane, and the point behind their middle is not inside a
+        closed solid (``visibility.buried_at`` probing about -n). The others emit from their
+        front alone: what their back emits would all escape (a closed room's lit wall) or stay
+        inside the solid it bounds (a lamp box's face), where it lights no visible surface."""
         back = np.zeros(self.patch_count, dtype=bool)
         emitting = np.flatnonzero(self.emission.any(axis=1))
         if not emitting.size:
             return back
         g = self.geometry
         normal = g.patch_normal[emitting].astype(np.float64)
-        point = g.to_world(g.corners[g.patch_first_triangle[emitting]][:, 0, :], emitting)
-        low, high = self.vertices.min(axis=0), self.vertices.max(axis=0)
-        # The box's farthest corner behind each plane: the low or high end of each axis.
-        behind = (np.where(normal > 0, low, high) - point) * normal
-        back[emitting] = behind.sum(axis=1) < -BEHIND_TOLERANCE * g.diagonal
+        depth = np.einsum("ij,ij->i", normal, g.to_world(g.corners[g.patch_first_triangle[emitting]][:, 0, :], emitting))
+        # Coplanar emitters (a lamp's patches) share one test: their planes, to within PLANE_GRAIN.
+        key = np.round(np.column_stack([normal, depth / g.diagonal]) / PLANE_GRAIN)
+        planes, first, plane_of = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        behind = np.zeros(planes.shape[0], dtype=bool)
+        for rows in np.array_split(np.arange(planes.shape[0]), max(1, planes.shape[0] * len(self.vertices) >> 22)):
+            lowest = (self.vertices @ normal[first[rows]].T).min(axis=0)
+            behind[rows] = lowest < depth[first[rows]] - BEHIND_TOLERANCE * g.diagonal
+        open_behind = emitting[behind[plane_of.ravel()]]
+        if open_behind.size:
+            middle = np.full(open_behind.size, 0.5, np.float32)
+            points = patch_point_rows(g, open_behind, middle.copy(), middle.copy(), middle.copy()).astype(np.float64)
+            points -= g.patch_normal_rows.take(open_behind, axis=1) * (2 * g.ray_offsets(open_behind, np.float64))
+            back[open_behind[~buried_at(g, points, open_behind, side=-1.0)]] = True
         return back
 
     @cached_property
