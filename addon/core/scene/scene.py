@@ -16,7 +16,8 @@ from functools import cached_property
 import numpy as np
 
 from .geometry_build import build_geometry
-from .visibility import buried_at
+from .rays import meets_front
+from .visibility import PROBES, VOTES, buried_at, tangents
 from ..lights.sampling import patch_point_rows
 from ..materials.glossy import GlossyLobe
 from ..lights.lights import Lights
@@ -152,10 +153,10 @@ class PatchScene:
     @cached_property
     def back_emits(self):
         """(P,) bool: the emitting patches whose back has something to light: some vertex of
-        the scene lies behind their plane, and the point behind their middle is not inside a
-        closed solid (``visibility.buried_at`` probing about -n). The others emit from their
-        front alone: what their back emits would all escape (a closed room's lit wall) or stay
-        inside the solid it bounds (a lamp box's face), where it lights no visible surface."""
+        the scene lies behind their plane, and the space behind them is not closed in
+        (:func:`closed_behind`). The others emit from their front alone: what their back emits
+        would all escape (a closed room's lit wall) or stay inside the solid it bounds (a lamp
+        box's face), where it lights no visible surface."""
         back = np.zeros(self.patch_count, dtype=bool)
         emitting = np.flatnonzero(self.emission.any(axis=1))
         if not emitting.size:
@@ -172,10 +173,7 @@ class PatchScene:
             behind[rows] = lowest < depth[first[rows]] - BEHIND_TOLERANCE * g.diagonal
         open_behind = emitting[behind[plane_of.ravel()]]
         if open_behind.size:
-            middle = np.full(open_behind.size, 0.5, np.float32)
-            points = patch_point_rows(g, open_behind, middle.copy(), middle.copy(), middle.copy()).astype(np.float64)
-            points -= g.patch_normal_rows.take(open_behind, axis=1) * (2 * g.ray_offsets(open_behind, np.float64))
-            back[open_behind[~buried_at(g, points, open_behind, side=-1.0)]] = True
+            back[open_behind[~closed_behind(g, open_behind)]] = True
         return back
 
     @cached_property
@@ -217,3 +215,24 @@ class PatchScene:
             f"A_T={self.total_area:.6g}, Phi_T={self.total_power:.6g}, R_ave={self.average_reflectivity:.4g}"
             + (f", {len(self.lights)} lights)" if len(self.lights) else ")")
         )
+
+
+def closed_behind(g, patch):
+    """(n,) bool: whether the space just behind the middle of each of ``patch`` is closed in:
+    inside more solids than it enters (``visibility.buried_at``, probing about -n), or along
+    VOTES of the probes a back side is met first (the inside of a closed object in a room of
+    inward faces, whose windings the room's walls take back to 0)."""
+    middle = np.full(patch.size, 0.5, np.float32)
+    points = patch_point_rows(g, patch, middle.copy(), middle.copy(), middle.copy()).astype(np.float64)
+    normal = -g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
+    points += normal * (2 * g.ray_offsets(patch, np.float64))
+    closed = buried_at(g, points, patch, side=-1.0)
+    tangent, bitangent = tangents(normal)
+    origins, backs = np.ascontiguousarray(points.T, dtype=np.float32), np.zeros(patch.size, np.int64)
+    for theta, phi in PROBES:
+        theta, phi = np.radians(theta), np.radians(phi)
+        d = np.cos(theta) * normal + np.sin(theta) * (np.cos(phi) * tangent + np.sin(phi) * bitangent)
+        d32 = np.ascontiguousarray(d.T, dtype=np.float32)
+        hit, _, _, _, hit_normal = g.surface_tracer.first_hit_barycentric(origins, d32, g.region_of(patch))
+        backs += (hit >= 0) & ~meets_front(d32.T, hit_normal)
+    return closed | (backs >= VOTES)
