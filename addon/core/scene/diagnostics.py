@@ -16,8 +16,9 @@ MAX_RAYS = 1 << 16
 
 def escaping_light(scene, seed=0):
     """(emitting patches (n,), the share of each one's cosine rays that meet nothing (n,)):
-    an emitter facing away from everything (a plane left facing up above a scene) sends all
-    its light out of the scene. Only patches with the most power, up to MAX_RAYS rays."""
+    an emitter that sees nothing from either side (a plane far above a scene) sends all its
+    light out of the scene. Where its back emits too (``PatchScene.back_emits``), half its rays
+    leave the back. Only patches with the most power, up to MAX_RAYS rays."""
     emitting = np.flatnonzero(scene.patch_power > 0)
     if not emitting.size:
         return emitting, np.zeros(0)
@@ -28,6 +29,9 @@ def escaping_light(scene, seed=0):
     u = rng.random((5, patch.size), dtype=np.float32)
     origins = points_on_patches(g, patch, u[4], u[0], u[1])
     directions = cosine_directions(g, patch, u[2], u[3])
+    back = np.flatnonzero(scene.back_emits[patch] & np.tile(np.arange(RAYS_PER_EMITTER) % 2 == 1, emitting.size))
+    directions[back] *= -1.0
+    origins[back] -= g.patch_normal[patch[back]] * (2 * np.reshape(g.ray_offsets(patch[back]), (-1, 1)))
     missed = g.surface_tracer.first_hit(origins, directions, g.region_of(patch)) < 0
     return emitting, missed.reshape(-1, RAYS_PER_EMITTER).mean(axis=1)
 
