@@ -113,7 +113,7 @@ class Gathering:
         self.worlds = [light for light in self.lights if isinstance(light, WorldLight)]
         light_power = scene.lights.light_power()
         looked_at = np.array([not isinstance(light, WorldLight) for light in self.lights], dtype=bool)
-        weights = source_weights(scene.patch_area * scene.emitting_sides, scene.emission, light_power * looked_at[:, None])
+        weights = source_weights(scene.patch_area, scene.emission, light_power * looked_at[:, None], scene.back_emits)
         self.table = SourceTable(weights) if weights.any() else None
         self.choice = weights / weights.sum() if weights.any() else weights  # P_s
         self.near = near_choice(scene, self.choice) if self.table is not None else None

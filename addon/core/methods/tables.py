@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from ..names import EXIT_RANDOM, FINITE, INDEPENDENT, STRATIFIED
-from ..lights.sampling import SourceTable, channel_sum
+from ..lights.sampling import SourceTable, channel_sum, source_weights
 from ..estimate.grouping import WalkGroups, world_group
 
 # At most this many patch classes (2^12 classes take 200 kB); more, and the classes are the
@@ -48,7 +48,7 @@ class WalkTables:
         self.exit_random = exit_point == EXIT_RANDOM
         self.stratified = sampling == STRATIFIED
         self.patch_count = scene.patch_count
-        self.sources = SourceTable(channel_sum(scene.source_power))
+        self.sources = SourceTable(source_weights(scene.patch_area, scene.emission, scene.lights.power, scene.back_emits))
         # (P,) bool: the emitting patches whose paths leave their front or their back
         # (rays.emitter_backs), or None: the reflected light a gathered walk shoots
         # (with_sources) leaves fronts alone.

@@ -167,16 +167,21 @@ class PatchScene:
         # Coplanar emitters (a lamp's patches) share one test: their planes, to within PLANE_GRAIN.
         key = np.round(np.column_stack([normal, depth / g.diagonal]) / PLANE_GRAIN)
         planes, first, plane_of = np.unique(key, axis=0, return_index=True, return_inverse=True)
-        behind = np.zeros(planes.shape[0], dtype=bool)
-        for rows in np.array_split(np.arange(planes.shape[0]), max(1, planes.shape[0] * len(self.vertices) >> 22)):
-            lowest = (self.vertices @ normal[first[rows]].T).min(axis=0)
-            behind[rows] = lowest < depth[first[rows]] - BEHIND_TOLERANCE * g.diagonal
+        level = depth[first] - BEHIND_TOLERANCE * g.diagonal  # a vertex below it is behind the plane
+        low, high = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        behind = np.einsum("ij,ij->i", normal[first], np.where(normal[first] > 0, low, high)) < level  # (the box's)
+        candidates = np.flatnonzero(behind)
+        step = max(1, (1 << 16) // max(candidates.size, 1))  # (vertices a block: small temporaries)
+        lowest = np.full(candidates.size, np.inf)
+        for start in range(0, len(self.vertices) if candidates.size else 0, step):
+            np.minimum(lowest, (self.vertices[start:start + step] @ normal[first[candidates]].T).min(axis=0), out=lowest)
+        behind[candidates] = lowest < level[candidates]
         open_behind = emitting[behind[plane_of.ravel()]]
         if open_behind.size:
             back[open_behind[~closed_behind(g, open_behind)]] = True
         return back
 
-    @cached_property
+    @property
     def emitting_sides(self):
         """(P,) s_i: 2 where the patch's back emits too (``back_emits``), else 1."""
         return 1.0 + self.back_emits
@@ -218,14 +223,15 @@ class PatchScene:
 
 
 def closed_behind(g, patch):
-    """(n,) bool: whether the space just behind the middle of each of ``patch`` is closed in:
+    """(n,) bool: whether the space just behind a middle point of each of ``patch`` is closed in:
     inside more solids than it enters (``visibility.buried_at``, probing about -n), or along
     VOTES of the probes a back side is met first (the inside of a closed object in a room of
     inward faces, whose windings the room's walls take back to 0)."""
-    middle = np.full(patch.size, 0.5, np.float32)
-    points = patch_point_rows(g, patch, middle.copy(), middle.copy(), middle.copy()).astype(np.float64)
+    third = np.full(patch.size, 1 / 3, np.float32)  # (a triangle's centroid; inside a parallelogram)
+    points = patch_point_rows(g, patch, third + np.float32(1 / 6), third.copy(), third.copy()).astype(np.float64)
     normal = -g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
-    points += normal * (2 * g.ray_offsets(patch, np.float64))
+    # A quarter of the ray offset behind the surface: inside a body as thin as that (a sliver).
+    points += normal * (1.25 * g.ray_offsets(patch, np.float64))
     closed = buried_at(g, points, patch, side=-1.0)
     tangent, bitangent = tangents(normal)
     origins, backs = np.ascontiguousarray(points.T, dtype=np.float32), np.zeros(patch.size, np.int64)
