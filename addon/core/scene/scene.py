@@ -3,8 +3,8 @@
 Notation follows Sbert & Brusi: a patch i has area A_i, reflectivity R_i and emittance
 (emitted power per unit area) E_i. An emitting patch emits E_i from its front and from its
 back, as Cycles' emission leaves both sides of a face: its power is Phi_i = s_i E_i A_i with
-s_i = 2 sides (``emitting_sides``), or 1 where nothing lies behind it (its back faces out of
-the scene's bounding box, as a closed room's lit wall does: that light would all escape), and
+s_i = 2 sides (``emitting_sides``), or 1 where its back has nothing to light (no vertex behind
+it, as behind a closed room's lit wall, or closed in, as in a lamp box: ``back_emits``), and
 Phi_T = sum_i Phi_i (beside the lights'). Its radiosity B_i is its front's.
 Colours are carried as three channels; the grey quantities the paper's formulas use are
 channel means (R_bar_i, E_bar_i), so that a grey scene is exactly the paper's.
