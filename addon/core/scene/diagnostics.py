@@ -119,7 +119,9 @@ def back_light(scene, receives, seed=0):
     view of the selection* when rays leaving its back side meet the front of a receiving patch
     (a receiver sees that back side, black where Cycles would show it lit), or none of them
     escapes (a region closed by back sides: a room built inside out); otherwise the light met
-    it from outside every receiver (a sky under a room's floor) and is nobody's concern.
+    it from outside every receiver (a sky under a room's floor) and is nobody's concern, and so
+    is the back of an emitter whose back emits (``PatchScene.back_emits``: a panel under a
+    ceiling, its back lit by the ceiling it lights).
 
     Returns (source (n,) rows of ``scene.source_power`` (patches, then the lights' emitters),
     patch (n,), share (n,) of the total power, in_view (n,) bool) for each ray that met a back
@@ -136,6 +138,10 @@ def back_light(scene, receives, seed=0):
     region = None if g.regions is None else np.zeros(rows.size, np.int32)
     if from_patch.any():
         origins[from_patch], directions[from_patch] = _leave(g, rows[from_patch].astype(np.int32), rng)
+        # (half the light of an emitter whose back emits too leaves its back, as in the solve)
+        if scene.back_emits.any():
+            back = np.flatnonzero(from_patch & scene.back_emits[np.minimum(rows, P - 1)] & (rng.random(rows.size) < 0.5))
+            origins[back], directions[back] = _leave(g, rows[back].astype(np.int32), rng, behind=True)
         if region is not None:
             region[from_patch] = g.region_of(rows[from_patch])
     if (~from_patch).any():
@@ -163,7 +169,8 @@ def back_light(scene, receives, seed=0):
     sees_receiver = (front & receives[np.maximum(seen, 0)]).reshape(-1, BEHIND_RAYS).any(axis=1)
     escapes = (seen < 0).reshape(-1, BEHIND_RAYS).any(axis=1)
     in_view = np.zeros(P, dtype=bool)
-    in_view[lit] = sees_receiver | ~escapes
+    # (an emitter whose back emits absorbs there: surfaces are one-sided, and no face is flipped)
+    in_view[lit] = (sees_receiver | ~escapes) & ~scene.back_emits[lit]
     return source, patch, weight, in_view[patch]
 
 

@@ -458,7 +458,8 @@ def test_flipped_normals_are_reported(blender):
     assert warning, reports
     share = float(warning[0].split("%")[0])
     assert share > 50  # most of the light: the room is inside out
-    # The normal scene stays below the warning threshold (its one-sided lamp's back takes ~3%).
+    # The normal scene stays below the warning threshold (its lamp's back, which emits, takes what
+    # the ceiling sends back: an emitter's back is no face to flip).
     room.data.flip_normals()
     state, reports = _run_sync(blender)
     assert state == {"FINISHED"} and not any(kind == "WARNING" and "back of faces" in text for kind, text in reports)
