@@ -119,13 +119,11 @@ def back_light(scene, receives, seed=0):
     view of the selection* when rays leaving its back side meet the front of a receiving patch
     (a receiver sees that back side, black where Cycles would show it lit), or none of them
     escapes (a region closed by back sides: a room built inside out); otherwise the light met
-    it from outside every receiver (a sky under a room's floor) and is nobody's concern, and so
-    is the back of an emitter whose back emits (``PatchScene.back_emits``: a panel under a
-    ceiling, its back lit by the ceiling it lights).
+    it from outside every receiver (a sky under a room's floor) and is nobody's concern, as is
+    an emitting back (``PatchScene.back_emits``: a panel's, lit by the ceiling over it).
 
     Returns (source (n,) rows of ``scene.source_power`` (patches, then the lights' emitters),
-    patch (n,), share (n,) of the total power, in_view (n,) bool) for each ray that met a back
-    side."""
+    patch (n,), share (n,) of the total power, in_view (n,) bool) for each ray met from behind."""
     g = scene.geometry
     rng = np.random.default_rng(seed)
     power = scene.source_power.mean(axis=1)
