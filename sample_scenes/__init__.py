@@ -78,7 +78,8 @@ class SampleScene:
 
     @property
     def total_power(self):
-        """Phi_T: emittance times area, channel mean (the grey power the paper's formulas use)."""
+        """Emittance times area, channel mean: the paper's Phi_T of one-sided emitters (the core's
+        PatchScene.total_power counts an emitter's back too, where that emits)."""
         return float(np.sum(self.patch_area * self.emission.mean(axis=1)))
 
     def part_patches(self, name):

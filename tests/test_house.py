@@ -132,7 +132,7 @@ def test_the_tests_mirror_the_code():
 # Tests of the whole solve against references, named for what they check, not for a module.
 CROSS_CUTTING = {
     "energy", "error_model", "exact_reference", "furnace", "stress", "two_way_stress", "variance", "pinned",
-    "properties", "stratified", "economy", "groups", "memory", "error_promise",
+    "properties", "stratified", "economy", "groups", "memory", "error_promise", "two_sided",
 }
 
 

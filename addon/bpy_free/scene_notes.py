@@ -91,7 +91,7 @@ def light_notes(scene) -> list:
 
 def escaping_sources(patches: Patches, scene) -> list:
     """A note for each object whose emitting faces send (almost) all their light out of the
-    scene: they face away from everything else."""
+    scene: neither side of them sees anything else."""
     emitting, missed = escaping_light(scene)
     if not emitting.size:
         return []
@@ -102,8 +102,8 @@ def escaping_sources(patches: Patches, scene) -> list:
         share = float(np.average(missed[owner == k], weights=power[owner == k]))
         if share >= ESCAPING_WARNING:
             notes.append(f"'{patches.objects[k].name}' sends {share:.0%} of its light out of the scene: its "
-                         "emitting faces point away from everything else (a new plane faces up: flip its normals "
-                         "or turn it; see Overlays > Face Orientation)")
+                         "emitting faces see nothing else of the scene from either side (move it nearer the objects "
+                         "it should light, or turn it; see Overlays > Face Orientation)")
     return notes
 
 

@@ -53,12 +53,11 @@ def test_geometry_or_patch_size_change_rebuilds_and_the_last_two_are_kept():
     assert make(patch=0.2).geometry is not finer.geometry
 
 
-def _plane_over_box(normal_up):
-    """A closed box (its top face not emitting) and a small emitting plane above it, facing up
-    (away from everything) or down."""
+def _plane_over_box(normal_up, z=1.5):
+    """A closed box (its top face not emitting) and a small emitting plane above it at height
+    ``z``, facing up (away from everything) or down."""
     box = box_object(name="Room", reflectivity=0.5)
     box.face_emission = np.zeros((6, 3))
-    z = 1.5
     corners = [[0.3, 0.3, z], [0.7, 0.3, z], [0.7, 0.7, z], [0.3, 0.7, z]]
     order = [0, 1, 2, 3] if normal_up else [0, 3, 2, 1]
     lamp = patches.ObjectArrays(
@@ -71,12 +70,14 @@ def _plane_over_box(normal_up):
     return [box, lamp]
 
 
-def test_an_emitter_facing_away_from_everything_is_named():
-    """An emissive plane facing up above the other objects sends all its
-    light out of the scene: a note names it; facing down, no note."""
-    up = patches.make_patches(_plane_over_box(normal_up=True), patch_size=0.25)
-    _, notes = scene_and_notes(up)
+def test_an_emitter_that_sees_nothing_is_named():
+    """An emissive plane far above the other objects sends nearly all its light out of the
+    scene, from either side: a note names it. Just above them, facing up or down, one side
+    lights them (emitting faces emit from both sides, as in Cycles): no note."""
+    far = patches.make_patches(_plane_over_box(normal_up=True, z=40.0), patch_size=0.25)
+    _, notes = scene_and_notes(far)
     assert any(n.startswith("'Lamp' sends 100% of its light out of the scene") for n in notes), notes
-    down = patches.make_patches(_plane_over_box(normal_up=False), patch_size=0.25)
-    _, notes = scene_and_notes(down)
-    assert not any("out of the scene" in n for n in notes), notes
+    for normal_up in (True, False):
+        near = patches.make_patches(_plane_over_box(normal_up=normal_up), patch_size=0.25)
+        _, notes = scene_and_notes(near)
+        assert not any("out of the scene" in n for n in notes), notes

@@ -470,3 +470,19 @@ def test_an_abandoned_chunk_stops_between_its_stages(exit_point):
     finally:
         tw.reflect_first, tw.generation, first_shot._cosine_rays = original
     assert calls == [0]
+
+
+def test_a_panels_back_lighting_the_ceiling_over_it_leaves_the_two_way_iteration_to_automatic():
+    """The sample Cornell box's panel hangs 1 cm under the ceiling, and its back emits: half its
+    light lands on the few ceiling patches over it (counted by where it lands: concentration
+    about 18 and 23 at 10 and 5 cm patches, and Automatic ran the walk, 2.3x the two-way
+    iteration's time in the main job). That light goes back to the panel's back, where it is
+    absorbed and adds no patch's noise: counted by the light that goes on from where it lands,
+    the concentration is an ordinary room's, and Automatic runs the two-way iteration."""
+    import sample_scenes
+
+    for divisions in (10, 20):
+        scene = sample_scenes.build("cornell_box", divisions=divisions).scene
+        assert scene.back_emits.any()
+        assert automatic.concentration(scene) < automatic.MAX_CONCENTRATION / 1.5
+        assert automatic.choose(scene, Settings(target_error=0.02)) == "two_way"

@@ -105,14 +105,21 @@ def test_deterministic_and_registry():
 ])
 def test_rays_hit_front_faces(name, kwargs, closed):
     """Through the core: in a closed scene no ray escapes, and back faces are hit only where a
-    light panel's back faces the ceiling across its 1 cm gap (measured: 0.2% of paths in the
-    room, 1.3% in the 1 m Cornell box). Reversing a single wall ends 19% of paths in the figure 6
-    room and 30% in the closed box (measured), so a bound of 3% tells the two apart."""
-    solve = pytest.importorskip("addon.core").solve
+    light panel's back faces the ceiling across its 1 cm gap: the panel's back emits too, and
+    takes back most of what the ceiling over it reflects (10-26% of the paths end there), which
+    the back-light check leaves out (``diagnostics.back_light``: an emitting back is no flipped
+    face). The rest: 0.4-0.5% of the power in the Cornell boxes; with the floor reversed 11-14%
+    (measured), so a bound of 3% on it tells the two apart."""
+    pytest.importorskip("addon.core")
+    from addon.core import solve
+    from addon.core.scene.diagnostics import back_light
+
     sample = build(name, **kwargs)
-    r = solve(sample.scene, estimator="finite", paths=20_000, seed=5, threads=1)
+    scene = sample.scene
+    r = solve(scene, estimator="finite", paths=20_000, seed=5, threads=1)
     if closed:
         assert r.path_ends["escaped"] == 0
-    assert r.path_ends["blocked"] <= 0.03 * r.paths
+    _, _, share, in_view = back_light(scene, np.ones(scene.patch_count, bool))
+    assert share[in_view].sum() <= 0.03
     if name.startswith("fig1"):
         assert r.path_ends["blocked"] == 0

@@ -80,7 +80,8 @@ def sky_at(tables, points, worlds, u, value):
 
 
 def emitters_at(tables, points, scene, emitters, power, u, value):
-    """Adds the light of an emitting patch chosen by power (a point of it, a shadow ray)."""
+    """Adds the light of an emitting patch chosen by power (a point of it, a shadow ray): of its
+    front, or of its back where that emits (``scene.back_emits``)."""
     g, rows = tables.geometry, points.rows
     source = emitters.choose(u[5])
     e = patch_point_rows(g, source, u[6], u[7].copy(), u[8].copy()).astype(np.float64)
@@ -93,12 +94,13 @@ def emitters_at(tables, points, scene, emitters, power, u, value):
     e /= length
     cos_x = np.einsum("in,in->n", points.normal, e)
     cos_y = -np.einsum("in,in->n", normal_s, e)
-    live = np.flatnonzero((cos_x > 0) & (cos_y > 0) & (source != rows))
+    facing = cos_y > 0
+    live = np.flatnonzero((cos_x > 0) & (facing | scene.back_emits.take(source)) & (cos_y != 0) & (source != rows))
     if not live.size:
         return
     hit, hit_patch, front, t = trace(tables, points.x[:, live], e[:, live], g.region_of(rows[live]))
     reach = length[live] - points.offset_of(live) * cos_x[live]
-    met = ((hit >= 0) & (hit_patch == source[live]) & front) | (hit < 0) | (t >= reach * SEEN_BEFORE)
+    met = ((hit >= 0) & (hit_patch == source[live]) & (front == facing[live])) | (hit < 0) | (t >= reach * SEEN_BEFORE)
     s = source[live]
-    weight = cos_x[live] * cos_y[live] / (np.pi * (length[live] * g.diagonal) ** 2) * scene.patch_area[s]
+    weight = cos_x[live] * np.abs(cos_y[live]) / (np.pi * (length[live] * g.diagonal) ** 2) * scene.patch_area[s]
     value[:, live] += scene.emission[s].T * (weight / (power[s] / power.sum()) * met)

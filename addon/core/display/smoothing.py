@@ -53,6 +53,9 @@ RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same it
 # A corner's value never falls below this share of the darkest patch meeting at it (a valley may
 # dip below its patches, as a smooth surface through their means must; black it may not).
 LOWEST_SHARE = 0.5
+# A patch whose corners' mean came below this share of its value shows flat: scaled up, they would
+# make a spike, and each source's corners (linear maps of the same steps) cancel past float32's digits.
+FLAT_BELOW = 1e-3
 
 
 @dataclass
@@ -247,11 +250,13 @@ class Surface(NoiseFilter):
 
     def _scale_to(self, values, x, corner_patch):
         """Corners ``x`` (T*3,) scaled in place to each patch's value (exact at last; a patch
-        whose corners all came to zero keeps its own value, flat): (x, scales (P,), flat corners)."""
+        whose corners all came to zero, or below FLAT_BELOW of its value, keeps its own value,
+        flat): (x, scales (P,), flat corners)."""
         means = self.corner_means(x)
-        scale = np.divide(values, means, out=np.ones_like(values), where=means > 0)
+        low = means <= FLAT_BELOW * values
+        scale = np.divide(values, means, out=np.ones_like(values), where=~low)
         x *= scale.take(corner_patch, mode="wrap")
-        flat = np.flatnonzero((means <= 0)[corner_patch])
+        flat = np.flatnonzero(low[corner_patch])
         x[flat] = values[corner_patch[flat]]
         return x, scale, flat
 

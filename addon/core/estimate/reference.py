@@ -1,7 +1,9 @@
 """Exact and near-exact references for the random walks, to test them against.
 
 Form factors, the direct solve of the discrete radiosity system B = E + R F B, and the exact
-per-path variances of table 1.
+per-path variances of table 1. Emitting patches emit from their backs too (``PatchScene``):
+then B = E + R F B + R F_back E, F_back[i, j] the form factor from i to the back of j (the
+backs emit but reflect nothing: surfaces are one-sided), ``back_form_factors``.
 
 Form factors between axis-aligned rectangles come in closed form from the contour integral
 (Stokes' theorem applied to the form factor's double area integral)
@@ -91,11 +93,21 @@ def rectangle_form_factors(origin, edge_u, edge_v, block=256):
     return np.where(j_in_front_of_i & i_in_front_of_j, F, 0.0)
 
 
+def back_form_factors(origin, edge_u, edge_v):
+    """F_back[i, j]: the form factor from axis-aligned rectangle i (its front) to the back of
+    rectangle j, each seen whole (:func:`rectangle_form_factors` of j turned over)."""
+    origin, edge_u, edge_v = (np.asarray(a, dtype=np.float64) for a in (origin, edge_u, edge_v))
+    n = origin.shape[0]
+    both = rectangle_form_factors(np.vstack([origin, origin]), np.vstack([edge_u, edge_v]), np.vstack([edge_v, edge_u]))
+    return both[:n, n:]
+
+
 # --- form factors by ray casting -------------------------------------------------------------
 
-def form_factors_raycast(scene, rays_per_patch=100_000, seed=0, block_rays=1 << 20):
+def form_factors_raycast(scene, rays_per_patch=100_000, seed=0, block_rays=1 << 20, backs=False):
     """Estimate F_ij by casting ``rays_per_patch`` cosine-distributed rays from uniform points
-    on every patch i and counting front hits on j. Dense (P,P); meant for small scenes.
+    on every patch i and counting front hits on j. Dense (P,P); meant for small scenes. With
+    ``backs``, (F, F_back): F_back[i, j] counts the same rays' hits on the back of j.
 
     Each row is a multinomial estimate: F_ij has standard error sqrt(F_ij (1 - F_ij) / rays).
     """
@@ -104,7 +116,7 @@ def form_factors_raycast(scene, rays_per_patch=100_000, seed=0, block_rays=1 << 
     if P > 8000:
         raise ValueError(f"form_factors_raycast is dense (P x P); {P} patches is too many")
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(0xF0F0,))))
-    counts = np.zeros(P * P)
+    counts, back_counts = np.zeros(P * P), np.zeros(P * P)
     patches_per_block = max(1, block_rays // rays_per_patch)
     for p0 in range(0, P, patches_per_block):
         rows = np.arange(p0, min(P, p0 + patches_per_block))
@@ -118,7 +130,10 @@ def form_factors_raycast(scene, rays_per_patch=100_000, seed=0, block_rays=1 << 
         front = ok & (np.einsum("ij,ij->i", directions, g.triangle_normal[hit_safe]) < 0)
         target = g.triangle_patch[hit_safe[front]]
         counts += np.bincount(patch[front] * P + target, minlength=P * P)
-    return counts.reshape(P, P) / rays_per_patch
+        back = ok & ~front
+        back_counts += np.bincount(patch[back] * P + g.triangle_patch[hit_safe[back]], minlength=P * P)
+    F = counts.reshape(P, P) / rays_per_patch
+    return (F, back_counts.reshape(P, P) / rays_per_patch) if backs else F
 
 
 # --- the discrete radiosity system and table 1 -------------------------------------------------
@@ -128,13 +143,15 @@ def _channels(values, P):
     return np.repeat(a[:, None], 3, axis=1) if a.ndim == 1 else a
 
 
-def solve_radiosity_system(F, reflectivity, emission):
-    """B = E + R F B solved directly, per channel. (P,3) for (P,3) or (P,) inputs."""
+def solve_radiosity_system(F, reflectivity, emission, F_back=None):
+    """B = E + R F B (+ R F_back E: the emitters' backs' light, given their form factors)
+    solved directly, per channel. (P,3) for (P,3) or (P,) inputs."""
     P = F.shape[0]
     R = _channels(reflectivity, P)
     E = _channels(emission, P)
     identity = np.eye(P)
-    return np.stack([np.linalg.solve(identity - R[:, c, None] * F, E[:, c]) for c in range(3)], axis=1)
+    source = E if F_back is None else E + R * (F_back @ E)
+    return np.stack([np.linalg.solve(identity - R[:, c, None] * F, source[:, c]) for c in range(3)], axis=1)
 
 
 def self_return(F, reflectivity):
@@ -146,19 +163,21 @@ def self_return(F, reflectivity):
     return np.diag(H).copy()
 
 
-def path_variances(F, reflectivity, emission, area):
+def path_variances(F, reflectivity, emission, area, F_back=None, sides=1.0):
     """Exact per-path variances of table 1 for a grey scene: (finite, infinite), each (P,).
 
         finite:   R_i b_i Phi_T / A_i (1 + 2 R_i xi_i) - b_i^2
         infinite: beta_i Phi_T / A_i (1 + 2 R_i xi_i) - b_i^2
-    with beta the reflected radiosity when every reflectivity is replaced by its square.
+    with beta the reflected radiosity when every reflectivity is replaced by its square, Phi_T
+    the sources' sum of ``sides`` E_i A_i (``PatchScene.emitting_sides``), their backs' light
+    through ``F_back`` where given.
     """
     R = np.asarray(reflectivity, dtype=np.float64)
     E = np.asarray(emission, dtype=np.float64)
     A = np.asarray(area, dtype=np.float64)
-    Phi_T = float((E * A).sum())
-    b = solve_radiosity_system(F, R, E)[:, 0] - E
-    beta = solve_radiosity_system(F, R**2, E)[:, 0] - E
+    Phi_T = float((np.asarray(sides) * E * A).sum())
+    b = solve_radiosity_system(F, R, E, F_back)[:, 0] - E
+    beta = solve_radiosity_system(F, R**2, E, F_back)[:, 0] - E
     xi = self_return(F, R)
     finite = R * b * Phi_T / A * (1 + 2 * R * xi) - b**2
     infinite = beta * Phi_T / A * (1 + 2 * R * xi) - b**2

@@ -28,10 +28,13 @@ def channel_sum(values):
     return total
 
 
-def source_weights(patch_area, emission, light_power=None):
+def source_weights(patch_area, emission, light_power=None, back=None):
     """(S,) what a source is chosen in proportion to: its power summed over the channels, the
-    patches' (A_i E_i) first, then the lights' emitters'."""
+    patches' (A_i E_i, twice that where ``back`` (P,) bool: emitters whose back emits too) first,
+    then the lights' emitters'."""
     power = patch_area * channel_sum(emission)
+    if back is not None:
+        power[back] *= 2.0
     if light_power is None or not len(light_power):
         return power
     return np.concatenate([power, channel_sum(light_power)])

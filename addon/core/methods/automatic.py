@@ -27,7 +27,7 @@ import numpy as np
 from ..estimate.grouping import source_groups
 from ..names import EXIT_RANDOM, FINITE, GATHERED, TWO_WAY, WALK
 from ..estimate.plan import chunk_plan
-from ..scene.rays import cast, leave_sources, region_of
+from ..scene.rays import cast, leave_random, leave_sources, region_of
 from .tables import WalkTables
 from .two_way import TwoWay, allotment_weight
 
@@ -83,14 +83,20 @@ def concentration(scene, rays=CONCENTRATION_RAYS):
     power the sources' light reflects where it first lands and w_j its share of the two-way
     iteration's rays (two_way.allotment_weight). 1 where the light lands as the rays are allotted;
     the patch count over k where it lands evenly on k of them. From ``rays`` rays cast from the
-    sources, q_j^2 from their counts unbiased (c_j (c_j - 1)); 0 where none lands on a front."""
+    sources, each landing counted where a ray reflected from its patch meets a front, q_j^2 from
+    their counts unbiased (c_j (c_j - 1)); 0 where none lands on a front."""
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(0, spawn_key=(CONCENTRATION_STREAM,))))
     source = tables.sources.sample(rays, rng)
     u = rng.random((tables.uniforms_per_ray, rays), dtype=np.float32)
     with tables.numpy_turn:
         hits = cast(tables, *leave_sources(tables, source, u), region_of(tables, source))
-    counts = np.bincount(hits.patch[hits.front], minlength=scene.patch_count).astype(np.float64)
+        # Only the reflected light that goes on to a front counts: what a patch sends into back
+        # sides (the ceiling over a panel, to its back) or out of the scene adds no patch's noise.
+        landed = hits.patch[hits.front]
+        u = rng.random((tables.uniforms_per_ray, landed.size), dtype=np.float32)
+        goes_on = cast(tables, *leave_random(tables, landed, u), region_of(tables, landed)).front
+    counts = np.bincount(landed[goes_on], minlength=scene.patch_count).astype(np.float64)
     reflected = scene.grey_reflectivity * counts
     if rays < 2 or not reflected.sum() > 0:
         return 0.0

@@ -113,11 +113,12 @@ class Gathering:
         self.worlds = [light for light in self.lights if isinstance(light, WorldLight)]
         light_power = scene.lights.light_power()
         looked_at = np.array([not isinstance(light, WorldLight) for light in self.lights], dtype=bool)
-        weights = source_weights(scene.patch_area, scene.emission, light_power * looked_at[:, None])
+        weights = source_weights(scene.patch_area, scene.emission, light_power * looked_at[:, None], scene.back_emits)
         self.table = SourceTable(weights) if weights.any() else None
         self.choice = weights / weights.sum() if weights.any() else weights  # P_s
         self.near = near_choice(scene, self.choice) if self.table is not None else None
-        self.emission, self.emits = scene.emission.T, scene.emission.any(axis=1)  # (3,P); (P,) what a cosine ray can find
+        # (3,P); (P,) what a cosine ray can find; (P,) the emitters whose back emits too (scene.back_emits)
+        self.emission, self.emits, self.back_emits = scene.emission.T, scene.emission.any(axis=1), scene.back_emits
         self.reflectivity = scene.reflectivity.T  # (3,P)
         self.patch_area = scene.patch_area
         self.cosine_share = cosine_share(scene, bool(self.worlds))
@@ -175,8 +176,7 @@ def gather_direct(tables, gathering, rng, grouped=False, check=None):
     and its cosine ray's parts, each of one source group (grouping.SampleParts), a fourth item.
     With a glossy lobe (``gathering.glossy``) the samples hold a fourth item: the two rays'
     parts (2,3,n) and unit directions (2,3,n float32). ``check()``: called between the two kinds of rays."""
-    P = tables.patch_count
-    patch, scale = gathering.draw(rng)
+    P, (patch, scale) = tables.patch_count, gathering.draw(rng)
     x = np.empty((3, patch.size), dtype=np.float32)  # unit space (ReflectedPoints keeps them)
     value = np.zeros((3, patch.size))
     parts = SampleParts(tables, patch) if grouped else None
@@ -269,14 +269,14 @@ def _shadow_rays(tables, gathering, patch, source, x, normal, u, value, directio
     distance = np.empty(n)  # unit space, to the point looked at
     weight = np.zeros(n)  # an emitting patch's estimate over its emittance
     lit = None  # (3,n) the lights' estimates
-    unshadowed = np.zeros(n, dtype=bool)  # from a light that casts no shadow: always seen
+    unshadowed, facing = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)  # a light without shadow: always seen; a front seen
     # The estimate's geometry is the surfaces' own: the points lie a ray offset off them (for the
     # rays), which seen at a grazing angle changes cos and distance by far more than the offset.
     surface = x - normal * g.ray_offsets(patch, np.float64)
     on_patch = source < P
     at_patch = slice(None) if on_patch.all() else np.flatnonzero(on_patch)
     if on_patch.any():
-        towards[:, at_patch], distance[at_patch], weight[at_patch] = _towards_emitters(
+        towards[:, at_patch], distance[at_patch], weight[at_patch], facing[at_patch] = _towards_emitters(
             tables, gathering, patch[at_patch], source[at_patch], surface[:, at_patch], normal[:, at_patch], u[:, at_patch])
     at_light = np.flatnonzero(~on_patch)
     if at_light.size:
@@ -301,7 +301,7 @@ def _shadow_rays(tables, gathering, patch, source, x, normal, u, value, directio
         # patch is met first. (A patch's points lie a ray offset off it: at grazing angles a ray
         # to a point near its far edge passes the point and misses the patch. Asking for the
         # patch alone lost 0.23% of the figure 4 room's direct light, 2% on its walls' tops.)
-        met_source = (hit >= 0) & (hit_patch == source[live]) & front & on_patch[live]
+        met_source = (hit >= 0) & (hit_patch == source[live]) & (front == facing[live]) & on_patch[live]
         reach = distance[live]
         if g.patch_ray_offset is not None:
             # The ray leaves x, an offset along the normal from the surface the distance is
@@ -324,8 +324,8 @@ def _shadow_rays(tables, gathering, patch, source, x, normal, u, value, directio
 
 def _towards_emitters(tables, gathering, patch, source, surface, normal, u):
     """For samples at ``surface`` (3,n) of ``patch`` looking at points of emitting patches
-    ``source``: (unit directions (3,n), unit-space distances (n,), the estimate over the
-    emittance of each, 0 where the emitter faces away or is the patch itself)."""
+    ``source``: (unit directions (3,n), unit-space distances (n,), the estimate over the emittance
+    of each, 0 where the side seen emits nothing or is the patch's own, whether a front is seen)."""
     g = tables.geometry
     e = patch_point_rows(g, source, u[8], u[3].copy(), u[4].copy()).astype(np.float64)
     normal_s = g.patch_normal_rows.take(source, axis=1)
@@ -337,9 +337,9 @@ def _towards_emitters(tables, gathering, patch, source, surface, normal, u):
     e /= length
     cos_x = np.einsum("in,in->n", normal, e)
     cos_y = -np.einsum("in,in->n", normal_s, e)
-    ok = (cos_x > 0) & (cos_y > 0) & (source != patch)
-    w = _emitter_weight(gathering, SHADOW, patch, source, cos_x, np.maximum(cos_y, 1e-12), length * g.diagonal)
-    return e, length, np.where(ok, w, 0.0)
+    ok = (cos_x > 0) & ((cos_y > 0) | gathering.back_emits.take(source)) & (cos_y != 0) & (source != patch)
+    w = _emitter_weight(gathering, SHADOW, patch, source, cos_x, np.maximum(np.abs(cos_y), 1e-12), length * g.diagonal)
+    return e, length, np.where(ok, w, 0.0), cos_y > 0
 
 
 def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, groups=None, directions=None):
@@ -365,11 +365,11 @@ def _cosine_rays(tables, gathering, patch, x, normal, u, value, cast_all=False, 
     towards = towards.astype(np.float64)
     towards /= np.sqrt(np.einsum("in,in->n", towards, towards))  # (normal + a sphere point: cosine distributed)
     hit, source, front, t = trace(tables, x, towards, g.region_of(patch))
-    met = np.flatnonzero(front & (hit >= 0) & gathering.emits.take(source) & (source != patch))
+    met = np.flatnonzero((front | gathering.back_emits.take(source)) & (hit >= 0) & gathering.emits.take(source) & (source != patch))
     if met.size:
         s = source[met]
         cos_x = np.einsum("in,in->n", normal[:, met], towards[:, met])
-        cos_y = -np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), towards[:, met])
+        cos_y = np.abs(np.einsum("in,in->n", g.patch_normal_rows.take(s, axis=1).astype(np.float64), towards[:, met]))
         value[:, met] += gathering.emission[:, s] * _emitter_weight(gathering, COSINE, patch[met], s, cos_x, np.maximum(cos_y, 1e-12), t[met] * g.diagonal)
     escaped = np.flatnonzero(hit < 0)
     if escaped.size and gathering.worlds:

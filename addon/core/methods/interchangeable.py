@@ -57,7 +57,7 @@ class InterchangeableWalk:
         # chunks. New paths join the counts from their sources' counts where each chunk draws
         # those (a chunk's paths come in runs, one per source), else from every path's source.
         self.live = self.runs = None
-        if self.counted and g.all_parallelograms and not t.stratified and t.lights is None:
+        if self.counted and g.all_parallelograms and not t.stratified and t.lights is None and t.emitter_backs is None:
             self.live = np.zeros((G, P), dtype=np.int64)
             if t.groups is None and all(t.sources.draws_counts(n) for n in sizes):
                 self.runs = SourceRuns(t.sources, sizes, rng)
@@ -128,7 +128,7 @@ class InterchangeableWalk:
         self.region = rays.region_of(t, self.patch)
         if self.first_uniforms is not None and new > 0:
             u[:4, self.n_live :] = self.first_uniforms[:, start : start + new]  # stratified first rays
-        return rays.leave_sources(t, self.patch, u)
+        return rays.leave_sources(t, self.patch, u, self.n_live)
 
     def intersect(self, origins, directions):
         return rays.cast(self.tables, origins, directions, self.region)

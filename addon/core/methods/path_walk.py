@@ -133,7 +133,7 @@ class PathWalk:
             u = rng.random((t.uniforms_per_ray, n), dtype=np.float32)
             if first is not None and new > 0:
                 u[:4, n_live:] = first[:, start : start + new]  # stratified first rays
-            return rays.leave_sources(t, p.patch, u)
+            return rays.leave_sources(t, p.patch, u, n_live)
         u = rng.random((2, n), dtype=np.float32)
         # (new paths from a light take their rays from it below; its id, P and on, must not index
         # a patch table: take's "wrap" mode steps an id down by P at a time)
@@ -141,7 +141,7 @@ class PathWalk:
         origins = p.leave_from
         g = t.geometry
         origins += normals[:, :n_live] * (g.ray_offset if g.patch_ray_offset is None else g.ray_offsets(p.patch[:n_live]))
-        light = None
+        light = back = None
         if new > 0:
             # New paths leave from points of their sources (their directions take u's rows).
             u_new = np.empty((t.uniforms_per_ray, new), dtype=np.float32)
@@ -153,6 +153,7 @@ class PathWalk:
             if t.row_triangle is not None:
                 rng.random(dtype=np.float32, out=u_new[t.row_triangle])
             source = p.patch[n_live:]
+            back = rays.emitter_backs(t, p.patch, u[1], n_live)  # (before the directions take u[1])
             light = rays.light_columns(t, source)
             if light is not None:  # (their uniforms before leave_frames folds them)
                 u_light = np.vstack([u_new[:2, light], u[:, n_live + light]])
@@ -162,6 +163,8 @@ class PathWalk:
         directions = add_sphere_points(normals, u[0], u[1])
         if light is not None:
             rays.set_light_rays(t, p.patch[n_live + light], u_light, origins, directions, n_live + light)
+        if back is not None:
+            rays.turn_to_backs(t, p.patch.take(back), origins, directions, back)
         return origins, directions
 
     def intersect(self, origins, directions):

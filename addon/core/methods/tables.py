@@ -48,7 +48,11 @@ class WalkTables:
         self.exit_random = exit_point == EXIT_RANDOM
         self.stratified = sampling == STRATIFIED
         self.patch_count = scene.patch_count
-        self.sources = SourceTable(source_weights(scene.patch_area, scene.emission, scene.lights.power))
+        self.sources = SourceTable(source_weights(scene.patch_area, scene.emission, scene.lights.power, scene.back_emits))
+        # (P,) bool: the emitting patches whose paths leave their front or their back
+        # (rays.emitter_backs), or None: the reflected light a gathered walk shoots
+        # (with_sources) leaves fronts alone.
+        self.emitter_backs = scene.back_emits if scene.back_emits.any() else None
         # Source ids from the patch count on are the lights' emitters (None: no lights).
         # Per-source results: the group of each source (grouping.WalkGroups), or None.
         self.groups = None if groups is None else WalkGroups(groups.count, groups.source_group, whole=groups, world=world_group(scene, groups))
@@ -131,6 +135,7 @@ class WalkTables:
         a walk of the light the patches reflect (first_shot)."""
         tables = copy.copy(self)
         tables.sources, tables.emission, tables.lights = sources, emission, lights
+        tables.emitter_backs = None
         if mix is not None:
             tables.groups = tables.groups.with_mix(mix)
         return tables

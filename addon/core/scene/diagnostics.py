@@ -16,8 +16,9 @@ MAX_RAYS = 1 << 16
 
 def escaping_light(scene, seed=0):
     """(emitting patches (n,), the share of each one's cosine rays that meet nothing (n,)):
-    an emitter facing away from everything (a plane left facing up above a scene) sends all
-    its light out of the scene. Only patches with the most power, up to MAX_RAYS rays."""
+    an emitter that sees nothing from either side (a plane far above a scene) sends all its
+    light out of the scene. Where its back emits too (``PatchScene.back_emits``), half its rays
+    leave the back. Only patches with the most power, up to MAX_RAYS rays."""
     emitting = np.flatnonzero(scene.patch_power > 0)
     if not emitting.size:
         return emitting, np.zeros(0)
@@ -28,6 +29,9 @@ def escaping_light(scene, seed=0):
     u = rng.random((5, patch.size), dtype=np.float32)
     origins = points_on_patches(g, patch, u[4], u[0], u[1])
     directions = cosine_directions(g, patch, u[2], u[3])
+    back = np.flatnonzero(scene.back_emits[patch] & np.tile(np.arange(RAYS_PER_EMITTER) % 2 == 1, emitting.size))
+    directions[back] *= -1.0
+    origins[back] -= g.patch_normal[patch[back]] * (2 * np.reshape(g.ray_offsets(patch[back]), (-1, 1)))
     missed = g.surface_tracer.first_hit(origins, directions, g.region_of(patch)) < 0
     return emitting, missed.reshape(-1, RAYS_PER_EMITTER).mean(axis=1)
 
@@ -115,11 +119,11 @@ def back_light(scene, receives, seed=0):
     view of the selection* when rays leaving its back side meet the front of a receiving patch
     (a receiver sees that back side, black where Cycles would show it lit), or none of them
     escapes (a region closed by back sides: a room built inside out); otherwise the light met
-    it from outside every receiver (a sky under a room's floor) and is nobody's concern.
+    it from outside every receiver (a sky under a room's floor) and is nobody's concern, as is
+    an emitting back (``PatchScene.back_emits``: a panel's, lit by the ceiling over it).
 
     Returns (source (n,) rows of ``scene.source_power`` (patches, then the lights' emitters),
-    patch (n,), share (n,) of the total power, in_view (n,) bool) for each ray that met a back
-    side."""
+    patch (n,), share (n,) of the total power, in_view (n,) bool) for each ray met from behind."""
     g = scene.geometry
     rng = np.random.default_rng(seed)
     power = scene.source_power.mean(axis=1)
@@ -132,6 +136,10 @@ def back_light(scene, receives, seed=0):
     region = None if g.regions is None else np.zeros(rows.size, np.int32)
     if from_patch.any():
         origins[from_patch], directions[from_patch] = _leave(g, rows[from_patch].astype(np.int32), rng)
+        # (half the light of an emitter whose back emits too leaves its back, as in the solve)
+        if scene.back_emits.any():
+            back = np.flatnonzero(from_patch & scene.back_emits[np.minimum(rows, P - 1)] & (rng.random(rows.size) < 0.5))
+            origins[back], directions[back] = _leave(g, rows[back].astype(np.int32), rng, behind=True)
         if region is not None:
             region[from_patch] = g.region_of(rows[from_patch])
     if (~from_patch).any():
@@ -159,7 +167,8 @@ def back_light(scene, receives, seed=0):
     sees_receiver = (front & receives[np.maximum(seen, 0)]).reshape(-1, BEHIND_RAYS).any(axis=1)
     escapes = (seen < 0).reshape(-1, BEHIND_RAYS).any(axis=1)
     in_view = np.zeros(P, dtype=bool)
-    in_view[lit] = sees_receiver | ~escapes
+    # (an emitter whose back emits absorbs there: surfaces are one-sided, and no face is flipped)
+    in_view[lit] = (sees_receiver | ~escapes) & ~scene.back_emits[lit]
     return source, patch, weight, in_view[patch]
 
 

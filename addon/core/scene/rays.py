@@ -5,6 +5,8 @@ method) or from where the previous ray hit (exit_point="hit"), in a cosine-distr
 direction about the patch's normal, from a point pushed off the surface. Points and directions
 are (3,n) float32 rows, one coordinate per row, in unit space; the ray tracer reads (n,3) views
 of them. A hit on a patch's back side is a hit all the same: the walk absorbs it ("blocked").
+A path's first ray from an emitting patch leaves its front or its back, half each (emitting
+patches emit from both sides, as Cycles' do: ``emitter_backs``).
 """
 from __future__ import annotations
 
@@ -29,16 +31,52 @@ class Hits:
     points: np.ndarray | None = None  # (3,n) where (exit_point="hit"), not yet pushed off
 
 
-def leave_sources(tables, source, u):
+def leave_sources(tables, source, u, first_new=0):
     """:func:`leave_random` for paths on patches; paths just started at a light (a source id
-    from the patch count on) take that light's rays, from the same uniforms u[0:4]."""
+    from the patch count on) take that light's rays, from the same uniforms u[0:4]; paths just
+    started (columns from ``first_new`` on) at an emitting patch leave its front or its back
+    (:func:`emitter_backs`)."""
+    back = emitter_backs(tables, source, u[3], first_new)
     light = light_columns(tables, source)
     if light is None:
-        return leave_random(tables, source, u)
-    u_light = u[:4, light].copy()  # (before leave_random folds points onto triangles)
-    origins, directions = leave_random(tables, on_patches(tables, source), u)
-    set_light_rays(tables, source[light], u_light, origins, directions, light)
+        origins, directions = leave_random(tables, source, u)
+    else:
+        u_light = u[:4, light].copy()  # (before leave_random folds points onto triangles)
+        origins, directions = leave_random(tables, on_patches(tables, source), u)
+        set_light_rays(tables, source[light], u_light, origins, directions, light)
+    if back is not None:
+        turn_to_backs(tables, source.take(back), origins, directions, back)
     return origins, directions
+
+
+def emitter_backs(tables, source, u, first_new=0):
+    """The columns, from ``first_new`` on, of new paths at emitting patches (source ids below
+    the patch count) that leave the patch's back: those whose direction uniform ``u`` (n,) is
+    1/2 or more. Every new column's ``u`` is then 2u modulo 1 (in place, exact in float32): still
+    uniform, and independent of the side. Only patches whose back emits (``tables.emitter_backs``)
+    leave it; None where no new path leaves a back."""
+    if tables.emitter_backs is None or first_new >= source.size:
+        return None
+    v = u[first_new:]
+    v *= np.float32(2.0)
+    back = v >= 1
+    v -= back
+    new = source[first_new:]
+    back &= tables.emitter_backs.take(new, mode="wrap")
+    if tables.lights is not None:
+        back &= new < tables.patch_count
+    columns = np.flatnonzero(back)
+    return columns + first_new if columns.size else None
+
+
+def turn_to_backs(tables, patch, origins, directions, columns):
+    """Turns the rays in ``columns`` of (3,n) ``origins`` and ``directions``, leaving the fronts
+    of ``patch`` (one a column) in cosine directions n + s, to leave their backs: the
+    origin pushed off the other side, the direction -(n + s) (cosine-distributed about -n)."""
+    g = tables.geometry
+    offset = g.ray_offset if g.patch_ray_offset is None else g.ray_offsets(patch)
+    origins[:, columns] -= patch_normals(tables, patch) * (2 * offset)
+    directions[:, columns] *= np.float32(-1.0)
 
 
 def light_columns(tables, source):

@@ -220,11 +220,11 @@ def buried_points(geometry, patch, u_triangle, u0, u1):
     return buried_at(geometry, origins, patch)
 
 
-def buried_at(g, origins, patch):
+def buried_at(g, origins, patch, side=1.0):
     """(n,) bool: whether each point (3,n) unit space, pushed off) of ``patch`` is buried: along
     VOTES of the probes it is inside more solids than it enters (:func:`windings` >= 1). Probes
-    are cast only for points still undecided."""
-    normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64)
+    are cast only for points still undecided; ``side`` -1: about -n, for points behind it."""
+    normal = g.patch_normal_rows.take(patch, axis=1).astype(np.float64) * side
     tangent, bitangent = tangents(normal)
     inside, outside = np.zeros(patch.size, np.int32), np.zeros(patch.size, np.int32)
     undecided = np.arange(patch.size)

@@ -232,9 +232,10 @@ def test_the_sources_and_their_shares_are_listed(blender):
     blender.scene.radiosity.patch_size, blender.scene.radiosity.threads = 0.25, 1
     objects, _ = read_selection(blender)
     value = pipeline.estimate(objects, blender.scene.radiosity.solve_settings())
-    # the lamp quad: 0.09 m^2 x mean(4, 3.5, 3) = 0.315; the bulb 4 x 4 pi / (4 pi^2) = 1.27
+    # the lamp quad under the ceiling, both its sides: 2 x 0.09 m^2 x mean(4, 3.5, 3) = 0.63; the
+    # bulb 4 x 4 pi / (4 pi^2) = 1.27
     bulb = 4.0 / math.pi
-    lamp = 0.09 * 3.5
+    lamp = 2 * 0.09 * 3.5
     assert value["sources"] == f"1 point light {bulb / (bulb + lamp):.0%}, emissive faces {lamp / (bulb + lamp):.0%}"
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     assert blender.scene.radiosity.last_sources == value["sources"]

@@ -50,7 +50,7 @@ def _box_room():
         _quad(name, [v[i] for i in face], material)
     block_v, block_f = box_arrays((1.1, 0.9, 0.0), (1.6, 1.4, 0.7), inward=False)
     make_object("Block", block_v, block_f, [principled("Grey", (0.5, 0.5, 0.5))])
-    # (a box whose bottom alone emits: Cycles' emission leaves both sides of a face, the solve's its front, docs/lights.md)
+    # (a box whose bottom alone emits: its back's light stays inside the box, in Cycles as in the solve, docs/lights.md)
     panel_v, panel_f = box_arrays((0.7, 0.7, 1.95), (1.3, 1.3, 1.99), inward=False)
     glow, black = principled("Glow", (0.0, 0.0, 0.0), (1.0, 0.9, 0.8), 12.0), principled("Black", (0.0, 0.0, 0.0))
     make_object("Panel", panel_v, panel_f, [glow, black], face_materials=[0, 1, 1, 1, 1, 1])
