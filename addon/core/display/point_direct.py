@@ -106,10 +106,10 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
 
 
 def points_direct(surface, scene, position, patch, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0,
-                  deadline=None, light=None, retries=RETRIES):
+                  deadline=None, light=None, retries=None):
     """([G,]n,3) the direct light at the points ``position`` (n,3, moved in place: INWARD) of
     ``patch`` (n,), as ``corner_direct`` takes it at corners (float32 without groups), the noisy ones
-    sampled again ``retries`` times."""
+    sampled again ``retries`` times (None: RETRIES)."""
     towards = surface.patch_centroid[patch]  # (in place: four (n,3) temporaries were most of this stage's memory)
     towards -= position
     towards *= INWARD
@@ -217,7 +217,7 @@ def _lamp_sources(group, lamps):
 
 
 def direct_at(scene, position, patch, samples, seed, light_group, patch_group, groups, deadline=None, spent=None,
-              shown=None, retries=RETRIES):
+              shown=None, retries=None):
     """([G,]n,3) the direct light at world points ``position`` (n,3) of ``patch`` (n,), each
     group's lamps and each emitting group apart (``_part_at``), added up into its group's row;
     retries within ``deadline`` (``sample_rounds``), of the points noisy beside ``shown`` (n,) too."""
@@ -227,7 +227,7 @@ def direct_at(scene, position, patch, samples, seed, light_group, patch_group, g
     sources = _sources(scene, light_group, patch_group, groups)
     with tables.numpy_turn:
         parts = [_part_at(tables, position, patch, rng, add, paired, shown) for _, add, paired in sources]
-        means = rounds(parts, len(patch), samples, retries, MORE_SAMPLES, deadline, spent)
+        means = rounds(parts, len(patch), samples, RETRIES if retries is None else retries, MORE_SAMPLES, deadline, spent)
     for (group, _, _), mean in zip(sources, means):
         out[group] += mean
     return out if groups else out[0]
