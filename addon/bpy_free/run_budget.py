@@ -24,9 +24,9 @@ from ..core.display.sample_rounds import Spent
 from ..core.distributed.runners import local_threads
 from . import adaptive_patches, options
 
-# The display's cells (bpy_free shown_mesh) over the corners' direct light they add to: their new points'
-# light and the larger meshes made (0.5 in the 11k window room: results/operator_stages.md).
-CELLS_SHARE = 0.5
+# The display's cells (bpy_free shown_mesh) over the corners' direct light they add to: at most as many
+# new points as the meshes have points, about a quarter of the corners, each sampled again once at most.
+CELLS_SHARE = 0.25
 PILOT_CORNERS = 512  # corners (or patches) a pilot of the display's direct light times
 # Seconds of the display a shading triangle beyond the direct light (the smoothing, the noise
 # filter, the polygon corners): 25-110 microseconds in the rooms measured (docs/performance.md).
