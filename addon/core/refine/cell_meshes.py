@@ -56,14 +56,6 @@ class RefinedSurface:
     def triangle_patch(self):
         return self.fine.triangle_patch
 
-    @property
-    def vertices(self):
-        return self.shown.vertices
-
-    @property
-    def triangles(self):
-        return self.shown.triangles
-
     def corner_means(self, x):
         return self.fine.corner_means(x)
 

@@ -31,7 +31,7 @@ CHANGE = 0.25  # of the patch's light: a difference between corners the eye sees
 FLOOR = 0.2  # of the mean light: the least light a difference is measured against
 BUDGET = 1.0  # new points at most, a share of the split meshes' points (each costs a corner's rays)
 MOST = 8_192  # and at most this many: where patches are that many, a hot spot spans patches of its own
-NEW_POINTS = 3  # points a split quad adds, its four midpoints shared with neighbours
+NEW_POINTS = 3  # points a split cell adds at most (a triangle's three midpoints; fewer where neighbours share them)
 FAR = np.int64(1) << np.int64(31)  # key of a new point: patch * FAR + its point in the object's cells
 
 
