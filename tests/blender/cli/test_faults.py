@@ -147,13 +147,40 @@ class Terminal:
             try:
                 fcntl.ioctl(1, termios.TIOCSWINSZ, struct.pack("HHHH", 24, columns, 0, 0))
                 # as a shell starts a job in the foreground: a test run started in the background
-                # (CI) has SIGINT ignored, which exec would hand on, and a program rightly keeps
-                signal.signal(signal.SIGINT, signal.SIG_DFL)
+                # (CI) has SIGINT ignored (under nohup SIGHUP too), or a runner's thread has them
+                # blocked; exec would hand both on, and a program rightly keeps an ignored signal
+                stopping = {signal.SIGINT, signal.SIGHUP, signal.SIGTERM}
+                for signum in stopping:
+                    signal.signal(signum, signal.SIG_DFL)
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, stopping)
                 os.chdir(cwd)
                 os.execve(sys.executable, [sys.executable, "-m", "addon", *args], env or ENV)
             finally:
                 os._exit(127)
+        os.set_inheritable(fd, False)  # (no other child of this process keeps the terminal open)
         self.pid, self.fd, self.data, self.status = pid, fd, b"", None
+
+    def state(self):
+        """What the child is doing, for a failure's message: its threads' states and where they
+        wait, its signals (pending, blocked, ignored, caught) and who else holds a terminal's master."""
+        lines = []
+        try:
+            status = open(f"/proc/{self.pid}/status").read().splitlines()
+            lines += [line for line in status if line.split(":")[0] in ("State", "SigPnd", "ShdPnd", "SigBlk", "SigIgn", "SigCgt")]
+            for task in sorted(os.listdir(f"/proc/{self.pid}/task")):
+                wchan = open(f"/proc/{self.pid}/task/{task}/wchan").read()
+                comm = open(f"/proc/{self.pid}/task/{task}/comm").read().strip()
+                lines.append(f"thread {task} {comm}: {wchan}")
+        except OSError as exc:
+            lines.append(f"(no /proc state: {exc})")
+        for pid in filter(str.isdigit, os.listdir("/proc")):
+            try:
+                for fd in os.listdir(f"/proc/{pid}/fd"):
+                    if os.readlink(f"/proc/{pid}/fd/{fd}") in ("/dev/ptmx", "/dev/pts/ptmx"):
+                        lines.append(f"process {pid} holds a terminal master as fd {fd}")
+            except OSError:
+                continue
+        return "\n".join(lines)
 
     @property
     def text(self):
@@ -421,7 +448,8 @@ def test_a_closed_terminal_stops_the_run_with_129_and_leaves_no_file(tmp_path):
             status = os.waitstatus_to_exitcode(raw) if pid else None
             time.sleep(0.05)
         term.status = status
+        state = term.state() if status is None else ""
     finally:
         term.close()
-    assert status == 129, (status, term.text[-3000:])
+    assert status == 129, (status, state, term.text[-3000:])
     assert os.listdir(out) == [] and os.listdir(temp) == []
