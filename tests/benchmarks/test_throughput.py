@@ -8,8 +8,9 @@ from benchmarks.throughput import replay
 
 
 def _spin(seconds):
-    until = time.perf_counter() + seconds
-    while time.perf_counter() < until:
+    """``seconds`` of this process's CPU (as the replay counts it: a busy machine stretches the wall time, not this)."""
+    until = time.process_time() + seconds
+    while time.process_time() < until:
         pass
 
 
@@ -54,7 +55,7 @@ def test_replay_without_pause_traces_back_to_back():
     rate, lines_a_ray = replay(trace, casts, 0.0, lambda t, o, d: t(o, d), lambda: float("nan"))
     assert len(calls) == 4
     assert np.isnan(lines_a_ray)  # no counters: NaN, as the breakdown prints n/a
-    assert 2000 / rate >= 0.0035
+    assert 2000 / rate >= 0.004  # the four casts' own CPU
 
 
 def test_steal_is_read_and_a_round_is_quiet_only_when_each_measurement_lost_little():
