@@ -52,12 +52,28 @@ def object_patches(output, names):
         if (mesh.face_sizes != 4).any():
             raise ValueError(f"'{o.name}': patches of {sorted(set(mesh.face_sizes.tolist()))} corners; quads only")
         quads = mesh.points[mesh.corner_verts.reshape(-1, 4)]
-        corner_patch = np.repeat(np.arange(len(mesh.face_sizes)), 4)
-        light = np.asarray(output.light_colours[k], np.float64)
-        shown = np.stack([np.bincount(corner_patch, light[:, c]) / 4 for c in range(3)], axis=1)
-        out[o.name] = {"quads": quads, "area": np.asarray(mesh.patch_area), "H": result.irradiance[rows], "shown": shown,
-                       "B": result.radiosity[rows], "variance": result.reflected_variance[rows]}
+        out[o.name] = {"quads": quads, "area": np.asarray(mesh.patch_area), "H": result.irradiance[rows],
+                       "shown": shown_means(output, k), "B": result.radiosity[rows], "variance": result.reflected_variance[rows]}
     return out
+
+
+def shown_means(output, k):
+    """(P_k,3) each patch's light as written ('Radiosity Light'): the area-weighted mean of its
+    polygons' corner means, on the mesh the display is written on (the patches, or their display cells)."""
+    from addon.bpy_free.shown_mesh import mesh_of
+
+    mesh, shown = mesh_of(output, k), getattr(output, "shown", None)
+    origin = None if shown is None else shown.origin[k]
+    polygons = len(mesh.face_sizes)
+    origin = np.arange(polygons) if origin is None else np.asarray(origin)
+    light = np.asarray(output.light_colours[k], np.float64)
+    corner_polygon = np.repeat(np.arange(polygons), mesh.face_sizes)
+    area = np.asarray(mesh.patch_area, np.float64)
+    weight = area / np.asarray(mesh.face_sizes, np.float64)
+    patches = int(origin.max()) + 1
+    total = np.bincount(origin, area, minlength=patches)
+    return np.stack([np.bincount(origin, np.bincount(corner_polygon, light[:, c], minlength=polygons) * weight,
+                                 minlength=patches) / total for c in range(3)], axis=1)
 
 
 def solves(names, seeds, overrides, log=print):
