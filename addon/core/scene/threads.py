@@ -1,5 +1,6 @@
 """This machine's threads for work that is not a solve's chunks: the display's shadow rays and the
-scene's probes of buried parts (``local_threads``, ``on_threads``), the user's threads setting.
+scene's probes of buried parts, the display's smoothing (``local_threads``, ``on_threads``,
+``each_on_threads``), the user's threads setting.
 
 Here, below every package that traces rays here, so that the scene's build may use them
 (``distributed.runners`` hands the same names on, where the solve's own threads are).
@@ -9,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 # The threads the display's work takes here (None: the machine's), set by ``local_threads``.
@@ -51,3 +53,19 @@ def on_threads(work, most):
         futures = [pool.submit(context.run, work) for context in contexts]
     for future in futures:
         future.result()
+
+
+def each_on_threads(count, task):
+    """``task(i)`` for i in range(count), on the local threads (``on_threads``), each taking the
+    next; each task's work must be its own, so that the bits are the same on any number of threads."""
+    lock, items = threading.Lock(), iter(range(count))
+
+    def work():
+        while True:
+            with lock:
+                i = next(items, None)
+            if i is None:
+                return
+            task(i)
+
+    on_threads(work, count)

@@ -34,7 +34,6 @@ found, where some patch is partly buried, by probing every other patch's centre)
 from __future__ import annotations
 
 import dataclasses
-import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,7 +41,7 @@ import numpy as np
 from .coincident import contacts_of
 from .crossings import crossed_patches
 from .rays import meets_front
-from .threads import local_thread_count, on_threads
+from .threads import each_on_threads, local_thread_count
 from ..lights.sampling import FLOAT32_BELOW_ONE, patch_point_rows
 
 # Cells per side of a patch's (u0, u1) square, and bins of the triangle uniform for patches that
@@ -57,7 +56,7 @@ PROBES = ((0.0, 0.0),) + tuple((85.0, 23.0 + 120.0 * k) for k in range(3))
 VOTES = len(PROBES) - 1
 # Surfaces a probe is traced through at most.
 MAX_CROSSINGS = 64
-# Points probed a block at a time, the blocks shared among the local threads (``threads.on_threads``):
+# Points probed a block at a time, the blocks shared among the local threads (``threads.each_on_threads``):
 # a point's answer is its own rays', so the bits are the same on any number of threads.
 PROBE_BLOCK = 1 << 13
 
@@ -230,17 +229,12 @@ def buried_at(g, origins, patch, side=1.0):
     if len(blocks) < 2 or local_thread_count() == 1:
         return _buried_block(g, origins, patch, side)
     g.surface_tracer, contacts_of(g)  # (made once, here, before the threads read them)
-    out, lock, queue = np.zeros(patch.size, bool), threading.Lock(), iter(blocks)
+    out = np.zeros(patch.size, bool)
 
-    def work():
-        while True:
-            with lock:
-                rows = next(queue, None)
-            if rows is None:
-                return
-            out[rows] = _buried_block(g, origins[:, rows], patch[rows], side)
+    def block(k):
+        out[blocks[k]] = _buried_block(g, origins[:, blocks[k]], patch[blocks[k]], side)
 
-    on_threads(work, len(blocks))
+    each_on_threads(len(blocks), block)
     return out
 
 
