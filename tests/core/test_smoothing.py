@@ -630,7 +630,8 @@ def test_the_corners_are_made_on_the_local_threads_with_the_same_bits(monkeypatc
     """The whole's corners a colour channel a thread, its parts' (the fixed-weight maps) a part a
     thread: with two threads both make corners at once (each one's first averaging waits for the
     other's), and the corners, the records and the parts' corners are the same bit for bit as on
-    one thread (a channel's and a part's steps are their own)."""
+    one thread (a channel's and a part's steps are their own); above THREADED_CORNERS corners,
+    on the calling thread alone."""
     import threading
 
     from addon.core.distributed import runners
@@ -656,7 +657,16 @@ def test_the_corners_are_made_on_the_local_threads_with_the_same_bits(monkeypatc
             corners, apply = surface.corner_values(values, return_filter=True)
             made.append((corners, apply(parts, np.float32), apply.records))
         assert (len(seen) == 1) if threads == 1 else (len(seen) >= 2), (threads, len(seen))
-    (one, one_parts, one_records), (two, two_parts, two_records) = made
+    # above THREADED_CORNERS (memory), a channel and a part at a time on the calling thread
+    monkeypatch.setattr(smoothing, "THREADED_CORNERS", 3 * len(T) - 1)
+    seen.clear()
+    threads = 0  # (no barrier)
+    with runners.local_threads(2):
+        corners, apply = surface.corner_values(values, return_filter=True)
+        made.append((corners, apply(parts, np.float32), apply.records))
+    assert seen == {threading.get_ident()}
+    (one, one_parts, one_records), (two, two_parts, two_records) = made[:2]
+    assert np.array_equal(made[2][0], one) and np.array_equal(made[2][1], one_parts)
     assert np.array_equal(one, two) and np.array_equal(one_parts, two_parts) and two_parts.dtype == np.float32
     for a, b in zip(one_records, two_records):
         assert a.keys() == b.keys()

@@ -49,6 +49,9 @@ RINGING = 0.5
 RINGING_BLOCK = 1 << 16  # corners compared at a time (a few hundred kB of temporaries)
 SIGNIFICANT = 1e-3  # nor where the iterations moved its corners by less than this share of its value (RMS)
 RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
+# Channels (and parts) on the local threads up to this many corners, above one at a time: a channel
+# holds a few (T*3,) float64 arrays, two at once passed the command line's memory bound a patch.
+THREADED_CORNERS = 1 << 19
 
 
 # A corner's value never falls below this share of the darkest patch meeting at it (a valley may
@@ -209,7 +212,7 @@ class Surface(NoiseFilter):
             out[:, :, k] = x.reshape(-1, 3)
             made[k] = record, plain_scale, ringing
 
-        each_on_threads(values.shape[1], channel)
+        each_on_threads(values.shape[1], channel, 1 if corner_patch.size > THREADED_CORNERS else None)
         records, plain_scales = [m[0] for m in made], [m[1] for m in made]
         for _, _, ringing in made:
             rings |= ringing
@@ -334,7 +337,8 @@ class LinearCorners:
             raise ValueError(f"the corners take values of shape (P, k) = {self.positive.shape} (or (S, P, k)); got {x.shape}")
         if x.ndim == 3:
             out = np.empty((len(x), len(self.surface.triangle_patch), 3, x.shape[2]), dtype)
-            each_on_threads(len(x), lambda s: out.__setitem__(s, self(x[s], dtype)))  # (a part's float64 steps a thread)
+            each_on_threads(len(x), lambda s: out.__setitem__(s, self(x[s], dtype)),  # (a part a thread)
+                            1 if self.corner_patch.size > THREADED_CORNERS else None)
             return out
         surface, cp = self.surface, self.corner_patch
         values = np.where(self.positive, x, 0.0)  # (the whole's negative patches count as 0)
@@ -353,8 +357,9 @@ class LinearCorners:
             _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
             out[:, :, k] = corner.reshape(-1, 3)
 
-        each_on_threads(len(self.records), channel)
+        each_on_threads(len(self.records), channel, 1 if cp.size > THREADED_CORNERS else None)
         return out
+
 
 
 

@@ -55,9 +55,10 @@ def on_threads(work, most):
         future.result()
 
 
-def each_on_threads(count, task):
-    """``task(i)`` for i in range(count), on the local threads (``on_threads``), each taking the
-    next; each task's work must be its own, so that the bits are the same on any number of threads."""
+def each_on_threads(count, task, most=None):
+    """``task(i)`` for i in range(count), on the local threads (``on_threads``; at most ``most``),
+    each taking the next; each task's work must be its own, so that the bits are the same on any
+    number of threads."""
     lock, items = threading.Lock(), iter(range(count))
 
     def work():
@@ -68,4 +69,4 @@ def each_on_threads(count, task):
                 return
             task(i)
 
-    on_threads(work, count)
+    on_threads(work, count if most is None else min(count, most))
