@@ -128,7 +128,7 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
         made["filtered"] += _whole(held)
 
     surface.neighbours()  # (made once, before the two filters read it on the local threads)
-    filters = [reflected_filter] + ([arriving_filter] if light else [])
+    filters = ([arriving_filter] if light else []) + [reflected_filter]  # (a bad input's error as before: the first's)
     each_on_threads(len(filters), lambda k: filters[k]())
     filtered, noise = made["filtered"], made["noise"]
     if light:
