@@ -361,8 +361,6 @@ class LinearCorners:
         return out
 
 
-
-
 def _put_rings(out, plain, scale, rings, corner_patch, block=RINGING_BLOCK):
     """``out`` (T*3,) = the plain average ``plain`` x its ``scale`` (P,) at the corners of the
     patches ``rings`` (P,) bool: a block of corners at a time (no (T*3,) index)."""
