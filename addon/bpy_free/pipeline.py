@@ -159,7 +159,7 @@ def estimate(objects, settings: SolveSettings, should_stop=None) -> dict:
     started = time.perf_counter()
     patches = adaptive_patches.refined(objects, make_patches(objects, settings.patch_size), settings.detail,
                                        settings.seed, should_stop=should_stop)
-    with trim.roomy(patches.combined.patch_count):  # (as the run builds it: the time it takes is the run's)
+    with trim.roomy(patches.combined.patch_count), local_threads(settings.threads):  # (as the run builds it: its time the run's)
         scene, notes = scene_and_notes(patches)
     building = time.perf_counter() - started  # (a run meshes again)
     automatic = settings.method == AUTO
@@ -231,7 +231,7 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     patches, settings = solve_refinement.refined(objects, patches, settings, progress, should_stop, on_prediction)
     del objects  # the source arrays are meshed: the caller's references are the only ones left
     trim.give_back()  # (between stages: what meshing freed, then what building the scene freed)
-    with trim.roomy(patches.combined.patch_count):
+    with trim.roomy(patches.combined.patch_count), local_threads(settings.threads):  # (its probes on the threads)
         scene, notes = scene_and_notes(patches)
     prediction, target = prediction_for(scene, settings)
     groups = relit.groups_for(scene, patches, settings.per_source, notes)

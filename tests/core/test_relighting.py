@@ -394,3 +394,37 @@ def _assert_reported_error_is_the_spread(weight, relit, reported):
     n_eff = terms.sum() ** 2 / (terms**2).sum()
     band = Z * math.sqrt(2 / (15 * n_eff)) * CORRELATION_ALLOWANCE
     assert abs(np.mean(reported) / empirical - 1) < band, (np.mean(reported), empirical)
+
+
+def test_each_sources_noise_filters_run_on_the_local_threads_with_the_same_bits(monkeypatch):
+    """smooth_sources' two noise filters (the light arriving, the reflected light) are their own
+    work: with two threads they run at once (each one's start waits for the other's), and every
+    group's colours are the same bit for bit as on one thread."""
+    import threading
+
+    from addon.core.display import smoothing
+    from addon.core.distributed import runners
+    from addon.core.relight.relighting import smooth_sources
+
+    scene = open_box()
+    r = solve_case(scene, METHODS[0], paths=20_000, seed=3, per_source=True)
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    meet, seen = threading.Barrier(2, timeout=20), []
+    filter_noise = smoothing.Surface.filter_noise
+
+    def filtered(self, *args, **kwargs):
+        seen.append(threading.get_ident())
+        if threads == 2 and len(seen) <= 2:
+            meet.wait()  # (a filter that waits for the other to end breaks the barrier: the test fails)
+        return filter_noise(self, *args, **kwargs)
+
+    monkeypatch.setattr(smoothing.Surface, "filter_noise", filtered)
+    made = []
+    for threads in (1, 2):
+        seen.clear()
+        with runners.local_threads(threads):
+            made.append(dict(smooth_sources(surface, scene, r, light=True)))
+        assert len(set(seen[:2])) == threads, (threads, seen)
+    assert made[0].keys() == made[1].keys() == {"light", "smooth"}
+    for name in made[0]:
+        assert np.array_equal(made[0][name], made[1][name]), name

@@ -624,3 +624,52 @@ def test_the_lowest_corners_patch_is_the_one_a_stable_sort_finds_ties_and_hidden
         expected[crease[local[first]]] = o[first]
         got = surface._corner_lowest_patch(np.ascontiguousarray(values[:, k]), corner_patch, averaging)
         assert np.array_equal(got, corner_patch[expected])
+
+
+def test_the_corners_are_made_on_the_local_threads_with_the_same_bits(monkeypatch):
+    """The whole's corners a colour channel a thread, its parts' (the fixed-weight maps) a part a
+    thread: with two threads both make corners at once (each one's first averaging waits for the
+    other's), and the corners, the records and the parts' corners are the same bit for bit as on
+    one thread (a channel's and a part's steps are their own); above THREADED_CORNERS corners,
+    on the calling thread alone."""
+    import threading
+
+    from addon.core.distributed import runners
+
+    V, T, TP, values = _random_mesh(3)
+    parts = np.stack([0.25 * values, 0.75 * values, values])
+    surface = smoothing.Surface.of(V, T, TP, len(values))
+    average, seen, waited, meet = smoothing.Surface._average_corners, set(), set(), threading.Barrier(2, timeout=20)
+
+    def averaged(self, x, averaging):
+        ident = threading.get_ident()
+        seen.add(ident)
+        if threads == 2 and len(waited) < 2 and ident not in waited:  # (the first two threads to average)
+            waited.add(ident)
+            meet.wait()  # (a second thread that never averages breaks the barrier: the test fails)
+        return average(self, x, averaging)
+
+    monkeypatch.setattr(smoothing.Surface, "_average_corners", averaged)
+    made = []
+    for threads in (1, 2):
+        seen.clear()
+        with runners.local_threads(threads):
+            corners, apply = surface.corner_values(values, return_filter=True)
+            made.append((corners, apply(parts, np.float32), apply.records))
+        assert (len(seen) == 1) if threads == 1 else (len(seen) >= 2), (threads, len(seen))
+    # above THREADED_CORNERS (memory), a channel and a part at a time on the calling thread
+    monkeypatch.setattr(smoothing, "THREADED_CORNERS", 3 * len(T) - 1)
+    seen.clear()
+    threads = 0  # (no barrier)
+    with runners.local_threads(2):
+        corners, apply = surface.corner_values(values, return_filter=True)
+        made.append((corners, apply(parts, np.float32), apply.records))
+    assert seen == {threading.get_ident()}
+    (one, one_parts, one_records), (two, two_parts, two_records) = made[:2]
+    assert np.array_equal(made[2][0], one) and np.array_equal(made[2][1], one_parts)
+    assert np.array_equal(one, two) and np.array_equal(one_parts, two_parts) and two_parts.dtype == np.float32
+    for a, b in zip(one_records, two_records):
+        assert a.keys() == b.keys()
+        for key in a:
+            same = [np.array_equal(x, y) for x, y in zip(a[key], b[key])] if key == "floored" else [np.array_equal(a[key], b[key])]
+            assert all(same), key

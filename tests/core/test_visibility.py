@@ -5,6 +5,8 @@ Exact references: a closed room of uniform emittance E and reflectivity R has B 
 on every inner patch, however its walls overlap; and the discrete system on the visible
 rectangles (closed-form form factors) is what the random exit estimates.
 """
+import threading
+
 import numpy as np
 import pytest
 
@@ -349,3 +351,36 @@ def test_probes_count_every_coincident_face_of_flush_boxes():
     np.testing.assert_array_equal(g.buried.visible_fraction(origin.shape[0])[-n:], np.full(n, 0.5))
     first_seat = sum(p[0].shape[0] for p in parts[:4])
     assert set(range(first_seat, first_seat + seat[0].shape[0])) <= set(g.buried.whole.tolist())
+
+
+def test_probes_run_on_the_local_threads_and_give_the_same_bits(uniform_room, monkeypatch):
+    """The probes of buried parts go in blocks (PROBE_BLOCK points) shared among the local
+    threads: with two, both threads probe at once (each one's first probe waits for the other's),
+    and every answer is the same bit for bit as on one thread (a point's answer is its own
+    rays'). Blocks of 64 points: the slab room's probes are thousands of points, dozens of blocks."""
+    from addon.core.distributed import runners
+
+    g = uniform_room[0].geometry
+    monkeypatch.setattr(visibility, "PROBE_BLOCK", 64)
+    windings, seen, waited = visibility.windings, set(), set()
+    meet = threading.Barrier(2, timeout=20)
+
+    def probe(*args):
+        ident = threading.get_ident()
+        seen.add(ident)
+        if threads == 2 and len(waited) < 2 and ident not in waited:  # (the first two threads to probe)
+            waited.add(ident)
+            meet.wait()  # (a second thread that never probes breaks the barrier: the test fails)
+        return windings(*args)
+
+    monkeypatch.setattr(visibility, "windings", probe)
+    answers = []
+    for threads in (1, 2):
+        seen.clear()
+        with runners.local_threads(threads):
+            answers.append(visibility.find_buried(g))
+        assert (len(seen) == 1) if threads == 1 else (len(seen) >= 2), (threads, len(seen))
+    one, two = answers
+    for field in ("slot", "patch", "bins", "first", "cells", "fraction", "whole"):
+        assert np.array_equal(getattr(one, field), getattr(two, field)), field
+    assert one.patch.size > 0

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .noise_filter import NOISE_CUTOFF, NoiseFilter, checked_rows, sums_by
+from ..distributed.runners import each_on_threads
 from ..mesh.welding import run_starts, weld_points
 
 CREASE_ANGLE = 30.0  # degrees, as Blender's auto smooth
@@ -48,6 +49,9 @@ RINGING = 0.5
 RINGING_BLOCK = 1 << 16  # corners compared at a time (a few hundred kB of temporaries)
 SIGNIFICANT = 1e-3  # nor where the iterations moved its corners by less than this share of its value (RMS)
 RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same iterations
+# Channels (and parts) on the local threads up to this many corners, above one at a time: a channel
+# holds a few (T*3,) float64 arrays, two at once passed the command line's memory bound a patch.
+THREADED_CORNERS = 1 << 19
 
 
 # A corner's value never falls below this share of the darkest patch meeting at it (a valley may
@@ -198,16 +202,19 @@ class Surface(NoiseFilter):
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
         out = np.empty((len(self.triangle_patch), 3, values.shape[1]), dtype)
-        records, plain_scales = [], []
+        made = [None] * values.shape[1]
         rings = np.zeros(self.patch_count, bool)
-        for k in range(values.shape[1]):  # one colour channel at a time: a third of the memory
-            channel = np.ascontiguousarray(values[:, k])
+
+        def channel(k):  # (a colour channel a thread: a channel's memory each)
             record = {} if return_filter else None
-            x, plain_scale, ringing = self._corner_channel(channel, corner_patch, averaging, iterations, record)
+            x, plain_scale, ringing = self._corner_channel(np.ascontiguousarray(values[:, k]), corner_patch, averaging,
+                                                           iterations, record)
             out[:, :, k] = x.reshape(-1, 3)
-            del x  # (not held through the next channel's steps)
-            records.append(record)
-            plain_scales.append(plain_scale)
+            made[k] = record, plain_scale, ringing
+
+        each_on_threads(values.shape[1], channel, 1 if corner_patch.size > THREADED_CORNERS else None)
+        records, plain_scales = [m[0] for m in made], [m[1] for m in made]
+        for _, _, ringing in made:
             rings |= ringing
         # patches that ring in any channel take the plain average in every one (no colour fringes);
         # it is made again here (one averaging pass) rather than kept from each channel's steps
@@ -330,14 +337,15 @@ class LinearCorners:
             raise ValueError(f"the corners take values of shape (P, k) = {self.positive.shape} (or (S, P, k)); got {x.shape}")
         if x.ndim == 3:
             out = np.empty((len(x), len(self.surface.triangle_patch), 3, x.shape[2]), dtype)
-            for s, part in enumerate(x):  # (one part's float64 steps at a time)
-                out[s] = self(part)
+            each_on_threads(len(x), lambda s: out.__setitem__(s, self(x[s], dtype)),  # (a part a thread)
+                            1 if self.corner_patch.size > THREADED_CORNERS else None)
             return out
         surface, cp = self.surface, self.corner_patch
         values = np.where(self.positive, x, 0.0)  # (the whole's negative patches count as 0)
         out = np.empty((len(surface.triangle_patch), 3, values.shape[1]), dtype)
-        for k, record in enumerate(self.records):  # over colour channels, not elements
-            v = np.ascontiguousarray(values[:, k])
+
+        def channel(k):  # (a colour channel a thread)
+            record, v = self.records[k], np.ascontiguousarray(values[:, k])
             corner = surface._average_corners(v.take(cp, mode="wrap"), self.averaging)
             plain = corner.copy()
             for floored in record["floored"]:
@@ -348,6 +356,8 @@ class LinearCorners:
             corner[record["flat"]] = v[cp[record["flat"]]]
             _put_rings(corner, plain, record["plain_scale"], record["rings"], cp)
             out[:, :, k] = corner.reshape(-1, 3)
+
+        each_on_threads(len(self.records), channel, 1 if cp.size > THREADED_CORNERS else None)
         return out
 
 

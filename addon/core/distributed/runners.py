@@ -1,5 +1,6 @@
 """Where a solve's chunks run: this machine's threads (a cluster runner offers the same calls);
-and the display's shadow rays on this machine's threads (``local_threads``, ``on_threads``).
+the display's shadow rays on this machine's threads (``local_threads``, ``on_threads``: made in
+``scene.threads``, which the scene's build uses too, and handed on here).
 
 A runner takes tasks "chunks k, k+1, ... of sizes n_k" and returns futures of their tallies.
 Chunk k draws from its own stream, SeedSequence(seed, spawn_key=(k,)) (a group of chunks traced
@@ -8,13 +9,15 @@ bitwise the same wherever and in whatever order it runs.
 """
 from __future__ import annotations
 
-import contextlib
-import contextvars
-import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+
+from ..scene.threads import each_on_threads, local_thread_count, local_threads, machine_threads, on_threads
+
+__all__ = ["ThreadRunner", "chunk_generator", "each_on_threads", "local_thread_count", "local_threads", "machine_threads",
+           "on_threads", "run_chunks"]
 
 
 def chunk_generator(seed, first_chunk):
@@ -52,46 +55,3 @@ class ThreadRunner:
             future.cancel()
         if self._executor is not None:
             self._executor.shutdown(wait=True)
-
-
-# The threads the display's work takes here (None: the machine's), set by ``local_threads``.
-_LOCAL_THREADS = contextvars.ContextVar("local_threads", default=None)
-
-
-def machine_threads(threads=None):
-    """``threads``, or where it is 0 or None this machine's cores (at most 8), as the solve's."""
-    return int(threads or min(os.cpu_count() or 1, 8))
-
-
-@contextlib.contextmanager
-def local_threads(threads):
-    """The work ``on_threads`` runs inside takes ``threads`` threads (0 or None: the machine's;
-    1: the calling thread alone): the user's threads setting, for the display as for the solve."""
-    token = _LOCAL_THREADS.set(machine_threads(threads))
-    try:
-        yield
-    finally:
-        _LOCAL_THREADS.reset(token)
-
-
-def local_thread_count():
-    """The threads ``on_threads`` takes here (``local_threads``)."""
-    return machine_threads(_LOCAL_THREADS.get())
-
-
-def on_threads(work, most):
-    """Runs ``work()`` on up to ``most`` threads at once (``local_thread_count`` of them; one: on
-    the calling thread), each inside a copy of the caller's context in which ``on_threads`` takes
-    one thread (no pool inside a pool); returns when all have ended, raising the first error.
-    ``work`` takes its tasks from a shared queue, so what each thread did must not matter."""
-    count = max(1, min(int(most), local_thread_count()))
-    if count == 1:
-        return work()
-    contexts = [contextvars.copy_context() for _ in range(count)]
-    for context in contexts:
-        context.run(_LOCAL_THREADS.set, 1)
-    with ThreadPoolExecutor(max_workers=count, thread_name_prefix="radiosity-local") as pool:
-        futures = [pool.submit(context.run, work) for context in contexts]
-    for future in futures:
-        future.result()
-

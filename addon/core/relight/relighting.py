@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..display import point_direct
+from ..distributed.runners import each_on_threads
 from . import relit_checks
 
 
@@ -109,18 +110,31 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     # (the solve's noise is in its indirect part alone where its direct part is known: display.direct_means)
     drawn = per_source.direct_irradiance  # (S,P,3) or None
     rho = scene.reflectivity
-    if light:  # (the noise filters first, as the pipeline's: with the direct light's corners held, the peak)
-        if live and drawn is None:  # (the lamps', suns', emitters' and world's direct light left to the renderer)
-            drawn = point_direct.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
-                                            patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline)
+    if light and live and drawn is None:  # (the lamps', suns', emitters' and world's direct light left to the renderer)
+        drawn = point_direct.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
+                                        patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline)
+    made = {}
+
+    def arriving_filter():  # (the noise filters first, as the pipeline's: with the direct light's corners held, the peak)
         held = 0.0 if drawn is None else drawn
         rest, rest_fill = surface.arriving_light(result.irradiance - _whole(held), result.irradiance_variance, rho,
                                                  return_filter=True)
-        rest_parts = rest_fill(per_source.irradiance - held)
+        made["rest"], made["rest_parts"] = rest, rest_fill(per_source.irradiance - held)
+
+    def reflected_filter():
+        held = 0.0 if per_source.direct_irradiance is None else per_source.direct_irradiance * rho
+        made["filtered"], made["noise"] = surface.filter_light(result.reflected - _whole(held), result.reflected_variance,
+                                                               return_filter=True)
+        made["filtered"] += _whole(held)
+
+    surface.neighbours()  # (made once, before the two filters read it on the local threads)
+    filters = ([arriving_filter] if light else []) + [reflected_filter]  # (a bad input's error as before: the first's)
+    each_on_threads(len(filters), lambda k: filters[k]())
+    filtered, noise = made["filtered"], made["noise"]
+    if light:
+        rest, rest_parts = made["rest"], made["rest_parts"]
         arriving, parts = (rest, rest_parts) if drawn is None else (rest + drawn.sum(axis=0), rest_parts + drawn)
     held = 0.0 if per_source.direct_irradiance is None else per_source.direct_irradiance * rho
-    filtered, noise = surface.filter_light(result.reflected - _whole(held), result.reflected_variance, return_filter=True)
-    filtered += _whole(held)
     if direct is None:  # (else the display's own: its finer cells')
         direct = group_direct(surface, scene, result, triangles, deadline)
     whole = _summed(direct)
