@@ -85,11 +85,11 @@ def floor_light(p, seed):
 
 
 def test_detail_off_splits_the_patches_a_near_surface_partly_covers_and_the_room_gets_the_right_light():
-    """Detail off, the ceiling's four 0.5 m patches the slab's outline crosses split (the slab,
-    the walls and the floor keep their meshes, no shading triangulation of their own), materials,
-    areas and power kept; the floor's light then within a quarter of the straddling patches' excess
-    of the solve on 0.05 m patches, which follow the outline (before: the patches themselves, 29%
-    too bright: tests/core/test_covered_parts.py)."""
+    """Detail off, the ceiling's four 0.5 m patches the slab's outline crosses split along it (the
+    slab, the walls and the floor keep their meshes, no shading triangulation of their own),
+    materials, areas and power kept; the floor's light then within 3% of the solve on 0.05 m
+    patches, which follow the outline (before: the patches themselves, 29% too bright; the 0.5 m
+    patches' own discretization is 2.6%: tests/core/test_covered_parts.py)."""
     objects = slab_room()
     adaptive_patches._LAST.key = None
     first = patches.make_patches(objects, 0.5, layers=True)
@@ -108,4 +108,4 @@ def test_detail_off_splits_the_patches_a_near_surface_partly_covers_and_the_room
     straddling, straddling_se = floor_light(first, 11)
     light, se = floor_light(split, 12)
     assert straddling - ref > 0.2 * ref
-    assert -4 * np.hypot(ref_se, se) < light - ref < 0.25 * (straddling - ref), (light, ref, straddling)
+    assert -4 * np.hypot(ref_se, se) < light - ref < 0.03 * ref, (light, ref, straddling)
