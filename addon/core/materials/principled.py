@@ -74,8 +74,14 @@ def smith_lambda(alpha, cos_n):
 
 def mu_nodes(n=MU_NODES):
     """(mu, w): Gauss-Legendre nodes on (0, 1) with weights for the cosine-weighted mean
-    ``sum(w * f(mu))`` = integral of 2 mu f(mu) dmu."""
-    x, w = np.polynomial.legendre.leggauss(n)
+    ``sum(w * f(mu))`` = integral of 2 mu f(mu) dmu (copies: the caller may write to them)."""
+    mu, w = _mu_nodes(int(n))
+    return mu.copy(), w.copy()
+
+
+@lru_cache(maxsize=8)
+def _mu_nodes(n):
+    x, w = np.polynomial.legendre.leggauss(n)  # (an eigenvalue solve: 4 ms a material otherwise)
     mu = 0.5 * (x + 1.0)
     return mu, w * mu  # (w/2 for the interval) x 2 mu
 
