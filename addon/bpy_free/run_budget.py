@@ -27,7 +27,10 @@ from . import adaptive_patches, options
 # The display's cells (bpy_free shown_mesh) over the corners' direct light they add to: at most as many
 # new points as the meshes have points, about a quarter of the corners, each sampled again once at most.
 CELLS_SHARE = 0.25
-PILOT_CORNERS = 512  # corners (or patches) a pilot of the display's direct light times
+PILOT_CORNERS = 512  # patches a pilot of the live light's means times
+# Corners a pilot of the display's direct light times: a pass's cost a point falls with its size
+# (its blocks' and rounds' own costs), and a pilot of 512 took two to three times the pass's.
+CORNER_PILOT = 2048
 # Seconds of the display a shading triangle beyond the direct light (the smoothing, the noise
 # filter, the polygon corners): 25-110 microseconds in the rooms measured (docs/performance.md).
 REST_PER_TRIANGLE = 5e-5
@@ -54,7 +57,7 @@ class Display:
         return self.corners + self.live + self.rest
 
 
-def corner_seconds(scene, triangles, triangle_patch, seed=0, corners=PILOT_CORNERS, light_group=None, patch_group=None,
+def corner_seconds(scene, triangles, triangle_patch, seed=0, corners=CORNER_PILOT, light_group=None, patch_group=None,
                    groups=0):
     """(the seconds ``point_direct.corner_direct`` would take at the corners of ``triangles``
     (T,3) of ``triangle_patch`` (T,) (with these groups), those of its first samples alone (the
@@ -86,11 +89,12 @@ def live_seconds(scene, seed=0, patches=PILOT_CORNERS):
 
 
 def solved_light(scene):
-    """(P,3) a stand-in for each patch's solved light before the solve, which a point's noise is
-    measured against: the mean power a unit of area gets, times R / (1 - R) of the mean
-    reflectivity R, as a closed room's reflected light."""
+    """(P,3) a stand-in for each patch's solved light arriving (the run measures a point's noise
+    against its patch's irradiance, ``result.irradiance``) before the solve: the mean power a unit
+    of area gets, over 1 - R of the mean reflectivity R, as in a closed room (each unit of power
+    arrives 1 / (1 - R) times)."""
     R = float(np.average(scene.grey_reflectivity, weights=scene.patch_area))
-    return np.full((scene.patch_count, 3), scene.total_power / scene.total_area * R / max(1.0 - R, 1e-3))
+    return np.full((scene.patch_count, 3), scene.total_power / scene.total_area / max(1.0 - R, 1e-3))
 
 
 def smooth_made(settings, scene):
