@@ -166,8 +166,29 @@ def _snap(cells, parent, split_rows, where):
     c = cells.corners
     old = np.stack([c[rows[:, 0], 0], c[rows[:, 1], 1], c[rows[:, 2], 2], c[rows[:, 3], 3]], axis=1)
     corners = cells.points[old]
+    facing = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
     s, t = where[quad, 0], where[quad, 1]
-    zero, one = np.zeros_like(s), np.ones_like(s)
-    for point, (u, v) in ((c[rows[:, 0], 1], (s, zero)), (c[rows[:, 1], 2], (one, t)), (c[rows[:, 2], 3], (s, one)),
-                          (c[rows[:, 3], 0], (zero, t)), (c[rows[:, 0], 2], (s, t))):
-        cells.points[point] = _bilinear(corners, u, v)
+    points = (c[rows[:, 0], 1], c[rows[:, 1], 2], c[rows[:, 2], 3], c[rows[:, 3], 0], c[rows[:, 0], 2])
+    moving = np.ones(len(quad), bool)
+    for attempt in range(9):  # (a quad whose children would fold goes back to its midpoints, and so its neighbours' shared points)
+        if attempt == 8:
+            moving[:] = False  # (still folding: every one at its midpoints, the plain split)
+        u_s, u_t = np.where(moving, s, 0.5), np.where(moving, t, 0.5)
+        zero, one = np.zeros_like(u_s), np.ones_like(u_s)
+        for point, (u, v) in zip(points, ((u_s, zero), (one, u_t), (u_s, one), (zero, u_t), (u_s, u_t))):
+            cells.points[point] = _bilinear(corners, u, v)
+        folded = moving & ~_children_face(cells, rows, facing)
+        if not folded.any():
+            return
+        moving &= ~folded
+
+
+def _children_face(cells, rows, facing):
+    """(n,) bool: each of the quads' four children (``rows`` (n,4)) has both its triangles, cut
+    either way, facing as ``facing`` (n,3)."""
+    good = np.ones(len(rows), bool)
+    for k in range(4):
+        a, b, c, d = (cells.points[cells.corners[rows[:, k], j]] for j in range(4))
+        for p, q, r in ((a, b, c), (a, c, d), (a, b, d), (b, c, d)):
+            good &= np.einsum("ij,ij->i", np.cross(q - p, r - p), facing) > 0
+    return good
