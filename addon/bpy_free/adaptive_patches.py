@@ -14,6 +14,7 @@ from ..core.mesh import meshing
 from ..core.refine.adaptive import patch_mesh, shading_triangulation
 from ..core.refine.adaptive_light import DETAILS, refine_by_direct_light
 from ..core.refine.covered_parts import split_covered
+from . import patches as patches_module
 from .cleaning import drop_zero_area_faces
 from .patches import MAX_PATCHES, Patches, GEOMETRY_CACHE, glossy_of_patches, material_of_patches, patch_materials
 from .surface_layers import result_layers
@@ -88,7 +89,8 @@ def covered(objects, patches: Patches, layers=False) -> Patches:
         with _LAST.lock:
             _LAST.key, _LAST.value = key, cached
     cells, _ = cached
-    if cells is None:
+    # (a refinement of the light's accuracy, not needed: never past the patch limit the meshing kept to)
+    if cells is None or sum(c.count for c in cells) > patches_module.MAX_PATCHES:
         return patches
     out = of_cells(objects, patches, cells, key, [], layers, "", keep_unsplit=True)
     return replace(out, cells=None)

@@ -15,8 +15,8 @@ from the gap is a strip a gap's height wide along the slit, which a cell shows s
 width. A moved point stays on its edge (a neighbour sharing it keeps it as a corner on its own
 edge: no crack) and in the cell's plane.
 
-A point is covered when the ray from it along its patch's normal meets a surface (either side)
-within NEAR of its first patch's side: light reaches it only along the slit between the two.
+A point is covered when the ray from it along its patch's normal meets a surface (either side,
+within 30 degrees of parallel to it) within NEAR of its first patch's side: light reaches it only along the slit between the two.
 Patches another object runs into (``visibility``'s buried parts) stay whole, as the Detail
 refinement keeps them (a buried child gets no light).
 """
@@ -29,6 +29,7 @@ from .adaptive import cells_of, patch_mesh, split
 LEVELS = 2  # splits of a first patch at most: along the outline, then the cells beside it once more
 PROBES = 4  # points a side of a cell whose covering is probed (16 a cell)
 NEAR = 0.25  # of the first patch's side: a surface this close in front covers a point
+PARALLEL = np.cos(np.radians(30.0))  # ... if it lies within this of parallel to the patch
 SNAP = 16  # probes a side of a split cell where its covering changes (its split lines moved there)
 SNAP_LIMIT = 0.4  # of a cell's side from its middle, a split line moves at most (no sliver of a neighbour)
 SMALLEST_SIDE = 2e-3  # of the scene's diagonal: no cell smaller (as adaptive_light's)
@@ -46,9 +47,15 @@ def covered_points(geometry, position, patch, near):
     normal = g.patch_normal_rows.take(patch, axis=1).T.astype(np.float64)
     offset = np.asarray(g.ray_offsets(patch, np.float64), np.float64)
     origin = unit + normal * (offset[:, None] if offset.ndim else offset)
-    hit, _, _, t, _ = g.surface_tracer.first_hit_barycentric(np.ascontiguousarray(origin, np.float32),
-                                                             np.ascontiguousarray(normal, np.float32), g.region_of(patch))
-    return (hit >= 0) & (np.asarray(t, np.float64) * g.diagonal < near)
+    hit, _, _, t, met = g.surface_tracer.first_hit_barycentric(np.ascontiguousarray(origin, np.float32),
+                                                               np.ascontiguousarray(normal, np.float32), g.region_of(patch))
+    met = np.asarray(met, np.float64)
+    # (a cover lies along the patch, as a panel under a ceiling: a surface met at a slant, the next face
+    # of a bend or a concave corner, leaves the light an opening as wide as the distance)
+    along = np.abs(np.einsum("ij,ij->i", met, normal)) >= PARALLEL * np.maximum(np.linalg.norm(met, axis=1), 1e-30)
+    # (a warped patch's probe points lie a little off its triangles: meeting the patch itself is no cover)
+    other = (hit >= 0) & (g.triangle_patch.take(np.maximum(hit, 0)) != patch)
+    return other & (np.asarray(t, np.float64) * g.diagonal < near) & along
 
 
 def _probe_points(cells, rows):
