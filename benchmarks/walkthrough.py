@@ -177,17 +177,19 @@ def shown_views(walk, kinds, log=print):
     return out
 
 
-def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=True, seed=0, log=print):
+def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=True, seed=0, log=print, overrides=None):
     """One interior: references, the product's solve and its pictures of every view, Cycles at the
-    solve's time; a dict of images per kind and view, times and statistics."""
+    solve's time; a dict of images per kind and view, times and statistics. ``overrides``: panel
+    settings of the product's solves, as NAME=VALUE."""
     walk = scenes.build(name, views)
+    overrides = settings_of(overrides or [])
     clock = time.perf_counter()
     refs = references(walk, reference_samples, log)
     timing = {"references": time.perf_counter() - clock}
     if warm_up:
         log(f"{name}: warming up (a solve not counted)")
-        solve(seed=99)
-    solve_seconds, stats = solve(seed=seed)
+        solve(seed=99, **overrides)
+    solve_seconds, stats = solve(seed=seed, **overrides)
     log(f"{name}: the solve took {solve_seconds:.1f} s ({stats['patches']:,} patches, {stats['method']})")
     kinds = [k for k in SHOWN if eevee or k != "eevee"]
     clock = time.perf_counter()
@@ -199,7 +201,7 @@ def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=Tru
     images["cycles"] = [(image, wall) for image, wall, _ in cycles]
     unlive_stats = None
     if unlive:
-        _, unlive_stats = solve(seed=seed, live_lamps=False)
+        _, unlive_stats = solve(seed=seed, **{**overrides, "live_lamps": False})
         images["baked_unlive"] = [(set_view(walk, v), SHOWN["baked"]())[1] for v in walk.views]
     return {"walk": walk, "refs": refs, "images": images, "solve": solve_seconds, "stats": stats,
             "unlive_stats": unlive_stats, "samples": [s for _, _, s in cycles], "timing": timing}
@@ -238,6 +240,8 @@ def main(argv=None):
                         "Live lamps off, its baked display")
     parser.add_argument("--seed", type=int, default=0, help="the product's seed (its solves')")
     parser.add_argument("--warm-up", action=argparse.BooleanOptionalAction, default=True, help="a solve before the timed one")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a panel setting of the "
+                        "product's solves (repeatable), e.g. detail=HIGH")
     parser.add_argument("--quick", action="store_true", help=f"smoke run: 16 reference samples, 2 views, into {QUICK.relative_to(ROOT)}/")
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder of the reports and sheets")
     parser.add_argument("--replot", action="store_true", help="rewrite the reports from their .json")
@@ -249,6 +253,9 @@ def main(argv=None):
         parser.error(f"--views must be between 1 and 10; got {args.views}")
     if args.reference_samples < 2:
         parser.error(f"--reference-samples must be at least 2 (two halves); got {args.reference_samples}")
+    for item in args.set:
+        if not item.partition("=")[2]:
+            parser.error(f"--set takes NAME=VALUE; got '{item}'")
     if args.quick:
         args.reference_samples, args.views, args.out = 16, 2, QUICK
     args.out.mkdir(parents=True, exist_ok=True)
@@ -268,7 +275,8 @@ def main(argv=None):
 def walk_one(name, args, command):
     """Measure, analyse and save one interior: its numbers (.json) and contact sheet (.png)."""
     start, load = time.perf_counter(), os.getloadavg()[0]
-    m = measure(name, args.reference_samples, args.views, args.eevee, args.unlive, args.warm_up, args.seed)
+    m = measure(name, args.reference_samples, args.views, args.eevee, args.unlive, args.warm_up, args.seed,
+                overrides=args.set)
     a, masks = analyse(m)
     keep_images(m, masks, ROOT / "out" / "walkthrough_images" / f"{name}{image_tag(args)}.npz")
     sheet = args.out / f"walkthrough_{name}.png"
@@ -279,6 +287,19 @@ def walk_one(name, args, command):
                 "sheet": sheet.name}
     (args.out / f"walkthrough_{name}.json").write_text(json.dumps(a, indent=1))
     return a
+
+
+def settings_of(items):
+    """{name: value} of ``--set NAME=VALUE`` items, each value as its panel setting's type (a bool
+    from 1/true/yes)."""
+    import bpy
+
+    settings, out = bpy.context.scene.radiosity, {}
+    for item in items:
+        name, _, value = item.partition("=")
+        kind = type(getattr(settings, name))
+        out[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+    return out
 
 
 def reanalyse(name, args):
@@ -304,7 +325,8 @@ def reanalyse(name, args):
 
 def image_tag(args):
     """What tells a run's kept pictures from the default run's: quick, another seed."""
-    return ("_quick" if args.quick else "") + (f"_seed{args.seed}" if args.seed else "")
+    return ("_quick" if args.quick else "") + (f"_seed{args.seed}" if args.seed else "") + "".join(
+        "_" + item.replace("=", "-") for item in getattr(args, "set", []))
 
 
 def keep_images(m, masks, path):

@@ -13,6 +13,8 @@ import numpy as np
 from ..core.mesh import meshing
 from ..core.refine.adaptive import patch_mesh, shading_triangulation
 from ..core.refine.adaptive_light import DETAILS, refine_by_direct_light
+from ..core.refine.covered_parts import split_covered
+from . import patches as patches_module
 from .cleaning import drop_zero_area_faces
 from .patches import MAX_PATCHES, Patches, GEOMETRY_CACHE, glossy_of_patches, material_of_patches, patch_materials
 from .surface_layers import result_layers
@@ -47,9 +49,10 @@ def _key(patches, detail, seed):
 def refined(objects, patches: Patches, detail: str, seed: int = 0, layers=False, should_stop=None) -> Patches:
     """``patches`` (make_patches' of ``objects``) with the receiving objects' patches split where
     their direct light changes, as far as ``detail`` (OFF, LOW, MEDIUM, HIGH) says; the same
-    Patches where it is OFF or nothing splits. The steps taken are in ``.refinement``."""
+    Patches where nothing splits. The steps taken are in ``.refinement``. At OFF only the
+    patches a near surface partly covers split, along its outline (``covered``)."""
     if detail == OFF:
-        return patches
+        return covered(objects, patches, layers)
     key = _key(patches, detail, seed)
     with _LAST.lock:
         cached = _LAST.value if _LAST.key == key else None
@@ -69,11 +72,37 @@ def refined(objects, patches: Patches, detail: str, seed: int = 0, layers=False,
     return of_cells(objects, patches, result.cells, key + ":refined", steps, layers, detail)
 
 
-def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False, detail="") -> Patches:
+def covered(objects, patches: Patches, layers=False) -> Patches:
+    """``patches`` with the patches a near surface partly covers split along its outline (core
+    refine.covered_parts: a light panel just under a ceiling), the same Patches where none is;
+    the objects not split keep their meshes as they were (the display's own cells split them)."""
+    key = f"{patches.geometry_key}:covered"  # (the geometry's alone: no seed, no light)
+    with _LAST.lock:
+        cached = _LAST.value if _LAST.key == key else None
+    if cached is None:
+        scene = patches.patch_scene()
+        buried = scene.geometry.buried
+        whole = np.zeros(scene.patch_count, bool)
+        if buried is not None:
+            whole[np.concatenate([buried.patch, buried.whole]).astype(np.int64)] = True
+        cached = (split_covered(patches.meshes, scene.geometry, [o.receives for o in patches.objects], whole), 0.0)
+        with _LAST.lock:
+            _LAST.key, _LAST.value = key, cached
+    cells, _ = cached
+    # (a refinement of the light's accuracy, not needed: never past the patch limit the meshing kept to)
+    if cells is None or sum(c.count for c in cells) > patches_module.MAX_PATCHES:
+        return patches
+    out = of_cells(objects, patches, cells, key, [], layers, "", keep_unsplit=True)
+    return replace(out, cells=None)
+
+
+def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False, detail="", keep_unsplit=False) -> Patches:
     """``patches`` (make_patches' of ``objects``, or refined ones) on the conforming meshes of
-    ``cells`` (core.adaptive, one per object), their materials and result layers made again."""
+    ``cells`` (core.adaptive, one per object), their materials and result layers made again;
+    ``keep_unsplit``: an object none of whose cells split keeps its plain mesh (no shading
+    triangulation of its own: the display's cells may split it)."""
     objects, _ = drop_zero_area_faces(objects)  # (as make_patches read them: the same faces)
-    meshes = [_copy(patch_mesh(c)[0]) for c in cells]
+    meshes = [_copy(patch_mesh(c)[0], not (keep_unsplit and c.level.max(initial=0) == 0)) for c in cells]
     combined = meshing.concatenate(meshes)
     if combined.patch_count > MAX_PATCHES:
         raise ValueError(f"Detail {detail.lower()} would make {combined.patch_count:,} patches, more than the limit of "
@@ -109,11 +138,12 @@ def refinement_text(patches: Patches) -> str:
     return text + (" after a refining solve" if ROUNDS == 1 else f" after up to {ROUNDS} refining solves")
 
 
-def _copy(mesh):
-    """A PatchMesh of its own (concatenate makes a mesh share the combined arrays), shading kept."""
+def _copy(mesh, shading=True):
+    """A PatchMesh of its own (concatenate makes a mesh share the combined arrays), ``shading`` kept."""
     out = meshing.PatchMesh(mesh.points, mesh.face_sizes, mesh.corner_verts, mesh.patch_face, mesh.triangles,
                             mesh.triangle_patch, mesh.patch_area)
-    out.shading_triangles, out.shading_triangle_patch = shading_triangulation(mesh)
+    if shading:
+        out.shading_triangles, out.shading_triangle_patch = shading_triangulation(mesh)
     return out
 
 

@@ -15,7 +15,7 @@ from ..blender_read import sources
 from ..blender_read.selection import read_selection
 from ..blender_write import relight_keep, relight_store, solve_job
 from ..blender_write.results import write_results
-from ..bpy_free import pipeline, relit
+from ..bpy_free import adaptive_patches, pipeline, relit
 from ..bpy_free.settings import method_for, prediction_for
 from ..bpy_free.patches import make_patches
 from ..bpy_free.scene_notes import scene_and_notes
@@ -87,7 +87,8 @@ def _partial(context, meta, stale, last, outcome):
     result, settings, patch_size = last
     _select(context, meta)
     objects, notes = read_selection(context)
-    patches = make_patches(objects, patch_size, layers=True)
+    # (the patches a near surface partly covers split as the solve split them: the same patches)
+    patches = adaptive_patches.covered(objects, make_patches(objects, patch_size, layers=True), layers=True)
     del objects
     core_scene, more = scene_and_notes(patches)
     groups = relit.groups_for(core_scene, patches, "ON", [])

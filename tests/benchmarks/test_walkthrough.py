@@ -329,3 +329,17 @@ def test_the_baked_display_shows_the_result_materials_stored_light(live):
         assert mix.bl_idname == "ShaderNodeMix"  # the colour the result's own Emission shader takes
         assert mix.inputs[7].links[0].from_node.attribute_name in ("Radiosity Patches", "Radiosity")
     bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def test_set_takes_name_value_and_its_run_keeps_pictures_of_its_own(capsys):
+    """``--set NAME=VALUE`` (a panel setting of the product's solves): without a value one line; the
+    kept pictures of such a run are not the default run's."""
+    import argparse
+
+    from benchmarks import walkthrough as wt
+
+    with pytest.raises(SystemExit):
+        wt.main(["--interior", "studio_flat", "--set", "detail"])
+    assert "--set takes NAME=VALUE; got 'detail'" in capsys.readouterr().err
+    run = argparse.Namespace(quick=False, seed=0, set=["detail=HIGH"])
+    assert wt.image_tag(run) == "_detail-HIGH" and wt.image_tag(argparse.Namespace(quick=False, seed=0, set=[])) == ""

@@ -83,7 +83,7 @@ def test_an_emitting_material_in_a_slot_no_face_uses_is_not_new_light(blender):
 
 def swamped(context, glow):
     """The room lit by its glowing strip at ``glow`` and the bulb at 500 W alone: the bulb's
-    share of the power (and of the paths) about 1e-4 at 1e7."""
+    share of the power (and of the paths) about 1e-3 at 1e6."""
     settings = rs.build(context)
     for name in ("Panel", "Sun"):
         bpy.data.objects.remove(bpy.data.objects[name])
@@ -93,10 +93,11 @@ def swamped(context, glow):
     return settings
 
 
-@pytest.mark.parametrize("glow,unknown", [(1e7, False), (1e10, True)])
+@pytest.mark.parametrize("glow,unknown", [(1e6, False), (1e10, True)])
 def test_a_lamp_hidden_by_a_far_brighter_emitter_is_stale_when_it_is_most_of_the_light(blender, monkeypatch, glow,
                                                                                          unknown):
-    """The glow at 1e7 leaves the bulb a few of the solve's paths: relit alone its error is
+    """The glow at 1e6 leaves the bulb a few of the solve's paths (at 1e7, with the wall's patches
+    behind the strip split along its outline, fewer than two batches at this seed): relit alone its error is
     measured, far past the target, and the bulb is stale; at 1e10 it drew none: the room black,
     its error unknown (before: "error 0%"), stale too. Update solves the bulb's light alone."""
     swamped(blender, glow)
