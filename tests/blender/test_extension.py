@@ -92,14 +92,14 @@ def _covered(meshes, names, spec):
     outline (the lamp 1 cm under the ceiling; core refine.covered_parts, as adaptive_patches.covered)."""
     from addon.core.refine.adaptive import patch_mesh
     from addon.core.refine.covered_parts import split_covered
+    from addon.core.scene.crossings import crossed_patches
+    from addon.core.scene.geometry_build import build_geometry
 
     c = concatenate(meshes)
-    R, E = (np.concatenate([spec[n][i][m.patch_face] for n, m in zip(names, meshes)]) for i in (2, 3))
-    scene = PatchScene(c.vertices, c.triangles, c.triangle_patch, R, E)
-    buried, whole = scene.geometry.buried, np.zeros(scene.patch_count, bool)
-    if buried is not None:
-        whole[np.concatenate([buried.patch, buried.whole]).astype(np.int64)] = True
-    cells = split_covered(meshes, scene.geometry, None, whole)
+    geometry = build_geometry(c.vertices, c.triangles, c.triangle_patch, c.patch_count, visible_parts=False)
+    whole = np.zeros(c.patch_count, bool)
+    whole[crossed_patches(geometry)] = True
+    cells = split_covered(meshes, geometry, None, whole)
     if cells is None:
         return meshes
     out = []
