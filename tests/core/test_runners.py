@@ -1,26 +1,11 @@
 """The display's work on this machine's threads (addon/core/distributed/runners.py): ``on_threads``
-runs a queue's worker on the threads ``local_threads`` allows (the threads setting; 1: the
+runs a worker on the threads ``local_threads`` allows (the threads setting; 1: the
 calling thread alone), raises a worker's error, and nests no pool inside a pool."""
 import threading
 
 import pytest
 
 from addon.core.distributed import runners
-
-
-def _queue(items, task):
-    """A worker taking ``items`` from a shared queue, ``task(item)`` each."""
-    lock, taken = threading.Lock(), iter(items)
-
-    def work():
-        while True:
-            with lock:
-                item = next(taken, None)
-            if item is None:
-                return
-            task(item)
-
-    return work
 
 
 def test_the_work_runs_on_two_threads_at_once():
@@ -35,7 +20,7 @@ def test_the_work_runs_on_two_threads_at_once():
         done.append(k)
 
     with runners.local_threads(2):
-        runners.on_threads(_queue(range(7), task), 7)
+        runners.each_on_threads(7, task, most=7)
     assert len(threads) == 2 and sorted(done) == list(range(7))
 
 
@@ -43,10 +28,10 @@ def test_one_thread_runs_every_task_on_the_calling_thread():
     seen = []
     with runners.local_threads(1):
         assert runners.local_thread_count() == 1
-        runners.on_threads(_queue(range(5), lambda k: seen.append(threading.get_ident())), 5)
+        runners.each_on_threads(5, lambda k: seen.append(threading.get_ident()), most=5)
     assert seen == [threading.get_ident()] * 5
     with runners.local_threads(2):  # (one task: no pool)
-        runners.on_threads(_queue(range(3), lambda k: seen.append(threading.get_ident())), 1)
+        runners.each_on_threads(3, lambda k: seen.append(threading.get_ident()), most=1)
     assert set(seen) == {threading.get_ident()}
 
 
@@ -59,7 +44,7 @@ def test_a_workers_error_is_raised_and_no_pool_starts_inside_a_pool():
             raise ValueError("task 3")
 
     with runners.local_threads(2), pytest.raises(ValueError, match="task 3"):
-        runners.on_threads(_queue(range(6), task), 6)
+        runners.each_on_threads(6, task, most=6)
     assert inner and set(inner) == {1}
 
 
