@@ -13,9 +13,7 @@ import numpy as np
 from ..core.mesh import meshing
 from ..core.refine.adaptive import patch_mesh, shading_triangulation
 from ..core.refine.adaptive_light import DETAILS, refine_by_direct_light
-from ..core.refine.covered_parts import split_covered
-from ..core.scene.crossings import crossed_patches
-from ..core.scene.geometry_build import build_geometry
+from ..core.refine.covered_parts import covered_cells
 from . import patches as patches_module
 from .cleaning import drop_zero_area_faces
 from .patches import MAX_PATCHES, Patches, GEOMETRY_CACHE, glossy_of_patches, material_of_patches, patch_materials
@@ -82,13 +80,7 @@ def covered(objects, patches: Patches, layers=False) -> Patches:
     with _LAST.lock:
         cached = _LAST.value if _LAST.key == key else None
     if cached is None:
-        # (the rays alone, not the scene's buried parts: those the split scene finds; a patch another
-        # surface crosses stays whole, as a buried one does, a buried child getting no light)
-        c = patches.combined
-        geometry = build_geometry(c.vertices, c.triangles, c.triangle_patch, c.patch_count, visible_parts=False)
-        whole = np.zeros(c.patch_count, bool)
-        whole[crossed_patches(geometry)] = True
-        cached = (split_covered(patches.meshes, geometry, [o.receives for o in patches.objects], whole), 0.0)
+        cached = (covered_cells(patches.meshes, patches.combined, [o.receives for o in patches.objects]), 0.0)
         with _LAST.lock:
             _LAST.key, _LAST.value = key, cached
     cells, _ = cached

@@ -91,15 +91,9 @@ def _covered(meshes, names, spec):
     """The meshes as the operator meshes them: the patches a near surface partly covers split along its
     outline (the lamp 1 cm under the ceiling; core refine.covered_parts, as adaptive_patches.covered)."""
     from addon.core.refine.adaptive import patch_mesh
-    from addon.core.refine.covered_parts import split_covered
-    from addon.core.scene.crossings import crossed_patches
-    from addon.core.scene.geometry_build import build_geometry
+    from addon.core.refine.covered_parts import covered_cells
 
-    c = concatenate(meshes)
-    geometry = build_geometry(c.vertices, c.triangles, c.triangle_patch, c.patch_count, visible_parts=False)
-    whole = np.zeros(c.patch_count, bool)
-    whole[crossed_patches(geometry)] = True
-    cells = split_covered(meshes, geometry, None, whole)
+    cells = covered_cells(meshes, concatenate(meshes))
     if cells is None:
         return meshes
     out = []

@@ -25,6 +25,8 @@ from __future__ import annotations
 import numpy as np
 
 from .adaptive import cells_of, patch_mesh, split
+from ..scene.crossings import crossed_patches
+from ..scene.geometry_build import build_geometry
 
 LEVELS = 2  # splits of a first patch at most: along the outline, then the cells beside it once more
 PROBES = 4  # points a side of a cell whose covering is probed (16 a cell)
@@ -74,6 +76,17 @@ def _probe_points(cells, rows):
     folded = p[:, None, 0] + fs[None, :, None] * (p[:, None, 1] - p[:, None, 0]) + ft[None, :, None] * (p[:, None, 2] - p[:, None, 0])
     points = np.where(quad[:, None, None], bilinear, folded)
     return points.reshape(-1, 3), np.repeat(np.arange(len(rows)), PROBES * PROBES)
+
+
+def covered_cells(meshes, combined, receives=None):
+    """``split_covered`` of ``meshes`` (their ``combined`` CombinedPatches) on their rays alone: no buried
+    parts (the split scene finds them), a patch another surface crosses kept whole, as a buried one
+    would be (a buried child gets no light)."""
+    geometry = build_geometry(combined.vertices, combined.triangles, combined.triangle_patch, combined.patch_count,
+                              visible_parts=False)
+    whole = np.zeros(combined.patch_count, bool)
+    whole[crossed_patches(geometry)] = True
+    return split_covered(meshes, geometry, receives, whole)
 
 
 def split_covered(meshes, geometry, receives=None, keep_whole=None):
