@@ -1,5 +1,5 @@
 """The two-way iteration's direct-light samples allotted by area alone or half by a pilot's
-light (two_way.RECEIVED_SHARE, first_shot.pilot_irradiance), against exact references.
+light (two_way.RECEIVED_SHARE, two_way.pilot_irradiance), against exact references.
 
     python -m benchmarks.direct_allocation [fixed|stop|stop2|sample]   # all: writes
                                                                  # benchmarks/results/direct_allocation.md

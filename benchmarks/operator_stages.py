@@ -41,6 +41,7 @@ RESULTS = Path(__file__).parent / "results"
 STAGES = (
     ("read the selection", "addon.blender_write.solve_job", "read_selection", 0),
     ("meshing (patches)", "addon.bpy_free.pipeline", "make_patches", 0),
+    ("refined patches (the outline split)", "addon.bpy_free.pipeline.solve_refinement", "refined", 0),
     ("scene arrays, Embree scenes", "addon.bpy_free.pipeline", "scene_and_notes", 0),
     ("prediction, method", "addon.bpy_free.pipeline", "prediction_for", 0),
     ("per-source groups", "addon.bpy_free.pipeline.relit", "groups_for", 0),
@@ -51,11 +52,13 @@ STAGES = (
     ("the two-way state (pilot, gathering)", "addon.core.methods.two_way.TwoWay", "create", 1),
     ("chunks", "addon.core.chunks._Run", "chunks", 1),
     ("result", "addon.core.chunks", "_result", 1),
+    ("the display's direct means", "addon.bpy_free.pipeline.direct_means", "corrected", 0),
     ("back-light warning", "addon.bpy_free.pipeline", "back_light_warning", 0),
     ("colours (display)", "addon.bpy_free.pipeline", "write_colours", 0),
     ("display's direct light at corners", "addon.core.display.point_direct", "corner_direct", 1),
     ("light arriving at corners", "addon.core.display.point_direct", "arriving", 1),
     ("the display's cells (their new points' light)", "addon.core.refine.display_cells", "refine", 1),
+    ("per-source results", "addon.bpy_free.pipeline.relit", "source_results", 0),
     ("writing results", "addon.blender_write.solve_job", "write_results", 0),
     ("relight keep", "addon.blender_write.relight_keep", "keep", 0),
 )

@@ -234,9 +234,9 @@ def direct_only(paths, chunks=32):
     from addon.bpy_free import patches as patch_making
     from addon.bpy_free.scene_notes import scene_and_notes
     from addon.blender_read.selection import read_selection
-    from addon.core.methods.first_shot import Gathering, gather_direct, pilot_irradiance
+    from addon.core.methods.first_shot import Gathering, gather_direct
     from addon.core.methods.tables import WalkTables
-    from addon.core.methods.two_way import direct_samples
+    from addon.core.methods.two_way import direct_samples, pilot_irradiance
     from addon.core.methods.walk import FreeTurn
 
     objects, _ = read_selection(bpy.context)

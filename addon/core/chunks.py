@@ -20,7 +20,8 @@ from .distributed.cluster import ClusterRunner, WalkParameters
 from .distributed.cluster_connect import cluster_address
 from .distributed.runners import ThreadRunner
 from .estimate.batches import Batches
-from .estimate.plan import chunk_plan, meets_target, paths_to_target, relative_error, target_bound, target_now
+from .estimate.plan import (RESIZE_AFTER, chunk_plan, meets_target, paths_to_target, relative_error, resize_inputs, resizes,
+                            target_bound, target_now)
 from .methods.tables import WalkTables
 from .names import (
     FINITE,
@@ -94,9 +95,9 @@ def run(scene, settings, method, start=None, progress=None, should_stop=None):
     runner = _runner(scene, settings, method, state)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
     done_rule = STOP_TARGET if (settings.paths is None and not plan.measured_rule) else STOP_PATHS
-    chunks = _Run(plan, chunk, settings, done_rule, start)
+    chunks = _Run(plan, chunk, settings, done_rule, start, method)
     total, stopped = chunks.chunks(scene, state, runner, int(settings.seed), progress, should_stop, settings.max_seconds)
-    return _result(scene, total, stopped, chunks, method, state, settings, runner.threads)
+    return _result(scene, total, stopped, chunks, method, chunks.state, settings, runner.threads)
 
 
 def _runner(scene, settings, method, state):
@@ -114,14 +115,19 @@ def _runner(scene, settings, method, state):
 
 class _Run:
     """A run of a plan's chunks: submitted in order, a group at a time, while the runner has
-    room; their tallies added in order; stopped by the plan's rule, a cancel or the time limit."""
+    room; their tallies added in order; stopped by the plan's rule, a cancel or the time limit.
+    A plan sized on a guess of its paths (a measured stop, no paths, chunk or time limit given)
+    sizes its chunks after its first RESIZE_AFTER (``Method.shrunk_chunk``): the later ones wait
+    for them, so that every chunk's size is the same on any number of threads."""
 
-    def __init__(self, plan, chunk, settings, done_rule, start):
-        self.plan, self.chunk, self.start = plan, chunk, start
+    def __init__(self, plan, chunk, settings, done_rule, start, method):
+        self.plan, self.chunk, self.start, self.method = plan, chunk, start, method
         self.measured = plan.measured_rule and plan.target_mse is not None  # (else the run stops on its paths)
         self.target_error, self.error_scale = settings.target_error, settings.error_scale
         self.done_rule = done_rule
         self.replaced = settings.replaced_direct
+        self.resize_at = RESIZE_AFTER if method.shrinks_chunks and resizes(plan, settings) else None
+        self.state = None
 
     def target(self, total):
         """The MSE the measured stop rule holds the run to now (None: it stops on its paths): the
@@ -132,16 +138,18 @@ class _Run:
 
     def chunks(self, scene, state, runner, seed, progress, should_stop, max_seconds):
         """(Batches of the chunks added, why the run stopped)."""
-        plan, chunk = self.plan, self.chunk
+        plan, self.state = self.plan, state
         total = Batches(scene, state.tables, increments=plan.measured_rule, replaced=self.replaced)
-        count = math.ceil(plan.cap / chunk)
-        group = state.group(chunk, plan.prediction.expected_path_length)
-        stopped, pending, next_chunk = None, deque(), 0
+        group = state.group(self.chunk, plan.prediction.expected_path_length)
+        stopped, pending, next_chunk, submitted = None, deque(), 0, 0
         try:
             runner.start(state, seed)
             while stopped is None:
-                while next_chunk < count and len(pending) < runner.slots:
-                    sizes = [min(chunk, plan.cap - k * chunk) for k in range(next_chunk, min(next_chunk + group, count))]
+                while submitted < plan.cap and len(pending) < runner.slots and not self._waiting(next_chunk):
+                    sizes = []
+                    while len(sizes) < group and submitted < plan.cap:
+                        sizes.append(min(self.chunk, plan.cap - submitted))
+                        submitted += sizes[-1]
                     pending.append(runner.submit(next_chunk, sizes))
                     next_chunk += len(sizes)
                 if not pending:
@@ -156,10 +164,30 @@ class _Run:
                     break
                 pending.popleft()
                 stopped = self._add(total, tallies, progress, should_stop, max_seconds)
+                if stopped is None and self._waiting(next_chunk) and total.chunks >= self.resize_at:
+                    self._resize(scene, total, runner)
+                    group = self.state.group(self.chunk, plan.prediction.expected_path_length)
         finally:
             runner.stop(pending)  # tasks still running are abandoned; their partial tallies dropped
             pending.clear()  # (their futures hold a tally, or a traceback and the walk's arrays in it)
         return total, stopped
+
+    def _waiting(self, next_chunk):
+        """Whether chunk ``next_chunk`` waits for the first ones to size it."""
+        return self.resize_at is not None and next_chunk >= self.resize_at
+
+    def _resize(self, scene, total, runner):
+        """The later chunks' size (and the state they read) from the first ones' measured error."""
+        self.resize_at, target = None, self.target(total)
+        inputs = None if target is None else resize_inputs(total, target)
+        if inputs is None:
+            return
+        variance, target = inputs
+        chunk = self.method.shrunk_chunk(scene.patch_count, self.chunk, total.chunks, variance, target)
+        if chunk < self.chunk:
+            self.state = self.method.resized(self.state, self.chunk, chunk)
+            runner.restate(self.state)
+            self.chunk = chunk
 
     def _add(self, total, tallies, progress, should_stop, max_seconds):
         """Adds a task's tallies (progress once per chunk); why the run stops now, or None."""

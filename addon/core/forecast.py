@@ -29,8 +29,10 @@ from .estimate.plan import (
     MEASURED_STOP_CHUNKS,
     MIN_CHUNK_PATHS,
     MIN_MEASURED_CHUNKS,
+    RESIZE_AFTER,
     chunk_plan,
     paths_to_target,
+    resizes,
     target_now,
 )
 
@@ -139,7 +141,22 @@ def forecast(scene, settings, *, bounces=None, budget=PILOT_RAYS, should_stop=No
         rays_per_path, setup = guess, 0.0
         per_path = max(guess / (raw_rate(scene, seed=settings.seed) * SOLVE_SHARE_OF_RAW_RATE * workers),
                        seconds / (pilot_chunk * min(workers, pilot_chunks)))
-    short = 1.0
+    expected, short, chunks = _expected_paths(scene, settings, plan, chosen, variance, r)
+    seconds = setup + per_path * expected
+    limited = settings.max_seconds is not None and seconds > settings.max_seconds
+    return Forecast(paths=expected, rays=expected * rays_per_path, seconds=seconds,
+                    chunk=plan.chunk, chunks=chunks, variance_per_path=variance,
+                    rays_per_path=rays_per_path, seconds_per_path=per_path, setup_seconds=setup,
+                    pilot_chunk=pilot_chunk, pilot_chunks=r.chunks, pilot_seconds=time.perf_counter() - start,
+                    measured=measured, time_limited=limited, short_of_target=short)
+
+
+def _expected_paths(scene, settings, plan, chosen, variance, r):
+    """(paths, short_of, chunks) a run of ``plan`` is expected to end at, from the pilot's
+    ``variance`` per path at the plan's chunk and its result ``r`` (the mean a measured target is
+    relative to): the cap where it runs given paths; whole chunks to its target, its first of the
+    plan's size and the rest as it sizes them (``Method.shrunk_chunk``), where it stops on its error."""
+    short, chunks = 1.0, None
     if settings.paths is not None or not plan.measured_rule:
         expected = float(plan.cap)
     elif variance == variance:
@@ -147,15 +164,16 @@ def forecast(scene, settings, *, bounces=None, budget=PILOT_RAYS, should_stop=No
         if settings.replaced_direct is not None and r.per_source is not None and r.per_source.direct_irradiance is not None:
             target *= 1.0 - settings.replaced_direct.share  # (what the run keeps is held to the rest: estimate.batches.Replaced)
         expected, short = paths_to_target(1, variance, target, plan.chunk, plan.cap), short_of(variance, target, plan.cap)
+        later = chosen.shrunk_chunk(scene.patch_count, plan.chunk, RESIZE_AFTER, variance, target) \
+            if chosen.shrinks_chunks and resizes(plan, settings) else plan.chunk
+        if later < plan.chunk:  # (the run's first chunks of the plan's size, the rest of ``later``)
+            rest = paths_to_target(1, variance * chosen.variance_scale(scene.patch_count, plan.chunk, later), target, later,
+                                   plan.cap)
+            expected = float(min(plan.cap, RESIZE_AFTER * (plan.chunk - later) + rest))
+            chunks = RESIZE_AFTER + (expected - RESIZE_AFTER * plan.chunk) / later
     else:  # at least the chunks the measured rule needs, at most the cap
         expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(plan.target_mse))))
-    seconds = setup + per_path * expected
-    limited = settings.max_seconds is not None and seconds > settings.max_seconds
-    return Forecast(paths=expected, rays=expected * rays_per_path, seconds=seconds,
-                    chunk=plan.chunk, chunks=expected / plan.chunk, variance_per_path=variance,
-                    rays_per_path=rays_per_path, seconds_per_path=per_path, setup_seconds=setup,
-                    pilot_chunk=pilot_chunk, pilot_chunks=r.chunks, pilot_seconds=time.perf_counter() - start,
-                    measured=measured, time_limited=limited, short_of_target=short)
+    return expected, short, expected / plan.chunk if chunks is None else chunks
 
 
 def short_of(variance, target, cap):

@@ -74,3 +74,47 @@ def test_the_variance_of_light_beyond_float32s_square_root_is_kept_whole():
     assert np.isfinite(bright.irradiance_variance).all()
     np.testing.assert_allclose(bright.irradiance_variance / 1e60, unit.irradiance_variance, rtol=1e-5,
                                atol=1e-6 * float(unit.irradiance_variance.max()))
+
+
+
+def _tally(n, incident):
+    from addon.core.estimate.tallies import ChunkTally
+    zero = np.zeros(3)
+    return ChunkTally(n, 0, incident, zero, zero, zero, zero, zero)
+
+
+def test_chunks_of_two_sizes_are_estimated_as_shrunk_chunk_expects():
+    """A run whose later chunks are smaller (two_way.shrunk_chunk) is read by the same batch
+    estimate: each chunk's spread counts alike, so its expectation is
+    (sum_k v_k - sum_k n_k v_k / N) / ((K - 1) N) for chunks of n_k paths and variance v_k per
+    path (``two_way.later_estimate``, what shrunk_chunk sizes them by). Synthetic tallies:
+    Gaussian incident power of variance n_k v_k about its mean at every patch, RESIZE_AFTER
+    chunks of 6,000 paths, the rest of 1,500 with the variance per path TWO_WAY_GROWTH makes of
+    it; 400 replicas, their mean within 4 standard errors of it."""
+    from addon.core.estimate import plan
+    from addon.core.estimate.batches import Batches
+    from addon.core.methods import two_way as tw
+    from addon.core.methods.tables import WalkTables
+
+    scene, _, _ = _black_floor_box()
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    P, K, m, big, small = scene.patch_count, plan.MEASURED_STOP_CHUNKS, plan.RESIZE_AFTER, 6000, 1500
+    grown = (1 + tw.TWO_WAY_GROWTH * P / small) / (1 + tw.TWO_WAY_GROWTH * P / big)
+    spread = 1e-3 * np.sqrt(np.random.default_rng(0).uniform(0.5, 2.0, (3, P)))  # (a patch's noise a path)
+    # the variance a path that chunks of one size measure: two one-path chunks +a and -a read sum W a^2
+    unit = Batches(scene, tables)
+    unit.add(_tally(1, spread))
+    unit.add(_tally(1, -spread))
+    variance = unit.measured_mse()
+    mean = 1e-3 * np.ones((3, P))
+    rng, readings = np.random.default_rng(7), []
+    for _ in range(400):
+        total = Batches(scene, tables)
+        for k in range(K):
+            n, v = (big, 1.0) if k < m else (small, grown)
+            total.add(_tally(n, n * mean + np.sqrt(n * v) * spread * rng.standard_normal((3, P))))
+        readings.append(total.measured_mse())
+    readings = np.asarray(readings)
+    expected = tw.later_estimate(P, big, m, variance, small)
+    assert grown > 1.5  # (the small chunks' variance a path well above the large ones')
+    assert abs(readings.mean() - expected) <= 4 * readings.std(ddof=1) / np.sqrt(readings.size), (readings.mean(), expected)

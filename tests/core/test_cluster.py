@@ -73,6 +73,24 @@ def test_the_two_way_iteration_on_a_cluster_is_bitwise_the_local_one(client, sce
     assert np.array_equal(local.reflected_variance, remote.reflected_variance, equal_nan=True)
 
 
+def test_a_two_way_run_that_shrinks_its_chunks_on_a_cluster_is_bitwise_the_local_one(client):
+    """After its first chunks a run to a loose target goes on with smaller chunks and a smaller
+    gathering (chunks._Run, two_way.shrunk_chunk): the workers rebuild that state too."""
+    from boxes import grey_room
+
+    room, _ = grey_room()
+    local = solve(room, target_error=0.02, seed=1, method="two_way", threads=1)
+    remote = solve(room, target_error=0.02, seed=1, method="two_way", cluster=client)
+    from addon.core.estimate.plan import chunk_plan
+    from addon.core.methods import TwoWay
+    from addon.core.settings import Settings
+
+    first = chunk_plan(room, TwoWay(), Settings(target_error=0.02, method="two_way")).chunk
+    assert local.paths < local.chunks * first  # (its later chunks smaller)
+    assert np.array_equal(local.radiosity, remote.radiosity) and local.paths == remote.paths and local.rays == remote.rays
+    assert local.gather_rays == remote.gather_rays and local.stopped == remote.stopped == "target"
+
+
 def _worker_table_ids():
     from addon.core.distributed import cluster
 

@@ -170,8 +170,10 @@ def test_measured_stop_rule_reads_the_estimate_once_a_group(scene, monkeypatch, 
     target = 3 * predict(scene, estimator, paths=200_000).predicted_mse
     r = solve(scene, estimator=estimator, target_mse=target, stop_rule="measured", seed=5, threads=1)
     assert r.stopped == "target" and r.measured_mse <= target
-    # Read at MIN_MEASURED_CHUNKS chunks and after, once per task, then for the result.
-    assert made[-2:] == [r.chunks, r.chunks] and made[0] >= plan.MIN_MEASURED_CHUNKS
+    # Read once at RESIZE_AFTER chunks (the later chunks' size), at MIN_MEASURED_CHUNKS and after,
+    # once per task, then for the result.
+    sized = [plan.RESIZE_AFTER] if r.method == "two_way" else []  # (the two-way iteration's chunks: Method.shrinks_chunks)
+    assert made[-2:] == [r.chunks, r.chunks] and made[:len(sized)] == sized and made[len(sized)] >= plan.MIN_MEASURED_CHUNKS
     assert all(b > a for a, b in zip(made[:-1], made[1:-1]))
 
 

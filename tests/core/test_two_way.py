@@ -12,7 +12,8 @@ from addon.core.settings import Settings
 from addon.core import PatchScene, predict, relative_rms_to_mse, solve
 from addon.core.estimate import plan
 from addon.core.methods import two_way
-from addon.core.methods.first_shot import Gathering, pilot_irradiance
+from addon.core.methods.first_shot import Gathering
+from addon.core.methods.two_way import pilot_irradiance
 from addon.core.methods import automatic
 from addon.core.methods import two_way as tw
 from addon.core.lights.lights import AreaLight, PointLight, SunLight, WorldLight
@@ -285,7 +286,9 @@ def test_a_guessed_plan_grows_the_two_way_chunks_to_the_balance_of_the_stop_rule
     chosen = plan.chunk_plan(scene, tw.TwoWay(), Settings.for_mse(scene, target))
     assert chosen.chunk >= tw.balanced_chunk(scene.patch_count, tw.TwoWay().planned_paths(chosen.prediction.paths_for(target)))
     r = solve(scene, target_mse=target, seed=1, method="auto")
-    assert r.method == "two_way" and r.stopped == "target" and r.paths == r.chunks * chosen.chunk
+    assert r.method == "two_way" and r.stopped == "target"
+    first = plan.RESIZE_AFTER * chosen.chunk  # (the first chunks of the plan's size, the rest alike: shrunk_chunk)
+    assert (r.paths - first) % (r.chunks - plan.RESIZE_AFTER) == 0 and r.paths <= r.chunks * chosen.chunk
 
 
 def test_a_small_plan_runs_in_fewer_larger_chunks_than_the_walk_s():
@@ -486,3 +489,42 @@ def test_a_panels_back_lighting_the_ceiling_over_it_leaves_the_two_way_iteration
         assert scene.back_emits.any()
         assert automatic.concentration(scene) < automatic.MAX_CONCENTRATION / 1.5
         assert automatic.choose(scene, Settings(target_error=0.02)) == "two_way"
+
+
+def test_shrunk_chunk_is_the_smallest_that_meets_the_target_on_the_fewest_chunks():
+    """The later chunks' size: the smallest n whose expected batch estimate on
+    MEASURED_STOP_CHUNKS chunks (``later_estimate``) meets the target; the plan's chunk where
+    even its own size would not; never below ``least``."""
+    P, n0, m, least = 4_000, 60_000, plan.RESIZE_AFTER, 2_000
+    variance = 1.0
+    at_plan = tw.later_estimate(P, n0, m, variance, n0)
+    assert at_plan == pytest.approx(variance / (plan.MEASURED_STOP_CHUNKS * n0))  # (equal chunks: v / N)
+    assert tw.shrunk_chunk(P, n0, m, variance, 0.9 * at_plan, least) == n0
+    target = 2.0 * at_plan
+    n = tw.shrunk_chunk(P, n0, m, variance, target, least)
+    assert least < n < n0
+    assert tw.later_estimate(P, n0, m, variance, n) <= target < tw.later_estimate(P, n0, m, variance, n - 1)
+    assert tw.shrunk_chunk(P, n0, m, variance, 100 * at_plan, least) == least
+
+
+def test_a_run_whose_first_chunks_overshoot_goes_on_with_smaller_ones_and_still_meets_its_target():
+    """A grey room at a 2% target: the walk's guess plans chunks twelve of which reach about
+    1%; after RESIZE_AFTER of them the run goes on with smaller ones (their gathering smaller
+    alike) and stops on its measured error at the target. Against the direct solve, each
+    patch's error is within its batch standard error (z-scores, as above; chunks of two sizes
+    in the estimate), and the run's true error meets the target."""
+    from boxes import grey_room
+
+    scene, F = grey_room()
+    exact = solve_radiosity_system(F, scene.reflectivity, scene.emission)
+    settings = Settings.for_mse(scene, relative_rms_to_mse(predict(scene), 0.02), method="two_way")
+    first = plan.chunk_plan(scene, tw.TwoWay(), settings).chunk
+    w = scene.patch_area / scene.total_area
+    for seed in range(3):
+        r = solve(scene, target_error=0.02, method="two_way", seed=seed, threads=2)
+        later = (r.paths - plan.RESIZE_AFTER * first) / (r.chunks - plan.RESIZE_AFTER)
+        assert r.stopped == "target" and later < first / 1.5, (r.paths, r.chunks, first)
+        z = _z(r, exact)
+        assert _z_ok(z, r.chunks), (np.abs(z).max(), np.mean(z**2))
+        true = float((w[:, None] * (r.radiosity - exact) ** 2).mean(axis=1).sum())
+        assert math.sqrt(true) / float((w[:, None] * (exact - scene.emission)).mean(axis=1).sum()) <= 0.02

@@ -14,7 +14,7 @@ import pickle
 import threading
 import time
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -191,6 +191,10 @@ class ClusterRunner:
         future = self.client.submit(cluster_chunks, self._scene, self.parameters, self.seed, first_chunk,
                                     list(sizes), pure=False, key=f"radiosity-chunks-{first_chunk}-{id(self)}")
         return _Result(future)
+
+    def restate(self, state):
+        """The state the tasks submitted from now on rebuild (its spec: their size changed)."""
+        self.parameters = replace(self.parameters, spec=state.spec)
 
     def stop(self, pending):
         """Cancel the tasks still queued or running; their partial tallies are dropped."""

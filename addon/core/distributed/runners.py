@@ -48,6 +48,10 @@ class ThreadRunner:
         """A future of the tallies of chunks ``first_chunk``... of ``sizes`` paths."""
         return self._executor.submit(run_chunks, self._state, self._seed, first_chunk, sizes, self._abort)
 
+    def restate(self, state):
+        """The state the chunks submitted from now on read (their size changed)."""
+        self._state = state
+
     def stop(self, pending):
         """Abandon the tasks still running (at their next step) or queued; wait for the threads."""
         self._abort.set()

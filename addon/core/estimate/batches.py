@@ -235,6 +235,20 @@ class Batches:
         self._mse_at = (self.chunks, mse)
         return mse
 
+    def spread_terms(self):
+        """The number of independent terms measured_mse's sum over patches and channels is worth,
+        (sum t)^2 / sum t^2 of its terms t (inf without error): few where a few patches hold the
+        error, whose estimate is then as noisy as a chi-square of that many degrees of freedom.
+        From two chunks it reads a third of the true number (a term's square is 3 times its
+        variance's): on the safe side."""
+        first = second = 0.0
+        for k, rows, weight in self._squared_score_weights():
+            term = self._spread(k, rows)
+            term *= weight
+            first += float(term.sum())
+            second += float(np.einsum("i,i->", term, term))
+        return first * first / second if second > 0 else math.inf
+
     def mean_reflected(self):
         """The area-weighted mean over patches (and channels) of the reflected radiosity so far,
         sum_j A_j b_j / A_T = Phi_T sum_j R_j I_j / (A_T N): what a relative error on the measured

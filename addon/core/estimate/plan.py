@@ -28,6 +28,9 @@ MEASURED_CAP_FACTOR = 64
 # few or heavy-tailed chunks make such readings common.
 MEASURED_STOP_Z = 2.0
 MEASURED_STOP_CHUNKS = 12
+# A run whose chunks were sized on a guess of its paths reads this many before it sizes the rest
+# (Method.shrunk_chunk): the first of them run, the others wait.
+RESIZE_AFTER = 2
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,27 @@ def paths_to_target(paths, measured_mse, target_mse, chunk, cap):
     needed = paths * measured_mse / target_mse if measured_mse > 0 else 0.0
     chunks = max(MEASURED_STOP_CHUNKS, math.ceil(needed / chunk))
     return float(min(cap, chunks * chunk))
+
+
+def resizes(plan, settings):
+    """Whether a run of ``plan`` sizes its chunks after its first RESIZE_AFTER: a measured stop
+    at a target, on a guess of its paths (no paths, chunk or time limit given)."""
+    return plan.measured_rule and plan.target_mse is not None and settings.paths is None \
+        and settings.chunk_paths is None and settings.max_seconds is None
+
+
+def resize_inputs(total, target_mse):
+    """(variance per path, MSE) a run's later chunks are sized for after its first ones
+    (``total``, Batches): the measured variance at the upper end of its own noise
+    (MEASURED_STOP_Z standard errors of a chi-square of ``spread_terms`` degrees of freedom),
+    and ``target_mse`` less what the stop rule's bound adds to the estimate at
+    MEASURED_STOP_CHUNKS chunks of that noise. None where nothing is measured yet."""
+    mse = total.measured_mse()
+    if not mse > 0:
+        return None
+    noise = math.sqrt(2.0 / total.spread_terms())
+    variance = mse * total.paths * (1.0 + MEASURED_STOP_Z * noise)
+    return variance, target_mse / (1.0 + MEASURED_STOP_Z * noise / math.sqrt(MEASURED_STOP_CHUNKS - 1))
 
 
 def target_now(plan, target_error, error_scale, mean_reflected):

@@ -28,6 +28,8 @@ walk does.
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from ..lights.lights import WorldLight
@@ -65,8 +67,6 @@ SHADOW, COSINE = range(2)
 # of the solve's seed.
 FATE_RAYS = 1 << 13
 FATE_STREAM = 1 << 62
-# The stream of a solve's seed its pilot gathering draws from (pilot_irradiance).
-PILOT_STREAM = FATE_STREAM + 1
 # A light is seen if the shadow ray meets nothing before this share of the way to it.
 SEEN_BEFORE = 1.0 - 1e-5
 
@@ -105,10 +105,7 @@ class Gathering:
     quantities in world units."""
 
     def __init__(self, scene, samples, stratified=True, fate_shares=(1.0, 0.0)):
-        self.samples = np.asarray(samples, dtype=np.float64)  # (P,) expected, per patch
         self.stratified = stratified  # a patch's samples a low-discrepancy set (else independent)
-        self.whole = np.floor(self.samples).astype(np.int64)
-        self.chance = self.samples - self.whole
         self.lights = scene.lights.lights
         self.worlds = [light for light in self.lights if isinstance(light, WorldLight)]
         light_power = scene.lights.light_power()
@@ -129,7 +126,7 @@ class Gathering:
             self.cosine_shares = np.maximum(self.cosine_shares, near)
         # P_s / A_s of each emitting patch (_emitter_weight), A_j / n_j of each patch (ReflectedPoints).
         self.shadow_density = self.choice[:scene.patch_count] / scene.patch_area
-        self.area_per_sample = scene.patch_area / self.samples
+        self._take_samples(samples)
         self.channel_power = scene.source_power.sum(axis=0)  # (3,) Phi_c
         # (escaped, blocked) of the light found on no front: what the solve measures (fate_shares).
         self.fate_shares = tuple(fate_shares)
@@ -137,6 +134,18 @@ class Gathering:
         # The glossy share of each patch's reflection (glossy.GlossyLobe) or None: where it is,
         # each sample keeps its rays' parts and directions.
         self.glossy = scene.glossy
+
+    def _take_samples(self, samples):
+        self.samples = np.asarray(samples, dtype=np.float64)  # (P,) expected, per patch
+        self.whole = np.floor(self.samples).astype(np.int64)
+        self.chance = self.samples - self.whole
+        self.area_per_sample = self.patch_area / self.samples
+
+    def with_samples(self, samples):
+        """The same gathering with ``samples`` (P,) expected a patch (chunks of another size's)."""
+        other = copy.copy(self)
+        other._take_samples(samples)
+        return other
 
     def choose(self, patch, u):
         """(n,) the source a shadow ray from each sample of ``patch`` looks at (near_choice)."""
@@ -405,16 +414,3 @@ def direct_irradiance(scene, samples=64, seed=0):
             total += gather_direct(tables, gathering, rng)[0]
     return (total / rounds).T
 
-
-def pilot_irradiance(tables, gathering, seed):
-    """(P,) the root mean square, over each patch's samples, of their estimates of its direct
-    irradiance (channels summed), from one draw of ``gathering``'s samples from the seed's own
-    stream (0 where a patch drew none): what a solve allots its chunks' samples by
-    (two_way.direct_samples), the second moment because a sample's variance goes as it (a
-    patch beside a small source finds light as heavy-tailed as it is strong). Only the
-    allotment reads it, so each chunk's estimate stays unbiased whatever it says."""
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(PILOT_STREAM,))))
-    patch, value = gather_direct(tables, gathering, rng)[2][::2]
-    square = value.sum(axis=0) ** 2
-    count = np.bincount(patch, minlength=tables.patch_count)
-    return np.sqrt(np.bincount(patch, weights=square, minlength=tables.patch_count) / np.maximum(count, 1))

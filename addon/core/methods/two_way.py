@@ -66,9 +66,9 @@ from .first_shot import MAX_GATHER_SAMPLES, gather_direct
 from .gathered_walk import split_lost
 from ..estimate.grouping import with_groups
 from ..estimate.tallies import ChunkTally
-from .first_shot import Gathering, pilot_irradiance
+from .first_shot import FATE_STREAM, Gathering
 from ..names import GATHERED, TWO_WAY
-from ..estimate.plan import MEASURED_STOP_CHUNKS, MIN_MEASURED_CHUNKS, chunk_paths_for
+from ..estimate.plan import MEASURED_STOP_CHUNKS, MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_paths_for
 from .base import GatheringIntegrator, Method, check, solve_gathering, spec_gathering
 from .tables import chunk_wide
 
@@ -80,6 +80,8 @@ DIRECT_SAMPLES = 1.5
 # The share of them allotted by each patch's estimated direct light; the rest by the allotment
 # weight alone, so that no patch's share falls below that part of it.
 RECEIVED_SHARE = 0.5
+# The stream of a solve's seed its pilot gathering draws from (pilot_irradiance).
+PILOT_STREAM = FATE_STREAM + 1
 # A generation casts at least this many rays a patch: one whose power would pay for fewer goes on
 # with this many. Fewer rays a patch, and a generation's estimate is spikier than the last's (a
 # chain of sparse generations lets a few patches' values grow without bound: at 0.1 runs were up
@@ -133,7 +135,7 @@ def direct_samples(chunk_paths, scene, irradiance=None):
     """(P,) expected gathering samples of each patch's direct light in a chunk of ``chunk_paths``:
     DIRECT_SAMPLES a path in all, allotted as a generation's rays are (a share below one is a
     chance of a sample); given each patch's ``irradiance`` (P,), a pilot's root mean square
-    sample of its direct light (first_shot.pilot_irradiance), RECEIVED_SHARE of them in
+    sample of its direct light (pilot_irradiance), RECEIVED_SHARE of them in
     proportion to the allotment weight times it (what minimises the weighted sum of the
     patches' variances, sum_j w_j^2 E[X_j^2] / n_j: where a small source sends much of its
     light to a few patches, they need many more samples than their area's), the rest by the
@@ -145,6 +147,20 @@ def direct_samples(chunk_paths, scene, irradiance=None):
         if received.sum() > 0:
             share = (1.0 - RECEIVED_SHARE) * share + RECEIVED_SHARE * received / received.sum()
     return np.clip(share * (DIRECT_SAMPLES * chunk_paths), 1e-3, MAX_GATHER_SAMPLES)
+
+
+def pilot_irradiance(tables, gathering, seed):
+    """(P,) the root mean square, over each patch's samples, of their estimates of its direct
+    irradiance (channels summed), from one draw of ``gathering``'s samples from the seed's own
+    stream (0 where a patch drew none): what a solve allots its chunks' samples by
+    (two_way.direct_samples), the second moment because a sample's variance goes as it (a
+    patch beside a small source finds light as heavy-tailed as it is strong). Only the
+    allotment reads it, so each chunk's estimate stays unbiased whatever it says."""
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(PILOT_STREAM,))))
+    patch, value = gather_direct(tables, gathering, rng)[2][::2]
+    square = value.sum(axis=0) ** 2
+    count = np.bincount(patch, minlength=tables.patch_count)
+    return np.sqrt(np.bincount(patch, weights=square, minlength=tables.patch_count) / np.maximum(count, 1))
 
 
 def two_way_chunk(tables, gathering, paths, rng, check=None):
@@ -255,6 +271,7 @@ class TwoWay(Method):
 
     name = TWO_WAY
     direct_lights = (GATHERED,)
+    shrinks_chunks = True
 
     def chunk_paths(self, patch_count, expected_path_length, planned_paths, time_limited=False, guessed=False):
         """The usual rays (a small plan in TWO_WAY_MIN_CHUNKS chunks), or more: up to
@@ -286,6 +303,15 @@ class TwoWay(Method):
     def variance_scale(self, patch_count, pilot_chunk, chunk):
         return (1 + TWO_WAY_GROWTH * patch_count / chunk) / (1 + TWO_WAY_GROWTH * patch_count / pilot_chunk)
 
+    def shrunk_chunk(self, patch_count, chunk, done, variance, target_mse):
+        least = max(MIN_CHUNK_PATHS, math.ceil(TWO_WAY_RAYS_PER_PATCH * patch_count / GENERATION_RAYS))
+        return shrunk_chunk(patch_count, chunk, done, variance, target_mse, least)
+
+    def resized(self, state, chunk, new_chunk):
+        """Its gathering's samples scaled with the chunk (DIRECT_SAMPLES a path, as direct_samples)."""
+        samples = np.clip(state.gathering.samples * (new_chunk / chunk), 1e-3, MAX_GATHER_SAMPLES)
+        return TwoWayChunks(state.tables, state.gathering.with_samples(samples))
+
     def create(self, scene, tables, chunk, seed, prediction):
         """Its gathering, the samples allotted partly by a pilot's direct light."""
         with tables.numpy_turn:
@@ -303,6 +329,41 @@ def balanced_chunk(patch_count, planned_paths):
     chunks need more paths for the same error; larger ones run past it."""
     k, n = MEASURED_STOP_CHUNKS, float(planned_paths)
     return math.ceil((n + math.sqrt(n * n + 4.0 * k * TWO_WAY_GROWTH * patch_count * n)) / (2.0 * k))
+
+
+def shrunk_chunk(patch_count, chunk, done, variance, target_mse, least):
+    """The smallest chunk n (at least ``least``, at most ``chunk``) at which a run whose first
+    ``done`` chunks of ``chunk`` paths measured ``variance`` per path is expected to meet
+    ``target_mse`` on the fewest chunks the stop rule reads (MEASURED_STOP_CHUNKS, K): the rest
+    of them of n paths, their variance per path grown as (1 + G P / n) (TWO_WAY_GROWTH, the
+    suite's middle: a scene that grows faster runs a few more chunks), the batch estimate of
+    chunks of two sizes as Batches makes it (each chunk's spread counts alike: the small
+    chunks' larger variance per path weighs more than in the true error, which it then covers).
+    A plan's paths are the paper's guess for the walk, often several times off; its chunks are
+    sized to it, and a run whose first chunks say it will meet the target long before K of
+    them goes on with smaller ones."""
+    if MEASURED_STOP_CHUNKS <= done or not (variance > 0 and target_mse > 0) or least >= chunk:
+        return chunk
+    expected = lambda n: later_estimate(patch_count, chunk, done, variance, n)  # noqa: E731
+    if expected(least) <= target_mse:
+        return least
+    if expected(chunk) > target_mse:
+        return chunk
+    low, high = least, chunk  # (expected(n) falls as n grows: the smallest n that meets it)
+    while high - low > 1:
+        middle = (low + high) // 2
+        low, high = (low, middle) if expected(middle) <= target_mse else (middle, high)
+    return high
+
+
+def later_estimate(patch_count, chunk, done, variance, n):
+    """The expected batch estimate (Batches.measured_mse) on MEASURED_STOP_CHUNKS chunks (K), the
+    first ``done`` of ``chunk`` paths and ``variance`` per path, the rest of n paths and that
+    variance grown as (1 + G P / n) (TWO_WAY_GROWTH): (sum_k v_k - sum_k n_k v_k / N) / ((K - 1) N)."""
+    K, m = MEASURED_STOP_CHUNKS, done
+    v = variance * (1.0 + TWO_WAY_GROWTH * patch_count / n) / (1.0 + TWO_WAY_GROWTH * patch_count / chunk)
+    paths = m * chunk + (K - m) * n
+    return (m * variance + (K - m) * v - (m * chunk * variance + (K - m) * n * v) / paths) / ((K - 1) * paths)
 
 
 def first_generation_rays(patch_count, chunk_paths):
