@@ -89,13 +89,14 @@ def run(scene, settings, method, start=None, progress=None, should_stop=None):
     start = time.perf_counter() if start is None else start
     plan = chunk_plan(scene, method, settings)
     chunk = plan.chunk if settings.chunk_paths is None else int(settings.chunk_paths)
+    sized = method.sizes_later_chunks and resizes(plan, settings)  # (its later chunks sized by its first ones)
     tables = WalkTables(scene, settings.estimator, settings.threshold, settings.exit_point, settings.sampling,
                         settings.speedups, groups=settings.groups, direct_apart=settings.direct_apart)
     state = method.create(scene, tables, chunk, int(settings.seed), plan.prediction)
     runner = _runner(scene, settings, method, state)
     # Running the predicted paths for a target ends as "target"; running given paths, "paths".
     done_rule = STOP_TARGET if (settings.paths is None and not plan.measured_rule) else STOP_PATHS
-    chunks = _Run(plan, chunk, settings, done_rule, start, method)
+    chunks = _Run(plan, chunk, settings, done_rule, start, method, sized)
     total, stopped = chunks.chunks(scene, state, runner, int(settings.seed), progress, should_stop, settings.max_seconds)
     return _result(scene, total, stopped, chunks, method, chunks.state, settings, runner.threads)
 
@@ -116,17 +117,17 @@ def _runner(scene, settings, method, state):
 class _Run:
     """A run of a plan's chunks: submitted in order, a group at a time, while the runner has
     room; their tallies added in order; stopped by the plan's rule, a cancel or the time limit.
-    A plan sized on a guess of its paths (a measured stop, no paths, chunk or time limit given)
-    sizes its chunks after its first RESIZE_AFTER (``Method.shrunk_chunk``): the later ones wait
-    for them, so that every chunk's size is the same on any number of threads."""
+    A plan sized on a guess of its paths (``sized``: a measured stop, no paths, chunk or time limit
+    given) sizes its chunks after its first RESIZE_AFTER (``Method.later_chunk``): the later ones
+    wait for them, so that every chunk's size is the same on any number of threads."""
 
-    def __init__(self, plan, chunk, settings, done_rule, start, method):
+    def __init__(self, plan, chunk, settings, done_rule, start, method, sized=False):
         self.plan, self.chunk, self.start, self.method = plan, chunk, start, method
         self.measured = plan.measured_rule and plan.target_mse is not None  # (else the run stops on its paths)
         self.target_error, self.error_scale = settings.target_error, settings.error_scale
         self.done_rule = done_rule
         self.replaced = settings.replaced_direct
-        self.resize_at = RESIZE_AFTER if method.shrinks_chunks and resizes(plan, settings) else None
+        self.resize_at = RESIZE_AFTER if sized else None
         self.state = None
 
     def target(self, total):
@@ -183,8 +184,8 @@ class _Run:
         if inputs is None:
             return
         variance, target = inputs
-        chunk = self.method.shrunk_chunk(scene.patch_count, self.chunk, total.chunks, variance, target)
-        if chunk < self.chunk:
+        chunk = self.method.later_chunk(scene.patch_count, self.chunk, total.chunks, variance, target, self.plan.chunk)
+        if chunk != self.chunk:
             self.state = self.method.resized(self.state, self.chunk, chunk)
             runner.restate(self.state)
             self.chunk = chunk

@@ -155,7 +155,8 @@ def _expected_paths(scene, settings, plan, chosen, variance, r):
     """(paths, short_of, chunks) a run of ``plan`` is expected to end at, from the pilot's
     ``variance`` per path at the plan's chunk and its result ``r`` (the mean a measured target is
     relative to): the cap where it runs given paths; whole chunks to its target, its first of the
-    plan's size and the rest as it sizes them (``Method.shrunk_chunk``), where it stops on its error."""
+    first of the plan's size and the rest as it sizes them (``Method.later_chunk``), where it
+    stops on its error."""
     short, chunks = 1.0, None
     if settings.paths is not None or not plan.measured_rule:
         expected = float(plan.cap)
@@ -164,13 +165,12 @@ def _expected_paths(scene, settings, plan, chosen, variance, r):
         if settings.replaced_direct is not None and r.per_source is not None and r.per_source.direct_irradiance is not None:
             target *= 1.0 - settings.replaced_direct.share  # (what the run keeps is held to the rest: estimate.batches.Replaced)
         expected, short = paths_to_target(1, variance, target, plan.chunk, plan.cap), short_of(variance, target, plan.cap)
-        later = chosen.shrunk_chunk(scene.patch_count, plan.chunk, RESIZE_AFTER, variance, target) \
-            if chosen.shrinks_chunks and resizes(plan, settings) else plan.chunk
-        if later < plan.chunk:  # (the run's first chunks of the plan's size, the rest of ``later``)
-            rest = paths_to_target(1, variance * chosen.variance_scale(scene.patch_count, plan.chunk, later), target, later,
-                                   plan.cap)
-            expected = float(min(plan.cap, RESIZE_AFTER * (plan.chunk - later) + rest))
-            chunks = RESIZE_AFTER + (expected - RESIZE_AFTER * plan.chunk) / later
+        if chosen.sizes_later_chunks and resizes(plan, settings):  # (its first chunks, then the rest of ``later``)
+            P, first = scene.patch_count, plan.chunk
+            later = chosen.later_chunk(P, first, RESIZE_AFTER, variance, target, first)
+            rest = paths_to_target(1, variance * chosen.variance_scale(P, first, later), target, later, plan.cap)
+            expected = float(min(plan.cap, RESIZE_AFTER * (first - later) + rest))
+            chunks = RESIZE_AFTER + (expected - RESIZE_AFTER * first) / later
     else:  # at least the chunks the measured rule needs, at most the cap
         expected = float(min(plan.cap, max(MEASURED_STOP_CHUNKS * plan.chunk, plan.prediction.paths_for(plan.target_mse))))
     return expected, short, expected / plan.chunk if chunks is None else chunks

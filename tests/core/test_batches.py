@@ -83,11 +83,11 @@ def _tally(n, incident):
     return ChunkTally(n, 0, incident, zero, zero, zero, zero, zero)
 
 
-def test_chunks_of_two_sizes_are_estimated_as_shrunk_chunk_expects():
-    """A run whose later chunks are smaller (two_way.shrunk_chunk) is read by the same batch
+def test_chunks_of_two_sizes_are_estimated_as_later_chunk_expects():
+    """A run whose later chunks are smaller (two_way.later_chunk) is read by the same batch
     estimate: each chunk's spread counts alike, so its expectation is
     (sum_k v_k - sum_k n_k v_k / N) / ((K - 1) N) for chunks of n_k paths and variance v_k per
-    path (``two_way.later_estimate``, what shrunk_chunk sizes them by). Synthetic tallies:
+    path (``two_way.later_estimate``, what later_chunk sizes them by). Synthetic tallies:
     Gaussian incident power of variance n_k v_k about its mean at every patch, RESIZE_AFTER
     chunks of 6,000 paths, the rest of 1,500 with the variance per path TWO_WAY_GROWTH makes of
     it; 400 replicas, their mean within 4 standard errors of it."""

@@ -75,7 +75,8 @@ def test_the_forecast_paths_are_within_2x_of_where_the_run_stops(relative_rms):
     assert 0.5 <= f.rays / r.rays <= 2.0, (f.rays, r.rays)
     assert f.measured and 0.5 <= f.chunks / r.chunks <= 2.0, (f.chunks, r.chunks)
     # (the run's first chunks of the plan's size, the rest of one size: chunks.RESIZE_AFTER)
-    assert r.paths > plan.RESIZE_AFTER * f.chunk and (r.paths - plan.RESIZE_AFTER * f.chunk) % (r.chunks - plan.RESIZE_AFTER) == 0
+    first = f.chunk
+    assert r.paths > plan.RESIZE_AFTER * first and (r.paths - plan.RESIZE_AFTER * first) % (r.chunks - plan.RESIZE_AFTER) == 0
 
 
 def test_a_run_predicts_its_end_from_its_measured_error_as_it_goes():

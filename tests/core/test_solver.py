@@ -172,7 +172,7 @@ def test_measured_stop_rule_reads_the_estimate_once_a_group(scene, monkeypatch, 
     assert r.stopped == "target" and r.measured_mse <= target
     # Read once at RESIZE_AFTER chunks (the later chunks' size), at MIN_MEASURED_CHUNKS and after,
     # once per task, then for the result.
-    sized = [plan.RESIZE_AFTER] if r.method == "two_way" else []  # (the two-way iteration's chunks: Method.shrinks_chunks)
+    sized = [plan.RESIZE_AFTER] if r.method == "two_way" else []  # (the two-way iteration's chunks: Method.later_chunk)
     assert made[-2:] == [r.chunks, r.chunks] and made[:len(sized)] == sized and made[len(sized)] >= plan.MIN_MEASURED_CHUNKS
     assert all(b > a for a, b in zip(made[:-1], made[1:-1]))
 

@@ -287,7 +287,7 @@ def test_a_guessed_plan_grows_the_two_way_chunks_to_the_balance_of_the_stop_rule
     assert chosen.chunk >= tw.balanced_chunk(scene.patch_count, tw.TwoWay().planned_paths(chosen.prediction.paths_for(target)))
     r = solve(scene, target_mse=target, seed=1, method="auto")
     assert r.method == "two_way" and r.stopped == "target"
-    first = plan.RESIZE_AFTER * chosen.chunk  # (the first chunks of the plan's size, the rest alike: shrunk_chunk)
+    first = plan.RESIZE_AFTER * chosen.chunk  # (the first chunks of the plan's size, the rest alike: later_chunk)
     assert (r.paths - first) % (r.chunks - plan.RESIZE_AFTER) == 0 and r.paths <= r.chunks * chosen.chunk
 
 
@@ -491,26 +491,28 @@ def test_a_panels_back_lighting_the_ceiling_over_it_leaves_the_two_way_iteration
         assert automatic.choose(scene, Settings(target_error=0.02)) == "two_way"
 
 
-def test_shrunk_chunk_is_the_smallest_that_meets_the_target_on_the_fewest_chunks():
-    """The later chunks' size: the smallest n whose expected batch estimate on
-    MEASURED_STOP_CHUNKS chunks (``later_estimate``) meets the target; the plan's chunk where
-    even its own size would not; never below ``least``."""
-    P, n0, m, least = 4_000, 60_000, plan.RESIZE_AFTER, 2_000
+def test_later_chunk_is_the_smallest_that_meets_the_target_on_the_fewest_chunks():
+    """The later chunks' size: the smallest n from ``least`` to ``most`` whose expected batch
+    estimate on MEASURED_STOP_CHUNKS chunks (``later_estimate``) meets the target; ``most`` where
+    none does; ``least`` where it already does. (A run's ``most`` is its first chunks' size: the
+    plan's.)"""
+    P, first, m, least, most = 4_000, 30_000, plan.RESIZE_AFTER, 2_000, 60_000
     variance = 1.0
-    at_plan = tw.later_estimate(P, n0, m, variance, n0)
-    assert at_plan == pytest.approx(variance / (plan.MEASURED_STOP_CHUNKS * n0))  # (equal chunks: v / N)
-    assert tw.shrunk_chunk(P, n0, m, variance, 0.9 * at_plan, least) == n0
-    target = 2.0 * at_plan
-    n = tw.shrunk_chunk(P, n0, m, variance, target, least)
-    assert least < n < n0
-    assert tw.later_estimate(P, n0, m, variance, n) <= target < tw.later_estimate(P, n0, m, variance, n - 1)
-    assert tw.shrunk_chunk(P, n0, m, variance, 100 * at_plan, least) == least
+    at_first = tw.later_estimate(P, first, m, variance, first)
+    assert at_first == pytest.approx(variance / (plan.MEASURED_STOP_CHUNKS * first))  # (equal chunks: v / N)
+    assert tw.later_chunk(P, first, m, variance, 0.1 * at_first, least, most) == most
+    for target in (0.8 * at_first, 2.0 * at_first):  # (larger chunks than the first, or smaller)
+        n = tw.later_chunk(P, first, m, variance, target, least, most)
+        assert least < n < most and (n > first) == (target < at_first)
+        assert tw.later_estimate(P, first, m, variance, n) <= target < tw.later_estimate(P, first, m, variance, n - 1)
+    assert tw.later_chunk(P, first, m, variance, 100 * at_first, least, most) == least
 
 
-def test_a_run_whose_first_chunks_overshoot_goes_on_with_smaller_ones_and_still_meets_its_target():
+def test_a_run_whose_plan_overshoots_goes_on_with_smaller_chunks_and_still_meets_its_target():
     """A grey room at a 2% target: the walk's guess plans chunks twelve of which reach about
-    1%; after RESIZE_AFTER of them the run goes on with smaller ones (their gathering smaller
-    alike) and stops on its measured error at the target. Against the direct solve, each
+    1%; after RESIZE_AFTER of them the run goes on with the smaller chunks its target needs
+    (their gathering sized alike), stopping on its measured error at the target, on well under
+    the plan's paths. Against the direct solve, each
     patch's error is within its batch standard error (z-scores, as above; chunks of two sizes
     in the estimate), and the run's true error meets the target."""
     from boxes import grey_room
@@ -518,12 +520,14 @@ def test_a_run_whose_first_chunks_overshoot_goes_on_with_smaller_ones_and_still_
     scene, F = grey_room()
     exact = solve_radiosity_system(F, scene.reflectivity, scene.emission)
     settings = Settings.for_mse(scene, relative_rms_to_mse(predict(scene), 0.02), method="two_way")
-    first = plan.chunk_plan(scene, tw.TwoWay(), settings).chunk
+    planned = plan.chunk_plan(scene, tw.TwoWay(), settings).chunk
+    first = planned
     w = scene.patch_area / scene.total_area
     for seed in range(3):
         r = solve(scene, target_error=0.02, method="two_way", seed=seed, threads=2)
         later = (r.paths - plan.RESIZE_AFTER * first) / (r.chunks - plan.RESIZE_AFTER)
-        assert r.stopped == "target" and later < first / 1.5, (r.paths, r.chunks, first)
+        assert later == int(later) and later != first, (r.paths, r.chunks, first)
+        assert r.stopped == "target" and r.paths < plan.MEASURED_STOP_CHUNKS * planned / 1.5, (r.paths, r.chunks, planned)
         z = _z(r, exact)
         assert _z_ok(z, r.chunks), (np.abs(z).max(), np.mean(z**2))
         true = float((w[:, None] * (r.radiosity - exact) ** 2).mean(axis=1).sum())

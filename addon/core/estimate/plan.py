@@ -29,7 +29,7 @@ MEASURED_CAP_FACTOR = 64
 MEASURED_STOP_Z = 2.0
 MEASURED_STOP_CHUNKS = 12
 # A run whose chunks were sized on a guess of its paths reads this many before it sizes the rest
-# (Method.shrunk_chunk): the first of them run, the others wait.
+# (Method.later_chunk): the first of them run, the others wait.
 RESIZE_AFTER = 2
 
 

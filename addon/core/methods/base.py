@@ -66,13 +66,13 @@ class Method:
         ``pilot_chunk`` (the forecast's pilot): 1 where paths are independent."""
         return 1.0
 
-    shrinks_chunks = False  # (whether shrunk_chunk may give less than its chunk)
+    sizes_later_chunks = False  # (whether later_chunk sizes a run's chunks from its first ones)
 
-    def shrunk_chunk(self, patch_count, chunk, done, variance, target_mse):
-        """The paths of a run's chunks after its first ``done`` chunks of ``chunk`` paths measured
-        ``variance`` per path, for a measured stop at ``target_mse``: ``chunk`` where paths are
-        independent (the chunk's size changes nothing but the stop's steps)."""
-        return chunk
+    def later_chunk(self, patch_count, first, done, variance, target_mse, most):
+        """The paths of a run's chunks after its first ``done`` chunks of ``first`` paths measured
+        ``variance`` per path, for a measured stop at ``target_mse``, at most ``most``: ``first``
+        where paths are independent (the chunk's size changes nothing but the stop's steps)."""
+        return first
 
     def resized(self, state, chunk, new_chunk):
         """The Integrator ``state`` (made for chunks of ``chunk`` paths) for chunks of ``new_chunk``."""

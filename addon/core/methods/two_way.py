@@ -271,7 +271,7 @@ class TwoWay(Method):
 
     name = TWO_WAY
     direct_lights = (GATHERED,)
-    shrinks_chunks = True
+    sizes_later_chunks = True
 
     def chunk_paths(self, patch_count, expected_path_length, planned_paths, time_limited=False, guessed=False):
         """The usual rays (a small plan in TWO_WAY_MIN_CHUNKS chunks), or more: up to
@@ -303,9 +303,8 @@ class TwoWay(Method):
     def variance_scale(self, patch_count, pilot_chunk, chunk):
         return (1 + TWO_WAY_GROWTH * patch_count / chunk) / (1 + TWO_WAY_GROWTH * patch_count / pilot_chunk)
 
-    def shrunk_chunk(self, patch_count, chunk, done, variance, target_mse):
-        least = max(MIN_CHUNK_PATHS, math.ceil(TWO_WAY_RAYS_PER_PATCH * patch_count / GENERATION_RAYS))
-        return shrunk_chunk(patch_count, chunk, done, variance, target_mse, least)
+    def later_chunk(self, patch_count, first, done, variance, target_mse, most):
+        return later_chunk(patch_count, first, done, variance, target_mse, least_chunk(patch_count), most)
 
     def resized(self, state, chunk, new_chunk):
         """Its gathering's samples scaled with the chunk (DIRECT_SAMPLES a path, as direct_samples)."""
@@ -331,25 +330,29 @@ def balanced_chunk(patch_count, planned_paths):
     return math.ceil((n + math.sqrt(n * n + 4.0 * k * TWO_WAY_GROWTH * patch_count * n)) / (2.0 * k))
 
 
-def shrunk_chunk(patch_count, chunk, done, variance, target_mse, least):
-    """The smallest chunk n (at least ``least``, at most ``chunk``) at which a run whose first
-    ``done`` chunks of ``chunk`` paths measured ``variance`` per path is expected to meet
-    ``target_mse`` on the fewest chunks the stop rule reads (MEASURED_STOP_CHUNKS, K): the rest
-    of them of n paths, their variance per path grown as (1 + G P / n) (TWO_WAY_GROWTH, the
-    suite's middle: a scene that grows faster runs a few more chunks), the batch estimate of
-    chunks of two sizes as Batches makes it (each chunk's spread counts alike: the small
-    chunks' larger variance per path weighs more than in the true error, which it then covers).
-    A plan's paths are the paper's guess for the walk, often several times off; its chunks are
-    sized to it, and a run whose first chunks say it will meet the target long before K of
-    them goes on with smaller ones."""
-    if MEASURED_STOP_CHUNKS <= done or not (variance > 0 and target_mse > 0) or least >= chunk:
-        return chunk
-    expected = lambda n: later_estimate(patch_count, chunk, done, variance, n)  # noqa: E731
+def least_chunk(patch_count):
+    """The fewest paths a run's later chunks take: TWO_WAY_RAYS_PER_PATCH first-generation rays a patch."""
+    return max(MIN_CHUNK_PATHS, math.ceil(TWO_WAY_RAYS_PER_PATCH * patch_count / GENERATION_RAYS))
+
+
+def later_chunk(patch_count, first, done, variance, target_mse, least, most):
+    """The smallest chunk n from ``least`` to ``most`` at which a run whose first ``done`` chunks
+    of ``first`` paths measured ``variance`` per path is expected to meet ``target_mse`` on the
+    fewest chunks the stop rule reads (MEASURED_STOP_CHUNKS, K): the rest of them of n paths,
+    their variance per path as (1 + G P / n) (TWO_WAY_GROWTH, the suite's middle: a scene whose
+    growth differs runs a few more chunks), the batch estimate of chunks of two sizes as Batches
+    makes it (``later_estimate``: each chunk's spread counts alike, and the smaller chunks' larger
+    variance per path weighs more than in the true error, which it then covers); ``most`` where
+    none does. A plan's paths are the paper's guess for the walk, often several times off; a run
+    starts on the plan's chunks and sizes the rest, at most as large, on what they measured."""
+    if MEASURED_STOP_CHUNKS <= done or not (variance > 0 and target_mse > 0) or least >= most:
+        return most
+    expected = lambda n: later_estimate(patch_count, first, done, variance, n)  # noqa: E731
     if expected(least) <= target_mse:
         return least
-    if expected(chunk) > target_mse:
-        return chunk
-    low, high = least, chunk  # (expected(n) falls as n grows: the smallest n that meets it)
+    if expected(most) > target_mse:
+        return most
+    low, high = least, most  # (expected(n) falls as n grows: the smallest n that meets it)
     while high - low > 1:
         middle = (low + high) // 2
         low, high = (low, middle) if expected(middle) <= target_mse else (middle, high)
