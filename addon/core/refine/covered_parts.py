@@ -36,6 +36,7 @@ from ..scene.geometry_build import build_geometry
 
 LEVELS = 2  # splits of a first patch at most: along the outline, then the cells beside it once more
 PROBES = 4  # points a side of a cell whose covering is probed (16 a cell)
+EDGE = 0.02  # of a cell's side: its outer probes this far in (a sliver of cover along an edge is met)
 NEAR = 0.25  # of the first patch's side: a surface this close in front covers a point
 PARALLEL = np.cos(np.radians(30.0))  # ... if it lies within this of parallel to the patch
 SNAP = 16  # probes a side of a split cell where its covering changes (its split lines moved there)
@@ -78,8 +79,8 @@ def covered_points(geometry, position, patch, near):
 def _probe_points(cells, rows):
     """((n*PROBES^2, 3) points spread over the cells ``rows``, (n*PROBES^2,) the row of each): a
     quad's bilinear grid, a triangle's the grid folded into it."""
-    s, t = (a.ravel() for a in np.meshgrid((np.arange(PROBES) + 0.5) / PROBES, (np.arange(PROBES) + 0.5) / PROBES,
-                                           indexing="ij"))
+    grid = EDGE + (1 - 2 * EDGE) * np.arange(PROBES) / (PROBES - 1)
+    s, t = (a.ravel() for a in np.meshgrid(grid, grid, indexing="ij"))
     corners = cells.corners[rows]
     quad = corners[:, 3] >= 0
     p = cells.points[np.maximum(corners, 0)]  # (n,4,3)
