@@ -14,6 +14,10 @@ solve's patches, error and time are untouched. Every output (the colours, the so
 stored values) is written on the finer cells, each cell's patch its origin's.
 
 Not split: patches no camera sees, n-gons kept whole and their neighbours, meshes a Detail refinement made.
+A mesh the outline split made (``refine.covered_parts``: a ceiling round a panel hung under it) splits
+on its shading triangles (its polygons' every corner, the neighbours' midpoints too: no T-junction):
+the light from the panel's top through the slit falls off within a few cm of the outline, which its
+cells beside the outline would show as wedges as wide as they are.
 """
 from __future__ import annotations
 
@@ -35,19 +39,22 @@ NEW_POINTS = 3  # points a split cell adds at most (a triangle's three midpoints
 FAR = np.int64(1) << np.int64(31)  # key of a new point: patch * FAR + its point in the object's cells
 
 
-def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None):
+def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None, on_shading=None):
     """(RefinedSurface, its CornerDirect, Shown), or None where no cell splits. ``coarse`` the
     ``smoothing.Surface`` of ``triangles`` (T,3) of the scene's vertices, ``direct`` the coarse
     CornerDirect (([G,]T,3,3)); ``meshes`` the objects' PatchMeshes in scene order, ``receives``
     whether each gets results; ``light`` (P,3) the light the patches show; ``at_points(position
     (n,3), patch (n,), level)`` the direct light ([G,]n,3) at points (``point_direct.points_direct``);
-    ``most``: new points at most (a time limit's), beside the budget."""
+    ``most``: new points at most (a time limit's), beside the budget; ``on_shading`` (per object, bool): a
+    refined mesh that splits on its shading triangles (the outline split's), not kept as made."""
     V = len(scene.vertices)
     triangles = np.asarray(triangles, np.int64)
     tp = np.asarray(coarse.triangle_patch, np.int64)
     table = _Table(direct, triangles, tp, V)
     starts = np.cumsum([0] + [len(m.points) for m in meshes])
     offsets = np.cumsum([0] + [m.patch_count for m in meshes])
+    written = meshes
+    meshes = [_on_shading(m) if on_shading is not None and on_shading[k] else m for k, m in enumerate(meshes)]
     splittable = [k for k, m in enumerate(meshes) if receives[k] and getattr(m, "shading_triangles", None) is None
                   and m.patch_count]
     threshold, kept = _limits(coarse, scene, light)
@@ -77,7 +84,7 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     if not refined:
         return None
     made = {k: patch_mesh(cells[k]) for k in refined}
-    shown = shown_of(meshes, {k: merged(meshes[k], mesh, patch_of[k][origin] - offsets[k]) for k, (mesh, origin) in made.items()},
+    shown = shown_of(written, {k: merged(meshes[k], mesh, patch_of[k][origin] - offsets[k]) for k, (mesh, origin) in made.items()},
                    triangles, tp, starts, offsets)
     _evaluate(table, _shading_corners(shown, refined, offsets), starts, meshes, cells, at_points, LEVELS)
     fine = Means(shown, scene.patch_count, visible_corner_weights(scene.geometry, shown.vertices, shown.triangles,
@@ -119,6 +126,14 @@ def _region(mesh, patch, table, start, threshold, kept):
         near[triangles[chosen[patch]].ravel()] = True
         chosen[patch[near[triangles].any(axis=1)]] = True
     return np.flatnonzero(chosen[patch])
+
+
+def _on_shading(mesh):
+    """``mesh`` (a refined one) as a PatchMesh whose triangles are its shading triangles."""
+    if getattr(mesh, "shading_triangles", None) is None:
+        return mesh
+    return PatchMesh(mesh.points, mesh.face_sizes, mesh.corner_verts, mesh.patch_face, np.asarray(mesh.shading_triangles),
+                     np.asarray(mesh.shading_triangle_patch), mesh.patch_area)
 
 
 def _triangle_mesh(mesh, rows):
