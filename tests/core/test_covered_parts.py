@@ -27,9 +27,9 @@ def box(lo, hi, inward):
     return v, sum(faces, [])
 
 
-def meshes(room_size, slab_size):
+def meshes(room_size, slab_size, slab=SLAB):
     """[the room's PatchMesh, the slab's] at those patch sizes."""
-    (room, room_faces), (slab, slab_faces) = box((0, 0, 0), ROOM, True), box(*SLAB, False)
+    (room, room_faces), (slab, slab_faces) = box((0, 0, 0), ROOM, True), box(*slab, False)
     return [meshing.mesh_patches(room, [4] * 6, room_faces, room_size),
             meshing.mesh_patches(slab, [4] * 6, slab_faces, slab_size)]
 
@@ -118,6 +118,27 @@ def test_each_cell_knows_its_side_of_the_outline(coarse):
     assert over.sum() >= 4
     top = np.abs(_cell_points(slab)[:, :, 2] - SLAB[1][2]).max(axis=1) < 1e-9
     np.testing.assert_array_equal(made.covered[1], top)
+
+
+def test_a_sliver_of_cover_along_a_patchs_edge_is_split_off():
+    """A slab reaching 2 cm past the 0.5 m patches' lines (a twenty-fifth of a patch along its edge,
+    between the probes' outer rows and the edge before): the patches with that sliver split too, and
+    every ceiling cell lies wholly over the slab or wholly beside it (its overlap with the slab's
+    outline, the cells being axis-aligned rectangles, none or all of it to the split lines' bisection,
+    a thousandth of a cell); before, they stayed whole, a room-side patch holding 4% of the gap's light."""
+    slab = ((0.48, 0.48, 0.94), (1.52, 1.52, 0.98))
+    first = meshes(0.5, 0.5, slab)
+    scene, _ = scene_of(first)
+    made = split_covered(first, scene.geometry)
+    assert made is not None
+    room = made.cells[0]
+    q = room.points[room.corners]
+    ceiling = np.abs(q[:, :, 2] - ROOM[2]).max(axis=1) < 1e-9
+    low, high = q[ceiling, :, :2].min(axis=1), q[ceiling, :, :2].max(axis=1)
+    overlap = np.prod(np.clip(np.minimum(high, slab[1][:2]) - np.maximum(low, slab[0][:2]), 0, None), axis=1)
+    share = overlap / np.prod(high - low, axis=1)
+    assert ((share < 1e-3) | (share > 1 - 1e-3)).all(), np.sort(share[(share > 1e-3) & (share < 1 - 1e-3)])
+    np.testing.assert_array_equal(made.covered[0][ceiling], share > 0.5)
 
 
 def test_the_room_side_of_the_outline_keeps_the_rooms_light_in_the_smoothing(coarse):
