@@ -49,9 +49,8 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
         return point_direct.points_direct(surface, scene, position, patch, seed=int(result.seed) + SEED_STEP * (level + 1),
                                           deadline=deadline, light=result.irradiance, retries=NEW_POINT_RETRIES, **groups)
 
-    # (the outline split's meshes, which carry ``covered``, split on their shading triangles; a Detail's stay as made)
     made = display_cells.refine(surface, direct, scene, triangles, out.patches.meshes, [o.receives for o in out.patches.objects],
-                                result.irradiance, at_points, most, [getattr(m, "covered", None) is not None for m in out.patches.meshes])
+                                result.irradiance, at_points, most, surface.covered)
     return (surface, direct, None) if made is None else made
 
 

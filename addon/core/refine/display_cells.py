@@ -15,9 +15,10 @@ stored values) is written on the finer cells, each cell's patch its origin's.
 
 Not split: patches no camera sees, n-gons kept whole and their neighbours, meshes a Detail refinement made.
 A mesh the outline split made (``refine.covered_parts``: a ceiling round a panel hung under it) splits
-on its shading triangles (its polygons' every corner, the neighbours' midpoints too: no T-junction):
-the light from the panel's top through the slit falls off within a few cm of the outline, which its
-cells beside the outline would show as wedges as wide as they are.
+on its shading triangles (its polygons' every corner, the neighbours' midpoints too: no T-junction), its
+patches touching the outline alone (the rest as made: the display's time): the light from the panel's
+top through the slit falls off within a few cm of the outline, which the cells beside it would show
+as wedges as wide as they are.
 """
 from __future__ import annotations
 
@@ -39,25 +40,26 @@ NEW_POINTS = 3  # points a split cell adds at most (a triangle's three midpoints
 FAR = np.int64(1) << np.int64(31)  # key of a new point: patch * FAR + its point in the object's cells
 
 
-def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None, on_shading=None):
+def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None, covered=None):
     """(RefinedSurface, its CornerDirect, Shown), or None where no cell splits. ``coarse`` the
     ``smoothing.Surface`` of ``triangles`` (T,3) of the scene's vertices, ``direct`` the coarse
     CornerDirect (([G,]T,3,3)); ``meshes`` the objects' PatchMeshes in scene order, ``receives``
     whether each gets results; ``light`` (P,3) the light the patches show; ``at_points(position
     (n,3), patch (n,), level)`` the direct light ([G,]n,3) at points (``point_direct.points_direct``);
-    ``most``: new points at most (a time limit's), beside the budget; ``on_shading`` (per object, bool): a
-    refined mesh that splits on its shading triangles (the outline split's), not kept as made."""
+    ``most``: new points at most (a time limit's), beside the budget; ``covered`` (P,) bool the patches under
+    a cover (the outline split's, whose refined meshes then split on their shading triangles near it)."""
     V = len(scene.vertices)
     triangles = np.asarray(triangles, np.int64)
     tp = np.asarray(coarse.triangle_patch, np.int64)
     table = _Table(direct, triangles, tp, V)
     starts = np.cumsum([0] + [len(m.points) for m in meshes])
     offsets = np.cumsum([0] + [m.patch_count for m in meshes])
+    threshold, kept = _limits(coarse, scene, light)
     written = meshes
-    meshes = [_on_shading(m) if on_shading is not None and on_shading[k] else m for k, m in enumerate(meshes)]
+    if covered is not None:
+        meshes = [_on_shading(m, offsets[k], covered, kept) for k, m in enumerate(meshes)]
     splittable = [k for k, m in enumerate(meshes) if receives[k] and getattr(m, "shading_triangles", None) is None
                   and m.patch_count]
-    threshold, kept = _limits(coarse, scene, light)
     # (cells of the patches' triangles: a cell's triangles never cross its patch's, so the coarse light's linear
     # interpolation at the new points keeps every patch's mean, in any triangulation of the cells' polygons; only
     # the patches whose light changes and LEVELS + 1 rings around them: the balance's splits stay among them)
@@ -128,12 +130,19 @@ def _region(mesh, patch, table, start, threshold, kept):
     return np.flatnonzero(chosen[patch])
 
 
-def _on_shading(mesh):
-    """``mesh`` (a refined one) as a PatchMesh whose triangles are its shading triangles."""
+def _on_shading(mesh, offset, covered, kept):
+    """``mesh`` (a refined one) as a PatchMesh whose triangles are its shading triangles, its patches
+    (scene patches from ``offset``) but those beside a cover's outline (``covered`` (P,) bool) ``kept`` whole."""
     if getattr(mesh, "shading_triangles", None) is None:
         return mesh
-    return PatchMesh(mesh.points, mesh.face_sizes, mesh.corner_verts, mesh.patch_face, np.asarray(mesh.shading_triangles),
-                     np.asarray(mesh.shading_triangle_patch), mesh.patch_area)
+    triangles, patch = np.asarray(mesh.shading_triangles, np.int64), np.asarray(mesh.shading_triangle_patch, np.int64)
+    under = covered[patch + offset]
+    sides = np.zeros((2, len(mesh.points)), bool)
+    sides[0, triangles[~under]] = sides[1, triangles[under]] = True
+    near = np.zeros(mesh.patch_count, bool)  # (the room's side: the gap is seen through the slit alone)
+    near[patch[(sides[0] & sides[1])[triangles].any(axis=1) & ~under]] = True
+    kept[offset:offset + mesh.patch_count] |= ~near
+    return PatchMesh(mesh.points, mesh.face_sizes, mesh.corner_verts, mesh.patch_face, triangles, patch, mesh.patch_area)
 
 
 def _triangle_mesh(mesh, rows):
