@@ -131,6 +131,7 @@ def test_a_mesh_the_outline_split_made_splits_beside_the_outline_on_its_shading_
         return point_direct.points_direct(surface, scene, position, patch_, seed=11 + level)
 
     monkeypatch.setattr(display_cells, "BUDGET", 16.0)  # (the whole ceiling is the hot spot here)
+    monkeypatch.setattr(display_cells, "OUTLINE_RINGS", 1)  # (the patches touching the outline: the far ones in a 4 m ceiling)
     assert display_cells.refine(surface, direct, scene, triangles, [mesh], [True], light, at_points) is None
     made = display_cells.refine(surface, direct, scene, triangles, [mesh], [True], light, at_points, covered=covered)
     assert made is not None

@@ -38,6 +38,7 @@ BUDGET = 1.0  # new points at most, a share of the split meshes' points (each co
 MOST = 8_192  # and at most this many: where patches are that many, a hot spot spans patches of its own
 NEW_POINTS = 3  # points a split cell adds at most (a triangle's three midpoints; fewer where neighbours share them)
 FAR = np.int64(1) << np.int64(31)  # key of a new point: patch * FAR + its point in the object's cells
+OUTLINE_RINGS = 3  # rings of patches round a cover's outline that split on an outline split's mesh (the glow's width)
 
 
 def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None, covered=None):
@@ -132,15 +133,19 @@ def _region(mesh, patch, table, start, threshold, kept):
 
 def _on_shading(mesh, offset, covered, kept):
     """``mesh`` (a refined one) as a PatchMesh whose triangles are its shading triangles, its patches
-    (scene patches from ``offset``) but those beside a cover's outline (``covered`` (P,) bool) ``kept`` whole."""
+    (scene patches from ``offset``) but those within OUTLINE_RINGS of a cover's outline (``covered`` (P,)
+    bool) on the room's side ``kept`` whole."""
     if getattr(mesh, "shading_triangles", None) is None:
         return mesh
     triangles, patch = np.asarray(mesh.shading_triangles, np.int64), np.asarray(mesh.shading_triangle_patch, np.int64)
     under = covered[patch + offset]
     sides = np.zeros((2, len(mesh.points)), bool)
     sides[0, triangles[~under]] = sides[1, triangles[under]] = True
+    at = sides[0] & sides[1]  # (points on the outline, then OUTLINE_RINGS rings of patches round them)
+    for _ in range(OUTLINE_RINGS - 1):
+        at[triangles[at[triangles].any(axis=1) & ~under]] = True
     near = np.zeros(mesh.patch_count, bool)  # (the room's side: the gap is seen through the slit alone)
-    near[patch[(sides[0] & sides[1])[triangles].any(axis=1) & ~under]] = True
+    near[patch[at[triangles].any(axis=1) & ~under]] = True
     kept[offset:offset + mesh.patch_count] |= ~near
     return PatchMesh(mesh.points, mesh.face_sizes, mesh.corner_verts, mesh.patch_face, triangles, patch, mesh.patch_area)
 
