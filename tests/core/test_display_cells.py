@@ -106,7 +106,8 @@ def test_a_hot_spot_splits_cells_near_the_lamp_and_is_drawn_far_closer_to_the_ex
 def test_a_mesh_the_outline_split_made_splits_beside_the_outline_on_its_shading_triangles_with_no_t_junction(monkeypatch):
     """A ceiling whose patch under the lamp was split as the outline split does round a panel (its
     four cells under the cover; its neighbours' polygons carry the split's midpoints, their core
-    triangles do not) is kept as made without ``covered``; with it, the patches beside the outline on
+    triangles do not) is kept as made without ``covered``, or where the gap is no brighter than the
+    room; with it and the gap lit (the lamp's hot spot), the patches beside the outline on
     the room's side split on their shading triangles, the far ones stay whole: every patch keeps its
     mean, the light beside the outline is drawn closer to the exact light, and every edge inside the
     ceiling is two triangles' (no T-junction, no crack)."""
@@ -133,6 +134,8 @@ def test_a_mesh_the_outline_split_made_splits_beside_the_outline_on_its_shading_
     monkeypatch.setattr(display_cells, "BUDGET", 16.0)  # (the whole ceiling is the hot spot here)
     monkeypatch.setattr(display_cells, "OUTLINE_RINGS", 1)  # (the patches touching the outline: the far ones in a 4 m ceiling)
     assert display_cells.refine(surface, direct, scene, triangles, [mesh], [True], light, at_points) is None
+    dark = np.where(covered[:, None], 0.0, light)  # (a gap no brighter than the room: no light through a slit, kept as made)
+    assert display_cells.refine(surface, direct, scene, triangles, [mesh], [True], dark, at_points, covered=covered) is None
     made = display_cells.refine(surface, direct, scene, triangles, [mesh], [True], light, at_points, covered=covered)
     assert made is not None
     fine_surface, fine_direct, shown = made

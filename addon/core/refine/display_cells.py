@@ -15,10 +15,10 @@ stored values) is written on the finer cells, each cell's patch its origin's.
 
 Not split: patches no camera sees, n-gons kept whole and their neighbours, meshes a Detail refinement made.
 A mesh the outline split made (``refine.covered_parts``: a ceiling round a panel hung under it) splits
-on its shading triangles (its polygons' every corner, the neighbours' midpoints too: no T-junction), its
-patches touching the outline alone (the rest as made: the display's time): the light from the panel's
-top through the slit falls off within a few cm of the outline, which the cells beside it would show
-as wedges as wide as they are.
+on its shading triangles (its polygons' every corner, the neighbours' midpoints too: no T-junction)
+round the outline of a gap brighter than the room (the rest as made: the display's time): the light
+from the panel's top and sides through the slit falls off within cm of the outline, which the cells
+beside it would show as wedges as wide as they are.
 """
 from __future__ import annotations
 
@@ -39,6 +39,7 @@ MOST = 8_192  # and at most this many: where patches are that many, a hot spot s
 NEW_POINTS = 3  # points a split cell adds at most (a triangle's three midpoints; fewer where neighbours share them)
 FAR = np.int64(1) << np.int64(31)  # key of a new point: patch * FAR + its point in the object's cells
 OUTLINE_RINGS = 3  # rings of patches round a cover's outline that split on an outline split's mesh (the glow's width)
+GLOW = 2.0  # ... where the gap's light passes this many times the mean light (a lit gap: light leaks through its slit)
 
 
 def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None, covered=None):
@@ -57,8 +58,10 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     offsets = np.cumsum([0] + [m.patch_count for m in meshes])
     threshold, kept = _limits(coarse, scene, light)
     written = meshes
-    if covered is not None:
-        meshes = [_on_shading(m, offsets[k], covered, kept) for k, m in enumerate(meshes)]
+    if covered is not None:  # (a gap brighter than the room round it: the light through its slit)
+        grey = np.asarray(light, np.float64).sum(axis=1)
+        glowing = covered & (grey > GLOW * (grey[~kept].mean() if (~kept).any() else np.inf))
+        meshes = [_on_shading(m, offsets[k], covered, glowing, kept) for k, m in enumerate(meshes)]
     splittable = [k for k, m in enumerate(meshes) if receives[k] and getattr(m, "shading_triangles", None) is None
                   and m.patch_count]
     # (cells of the patches' triangles: a cell's triangles never cross its patch's, so the coarse light's linear
@@ -131,16 +134,16 @@ def _region(mesh, patch, table, start, threshold, kept):
     return np.flatnonzero(chosen[patch])
 
 
-def _on_shading(mesh, offset, covered, kept):
-    """``mesh`` (a refined one) as a PatchMesh whose triangles are its shading triangles, its patches
-    (scene patches from ``offset``) but those within OUTLINE_RINGS of a cover's outline (``covered`` (P,)
-    bool) on the room's side ``kept`` whole."""
-    if getattr(mesh, "shading_triangles", None) is None:
+def _on_shading(mesh, offset, covered, glowing, kept):
+    """``mesh`` (a refined one; as made where no ``glowing`` patch is in it) as a PatchMesh whose
+    triangles are its shading triangles, its patches (scene patches from ``offset``) but those within
+    OUTLINE_RINGS of the outline of ``glowing`` (P,) bool ones on the side not ``covered`` ``kept`` whole."""
+    if getattr(mesh, "shading_triangles", None) is None or not glowing[offset:offset + mesh.patch_count].any():
         return mesh
     triangles, patch = np.asarray(mesh.shading_triangles, np.int64), np.asarray(mesh.shading_triangle_patch, np.int64)
     under = covered[patch + offset]
     sides = np.zeros((2, len(mesh.points)), bool)
-    sides[0, triangles[~under]] = sides[1, triangles[under]] = True
+    sides[0, triangles[~under]] = sides[1, triangles[glowing[patch + offset]]] = True
     at = sides[0] & sides[1]  # (points on the outline, then OUTLINE_RINGS rings of patches round them)
     for _ in range(OUTLINE_RINGS - 1):
         at[triangles[at[triangles].any(axis=1) & ~under]] = True
