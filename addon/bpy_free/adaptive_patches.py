@@ -13,7 +13,7 @@ import numpy as np
 from ..core.mesh import meshing
 from ..core.refine.adaptive import patch_mesh, shading_triangulation
 from ..core.refine.adaptive_light import DETAILS, refine_by_direct_light
-from ..core.refine.covered_parts import covered_cells
+from ..core.refine.covered_parts import covered_split
 from . import patches as patches_module
 from .cleaning import drop_zero_area_faces
 from .patches import MAX_PATCHES, Patches, GEOMETRY_CACHE, glossy_of_patches, material_of_patches, patch_materials
@@ -75,20 +75,32 @@ def refined(objects, patches: Patches, detail: str, seed: int = 0, layers=False,
 def covered(objects, patches: Patches, layers=False) -> Patches:
     """``patches`` with the patches a near surface partly covers split along its outline (core
     refine.covered_parts: a light panel just under a ceiling), the same Patches where none is;
-    the objects not split keep their meshes as they were (the display's own cells split them)."""
+    the objects not split keep their meshes as they were (the display's own cells split them).
+    Each mesh keeps its patches' side of the outline as ``covered`` (``covered_flags``)."""
     key = f"{patches.geometry_key}:covered"  # (the geometry's alone: no seed, no light)
     with _LAST.lock:
         cached = _LAST.value if _LAST.key == key else None
     if cached is None:
-        cached = (covered_cells(patches.meshes, patches.combined, [o.receives for o in patches.objects]), 0.0)
+        cached = (covered_split(patches.meshes, patches.combined, [o.receives for o in patches.objects]), 0.0)
         with _LAST.lock:
             _LAST.key, _LAST.value = key, cached
-    cells, _ = cached
+    split, _ = cached
     # (a refinement of the light's accuracy, not needed: never past the patch limit the meshing kept to)
-    if cells is None or sum(c.count for c in cells) > patches_module.MAX_PATCHES:
+    if split is None or sum(c.count for c in split.cells) > patches_module.MAX_PATCHES:
         return patches
-    out = of_cells(objects, patches, cells, key, [], layers, "", keep_unsplit=True)
+    out = of_cells(objects, patches, split.cells, key, [], layers, "", keep_unsplit=True)
+    for mesh, flags in zip(out.meshes, split.covered):
+        mesh.covered = flags  # (one patch a cell, in cell order)
     return replace(out, cells=None)
+
+
+def covered_flags(patches: Patches):
+    """(P,) bool the patches under a near surface (the outline split's ``covered``, which the
+    display's smoothing keeps apart from the rest as at a crease), or None where none is."""
+    flags = [getattr(m, "covered", None) for m in patches.meshes]
+    if not any(f is not None and np.any(f) for f in flags):
+        return None
+    return np.concatenate([np.zeros(m.patch_count, bool) if f is None else np.asarray(f, bool) for m, f in zip(patches.meshes, flags)])
 
 
 def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False, detail="", keep_unsplit=False) -> Patches:

@@ -14,6 +14,7 @@ from ..core.refine import cell_meshes, display_cells
 from ..core.display.covered import seen_parts
 from ..core.mesh.faces import polygon_corner_rows
 from ..core.relight.relighting import group_direct
+from .adaptive_patches import covered_flags
 
 TIME_SHARE = 0.5  # of the time left before a deadline the new points may take (the rest: the smoothing, the writing)
 NEW_POINT_RETRIES = 1  # a new point's noisy light sampled again once (8x the samples), a corner's twice
@@ -25,8 +26,9 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
     source group's for a per-source run), Shown or None) the colours are made on: the solve's
     shading triangles, their cells split where ``refine`` and the direct light say so (``out.shown``)."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
+    # (the patches under a cover kept apart from the rest, as at a crease: the gap's light stays in the gap)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
-                                   **seen_parts(scene, triangles, triangle_patch))
+                                   covered=covered_flags(out.patches), **seen_parts(scene, triangles, triangle_patch))
     grouped = out.sources_out is not None
     started = time.perf_counter()
     direct = (group_direct(surface, scene, result, triangles, deadline) if grouped else
@@ -48,7 +50,7 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
                                           deadline=deadline, light=result.irradiance, retries=NEW_POINT_RETRIES, **groups)
 
     made = display_cells.refine(surface, direct, scene, triangles, out.patches.meshes, [o.receives for o in out.patches.objects],
-                                result.irradiance, at_points, most)
+                                result.irradiance, at_points, most, surface.covered)
     return (surface, direct, None) if made is None else made
 
 

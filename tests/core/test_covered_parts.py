@@ -8,6 +8,7 @@ import pytest
 from addon.core import PatchScene, solve
 from addon.core.mesh import meshing
 from addon.core.refine.adaptive import patch_mesh
+from addon.core.display import smoothing
 from addon.core.refine.covered_parts import LEVELS, covered_points, split_covered
 
 ROOM = (2.0, 2.0, 1.0)
@@ -26,9 +27,9 @@ def box(lo, hi, inward):
     return v, sum(faces, [])
 
 
-def meshes(room_size, slab_size):
+def meshes(room_size, slab_size, slab=SLAB):
     """[the room's PatchMesh, the slab's] at those patch sizes."""
-    (room, room_faces), (slab, slab_faces) = box((0, 0, 0), ROOM, True), box(*SLAB, False)
+    (room, room_faces), (slab, slab_faces) = box((0, 0, 0), ROOM, True), box(*slab, False)
     return [meshing.mesh_patches(room, [4] * 6, room_faces, room_size),
             meshing.mesh_patches(slab, [4] * 6, slab_faces, slab_size)]
 
@@ -60,8 +61,9 @@ def under_slab(points, margin=0.0):
 def coarse():
     first = meshes(0.5, 0.5)
     scene, _ = scene_of(first)
-    cells = split_covered(first, scene.geometry)
-    return first, scene, cells
+    made = split_covered(first, scene.geometry)
+    assert made is not None
+    return first, scene, made
 
 
 def test_the_patches_the_outline_crosses_split_along_it_and_the_cells_beside_it_finer(coarse):
@@ -70,8 +72,8 @@ def test_the_patches_the_outline_crosses_split_along_it_and_the_cells_beside_it_
     points). The cells beside the outline split on, down to the last level (the light leaking from
     the gap is a strip there); nothing farther than a patch from the slab splits, the slab not at
     all, and the ceiling's area is kept."""
-    first, _, cells = coarse
-    assert cells is not None
+    first, _, made = coarse
+    cells = made.cells
     room = cells[0]
     assert cells[1].level.max(initial=0) == 0  # (the slab: its top wholly covered, nothing crosses it)
     c = centres(first[0])
@@ -92,6 +94,75 @@ def test_the_patches_the_outline_crosses_split_along_it_and_the_cells_beside_it_
     assert beside.sum() > 0 and (room.level[beside] == LEVELS).all()
     mesh, _ = patch_mesh(room)
     assert mesh.patch_area.sum() == pytest.approx(first[0].patch_area.sum(), rel=1e-12)
+
+
+def _cell_points(cells):
+    """(L,64,3) 8 x 8 points spread over each quad cell."""
+    grid = (np.arange(8) + 0.5) / 8
+    s, t = (a.ravel() for a in np.meshgrid(grid, grid, indexing="ij"))
+    q = cells.points[cells.corners]
+    return sum(w[None, :, None] * q[:, None, k] for k, w in enumerate([(1 - s) * (1 - t), s * (1 - t), s * t, (1 - s) * t]))
+
+
+def test_each_cell_knows_its_side_of_the_outline(coarse):
+    """The split gives each cell its side of the outline: a ceiling cell is covered exactly where it
+    lies over the slab (64 points a cell), the slab's top (facing the ceiling 2 cm away) covered,
+    nothing else (walls, floor, the slab's sides and bottom)."""
+    _, _, made = coarse
+    room, slab = made.cells
+    assert [len(f) for f in made.covered] == [room.count, slab.count]
+    points = _cell_points(room)
+    on_ceiling = np.abs(points[:, :, 2] - ROOM[2]).max(axis=1) < 1e-9
+    over = under_slab(points.reshape(-1, 3)).reshape(len(points), -1).all(axis=1) & on_ceiling
+    np.testing.assert_array_equal(made.covered[0], over)
+    assert over.sum() >= 4
+    top = np.abs(_cell_points(slab)[:, :, 2] - SLAB[1][2]).max(axis=1) < 1e-9
+    np.testing.assert_array_equal(made.covered[1], top)
+
+
+def test_a_sliver_of_cover_along_a_patchs_edge_is_split_off():
+    """A slab reaching 2 cm past the 0.5 m patches' lines (a twenty-fifth of a patch along its edge,
+    between the probes' outer rows and the edge before): the patches with that sliver split too, and
+    every ceiling cell lies wholly over the slab or wholly beside it (its overlap with the slab's
+    outline, the cells being axis-aligned rectangles, none or all of it to the split lines' bisection,
+    a thousandth of a cell); before, they stayed whole, a room-side patch holding 4% of the gap's light."""
+    slab = ((0.48, 0.48, 0.94), (1.52, 1.52, 0.98))
+    first = meshes(0.5, 0.5, slab)
+    scene, _ = scene_of(first)
+    made = split_covered(first, scene.geometry)
+    assert made is not None
+    room = made.cells[0]
+    q = room.points[room.corners]
+    ceiling = np.abs(q[:, :, 2] - ROOM[2]).max(axis=1) < 1e-9
+    low, high = q[ceiling, :, :2].min(axis=1), q[ceiling, :, :2].max(axis=1)
+    overlap = np.prod(np.clip(np.minimum(high, slab[1][:2]) - np.maximum(low, slab[0][:2]), 0, None), axis=1)
+    share = overlap / np.prod(high - low, axis=1)
+    assert ((share < 1e-3) | (share > 1 - 1e-3)).all(), np.sort(share[(share > 1e-3) & (share < 1 - 1e-3)])
+    np.testing.assert_array_equal(made.covered[0][ceiling], share > 0.5)
+
+
+def test_the_room_side_of_the_outline_keeps_the_rooms_light_in_the_smoothing(coarse):
+    """The display's smoothing on the split mesh with given values (the gap's cells 25, the room's
+    1, the slab 2): every corner of a room cell is 1, the outline's included, and every corner of a
+    gap cell 25. Joined at the outline (no sides), the room's corners there take the gap's light
+    (the spikes round a ceiling panel) and the gap's corners dip toward the room's."""
+    _, _, made = coarse
+    meshes_ = [patch_mesh(c)[0] for c in made.cells]
+    combined = meshing.concatenate(meshes_)
+    start = np.cumsum([0] + [len(m.points) for m in meshes_])
+    triangles = np.concatenate([np.asarray(m.shading_triangles, np.int64) + start[k] for k, m in enumerate(meshes_)])
+    triangle_patch = np.concatenate([np.asarray(m.shading_triangle_patch, np.int64) + combined.patch_offsets[k]
+                                     for k, m in enumerate(meshes_)])
+    covered = np.concatenate(made.covered)
+    in_room = np.arange(combined.patch_count) < meshes_[0].patch_count
+    values = np.where(in_room, np.where(covered, 25.0, 1.0), 2.0)[:, None] * np.ones(3)
+    room = in_room[triangle_patch] & ~covered[triangle_patch]
+    gap = in_room[triangle_patch] & covered[triangle_patch]
+    for sides, kept in ((covered, True), (None, False)):
+        surface = smoothing.Surface.of(combined.vertices, triangles, triangle_patch, combined.patch_count, covered=sides)
+        corners = surface.corner_values(values)
+        assert np.allclose(corners[room], 1.0, rtol=1e-9) == kept and np.allclose(corners[gap], 25.0, rtol=1e-9) == kept
+    assert corners[room].max() > 3.0 and corners[gap].min() < 20.0
 
 
 def test_covered_points_are_those_a_near_surface_faces():
@@ -122,8 +193,8 @@ def floor_light(mesh_list, seed):
 
 @pytest.fixture(scope="module")
 def lights(coarse):
-    first, _, cells = coarse
-    split_meshes = [patch_mesh(c)[0] for c in cells]
+    first, _, made = coarse
+    split_meshes = [patch_mesh(c)[0] for c in made.cells]
     # (the reference: 0.05 m patches, which the outline at 0.65 and 1.35 m runs along: none straddles)
     return {name: floor_light(m, seed) for (name, m), seed in zip(
         [("straddling", first), ("split", split_meshes), ("following", meshes(0.05, 0.05))], (11, 12, 13))}

@@ -103,6 +103,62 @@ def test_a_hot_spot_splits_cells_near_the_lamp_and_is_drawn_far_closer_to_the_ex
     assert (polygon_patch == far).sum() < (polygon_patch == near).sum() and (polygon_patch == near).sum() >= 16
 
 
+def test_a_mesh_the_outline_split_made_splits_beside_the_outline_on_its_shading_triangles_with_no_t_junction(monkeypatch):
+    """A ceiling whose patch under the lamp was split as the outline split does round a panel (its
+    four cells under the cover; its neighbours' polygons carry the split's midpoints, their core
+    triangles do not) is kept as made without ``covered``, or where the gap is no brighter than the
+    room; with it and the gap lit (the lamp's hot spot), the patches beside the outline on
+    the room's side split on their shading triangles, the far ones stay whole: every patch keeps its
+    mean, the light beside the outline is drawn closer to the exact light, and every edge inside the
+    ceiling is two triangles' (no T-junction, no crack)."""
+    from addon.core.refine.adaptive import cells_of, patch_mesh, split
+
+    square = np.array([[0, 0, 0], [0, 2 * SIDE, 0], [2 * SIDE, 2 * SIDE, 0], [2 * SIDE, 0, 0]], float)
+    cells = cells_of(mesh_patches(square, np.array([4]), np.array([0, 1, 2, 3]), PATCH))  # (8 x 8, facing down)
+    under = np.argmin(np.linalg.norm(cells.points[cells.corners].mean(axis=1) - LAMP * [1, 1, 0], axis=1))
+    made_cells, parent = split(cells, np.arange(cells.count) == under)
+    mesh, _ = patch_mesh(made_cells)
+    assert mesh.patch_count == 67 and mesh.face_sizes.max() > 4  # (its neighbours' polygons carry midpoints)
+    covered = parent == under  # (one patch a cell, in cell order)
+    P = mesh.patch_count
+    scene = PatchScene(mesh.points, mesh.triangles, mesh.triangle_patch, np.full(P, 0.5), np.zeros(P),
+                       lights=[PointLight(LAMP, np.ones(3))])
+    triangles, patch = np.asarray(mesh.shading_triangles), np.asarray(mesh.shading_triangle_patch)
+    surface = smoothing.Surface.of(scene.vertices, triangles, patch, P, covered=covered)
+    direct = point_direct.corner_direct(surface, scene, triangles, seed=3)
+    light = _patch_means_exact(scene)
+
+    def at_points(position, patch_, level):
+        return point_direct.points_direct(surface, scene, position, patch_, seed=11 + level)
+
+    monkeypatch.setattr(display_cells, "BUDGET", 16.0)  # (the whole ceiling is the hot spot here)
+    monkeypatch.setattr(display_cells, "OUTLINE_RINGS", 1)  # (the patches touching the outline: the far ones in a 4 m ceiling)
+    assert display_cells.refine(surface, direct, scene, triangles, [mesh], [True], light, at_points) is None
+    dark = np.where(covered[:, None], 0.0, light)  # (a gap no brighter than the room: no light through a slit, kept as made)
+    assert display_cells.refine(surface, direct, scene, triangles, [mesh], [True], dark, at_points, covered=covered) is None
+    made = display_cells.refine(surface, direct, scene, triangles, [mesh], [True], light, at_points, covered=covered)
+    assert made is not None
+    fine_surface, fine_direct, shown = made
+    fine = point_direct.shown(fine_surface, light, fine_direct)
+    np.testing.assert_allclose(fine_surface.corner_means(fine[..., 0].ravel()), light[:, 0], rtol=1e-9)
+    coarse = point_direct.shown(surface, light, direct)
+    beside = np.zeros(P, bool)
+    beside[np.unique(patch[np.isin(triangles, triangles[covered[patch]]).any(axis=1)])] = True
+    beside &= ~covered
+    polygons = np.bincount(shown.origin[0], minlength=P)
+    far = (surface.patch_centroid[:, :2] > 2.5).all(axis=1)  # (three patches and more from the outline: no balance reaches)
+    assert (polygons[beside] > 1).all() and far.sum() == 9 and (polygons[far] == 1).all(), polygons
+    rows = np.flatnonzero(beside[shown.triangle_patch])
+    after = _shown_error(shown.vertices, shown.triangles[rows], fine[rows])
+    before = _shown_error(scene.vertices, triangles[beside[patch]], coarse[beside[patch]])
+    assert after < before / 3, (before, after)
+    edges = np.sort(shown.triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    key, count = np.unique(edges, axis=0, return_counts=True)
+    ends = shown.vertices[key]
+    border = np.any([np.all(np.isclose(ends[:, :, a], v), axis=1) for a in (0, 1) for v in (0.0, 2 * SIDE)], axis=0)
+    assert (count[~border] == 2).all() and (count[border] == 1).all()
+
+
 def test_the_new_points_direct_light_is_the_lamps_exact_light():
     """Every corner of the split cells, new points included, gets the point lamp's I cos / r^2 (a
     hundredth of the way to its patch's centre, as every corner)."""

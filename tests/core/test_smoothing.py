@@ -159,6 +159,25 @@ def test_crease_keeps_each_surface_its_own_light():
     assert np.all((today[on_edge, 0] > 0.25) & (today[on_edge, 0] < 0.95)), today[on_edge, 0]
 
 
+def test_a_covers_outline_keeps_each_side_its_own_light():
+    """A flat 6 x 6 grid whose middle 2 x 2 cells lie under a cover (the gap over a light panel)
+    at 25 times the rest's light: as at a crease, every corner outside is 1 and every corner inside
+    25, the outline's too (joined, the outline's corners took the gap's light into the room's cells
+    and the gap's corners dipped toward the room's)."""
+    points, quads, triangles, patch = _grid(6, 6, (0.0, 0.0, 0.0), (3.0, 0.0, 0.0), (0.0, 3.0, 0.0))
+    centre = _centres(points, quads)
+    covered = (np.abs(centre[:, 0] - 1.5) < 0.5) & (np.abs(centre[:, 1] - 1.5) < 0.5)
+    assert covered.sum() == 4
+    values = np.where(covered, 25.0, 1.0)[:, None] * [1.0, 0.9, 0.8]
+    surface = smoothing.Surface.of(points, triangles, patch, len(quads), covered=covered)
+    corners = surface.corner_values(values)
+    expected = values[patch][:, None, :] * np.ones((1, 3, 1))
+    np.testing.assert_allclose(corners, expected, rtol=1e-12)
+    joined = smoothing.Surface.of(points, triangles, patch, len(quads)).corner_values(values)
+    assert joined[~covered[patch]].max() > 5.0 and joined[covered[patch]].min() < 15.0
+    assert smoothing.Surface.of(points, triangles, patch, len(quads), covered=np.zeros(len(quads), bool)).covered is None
+
+
 def test_shallow_fold_is_smoothed_across():
     """Below the crease angle (a 160 degree fold: normals 20 degrees apart) the edge is one smooth
     surface: light changing linearly across the fold gets the same corner values on both sides of

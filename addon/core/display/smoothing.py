@@ -13,7 +13,8 @@ normals). A corner's value is built only from the corners at its point whose nor
 ``crease_angle`` of its own: a wall and the ceiling keep their own values at their shared edge,
 and back-to-back faces never mix. Points whose normals all lie within half the angle of their mean
 are smooth (every pair compatible) and take one sum per point; only the other points ("crease
-points") are handled pair by pair, so memory stays linear in the triangles.
+points") are handled pair by pair, so memory stays linear in the triangles. A cover's outline (a
+panel's under a ceiling: ``refine.covered_parts``) is a crease too: the gap's light stays in the gap.
 
 Mean preservation (``corner_values``). The corners start as the area-weighted average of the
 compatible corners around them (a continuous field). Then, ``iterations`` times, each patch's
@@ -53,7 +54,6 @@ RELAXATION = 1.5  # over-relaxed corrections leave smaller jumps for the same it
 # holds a few (T*3,) float64 arrays, two at once passed the command line's memory bound a patch.
 THREADED_CORNERS = 1 << 19
 
-
 # A corner's value never falls below this share of the darkest patch meeting at it (a valley may
 # dip below its patches, as a smooth surface through their means must; black it may not).
 LOWEST_SHARE = 0.5
@@ -86,6 +86,7 @@ class Surface(NoiseFilter):
     # (P,) that part's area; None: every patch seen whole (a third of each triangle's area a corner)
     visible: np.ndarray | None = None
     visible_area: np.ndarray | None = None
+    covered: np.ndarray | None = None  # (P,) bool: patches under a cover, kept apart from the rest as at a crease
 
     @property
     def patch_count(self):
@@ -93,14 +94,15 @@ class Surface(NoiseFilter):
 
     @classmethod
     def of(cls, vertices, triangles, triangle_patch, patch_count=None, crease_angle=CREASE_ANGLE, weld=None, hidden=None,
-           visible=None):
+           visible=None, covered=None):
         """``vertices`` (V,3) world positions, ``triangles`` (T,3) vertex indices, ``triangle_patch``
         (T,) patch of each triangle; ``weld`` a length (default WELD_FRACTION of the median
         patch's side, at least float32 rounding of the coordinates); ``hidden`` (P,) bool the
         patches no camera sees (``covered.hidden_patches``: under a box, behind a panel that
         touches them), whose light, nothing or little, joins no visible neighbour's corners;
         ``visible`` (T,3) each corner's weight in its patch's mean over the part seen (partly
-        buried patches: ``covered.visible_corner_weights``), the mean every patch's corners keep."""
+        buried patches: ``covered.visible_corner_weights``), the mean every patch's corners keep; ``covered``
+        (P,) bool the patches under a cover (``covered_parts.CoveredSplit``): a crease."""
         vertices = np.asarray(vertices, np.float64)
         triangles = np.asarray(triangles)
         triangle_patch = np.asarray(triangle_patch)
@@ -127,13 +129,14 @@ class Surface(NoiseFilter):
                              where=patch_area[:, None] > 0)
         point = weld_points(vertices, weld)[triangles]
         cos_crease = float(np.cos(np.radians(crease_angle)))
-        smooth_point, pairs = _crease_pairs(point, triangle_patch, patch_normal, cos_crease)
+        covered = None if covered is None or not np.any(covered) else np.asarray(covered, bool)
+        smooth_point, pairs = _crease_pairs(point, triangle_patch, patch_normal, cos_crease, covered)
         hidden = None if hidden is None or not np.any(hidden) else np.asarray(hidden, bool)
         if visible is not None:
             visible = np.asarray(visible, np.float64).reshape(-1)
             visible_area = np.bincount(np.repeat(triangle_patch, 3), weights=visible, minlength=P)
         return cls(point, triangle_patch, triangle_area, patch_area, patch_normal, centroid, cos_crease,
-                   smooth_point, pairs, hidden, visible, None if visible is None else visible_area)
+                   smooth_point, pairs, hidden, visible, None if visible is None else visible_area, covered)
 
     # -- corner values -------------------------------------------------------------------------
     def _averaging(self):
@@ -369,9 +372,9 @@ def _put_rings(out, plain, scale, rings, corner_patch, block=RINGING_BLOCK):
         out[at] = plain[at] * scale[corner_patch[at]]
 
 
-def _crease_pairs(point, triangle_patch, patch_normal, cos_crease):
+def _crease_pairs(point, triangle_patch, patch_normal, cos_crease, covered=None):
     """(smooth point flags (n,), compatible (corner, other) pairs at the other points); a
-    corner's normal is its patch's."""
+    corner's normal is its patch's, and its side of a cover's outline its patch's ``covered``."""
     p = point.ravel()
     cp = np.repeat(triangle_patch, 3)
     n = int(p.max()) + 1 if len(p) else 0
@@ -386,6 +389,8 @@ def _crease_pairs(point, triangle_patch, patch_normal, cos_crease):
     np.minimum.at(lowest, p, dot)
     del dot
     smooth = (lowest >= half) & (length[:, 0] > 0)
+    if covered is not None:  # (a point both sides meet at is a crease point: some of its corners covered, not all)
+        smooth &= np.bincount(p, weights=covered[cp], minlength=n) % np.maximum(np.bincount(p, minlength=n), 1) == 0
     corners = np.flatnonzero(~smooth[p])
     if len(corners) == 0:
         return smooth, (np.zeros(0, np.int64), np.zeros(0, np.int64))
@@ -398,6 +403,7 @@ def _crease_pairs(point, triangle_patch, patch_normal, cos_crease):
     rank = np.arange(len(first)) - np.repeat(np.cumsum(square) - square, square)
     c, o = corners[first + rank // size], corners[first + rank % size]
     keep = np.einsum("ij,ij->i", patch_normal[cp[c]], patch_normal[cp[o]]) >= cos_crease
+    keep &= True if covered is None else covered[cp[c]] == covered[cp[o]]
     return smooth, (c[keep], o[keep])
 
 

@@ -19,8 +19,14 @@ A point is covered when the ray from it along its patch's normal meets a surface
 within 30 degrees of parallel to it) within NEAR of its first patch's side: light reaches it only along the slit between the two.
 Patches another object runs into (``visibility``'s buried parts) stay whole, as the Detail
 refinement keeps them (a buried child gets no light).
+
+Each cell's side of the outline (``CoveredSplit.covered``: most of its probes covered) goes to the
+display as data: the smoothing keeps the two sides apart as at a crease (``smoothing.Surface``'s
+``covered``), so that the gap's light, tens of times the room's, is not spread into the room's cells.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -30,11 +36,21 @@ from ..scene.geometry_build import build_geometry
 
 LEVELS = 2  # splits of a first patch at most: along the outline, then the cells beside it once more
 PROBES = 4  # points a side of a cell whose covering is probed (16 a cell)
+EDGE = 0.02  # of a cell's side: its outer probes this far in (a sliver of cover along an edge is met)
 NEAR = 0.25  # of the first patch's side: a surface this close in front covers a point
 PARALLEL = np.cos(np.radians(30.0))  # ... if it lies within this of parallel to the patch
 SNAP = 16  # probes a side of a split cell where its covering changes (its split lines moved there)
 SNAP_LIMIT = 0.4  # of a cell's side from its middle, a split line moves at most (no sliver of a neighbour)
 SMALLEST_SIDE = 2e-3  # of the scene's diagonal: no cell smaller (as adaptive_light's)
+
+
+@dataclass
+class CoveredSplit:
+    """The outline split: the cells per object (core refine.adaptive Cells) and, per object, each
+    cell's side of the outline, (L,) bool: most of its probe points covered (False on objects
+    that do not receive, and on patches kept whole)."""
+    cells: list
+    covered: list
 
 
 def covered_points(geometry, position, patch, near):
@@ -63,8 +79,8 @@ def covered_points(geometry, position, patch, near):
 def _probe_points(cells, rows):
     """((n*PROBES^2, 3) points spread over the cells ``rows``, (n*PROBES^2,) the row of each): a
     quad's bilinear grid, a triangle's the grid folded into it."""
-    s, t = (a.ravel() for a in np.meshgrid((np.arange(PROBES) + 0.5) / PROBES, (np.arange(PROBES) + 0.5) / PROBES,
-                                           indexing="ij"))
+    grid = EDGE + (1 - 2 * EDGE) * np.arange(PROBES) / (PROBES - 1)
+    s, t = (a.ravel() for a in np.meshgrid(grid, grid, indexing="ij"))
     corners = cells.corners[rows]
     quad = corners[:, 3] >= 0
     p = cells.points[np.maximum(corners, 0)]  # (n,4,3)
@@ -79,6 +95,12 @@ def _probe_points(cells, rows):
 
 
 def covered_cells(meshes, combined, receives=None):
+    """The cells per object of ``covered_split`` (None where no patch is partly covered)."""
+    made = covered_split(meshes, combined, receives)
+    return None if made is None else made.cells
+
+
+def covered_split(meshes, combined, receives=None):
     """``split_covered`` of ``meshes`` (their ``combined`` CombinedPatches) on their rays alone: no buried
     parts (the split scene finds them), a patch another surface crosses kept whole, as a buried one
     would be (a buried child gets no light)."""
@@ -90,16 +112,17 @@ def covered_cells(meshes, combined, receives=None):
 
 
 def split_covered(meshes, geometry, receives=None, keep_whole=None):
-    """(Cells per object, or None where no patch is partly covered): the patches of ``meshes``
-    (one PatchMesh per object, ``geometry`` their scene's) split where a near surface's outline
-    crosses them (the module's docstring). ``receives`` (per object): only those objects split;
-    ``keep_whole`` (P,) bool: patches that never split."""
+    """(CoveredSplit, or None where no patch is partly covered): the patches of ``meshes`` (one
+    PatchMesh per object, ``geometry`` their scene's) split where a near surface's outline crosses
+    them (the module's docstring), and each cell's side of it. ``receives`` (per object): only
+    those objects split; ``keep_whole`` (P,) bool: patches that never split."""
     receives = [True] * len(meshes) if receives is None else list(receives)
     offsets = np.cumsum([0] + [m.patch_count for m in meshes])
     whole = np.zeros(offsets[-1], bool) if keep_whole is None else np.asarray(keep_whole, bool)
     side = np.sqrt(np.asarray(geometry.patch_area, np.float64))
     smallest = (SMALLEST_SIDE * geometry.diagonal) ** 2 * 4  # (a cell's area: its children's four)
     cells = [cells_of(m) for m in meshes]
+    share = [np.full(c.count, np.nan) for c in cells]  # (each cell's covered probes' share; nan: not known)
     changed = False
     for level in range(LEVELS):
         for k, c in enumerate(cells):
@@ -113,6 +136,7 @@ def split_covered(meshes, geometry, receives=None, keep_whole=None):
             points, row = _probe_points(c, rows)
             patch = base[rows][row]
             some = np.bincount(row, weights=covered_points(geometry, points, patch, NEAR * side[patch]), minlength=len(rows))
+            share[k][rows] = some / (PROBES * PROBES)
             now = c.level[rows] == level
             mixed = rows[now & (some > 0) & (some < PROBES * PROBES)]
             # (the cells beside the outline split too: the light leaking from under the cover is a strip
@@ -127,8 +151,36 @@ def split_covered(meshes, geometry, receives=None, keep_whole=None):
                 where = _crossings(c, mixed, geometry, base[mixed], NEAR * side[base[mixed]])
                 cells[k], parent = split(c, marked)
                 _snap(cells[k], parent, mixed, where)
+                share[k] = _inherited(share[k], cells[k].level > c.level[parent], parent)
                 changed = True
-    return cells if changed else None
+    if not changed:
+        return None
+    return CoveredSplit(cells, _sides(cells, share, geometry, offsets, side, receives, whole))
+
+
+def _inherited(share, new, parent):
+    """(L',) the covered share of each cell after a split (``parent``: the old cell each lies in,
+    ``new`` (L',) bool: a child): its parent's, unknown (nan) for a child of a mixed cell."""
+    out = share[parent]
+    out[new & ~((out == 0) | (out == 1))] = np.nan
+    return out
+
+
+def _sides(cells, share, geometry, offsets, side, receives, whole):
+    """Per object, (L,) bool each cell's side of the outline: most of its probes covered; the cells
+    not known yet (a last split's children of a mixed cell, frozen or the smallest ones) probed now."""
+    out = []
+    for k, c in enumerate(cells):
+        known = share[k]
+        base = c.origin + offsets[k]
+        rows = np.flatnonzero(np.isnan(known) & ~whole[base]) if receives[k] else np.zeros(0, np.int64)
+        if rows.size:
+            points, row = _probe_points(c, rows)
+            patch = base[rows][row]
+            hit = covered_points(geometry, points, patch, NEAR * side[patch])
+            known[rows] = np.bincount(row, weights=hit, minlength=len(rows)) / (PROBES * PROBES)
+        out.append(np.nan_to_num(known, nan=0.0) > 0.5)
+    return out
 
 
 def _bilinear(corners, s, t):

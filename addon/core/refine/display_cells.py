@@ -14,6 +14,11 @@ solve's patches, error and time are untouched. Every output (the colours, the so
 stored values) is written on the finer cells, each cell's patch its origin's.
 
 Not split: patches no camera sees, n-gons kept whole and their neighbours, meshes a Detail refinement made.
+A mesh the outline split made (``refine.covered_parts``: a ceiling round a panel hung under it) splits
+on its shading triangles (its polygons' every corner, the neighbours' midpoints too: no T-junction)
+round the outline of a gap brighter than the room (the rest as made: the display's time): the light
+from the panel's top and sides through the slit falls off within cm of the outline, which the cells
+beside it would show as wedges as wide as they are.
 """
 from __future__ import annotations
 
@@ -33,24 +38,32 @@ BUDGET = 1.0  # new points at most, a share of the split meshes' points (each co
 MOST = 8_192  # and at most this many: where patches are that many, a hot spot spans patches of its own
 NEW_POINTS = 3  # points a split cell adds at most (a triangle's three midpoints; fewer where neighbours share them)
 FAR = np.int64(1) << np.int64(31)  # key of a new point: patch * FAR + its point in the object's cells
+OUTLINE_RINGS = 3  # rings of patches round a cover's outline that split on an outline split's mesh (the glow's width)
+GLOW = 2.0  # ... where the gap's light passes this many times the mean light (a lit gap: light leaks through its slit)
 
 
-def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None):
+def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None, covered=None):
     """(RefinedSurface, its CornerDirect, Shown), or None where no cell splits. ``coarse`` the
     ``smoothing.Surface`` of ``triangles`` (T,3) of the scene's vertices, ``direct`` the coarse
     CornerDirect (([G,]T,3,3)); ``meshes`` the objects' PatchMeshes in scene order, ``receives``
     whether each gets results; ``light`` (P,3) the light the patches show; ``at_points(position
     (n,3), patch (n,), level)`` the direct light ([G,]n,3) at points (``point_direct.points_direct``);
-    ``most``: new points at most (a time limit's), beside the budget."""
+    ``most``: new points at most (a time limit's), beside the budget; ``covered`` (P,) bool the patches under
+    a cover (the outline split's, whose refined meshes then split on their shading triangles near it)."""
     V = len(scene.vertices)
     triangles = np.asarray(triangles, np.int64)
     tp = np.asarray(coarse.triangle_patch, np.int64)
     table = _Table(direct, triangles, tp, V)
     starts = np.cumsum([0] + [len(m.points) for m in meshes])
     offsets = np.cumsum([0] + [m.patch_count for m in meshes])
+    threshold, kept = _limits(coarse, scene, light)
+    written = meshes
+    if covered is not None:  # (a gap brighter than the room round it: the light through its slit)
+        grey = np.asarray(light, np.float64).sum(axis=1)
+        glowing = covered & (grey > GLOW * (grey[~kept].mean() if (~kept).any() else np.inf))
+        meshes = [_on_shading(m, offsets[k], covered, glowing, kept) for k, m in enumerate(meshes)]
     splittable = [k for k, m in enumerate(meshes) if receives[k] and getattr(m, "shading_triangles", None) is None
                   and m.patch_count]
-    threshold, kept = _limits(coarse, scene, light)
     # (cells of the patches' triangles: a cell's triangles never cross its patch's, so the coarse light's linear
     # interpolation at the new points keeps every patch's mean, in any triangulation of the cells' polygons; only
     # the patches whose light changes and LEVELS + 1 rings around them: the balance's splits stay among them)
@@ -77,7 +90,7 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     if not refined:
         return None
     made = {k: patch_mesh(cells[k]) for k in refined}
-    shown = shown_of(meshes, {k: merged(meshes[k], mesh, patch_of[k][origin] - offsets[k]) for k, (mesh, origin) in made.items()},
+    shown = shown_of(written, {k: merged(meshes[k], mesh, patch_of[k][origin] - offsets[k]) for k, (mesh, origin) in made.items()},
                    triangles, tp, starts, offsets)
     _evaluate(table, _shading_corners(shown, refined, offsets), starts, meshes, cells, at_points, LEVELS)
     fine = Means(shown, scene.patch_count, visible_corner_weights(scene.geometry, shown.vertices, shown.triangles,
@@ -119,6 +132,25 @@ def _region(mesh, patch, table, start, threshold, kept):
         near[triangles[chosen[patch]].ravel()] = True
         chosen[patch[near[triangles].any(axis=1)]] = True
     return np.flatnonzero(chosen[patch])
+
+
+def _on_shading(mesh, offset, covered, glowing, kept):
+    """``mesh`` (a refined one; as made where no ``glowing`` patch is in it) as a PatchMesh whose
+    triangles are its shading triangles, its patches (scene patches from ``offset``) but those within
+    OUTLINE_RINGS of the outline of ``glowing`` (P,) bool ones on the side not ``covered`` ``kept`` whole."""
+    if getattr(mesh, "shading_triangles", None) is None or not glowing[offset:offset + mesh.patch_count].any():
+        return mesh
+    triangles, patch = np.asarray(mesh.shading_triangles, np.int64), np.asarray(mesh.shading_triangle_patch, np.int64)
+    under = covered[patch + offset]
+    sides = np.zeros((2, len(mesh.points)), bool)
+    sides[0, triangles[~under]] = sides[1, triangles[glowing[patch + offset]]] = True
+    at = sides[0] & sides[1]  # (points on the outline, then OUTLINE_RINGS rings of patches round them)
+    for _ in range(OUTLINE_RINGS - 1):
+        at[triangles[at[triangles].any(axis=1) & ~under]] = True
+    near = np.zeros(mesh.patch_count, bool)  # (the room's side: the gap is seen through the slit alone)
+    near[patch[at[triangles].any(axis=1) & ~under]] = True
+    kept[offset:offset + mesh.patch_count] |= ~near
+    return PatchMesh(mesh.points, mesh.face_sizes, mesh.corner_verts, mesh.patch_face, triangles, patch, mesh.patch_area)
 
 
 def _triangle_mesh(mesh, rows):
