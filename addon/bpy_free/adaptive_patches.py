@@ -76,7 +76,7 @@ def covered(objects, patches: Patches, layers=False) -> Patches:
     """``patches`` with the patches a near surface partly covers split along its outline (core
     refine.covered_parts: a light panel just under a ceiling), the same Patches where none is;
     the objects not split keep their meshes as they were (the display's own cells split them).
-    Each mesh keeps its patches' side of the outline as ``covered`` (``covered_flags``)."""
+    Each mesh keeps its patches' side of the outline as ``covered`` (``patches.covered_flags``)."""
     key = f"{patches.geometry_key}:covered"  # (the geometry's alone: no seed, no light)
     with _LAST.lock:
         cached = _LAST.value if _LAST.key == key else None
@@ -92,15 +92,6 @@ def covered(objects, patches: Patches, layers=False) -> Patches:
     for mesh, flags in zip(out.meshes, split.covered):
         mesh.covered = flags  # (one patch a cell, in cell order)
     return replace(out, cells=None)
-
-
-def covered_flags(patches: Patches):
-    """(P,) bool the patches under a near surface (the outline split's ``covered``, which the
-    display's smoothing keeps apart from the rest as at a crease), or None where none is."""
-    flags = [getattr(m, "covered", None) for m in patches.meshes]
-    if not any(f is not None and np.any(f) for f in flags):
-        return None
-    return np.concatenate([np.zeros(m.patch_count, bool) if f is None else np.asarray(f, bool) for m, f in zip(patches.meshes, flags)])
 
 
 def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False, detail="", keep_unsplit=False) -> Patches:

@@ -173,6 +173,7 @@ class _GeometryCache:
                     patches.emission,
                     lights=patches.lights,
                     glossy=patches.glossy,
+                    hidden=covered_flags(patches),
                 )
             for w in caught:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -187,6 +188,15 @@ class _GeometryCache:
 
 
 GEOMETRY_CACHE = _GeometryCache()
+
+
+def covered_flags(patches: Patches):
+    """(P,) bool the patches under a near surface (the outline split's ``covered`` on each mesh it
+    made: ``adaptive_patches.covered``), or None where none is."""
+    flags = [getattr(m, "covered", None) for m in patches.meshes]
+    if not any(f is not None and np.any(f) for f in flags):
+        return None
+    return np.concatenate([np.zeros(m.patch_count, bool) if f is None else np.asarray(f, bool) for m, f in zip(patches.meshes, flags)])
 
 
 def patch_count(objects, patch_size) -> float:

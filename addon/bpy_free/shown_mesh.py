@@ -14,7 +14,7 @@ from ..core.refine import cell_meshes, display_cells
 from ..core.display.covered import seen_parts
 from ..core.mesh.faces import polygon_corner_rows
 from ..core.relight.relighting import group_direct
-from .adaptive_patches import covered_flags
+from .patches import covered_flags
 
 TIME_SHARE = 0.5  # of the time left before a deadline the new points may take (the rest: the smoothing, the writing)
 NEW_POINT_RETRIES = 1  # a new point's noisy light sampled again once (8x the samples), a corner's twice

@@ -102,6 +102,10 @@ def test_detail_off_splits_the_patches_a_near_surface_partly_covers_and_the_room
     assert split.combined.patch_area.sum() == pytest.approx(first.combined.patch_area.sum(), rel=1e-12)
     assert split.patch_scene().source_power.sum() == pytest.approx(first.patch_scene().source_power.sum(), rel=1e-12)
     assert len(split.layers[0].patch_slot) == split.meshes[0].patch_count
+    # the gap's patches, under the slab, are the scene's hidden ones: the error measure leaves them out
+    hidden = split.patch_scene().hidden
+    np.testing.assert_array_equal(hidden, patches.covered_flags(split))
+    assert hidden is not None and 0 < hidden.sum() and first.patch_scene().hidden is None
     assert adaptive_patches.refined(objects, patches.make_patches(objects, 0.5), "OFF").combined.patch_count == \
         split.combined.patch_count  # (the estimate's patches are the run's)
     ref, ref_se = floor_light(patches.make_patches(objects, 0.05), 13)

@@ -209,3 +209,42 @@ def test_the_floor_gets_the_light_of_a_mesh_that_follows_the_outline(lights):
     (ref, ref_se), (split, split_se), (straddling, straddling_se) = lights["following"], lights["split"], lights["straddling"]
     assert straddling - ref > 4 * np.hypot(ref_se, straddling_se) and straddling > 1.2 * ref, (straddling, ref)
     assert -4 * np.hypot(ref_se, split_se) < split - ref < 0.03 * ref, (split, ref, straddling)
+
+
+def test_the_error_a_solve_measures_leaves_the_covered_patches_out(coarse):
+    """Patches under a near cover (the gap over the slab: seen only through the slit) are
+    ``hidden`` in the scene: the measured MSE is the area-weighted mean of the variance over the
+    other patches alone, and the mean reflected light it is relative to too, to rounding; a scene
+    without them measures every patch as before, bit for bit."""
+    _, _, made = coarse
+    split_meshes = [patch_mesh(c)[0] for c in made.cells]
+    plain, _ = scene_of(split_meshes)
+    hidden = np.concatenate(made.covered)
+    assert 0 < hidden.sum() < hidden.size
+    scene = plain.with_materials(plain.reflectivity, plain.emission)
+    covered = PatchScene(plain.vertices, plain.triangles, plain.triangle_patch, plain.reflectivity, plain.emission,
+                         hidden=hidden, _geometry=plain.geometry)
+    share = covered.area_share
+    assert share[hidden].sum() == 0 and share.sum() == pytest.approx(1.0)
+    np.testing.assert_array_equal(covered.with_materials(covered.reflectivity, covered.emission).hidden, hidden)
+    runs = [solve(s, paths=40_000, seed=3, threads=1) for s in (scene, covered)]
+    # (the same paths: the scene's light is the same, only what is measured of it differs)
+    np.testing.assert_array_equal(runs[0].radiosity, runs[1].radiosity)
+    variance, reflected = runs[1].reflected_variance.mean(axis=1), runs[1].reflected.mean(axis=1)
+    assert runs[1].measured_mse == pytest.approx(float(share @ variance), rel=1e-9)
+    assert runs[1].mean_reflected == pytest.approx(float(share @ reflected), rel=1e-9)
+    everything = scene.patch_area / scene.total_area
+    assert runs[0].measured_mse == pytest.approx(float(everything @ runs[0].reflected_variance.mean(axis=1)), rel=1e-9)
+    # the gap's light, tens of times the room's, held most of the error: left out, the rest is far smaller
+    assert runs[1].measured_mse < 0.5 * runs[0].measured_mse, (runs[1].measured_mse, runs[0].measured_mse)
+
+
+def test_a_hidden_flag_a_patch_is_checked():
+    """A hidden mask of another length is one clear error; all hidden or none is no mask."""
+    first = meshes(0.5, 0.5)
+    plain, _ = scene_of(first)
+    args = (plain.vertices, plain.triangles, plain.triangle_patch, plain.reflectivity, plain.emission)
+    with pytest.raises(ValueError, match="one flag a patch"):
+        PatchScene(*args, hidden=np.zeros(3, bool))
+    for flags in (np.zeros(plain.patch_count, bool), np.ones(plain.patch_count, bool)):
+        assert PatchScene(*args, hidden=flags).hidden is None

@@ -88,7 +88,7 @@ def measured_means(scene, made, seed=0, target_mse=None):
     points, whose difference d gives each patch's variance of their mean, d^2 / 4; where that
     MSE passes ``target_mse``, one more pair as large as it says is needed (MOST_SAMPLES in all
     at most), each pair weighing by its points."""
-    weight = scene.patch_area / scene.total_area
+    weight = scene.area_share
     total, points, mse, half = 0.0, 0, 0.0, MEAN_SAMPLES // 2
     for k in range(2):
         a, b = (lamp_means(made, seed=[int(seed), k, side], samples=half) for side in (0, 1))

@@ -65,7 +65,7 @@ class Batches:
         # b_j = (R_j Phi_T / A_j) I_j / N: the score R_j Phi_T / A_j made where it is used (_score),
         # not kept beside the tallies (a (C,P) array less through the solve)
         self._reflectivity = tables.reflectivity  # (C,P)
-        self.weight = scene.patch_area / scene.total_area
+        self.weight = scene.area_share
         self._mse_at = (0, math.nan)  # (chunks, measured_mse at that many chunks)
         self._mean_at = (0, math.nan)  # (chunks, mean_reflected at that many chunks)
         # Area-weighted Helmert increments of the sum of squares, one a chunk from the second on:
@@ -251,14 +251,18 @@ class Batches:
 
     def mean_reflected(self):
         """The area-weighted mean over patches (and channels) of the reflected radiosity so far,
-        sum_j A_j b_j / A_T = Phi_T sum_j R_j I_j / (A_T N): what a relative error on the measured
-        scale is relative to. NaN before any path."""
+        sum_j A_j b_j / A_T = Phi_T sum_j R_j I_j / (A_T N) (the scene's hidden patches left out,
+        as from the measured MSE): what a relative error on the measured scale is relative to.
+        NaN before any path."""
         if self.paths == 0:
             return math.nan
         if self._mean_at[0] != self.chunks:
-            reflected = sum(float(np.einsum("i,i->", self._reflectivity[k], self.incident[k])) for k in range(self.channels))
-            scale = self.scene.total_power / (self.scene.total_area * self.paths * self.channels)
-            self._mean_at = (self.chunks, reflected * scale)
+            scene = self.scene
+            # (the hidden patches left out: sum_j w_j b_j, w_j the area share, b_j = R_j Phi_T I_j / (A_j N))
+            seen = 1.0 if scene.hidden is None else np.where(scene.hidden, 0.0, 1.0)
+            reflected = sum(float(np.einsum("i,i->", self._reflectivity[k] * seen, self.incident[k])) for k in range(self.channels))
+            area = scene.total_area if scene.hidden is None else float(scene.patch_area[~scene.hidden].sum())
+            self._mean_at = (self.chunks, reflected * scene.total_power / (area * self.paths * self.channels))
         return self._mean_at[1]
 
     def _increment(self, n, kept):

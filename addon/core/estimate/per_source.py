@@ -37,7 +37,7 @@ class GroupBatches:
         self.cross = np.zeros((C, S, S))  # sum_k sum_j W_j I_sj^(k) I_tj^(k) / n_k
         self.lit = np.zeros(S, np.int64)  # the batches each group's light reached a reflecting patch in
         score = tables.reflectivity * (scene.total_power / scene.patch_area)  # (C,P)
-        self.root_weight = score * np.sqrt(scene.patch_area / scene.total_area)  # sqrt(W_j)
+        self.root_weight = score * np.sqrt(scene.area_share)  # sqrt(W_j)
 
     def add(self, tally):
         """Adds a chunk's ``incident_groups`` (S,C,P) of ``tally.paths`` paths."""
@@ -76,7 +76,7 @@ class GroupBatches:
         direct = None if self.direct is None else self.irradiance(scene, self.direct, N)
         means = None
         if measured_scale:  # (area-weighted over patches: Batches.mean_reflected's, group by group)
-            means = np.einsum("spc,pc,p->sc", irradiance, scene.reflectivity, scene.patch_area / scene.total_area)
+            means = np.einsum("spc,pc,p->sc", irradiance, scene.reflectivity, scene.area_share)
         power = group_power(scene, self.groups)
         return PerSource(self.groups.names, radiosity, irradiance, power, covariance, scene_scale(scene), target_error,
                          patch_group, self.groups.light_group, direct, means, self.lit.copy(),

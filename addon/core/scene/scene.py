@@ -57,13 +57,15 @@ class PatchScene:
     glossy : (share (P,3), alpha (P,)) or a GlossyLobe: the share of each patch's reflectivity
         that its first reflection of a source's light sends along a GGX lobe (``glossy``);
         default none (every reflection Lambertian).
+    hidden : (P,) bool, the patches a near surface covers (a ceiling over a panel hung just under
+        it): the error a solve measures and stops on leaves them out (``area_share``).
 
     Degenerate triangles are dropped with a warning; everything else that is wrong raises
     ``ValueError`` naming the problem and the offending indices.
     """
 
     def __init__(self, vertices, triangles, triangle_patch, reflectivity, emission, lights=(), aim=None, *, glossy=None,
-                 _geometry=None):
+                 hidden=None, _geometry=None):
         reflectivity_arr = np.asarray(reflectivity)
         if reflectivity_arr.ndim not in (1, 2) or reflectivity_arr.shape[0] == 0:
             raise ValueError(f"reflectivity must have shape (P,) or (P, 3) with P > 0; got {reflectivity_arr.shape}")
@@ -99,6 +101,7 @@ class PatchScene:
         if lights and not (self.source_power > 0).any():
             raise ValueError("the scene has no source: every emission is zero and no light gives power")
         validate_power_scale(self.total_power, self.patch_area)
+        self.hidden = _hidden(hidden, self.patch_count)
 
     # --- materials -------------------------------------------------------------------------
     def with_materials(self, reflectivity, emission, lights=None, glossy=SAME):
@@ -108,7 +111,7 @@ class PatchScene:
         return PatchScene(
             self.vertices, self.triangles, self.triangle_patch, reflectivity, emission,
             self.lights if lights is None else lights, self.lights.aim,
-            glossy=self.glossy if glossy is SAME else glossy, _geometry=self.geometry,
+            glossy=self.glossy if glossy is SAME else glossy, hidden=self.hidden, _geometry=self.geometry,
         )
 
     # --- sizes -----------------------------------------------------------------------------
@@ -123,6 +126,16 @@ class PatchScene:
     @property
     def patch_area(self):
         return self.geometry.patch_area
+
+    @property
+    def area_share(self):
+        """(P,) each patch's share of the surfaces the error is measured over: its area over the
+        scene's, the ``hidden`` patches left out (under a near cover: seen only through the gap,
+        their light counted where it comes out)."""
+        if self.hidden is None:
+            return self.patch_area / self.total_area
+        seen = np.where(self.hidden, 0.0, self.patch_area)
+        return seen / seen.sum()
 
     @property
     def patch_normal(self):
@@ -242,3 +255,14 @@ def closed_behind(g, patch):
         hit, _, _, _, hit_normal = g.surface_tracer.first_hit_barycentric(origins, d32, g.region_of(patch))
         backs += (hit >= 0) & ~meets_front(d32.T, hit_normal)
     return closed | (backs >= VOTES)
+
+
+def _hidden(hidden, patch_count):
+    """(P,) bool of the patches the error measure leaves out, or None where it counts every one
+    (none given, none hidden, or all of them: a measure needs a surface)."""
+    if hidden is None:
+        return None
+    hidden = np.asarray(hidden, dtype=bool).ravel()
+    if hidden.shape != (patch_count,):
+        raise ValueError(f"hidden must have one flag a patch ({patch_count}); got {hidden.shape[0]}")
+    return hidden if hidden.any() and not hidden.all() else None
