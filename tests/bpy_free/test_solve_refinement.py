@@ -165,9 +165,11 @@ def test_with_a_time_limit_late_refining_steps_are_skipped_and_the_final_solve_k
 
 def test_a_refining_solve_is_a_quarter_of_the_fewest_paths_the_final_solve_runs(monkeypatch):
     """With an error target the refining solve runs MEASURED_STOP_CHUNKS chunks of a quarter of
-    the final solve's chunk (a looser target stopped on its measured error ran many small chunks,
-    more paths than the final solve); with a path count, a quarter of it."""
-    from addon.core.estimate.plan import MEASURED_STOP_CHUNKS
+    the final solve's planned chunk (a looser target stopped on its measured error ran many small
+    chunks, more paths than the final solve), and the final solve's first RESIZE_AFTER chunks are
+    of that plan (its later ones sized by what they measure: chunks.RESIZE_AFTER); with a path
+    count, a quarter of it."""
+    from addon.core.estimate.plan import MEASURED_STOP_CHUNKS, RESIZE_AFTER
 
     monkeypatch.setattr(adaptive_patches, "ROUNDS", 1)
     runs = []
@@ -177,7 +179,7 @@ def test_a_refining_solve_is_a_quarter_of_the_fewest_paths_the_final_solve_runs(
     (core, refining), = runs
     assert core.target_error is None and refining.chunks == MEASURED_STOP_CHUNKS
     assert refining.paths == MEASURED_STOP_CHUNKS * core.chunk_paths
-    assert 4 * refining.paths <= out.result.paths * 1.01 and out.result.stopped == "target"
+    assert out.result.paths > RESIZE_AFTER * 4 * core.chunk_paths and out.result.stopped == "target"
     runs.clear()
     pipeline.run_solve(room(), settings(paths=40_000))
     assert runs[0][1].paths == 10_000

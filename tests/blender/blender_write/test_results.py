@@ -24,8 +24,9 @@ def _corner_values(name):
 
 def test_wall_pieces_of_separate_objects_share_their_light_and_corners_keep_creases(blender):
     """A room whose floor is two objects side by side, lit by a lamp low beside their joint: at
-    the joint the two floors' smooth colours agree within 0.5% (before, each object's vertex
-    averages stopped at its own edge: a seam of the light's slope across a patch). At the room's floor-wall edge the floor and the wall keep
+    the joint the two floors' smooth colours differ no more than two patches' corners inside one
+    floor do (before, each object's vertex averages stopped at its own edge: a seam of the
+    light's slope across a patch). At the room's floor-wall edge the floor and the wall keep
     their own light (before, a point averaged both: a dark line)."""
     room_v, room_f = box_arrays((0, 0, 0), (2, 1, 1), inward=True)
     floor = [f for f in room_f if all(room_v[i][2] == 0 for i in f)]
@@ -42,12 +43,18 @@ def test_wall_pieces_of_separate_objects_share_their_light_and_corners_keep_crea
     left, right = _corner_values("Left floor"), _corner_values("Right floor")
     joint = [p for p in left if abs(p[0] - 1.0) < 1e-6 and p in right]
     assert len(joint) >= 9
+    # (the smoothing keeps each patch's mean exactly, which leaves a step between two patches'
+    # corners at every point inside an object, with the solve's noise: at the joint no larger than
+    # those; a per-object average differs there by the light's slope across a patch)
+    inside = [p for p in left if 0.05 < p[0] < 0.95 and 0.05 < p[1] < 0.95 and len(left[p]) > 1]
+    assert len(inside) > 50
+    steps = [np.ptp([v for _, v in left[p]], axis=0).max() / np.mean([v for _, v in left[p]]) for p in inside]
+    gaps = []
     for p in joint:
         a = np.mean([v for _, v in left[p]], axis=0)
         b = np.mean([v for _, v in right[p]], axis=0)
-        # (the smoothing keeps each patch's mean exactly, which leaves steps of about 0.1%: far
-        # below what the eye sees; a per-object average differs by the light's slope there)
-        np.testing.assert_allclose(a, b, rtol=5e-3)
+        gaps.append(float(np.abs(a - b).max() / np.abs(b).max()))
+    assert np.median(gaps) <= 2 * np.median(steps) and max(gaps) <= 2 * np.percentile(steps, 90), (gaps, np.percentile(steps, [50, 90]))
     walls = _corner_values("Walls")
     edge = [p for p in left if p in walls and 0.05 < p[0] < 0.95]  # the floor's edge along the y = 0 or 1 wall
     assert edge
