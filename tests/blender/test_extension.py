@@ -88,19 +88,19 @@ def test_register_and_unregister_leave_no_trace():
 # ---------------------------------------------------------------------------
 
 def _covered(meshes, names, spec):
-    """The meshes as the operator meshes them: the patches a near surface partly covers split along its
-    outline (the lamp 1 cm under the ceiling; core refine.covered_parts, as adaptive_patches.covered)."""
+    """(the meshes as the operator meshes them: the patches a near surface partly covers split along its
+    outline (the lamp 1 cm under the ceiling; core refine.covered_parts, as adaptive_patches.covered),
+    (P,) bool the covered ones, the scene's hidden patches, or None)."""
     from addon.core.refine.adaptive import patch_mesh
-    from addon.core.refine.covered_parts import covered_cells
+    from addon.core.refine.covered_parts import covered_split
 
-    cells = covered_cells(meshes, concatenate(meshes))
-    if cells is None:
-        return meshes
+    made = covered_split(meshes, concatenate(meshes))
+    if made is None:
+        return meshes, None
     out = []
-    for mesh, cell in zip(meshes, cells):
-        made = patch_mesh(cell)[0]
-        out.append(mesh if cell.level.max(initial=0) == 0 else made)
-    return out
+    for mesh, cell in zip(meshes, made.cells):
+        out.append(mesh if cell.level.max(initial=0) == 0 else patch_mesh(cell)[0])
+    return out, np.concatenate(made.covered)
 
 
 def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1, **solve_options):
@@ -108,11 +108,11 @@ def reference(spec, relative_rms=ERROR / 100, seed=3, threads=1, **solve_options
     names = sorted(spec)
     meshes = [mesh_patches(spec[n][0], [len(f) for f in spec[n][1]], np.concatenate(spec[n][1]), PATCH_SIZE)
               for n in names]
-    meshes = _covered(meshes, names, spec)
+    meshes, hidden = _covered(meshes, names, spec)
     c = concatenate(meshes)
     R = np.concatenate([spec[n][2][m.patch_face] for n, m in zip(names, meshes)])
     E = np.concatenate([spec[n][3][m.patch_face] for n, m in zip(names, meshes)])
-    scene = PatchScene(c.vertices, c.triangles, c.triangle_patch, R, E)
+    scene = PatchScene(c.vertices, c.triangles, c.triangle_patch, R, E, hidden=hidden)
     target = relative_rms_to_mse(predict(scene), relative_rms)
     solve_options.setdefault("stop_rule", STOP_RULE.default)  # the extension's defaults
     solve_options.setdefault("method", METHOD.default)
