@@ -14,7 +14,6 @@ from ..core.refine import cell_meshes, display_cells
 from ..core.display.covered import seen_parts
 from ..core.mesh.faces import polygon_corner_rows
 from ..core.relight.relighting import group_direct
-from .patches import covered_flags
 
 TIME_SHARE = 0.5  # of the time left before a deadline the new points may take (the rest: the smoothing, the writing)
 NEW_POINT_RETRIES = 1  # a new point's noisy light sampled again once (8x the samples), a corner's twice
@@ -28,7 +27,7 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     # (the patches under a cover kept apart from the rest, as at a crease: the gap's light stays in the gap)
     surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
-                                   covered=covered_flags(out.patches), **seen_parts(scene, triangles, triangle_patch))
+                                   covered=scene.hidden, **seen_parts(scene, triangles, triangle_patch))
     grouped = out.sources_out is not None
     started = time.perf_counter()
     direct = (group_direct(surface, scene, result, triangles, deadline) if grouped else

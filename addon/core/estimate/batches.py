@@ -259,10 +259,9 @@ class Batches:
         if self._mean_at[0] != self.chunks:
             scene = self.scene
             # (the hidden patches left out: sum_j w_j b_j, w_j the area share, b_j = R_j Phi_T I_j / (A_j N))
-            seen = 1.0 if scene.hidden is None else np.where(scene.hidden, 0.0, 1.0)
-            reflected = sum(float(np.einsum("i,i->", self._reflectivity[k] * seen, self.incident[k])) for k in range(self.channels))
-            area = scene.total_area if scene.hidden is None else float(scene.patch_area[~scene.hidden].sum())
-            self._mean_at = (self.chunks, reflected * scene.total_power / (area * self.paths * self.channels))
+            seen = self._reflectivity if scene.hidden is None else np.where(scene.hidden, 0.0, self._reflectivity)
+            reflected = sum(float(np.einsum("i,i->", seen[k], self.incident[k])) for k in range(self.channels))
+            self._mean_at = (self.chunks, reflected * scene.total_power / (scene.seen_area * self.paths * self.channels))
         return self._mean_at[1]
 
     def _increment(self, n, kept):

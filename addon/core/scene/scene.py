@@ -134,8 +134,12 @@ class PatchScene:
         their light counted where it comes out)."""
         if self.hidden is None:
             return self.patch_area / self.total_area
-        seen = np.where(self.hidden, 0.0, self.patch_area)
-        return seen / seen.sum()
+        return np.where(self.hidden, 0.0, self.patch_area) / self.seen_area
+
+    @property
+    def seen_area(self):
+        """The area the error is measured over: A_T less the ``hidden`` patches'."""
+        return self.total_area if self.hidden is None else float(self.patch_area[~self.hidden].sum())
 
     @property
     def patch_normal(self):
