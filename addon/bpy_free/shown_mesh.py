@@ -49,7 +49,8 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
                                           deadline=deadline, light=result.irradiance, retries=NEW_POINT_RETRIES, **groups)
 
     made = display_cells.refine(surface, direct, scene, triangles, out.patches.meshes, [o.receives for o in out.patches.objects],
-                                result.irradiance, at_points, most, surface.covered)
+                                result.irradiance, at_points, most, surface.covered,
+                                point_direct.corner_sources_means(scene, result))
     return (surface, direct, None) if made is None else made
 
 

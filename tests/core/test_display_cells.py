@@ -103,14 +103,16 @@ def test_a_hot_spot_splits_cells_near_the_lamp_and_is_drawn_far_closer_to_the_ex
     assert (polygon_patch == far).sum() < (polygon_patch == near).sum() and (polygon_patch == near).sum() >= 16
 
 
-def test_a_mesh_the_outline_split_made_splits_beside_the_outline_on_its_shading_triangles_with_no_t_junction(monkeypatch):
+def test_a_mesh_the_outline_split_made_splits_where_its_light_changes_on_its_shading_triangles_with_no_t_junction(monkeypatch):
     """A ceiling whose patch under the lamp was split as the outline split does round a panel (its
     four cells under the cover; its neighbours' polygons carry the split's midpoints, their core
-    triangles do not) is kept as made without ``covered``, or where the gap is no brighter than the
-    room; with it and the gap lit (the lamp's hot spot), the patches beside the outline on
-    the room's side split on their shading triangles, the far ones stay whole: every patch keeps its
-    mean, the light beside the outline is drawn closer to the exact light, and every edge inside the
-    ceiling is two triangles' (no T-junction, no crack)."""
+    triangles do not) is kept as made without ``covered`` (a Detail refinement's mesh); with it, its
+    patches split on their shading triangles where the direct light changes, as any mesh's do, the
+    ones whose light is even (far from the lamp) whole or halved by a neighbour's balance: every patch keeps its mean,
+    the light is drawn closer to the exact light, and every edge inside the ceiling is two
+    triangles' (no T-junction, no crack). (Before, only the patches round the outline of a gap
+    brighter than the room split: a sun's patch on a floor with a rug on it kept the solve's wide
+    patches.)"""
     from addon.core.refine.adaptive import cells_of, patch_mesh, split
 
     square = np.array([[0, 0, 0], [0, 2 * SIDE, 0], [2 * SIDE, 2 * SIDE, 0], [2 * SIDE, 0, 0]], float)
@@ -132,25 +134,28 @@ def test_a_mesh_the_outline_split_made_splits_beside_the_outline_on_its_shading_
         return point_direct.points_direct(surface, scene, position, patch_, seed=11 + level)
 
     monkeypatch.setattr(display_cells, "BUDGET", 16.0)  # (the whole ceiling is the hot spot here)
-    monkeypatch.setattr(display_cells, "OUTLINE_RINGS", 1)  # (the patches touching the outline: the far ones in a 4 m ceiling)
     assert display_cells.refine(surface, direct, scene, triangles, [mesh], [True], light, at_points) is None
-    dark = np.where(covered[:, None], 0.0, light)  # (a gap no brighter than the room: no light through a slit, kept as made)
-    assert display_cells.refine(surface, direct, scene, triangles, [mesh], [True], dark, at_points, covered=covered) is None
+    dark = np.where(covered[:, None], 0.0, light)  # (a gap no brighter than the room: its outline no reason, the hot spot one)
+    made = display_cells.refine(surface, direct, scene, triangles, [mesh], [True], dark, at_points, covered=covered)
+    assert made is not None and (np.bincount(made[2].origin[0], minlength=mesh.patch_count)[~covered] > 1).sum() >= 16
     made = display_cells.refine(surface, direct, scene, triangles, [mesh], [True], light, at_points, covered=covered)
     assert made is not None
     fine_surface, fine_direct, shown = made
     fine = point_direct.shown(fine_surface, light, fine_direct)
     np.testing.assert_allclose(fine_surface.corner_means(fine[..., 0].ravel()), light[:, 0], rtol=1e-9)
     coarse = point_direct.shown(surface, light, direct)
-    beside = np.zeros(P, bool)
-    beside[np.unique(patch[np.isin(triangles, triangles[covered[patch]]).any(axis=1)])] = True
-    beside &= ~covered
     polygons = np.bincount(shown.origin[0], minlength=P)
-    far = (surface.patch_centroid[:, :2] > 2.5).all(axis=1)  # (three patches and more from the outline: no balance reaches)
-    assert (polygons[beside] > 1).all() and far.sum() == 9 and (polygons[far] == 1).all(), polygons
-    rows = np.flatnonzero(beside[shown.triangle_patch])
+    grey = direct.corners.sum(axis=-1)
+    changes = np.zeros(P)
+    np.maximum.at(changes, patch, np.ptp(grey, axis=1))
+    even = changes < display_cells.CHANGE * np.maximum(light.sum(axis=1), display_cells.FLOOR * light.sum(axis=1).mean())
+    far = even & (np.linalg.norm(surface.patch_centroid[:, :2] - LAMP[:2], axis=1) > 2.5)
+    assert far.sum() >= 4 and (polygons[far] <= 2).all() and np.median(polygons[far]) == 1, polygons  # (2: a neighbour's balance)
+    split_ = (polygons > 1) & ~covered
+    assert split_.sum() >= 16, polygons
+    rows = np.flatnonzero(split_[shown.triangle_patch])
     after = _shown_error(shown.vertices, shown.triangles[rows], fine[rows])
-    before = _shown_error(scene.vertices, triangles[beside[patch]], coarse[beside[patch]])
+    before = _shown_error(scene.vertices, triangles[split_[patch]], coarse[split_[patch]])
     assert after < before / 3, (before, after)
     edges = np.sort(shown.triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     key, count = np.unique(edges, axis=0, return_counts=True)
@@ -222,3 +227,35 @@ def test_layers_at_the_new_polygon_corners_are_interpolated_linearly():
     fine_uv = (uv[corners] * weights[..., None]).sum(axis=1)
     np.testing.assert_allclose(fine_uv, shown.meshes[0].points[shown.meshes[0].corner_verts][:, :2] * [0.5, 0.25],
                                atol=1e-12)
+
+
+def test_a_patch_whose_corners_miss_its_mean_direct_light_splits_and_keeps_its_mean():
+    """A sun at an angle lights the ceiling evenly (nothing splits: the corners agree); told that one
+    patch's mean direct light is three times what its corners show (a spot's cone on a wall between
+    a patch's corners, none of which it reaches), that patch splits (its neighbours at most by the
+    balance), the others stay whole, and every patch's mean is still its light."""
+    sun = SunLight(np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0]), np.ones(3))
+    mesh, scene = _ceiling([sun])
+    light = np.full((scene.patch_count, 3), float(sun.direction[2]))
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, scene.patch_count)
+    direct = point_direct.corner_direct(surface, scene, scene.triangles, seed=3, light=light)
+
+    def at_points(position, patch, level):
+        return point_direct.points_direct(surface, scene, position, patch, seed=11 + level, light=light)
+
+    def refined(means, light=light):
+        return display_cells.refine(surface, direct, scene, scene.triangles, [mesh], [True], light, at_points, means=means)
+
+    assert refined(None) is None and refined(direct.means) is None  # (the corners show the means: nothing missed)
+    lit = 5
+    means = direct.means.copy()
+    means[lit] *= 3.0
+    light = light.copy()
+    light[lit] *= 3.0
+    made = refined(means, light)
+    assert made is not None
+    fine_surface, fine_direct, shown = made
+    polygons = np.bincount(shown.origin[0], minlength=scene.patch_count)
+    assert polygons[lit] >= 4 and (polygons <= 2).sum() >= scene.patch_count - 5, polygons
+    fine = point_direct.shown(fine_surface, light, fine_direct)
+    np.testing.assert_allclose(fine_surface.corner_means(fine[..., 0].ravel()), light[:, 0], rtol=1e-9)

@@ -124,6 +124,22 @@ def points_direct(surface, scene, position, patch, samples=SAMPLES, seed=0, ligh
     return value
 
 
+def corner_sources_means(scene, result):
+    """(P,3) each patch's mean of the direct light its corners show (every lamp, sun and emitting
+    patch: the world's stays smooth), as the solve or the display's means have it
+    (``SolveResult.direct_irradiance``, a per-source run's groups but the world's), or None where it is
+    not known apart from the world's."""
+    worlds = [k for k, light in enumerate(scene.lights.lights) if isinstance(light, WorldLight)]
+    ps = result.per_source
+    if ps is not None and ps.direct_irradiance is not None and ps.light_group is not None:
+        keep = np.ones(ps.count, bool)
+        keep[np.asarray(ps.light_group, np.int64)[worlds]] = False
+        return ps.direct_irradiance[keep].sum(axis=0)
+    if result.direct_irradiance is None or worlds:
+        return None
+    return result.direct_irradiance
+
+
 def has_direct(scene):
     """Whether ``scene`` has a lamp or a sun or an emitting patch (the sky alone stays smooth)."""
     return bool(scene.emission.any()) or has_lamps(scene)
@@ -258,18 +274,24 @@ def _part_at(tables, position, patch, rng, add, paired=False, shown=None):
     return Part(sample, noise)
 
 
+def inside_other(g, position, patch):
+    """(n,) bool: whether each world point ``position`` (n,3) of ``patch`` (n,) lies inside another
+    object (``visibility.buried_at``, a ray offset off its patch)."""
+    out = np.zeros(len(patch), bool)
+    if g.buried is None:
+        return out
+    candidates = np.flatnonzero(np.isin(patch, np.concatenate([g.buried.patch, g.buried.whole])))
+    if candidates.size:
+        rows = patch[candidates]
+        pushed = _unit_points(g, position[candidates], rows) + g.patch_normal_rows.take(rows, axis=1) * g.ray_offsets(rows, np.float64)
+        out[candidates[buried_at(g, pushed, rows)]] = True
+    return out
+
+
 def _fill_buried(g, position, patch, value):
-    """Gives each corner inside another object (``visibility.buried_at``) the mean of its patch's
+    """Gives each corner inside another object (``inside_other``) the mean of its patch's
     corners that are not (0 where none is), in place; ``value`` ([G,]n,3)."""
-    buried_patches = g.buried
-    if buried_patches is None:
-        return
-    candidates = np.flatnonzero(np.isin(patch, np.concatenate([buried_patches.patch, buried_patches.whole])))
-    if not candidates.size:
-        return
-    rows = patch[candidates]
-    pushed = _unit_points(g, position[candidates], rows) + g.patch_normal_rows.take(rows, axis=1) * g.ray_offsets(rows, np.float64)
-    inside = candidates[buried_at(g, pushed, rows)]
+    inside = np.flatnonzero(inside_other(g, position, patch))
     if not inside.size:
         return
     seen = np.ones(len(patch), bool)

@@ -14,11 +14,13 @@ solve's patches, error and time are untouched. Every output (the colours, the so
 stored values) is written on the finer cells, each cell's patch its origin's.
 
 Not split: patches no camera sees, n-gons kept whole and their neighbours, meshes a Detail refinement made.
-A mesh the outline split made (``refine.covered_parts``: a ceiling round a panel hung under it) splits
-on its shading triangles (its polygons' every corner, the neighbours' midpoints too: no T-junction)
-round the outline of a gap brighter than the room (the rest as made: the display's time): the light
-from the panel's top and sides through the slit falls off within cm of the outline, which the cells
-beside it would show as wedges as wide as they are.
+A patch another object runs into (a wall's beside a painting hung into it, a floor's under a wall) splits;
+its new points inside that object show the coarse display there (they add no shape nobody sees, and a
+point without light would darken the visible part of its cells).
+A mesh the outline split made (``refine.covered_parts``: a ceiling round a panel hung under it, a
+floor round a rug) splits as any mesh, on its shading triangles (its polygons' every corner, the
+neighbours' midpoints too: no T-junction): the light through a lit gap's slit falls off within cm of
+the outline, and a sun's patch crosses a floor that has a rug on it, as any floor.
 """
 from __future__ import annotations
 
@@ -29,27 +31,27 @@ from ..mesh.meshing import PatchMesh
 from .adaptive import cells_of, patch_mesh, split
 from .cell_meshes import Means, RefinedSurface, containing, found, merged, shown_of
 from ..display.covered import visible_corner_weights
-from ..display.point_direct import CornerDirect, patch_means
+from ..display.point_direct import CornerDirect, inside_other, patch_means
 
 LEVELS = 3  # splits of a patch at most: an eighth of its side
 CHANGE = 0.25  # of the patch's light: a difference between corners the eye sees as a shape, not a shade
 FLOOR = 0.2  # of the mean light: the least light a difference is measured against
 BUDGET = 1.0  # new points at most, a share of the split meshes' points (each costs a corner's rays)
-MOST = 8_192  # and at most this many: where patches are that many, a hot spot spans patches of its own
+MOST = 4_096  # and at most this many: where patches are that many, a hot spot spans patches of its own
 NEW_POINTS = 3  # points a split cell adds at most (a triangle's three midpoints; fewer where neighbours share them)
 FAR = np.int64(1) << np.int64(31)  # key of a new point: patch * FAR + its point in the object's cells
-OUTLINE_RINGS = 3  # rings of patches round a cover's outline that split on an outline split's mesh (the glow's width)
-GLOW = 2.0  # ... where the gap's light passes this many times the mean light (a lit gap: light leaks through its slit)
 
 
-def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None, covered=None):
+def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points, most=None, covered=None, means=None):
     """(RefinedSurface, its CornerDirect, Shown), or None where no cell splits. ``coarse`` the
     ``smoothing.Surface`` of ``triangles`` (T,3) of the scene's vertices, ``direct`` the coarse
     CornerDirect (([G,]T,3,3)); ``meshes`` the objects' PatchMeshes in scene order, ``receives``
     whether each gets results; ``light`` (P,3) the light the patches show; ``at_points(position
     (n,3), patch (n,), level)`` the direct light ([G,]n,3) at points (``point_direct.points_direct``);
     ``most``: new points at most (a time limit's), beside the budget; ``covered`` (P,) bool the patches under
-    a cover (the outline split's, whose refined meshes then split on their shading triangles near it)."""
+    a cover (the outline split's, whose meshes then split on their shading triangles); ``means`` (P,3) each
+    patch's mean of the direct light the corners show (``point_direct.corner_sources_means``), where known:
+    a patch whose corners miss it (``_missed``) splits once, as if they differed."""
     V = len(scene.vertices)
     triangles = np.asarray(triangles, np.int64)
     tp = np.asarray(coarse.triangle_patch, np.int64)
@@ -57,18 +59,18 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     starts = np.cumsum([0] + [len(m.points) for m in meshes])
     offsets = np.cumsum([0] + [m.patch_count for m in meshes])
     threshold, kept = _limits(coarse, scene, light)
+    missed = _missed(direct, means, threshold, kept)
     written = meshes
-    if covered is not None:  # (a gap brighter than the room round it: the light through its slit)
-        grey = np.asarray(light, np.float64).sum(axis=1)
-        glowing = covered & (grey > GLOW * (grey[~kept].mean() if (~kept).any() else np.inf))
-        meshes = [_on_shading(m, offsets[k], covered, glowing, kept) for k, m in enumerate(meshes)]
+    if covered is not None:  # (the outline split's meshes: their cells on their shading triangles, the covered whole)
+        kept |= covered
+        meshes = [_on_shading(m, offsets[k], covered) for k, m in enumerate(meshes)]
     splittable = [k for k, m in enumerate(meshes) if receives[k] and getattr(m, "shading_triangles", None) is None
                   and m.patch_count]
     # (cells of the patches' triangles: a cell's triangles never cross its patch's, so the coarse light's linear
     # interpolation at the new points keeps every patch's mean, in any triangulation of the cells' polygons; only
     # the patches whose light changes and LEVELS + 1 rings around them: the balance's splits stay among them)
     rows = {k: _region(meshes[k], offsets[k] + np.asarray(meshes[k].triangle_patch, np.int64), table, starts[k],
-                       threshold, kept) for k in splittable}
+                       threshold, kept, missed) for k in splittable}
     splittable = [k for k in splittable if rows[k].size]
     cells = {k: cells_of(_triangle_mesh(meshes[k], rows[k])) for k in splittable}
     patch_of = {k: offsets[k] + np.asarray(meshes[k].triangle_patch, np.int64)[rows[k]] for k in splittable}
@@ -77,15 +79,16 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     budget = budget if most is None else min(budget, most)
     for level in range(LEVELS):
         made = sum(len(c.points) - len(meshes[k].points) for k, c in cells.items())
-        chosen = _chosen(cells, active, starts, patch_of, meshes, table, threshold, kept, budget - made)
+        chosen = _chosen(cells, active, starts, patch_of, meshes, table, threshold, kept, budget - made,
+                         missed if level == 0 else None)
         if chosen is None:
             break
         for k, marked in chosen.items():
             before = cells[k]
             cells[k], parent = split(before, marked)
             active[k] = cells[k].level > before.level[parent]
-        _evaluate(table, [(k, c.corners[active[k]], patch_of[k][c.origin[active[k]]]) for k, c in cells.items()],
-                  starts, meshes, cells, at_points, level)
+        _evaluate(table, [(k, c.corners[active[k]], patch_of[k][c.origin[active[k]]], rows[k][c.origin[active[k]]])
+                           for k, c in cells.items()], starts, meshes, cells, at_points, level, scene.geometry)
     refined = [k for k in splittable if cells[k].level.max(initial=0) > 0]
     if not refined:
         return None
@@ -104,27 +107,31 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
 
 def _limits(coarse, scene, light):
     """((P,) the change of direct light between a cell's corners that splits it, (P,) bool the patches
-    kept whole: no camera sees them, or another object runs into them (a new point inside it has no light
-    of its own))."""
+    kept whole: no camera sees them, or they lie inside another object whole. (A patch another object
+    runs into splits: its new points inside that object take the coarse display there, ``_under``.)"""
     grey = np.asarray(light, np.float64).sum(axis=1)
     hidden = coarse.hidden if coarse.hidden is not None else np.zeros(scene.patch_count, bool)
     seen = ~hidden & (coarse.patch_area > 0)
     kept = hidden.copy()
     if scene.geometry.buried is not None:
-        kept[np.concatenate([scene.geometry.buried.patch, scene.geometry.buried.whole]).astype(np.int64)] = True
+        kept[np.asarray(scene.geometry.buried.whole, np.int64)] = True
     floor = FLOOR * (grey[seen].mean() if seen.any() else 0.0)
     return CHANGE * np.maximum(grey, floor), kept
 
 
-def _region(mesh, patch, table, start, threshold, kept):
+def _region(mesh, patch, table, start, threshold, kept, missed=None):
     """(n,) the rows of ``mesh``'s triangles (their scene patches ``patch``) that may split: every
     triangle of the patches where one's corners' direct light differs by more than its patch's
-    ``threshold``, and of LEVELS + 1 rings of patches around them (sharing a point)."""
+    ``threshold`` or misses its mean (``missed`` > 1), and of LEVELS + 1 rings of patches around them
+    (sharing a point)."""
     triangles = np.asarray(mesh.triangles, np.int64)
     values = table.coarse(np.repeat(patch, 3), triangles.ravel() + start)
     grey = (values.sum(axis=-1) if values.ndim == 2 else values.sum(axis=(0, -1))).reshape(-1, 3)
     chosen = np.zeros(int(patch.max(initial=-1)) + 1, bool)
-    chosen[patch[(np.ptp(grey, axis=1) > threshold[patch]) & ~kept[patch]]] = True
+    changes = np.ptp(grey, axis=1) > threshold[patch]
+    if missed is not None:
+        changes |= missed[patch] > 1.0
+    chosen[patch[changes & ~kept[patch]]] = True
     if not chosen.any():
         return np.zeros(0, np.int64)
     for _ in range(LEVELS + 1):
@@ -134,22 +141,26 @@ def _region(mesh, patch, table, start, threshold, kept):
     return np.flatnonzero(chosen[patch])
 
 
-def _on_shading(mesh, offset, covered, glowing, kept):
-    """``mesh`` (a refined one; as made where no ``glowing`` patch is in it) as a PatchMesh whose
-    triangles are its shading triangles, its patches (scene patches from ``offset``) but those within
-    OUTLINE_RINGS of the outline of ``glowing`` (P,) bool ones on the side not ``covered`` ``kept`` whole."""
-    if getattr(mesh, "shading_triangles", None) is None or not glowing[offset:offset + mesh.patch_count].any():
+def _missed(direct, means, threshold, kept):
+    """(P,) how far each patch's corners miss its mean direct light ``means`` (P,3): |mean - M| over its
+    ``threshold`` (M the mean of the corners' interpolation): a spot's cone on a wall between a
+    patch's corners, none of which it reaches; 0 for the ``kept``; None without ``means``."""
+    if means is None:
+        return None
+    shown = direct.means.sum(axis=-1) if direct.means.ndim == 2 else direct.means.sum(axis=(0, -1))
+    gap = np.abs(np.asarray(means, np.float64).sum(axis=1) - shown)
+    out = np.divide(gap, threshold, out=np.zeros_like(gap), where=threshold > 0)
+    out[kept] = 0.0
+    return out
+
+
+def _on_shading(mesh, offset, covered):
+    """``mesh`` as a PatchMesh whose triangles are its shading triangles where it is one the outline
+    split made (shading triangles, and a patch of it ``covered`` (P,) bool: scene patches from
+    ``offset``), else as it is (a Detail refinement's meshes stay as made)."""
+    if getattr(mesh, "shading_triangles", None) is None or not covered[offset:offset + mesh.patch_count].any():
         return mesh
     triangles, patch = np.asarray(mesh.shading_triangles, np.int64), np.asarray(mesh.shading_triangle_patch, np.int64)
-    under = covered[patch + offset]
-    sides = np.zeros((2, len(mesh.points)), bool)
-    sides[0, triangles[~under]] = sides[1, triangles[glowing[patch + offset]]] = True
-    at = sides[0] & sides[1]  # (points on the outline, then OUTLINE_RINGS rings of patches round them)
-    for _ in range(OUTLINE_RINGS - 1):
-        at[triangles[at[triangles].any(axis=1) & ~under]] = True
-    near = np.zeros(mesh.patch_count, bool)  # (the room's side: the gap is seen through the slit alone)
-    near[patch[at[triangles].any(axis=1) & ~under]] = True
-    kept[offset:offset + mesh.patch_count] |= ~near
     return PatchMesh(mesh.points, mesh.face_sizes, mesh.corner_verts, mesh.patch_face, triangles, patch, mesh.patch_area)
 
 
@@ -197,10 +208,10 @@ def _values(table, k, points, patch, starts, meshes):
     return out
 
 
-def _chosen(cells, active, starts, patch_of, meshes, table, threshold, kept, budget):
+def _chosen(cells, active, starts, patch_of, meshes, table, threshold, kept, budget, missed=None):
     """{object: (L,) bool} the cells to split this level: active, unfrozen cells of patches not ``kept`` whose
-    corners' direct light differs by more than their patch's threshold, the largest first within
-    ``budget`` new points; None where none."""
+    corners' direct light differs by more than their patch's threshold (or whose patch's corners miss
+    its mean: ``missed`` (P,), its score), the largest first within ``budget`` new points; None where none."""
     found = []
     for k, c in cells.items():
         rows = np.flatnonzero(active[k] & ~c.frozen)
@@ -213,6 +224,8 @@ def _chosen(cells, active, starts, patch_of, meshes, table, threshold, kept, bud
         value[has] = lit.sum(axis=-1) if lit.ndim == 2 else lit.sum(axis=(0, -1))  # (grey: every group's)
         change = np.where(has, value, -np.inf).max(axis=1) - np.where(has, value, np.inf).min(axis=1)
         score = np.divide(change, threshold[patch], out=np.zeros_like(change), where=threshold[patch] > 0)
+        if missed is not None:
+            score = np.maximum(score, missed[patch])
         over = score > 1.0
         found.append((k, rows[over], score[over]))
     scores = np.concatenate([s for _, _, s in found]) if found else np.zeros(0)
@@ -229,20 +242,50 @@ def _chosen(cells, active, starts, patch_of, meshes, table, threshold, kept, bud
     return out or None
 
 
-def _evaluate(table, corner_sets, starts, meshes, cells, at_points, level):
+def _evaluate(table, corner_sets, starts, meshes, cells, at_points, level, geometry=None):
     """Takes the direct light at every new (patch, point) of ``corner_sets`` [(object, points
-    (n,m) (-1: none), patch (n,))] not yet in ``table``."""
-    keys, positions = [], []
-    for k, points, patch in corner_sets:
+    (n,m) (-1: none), patch (n,)[, the row of the object's triangles each cell lies in (n,)])] not
+    yet in ``table``; with the rows and ``geometry``, a new point inside another object (a floor's
+    under a wall standing on it) casts no rays: it takes its triangle's coarse corners'
+    interpolation (``_under``)."""
+    keys, positions, under = [], [], []
+    for k, points, patch, *base in corner_sets:
         patch = np.broadcast_to(np.asarray(patch, np.int64)[:, None], points.shape)
         new = points >= len(meshes[k].points)
-        key = np.unique(patch[new] * FAR + points[new])
-        key = key[~np.isin(key, table.new_keys)]
+        key, first = np.unique(patch[new] * FAR + points[new], return_index=True)
+        fresh = ~np.isin(key, table.new_keys)
+        key, first = key[fresh], first[fresh]
+        position = cells[k].points[key % FAR]
+        if base and geometry is not None and key.size:
+            inside = inside_other(geometry, position, key // FAR)
+            if inside.any():
+                row = np.broadcast_to(base[0][:, None], points.shape)[new][first][inside]
+                under.append((key[inside], _under(table, meshes[k], starts[k], position[inside], key[inside] // FAR, row)))
+                key, position = key[~inside], position[~inside]
         keys.append(key)
-        positions.append(cells[k].points[key % FAR])
+        positions.append(position)
     keys = np.concatenate(keys) if keys else np.zeros(0, np.int64)
     if keys.size:
         table.add(keys, np.asarray(at_points(np.concatenate(positions), keys // FAR, level)))
+    for key, values in under:
+        table.add(key, values)
+
+
+def _under(table, mesh, start, position, patch, row):
+    """([G,]n,3) the coarse display at new points inside another object: their triangles' (``row`` of
+    ``mesh``'s) coarse corners' linear interpolation (a point nobody sees adds no shape, and a dark
+    one would pull its cells' visible part down)."""
+    triangle = np.asarray(mesh.triangles, np.int64)[row]
+    corner = np.asarray(mesh.points, np.float64)[triangle]  # (n,3,3)
+    e1, e2, d = corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0], position - corner[:, 0]
+    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    d1, d2 = (d * e1).sum(1), (d * e2).sum(1)
+    det = np.maximum(d11 * d22 - d12 * d12, 1e-300)
+    b1, b2 = (d22 * d1 - d12 * d2) / det, (d11 * d2 - d12 * d1) / det
+    weight = np.stack([1.0 - b1 - b2, b1, b2], axis=1)  # (n,3) barycentric
+    coarse = table.coarse(np.repeat(patch, 3), triangle.ravel() + start)
+    coarse = coarse.reshape(coarse.shape[:-2] + (len(patch), 3, 3))
+    return (coarse * weight[:, :, None]).sum(axis=-2)
 
 
 def _shading_corners(shown, refined, offsets):
