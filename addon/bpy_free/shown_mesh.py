@@ -9,7 +9,7 @@ from functools import partial
 
 import numpy as np
 
-from ..core.display import point_direct, smoothing
+from ..core.display import direct_means, point_direct, smoothing
 from ..core.refine import cell_meshes, display_cells
 from ..core.display.covered import seen_parts
 from ..core.mesh.faces import polygon_corner_rows
@@ -50,7 +50,7 @@ def display(out, scene, result, shading=None, deadline=None, refine=True):
 
     made = display_cells.refine(surface, direct, scene, triangles, out.patches.meshes, [o.receives for o in out.patches.objects],
                                 result.irradiance, at_points, most, surface.covered,
-                                point_direct.corner_sources_means(scene, result))
+                                direct_means.corner_sources_means(scene, result))
     return (surface, direct, None) if made is None else made
 
 

@@ -28,16 +28,16 @@ def polygons(name):
 
 @pytest.mark.parametrize("output, light", [("FACE", True), ("VERTEX", False), ("BOTH", False), ("TEXTURED", False)])
 def test_every_output_on_refined_patches(blender, output, light):
-    """Detail high splits patches where the lamp's light changes (more polygons than Detail off);
+    """Detail high splits patches where the lamp's light changes (more polygons than the solve's own patches);
     every output is written on the refined mesh: its colours finite, one a polygon corner, and
     the closed room and block stay closed (every edge in exactly two polygons: no T-junction)."""
     build_test_scene()
     s = configure(blender, output=output)
     s.light_output = light
-    s.detail = "OFF"
+    s.detail, s.display_cells = "OFF", False  # (the solve's own patches: the display's cells split them too)
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     uniform = {name: polygons(name) for name in ("Room", "Block")}
-    s.detail = "HIGH"
+    s.detail, s.display_cells = "HIGH", True
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     assert polygons("Room") > uniform["Room"]
     assert s.last_patches == sum(len(o.data.polygons) for o in result_objects())

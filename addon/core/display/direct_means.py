@@ -28,7 +28,7 @@ import numpy as np
 from .point_direct import live_means
 from ..estimate.batches import Replaced
 from ..estimate.error_model import relative_rms_to_mse
-from ..lights.lights import AreaLight, PointLight
+from ..lights.lights import AreaLight, PointLight, WorldLight
 from ..names import SCALE_PAPER
 
 MEAN_SAMPLES = 32  # stratified points a patch, each a shadow ray to a lamp of the group (two halves)
@@ -148,3 +148,19 @@ def reflected(surface, scene, result):
     out = surface.filter_light(result.reflected - direct, result.reflected_variance)
     out += direct
     return out
+
+
+def corner_sources_means(scene, result):
+    """(P,3) each patch's mean of the direct light its corners show (every lamp, sun and emitting
+    patch: the world's stays smooth), as the solve or the display's means have it
+    (``SolveResult.direct_irradiance``, a per-source run's groups but the world's), or None where it is
+    not known apart from the world's."""
+    worlds = [k for k, light in enumerate(scene.lights.lights) if isinstance(light, WorldLight)]
+    ps = result.per_source
+    if ps is not None and ps.direct_irradiance is not None and ps.light_group is not None:
+        keep = np.ones(ps.count, bool)
+        keep[np.asarray(ps.light_group, np.int64)[worlds]] = False
+        return ps.direct_irradiance[keep].sum(axis=0)
+    if result.direct_irradiance is None or worlds:
+        return None
+    return result.direct_irradiance

@@ -124,22 +124,6 @@ def points_direct(surface, scene, position, patch, samples=SAMPLES, seed=0, ligh
     return value
 
 
-def corner_sources_means(scene, result):
-    """(P,3) each patch's mean of the direct light its corners show (every lamp, sun and emitting
-    patch: the world's stays smooth), as the solve or the display's means have it
-    (``SolveResult.direct_irradiance``, a per-source run's groups but the world's), or None where it is
-    not known apart from the world's."""
-    worlds = [k for k, light in enumerate(scene.lights.lights) if isinstance(light, WorldLight)]
-    ps = result.per_source
-    if ps is not None and ps.direct_irradiance is not None and ps.light_group is not None:
-        keep = np.ones(ps.count, bool)
-        keep[np.asarray(ps.light_group, np.int64)[worlds]] = False
-        return ps.direct_irradiance[keep].sum(axis=0)
-    if result.direct_irradiance is None or worlds:
-        return None
-    return result.direct_irradiance
-
-
 def has_direct(scene):
     """Whether ``scene`` has a lamp or a sun or an emitting patch (the sky alone stays smooth)."""
     return bool(scene.emission.any()) or has_lamps(scene)

@@ -50,7 +50,7 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     (n,3), patch (n,), level)`` the direct light ([G,]n,3) at points (``point_direct.points_direct``);
     ``most``: new points at most (a time limit's), beside the budget; ``covered`` (P,) bool the patches under
     a cover (the outline split's, whose meshes then split on their shading triangles); ``means`` (P,3) each
-    patch's mean of the direct light the corners show (``point_direct.corner_sources_means``), where known:
+    patch's mean of the direct light the corners show (``direct_means.corner_sources_means``), where known:
     a patch whose corners miss it (``_missed``) splits once, as if they differed."""
     V = len(scene.vertices)
     triangles = np.asarray(triangles, np.int64)
@@ -75,8 +75,7 @@ def refine(coarse, direct, scene, triangles, meshes, receives, light, at_points,
     cells = {k: cells_of(_triangle_mesh(meshes[k], rows[k])) for k in splittable}
     patch_of = {k: offsets[k] + np.asarray(meshes[k].triangle_patch, np.int64)[rows[k]] for k in splittable}
     active = {k: np.ones(cells[k].count, bool) for k in splittable}
-    budget = min(BUDGET * sum(len(meshes[k].points) for k in splittable), MOST)
-    budget = budget if most is None else min(budget, most)
+    budget = min(BUDGET * sum(len(meshes[k].points) for k in splittable), MOST, np.inf if most is None else most)
     for level in range(LEVELS):
         made = sum(len(c.points) - len(meshes[k].points) for k, c in cells.items())
         chosen = _chosen(cells, active, starts, patch_of, meshes, table, threshold, kept, budget - made,
