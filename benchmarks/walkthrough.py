@@ -177,11 +177,17 @@ def shown_views(walk, kinds, log=print):
     return out
 
 
-def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=True, seed=0, log=print, overrides=None):
+def measure(name, reference_samples, views, eevee=True, unlive=True, warm_up=True, seed=0, log=print, overrides=None,
+            diffuse=False):
     """One interior: references, the product's solve and its pictures of every view, Cycles at the
     solve's time; a dict of images per kind and view, times and statistics. ``overrides``: panel
-    settings of the product's solves, as NAME=VALUE."""
+    settings of the product's solves, as NAME=VALUE; ``diffuse``: every material Lambertian
+    (``interior_scene.make_diffuse``: what the specular layer accounts for)."""
     walk = scenes.build(name, views)
+    if diffuse:
+        from benchmarks import interior_scene
+
+        interior_scene.make_diffuse()
     overrides = settings_of(overrides or [])
     clock = time.perf_counter()
     refs = references(walk, reference_samples, log)
@@ -239,6 +245,8 @@ def main(argv=None):
     parser.add_argument("--unlive", action=argparse.BooleanOptionalAction, default=True, help="a second solve with "
                         "Live lamps off, its baked display")
     parser.add_argument("--seed", type=int, default=0, help="the product's seed (its solves')")
+    parser.add_argument("--diffuse", action="store_true", help="Specular IOR Level 0 on every material (Lambertian: "
+                        "what the specular layer accounts for)")
     parser.add_argument("--warm-up", action=argparse.BooleanOptionalAction, default=True, help="a solve before the timed one")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a panel setting of the "
                         "product's solves (repeatable), e.g. detail=HIGH")
@@ -276,7 +284,7 @@ def walk_one(name, args, command):
     """Measure, analyse and save one interior: its numbers (.json) and contact sheet (.png)."""
     start, load = time.perf_counter(), os.getloadavg()[0]
     m = measure(name, args.reference_samples, args.views, args.eevee, args.unlive, args.warm_up, args.seed,
-                overrides=args.set)
+                overrides=args.set, diffuse=args.diffuse)
     a, masks = analyse(m)
     keep_images(m, masks, ROOT / "out" / "walkthrough_images" / f"{name}{image_tag(args)}.npz")
     sheet = args.out / f"walkthrough_{name}.png"
@@ -325,7 +333,8 @@ def reanalyse(name, args):
 
 def image_tag(args):
     """What tells a run's kept pictures from the default run's: quick, another seed."""
-    return ("_quick" if args.quick else "") + (f"_seed{args.seed}" if args.seed else "") + "".join(
+    return ("_quick" if args.quick else "") + ("_diffuse" if getattr(args, "diffuse", False) else "") + (
+        f"_seed{args.seed}" if args.seed else "") + "".join(
         "_" + item.replace("=", "-") for item in getattr(args, "set", []))
 
 

@@ -259,3 +259,58 @@ def test_a_patch_whose_corners_miss_its_mean_direct_light_splits_and_keeps_its_m
     assert polygons[lit] >= 4 and (polygons <= 2).sum() >= scene.patch_count - 5, polygons
     fine = point_direct.shown(fine_surface, light, fine_direct)
     np.testing.assert_allclose(fine_surface.corner_means(fine[..., 0].ravel()), light[:, 0], rtol=1e-9)
+
+
+def test_a_patch_a_box_stands_on_splits_and_its_points_inside_the_box_show_the_coarse_light():
+    """A floor of 0.5 m patches with a closed box standing on it, a lamp 15 cm up beside the box's
+    corner: the floor patch the box covers a third of (partly buried) splits where the lamp's hot
+    spot is (before, such patches were kept whole), every new point inside the box takes its coarse
+    triangle's interpolation of the corners (no rays: no dark corner inside the box pulls the
+    visible part down), and every patch keeps its mean."""
+    floor = mesh_patches(np.array([[0, 0, 0], [SIDE, 0, 0], [SIDE, SIDE, 0], [0, SIDE, 0]], float), np.array([4]),
+                         np.array([0, 1, 2, 3]), PATCH)  # (facing up)
+    lo, hi = np.array([0.6, 0.6, 0.0]), np.array([1.3, 1.3, 0.4])
+    corners = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
+    quads = np.array([[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]])  # (outward)
+    box = mesh_patches(corners, np.full(6, 4), quads.ravel(), PATCH)
+    V = np.vstack([floor.points, box.points])
+    T = np.vstack([floor.triangles, box.triangles + len(floor.points)])
+    TP = np.concatenate([floor.triangle_patch, box.triangle_patch + floor.patch_count])
+    P = floor.patch_count + box.patch_count
+    lamp = np.array([1.45, 1.45, 0.15])
+    scene = PatchScene(V, T, TP, np.full(P, 0.5), np.zeros(P), lights=[PointLight(lamp, np.ones(3))])
+    g = scene.geometry
+    surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, P)
+    corner = np.argmin(np.linalg.norm(surface.patch_centroid - [1.25, 1.25, 0.0], axis=1))
+    assert g.buried is not None and corner in g.buried.patch and corner not in g.buried.whole
+    light = point_direct.live_means(scene, samples=256, seed=5)
+    direct = point_direct.corner_direct(surface, scene, scene.triangles, seed=3, light=light)
+
+    def at_points(position, patch, level):
+        return point_direct.points_direct(surface, scene, position, patch, seed=11 + level, light=light)
+
+    made = display_cells.refine(surface, direct, scene, scene.triangles, [floor, box], [True, True], light, at_points)
+    assert made is not None
+    fine_surface, fine_direct, shown = made
+    assert (shown.origin[0] == corner).sum() >= 4
+    fine = point_direct.shown(fine_surface, light, fine_direct)
+    np.testing.assert_allclose(fine_surface.corner_means(fine[..., 0].ravel()), light[:, 0], rtol=1e-6)
+    # the new points of that patch inside the box's footprint: their coarse triangle's interpolation
+    rows = np.flatnonzero(shown.triangle_patch == corner)
+    at = shown.vertices[shown.triangles[rows]].reshape(-1, 3)
+    value = fine_direct.corners[rows][..., 0].ravel()
+    inside = ((at[:, :2] > lo[:2] + 1e-6) & (at[:, :2] < hi[:2] - 1e-6)).all(axis=1) & ~np.isin(
+        np.round(at, 9), np.round(scene.vertices, 9)).all(axis=1)
+    assert inside.sum() >= 3
+    own = np.flatnonzero(scene.triangle_patch == corner)
+    expected = []
+    for point in at[inside]:
+        for t in own:
+            a, b, c = scene.vertices[scene.triangles[t]]
+            m = np.column_stack([b - a, c - a])[:2]
+            w1, w2 = np.linalg.solve(m, (point - a)[:2])
+            if min(w1, w2, 1 - w1 - w2) > -1e-9:
+                expected.append(direct.corners[t, :, 0] @ [1 - w1 - w2, w1, w2])
+                break
+    np.testing.assert_allclose(value[inside], expected, rtol=1e-5)
+    assert (value[inside] > 0).all()
