@@ -39,8 +39,8 @@ def local_thread_count():
 
 
 def on_threads(work, most):
-    """Runs ``work()`` on up to ``most`` threads at once (``local_thread_count`` of them; one: on
-    the calling thread), each inside a copy of the caller's context in which ``on_threads`` takes
+    """Runs ``work()`` on up to ``most`` threads at once (``local_thread_count`` of them, the calling
+    thread one of them), each inside a copy of the caller's context in which ``on_threads`` takes
     one thread (no pool inside a pool); returns when all have ended, raising the first error.
     ``work`` takes its tasks from a shared queue, so what each thread did must not matter."""
     count = max(1, min(int(most), local_thread_count()))
@@ -49,8 +49,12 @@ def on_threads(work, most):
     contexts = [contextvars.copy_context() for _ in range(count)]
     for context in contexts:
         context.run(_LOCAL_THREADS.set, 1)
-    with ThreadPoolExecutor(max_workers=count, thread_name_prefix="radiosity-local") as pool:
-        futures = [pool.submit(context.run, work) for context in contexts]
+    with ThreadPoolExecutor(max_workers=count - 1, thread_name_prefix="radiosity-local") as pool:
+        futures = [pool.submit(context.run, work) for context in contexts[1:]]
+        try:
+            contexts[0].run(work)  # (the calling thread takes a share: one thread fewer to start)
+        finally:
+            pool.shutdown(wait=True)
     for future in futures:
         future.result()
 
