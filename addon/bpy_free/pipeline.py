@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import predict, solve
-from ..core.display import direct_means, point_direct, smoothing
+from ..core.display import direct_means, final_gather, point_direct, smoothing
 from ..core.scene.diagnostics import MAX_BOUNCES, check_bounces
 from ..core.display.covered import seen_parts
 from ..core.distributed.runners import local_threads
@@ -251,17 +251,20 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
     out.sources_out = relit.source_results(scene, patches, result, groups) if groups is not None else None
     with trim.roomy(scene.patch_count), local_threads(settings.threads):
-        write_colours(out, scene, result, settings, budget.deadline())
+        # (the smooth display's light: the bounced light gathered again, core final_gather; the result stays as solved)
+        write_colours(out, scene, result, settings, budget.deadline(), final_gather.gathered(scene, result))
     relit.add_object_values(out, settings)
     shown_mesh.let_go(out)
     out.seconds = time.perf_counter() - started
     return out
 
 
-def write_colours(out, scene, result, settings, deadline=None):
+def write_colours(out, scene, result, settings, deadline=None, shown=None):
     """The colours ``out`` carries to the objects: per patch and per point, the light arriving
     (textured output), and the extra outputs (light only, indirect), per object that receives;
-    the direct light's retries within ``deadline``."""
+    the direct light's retries within ``deadline``. ``shown``: the result the smooth colours show
+    (``final_gather.gathered``'s), else ``result``; the per-patch ones are the solve's."""
+    shown = result if shown is None else shown
     patches = out.patches
     # Light is written as at least 0: an estimate below it is noise about a value near 0 (the two-way
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
@@ -280,9 +283,9 @@ def write_colours(out, scene, result, settings, deadline=None):
     both = settings.output in ("BOTH", "TEXTURED")
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
         shading = adaptive_patches.shading_arrays(patches, scene)
-        surface, direct, out.shown = shown_mesh.display(out, scene, result, shading, deadline, settings.display_cells)
+        surface, direct, out.shown = shown_mesh.display(out, scene, shown, shading, deadline, settings.display_cells)
         smooth = _smooth_corners if out.sources_out is None else relit.SmoothSources(out, shown_mesh.polygon_corners).corners
-        for name, corners in smooth(scene, result, light=textured, shading=shading, live=out.live_lamps, deadline=deadline,
+        for name, corners in smooth(scene, shown, light=textured, shading=shading, live=out.live_lamps, deadline=deadline,
                                     surface=surface, direct=direct):
             made[name] = shown_mesh.polygon_corners(out, scene, corners, shading, least=0.0)
             del corners  # (let go of before the next is made)

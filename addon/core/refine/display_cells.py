@@ -37,7 +37,7 @@ LEVELS = 3  # splits of a patch at most: an eighth of its side
 CHANGE = 0.25  # of the patch's light: a difference between corners the eye sees as a shape, not a shade
 FLOOR = 0.2  # of the mean light: the least light a difference is measured against
 BUDGET = 1.0  # new points at most, a share of the split meshes' points (each costs a corner's rays)
-MOST = 4_096  # and at most this many: where patches are that many, a hot spot spans patches of its own
+MOST = 2_048  # and at most this many: where patches are that many, a hot spot spans patches of its own
 NEW_POINTS = 3  # points a split cell adds at most (a triangle's three midpoints; fewer where neighbours share them)
 FAR = np.int64(1) << np.int64(31)  # key of a new point: patch * FAR + its point in the object's cells
 
