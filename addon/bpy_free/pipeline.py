@@ -251,20 +251,18 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     out.back_warning = back_light_warning(patches, scene, out.blocked_fraction(), int(settings.seed))
     out.sources_out = relit.source_results(scene, patches, result, groups) if groups is not None else None
     with trim.roomy(scene.patch_count), local_threads(settings.threads):
-        # (the smooth display's light: the bounced light gathered again, core final_gather; the result stays as solved)
-        write_colours(out, scene, result, settings, budget.deadline(), final_gather.gathered(scene, result))
+        write_colours(out, scene, result, settings, budget.deadline())
     relit.add_object_values(out, settings)
     shown_mesh.let_go(out)
     out.seconds = time.perf_counter() - started
     return out
 
 
-def write_colours(out, scene, result, settings, deadline=None, shown=None):
+def write_colours(out, scene, result, settings, deadline=None):
     """The colours ``out`` carries to the objects: per patch and per point, the light arriving
     (textured output), and the extra outputs (light only, indirect), per object that receives;
-    the direct light's retries within ``deadline``. ``shown``: the result the smooth colours show
-    (``final_gather.gathered``'s), else ``result``; the per-patch ones are the solve's."""
-    shown = result if shown is None else shown
+    the direct light's retries within ``deadline``. The smooth colours show the bounced light
+    gathered again (core final_gather); the per-patch ones, and ``result``, stay as solved."""
     patches = out.patches
     # Light is written as at least 0: an estimate below it is noise about a value near 0 (the two-way
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
@@ -283,13 +281,14 @@ def write_colours(out, scene, result, settings, deadline=None, shown=None):
     both = settings.output in ("BOTH", "TEXTURED")
     if settings.output == "VERTEX" or (both and scene.patch_count <= options.SMOOTH_MAX_PATCHES):
         shading = adaptive_patches.shading_arrays(patches, scene)
+        shown = final_gather.gathered(scene, result)  # (the blotches a dim wall's patches share through the chunks)
         surface, direct, out.shown = shown_mesh.display(out, scene, shown, shading, deadline, settings.display_cells)
         smooth = _smooth_corners if out.sources_out is None else relit.SmoothSources(out, shown_mesh.polygon_corners).corners
         for name, corners in smooth(scene, shown, light=textured, shading=shading, live=out.live_lamps, deadline=deadline,
                                     surface=surface, direct=direct):
             made[name] = shown_mesh.polygon_corners(out, scene, corners, shading, least=0.0)
             del corners  # (let go of before the next is made)
-        del surface, direct
+        del surface, direct, shown
         out.layers = shown_mesh.layers_on(out)
     elif both:
         shown = "the textures times each patch's own light are shown" if textured else "the flat colours are shown"

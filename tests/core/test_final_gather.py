@@ -88,3 +88,14 @@ def test_the_solves_weight_follows_the_variances():
     v_g = np.array([[3.0, 0.0, 1.0]])
     np.testing.assert_allclose(final_gather._solve_weight(v_s, v_g), [[0.75, 0.5, 0.0]])
     np.testing.assert_allclose(final_gather._solve_weight(v_s, v_g, hidden=np.array([True])), [[1.0, 1.0, 1.0]])
+
+
+def test_a_result_without_its_direct_light_apart_or_too_large_is_shown_as_solved(box, monkeypatch):
+    """The paper's walk keeps no direct light apart: nothing to gather; nor past MOST_PATCHES."""
+    scene, _, _ = box
+    walk = solve(scene, Settings(method="walk", paths=2_000, seed=1, threads=1))
+    assert walk.direct_irradiance is None and final_gather.gathered(scene, walk) is walk
+    two_way = solve(scene, Settings(method="two_way", paths=4_000, direct_apart=True, seed=1, threads=1, chunk_paths=1_000))
+    assert two_way.direct_irradiance is not None and final_gather.gathered(scene, two_way) is not two_way
+    monkeypatch.setattr(final_gather, "MOST_PATCHES", scene.patch_count - 1)
+    assert final_gather.gathered(scene, two_way) is two_way

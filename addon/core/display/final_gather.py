@@ -43,15 +43,19 @@ from ..scene.threads import each_on_threads, local_thread_count
 RAYS = 32  # cosine rays a patch
 STRATA = 8  # ... stratified on an 8 x RAYS/8 grid of the direction's two uniforms
 BLOCK_RAYS = 1 << 16  # rays traced at a time (a block of patches)
+# Patches beyond which the gather is left out: at that many the patches are small beside what a
+# camera sees (their blotches too), and its rays and per-source arrays would cost as much as the
+# smoothing (the textured output's smooth colours stop there too: bpy_free options.SMOOTH_MAX_PATCHES).
+MOST_PATCHES = 300_000
 STREAM = 1 << 29  # the gather's random stream, apart from the solve's and the display's
 
 
 def gathered(scene, result, rays=RAYS, seed=None):
-    """``result`` (a SolveResult whose direct light is known apart: ``direct_irradiance``) with its
-    light arriving, reflected light and radiosity (and each group's, for a per-source solve) the
-    solve's bounced light and the gather's combined by their variances (the module's docstring), its
-    light's variance the combined one; else ``result`` as it is."""
-    if result.direct_irradiance is None or scene.patch_count == 0 or rays < 2:
+    """``result`` (a SolveResult whose direct light is known apart: ``direct_irradiance``, of at most
+    MOST_PATCHES patches) with its light arriving, reflected light and radiosity (and each group's, for
+    a per-source solve) the solve's bounced light and the gather's combined by their variances (the
+    module's docstring), its light's variance the combined one; else ``result`` as it is."""
+    if result.direct_irradiance is None or not 0 < scene.patch_count <= MOST_PATCHES or rays < 2:
         return result
     ps = result.per_source
     grouped = ps is not None and ps.direct_irradiance is not None
