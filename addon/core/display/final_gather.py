@@ -8,20 +8,22 @@ patch's bounced light again from what its hemisphere sees:
 
     G_i = sum_j F_ij b_j  ~  mean over n cosine rays from points of i of b(hit)
 
-b_j the solved reflected light of the patch a ray meets (0 where it escapes or meets a back side:
-the world's light is direct light, kept apart). G_i averages the solve's errors over every patch i
+b_j = R_j H_j the light the patch a ray meets passes on, as solved (0 where the ray escapes or meets
+a back side: the world's light is direct light, kept apart). G_i averages the solve's errors over every patch i
 sees, so what is left is each patch's own sampling noise, independent from patch to patch, which
 the noise filter takes out (its variance: the rays' sample variance over n).
 
 The smooth display shows the two estimates of the same light combined by their variances (the
 solve's batch-means variance v_s, the rays' v_g): (v_g x_s + v_s x_g) / (v_s + v_g), given the
-noise filter the variance v_s v_g / (v_s + v_g). That is a guide for the filter, not a measured error:
-the gather also carries the solve's errors averaged over what a patch sees, which v_g leaves out
-(where they are one error over the whole scene, a total's, the gather keeps it whole). The solve's
-result, its error and the per-patch outputs stay as solved. Where the solve is sure (bright patches many paths reached) it stands;
-where it is not (a dim wall lit by bounced light alone) the gather does. Patches no camera sees
-(``PatchScene.hidden``) keep the solve's. Each source group's parts are combined with the same
-weights and gathered along the same rays, so they add up to the whole's (relighting).
+noise filter the variance v_s v_g / (v_s + v_g). Where the solve is sure (bright patches many paths
+reached) it stands; where it is not (a dim wall lit by bounced light alone) the gather does. Patches
+no camera sees (``PatchScene.hidden``) keep the solve's. Each source group's parts are gathered along
+the same rays and combined with the same weights, so they add up to the whole's (relighting).
+
+The combined variance is a guide for the filter, not a measured error: the gather also carries the
+solve's errors averaged over what a patch sees, which v_g leaves out (where they are one error over
+the whole scene, a total's, the gather keeps it whole). So the gather serves the smooth colours
+alone: the solve's result, its error and the per-patch outputs stay as solved.
 
 Rays: RAYS a patch, stratified over the hemisphere (an 8 x RAYS/8 grid of the cosine's uniforms),
 from points drawn on the patch's visible part, BLOCK_RAYS at a time on the local threads; a block's
@@ -59,8 +61,9 @@ def gathered(scene, result, rays=RAYS, seed=None):
         return result
     ps = result.per_source
     grouped = ps is not None and ps.direct_irradiance is not None
-    bounced = np.maximum(result.reflected, 0.0)
-    parts = scene.reflectivity[None] * np.maximum(ps.irradiance, 0.0) if grouped else None
+    # (what each patch passes on, b = R H, as solved: unclipped, so that the gather is linear and the parts add up)
+    parts = scene.reflectivity[None] * ps.irradiance if grouped else None
+    bounced = parts.sum(axis=0) if grouped else scene.reflectivity * result.irradiance
     mean, variance, part_means = gather(scene, bounced, parts, rays, result.seed if seed is None else seed)
     solve = result.irradiance - result.direct_irradiance
     v_s = np.asarray(result.irradiance_variance, np.float64)
@@ -112,15 +115,13 @@ def gather(scene, values, parts=None, rays=RAYS, seed=0):
         rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(int(seed), spawn_key=(STREAM, k))))
         with mine.numpy_turn:
             hit = _cast(mine, scene.geometry, start, stop, rays, rng)
-        count = stop - start
-        seen = np.where(hit >= 0, hit, 0)
+        met, seen = hit >= 0, np.maximum(hit, 0)
         for c in range(3):  # (a channel at a time: one (n,) array in flight)
-            sample = np.where(hit >= 0, values[seen, c], 0.0).reshape(count, rays)
+            sample = np.where(met, values[seen, c], 0.0).reshape(stop - start, rays)
             mean[start:stop, c] = sample.mean(axis=1)
             variance[start:stop, c] = sample.var(axis=1, ddof=1) / rays
-            if parts is not None:
-                for s in range(len(parts)):
-                    part_means[s, start:stop, c] = np.where(hit >= 0, parts[s, seen, c], 0.0).reshape(count, rays).mean(axis=1)
+            for s in range(0 if parts is None else len(parts)):
+                part_means[s, start:stop, c] = np.where(met, parts[s, seen, c], 0.0).reshape(stop - start, rays).mean(axis=1)
 
     each_on_threads(len(blocks), block)
     return mean, variance, part_means

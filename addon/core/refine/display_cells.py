@@ -29,7 +29,7 @@ import numpy as np
 from ..mesh.faces import triangle_areas
 from ..mesh.meshing import PatchMesh
 from .adaptive import cells_of, patch_mesh, split
-from .cell_meshes import Means, RefinedSurface, containing, found, merged, shown_of
+from .cell_meshes import Means, RefinedSurface, barycentric, containing, found, merged, shown_of
 from ..display.covered import visible_corner_weights
 from ..display.point_direct import CornerDirect, inside_other, patch_means
 
@@ -276,12 +276,7 @@ def _under(table, mesh, start, position, patch, row):
     one would pull its cells' visible part down)."""
     triangle = np.asarray(mesh.triangles, np.int64)[row]
     corner = np.asarray(mesh.points, np.float64)[triangle]  # (n,3,3)
-    e1, e2, d = corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0], position - corner[:, 0]
-    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-    d1, d2 = (d * e1).sum(1), (d * e2).sum(1)
-    det = np.maximum(d11 * d22 - d12 * d12, 1e-300)
-    b1, b2 = (d22 * d1 - d12 * d2) / det, (d11 * d2 - d12 * d1) / det
-    weight = np.stack([1.0 - b1 - b2, b1, b2], axis=1)  # (n,3) barycentric
+    weight = barycentric(position, corner[:, 0], corner[:, 1], corner[:, 2])
     coarse = table.coarse(np.repeat(patch, 3), triangle.ravel() + start)
     coarse = coarse.reshape(coarse.shape[:-2] + (len(patch), 3, 3))
     return (coarse * weight[:, :, None]).sum(axis=-2)

@@ -51,10 +51,7 @@ def on_threads(work, most):
         context.run(_LOCAL_THREADS.set, 1)
     with ThreadPoolExecutor(max_workers=count - 1, thread_name_prefix="radiosity-local") as pool:
         futures = [pool.submit(context.run, work) for context in contexts[1:]]
-        try:
-            contexts[0].run(work)  # (the calling thread takes a share: one thread fewer to start)
-        finally:
-            pool.shutdown(wait=True)
+        contexts[0].run(work)  # (the calling thread takes a share: one thread fewer to start)
     for future in futures:
         future.result()
 
