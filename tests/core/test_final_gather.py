@@ -83,11 +83,13 @@ def test_a_solve_gathered_again_is_the_discrete_solution_within_its_variance_and
     assert (out.irradiance_variance <= result.irradiance_variance * (1 + 1e-6) + 1e-30).all()
 
 
-def test_the_solves_weight_follows_the_variances():
-    v_s = np.array([[1.0, 0.0, np.nan]])
-    v_g = np.array([[3.0, 0.0, 1.0]])
-    np.testing.assert_allclose(final_gather._solve_weight(v_s, v_g), [[0.75, 0.5, 0.0]])
-    np.testing.assert_allclose(final_gather._solve_weight(v_s, v_g, hidden=np.array([True])), [[1.0, 1.0, 1.0]])
+def test_the_solves_weight_follows_the_variances_one_for_the_three_channels():
+    """v_g / (v_s + v_g) of the channels' sums (a patch keeps its colour); 0 where the solve measured
+    none, a half where neither varies, 1 on hidden patches."""
+    v_s = np.array([[1.0, 0.5, 0.5], [0.0, 0.0, 0.0], [np.nan, np.nan, np.nan]])
+    v_g = np.array([[3.0, 2.0, 1.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    np.testing.assert_allclose(final_gather._solve_weight(v_s, v_g), [[0.75], [0.5], [0.0]])
+    np.testing.assert_allclose(final_gather._solve_weight(v_s, v_g, hidden=np.array([True, False, False])), [[1.0], [0.5], [0.0]])
 
 
 def test_a_result_without_its_direct_light_apart_or_too_large_is_shown_as_solved(box, monkeypatch):

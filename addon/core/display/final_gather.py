@@ -14,7 +14,8 @@ sees, so what is left is each patch's own sampling noise, independent from patch
 the noise filter takes out (its variance: the rays' sample variance over n).
 
 The smooth display shows the two estimates of the same light combined by their variances (the
-solve's batch-means variance v_s, the rays' v_g): (v_g x_s + v_s x_g) / (v_s + v_g), given the
+solve's batch-means variance v_s, the rays' v_g, each summed over the colour channels: one share
+for the three, so that a patch keeps its colour): (v_g x_s + v_s x_g) / (v_s + v_g), given the
 noise filter the variance v_s v_g / (v_s + v_g). Where the solve is sure (bright patches many paths
 reached) it stands; where it is not (a dim wall lit by bounced light alone) the gather does. Patches
 no camera sees (``PatchScene.hidden``) keep the solve's. Each source group's parts are gathered along
@@ -84,17 +85,20 @@ def gathered(scene, result, rays=RAYS, seed=None):
 
 
 def _solve_weight(v_s, v_g, hidden=None):
-    """(P,3) the solve's share v_g / (v_s + v_g) of each patch's combined estimate: 0 where the
-    solve measured no variance (fewer than two chunks), 1 on ``hidden`` patches, a half where
-    neither estimate varies."""
-    finite = np.isfinite(v_s)
-    v_s = np.where(finite, v_s, 0.0)
+    """(P,1) the solve's share v_g / (v_s + v_g) of each patch's combined estimate, the variances
+    summed over the channels (one share for the three: a share of its own each would shift a
+    patch's colour towards whichever estimate is the surer in that channel, specks of the walls'
+    colours): 0 where the solve measured no variance (fewer than two chunks), 1 on ``hidden``
+    patches, a half where neither estimate varies."""
+    finite = np.isfinite(v_s).all(axis=1)
+    v_s = np.where(finite, np.nan_to_num(v_s, nan=0.0, posinf=0.0).sum(axis=1), 0.0)
+    v_g = np.asarray(v_g, np.float64).sum(axis=1)
     total = v_s + v_g
     weight = np.divide(v_g, total, out=np.full_like(total, 0.5), where=total > 0)
     weight = np.where(finite, weight, 0.0)
     if hidden is not None:
         weight[np.asarray(hidden, bool)] = 1.0
-    return weight
+    return weight[:, None]
 
 
 def gather(scene, values, parts=None, rays=RAYS, seed=0):
