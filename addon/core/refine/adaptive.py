@@ -8,7 +8,8 @@ cell has at most one extra point on each edge: the midpoint its finer neighbour 
 point becomes one of its polygon's corners (a planar n-gon, collinear corner included), so the
 written mesh has no T-junction: every edge inside a surface has two polygons, and smooth colours
 are continuous across it. A patch stays coplanar triangles: each polygon with extra points is
-triangulated by a fixed pattern of its own (:func:`_pattern`), no triangle of zero area.
+triangulated by a fixed pattern of its own (:func:`_pattern`), no triangle of zero area, and its
+corners start where Blender's own triangulation of it (which the viewport draws) has none either.
 
 Faces kept whole as n-gons (more than four corners) never split, and neither do the cells
 that share an edge with them (their midpoints would land on the n-gon's edge). Cells of
@@ -275,6 +276,12 @@ def _pattern(corner_count, mask):
         if mask >> k & 1:
             polygon.append(2 * k + 1)
             xy.append(0.5 * (ideal[k] + ideal[(k + 1) % corner_count]))
+    if len(polygon) == 4 and mask:
+        # A triangle with one midpoint: Blender splits a quad on its 0-2 diagonal, which must end
+        # at the midpoint, else one of its triangles has no area (a GPU draws such a sliver with
+        # wild interpolated colours: specks in EEVEE).
+        start = next(i for i, corner in enumerate(polygon) if corner % 2)
+        polygon, xy = polygon[start:] + polygon[:start], xy[start:] + xy[:start]
     xy = np.array(xy)
     alive, triangles = list(range(len(polygon))), []
     if mask == 0:  # the meshing's own fan
