@@ -8,8 +8,11 @@ cell has at most one extra point on each edge: the midpoint its finer neighbour 
 point becomes one of its polygon's corners (a planar n-gon, collinear corner included), so the
 written mesh has no T-junction: every edge inside a surface has two polygons, and smooth colours
 are continuous across it. A patch stays coplanar triangles: each polygon with extra points is
-triangulated by a fixed pattern of its own (:func:`_pattern`), no triangle of zero area, and its
-corners start where Blender's own triangulation of it (which the viewport draws) has none either.
+triangulated by a fixed pattern of its own (:func:`_pattern`), no triangle of zero area. Blender
+draws the polygons by its own triangulation: a triangle with one midpoint starts at it, so that
+Blender's fixed split of a 4-corner polygon gives the same two triangles; its ear clipping of the
+larger n-gons can still leave a zero-area triangle along a collinear edge, depending on float
+rounding (no speck seen from one in EEVEE).
 
 Faces kept whole as n-gons (more than four corners) never split, and neither do the cells
 that share an edge with them (their midpoints would land on the n-gon's edge). Cells of
