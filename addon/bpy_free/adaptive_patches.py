@@ -100,15 +100,21 @@ def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False
     ``keep_unsplit``: an object none of whose cells split keeps its plain mesh (no shading
     triangulation of its own: the display's cells may split it)."""
     objects, _ = drop_zero_area_faces(objects)  # (as make_patches read them: the same faces)
-    meshes = [_copy(patch_mesh(c)[0], not (keep_unsplit and c.level.max(initial=0) == 0)) for c in cells]
-    combined = meshing.concatenate(meshes)
-    if combined.patch_count > MAX_PATCHES:
-        raise ValueError(f"Detail {detail.lower()} would make {combined.patch_count:,} patches, more than the limit of "
-                         f"{MAX_PATCHES:,}: use a larger patch size or a lower detail")
+    # The key names these cells: meshes made for it before are these (kept with their core scene,
+    # which a re-run then reuses instead of building its arrays and Embree scenes again).
+    cached = GEOMETRY_CACHE.meshes(geometry_key)
+    if cached is not None:
+        meshes, combined = cached
+    else:
+        meshes = [_copy(patch_mesh(c)[0], not (keep_unsplit and c.level.max(initial=0) == 0)) for c in cells]
+        combined = meshing.concatenate(meshes)
+        if combined.patch_count > MAX_PATCHES:
+            raise ValueError(f"Detail {detail.lower()} would make {combined.patch_count:,} patches, more than the "
+                             f"limit of {MAX_PATCHES:,}: use a larger patch size or a lower detail")
+        GEOMETRY_CACHE.store(geometry_key, meshes, combined)
     materials = [patch_materials(o, m) for o, m in zip(objects, meshes)]
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
     emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
-    GEOMETRY_CACHE.store(geometry_key, meshes, combined)
     names = {n: i for i, n in enumerate(patches.material_names)}  # (per-light groups read each patch's)
     patch_material = np.concatenate([material_of_patches(o, m, names) for o, m in zip(objects, meshes)])
     out = replace(patches, meshes=meshes, combined=combined, reflectivity=reflectivity, emission=emission,

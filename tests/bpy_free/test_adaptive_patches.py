@@ -113,3 +113,23 @@ def test_detail_off_splits_the_patches_a_near_surface_partly_covers_and_the_room
     light, se = floor_light(split, 12)
     assert straddling - ref > 0.2 * ref
     assert -4 * np.hypot(ref_se, se) < light - ref < 0.03 * ref, (light, ref, straddling)
+
+
+def test_a_rerun_of_the_split_patches_with_other_materials_reuses_their_meshes_geometry_and_tracer():
+    """The outline split's meshes are kept with their core scene, as the plain meshes are
+    (test_patches): a second solve of the same objects, another reflectivity, neither splits nor
+    builds the scene's arrays and Embree scenes again (before: each run stored fresh meshes
+    under the split's key, dropping the scene the last run built); the new materials are read."""
+    objects = slab_room()
+    patches.GEOMETRY_CACHE.clear()
+    adaptive_patches._LAST.key = None
+    first = adaptive_patches.refined(objects, patches.make_patches(objects, 0.5, layers=True), "OFF", layers=True)
+    scene = first.patch_scene()
+    objects[0].face_reflectivity = objects[0].face_reflectivity * 0.5
+    again = adaptive_patches.refined(objects, patches.make_patches(objects, 0.5, layers=True), "OFF", layers=True)
+    assert again.meshes is first.meshes and again.combined is first.combined
+    rescene = again.patch_scene()
+    assert rescene.geometry is scene.geometry and rescene.tracer is scene.tracer
+    np.testing.assert_array_equal(rescene.hidden, scene.hidden)
+    np.testing.assert_allclose(rescene.reflectivity[: again.combined.patch_offsets[1]],
+                               0.5 * scene.reflectivity[: first.combined.patch_offsets[1]])
