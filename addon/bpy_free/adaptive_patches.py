@@ -108,9 +108,10 @@ def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False
     else:
         meshes = [_copy(patch_mesh(c)[0], not (keep_unsplit and c.level.max(initial=0) == 0)) for c in cells]
         combined = meshing.concatenate(meshes)
-        if combined.patch_count > MAX_PATCHES:
-            raise ValueError(f"Detail {detail.lower()} would make {combined.patch_count:,} patches, more than the "
-                             f"limit of {MAX_PATCHES:,}: use a larger patch size or a lower detail")
+    if combined.patch_count > MAX_PATCHES:
+        raise ValueError(f"Detail {detail.lower()} would make {combined.patch_count:,} patches, more than the "
+                         f"limit of {MAX_PATCHES:,}: use a larger patch size or a lower detail")
+    if cached is None:
         GEOMETRY_CACHE.store(geometry_key, meshes, combined)
     materials = [patch_materials(o, m) for o, m in zip(objects, meshes)]
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
