@@ -9,10 +9,9 @@ point becomes one of its polygon's corners (a planar n-gon, collinear corner inc
 written mesh has no T-junction: every edge inside a surface has two polygons, and smooth colours
 are continuous across it. A patch stays coplanar triangles: each polygon with extra points is
 triangulated by a fixed pattern of its own (:func:`_pattern`), no triangle of zero area. Blender
-draws the polygons by its own triangulation: a triangle with one midpoint starts at it, so that
-Blender's fixed split of a 4-corner polygon gives the same two triangles; its ear clipping of the
-larger n-gons can still leave a zero-area triangle along a collinear edge, depending on float
-rounding (no speck seen from one in EEVEE).
+draws the polygons by its own triangulation, which depends on where a polygon's corners start:
+each pattern starts where Blender's triangles all have area (BLENDER_START), but a quad with
+midpoints on two opposite edges, which no start saves.
 
 Faces kept whole as n-gons (more than four corners) never split, and neither do the cells
 that share an edge with them (their midpoints would land on the n-gon's edge). Cells of
@@ -32,6 +31,16 @@ from ..mesh.faces import ranks_in_runs, starts_of, triangle_areas
 from ..mesh.meshing import PatchMesh
 
 KEY = np.int64(1) << np.int64(31)  # edge key: smaller point * KEY + larger point
+# The corner each split polygon (corner count, bits of the edges with a midpoint) starts at, so
+# that Blender's own triangulation of it, which the viewport draws, has no triangle of zero area
+# along a collinear edge (a GPU draws such a sliver with wild interpolated colours: specks in
+# EEVEE). Blender splits a 4-corner polygon on its 0-2 diagonal and ear-clips larger ones in an
+# order its start decides; these starts were found by search over Blender's triangulation of
+# thousands of shapes of random size and orientation (tests/blender/test_adaptive.py checks them).
+# A quad with midpoints on two opposite edges (bits 5 and 10) has none: every start leaves a
+# sliver on about 45% of rotated shapes.
+BLENDER_START = {(3, 1): 1, (3, 2): 2, (3, 4): 3, (3, 6): 1, (4, 2): 1, (4, 4): 2, (4, 6): 1, (4, 7): 2,
+                 (4, 9): 2, (4, 12): 2, (4, 13): 5, (4, 14): 1, (4, 15): 2}
 
 
 def edge_keys(a, b):
@@ -279,12 +288,6 @@ def _pattern(corner_count, mask):
         if mask >> k & 1:
             polygon.append(2 * k + 1)
             xy.append(0.5 * (ideal[k] + ideal[(k + 1) % corner_count]))
-    if len(polygon) == 4 and mask:
-        # A triangle with one midpoint: Blender splits a quad on its 0-2 diagonal, which must end
-        # at the midpoint, else one of its triangles has no area (a GPU draws such a sliver with
-        # wild interpolated colours: specks in EEVEE).
-        start = next(i for i, corner in enumerate(polygon) if corner % 2)
-        polygon, xy = polygon[start:] + polygon[:start], xy[start:] + xy[:start]
     xy = np.array(xy)
     alive, triangles = list(range(len(polygon))), []
     if mask == 0:  # the meshing's own fan
@@ -307,7 +310,9 @@ def _pattern(corner_count, mask):
         triangles.append((alive[best - 1], v, alive[(best + 1) % len(alive)]))
         alive.pop(best)
     triangles.append(tuple(alive))
-    return tuple(polygon), np.array(triangles, np.int64)
+    # the polygon written from where Blender's triangles all have area; its own triangles the same
+    start = BLENDER_START.get((corner_count, mask), 0)
+    return tuple(polygon[start:] + polygon[:start]), (np.array(triangles, np.int64) - start) % len(polygon)
 
 
 def _collinear(points):
