@@ -1,8 +1,10 @@
 """Where the Solve operator's time goes on an interior, stage by stage, beside Embree's raw ray rate.
 
-    python -m benchmarks.operator_stages [--scene window_room] [--patch-size 0.155] [--rounds 3] [--before DIR]
+    python -m benchmarks.operator_stages [--scene window_room] [--patch-size 0.155] [--rounds 3] [--before DIR] [--again]
 
-``--before DIR``: a checkout of another commit (with this file in its benchmarks/), run in
+``--again``: each round's process solves twice, a lamp's strength changed between, and the table
+gives the second run (the same geometry: what the lighting loop pays, the meshes and the scene's
+arrays and Embree scenes kept from the first). ``--before DIR``: a checkout of another commit (with this file in its benchmarks/), run in
 alternation with this tree, round by round; the table gives both. Into
 benchmarks/results/operator_stages.md (``--out``).
 
@@ -114,8 +116,9 @@ def _embree_timer(totals):
         setattr(raytrace.RayTracer, name, timed)
 
 
-def one(scene_name, patch_size, seed):
-    """One operator run in this process: {stage: seconds, ...} and the raw rate."""
+def one(scene_name, patch_size, seed, again=False):
+    """One operator run in this process: {stage: seconds, ...} and the raw rate; ``again``: those
+    of a second run after a lamp's strength changed (the same geometry: what the lighting loop pays)."""
     import bpy
 
     sys.path.insert(0, str(ROOT))
@@ -152,11 +155,17 @@ def one(scene_name, patch_size, seed):
 
     pipeline.solve = solve_and_keep
     _embree_timer(embree)
-    start, cpu = time.perf_counter(), time.process_time()
-    finished = solve_job.run(bpy.context)
-    seconds["operator"], seconds["cpu operator"] = time.perf_counter() - start, time.process_time() - cpu
-    if finished.status != "FINISHED":
-        raise RuntimeError(finished.error)
+    for run in range(2 if again else 1):
+        if run:  # (the lighting loop: a lamp changed, the same geometry solved again; its stages alone)
+            lamp = next(o for o in bpy.data.objects if o.type == "LIGHT" and not o.hide_render)
+            lamp.data.energy *= 1.5
+            seconds.clear()
+            picture.source_objects()
+        start, cpu = time.perf_counter(), time.process_time()
+        finished = solve_job.run(bpy.context)
+        seconds["operator"], seconds["cpu operator"] = time.perf_counter() - start, time.process_time() - cpu
+        if finished.status != "FINISHED":
+            raise RuntimeError(finished.error)
     result, core_scene = captured["result"], captured["scene"]
     from addon.core.methods.tables import WalkTables
 
@@ -199,7 +208,7 @@ def table(sets, args):
     """The markdown report of the rounds: ``sets`` [(label, runs)], this tree's last."""
     first = sets[-1][1][0]
     lines = [f"`python -m benchmarks.operator_stages --scene {args.scene} --patch-size {args.patch_size:g} "
-             f"--rounds {args.rounds}`; {platform.machine()}, Python {platform.python_version()}, "
+             f"--rounds {args.rounds}{' --again' if args.again else ''}`; {platform.machine()}, Python {platform.python_version()}, "
              f"{first['threads']} threads, 2 cores shared with other work.", ""]
     for label, runs in sets:
         lines.append(f"- {label}: {runs[0]['patches']:,} patches, {runs[0]['method']}, "
@@ -225,7 +234,7 @@ def table(sets, args):
 
 def _round(tree, args):
     done = subprocess.run([sys.executable, "-m", "benchmarks.operator_stages", "--one", "--scene", args.scene,
-                           "--patch-size", str(args.patch_size), "--seed", str(args.seed)],
+                           "--patch-size", str(args.patch_size), "--seed", str(args.seed)] + (["--again"] if args.again else []),
                           cwd=tree, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(tree)})
     line = [x for x in done.stdout.splitlines() if x.startswith("RESULT ")]
     if not line:
@@ -242,10 +251,12 @@ def main(argv=None):
     parser.add_argument("--before", default=None, help="a checkout of the commit to compare with")
     parser.add_argument("--before-label", default="before")
     parser.add_argument("--out", default=str(RESULTS / "operator_stages.md"))
+    parser.add_argument("--again", action="store_true",
+                        help="time a second run in each process, after a lamp changed (the geometry kept)")
     parser.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.one:
-        print("RESULT " + json.dumps(one(args.scene, args.patch_size, args.seed)))
+        print("RESULT " + json.dumps(one(args.scene, args.patch_size, args.seed, args.again)))
         return
     trees = ([(args.before_label, Path(args.before))] if args.before else []) + [("after" if args.before else "this tree", ROOT)]
     runs = {label: [] for label, _ in trees}
