@@ -132,7 +132,7 @@ def test_update_after_a_lamp_moved_solves_everything_again_where_detail_refined_
 
 
 def _pattern_shapes(corner_count, polygon, count, rng):
-    """``count`` polygons of ``polygon``'s corners (adaptive._pattern's local numbers) on cells of
+    """``count`` polygons of ``polygon``'s corners (refine.patterns.pattern's local numbers) on cells of
     random shape, size, orientation and place, as float32 points: (points, faces)."""
     points, faces = [], []
     for _ in range(count):
@@ -158,7 +158,7 @@ def test_blender_triangulates_every_split_polygon_without_a_sliver(blender, corn
     carried one midpoint; before the starts, 25-45% of these shapes had one, in most patterns).
     A triangle with one midpoint is Blender's fixed split of 4 corners: its triangles are the
     core's. Quads with midpoints on two opposite edges are left out: no start saves them."""
-    from addon.core.refine.adaptive import _pattern
+    from addon.core.refine.patterns import pattern as _pattern
 
     rng = np.random.default_rng(3)
     for mask in range(1, 1 << corner_count):
