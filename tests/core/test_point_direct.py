@@ -599,3 +599,57 @@ def test_the_floor_under_a_panel_facing_away_shows_the_light_of_its_back(monkeyp
     np.maximum.at(brightest, corner_patch, exact)
     z = np.abs(shown - exact) / (point_direct.NOISE_SHARE * brightest[corner_patch])
     assert np.sqrt((z ** 2).mean()) < 1.0, np.sqrt((z ** 2).mean())
+
+
+def _slab_over_floor(n=40, side=2.0, gap=0.02):
+    """A floor of n x n patches (5 cm) under an emitting slab 0.6 x 0.6 x 0.04 m (exitance 1, 3 x 3
+    patches a face) ``gap`` above it: (scene, surface, the corners' points, the floor's corners
+    outside the slab's outline within 6 cm of it, the exact light at every floor corner: each
+    face's form factor by Lambert's contour where the point is in its front, nothing between)."""
+    from boxes import box_rectangles
+
+    step = side / n
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    origin = np.stack([i.ravel() * step, j.ravel() * step, np.zeros(n * n)], axis=1)
+    u, v = np.tile([step, 0.0, 0.0], (n * n, 1)), np.tile([0.0, step, 0.0], (n * n, 1))
+    low = np.array([0.71, 0.67])
+    slab, slab_u, slab_v, _ = box_rectangles((0.6, 0.6, 0.04), n=3, offset=(*low, gap))
+    V, T, TP = rectangles_to_mesh(np.vstack([origin, slab]), np.vstack([u, slab_v]), np.vstack([v, slab_u]))
+    emission = np.r_[np.zeros(n * n), np.ones(len(slab))]
+    scene = PatchScene(V, T, TP, np.full(len(emission), 0.5), emission)
+    surface = _surface(scene)
+    points = _shown_points(scene, surface).reshape(-1, 3)
+    floor = np.repeat(scene.triangle_patch, 3) < n * n
+    exact = np.zeros(len(points))
+    up = np.tile([0.0, 0.0, 1.0], (floor.sum(), 1))
+    for o, a, b in zip(slab, slab_v, slab_u):
+        normal = np.cross(a, b) / np.linalg.norm(np.cross(a, b))
+        front = np.einsum("nk,k->n", points[floor] - o, normal) > 0
+        exact[floor] += _lambert(np.array([o, o + a, o + a + b, o + b]), points[floor], up) * front
+    outside = np.maximum(np.maximum(low - points[:, :2], points[:, :2] - (low + 0.6)), 0.0).max(axis=1)
+    return scene, surface, points, floor & (outside > 0.005) & (outside < 0.06), exact
+
+
+def test_beside_an_emitters_edge_its_light_is_unbiased_and_not_heavy_tailed(monkeypatch):
+    """The floor beside a slab 2 cm above it (a panel hung under a ceiling, upside down), within
+    6 cm of its outline, where its light is 0.05-0.42 of its exitance, most of it from the slab's
+    near edge: each corner's light from a shadow ray (to a patch chosen by power and nearness) and
+    a cosine ray a sample, weighed by the power heuristic. Without retries over 12 seeds, the
+    light over the corners within 4 standard errors of the exact light and each corner's mean
+    within its own noise (z root mean square below 1.5: 1.1 expected of 11 degrees of freedom);
+    with them, one solve's corners within 15% root mean square. (By shadow rays to patches chosen
+    by power alone: -29% on average and 58% root mean square: a few samples found the near edge
+    1/d^2 strong, most found none; the display drew spikes round the studio flat's panel.)"""
+    scene, surface, points, band, exact = _slab_over_floor()
+    _, distinct = np.unique(np.round(points[band], 9), axis=0, return_index=True)
+    rows = np.flatnonzero(band)[distinct]
+    with monkeypatch.context() as patched:
+        patched.setattr(point_direct, "RETRIES", 0)
+        seeds = np.array([point_direct.corner_direct(surface, scene, scene.triangles, seed=seed).corners[..., 0].ravel()[rows]
+                          for seed in range(12)])
+    total = seeds.sum(axis=1) / exact[rows].sum()
+    assert abs(total.mean() - 1.0) < 4 * total.std(ddof=1) / np.sqrt(len(total)), total
+    z = (seeds.mean(axis=0) - exact[rows]) / (seeds.std(axis=0, ddof=1) / np.sqrt(len(seeds)))
+    assert np.sqrt((z ** 2).mean()) < 1.5, np.sqrt((z ** 2).mean())
+    shown = point_direct.corner_direct(surface, scene, scene.triangles, seed=1).corners[..., 0].ravel()[rows]
+    assert np.sqrt(((shown / exact[rows] - 1) ** 2).mean()) < 0.15

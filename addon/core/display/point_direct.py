@@ -12,7 +12,9 @@ does for direct light, and keeps the solve for the rest:
 D the direct light at every corner of the shading triangles (the lamps by ``SAMPLES`` stratified
 shadow rays shared among them, each ray to one lamp drawn by what it would give the corner
 unoccluded, ``lamp_choice``: the rays do not multiply with the lamps; each sun by as many of
-its own; each emitting material's patches by as many points chosen by power), M each patch's
+its own; each emitting material's patches by as many samples, each a shadow ray to a point of a
+patch chosen by power and nearness and, near them, a cosine ray, weighed by the power heuristic:
+``direct_points.emitters_at``), M each patch's
 area-weighted mean of D's linear interpolation, H the solved (filtered)
 light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``).
 Every patch's mean is still its solved
@@ -49,12 +51,11 @@ from functools import partial
 
 import numpy as np
 
-from .direct_points import SAMPLE_DIMENSIONS, Points, chosen_lamps, emitters_at, sky_at
+from .direct_points import SAMPLE_DIMENSIONS, Points, chosen_lamps, emitting, sky_at
 from ..lights.lamp_choice import LampChoice, patch_spheres
 from ..lights.lights import SunLight, WorldLight
 from ..names import EXIT_RANDOM, FINITE
 from .sample_rounds import Part, rounds, sampled
-from ..lights.sampling import SourceTable
 from ..methods.tables import WalkTables
 from ..scene.visibility import buried_at
 
@@ -197,7 +198,7 @@ def _sources(scene, light_group, patch_group, groups, sky=False):
              for part in (_lamp_sources(group, add) if paired is None else [(group, add, paired)])]
     for group in np.unique(emitter_group[power > 0]):
         mine = np.where(emitter_group == group, power, 0.0)
-        parts.append((group, partial(emitters_at, scene=scene, emitters=SourceTable(mine), power=mine), True))
+        parts.append((group, emitting(scene, mine), True))
     return parts
 
 
