@@ -5,6 +5,8 @@ display's direct light at corners (``display.point_direct``) and the Detail's re
 (``refine.adaptive_light``) read them; the first shot (``first_shot``) traces their rays."""
 from __future__ import annotations
 
+import hashlib
+import weakref
 from functools import partial
 
 import numpy as np
@@ -16,10 +18,12 @@ from ..methods.first_shot import COSINE_SHARE_LEAST, SEEN_BEFORE, trace
 # Sobol' dimensions of a sample: its point on the patch (2) and triangle (1), a point of a light
 # or a direction of the sky (2), an emitting patch (1) and its point (3).
 SAMPLE_DIMENSIONS = (0, 1, 7, 2, 3, 4, 5, 6, 8)
+_EMITTING = weakref.WeakKeyDictionary()  # scene -> {power's digest: (NearChoice or None, cosine shares)}
 # A patch's chance of casting a cosine ray towards emitting patches: this many times its bounded
-# form factor to the nearest (cosine_shares), for at most this many of them (more: the least).
+# form factor to the nearest (cosine_shares), where patches x emitting patches are at most this
+# many (more: the least chance everywhere, as the solve's gathering takes them by their area).
 NEAREST_SHARE = 3.0
-NEAREST_MOST = 4096
+NEAREST_PAIRS = 1 << 24
 
 
 class Points:
@@ -87,10 +91,15 @@ def sky_at(tables, points, worlds, u, value):
 
 
 def emitting(scene, power):
-    """``emitters_at`` for the emitting patches ``power`` (P,) > 0: ``add(tables, points, u, value)``."""
-    near = NearChoice(scene, power / power.sum())
-    return partial(emitters_at, scene=scene, emitters=SourceTable(power), power=power,
-                   near=near if near.active else None, share=cosine_shares(scene, power))
+    """``emitters_at`` for the emitting patches ``power`` (P,) > 0: ``add(tables, points, u, value)``;
+    their choice and cosine shares made once a scene (the display asks at every round of points)."""
+    made = _EMITTING.setdefault(scene, {})
+    key = hashlib.blake2b(np.ascontiguousarray(power).tobytes(), digest_size=16).digest()
+    if key not in made:
+        near = NearChoice(scene, power / power.sum())
+        made[key] = (near if near.active else None, cosine_shares(scene, power))
+    near, share = made[key]
+    return partial(emitters_at, scene=scene, emitters=SourceTable(power), power=power, near=near, share=share)
 
 
 def cosine_shares(scene, power):
@@ -99,10 +108,10 @@ def cosine_shares(scene, power):
     the nearest of them, A_s / (pi d^2 + A_s) between centres, from COSINE_SHARE_LEAST to 1 (the
     shadow rays' estimate is heavy-tailed only where an emitting patch is near for its size:
     beside a panel's edge, not on a floor a cube's height under it, where the cosine rays cost
-    4x the rays for a tenth less error); beyond NEAREST_MOST emitting patches, COSINE_SHARE_LEAST."""
+    4x the rays for a tenth less error); beyond NEAREST_PAIRS pairs, COSINE_SHARE_LEAST."""
     emitting = np.flatnonzero(power > 0)
     share = np.full(scene.patch_count, COSINE_SHARE_LEAST)
-    if emitting.size > NEAREST_MOST:
+    if scene.patch_count * emitting.size > NEAREST_PAIRS:
         return share
     centres = patch_centres(scene)
     area = scene.patch_area[emitting]
