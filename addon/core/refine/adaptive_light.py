@@ -20,11 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .adaptive import cells_of, patch_mesh, split
-from ..display.direct_points import SAMPLE_DIMENSIONS, Points, emitters_at, lamps_at, sky_at
+from ..display.direct_points import SAMPLE_DIMENSIONS, Points, emitting, lamps_at, sky_at
 from ..scene.geometry_build import build_geometry
 from ..lights.lights import WorldLight
 from ..names import EXIT_RANDOM, FINITE
-from ..lights.sampling import SourceTable, stratified_by_patch
+from ..lights.sampling import stratified_by_patch
 from ..scene.scene import PatchScene
 from ..methods.tables import WalkTables
 
@@ -78,7 +78,7 @@ def direct_estimates(scene, patches, samples, seed, replicas=2):
     lamps = [light for light in scene.lights.lights if not isinstance(light, WorldLight)]
     worlds = [light for light in scene.lights.lights if isinstance(light, WorldLight)]
     power = scene.patch_area * scene.emission.mean(axis=1)
-    emitters = SourceTable(power) if (power > 0).any() else None
+    emitters = emitting(scene, power) if (power > 0).any() else None  # (their light: shadow and cosine rays)
     out = np.zeros((replicas, len(patches), 3))
     rows_sorted = np.repeat(np.sort(patches), samples)
     with tables.numpy_turn:
@@ -92,7 +92,7 @@ def direct_estimates(scene, patches, samples, seed, replicas=2):
                 if worlds:
                     sky_at(tables, points, worlds, u, value)
                 if emitters is not None:
-                    emitters_at(tables, points, scene, emitters, power, u, value)
+                    emitters(tables, points, u=u, value=value)
                 sums = np.stack([np.bincount(rows, weights=value[c], minlength=P) for c in range(3)], axis=1)
                 out[r] += sums[patches] / samples
     return out
