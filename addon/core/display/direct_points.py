@@ -15,8 +15,8 @@ from ..lights.sampling import SourceTable, add_sphere_points, patch_point_rows
 from ..lights.near_choice import NearChoice, patch_centres
 from ..methods.first_shot import COSINE_SHARE_LEAST, SEEN_BEFORE, trace
 
-# Sobol' dimensions of a sample: its point on the patch (2) and triangle (1), a point of a light
-# or a direction of the sky (2), an emitting patch (1) and its point (3).
+# Sobol' dimensions of a sample: its point on the patch (2) and triangle (1), a point of a light,
+# a direction of the sky or an emitters' cosine ray (2), an emitting patch (1) and its point (3).
 SAMPLE_DIMENSIONS = (0, 1, 7, 2, 3, 4, 5, 6, 8)
 _EMITTING = weakref.WeakKeyDictionary()  # scene -> {power's digest: (NearChoice or None, cosine shares)}
 # A patch's chance of casting a cosine ray towards emitting patches: this many times its bounded
