@@ -61,11 +61,18 @@ def baked_material(material):
     """A copy of a result material showing its view-independent part alone, as emission: the
     colour its Emission shader of the solved light takes (``blender_write.materials.emission_output``:
     (base colour x scale + offset) x 'Radiosity Light' + emission, or 'Radiosity' for the flat
-    result material: its EEVEE output's); its live shader and outputs dropped."""
+    result material: its EEVEE output's, where it draws the lamps' highlights the glossy layers'
+    mean under the whole light again); its live shader and outputs dropped."""
+    from addon.blender_write.materials import LAMPLESS_ATTRIBUTE
+    from addon.blender_write.results import LIGHT_ATTRIBUTE_NAME
+
     copy = material.copy()
     tree = copy.node_tree
+    for node in tree.nodes:  # (a live copy that draws the lamps' highlights: its glossy layers' mean light again)
+        if node.bl_idname == "ShaderNodeAttribute" and node.attribute_name == LAMPLESS_ATTRIBUTE:
+            node.attribute_name = LIGHT_ATTRIBUTE_NAME
     shown = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.target in ("ALL", "EEVEE")]
-    emission = shown[0].inputs["Surface"].links[0].from_node if len(shown) == 1 else None
+    emission = _emission_under(shown[0].inputs["Surface"]) if len(shown) == 1 else None
     colour = emission.inputs["Color"].links if emission is not None and "Color" in emission.inputs else ()
     mixes = [link.from_node for link in colour if link.from_node.bl_idname == "ShaderNodeMix"]
     if len(mixes) != 1 or mixes[0].data_type != "RGBA":
@@ -81,6 +88,16 @@ def baked_material(material):
     output.is_active_output = True
     copy.cycles.emission_sampling = "NONE"
     return copy
+
+
+def _emission_under(socket):
+    """The Emission shader feeding ``socket``, through Mix and Add Shader nodes (the highlights'
+    layer beside it), or None."""
+    node = socket.links[0].from_node if socket.is_linked else None
+    while node is not None and node.bl_idname in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
+        node = next((link.from_node for s in node.inputs for link in s.links
+                     if link.from_node.bl_idname != "ShaderNodeAttribute"), None)
+    return node if node is not None and node.bl_idname == "ShaderNodeEmission" else None
 
 
 def attribute_material(_material):

@@ -182,6 +182,24 @@ def _gives_light(colour, strength, image):
     return strength > 0 and (image is not None or bool(colour.any()))
 
 
+# The nodes ``blender_write.eevee_world`` adds to the world for EEVEE (named so): never read here.
+EEVEE_WORLD_PREFIX = "Radiosity EEVEE "
+
+
+def added_for_eevee(node) -> bool:
+    return node.name.startswith(EEVEE_WORLD_PREFIX)
+
+
+def world_output(tree):
+    """The world output Cycles renders (Blender's choice for Cycles: an output for Cycles before
+    one for every engine, the active one first), or else the first output that is not
+    ``added_for_eevee``; None where there is none."""
+    chosen = tree.get_output_node("CYCLES")
+    if chosen is not None:
+        return chosen
+    return next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and not added_for_eevee(n)), None)
+
+
 def _background(world, notes):
     """(colour (3,), strength, image or None) of the world's surface."""
     tree = world.node_tree
@@ -189,8 +207,7 @@ def _background(world, notes):
         tree = None
     if tree is None:
         return np.array(world.color[:3], dtype=np.float64), 1.0, None
-    output = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
-    output = output or next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"), None)
+    output = world_output(tree)
     link = output.inputs["Surface"].links[0] if output is not None and output.inputs["Surface"].is_linked else None
     if link is None:
         return np.zeros(3), 0.0, None

@@ -223,6 +223,13 @@ def surface_terms(material, blur=0.0):
     return (np.ones(3), np.zeros(3)) if inputs is None else principled.surface_terms(inputs)
 
 
+def view_terms(material):
+    """``core.principled.view_terms`` of a Principled BSDF's material (the terms as a viewer at
+    each cosine sees it), or None for anything else."""
+    inputs = _material_inputs(material, 0.0)
+    return None if inputs is None else principled.view_terms(inputs)
+
+
 def transport_terms(material):
     """``surface_terms`` of the light passed on from surface to surface (under Filter Glossy): solved;
     and the glossy lobe's (share, alpha) (core.principled.glossy_terms; None but for a Principled BSDF)."""
@@ -272,8 +279,8 @@ def _principled_note(node, p, what):
     eta, _ = principled.specular_eta_f0(p["ior"], p["specular_ior_level"])
     counted = [name for name, on in (("coat", used("Coat Weight")), ("metallic", used("Metallic")),
                                      ("specular", eta != 1.0)) if on]
-    missing = [("view-dependent highlights (shown as their average over view directions; with Live lamps, "
-                "drawn by the renderer)")] if counted else []
+    missing = [("view-dependent highlights (shown as under even light, at the camera's angle on a dielectric, else "
+                "as their average over view directions; with Live lamps, the lamps' drawn by the renderer)")] if counted else []
     if used("Transmission Weight"):
         missing.append("light through transmission (only its reflection counted)")
     if used("Subsurface Weight"):

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 
 from .objects import is_result_object
-from .lights import world_gives_light
+from .lights import added_for_eevee, world_gives_light
 from .materials import EMISSION, shader_node
 from .objects import SOURCE_TYPES
 
@@ -69,12 +69,13 @@ def world_signature(world):
         return "no nodes"
     background = background_node(world)
     parts = []
-    for node in sorted(tree.nodes, key=lambda n: n.name):
+    for node in sorted((n for n in tree.nodes if not added_for_eevee(n)), key=lambda n: n.name):
         image = getattr(node, "image", None)
         inputs = [(s.name, _value(s)) for s in node.inputs
                   if not (node == background and s.name in ("Color", "Strength"))]
         parts.append((node.bl_idname, node.name, image.name if image is not None else "", inputs))
-    parts.append(sorted((l.from_node.name, l.from_socket.name, l.to_node.name, l.to_socket.name) for l in tree.links))
+    parts.append(sorted((l.from_node.name, l.from_socket.name, l.to_node.name, l.to_socket.name) for l in tree.links
+                        if not added_for_eevee(l.to_node)))
     return _digest(parts)
 
 

@@ -11,8 +11,13 @@ through an Emission shader, ``light`` being a colour attribute of the result mes
 light arriving, H in B = E + rho H). With live lamps the copy keeps its own shader too, which
 Cycles lights; the camera sees that shader, whose one bounce gathers the light of the results it
 meets (their shaders lit by the lamps plus their solved light after a bounce, BOUNCED_ATTRIBUTE:
-H less the light Cycles draws live). EEVEE sees the Emission shader alone: no lamp, world or
-probe of its own lights a result, so each part of the light counts once whatever its settings.
+H less the light Cycles draws live). EEVEE sees the Emission shader, and where the scene has lamps,
+a dielectric Principled BSDF's glossy layers lit by them (their highlights, which EEVEE draws
+with their shadows), the emission's glossy part then lit by the light less the lamps'
+(LAMPLESS_ATTRIBUTE); the world's EEVEE output lights nothing (``eevee_world``) and nothing else
+of EEVEE's own lights a result, so each part of the light counts once. A dielectric shows its
+base colour's weight and its glossy layers' albedo as the camera sees them (under even light:
+the glossy albedo rises towards grazing), their means over the views the solve's reflectivity.
 The texture stays at its own resolution whatever the patch
 size; the patch's reflected radiosity is the area mean of (base colour x light) over it, up to
 how much the texture and the light vary together inside it. The user's material is never
@@ -23,20 +28,19 @@ from __future__ import annotations
 
 import bpy
 
-from ..blender_read.materials import shader_node, surface_terms
+from ..blender_read.materials import shader_node, surface_terms, view_terms
+from .glossy_layers import as_viewed, has_highlights, plus_highlights
+from .shader_nodes import BASE, FLAT_SWITCH, feed, flat_switch, output_node, times_light
 
 TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
 LIVE_PROPERTY = "radiosity_live_lamps"  # marks copies whose own shader the lamps light (textured_material)
 LIVE_EMITS_PROPERTY = "radiosity_live_emits"  # marks live copies whose own emission lights the others
+HIGHLIGHTS_PROPERTY = "radiosity_highlights"  # marks live copies whose EEVEE output draws the lamps' highlights
 TEXTURED_SUFFIX = " Radiosity"
 BOUNCED_ATTRIBUTE = "Radiosity Bounced Light"  # live: the light arriving less the light Cycles draws live
+LAMPLESS_ATTRIBUTE = "Radiosity Light Less Lamps"  # live with lamps: the light arriving less the lamps' (EEVEE's)
 IDENTITY = ((1.0, 1.0, 1.0), (0.0, 0.0, 0.0))  # (scale, offset): the base colour is the reflectivity
-# The panel's switch to the flat per-patch colours, read by every result material from the scene
-# (a View Layer attribute: looked up in the view layer, then the scene).
-FLAT_SWITCH = "radiosity.show_patches"
-
-# The shader's base colour socket, and its emission colour and strength sockets.
-_BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
+# The shader's emission colour and strength sockets.
 EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
              "ShaderNodeEmission": ("Color", "Strength")}
 
@@ -54,19 +58,24 @@ def can_copy(material):
     if bpy.app.version < (5, 0, 0) and not material.use_nodes:
         return False, None
     node = shader_node(material)
-    if node is None or (node.bl_idname not in _BASE and node.bl_idname not in EMISSION):
+    if node is None or (node.bl_idname not in BASE and node.bl_idname not in EMISSION):
         kind = "nothing" if node is None else f"'{node.name}' ({node.bl_idname})"
         return False, (f"material '{material.name}': its surface is {kind}, not a Principled, Diffuse or Emission "
                        "shader; its result shows the baked 'Radiosity' colours, without its textures")
     return True, None
 
 
-def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, live=False):
+def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, live=False, lamps=False):
     """A new material showing ``source``'s base colour * scale + offset (``terms``, RGB each)
     times the colour attribute ``light_attribute``, plus its emission, or, where the panel's
     flat switch is on, the colour attribute ``flat_attribute``; ``can_copy(source)`` must
     hold. The copy is cut down to what drives that, and marked as ours. ``live``: so in EEVEE;
-    in Cycles its own shader for the lamps to light, with BOUNCED_ATTRIBUTE (``_lit_by_lamps``)."""
+    in Cycles its own shader for the lamps to light, with BOUNCED_ATTRIBUTE (``_lit_by_lamps``).
+    A dielectric Principled BSDF (``has_highlights``) shows its scale and offset as the camera sees
+    them (``view_terms``: the glossy layers' albedo rises towards grazing, the base colour's weight
+    falls), their means over the view directions the solve's; and ``live`` with ``lamps`` (the scene
+    has lamps; LAMPLESS_ATTRIBUTE written), in EEVEE its glossy layers draw the lamps' highlights
+    live and the emission's glossy part is lit by the light less the lamps' (``glossy_layers.as_viewed``)."""
     material = source.copy()
     material.name = source.name + TEXTURED_SUFFIX
     for key in list(material.keys()):  # (a copy carries the source's custom properties)
@@ -83,48 +92,32 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     surface.operation = "MULTIPLY_ADD"
     surface.label = "Reflectivity"
     surface.location = (x, y)
-    _feed(links, shader, _BASE.get(shader.bl_idname), surface.inputs[0], default=(0.0, 0.0, 0.0))
+    feed(links, shader, BASE.get(shader.bl_idname), surface.inputs[0], default=(0.0, 0.0, 0.0))
     surface.inputs[1].default_value = tuple(float(v) for v in terms[0])
     surface.inputs[2].default_value = tuple(float(v) for v in terms[1])
 
     outputs = []
-    if live and shader.bl_idname in _BASE:  # (Cycles: its own shader lit by the lamps, and the bounced light)
-        bounced = emission_output(tree, _times_light(tree, surface, BOUNCED_ATTRIBUTE, (x, y + 900)), flat_attribute,
+    if live and shader.bl_idname in BASE:  # (Cycles: its own shader lit by the lamps, and the bounced light)
+        bounced = emission_output(tree, times_light(tree, surface, BOUNCED_ATTRIBUTE, (x, y + 900)), flat_attribute,
                                   (x + 600, y + 900))
-        outputs.append(_output(tree, "CYCLES", _lit_by_lamps(tree, shader, bounced, (x + 800, y + 900)),
+        outputs.append(output_node(tree, "CYCLES", _lit_by_lamps(tree, shader, bounced, (x + 800, y + 900)),
                                (x + 1200, y + 900)))
         material[LIVE_PROPERTY] = True
-    total = _plus_emission(material, shader, _times_light(tree, surface, light_attribute, (x, y)), live, (x, y))
-    emission = emission_output(tree, total, flat_attribute, (x + 600, y))
-    outputs.append(_output(tree, "EEVEE" if outputs else "ALL", emission.outputs["Emission"], (x + 1200, y)))
+    viewed = view_terms(source) if has_highlights(shader) and any(terms[1]) else None
+    highlights = live and lamps and viewed is not None
+    if viewed is None:
+        lit = times_light(tree, surface, light_attribute, (x, y))
+    else:  # (as the camera sees the surface: its glossy layers' albedo rises towards grazing)
+        lit = as_viewed(tree, shader, viewed, light_attribute, LAMPLESS_ATTRIBUTE if highlights else light_attribute,
+                         (x, y - 1400))
+    emission = emission_output(tree, _plus_emission(material, shader, lit, live, (x, y)), flat_attribute, (x + 600, y))
+    shown = emission.outputs["Emission"]
+    if highlights:
+        shown = plus_highlights(tree, shader, emission, (x + 800, y - 300))
+        material[HIGHLIGHTS_PROPERTY] = True
+    outputs.append(output_node(tree, "EEVEE" if outputs else "ALL", shown, (x + 1200, y)))
     _keep_only_upstream(tree, outputs)
     return material
-
-
-def _times_light(tree, surface, attribute, location):
-    """A socket: the output of ``surface`` (a node) times the colour attribute ``attribute``."""
-    x, y = location
-    light = tree.nodes.new("ShaderNodeAttribute")
-    light.attribute_type = "GEOMETRY"
-    light.attribute_name = attribute
-    light.location = (x, y - 250)
-    lit = tree.nodes.new("ShaderNodeVectorMath")
-    lit.operation = "MULTIPLY"
-    lit.location = (x + 200, y)
-    tree.links.new(surface.outputs[0], lit.inputs[0])
-    tree.links.new(light.outputs["Color"], lit.inputs[1])
-    return lit.outputs[0]
-
-
-def _output(tree, target, surface, location):
-    """A Material Output node for ``target`` (ALL, CYCLES, EEVEE) showing ``surface`` (a socket),
-    the active one for its target."""
-    output = tree.nodes.new("ShaderNodeOutputMaterial")
-    output.location = location
-    output.target = target
-    tree.links.new(surface, output.inputs["Surface"])
-    output.is_active_output = True
-    return output
 
 
 def _plus_emission(material, shader, total, live, location):
@@ -168,7 +161,7 @@ def _lit_by_lamps(tree, shader, emission, location):
     switch is on, the camera sees the flat colours alone."""
     nodes, links = tree.nodes, tree.links
     x, y = location
-    switch = _flat_switch(tree, (x, y + 250))
+    switch = flat_switch(tree, (x, y + 250))
     either = nodes.new("ShaderNodeMath")
     either.operation = "MAXIMUM"
     either.location = (x - 200, y + 300)
@@ -257,7 +250,7 @@ def _emitted(tree, shader, location):
     emitted.operation = "SCALE"
     emitted.label = "Emission"
     emitted.location = location
-    _feed(tree.links, shader, colour.name, emitted.inputs[0], default=(0.0, 0.0, 0.0))
+    feed(tree.links, shader, colour.name, emitted.inputs[0], default=(0.0, 0.0, 0.0))
     if strength.is_linked:
         tree.links.new(strength.links[0].from_socket, emitted.inputs["Scale"])
     else:
@@ -265,22 +258,12 @@ def _emitted(tree, shader, location):
     return emitted.outputs[0]
 
 
-def _flat_switch(tree, location):
-    """An Attribute node reading the panel's FLAT_SWITCH from the view layer (1: flat colours)."""
-    switch = tree.nodes.new("ShaderNodeAttribute")
-    switch.attribute_type = "VIEW_LAYER"
-    switch.attribute_name = FLAT_SWITCH
-    switch.label = "Flat patches (paper)"
-    switch.location = location
-    return switch
-
-
 def emission_output(tree, colour, flat_attribute, location):
     """An Emission shader of ``colour`` (a socket), or of the colour attribute ``flat_attribute``
     where the scene's FLAT_SWITCH is on."""
     nodes, links = tree.nodes, tree.links
     x, y = location
-    switch = _flat_switch(tree, (x - 200, y + 250))
+    switch = flat_switch(tree, (x - 200, y + 250))
     flat = nodes.new("ShaderNodeAttribute")
     flat.attribute_type = "GEOMETRY"
     flat.attribute_name = flat_attribute
@@ -299,16 +282,6 @@ def emission_output(tree, colour, flat_attribute, location):
     return emission
 
 
-def _feed(links, shader, socket_name, target, default):
-    """Link what drives the shader's ``socket_name`` into ``target``, or set its value."""
-    socket = shader.inputs.get(socket_name) if socket_name else None
-    if socket is not None and socket.is_linked:
-        links.new(socket.links[0].from_socket, target)
-    else:
-        value = tuple(socket.default_value)[:3] if socket is not None else default
-        target.default_value = tuple(float(v) for v in value)
-
-
 def _keep_only_upstream(tree, outputs):
     """Remove every node that does not feed ``outputs`` (the original shaders, other outputs)."""
     keep = {output.name for output in outputs}
@@ -325,10 +298,11 @@ def _keep_only_upstream(tree, outputs):
         tree.nodes.remove(node)
 
 
-def result_materials(slot_names, light_attribute, flat_attribute, fallback, notes, made, live=False):
+def result_materials(slot_names, light_attribute, flat_attribute, fallback, notes, made, live=False, lamps=False):
     """The result material of each source slot: the textured copy of the named material
-    (made once a run, kept in ``made`` by name; ``live``: lit by the lamps too), or ``fallback``
-    where there is none or it cannot be copied (``notes`` get a line for the latter, once)."""
+    (made once a run, kept in ``made`` by name; ``live``: lit by the lamps too, and with
+    ``lamps`` their highlights drawn live in EEVEE), or ``fallback`` where there is none or it
+    cannot be copied (``notes`` get a line for the latter, once)."""
     out = []
     for name in slot_names:
         source = bpy.data.materials.get(name)
@@ -338,7 +312,7 @@ def result_materials(slot_names, light_attribute, flat_attribute, fallback, note
                 notes.append(note)
             # the surface as the camera sees it (a Principled BSDF's specular layer beside its base colour)
             made[name] = (textured_material(source, light_attribute, flat_attribute,
-                                            surface_terms(source), live) if ok else None)
+                                            surface_terms(source), live, lamps) if ok else None)
         out.append(made[name] or fallback)
     return out
 

@@ -17,7 +17,7 @@ from .results import result_collection
 
 META_PROPERTY = "radiosity_relight"
 DOMAINS = {"flat": "FACE", "irradiance": "FACE", "smooth": "CORNER", "light": "CORNER", "irradiance_point": "POINT",
-           "bounced": "CORNER", "bounced_irradiance": "FACE"}
+           "bounced": "CORNER", "bounced_irradiance": "FACE", "lampless": "CORNER", "lampless_irradiance": "FACE"}
 _CACHE = {}  # token -> Stored
 
 

@@ -9,6 +9,7 @@ import bpy
 import numpy as np
 
 from ..core.mesh import meshing
+from . import eevee_world
 from . import materials as textured
 from ..blender_read.objects import SOURCE_PROPERTY, is_result_object
 
@@ -18,8 +19,11 @@ PATCH_ATTRIBUTE_NAME = "Radiosity Patches"  # the flat per-patch colours when bo
 LIGHT_ATTRIBUTE_NAME = "Radiosity Light"  # the light arriving, which the textured materials multiply
 # live lamps: the light arriving less what the renderer draws live, which the Cycles output multiplies
 BOUNCED_ATTRIBUTE_NAME = textured.BOUNCED_ATTRIBUTE
+# live lamps: the light arriving less the lamps' alone, which the EEVEE output's specular layer reflects as a surface's
+# own colour does (EEVEE draws the lamps' highlights)
+LAMPLESS_ATTRIBUTE_NAME = textured.LAMPLESS_ATTRIBUTE
 OUR_ATTRIBUTES = (ATTRIBUTE_NAME, PATCH_ATTRIBUTE_NAME, LIGHT_ATTRIBUTE_NAME, BOUNCED_ATTRIBUTE_NAME,
-                  "Radiosity Indirect")
+                  LAMPLESS_ATTRIBUTE_NAME, "Radiosity Indirect")
 MATERIAL_NAME = "Radiosity Result"
 COLLECTION_PROPERTY = "radiosity_results"  # custom property marking a scene's results collection
 RESULT_SUFFIX = " Radiosity"
@@ -232,7 +236,7 @@ def _result_object(output_data, index, output_mode, layers, light, notes, materi
     output, else ``material``)."""
     arrays, pm = output_data.patches.objects[index], written_mesh(output_data, index)
     faces, points = output_data.face_colours[index], output_data.smooth_colours[index]
-    if not all(v is None or np.isfinite(v).all() for v in (faces, points, light, _bounced_of(output_data, index))):
+    if not all(v is None or np.isfinite(v).all() for v in (faces, points, light, *_live_of(output_data, index))):
         raise ValueError(f"the result for '{arrays.name}' is not finite")
     name = arrays.name + RESULT_SUFFIX
     mesh = build_mesh(name, pm)
@@ -257,9 +261,9 @@ def _fill_result(obj, output_data, index, output_mode, layers, light, notes, mat
     textured_output = output_mode == "TEXTURED" and light is not None and layers is not None
     if textured_output:
         write_light(mesh, light, output_data.light_domain)
-        bounced = _bounced_of(output_data, index)
-        if bounced is not None:
-            write_light(mesh, bounced, output_data.light_domain, BOUNCED_ATTRIBUTE_NAME)
+        for values, attribute in zip(_live_of(output_data, index), (BOUNCED_ATTRIBUTE_NAME, LAMPLESS_ATTRIBUTE_NAME)):
+            if values is not None:
+                write_light(mesh, values, output_data.light_domain, attribute)
     _show_colours(mesh, layers.render_colour if layers is not None else "")
     if textured_output:
         for slot_material in materials_for(layers.slot_names):
@@ -275,10 +279,12 @@ def written_mesh(output_data, index):
     return output_data.patches.meshes[index] if shown is None else shown.meshes[index]
 
 
-def _bounced_of(output_data, index):
-    """Source ``index``'s light arriving less what the renderer draws live, or None (not live)."""
-    bounced = getattr(output_data, "bounced_colours", None)
-    return bounced[index] if bounced and getattr(output_data, "live_lamps", False) else None
+def _live_of(output_data, index):
+    """Source ``index``'s light arriving less what the renderer draws live, and less what EEVEE
+    draws (the lamps'), each or None (not live; no lamps)."""
+    live = getattr(output_data, "live_lamps", False)
+    return tuple(colours[index] if live and colours else None
+                 for colours in (getattr(output_data, name, None) for name in ("bounced_colours", "lampless_colours")))
 
 
 def write_results(context, output_data, output_mode, scene=None):
@@ -300,6 +306,7 @@ def write_results(context, output_data, output_mode, scene=None):
         p is not None for p in output_data.smooth_colours)
     flat_name = PATCH_ATTRIBUTE_NAME if smooth_written and output_mode != "VERTEX" else ATTRIBUTE_NAME
     live = getattr(output_data, "live_lamps", False)  # (the lamps light the textured materials' own shaders in Cycles)
+    lamps = live and any(c is not None for c in getattr(output_data, "lampless_colours", None) or [])
     try:
         material = result_material(flat_name, live)
         for index, (arrays, faces) in enumerate(zip(output_data.patches.objects, output_data.face_colours)):
@@ -307,7 +314,7 @@ def write_results(context, output_data, output_mode, scene=None):
                 continue
             obj = _result_object(output_data, index, output_mode, layers_of[index], light_of[index], notes,
                                  lambda slots: textured.result_materials(slots, LIGHT_ATTRIBUTE_NAME, flat_name,
-                                                                         material, notes, made, live), material)
+                                                                         material, notes, made, live, lamps), material)
             created.append(obj)
             obj[SOURCE_PROPERTY] = arrays.name
     except Exception:
@@ -325,5 +332,9 @@ def write_results(context, output_data, output_mode, scene=None):
     for obj in created:
         collection.objects.link(obj)
         obj.name = obj.data.name = obj[SOURCE_PROPERTY] + RESULT_SUFFIX  # the names the old ones had
+    if any(copy is not None and copy.get(textured.HIGHLIGHTS_PROPERTY) for copy in made.values()):
+        eevee_world.camera_only(scene.world)  # (EEVEE's world probe would light the highlights' layers too)
+    elif scene.world is not None:
+        eevee_world.restore(scene.world)
     show_results_in_views(live)
     return created

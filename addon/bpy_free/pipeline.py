@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import predict, solve
-from ..core.display import direct_means, final_gather, point_direct, smoothing
+from ..core.display import direct_means, final_gather, live_sources, point_direct, smoothing
 from ..core.scene.diagnostics import MAX_BOUNCES, check_bounces
 from ..core.display.covered import seen_parts
 from ..core.distributed.runners import local_threads
@@ -39,6 +39,9 @@ class SolveOutput:
     light_domain: str = "CORNER"
     # live lamps: the light arriving less what the renderer draws live (what Cycles' output adds), as light_colours
     bounced_colours: list = field(default_factory=list)
+    # live lamps in a scene with lamps: the light arriving less the lamps' and suns' (EEVEE draws their highlights), as
+    # light_colours
+    lampless_colours: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)  # attribute name -> [(P_k,3) per object], light and indirect
     notes: list = field(default_factory=list)  # the core's warnings, for the user
     settings_relative_rms: float | None = None  # the error target asked for (None: a path count)
@@ -268,7 +271,7 @@ def write_colours(out, scene, result, settings, deadline=None):
     # iteration's control variate where a patch gets almost no light; a difference of two estimates).
     radiosity = np.maximum(result.radiosity, 0.0)
     textured = settings.output == "TEXTURED"
-    out.live_lamps = textured and settings.live_lamps and point_direct.has_live(scene)
+    out.live_lamps = textured and settings.live_lamps and live_sources.has_live(scene)
     extras = {}
     if settings.light_output and not textured:  # (the textured output writes the light smooth)
         extras[LIGHT_ATTRIBUTE] = np.maximum(result.irradiance, 0.0)
@@ -302,12 +305,16 @@ def write_colours(out, scene, result, settings, deadline=None):
     out.light_domain = "CORNER" if "light" in made else "FACE"
     flat = {} if not textured or "light" in made else {"light": np.maximum(result.irradiance, 0.0)}
     if flat and out.live_lamps:  # (lamps drawn live)
-        flat["bounced"] = np.maximum(result.irradiance - relit.drawn_light(out, scene, result, deadline), 0.0)
+        drawn = relit.drawn_light(out, scene, result, deadline)
+        flat["bounced"] = np.maximum(result.irradiance - drawn, 0.0)
+        if point_direct.has_lamps(scene):
+            flat["lampless"] = np.maximum(result.irradiance - relit.lamp_light(out, scene, result, drawn, deadline), 0.0)
     for k, o in enumerate(patches.objects):
         rows = patches.combined.patch_slice(k)
         out.face_colours.append(shown_mesh.per_polygon(out, k, radiosity[rows]) if o.receives else None)
         out.smooth_colours.append(made["smooth"][k] if "smooth" in made else None)
-        for name, colours in (("light", out.light_colours), ("bounced", out.bounced_colours)):
+        for name, colours in (("light", out.light_colours), ("bounced", out.bounced_colours),
+                              ("lampless", out.lampless_colours)):
             if name in made:
                 colours.append(made[name][k])
             else:
@@ -318,7 +325,8 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
                     direct=None):
     """("light", (T,3,3)) with ``light`` first: the light arriving (``Surface.arriving_light``) at every
     corner of the scene's triangles, and with ``live`` ("bounced", (T,3,3)) it less the lamps', suns', emitters' and
-    world's direct light, smooth (what the renderer draws live); then ("smooth", (T,3,3)): the reflected light, its
+    world's direct light, smooth (what the renderer draws live), and where there are lamps ("lampless", (T,3,3)) it
+    less the lamps' and suns' alone (what EEVEE draws live: ``live_sources.lamp_part``); then ("smooth", (T,3,3)): the reflected light, its
     tile noise filtered within its measured variance, joined across objects (not across hidden
     patches: core covered) and kept apart at creases (core smoothing), plus each patch's own
     emission, flat; both with the direct light's shape within each patch (core point_direct).
@@ -333,18 +341,24 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
                                        **seen_parts(scene, triangles, triangle_patch))
         direct = point_direct.corner_direct(surface, scene, triangles, seed=result.seed, deadline=deadline,
                                             light=result.irradiance)
+    drawn = live_sources.live_light(scene, result, deadline) if light and live else None
     if result.direct_irradiance is not None:  # (the solve's noise is in its indirect part alone: core direct_means)
-        arriving = direct_means.arriving(surface, scene, result, False) if light else None
-        bounced = direct_means.arriving(surface, scene, result, True) if light and live else None
+        rest = direct_means.arriving(surface, scene, result, True) if light else None
+        arriving = None if rest is None else rest + result.direct_irradiance  # (direct_means.arriving's, one filter)
+        bounced = rest if drawn is not None else None
         reflected = direct_means.reflected(surface, scene, result)
     else:  # (filters first: with the direct light held, the peak)
-        arriving = point_direct.arriving(surface, scene, result, False, deadline) if light else None
-        bounced = point_direct.arriving(surface, scene, result, True, deadline) if light and live else None
+        arriving = live_sources.arriving(surface, scene, result, False, deadline) if light else None
+        bounced = live_sources.arriving(surface, scene, result, True, deadline, drawn) if drawn is not None else None
         reflected = surface.filter_light(result.reflected, result.reflected_variance)
     if light:
         yield "light", point_direct.light_corners(surface, scene, arriving, direct, False, dtype)
     if bounced is not None:
         yield "bounced", point_direct.light_corners(surface, scene, bounced, direct, True, dtype)
+    if bounced is not None and point_direct.has_lamps(scene):  # (EEVEE's: the light less the lamps' it draws live)
+        lampless = bounced + drawn - live_sources.lamp_part(scene, drawn, seed=result.seed, light=result.irradiance,
+                                                            deadline=deadline)
+        yield "lampless", point_direct.light_corners(surface, scene, lampless, direct, True, dtype)
     corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True), dtype=dtype)
     corners += scene.emission[surface.triangle_patch][:, None, :]
     yield "smooth", corners

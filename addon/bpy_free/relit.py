@@ -5,7 +5,8 @@ group's outputs per result object, and their recombination with new strengths an
 A result object keeps, per group, the values its outputs are made of ("flat": each patch's
 radiosity, "irradiance": each patch's light arriving, "smooth" and "light": the smooth
 radiosity and light arriving at every polygon corner; with live lamps "bounced" and
-"bounced_irradiance", the light arriving less what the renderer draws live); an output is the sum of its groups'
+"bounced_irradiance", the light arriving less what the renderer draws live, and "lampless" and
+"lampless_irradiance", it less the lamps' alone, which EEVEE draws); an output is the sum of its groups'
 values times their weights, so relighting is one pass over them and traces no ray. No bpy.
 """
 from __future__ import annotations
@@ -16,7 +17,7 @@ from functools import partial
 
 import numpy as np
 
-from ..core.display import point_direct, smoothing
+from ..core.display import live_sources, smoothing
 from ..core.display.covered import seen_parts
 from ..core.estimate.grouping import PER_SOURCE_MAX, source_groups
 from ..core.lights.lights import WorldLight
@@ -109,6 +110,7 @@ class SourceResults:
     targets: list = field(default_factory=list)
     smooth: dict = field(default_factory=dict)  # (while the outputs are made) kind -> per object (S,C_k,3)
     drawn: object = None  # (S,P,3) each group's light the renderer draws live, where flat bounced light is written
+    lamps: object = None  # (S,P,3) the lamps' and suns' part of it (EEVEE's), where flat lampless light is written
 
     @property
     def names(self):
@@ -150,18 +152,31 @@ def source_corners(scene, result, light=False, shading=None, live=False, deadlin
 
 
 def drawn_light(out, scene, result, deadline=None):
-    """(P,3) each patch's mean of the light the renderer draws live (``point_direct.live_light``);
+    """(P,3) each patch's mean of the light the renderer draws live (``live_sources.live_light``);
     for a per-source solve the sum of each group's, which ``out.sources_out.drawn`` keeps (the
     groups' flat bounced light then adds up to the whole's)."""
     if out.sources_out is None:
-        return point_direct.live_light(scene, result, deadline)
+        return live_sources.live_light(scene, result, deadline)
     ps = result.per_source
     drawn = ps.direct_irradiance
     if drawn is None:
-        drawn = point_direct.live_means(scene, seed=result.seed, light=result.irradiance, light_group=ps.light_group,
+        drawn = live_sources.live_means(scene, seed=result.seed, light=result.irradiance, light_group=ps.light_group,
                                         patch_group=ps.patch_group, groups=ps.count, deadline=deadline)
     out.sources_out.drawn = drawn
     return drawn.sum(axis=0)
+
+
+def lamp_light(out, scene, result, drawn, deadline=None):
+    """(P,3) the lamps' and suns' part of ``drawn`` (``drawn_light``'s: what EEVEE draws live,
+    ``live_sources.lamp_part``); for a per-source solve the sum of each group's, which
+    ``out.sources_out.lamps`` keeps."""
+    if out.sources_out is None:
+        return live_sources.lamp_part(scene, drawn, seed=result.seed, light=result.irradiance, deadline=deadline)
+    ps = result.per_source
+    lamps = live_sources.lamp_part(scene, out.sources_out.drawn, ps.light_group, ps.patch_group, ps.count, result.seed,
+                                   result.irradiance, deadline)
+    out.sources_out.lamps = lamps
+    return lamps.sum(axis=0)
 
 
 def weights(meta, current):
@@ -265,6 +280,8 @@ def add_object_values(out, settings):
             values["irradiance"] = polygon(ps.irradiance[:, rows]).astype(np.float32)
         if "bounced_irradiance" in kinds:
             values["bounced_irradiance"] = polygon(ps.irradiance[:, rows] - results.drawn[:, rows]).astype(np.float32)
+        if "lampless_irradiance" in kinds:
+            values["lampless_irradiance"] = polygon(ps.irradiance[:, rows] - results.lamps[:, rows]).astype(np.float32)
         if "irradiance_point" in kinds:
             from ..core.mesh import meshing
 
@@ -290,6 +307,9 @@ def output_targets(settings, out):
         targets.append(("Radiosity Light", "light" if corner else "irradiance", "CORNER" if corner else "FACE"))
         if out.live_lamps:
             targets.append(("Radiosity Bounced Light", "bounced" if corner else "bounced_irradiance",
+                            "CORNER" if corner else "FACE"))
+        if out.live_lamps and any(c is not None for c in out.lampless_colours):
+            targets.append(("Radiosity Light Less Lamps", "lampless" if corner else "lampless_irradiance",
                             "CORNER" if corner else "FACE"))
     elif settings.light_output:
         targets.append(("Radiosity Light", "irradiance_point" if output == "VERTEX" else "irradiance",

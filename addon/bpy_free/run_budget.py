@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import methods
-from ..core.display import direct_means, point_direct
+from ..core.display import direct_means, live_sources, point_direct
 from ..core.lights.lamp_choice import patch_spheres
 from ..core.names import GATHERED, TWO_WAY
 from ..core.display.sample_rounds import Spent
@@ -78,13 +78,13 @@ def corner_seconds(scene, triangles, triangle_patch, seed=0, corners=CORNER_PILO
 
 
 def live_seconds(scene, seed=0, patches=PILOT_CORNERS):
-    """(the seconds ``point_direct.live_means`` would take, those of its first samples alone),
+    """(the seconds ``live_sources.live_means`` would take, those of its first samples alone),
     from it timed at up to ``patches`` patches drawn at random; (0, 0) without live light."""
-    if not point_direct.has_live(scene):
+    if not live_sources.has_live(scene):
         return 0.0, 0.0
     rows = np.sort(np.random.default_rng(seed).choice(scene.patch_count, min(patches, scene.patch_count), replace=False))
     spent = Spent()
-    point_direct.live_means(scene, seed=seed, light=solved_light(scene), spent=spent, rows=rows)
+    live_sources.live_means(scene, seed=seed, light=solved_light(scene), spent=spent, rows=rows)
     return spent.seconds * scene.patch_count / rows.size, spent.first * scene.patch_count / rows.size
 
 
@@ -105,9 +105,9 @@ def smooth_made(settings, scene):
 
 def live_made(settings, scene):
     """Whether the run takes the live light's patch means by their own samples
-    (``point_direct.live_means``): live lamps in the textured output, where the solve did not
+    (``live_sources.live_means``): live lamps in the textured output, where the solve did not
     gather the direct light apart (the two-way iteration and the gathered walk do)."""
-    if settings.output != "TEXTURED" or not settings.live_lamps or not point_direct.has_live(scene):
+    if settings.output != "TEXTURED" or not settings.live_lamps or not live_sources.has_live(scene):
         return False
     return not gathers(settings, scene)
 

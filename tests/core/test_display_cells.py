@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from addon.core import PatchScene
-from addon.core.display import point_direct, smoothing
+from addon.core.display import live_sources, point_direct, smoothing
 from addon.core.refine import cell_meshes, display_cells
 from addon.core.lights.lights import PointLight, SunLight
 from addon.core.mesh.meshing import mesh_patches
@@ -283,7 +283,7 @@ def test_a_patch_a_box_stands_on_splits_and_its_points_inside_the_box_show_the_c
     surface = smoothing.Surface.of(scene.vertices, scene.triangles, scene.triangle_patch, P)
     corner = np.argmin(np.linalg.norm(surface.patch_centroid - [1.25, 1.25, 0.0], axis=1))
     assert g.buried is not None and corner in g.buried.patch and corner not in g.buried.whole
-    light = point_direct.live_means(scene, samples=256, seed=5)
+    light = live_sources.live_means(scene, samples=256, seed=5)
     direct = point_direct.corner_direct(surface, scene, scene.triangles, seed=3, light=light)
 
     def at_points(position, patch, level):

@@ -7,7 +7,7 @@ from boxes import rectangles_to_mesh
 from overlap_boxes import slab_room
 
 from addon.core import PatchScene
-from addon.core.display import point_direct, smoothing
+from addon.core.display import live_sources, point_direct, smoothing
 from addon.core.lights.lights import AreaLight, PointLight, WorldLight
 
 LAMP = np.array([0.4, 0.55, 0.8])
@@ -202,7 +202,7 @@ def test_the_lamps_patch_means_are_the_exact_means():
     points' own error at the hot spot, whose light changes 3x across a patch)."""
     scene, lamp, rectangles = _lit_ceiling()
     exact = _exact_means(lamp, rectangles)
-    means = point_direct.live_means(scene, seed=4)
+    means = live_sources.live_means(scene, seed=4)
     np.testing.assert_allclose(means[:, 0], exact, rtol=0, atol=0.01 * exact.max())
 
 
@@ -220,16 +220,16 @@ def test_live_lamps_leave_each_patch_its_solved_light_less_the_lamps_mean_and_gr
     scene, _, _ = _lit_ceiling(lights=lamps)
     result = solve(scene, method="walk", paths=20_000, seed=5, per_source=True)
     surface = _surface(scene)
-    arriving = point_direct.arriving(surface, scene, result, live=True)
+    arriving = live_sources.arriving(surface, scene, result, live=True)
     live = point_direct.light_corners(surface, scene, arriving, None, live=True)
     np.testing.assert_array_equal(arriving, surface.arriving_light(
-        result.irradiance - point_direct.live_means(scene, seed=result.seed, light=result.irradiance),
+        result.irradiance - live_sources.live_means(scene, seed=result.seed, light=result.irradiance),
         result.irradiance_variance,
         scene.reflectivity))
     np.testing.assert_allclose(point_direct.patch_means(surface, live), arriving, rtol=1e-10, atol=1e-12)
     parts = dict(smooth_sources(surface, scene, result, light=True, live=True))["bounced"]
     per_source = result.per_source
-    drawn = point_direct.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
+    drawn = live_sources.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
                                     patch_group=per_source.patch_group, groups=per_source.count)
     summed = point_direct.light_corners(surface, scene, surface.arriving_light(
         result.irradiance - drawn.sum(axis=0), result.irradiance_variance, scene.reflectivity), None, live=True)
@@ -266,7 +266,7 @@ def test_an_emitters_patch_means_are_the_exact_means_where_its_light_is_heavy_ta
     a, b = (x.reshape(1, -1, 1) for x in np.meshgrid(s, s, indexing="ij"))
     points = origin[:, None, :] + a * u[:, None, :] + b * v[:, None, :]
     exact = _parallel_rectangle((centre[:2] - points[..., :2]).transpose(2, 0, 1), 0.5, centre[2]).mean(axis=1)
-    means = point_direct.live_means(scene, seed=2)
+    means = live_sources.live_means(scene, seed=2)
     assert np.all(means[-1] == 0)
     allowed = point_direct.NOISE_SHARE * exact
     np.testing.assert_array_less(np.abs(means[:-1, 0] - exact), 4 * allowed + 1e-6)
@@ -287,7 +287,7 @@ def test_the_worlds_patch_means_are_the_exact_means_beside_what_hides_the_sky():
     a, b = (x.reshape(1, -1, 1) for x in np.meshgrid(s, s, indexing="ij"))
     points = origin[:, None, :] + a * u[:, None, :] + b * v[:, None, :]
     exact = 1.0 - _parallel_rectangle((centre[:2] - points[..., :2]).transpose(2, 0, 1), 0.5, centre[2]).mean(axis=1)
-    means = point_direct.live_means(scene, seed=3)
+    means = live_sources.live_means(scene, seed=3)
     allowed = point_direct.NOISE_SHARE * exact
     np.testing.assert_array_less(np.abs(means[:-1, 0] - exact), 4 * allowed + 1e-6)
     assert abs(means[:-1, 0].sum() - exact.sum()) < 4 * np.sqrt((allowed ** 2).sum())
@@ -317,11 +317,11 @@ def test_live_lamps_take_the_solves_own_direct_light_out_where_it_was_gathered_a
     totals, own, theirs = [], [], []
     for seed in range(8):
         r = solve(scene, method="two_way", paths=20_000, seed=seed, threads=1, direct_apart=True)
-        assert point_direct.live_light(scene, r) is r.direct_irradiance
+        assert live_sources.live_light(scene, r) is r.direct_irradiance
         rest = r.irradiance - r.direct_irradiance
         totals.append(((r.direct_irradiance * area).sum(), (rest * area).sum()))
         own.append((((rest - reflected) ** 2) * area).sum())
-        means = point_direct.live_means(scene, seed=seed, light=r.irradiance)
+        means = live_sources.live_means(scene, seed=seed, light=r.irradiance)
         theirs.append((((r.irradiance - means - reflected) ** 2) * area).sum())
     totals = np.array(totals)
     z = (totals.mean(axis=0) - [(direct * area).sum(), (reflected * area).sum()]) / (totals.std(axis=0, ddof=1) / np.sqrt(8))
@@ -330,7 +330,7 @@ def test_live_lamps_take_the_solves_own_direct_light_out_where_it_was_gathered_a
     walk = solve(scene, method="walk", paths=2_000, seed=1, threads=1, direct_apart=True)
     assert walk.direct_irradiance is None
     assert solve(scene, method="two_way", paths=2_000, seed=1, threads=1).direct_irradiance is None  # (not asked: no memory for it)
-    np.testing.assert_array_equal(point_direct.live_light(scene, walk), point_direct.live_means(scene, seed=1, light=walk.irradiance))
+    np.testing.assert_array_equal(live_sources.live_light(scene, walk), live_sources.live_means(scene, seed=1, light=walk.irradiance))
 
 
 def _lambert(corners, x, normal):
@@ -456,7 +456,7 @@ def test_many_lamps_patch_means_are_the_exact_means():
     light = light.reshape(len(corners), len(ab), 3).mean(axis=1)
     exact = np.stack([np.bincount(scene.triangle_patch, weights=light[:, c] * area, minlength=scene.patch_count)
                       for c in range(3)], axis=1) / np.bincount(scene.triangle_patch, weights=area)[:, None]
-    means = point_direct.live_means(scene, seed=8)
+    means = live_sources.live_means(scene, seed=8)
     allowed = point_direct.NOISE_SHARE * exact.sum(axis=1)
     np.testing.assert_array_less(np.abs(means - exact).sum(axis=1), 4 * allowed + 1e-9)
     assert abs((means - exact).sum()) < 4 * np.sqrt((allowed ** 2).sum())
@@ -653,3 +653,56 @@ def test_beside_an_emitters_edge_its_light_is_unbiased_and_not_heavy_tailed(monk
     assert np.sqrt((z ** 2).mean()) < 1.5, np.sqrt((z ** 2).mean())
     shown = point_direct.corner_direct(surface, scene, scene.triangles, seed=1).corners[..., 0].ravel()[rows]
     assert np.sqrt(((shown / exact[rows] - 1) ** 2).mean()) < 0.15
+
+
+def _glowing_floor_lamp_and_sky():
+    """``_glowing_floor`` with a point lamp beside the emitting square and a dim uniform sky."""
+    scene, _, centre = _glowing_floor()
+    lights = [PointLight(centre + [0.6, -0.4, 0.3], np.array([2.0, 1.5, 1.0])), WorldLight(np.full(3, 0.2))]
+    return PatchScene(scene.vertices, scene.triangles, scene.triangle_patch, scene.reflectivity, scene.emission,
+                      lights=lights)
+
+
+def test_the_lamps_part_of_the_live_light_is_their_groups_and_a_mixed_groups_lamps_alone():
+    """What EEVEE draws live is the lamps' and suns' light, not an emitter's or the sky's
+    (``lamp_part``): per source group, a lamp's group gives its whole live light, the emitter's
+    and the sky's none; one group of them all gives its lamps' own ``live_means``, the same
+    numbers as a scene with the lamp alone (its samples drawn alike)."""
+    from addon.core.estimate.grouping import source_groups
+
+    scene = _glowing_floor_lamp_and_sky()
+    groups = source_groups(scene)
+    patch_group = groups.patch_group(scene.patch_count)
+    drawn = live_sources.live_means(scene, seed=3, light_group=groups.light_group, patch_group=patch_group,
+                                    groups=groups.count)
+    lamps = live_sources.lamp_part(scene, drawn, groups.light_group, patch_group, groups.count)
+    lamp_group = groups.light_group[0]
+    np.testing.assert_array_equal(lamps[lamp_group], drawn[lamp_group])
+    assert not np.delete(lamps, lamp_group, axis=0).any() and drawn.any(axis=(1, 2)).all()
+    alone = PatchScene(scene.vertices, scene.triangles, scene.triangle_patch, scene.reflectivity,
+                       np.zeros(scene.patch_count), lights=scene.lights.lights[:1])
+    mixed = live_sources.lamp_part(scene, drawn.sum(axis=0), seed=4)
+    np.testing.assert_allclose(mixed, live_sources.live_means(alone, seed=4), rtol=1e-12, atol=1e-15)
+    assert (mixed < drawn.sum(axis=0) + 1e-12).all() and mixed[:-1].sum() > 0
+
+
+def test_eevees_light_less_the_lamps_keeps_the_emitters_and_the_skys_direct_light_and_groups_add_up():
+    """The light EEVEE's glossy layers take (``smooth_sources``' "lampless", its groups' sum) is
+    the bounced light (the light less every live source's) plus the emitter's and the sky's live
+    light, as patch means (float error, where the bounced light is not clipped at 0)."""
+    from addon.core import solve
+    from addon.core.relight.relighting import smooth_sources
+
+    scene = _glowing_floor_lamp_and_sky()
+    result = solve(scene, method="walk", paths=20_000, seed=5, per_source=True)
+    surface = _surface(scene)
+    made = dict(smooth_sources(surface, scene, result, light=True, live=True))
+    ps = result.per_source
+    drawn = live_sources.live_means(scene, seed=result.seed, light=result.irradiance, light_group=ps.light_group,
+                                    patch_group=ps.patch_group, groups=ps.count)
+    others = np.delete(drawn, ps.light_group[0], axis=0).sum(axis=0)
+    rest = surface.arriving_light(result.irradiance - drawn.sum(axis=0), result.irradiance_variance, scene.reflectivity)
+    added = point_direct.patch_means(surface, made["lampless"].sum(axis=0) - made["bounced"].sum(axis=0))
+    kept = rest >= 0
+    np.testing.assert_allclose(added[kept], others[kept], rtol=0, atol=1e-9 * drawn.max())
+    assert kept.mean() > 0.9 and others.sum() > 0

@@ -97,6 +97,31 @@ def test_default_principled_returns_its_specular_light_on_top_of_a_scaled_base()
     assert brown[2] > 2 * 0.02 and brown[0] < 0.3 + offset[0]
 
 
+def test_the_terms_as_a_viewer_sees_them_are_the_layers_at_the_view_and_average_to_the_surface_terms():
+    """``view_terms``: at each view cosine the glossy layers' directional albedo and the base's
+    weight (the layering at that view), here at the Gauss-Legendre nodes themselves; a mirror's
+    the Fresnel reflectance at the view; between the points linear, and their cosine-weighted
+    means the surface terms (within 0.5% of the offset: the linear interpolation's)."""
+    for p in (pr.PrincipledInputs(), pr.PrincipledInputs(roughness=0.2), pr.PrincipledInputs(roughness=0.05, coat=0.5)):
+        energy, weight = pr._layers_out(p, np.zeros(3))
+        nodes = pr.mu_nodes()[0]
+        mu, scale, offset = pr.view_terms(p, count=len(nodes))
+        assert mu[0] == 0 and mu[-1] == 1 and np.all(np.diff(mu) > 0)
+        inside = (mu > nodes[0]) & (mu < nodes[-1])
+        np.testing.assert_allclose(offset[inside, 0], np.interp(mu[inside], nodes, energy[:, 0]), rtol=1e-12)
+        assert offset[0, 0] > 4 * offset[-1, 0] and scale[0, 0] < scale[-1, 0]  # (grazing: more glossy, less base)
+        x = np.linspace(0.0, 1.0, 200_001)
+        mean = lambda values: np.trapz(2 * x * np.interp(x, *pr.view_terms(p)[:1], values[:, 0]), x)
+        s, o = pr.surface_terms(p)
+        _, view_scale, view_offset = pr.view_terms(p)
+        assert abs(mean(view_offset) - o[0]) < 0.005 * o[0] and abs(mean(view_scale) - s[0]) < 0.005 * o[0]
+    eta = 1.5
+    mu, _, offset = pr.view_terms(pr.PrincipledInputs(roughness=0.0, ior=eta))
+    inside = mu > pr.mu_nodes()[0][0]
+    exact = np.interp(mu[inside], pr.mu_nodes()[0], pr.fresnel_dielectric(pr.mu_nodes()[0], eta))
+    np.testing.assert_allclose(offset[inside, 0], exact, atol=1e-8)
+
+
 def test_limits_give_the_plain_diffuse_or_all_the_light():
     for p in (pr.PrincipledInputs(specular_ior_level=0.0), pr.PrincipledInputs(ior=1.0),
               pr.PrincipledInputs(specular_ior_level=0.0, roughness=1.0)):

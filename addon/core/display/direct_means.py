@@ -4,7 +4,7 @@ The solve gathers the direct light with shadow rays to sources chosen by power: 
 beside a sun whose power counts over the whole scene (a spot on a painting in a hall under a
 skylight) gets a thousandth of the rays, and its patches' light comes out heavy-tailed, most
 of them far below it (the painting at half its light, the error estimate none the wiser). The
-display looks at a lamp from MEAN_SAMPLES stratified points a patch (``point_direct.live_means``,
+display looks at a lamp from MEAN_SAMPLES stratified points a patch (``live_sources.live_means``,
 no second round: a round taken only where the first was noisy keeps the patches whose first
 missed a rare bright sample low). Where the solve kept each source group's direct light apart
 (per-source results: ``PerSource.direct_irradiance``), every group of lamps alone (point, spot
@@ -25,7 +25,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .point_direct import live_means
+from .live_sources import live_means
 from ..estimate.batches import Replaced
 from ..estimate.error_model import relative_rms_to_mse
 from ..lights.lights import AreaLight, PointLight, WorldLight

@@ -34,9 +34,9 @@ scaled down to H, its shape kept: H - M is never negative, and the display one s
 where M passes OVERSHOOT times H (a corner a centimetre from an emitter) it shows corners(H)
 alone.
 
-With live lamps (``arriving``, ``light_corners``) the renderer draws the lamps', suns', emitting
-materials' and the world's own light pixel by pixel, and the light shown is H less each patch's
-mean of it (``live_means``), smooth.
+With live lamps (``light_corners``) the renderer draws the lamps', suns', emitting materials' and
+the world's own light pixel by pixel, and the light shown is H less each patch's mean of it
+(``live_sources``), smooth.
 
 A corner is evaluated a hundredth of the way from its point towards its patch's centre (inside
 the patch: a point on the edge shared with a wall standing on it would graze the wall). A
@@ -51,8 +51,8 @@ from functools import partial
 
 import numpy as np
 
-from .direct_points import SAMPLE_DIMENSIONS, Points, chosen_lamps, emitting, sky_at
-from ..lights.lamp_choice import LampChoice, patch_spheres
+from .direct_points import Points, chosen_lamps, emitting, sky_at
+from ..lights.lamp_choice import LampChoice
 from ..lights.lights import SunLight, WorldLight
 from ..names import EXIT_RANDOM, FINITE
 from .sample_rounds import Part, rounds, sampled
@@ -65,7 +65,7 @@ RETRIES = 2  # (16, 128, 1,024 samples)
 NOISE_SHARE = 0.04  # of the light of the patch's brightest corner: a standard error the eye would see
 OVERSHOOT = 2.0  # a patch's direct light's interpolated mean over its solved light beyond which it is not shown
 INWARD = 0.01  # of the way from a corner to its patch's centre
-LIVE_MEAN_SAMPLES = 64  # points a patch for its mean of the live light (live_means), before the noisy ones' again
+
 # Sobol' dimensions of a corner's sample: a point of a lamp (2, read as u[3:5]), an emitting
 # patch (u[5]) and a point of it (u[6:9]).
 DIMENSIONS = (0, 1, 2, 3, 4, 5, 6, 7, 8)
@@ -130,12 +130,6 @@ def has_direct(scene):
     return bool(scene.emission.any()) or has_lamps(scene)
 
 
-def has_live(scene):
-    """Whether ``scene`` has light a renderer draws live (``live_means``): a lamp, a sun, an
-    emitting patch or the world."""
-    return bool(scene.emission.any()) or bool(scene.lights.lights)
-
-
 def has_lamps(scene):
     """Whether ``scene`` has a lamp or a sun (a light other than the world)."""
     return any(not isinstance(light, WorldLight) for light in scene.lights.lights)
@@ -175,12 +169,13 @@ class _Corners:
         return self.offset[live] if np.ndim(self.offset) else self.offset
 
 
-def _sources(scene, light_group, patch_group, groups, sky=False):
+def light_sources(scene, light_group, patch_group, groups, sky=False, lamps_only=False):
     """[(group, add, paired)] each group's lamps, one of them drawn for each sample by what they
     would give its point (``lamp_choice``; each sun apart: ``_lamp_sources``), each emitting group (and each world:
     ``sky``) as ``add(tables, points, u, value)`` adds its light at sample points
     (``adaptive_light``), in the order of the lights; ``paired``: a choice among lamps or
-    emitting patches, whose error is measured on pairs of its strata (``sample_rounds.sampled``)."""
+    emitting patches, whose error is measured on pairs of its strata (``sample_rounds.sampled``).
+    ``lamps_only``: the lamps and suns alone (no emitting group, no world)."""
     power = scene.patch_area * scene.emission.mean(axis=1)
     emitter_group = np.zeros(scene.patch_count, np.int64) if not groups else np.asarray(patch_group, np.int64)
     parts, lamps = [], {}
@@ -195,14 +190,14 @@ def _sources(scene, light_group, patch_group, groups, sky=False):
             parts.append((group, lamps[group], None))
         lamps[group].append(light)
     parts = [part for group, add, paired in parts
-             for part in (_lamp_sources(group, add) if paired is None else [(group, add, paired)])]
-    for group in np.unique(emitter_group[power > 0]):
+             for part in (_lamplight_sources(group, add) if paired is None else [(group, add, paired)])]
+    for group in ([] if lamps_only else np.unique(emitter_group[power > 0])):
         mine = np.where(emitter_group == group, power, 0.0)
         parts.append((group, emitting(scene, mine), True))
     return parts
 
 
-def _lamp_sources(group, lamps):
+def _lamplight_sources(group, lamps):
     """[(group, add, paired)] a group's lamps: each sun a source of its own (its light is seldom
     what it would be unoccluded: through a window, most corners of a room see none of it; drawn
     with the lamps it took their samples: 2.6x the rays in the window room), the other lamps one
@@ -225,7 +220,7 @@ def direct_at(scene, position, patch, samples, seed, light_group, patch_group, g
     tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
     out = np.zeros((max(groups, 1), len(patch), 3))
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 28,))))
-    sources = _sources(scene, light_group, patch_group, groups)
+    sources = light_sources(scene, light_group, patch_group, groups)
     with tables.numpy_turn:
         parts = [_part_at(tables, position, patch, rng, add, paired, shown) for _, add, paired in sources]
         means = rounds(parts, len(patch), samples, RETRIES if retries is None else retries, MORE_SAMPLES, deadline, spent)
@@ -344,76 +339,9 @@ def _add_kept(out, corners, scale, triangle_patch, block=1 << 16):
         out[rows] += corners[rows] * scale[triangle_patch[rows]][:, None, :]
 
 
-def arriving(surface, scene, result, live=False, deadline=None):
-    """(P,3) the light arriving (``Surface.arriving_light``: noise filtered); ``live``: less
-    the lamps', suns', emitting patches' and world's (``live_light``, within ``deadline``),
-    which the renderer draws itself."""
-    irradiance = result.irradiance - live_light(scene, result, deadline) if live else result.irradiance
-    return surface.arriving_light(irradiance, result.irradiance_variance, scene.reflectivity)
-
-
 def light_corners(surface, scene, light, direct, live=False, dtype=np.float64):
     """(T,3,3) the light arriving ``light`` (``arriving``) shown at the corners with the direct
     light's shape (``shown``, given as ``dtype``; ``direct`` the CornerDirect of every source);
     ``live``: smooth alone (the renderer draws every lamp's, sun's, emitter's and the world's own
     light)."""
     return shown(surface, light, None if live else direct, dtype=dtype)
-
-
-def live_light(scene, result, deadline=None):
-    """(P,3) each patch's mean of the light a renderer draws live (every source's direct light):
-    the solve's own, where its chunks gathered it apart (``SolveResult.direct_irradiance``: what
-    is left of the total is then the reflected light with its own noise alone), else
-    ``live_means`` (within ``deadline``), an estimate of its own (the light left carries the noise of both)."""
-    if result.direct_irradiance is not None:
-        return result.direct_irradiance
-    return live_means(scene, seed=result.seed, light=result.irradiance, deadline=deadline)
-
-
-def live_means(scene, samples=LIVE_MEAN_SAMPLES, seed=0, light=None, light_group=None, patch_group=None, groups=0,
-               deadline=None, spent=None, rows=None, retries=RETRIES):
-    """([G,]P,3) each patch's mean of the light a renderer draws live where the lamps, suns,
-    emitting materials and the world light the surfaces themselves (``LIVE`` results): their
-    direct light, from ``samples`` stratified points over the patch's visible part, every lamp
-    and emitting group looked at from each (the world along one cosine ray). A patch whose mean's standard error passes NOISE_SHARE of its solved
-    ``light`` (P,3), or of the mean itself, is sampled again with MORE_SAMPLES times as many
-    points, RETRIES times (beside an emitter the light is heavy-tailed), within ``deadline``.
-    Given ``groups`` > 0, ``light_group`` (L,) and ``patch_group`` (P,): each group's
-    (``corner_direct``). ``rows``: those patches' alone, (n,3) (a pilot's); ``retries``: RETRIES, or 0 (unbiased)."""
-    tables = WalkTables(scene, FINITE, 1e-3, EXIT_RANDOM)
-    rows = np.arange(scene.patch_count) if rows is None else np.asarray(rows, np.int64)
-    out = np.zeros((max(groups, 1), len(rows), 3))
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(1 << 27,))))
-    spheres = patch_spheres(scene) if has_lamps(scene) else None
-    sources = _sources(scene, light_group, patch_group, groups, sky=True)
-    with tables.numpy_turn:
-        parts = [_means_of(tables, rows, rng, add, None if light is None else light[rows], spheres, paired)
-                 for _, add, paired in sources]
-        means = rounds(parts, len(rows), samples, retries, MORE_SAMPLES, deadline, spent)
-    for (group, _, _), mean in zip(sources, means):
-        out[group] += mean
-    return out if groups else out[0]
-
-
-def _means_of(tables, patches, rng, add, light, spheres, paired=False):
-    """The ``sample_rounds.Part`` of one source's mean light over each of ``patches``
-    (``live_means``); ``spheres`` (``lamp_choice.patch_spheres``) the patches' anchors where
-    lamps are chosen."""
-    g = tables.geometry
-
-    def points(rows, local, u):
-        anchor = None if spheres is None else (spheres[0][rows], g.patch_normal_rows.take(rows, axis=1).T.astype(
-            np.float64), spheres[1][rows])
-        return Points(g, rows[local], u, anchor, local)
-
-    def sample(rows, count):
-        rows = patches[rows]
-        return sampled(tables, len(rows), count, rng, add, lambda block, local, u: points(rows[block], local, u),
-                       SAMPLE_DIMENSIONS, paired=paired)
-
-    def noise(mean, error):
-        shown_light = mean.sum(axis=1) if light is None else np.maximum(light.sum(axis=1), mean.sum(axis=1))
-        allowed = NOISE_SHARE * shown_light
-        return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
-
-    return Part(sample, noise)

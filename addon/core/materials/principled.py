@@ -33,6 +33,7 @@ import numpy as np
 # Quadrature sizes: Gauss-Legendre nodes in mu, and a midpoint grid (cap height x azimuth) of
 # visible normals for each mu.
 MU_NODES = 32
+VIEW_POINTS = 33  # view cosines a result material's curves hold (view_terms)
 CAP_ROWS = 96
 CAP_COLUMNS = 48
 ROUGHNESS_FLOOR = 1e-4  # Cycles' tables clamp roughness likewise
@@ -358,6 +359,21 @@ def surface_terms(p: PrincipledInputs):
         scale = scale + slope
         offset = offset - slope * base
     return scale, offset
+
+
+def view_terms(p: PrincipledInputs, count=VIEW_POINTS):
+    """(mu (count,), scale (count,3), offset (count,3)): ``surface_terms`` as a viewer at the
+    cosine mu sees the surface under even light, at ``count`` evenly spaced cosines from 0 to 1
+    (linear between the Gauss-Legendre nodes, held beyond them). The glossy layers' directional
+    albedo rises towards grazing and the base colour's weight falls with it (the layering
+    ``_layers_out`` models); their cosine-weighted means are ``surface_terms``' (up to the
+    interpolation). A dielectric's (the tangent at the base colour for metallic is not kept)."""
+    base = np.maximum(np.asarray(p.base, dtype=np.float64), 0.0)
+    energy, weight = _layers_out(p, base)
+    nodes = mu_nodes()[0]
+    mu = np.linspace(0.0, 1.0, int(count))
+    at = lambda values: np.stack([np.interp(mu, nodes, values[:, c]) for c in range(3)], axis=1)
+    return mu, at(weight), at(energy)
 
 
 def glossy_terms(p: PrincipledInputs):

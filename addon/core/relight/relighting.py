@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..display import point_direct
+from ..display import live_sources, point_direct
 from ..distributed.runners import each_on_threads
 from . import relit_checks
 
@@ -97,8 +97,9 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
     they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
     ("light", (S,T,3,3)) first with ``light``, the light arriving (``Surface.arriving_light``), and
-    with ``live`` too ("bounced", (S,T,3,3)) it less the sources' direct light (the renderer's), smooth alone; then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``) and
-    smooth, plus each group's own emission, flat. Both show the direct light at the corners (``point_direct``), each group's own.
+    with ``live`` too ("bounced", (S,T,3,3)) it less the sources' direct light (the renderer's), smooth alone, with lamps
+    ("lampless") less theirs alone (``_lampless``); then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``)
+    and smooth, plus each group's own emission, flat. Both show the direct light at the corners (``point_direct``), each group's own.
     ``surface`` is ``smoothing.Surface.of`` the scene's triangles (or ``triangles``, (T,3) of its
     vertices); ``result`` a per-source solve's SolveResult. Made in float64, given as ``dtype``
     (float32: half the memory, as they are written; their sum then the whole's to float32
@@ -107,11 +108,10 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
     triangles = scene.triangles if triangles is None else triangles
-    # (the solve's noise is in its indirect part alone where its direct part is known: display.direct_means)
-    drawn = per_source.direct_irradiance  # (S,P,3) or None
+    drawn = per_source.direct_irradiance  # (S,P,3) or None (known: the solve's noise is in the rest alone, direct_means)
     rho = scene.reflectivity
     if light and live and drawn is None:  # (the lamps', suns', emitters' and world's direct light left to the renderer)
-        drawn = point_direct.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
+        drawn = live_sources.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
                                         patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline)
     made = {}
 
@@ -142,6 +142,8 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
         yield "light", point_direct.shown(surface, arriving, whole, parts, direct, dtype)[1]
     if light and live:  # (what Cycles' live output reads: the light less the direct light it draws)
         yield "bounced", point_direct.shown(surface, rest, None, rest_parts, None, dtype)[1]
+    if light and live and point_direct.has_lamps(scene):  # (EEVEE's: the light less the lamps' it draws)
+        yield "lampless", _lampless(surface, scene, result, rest, rest_parts, drawn, dtype, deadline)
     _, smooth = point_direct.shown(surface, filtered, whole and point_direct.scaled(surface, whole, rho),
                                    noise(per_source.irradiance * rho - held) + held,
                                    direct and point_direct.scaled(surface, direct, rho), dtype)
@@ -149,6 +151,16 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     for s in range(per_source.count):  # (a part at a time: no (S,T,3) copy)
         smooth[s] += emitting[s, surface.triangle_patch][:, None, :]
     yield "smooth", smooth
+
+
+def _lampless(surface, scene, result, rest, rest_parts, drawn, dtype, deadline):
+    """(S,T,3,3) each group's light arriving less its lamps' and suns' (``live_sources.lamp_part``),
+    smooth alone: ``rest`` (P,3) and ``rest_parts`` (S,P,3), the light less every live source's
+    ``drawn`` (S,P,3), with the emitters' and the world's part of ``drawn`` put back."""
+    ps = result.per_source
+    unlit = drawn - live_sources.lamp_part(scene, drawn, ps.light_group, ps.patch_group, ps.count, result.seed,
+                                           result.irradiance, deadline)
+    return point_direct.shown(surface, rest + unlit.sum(axis=0), None, rest_parts + unlit, None, dtype)[1]
 
 
 def group_direct(surface, scene, result, triangles, deadline=None):

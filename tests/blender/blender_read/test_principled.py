@@ -15,6 +15,9 @@ from ..conftest import box_arrays, make_object, read_colours, result_objects
 from ..test_extension import configure
 from .test_selection import _unchanged_after_error
 
+HIGHLIGHTS = ("view-dependent highlights (shown as under even light, at the camera's angle on a dielectric, else as "
+              "their average over view directions; with Live lamps, the lamps' drawn by the renderer)")
+
 
 def default_material(name, base, **inputs):
     """A Principled BSDF at Blender's defaults but for ``base`` and the named inputs."""
@@ -142,11 +145,9 @@ def test_one_note_per_material_naming_only_what_it_uses(blender):
     _, notes = read_selection(blender)
     principled_notes = [n for n in notes if "Principled" in n]
     assert principled_notes == [
-        f"materials 'Plaster', 'Wood': Principled specular {LAYERS}; not modelled: view-dependent highlights "
-        "(shown as their average over view directions; with Live lamps, drawn by the renderer)",
-        f"material 'Glass': Principled specular {LAYERS}; not modelled: view-dependent highlights (shown as their "
-        "average over view directions; with Live lamps, drawn by the renderer), light through transmission (only its "
-        "reflection counted)",
+        f"materials 'Plaster', 'Wood': Principled specular {LAYERS}; not modelled: {HIGHLIGHTS}",
+        f"material 'Glass': Principled specular {LAYERS}; not modelled: {HIGHLIGHTS}, light through transmission (only "
+        "its reflection counted)",
     ]
     assert not any("'Matte'" in n or "'Lamp'" in n for n in notes)
 

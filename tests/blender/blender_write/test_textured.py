@@ -297,18 +297,26 @@ def test_a_source_attribute_named_as_ours_is_left_out_with_a_note(blender, monke
 
 def test_a_principled_floor_s_copy_shows_its_specular_light_beside_its_base_colour(blender):
     """A Principled BSDF at its default specular level returns more than its base colour (its
-    specular layer's light): the copy's reflectivity node carries the material's own terms as
-    the camera sees them, not the identity (which showed the floor darker than its render)."""
+    specular layer's light): the copy shows the material's own terms as the camera sees them
+    (``glossy_layers.as_viewed``: two RGB Curves of the view cosine, the glossy albedo rising
+    towards grazing), whose cosine-weighted means over the views are its surface terms (within
+    0.5% of the offset), not the identity (which showed the floor darker than its render)."""
     from addon.blender_read.materials import surface_terms
 
     floor, material = _checker_floor()
     material.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.5
     copy = _solve(blender)["Floor"].data.materials[0]
-    node = next(n for n in copy.node_tree.nodes if n.label == "Reflectivity")
+    curves = {n.label: n.mapping for n in copy.node_tree.nodes if n.bl_idname == "ShaderNodeRGBCurve"}
     scale, offset = surface_terms(material)
-    assert np.allclose(node.inputs[1].default_value[:], scale, atol=1e-6)
-    assert np.allclose(node.inputs[2].default_value[:], offset, atol=1e-6)
-    assert min(offset) > 0.01 and max(scale) < 1.0
+    x = np.linspace(0.0, 1.0, 2001)
+    for label, terms in (("Base colour's weight as viewed", scale), ("Glossy layers' albedo as viewed", offset)):
+        mapping = curves[label]
+        for c in range(3):
+            values = np.array([mapping.evaluate(mapping.curves[c], float(v)) for v in x])
+            assert abs(np.trapz(2 * x * values, x) - terms[c]) < 0.005 * offset[c]
+    grazing, facing = (curves["Glossy layers' albedo as viewed"].evaluate(curves["Glossy layers' albedo as viewed"].curves[0], v)
+                       for v in (0.05, 1.0))
+    assert grazing > 3 * facing and min(offset) > 0.01 and max(scale) < 1.0
 
 
 def test_at_the_panels_defaults_the_results_are_live_and_material_preview_shows_the_scenes_lamps(blender):

@@ -107,9 +107,10 @@ def test_relight_traces_no_ray_and_rewrites_every_output_the_run_wrote(blender, 
     after = _attributes()
     assert set(after) == set(before)
     targets = {t[0] for t in relight_store.meta_of(bpy.context.scene)["targets"]}
-    # (TEXTURED at the panel's defaults is live: the bounced light Cycles' output reads is relit too)
+    # (TEXTURED at the panel's defaults is live: the bounced light Cycles' output reads is relit too, and with the
+    # sun the light less the lamps' that EEVEE's output reads)
     expected = {"FACE": {"Radiosity"}, "TEXTURED": {"Radiosity", "Radiosity Patches", "Radiosity Light",
-                                                    "Radiosity Bounced Light"},
+                                                    "Radiosity Bounced Light", "Radiosity Light Less Lamps"},
                 "BOTH": {"Radiosity", "Radiosity Patches", "Radiosity Light"},
                 "VERTEX": {"Radiosity", "Radiosity Light"}}[output]
     assert targets == expected

@@ -1,0 +1,75 @@
+"""The world as EEVEE shows it beside live results (bpy): seen by the camera, lighting nothing.
+
+A live result's EEVEE output draws the lamps' highlights with a Principled BSDF's specular layer
+(``materials.textured_material``), and EEVEE lights such a layer by its world probe as well: the
+sky would shine on every glossy floor of a closed room, through its walls, on top of the sky's
+light the solve has already put in the results. So the world gets an output of its own for
+EEVEE: its surface to camera rays (the sky through a window stays in the picture), black to the
+probes. Cycles keeps the world's own output (set to Cycles where it was for every engine), and
+everything the add-on reads of the world (its light, its signature) ignores what is added here
+(``is_ours``). Taken out again, the user's output put back as it was, when a run no longer needs
+it (``restore``).
+"""
+from __future__ import annotations
+
+from ..blender_read.lights import EEVEE_WORLD_PREFIX as PREFIX
+from ..blender_read.lights import added_for_eevee as is_ours
+from ..blender_read.lights import world_output as user_output
+
+WAS_ALL = "radiosity_output_was_all"  # on our output: the user's output was for every engine
+OUTPUT = PREFIX + "World Output"
+
+
+def camera_only(world):
+    """Gives ``world`` (or None) its EEVEE output seen by camera rays alone (the module's
+    docstring), or brings it up to date with the user's surface. False, changing nothing, where
+    the world has no nodes, no surface or an EEVEE output of the user's own."""
+    tree = getattr(world, "node_tree", None)
+    if tree is None:
+        return False
+    output = user_output(tree)
+    if output is None or not output.inputs["Surface"].is_linked:
+        return False
+    if any(n.bl_idname == "ShaderNodeOutputWorld" and n.target == "EEVEE" and not is_ours(n) for n in tree.nodes):
+        return False
+    nodes, links = tree.nodes, tree.links
+    ours = nodes.get(OUTPUT)
+    if ours is None:
+        x, y = output.location
+        path = nodes.new("ShaderNodeLightPath")
+        path.name = path.label = PREFIX + "Light Path"
+        path.location = (x, y - 250)
+        mix = nodes.new("ShaderNodeMixShader")
+        mix.name = PREFIX + "Camera Only"
+        mix.label = "EEVEE: the world to camera rays alone (the results hold its light)"
+        mix.location = (x, y - 450)
+        links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
+        ours = nodes.new("ShaderNodeOutputWorld")
+        ours.name = ours.label = OUTPUT
+        ours.location = (x + 200, y - 450)
+        ours.target = "EEVEE"
+        links.new(mix.outputs[0], ours.inputs["Surface"])
+        ours[WAS_ALL] = output.target == "ALL"
+    mix = nodes[PREFIX + "Camera Only"]
+    links.new(output.inputs["Surface"].links[0].from_socket, mix.inputs[2])
+    if output.target == "ALL":
+        output.target = "CYCLES"
+    output.is_active_output = True
+    ours.is_active_output = True
+    return True
+
+
+def restore(world):
+    """Takes ``world``'s EEVEE output of ``camera_only`` out, the user's output for every engine
+    again where it was."""
+    tree = getattr(world, "node_tree", None)
+    if tree is None:
+        return
+    ours = tree.nodes.get(OUTPUT)
+    if ours is not None and ours.get(WAS_ALL, False):
+        output = user_output(tree)
+        if output is not None:
+            output.target = "ALL"
+            output.is_active_output = True
+    for node in [n for n in tree.nodes if is_ours(n)]:
+        tree.nodes.remove(node)

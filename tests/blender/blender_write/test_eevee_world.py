@@ -1,0 +1,88 @@
+"""The world's EEVEE output beside live results whose glossy layers draw the lamps' highlights
+(``blender_write.eevee_world``): added by a run that needs it, read by nothing of the add-on,
+Cycles' output the user's, taken out by a run that does not need it."""
+import bpy
+import numpy as np
+
+from addon.blender_read import lights as lights_io
+from addon.blender_read.sources import world_signature
+from addon.blender_write import eevee_world
+
+from ..blender_read.test_lights import _lamp
+from ..conftest import box_arrays, make_object, principled
+
+SKY = (0.3, 0.5, 0.9)
+
+
+def _sky():
+    world = bpy.data.worlds.new("Sky")
+    background = world.node_tree.nodes["Background"]
+    background.inputs["Color"].default_value = (*SKY, 1.0)
+    background.inputs["Strength"].default_value = 2.0
+    bpy.context.scene.world = world
+    return world
+
+
+def _outputs(world):
+    return sorted((n.name, n.target) for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeOutputWorld")
+
+
+def test_the_eevee_output_lights_nothing_and_leaves_cycles_and_what_is_read_as_they_were(blender):
+    world = _sky()
+    notes = []
+    before = (lights_io._background(world, notes), world_signature(world), len(world.node_tree.nodes))
+    assert eevee_world.camera_only(world)
+    tree = world.node_tree
+    assert tree.get_output_node("CYCLES").name == "World Output"
+    ours = tree.get_output_node("EEVEE")
+    assert eevee_world.is_ours(ours) and ours.name == eevee_world.OUTPUT
+    mix = ours.inputs["Surface"].links[0].from_node  # (camera rays see the background, the rest nothing)
+    assert mix.inputs["Fac"].links[0].from_socket.name == "Is Camera Ray"
+    assert mix.inputs[2].links[0].from_node.bl_idname == "ShaderNodeBackground" and not mix.inputs[1].is_linked
+    colour, strength, image = lights_io._background(world, notes)
+    np.testing.assert_allclose(colour, before[0][0])
+    assert strength == before[0][1] == 2.0 and image is None and not notes
+    assert world_signature(world) == before[1]
+    assert lights_io.world_gives_light(bpy.context.scene)
+    count = len(tree.nodes)
+    assert eevee_world.camera_only(world) and len(tree.nodes) == count  # (once)
+    eevee_world.restore(world)
+    assert len(tree.nodes) == before[2] and _outputs(world) == [("World Output", "ALL")]
+    assert world_signature(world) == before[1]
+
+
+def test_a_world_with_an_eevee_output_of_the_users_own_is_left_alone(blender):
+    world = _sky()
+    own = world.node_tree.nodes.new("ShaderNodeOutputWorld")
+    own.target = "EEVEE"
+    before = _outputs(world)
+    assert not eevee_world.camera_only(world)
+    assert _outputs(world) == before
+
+
+def _glossy_box():
+    """A closed box of glossy white walls (Specular IOR Level 0.5) with a point lamp inside."""
+    white = principled("White", (0.7, 0.7, 0.7))
+    white.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.5
+    v, faces = box_arrays((0.0, 0.0, 0.0), (2.0, 2.0, 2.0), inward=True)
+    make_object("Box", v, faces, [white])
+    _lamp("POINT", "Lamp", location=(1.0, 1.0, 1.5), energy=50.0)
+
+
+def test_a_live_run_with_highlights_gives_the_world_its_output_and_a_run_without_them_takes_it_out(blender):
+    from benchmarks import picture as pic
+
+    world = _sky()
+    _glossy_box()
+    scene = bpy.context.scene
+    pic.source_objects()
+    assert scene.radiosity.live_lamps and scene.radiosity.output == "TEXTURED"
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    assert any(m.get("radiosity_highlights") for m in bpy.data.materials)
+    assert world.node_tree.get_output_node("EEVEE").name == eevee_world.OUTPUT
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}  # (again: one output still)
+    assert _outputs(world) == [(eevee_world.OUTPUT, "EEVEE"), ("World Output", "CYCLES")]
+    scene.radiosity.live_lamps = False
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    assert _outputs(world) == [("World Output", "ALL")]
+    assert not any(n.name.startswith(eevee_world.PREFIX) for n in world.node_tree.nodes)
