@@ -59,7 +59,8 @@ STAGES = (
     ("colours (display)", "addon.bpy_free.pipeline", "write_colours", 0),
     ("the final gather of the bounced light", "addon.bpy_free.pipeline.final_gather", "gathered", 1),
     ("display's direct light at corners", "addon.core.display.point_direct", "corner_direct", 1),
-    ("light arriving at corners", "addon.core.display.point_direct", "arriving", 1),
+    ("light arriving at corners", "addon.core.display.live_sources", "arriving", 1),
+    ("light arriving at corners", "addon.core.display.point_direct", "arriving", 1),  # (before 553f4cf)
     ("the display's cells (their new points' light)", "addon.core.refine.display_cells", "refine", 1),
     ("per-source results", "addon.bpy_free.pipeline.relit", "source_results", 0),
     ("writing results", "addon.blender_write.solve_job", "write_results", 0),
@@ -140,9 +141,9 @@ def one(scene_name, patch_size, seed, again=False):
     for label, module, attribute, _ in STAGES:
         try:
             owner = _owner(module)
-        except AttributeError:  # (a stage the code measured does not have: a --before version's)
+            _wrap(owner, attribute, label, seconds)
+        except (AttributeError, ImportError):  # (a stage the code measured does not have: a --before version's)
             continue
-        _wrap(owner, attribute, label, seconds)
     from addon.bpy_free import pipeline
 
     solve = pipeline.solve
@@ -218,7 +219,7 @@ def table(sets, args):
                      f"starts {', '.join(format(r['load'], '.1f') for r in runs)}.")
     head = " | ".join(f"{label} wall s | {label} CPU s" for label, _ in sets)
     lines += ["", f"| stage | {head} |", "|---|" + "---:|" * (2 * len(sets))]
-    for label, _, _, depth in STAGES:
+    for label, depth in dict((label, depth) for label, _, _, depth in STAGES).items():  # (a stage that moved: once)
         cells = " | ".join(f"{_cell([r['seconds'].get(label, 0.0) for r in runs])} | "
                            f"{_cell([r['seconds'].get('cpu ' + label, 0.0) for r in runs])}" for _, runs in sets)
         lines.append(f"| {'&nbsp;&nbsp;' * 2 * depth}{label} | {cells} |")

@@ -61,16 +61,11 @@ def baked_material(material):
     """A copy of a result material showing its view-independent part alone, as emission: the
     colour its Emission shader of the solved light takes (``blender_write.materials.emission_output``:
     (base colour x scale + offset) x 'Radiosity Light' + emission, or 'Radiosity' for the flat
-    result material: its EEVEE output's, where it draws the lamps' highlights the glossy layers'
-    mean under the whole light again); its live shader and outputs dropped."""
-    from addon.blender_write.materials import LAMPLESS_ATTRIBUTE
-    from addon.blender_write.results import LIGHT_ATTRIBUTE_NAME
-
+    result material: its EEVEE output's, where it draws the lamps' highlights as ``_as_baked``
+    makes it); its live shader and outputs dropped."""
     copy = material.copy()
     tree = copy.node_tree
-    for node in tree.nodes:  # (a live copy that draws the lamps' highlights: its glossy layers' mean light again)
-        if node.bl_idname == "ShaderNodeAttribute" and node.attribute_name == LAMPLESS_ATTRIBUTE:
-            node.attribute_name = LIGHT_ATTRIBUTE_NAME
+    _as_baked(copy)
     shown = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.target in ("ALL", "EEVEE")]
     emission = _emission_under(shown[0].inputs["Surface"]) if len(shown) == 1 else None
     colour = emission.inputs["Color"].links if emission is not None and "Color" in emission.inputs else ()
@@ -88,6 +83,30 @@ def baked_material(material):
     output.is_active_output = True
     copy.cycles.emission_sampling = "NONE"
     return copy
+
+
+def _as_baked(copy):
+    """A live copy whose EEVEE output draws the lamps' highlights (``glossy_layers``) made to show
+    the view-independent display: its terms as viewed held at their means over the views (its
+    source's ``surface_terms``), and its glossy part lit by the whole light arriving."""
+    import bpy
+
+    from addon.blender_read.materials import surface_terms
+    from addon.blender_write.glossy_layers import ALBEDO_LABEL, WEIGHT_LABEL
+    from addon.blender_write.materials import HIGHLIGHTS_PROPERTY, LAMPLESS_ATTRIBUTE, TEXTURED_PROPERTY
+    from addon.blender_write.results import LIGHT_ATTRIBUTE_NAME
+
+    if not copy.get(HIGHLIGHTS_PROPERTY):
+        return
+    means = dict(zip((WEIGHT_LABEL, ALBEDO_LABEL), surface_terms(bpy.data.materials[copy[TEXTURED_PROPERTY]])))
+    for node in copy.node_tree.nodes:
+        if node.bl_idname == "ShaderNodeAttribute" and node.attribute_name == LAMPLESS_ATTRIBUTE:
+            node.attribute_name = LIGHT_ATTRIBUTE_NAME
+        elif node.bl_idname == "ShaderNodeRGBCurve" and node.label in means:
+            for c in range(3):
+                for point in node.mapping.curves[c].points:
+                    point.location = (point.location[0], float(means[node.label][c]))
+            node.mapping.update()
 
 
 def _emission_under(socket):

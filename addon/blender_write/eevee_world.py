@@ -8,7 +8,8 @@ EEVEE: its surface to camera rays (the sky through a window stays in the picture
 probes. Cycles keeps the world's own output (set to Cycles where it was for every engine), and
 everything the add-on reads of the world (its light, its signature) ignores what is added here
 (``is_ours``). Taken out again, the user's output put back as it was, when a run no longer needs
-it (``restore``).
+it (``restore``). EEVEE's own reflections (Raytracing, reflection probes) would add the room's
+light again: a run says so (``reflection_notes``).
 """
 from __future__ import annotations
 
@@ -73,3 +74,18 @@ def restore(world):
             output.is_active_output = True
     for node in [n for n in tree.nodes if is_ours(n)]:
         tree.nodes.remove(node)
+
+
+def reflection_notes(scene):
+    """Notes on what of EEVEE's own would reflect the results in their glossy layers, whose
+    emission holds that light already: its Raytracing, reflection probes (spheres, planes)."""
+    notes = []
+    if getattr(getattr(scene, "eevee", None), "use_raytracing", False):
+        notes.append("EEVEE's Raytracing is on (Render Properties): its reflections add the room's light to the "
+                     "results' glossy layers, whose colours hold it already; turn it off to see them as solved")
+    probes = sorted(o.name for o in scene.objects if o.type == "LIGHT_PROBE" and o.data.type in ("SPHERE", "PLANE"))
+    if probes:
+        notes.append(f"EEVEE's reflection probes ({', '.join(probes[:3])}{' and more' if len(probes) > 3 else ''}) "
+                     "add the room's light to the results' glossy layers, whose colours hold it already; hide them "
+                     "from the render to see the results as solved")
+    return notes

@@ -13,6 +13,7 @@ from .shader_nodes import BASE, feed, flat_switch, times_light
 HIGHLIGHT_INPUTS = {"Base Color": (0.0, 0.0, 0.0, 1.0), "Emission Strength": 0.0, "Subsurface Weight": 0.0,
                     "Sheen Weight": 0.0, "Alpha": 1.0}
 NOT_ALONE = ("Metallic", "Transmission Weight")  # (their reflection depends on the base colour, or they pass light)
+WEIGHT_LABEL, ALBEDO_LABEL = "Base colour's weight as viewed", "Glossy layers' albedo as viewed"  # (as_viewed's curves)
 
 
 def has_highlights(shader):
@@ -40,8 +41,8 @@ def as_viewed(tree, shader, viewed, light_attribute, glossy_attribute, location)
     cosine.inputs[0].default_value = 1.0
     links.new(facing.outputs["Facing"], cosine.inputs[1])
     mu, scale, offset = viewed
-    weight = _curves(tree, mu, scale, "Base colour's weight as viewed", (x - 200, y + 200))
-    albedo = _curves(tree, mu, offset, "Glossy layers' albedo as viewed", (x - 200, y - 200))
+    weight = _curves(tree, mu, scale, WEIGHT_LABEL, (x - 200, y + 200))
+    albedo = _curves(tree, mu, offset, ALBEDO_LABEL, (x - 200, y - 200))
     links.new(cosine.outputs[0], weight.inputs["Color"])
     links.new(cosine.outputs[0], albedo.inputs["Color"])
     diffuse = nodes.new("ShaderNodeVectorMath")

@@ -14,10 +14,10 @@ meets (their shaders lit by the lamps plus their solved light after a bounce, BO
 H less the light Cycles draws live). EEVEE sees the Emission shader, and where the scene has lamps,
 a dielectric Principled BSDF's glossy layers lit by them (their highlights, which EEVEE draws
 with their shadows), the emission's glossy part then lit by the light less the lamps'
-(LAMPLESS_ATTRIBUTE); the world's EEVEE output lights nothing (``eevee_world``) and nothing else
-of EEVEE's own lights a result, so each part of the light counts once. A dielectric shows its
-base colour's weight and its glossy layers' albedo as the camera sees them (under even light:
-the glossy albedo rises towards grazing), their means over the views the solve's reflectivity.
+(LAMPLESS_ATTRIBUTE), its base colour's weight and its glossy layers' albedo as the camera sees
+them (the glossy albedo rises towards grazing; their means over the views the solve's
+reflectivity); the world's EEVEE output lights nothing (``eevee_world``) and nothing else of
+EEVEE's own lights a result, so each part of the light counts once.
 The texture stays at its own resolution whatever the patch
 size; the patch's reflected radiosity is the area mean of (base colour x light) over it, up to
 how much the texture and the light vary together inside it. The user's material is never
@@ -71,11 +71,11 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
     flat switch is on, the colour attribute ``flat_attribute``; ``can_copy(source)`` must
     hold. The copy is cut down to what drives that, and marked as ours. ``live``: so in EEVEE;
     in Cycles its own shader for the lamps to light, with BOUNCED_ATTRIBUTE (``_lit_by_lamps``).
-    A dielectric Principled BSDF (``has_highlights``) shows its scale and offset as the camera sees
-    them (``view_terms``: the glossy layers' albedo rises towards grazing, the base colour's weight
-    falls), their means over the view directions the solve's; and ``live`` with ``lamps`` (the scene
-    has lamps; LAMPLESS_ATTRIBUTE written), in EEVEE its glossy layers draw the lamps' highlights
-    live and the emission's glossy part is lit by the light less the lamps' (``glossy_layers.as_viewed``)."""
+    ``live`` with ``lamps`` (the scene has lamps; LAMPLESS_ATTRIBUTE written), a dielectric Principled
+    BSDF (``has_highlights``) in EEVEE: its glossy layers draw the lamps' highlights live, and the
+    emission shows its scale and offset as the camera sees them (``view_terms``: the glossy layers'
+    albedo rises towards grazing, the base colour's weight falls; their means over the views the
+    solve's), the offset's part lit by the light less the lamps' (``glossy_layers.as_viewed``)."""
     material = source.copy()
     material.name = source.name + TEXTURED_SUFFIX
     for key in list(material.keys()):  # (a copy carries the source's custom properties)
@@ -103,13 +103,11 @@ def textured_material(source, light_attribute, flat_attribute, terms=IDENTITY, l
         outputs.append(output_node(tree, "CYCLES", _lit_by_lamps(tree, shader, bounced, (x + 800, y + 900)),
                                (x + 1200, y + 900)))
         material[LIVE_PROPERTY] = True
-    viewed = view_terms(source) if has_highlights(shader) and any(terms[1]) else None
-    highlights = live and lamps and viewed is not None
-    if viewed is None:
+    highlights = live and lamps and has_highlights(shader) and any(terms[1])
+    if highlights:  # (as the camera sees the surface, the lamps' highlights drawn live)
+        lit = as_viewed(tree, shader, view_terms(source), light_attribute, LAMPLESS_ATTRIBUTE, (x, y - 1400))
+    else:  # (the mean over the views: a lamp's light is far from even, docs/picture.md)
         lit = times_light(tree, surface, light_attribute, (x, y))
-    else:  # (as the camera sees the surface: its glossy layers' albedo rises towards grazing)
-        lit = as_viewed(tree, shader, viewed, light_attribute, LAMPLESS_ATTRIBUTE if highlights else light_attribute,
-                         (x, y - 1400))
     emission = emission_output(tree, _plus_emission(material, shader, lit, live, (x, y)), flat_attribute, (x + 600, y))
     shown = emission.outputs["Emission"]
     if highlights:

@@ -334,6 +334,7 @@ def write_results(context, output_data, output_mode, scene=None):
         obj.name = obj.data.name = obj[SOURCE_PROPERTY] + RESULT_SUFFIX  # the names the old ones had
     if any(copy is not None and copy.get(textured.HIGHLIGHTS_PROPERTY) for copy in made.values()):
         eevee_world.camera_only(scene.world)  # (EEVEE's world probe would light the highlights' layers too)
+        notes.extend(eevee_world.reflection_notes(scene))
     elif scene.world is not None:
         eevee_world.restore(scene.world)
     show_results_in_views(live)

@@ -354,11 +354,13 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
     if light:
         yield "light", point_direct.light_corners(surface, scene, arriving, direct, False, dtype)
     if bounced is not None:
-        yield "bounced", point_direct.light_corners(surface, scene, bounced, direct, True, dtype)
-    if bounced is not None and point_direct.has_lamps(scene):  # (EEVEE's: the light less the lamps' it draws live)
-        lampless = bounced + drawn - live_sources.lamp_part(scene, drawn, seed=result.seed, light=result.irradiance,
-                                                            deadline=deadline)
-        yield "lampless", point_direct.light_corners(surface, scene, lampless, direct, True, dtype)
+        bounced = point_direct.light_corners(surface, scene, bounced, direct, True, dtype)
+        yield "bounced", bounced
+        if point_direct.has_lamps(scene):  # (EEVEE's: the light less the lamps' it draws live; the rest put back)
+            unlit = drawn - live_sources.lamp_part(scene, drawn, seed=result.seed, light=result.irradiance,
+                                                   deadline=deadline)
+            yield "lampless", bounced + surface.corner_values(unlit, dtype=dtype) if unlit.any() else bounced
+        del bounced
     corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True), dtype=dtype)
     corners += scene.emission[surface.triangle_patch][:, None, :]
     yield "smooth", corners

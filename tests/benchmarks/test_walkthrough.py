@@ -319,8 +319,16 @@ def test_the_baked_display_shows_the_result_materials_stored_light(live):
     source = interior_scene.principled("Paint", (0.8, 0.5, 0.2))
     made = [materials.textured_material(source, "Radiosity Light", "Radiosity Patches", live=live),
             results.result_material(live=live)]
+    if live:  # (with lamps: the lamps' highlights drawn live, the terms as viewed)
+        made.append(materials.textured_material(source, "Radiosity Light", "Radiosity Patches",
+                                                materials.surface_terms(source), live=True, lamps=True))
+        assert made[-1].get(materials.HIGHLIGHTS_PROPERTY)
     for material in made:
         copy = shown.baked_material(material)
+        attributes = {n.attribute_name for n in copy.node_tree.nodes if n.bl_idname == "ShaderNodeAttribute"}
+        assert materials.LAMPLESS_ATTRIBUTE not in attributes
+        for curves in (n.mapping for n in copy.node_tree.nodes if n.bl_idname == "ShaderNodeRGBCurve"):
+            assert all(np.ptp([p.location[1] for p in curves.curves[c].points]) == 0 for c in range(3))
         outputs = [n for n in copy.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
         assert len(outputs) == 1 and outputs[0].target == "ALL"
         emission = outputs[0].inputs["Surface"].links[0].from_node

@@ -140,10 +140,8 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     whole = _summed(direct)
     if light:
         yield "light", point_direct.shown(surface, arriving, whole, parts, direct, dtype)[1]
-    if light and live:  # (what Cycles' live output reads: the light less the direct light it draws)
-        yield "bounced", point_direct.shown(surface, rest, None, rest_parts, None, dtype)[1]
-    if light and live and point_direct.has_lamps(scene):  # (EEVEE's: the light less the lamps' it draws)
-        yield "lampless", _lampless(surface, scene, result, rest, rest_parts, drawn, dtype, deadline)
+    if light and live:  # (what the live outputs read: the light less what Cycles draws, and less what EEVEE does)
+        yield from _live_parts(surface, scene, result, rest, rest_parts, drawn, dtype, deadline)
     _, smooth = point_direct.shown(surface, filtered, whole and point_direct.scaled(surface, whole, rho),
                                    noise(per_source.irradiance * rho - held) + held,
                                    direct and point_direct.scaled(surface, direct, rho), dtype)
@@ -153,14 +151,30 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     yield "smooth", smooth
 
 
-def _lampless(surface, scene, result, rest, rest_parts, drawn, dtype, deadline):
+def _live_parts(surface, scene, result, rest, rest_parts, drawn, dtype, deadline):
+    """("bounced", (S,T,3,3)): each group's light arriving less its live sources' ``drawn`` (the
+    rest: ``rest`` (P,3), ``rest_parts`` (S,P,3)), smooth alone; then where there are lamps
+    ("lampless", ``_lampless``)."""
+    bounced = point_direct.shown(surface, rest, None, rest_parts, None, dtype)[1]
+    yield "bounced", bounced
+    if point_direct.has_lamps(scene):  # (EEVEE's: the light less the lamps' it draws)
+        yield "lampless", _lampless(surface, scene, result, bounced, drawn, dtype, deadline)
+
+
+def _lampless(surface, scene, result, bounced, drawn, dtype, deadline):
     """(S,T,3,3) each group's light arriving less its lamps' and suns' (``live_sources.lamp_part``),
-    smooth alone: ``rest`` (P,3) and ``rest_parts`` (S,P,3), the light less every live source's
-    ``drawn`` (S,P,3), with the emitters' and the world's part of ``drawn`` put back."""
+    smooth alone: its ``bounced`` corners (the light less every live source's ``drawn``, (S,P,3))
+    plus the corners of the emitters' and the world's part of ``drawn``, made by the map of their
+    sum (whose patch means are its own)."""
     ps = result.per_source
     unlit = drawn - live_sources.lamp_part(scene, drawn, ps.light_group, ps.patch_group, ps.count, result.seed,
                                            result.irradiance, deadline)
-    return point_direct.shown(surface, rest + unlit.sum(axis=0), None, rest_parts + unlit, None, dtype)[1]
+    out = bounced.copy()
+    rows = np.flatnonzero(unlit.any(axis=(1, 2)))  # (a lamp's group: its bounced light as it is)
+    if rows.size:
+        _, apply = surface.corner_values(unlit[rows].sum(axis=0), return_filter=True)
+        out[rows] += apply(unlit[rows], dtype)
+    return out
 
 
 def group_direct(surface, scene, result, triangles, deadline=None):

@@ -86,3 +86,15 @@ def test_a_live_run_with_highlights_gives_the_world_its_output_and_a_run_without
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     assert _outputs(world) == [("World Output", "ALL")]
     assert not any(n.name.startswith(eevee_world.PREFIX) for n in world.node_tree.nodes)
+
+
+def test_eevees_own_reflections_are_named_by_the_run(blender):
+    """EEVEE's Raytracing and reflection probes would reflect the room's light in the glossy
+    layers a second time: the run's notes name them (and nothing where there are none)."""
+    scene = bpy.context.scene
+    assert eevee_world.reflection_notes(scene) == []
+    scene.eevee.use_raytracing = True
+    probe = bpy.data.objects.new("Mirror Probe", bpy.data.lightprobes.new("Mirror Probe", "PLANE"))
+    scene.collection.objects.link(probe)
+    notes = eevee_world.reflection_notes(scene)
+    assert len(notes) == 2 and "Raytracing is on" in notes[0] and "(Mirror Probe)" in notes[1]

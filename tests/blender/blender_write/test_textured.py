@@ -297,17 +297,24 @@ def test_a_source_attribute_named_as_ours_is_left_out_with_a_note(blender, monke
 
 def test_a_principled_floor_s_copy_shows_its_specular_light_beside_its_base_colour(blender):
     """A Principled BSDF at its default specular level returns more than its base colour (its
-    specular layer's light): the copy shows the material's own terms as the camera sees them
+    specular layer's light): baked, the copy's reflectivity node carries the material's own terms
+    (their mean over the views), not the identity (which showed the floor darker than its
+    render); live under a lamp, its EEVEE output shows them as the camera sees them
     (``glossy_layers.as_viewed``: two RGB Curves of the view cosine, the glossy albedo rising
-    towards grazing), whose cosine-weighted means over the views are its surface terms (within
-    0.5% of the offset), not the identity (which showed the floor darker than its render)."""
+    towards grazing), whose cosine-weighted means over the views are those terms (within 0.5% of
+    the offset)."""
     from addon.blender_read.materials import surface_terms
 
     floor, material = _checker_floor()
     material.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.5
     copy = _solve(blender)["Floor"].data.materials[0]
-    curves = {n.label: n.mapping for n in copy.node_tree.nodes if n.bl_idname == "ShaderNodeRGBCurve"}
+    node = next(n for n in copy.node_tree.nodes if n.label == "Reflectivity")
     scale, offset = surface_terms(material)
+    assert np.allclose(node.inputs[1].default_value[:], scale, atol=1e-6)
+    assert np.allclose(node.inputs[2].default_value[:], offset, atol=1e-6)
+    assert not any(n.bl_idname == "ShaderNodeRGBCurve" for n in copy.node_tree.nodes)
+    copy = _solve(blender, live_lamps=True)["Floor"].data.materials[0]
+    curves = {n.label: n.mapping for n in copy.node_tree.nodes if n.bl_idname == "ShaderNodeRGBCurve"}
     x = np.linspace(0.0, 1.0, 2001)
     for label, terms in (("Base colour's weight as viewed", scale), ("Glossy layers' albedo as viewed", offset)):
         mapping = curves[label]
