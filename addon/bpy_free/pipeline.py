@@ -307,7 +307,7 @@ def write_colours(out, scene, result, settings, deadline=None):
     if flat and out.live_lamps:  # (lamps drawn live)
         drawn = relit.drawn_light(out, scene, result, deadline)
         flat["bounced"] = np.maximum(result.irradiance - drawn, 0.0)
-        if point_direct.has_lamps(scene):
+        if live_sources.draws_highlights(scene):
             flat["lampless"] = np.maximum(result.irradiance - relit.lamp_light(out, scene, result, drawn, deadline), 0.0)
     for k, o in enumerate(patches.objects):
         rows = patches.combined.patch_slice(k)
@@ -356,7 +356,7 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
     if bounced is not None:
         bounced = point_direct.light_corners(surface, scene, bounced, direct, True, dtype)
         yield "bounced", bounced
-        if point_direct.has_lamps(scene):  # (EEVEE's: the light less the lamps' it draws live; the rest put back)
+        if live_sources.draws_highlights(scene):  # (EEVEE's: the light less the lamps' it draws live; the rest put back)
             unlit = drawn - live_sources.lamp_part(scene, drawn, seed=result.seed, light=result.irradiance,
                                                    deadline=deadline)
             yield "lampless", bounced + surface.corner_values(unlit, dtype=dtype) if unlit.any() else bounced

@@ -659,8 +659,9 @@ def _glowing_floor_lamp_and_sky():
     """``_glowing_floor`` with a point lamp beside the emitting square and a dim uniform sky."""
     scene, _, centre = _glowing_floor()
     lights = [PointLight(centre + [0.6, -0.4, 0.3], np.array([2.0, 1.5, 1.0])), WorldLight(np.full(3, 0.2))]
+    glossy = (np.full((scene.patch_count, 3), 0.05), np.full(scene.patch_count, 0.25))  # (a glossy layer to reflect them)
     return PatchScene(scene.vertices, scene.triangles, scene.triangle_patch, scene.reflectivity, scene.emission,
-                      lights=lights)
+                      lights=lights, glossy=glossy)
 
 
 def test_the_lamps_part_of_the_live_light_is_their_groups_and_a_mixed_groups_lamps_alone():
@@ -689,7 +690,8 @@ def test_the_lamps_part_of_the_live_light_is_their_groups_and_a_mixed_groups_lam
 def test_eevees_light_less_the_lamps_keeps_the_emitters_and_the_skys_direct_light_and_groups_add_up():
     """The light EEVEE's glossy layers take (``smooth_sources``' "lampless", its groups' sum) is
     the bounced light (the light less every live source's) plus the emitter's and the sky's live
-    light, as patch means (float error, where the bounced light is not clipped at 0)."""
+    light, as patch means (float error, where the bounced light is not clipped at 0); a scene
+    without a glossy layer has none."""
     from addon.core import solve
     from addon.core.relight.relighting import smooth_sources
 
@@ -706,3 +708,7 @@ def test_eevees_light_less_the_lamps_keeps_the_emitters_and_the_skys_direct_ligh
     kept = rest >= 0
     np.testing.assert_allclose(added[kept], others[kept], rtol=0, atol=1e-9 * drawn.max())
     assert kept.mean() > 0.9 and others.sum() > 0
+    assert live_sources.draws_highlights(scene)
+    matte = scene.with_materials(scene.reflectivity, scene.emission, glossy=None)  # (no glossy layer: nothing kept apart)
+    assert not live_sources.draws_highlights(matte)
+    assert "lampless" not in dict(smooth_sources(surface, matte, result, light=True, live=True))

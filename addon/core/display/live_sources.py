@@ -23,6 +23,12 @@ def has_live(scene):
     return bool(scene.emission.any()) or bool(scene.lights.lights)
 
 
+def draws_highlights(scene):
+    """Whether EEVEE draws highlights of ``scene``'s lamps on its results (``lamp_part``'s light
+    is then kept apart): a lamp or a sun, and a glossy layer (``scene.glossy``) to reflect it."""
+    return has_lamps(scene) and scene.glossy is not None
+
+
 def lamp_part(scene, drawn, light_group=None, patch_group=None, groups=0, seed=0, light=None, deadline=None):
     """([G,]P,3) the lamps' and suns' part of ``drawn`` ([G,]P,3, the live light, ``live_light``
     or the groups' own): what EEVEE draws live too (it draws neither emitting meshes nor, from

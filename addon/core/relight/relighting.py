@@ -157,7 +157,7 @@ def _live_parts(surface, scene, result, rest, rest_parts, drawn, dtype, deadline
     ("lampless", ``_lampless``)."""
     bounced = point_direct.shown(surface, rest, None, rest_parts, None, dtype)[1]
     yield "bounced", bounced
-    if point_direct.has_lamps(scene):  # (EEVEE's: the light less the lamps' it draws)
+    if live_sources.draws_highlights(scene):  # (EEVEE's: the light less the lamps' it draws)
         yield "lampless", _lampless(surface, scene, result, bounced, drawn, dtype, deadline)
 
 

@@ -90,6 +90,8 @@ def test_relight_traces_no_ray_and_rewrites_every_output_the_run_wrote(blender, 
 
     settings = rs.build(blender, output)
     settings.light_output = light
+    if output == "TEXTURED":  # (a glossy room: EEVEE's light less the lamps' is written and relit too)
+        bpy.data.materials["White"].node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.5
     assert bpy.ops.radiosity.solve() == {"FINISHED"}
     before = _attributes()
     assert bpy.ops.radiosity.relight() == {"FINISHED"}  # at the solved strengths: the solve's own picture
@@ -108,7 +110,7 @@ def test_relight_traces_no_ray_and_rewrites_every_output_the_run_wrote(blender, 
     assert set(after) == set(before)
     targets = {t[0] for t in relight_store.meta_of(bpy.context.scene)["targets"]}
     # (TEXTURED at the panel's defaults is live: the bounced light Cycles' output reads is relit too, and with the
-    # sun the light less the lamps' that EEVEE's output reads)
+    # sun and a glossy room the light less the lamps' that EEVEE's output reads)
     expected = {"FACE": {"Radiosity"}, "TEXTURED": {"Radiosity", "Radiosity Patches", "Radiosity Light",
                                                     "Radiosity Bounced Light", "Radiosity Light Less Lamps"},
                 "BOTH": {"Radiosity", "Radiosity Patches", "Radiosity Light"},
