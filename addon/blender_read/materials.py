@@ -301,7 +301,7 @@ def _principled_note(node, p, what):
 
 
 #: The socket of each shader that gives the base colour, and the emission colour and strength.
-_BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
+BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
 EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
              "ShaderNodeEmission": ("Color", "Strength")}
 
@@ -319,9 +319,9 @@ def material_attribute(material):
     """The name of the colour attribute driving a material's base colour ('' for the active
     one), or None."""
     node = shader_node(material)
-    if node is None or node.bl_idname not in _BASE or not node.inputs[_BASE[node.bl_idname]].is_linked:
+    if node is None or node.bl_idname not in BASE or not node.inputs[BASE[node.bl_idname]].is_linked:
         return None
-    link = node.inputs[_BASE[node.bl_idname]].links[0]
+    link = node.inputs[BASE[node.bl_idname]].links[0]
     source = link.from_node
     if source.bl_idname == "ShaderNodeVertexColor" and link.from_socket.name == "Color":
         return source.layer_name
@@ -334,9 +334,9 @@ def material_attribute(material):
 def material_texture(material):
     """The image texture of a material's base colour, read per patch (``texture_of``), or None."""
     node = shader_node(material)
-    if node is None or node.bl_idname not in _BASE:
+    if node is None or node.bl_idname not in BASE:
         return None
-    return texture_of(node.inputs[_BASE[node.bl_idname]])
+    return texture_of(node.inputs[BASE[node.bl_idname]])
 
 
 def material_emission_texture(material):
@@ -365,7 +365,7 @@ def slot_tables(obj, notes):
         node = shader_node(material)
         per_patch = set()
         if texture is not None or attribute is not None:
-            per_patch.add(_BASE[node.bl_idname])
+            per_patch.add(BASE[node.bl_idname])
         if emission is not None:
             per_patch.add(EMISSION[node.bl_idname][0])
         more, later = material_reading(material, per_patch)

@@ -6,7 +6,8 @@ highlights, drawn live with their shadows).
 
 from __future__ import annotations
 
-from .shader_nodes import BASE, feed, flat_switch, times_light
+from ..blender_read.materials import BASE
+from .shader_nodes import feed, flat_switch, shader_or_flat, times_light
 
 # A live copy's glossy layers in EEVEE (``plus_highlights``): the source's Principled BSDF with these inputs so (the
 # base colour black: its diffuse part is the emission's); the layers it cannot draw alone keep the whole baked.
@@ -101,14 +102,4 @@ def plus_highlights(tree, shader, emission, location):
     for name, value in HIGHLIGHT_INPUTS.items():
         if name in layer.inputs:
             layer.inputs[name].default_value = value
-    added = nodes.new("ShaderNodeAddShader")
-    added.location = (x + 200, y)
-    links.new(emission.outputs["Emission"], added.inputs[0])
-    links.new(layer.outputs[0], added.inputs[1])
-    switch = flat_switch(tree, (x + 200, y + 250))
-    mix = nodes.new("ShaderNodeMixShader")
-    mix.location = (x + 400, y)
-    links.new(switch.outputs["Fac"], mix.inputs["Fac"])
-    links.new(added.outputs[0], mix.inputs[1])
-    links.new(emission.outputs["Emission"], mix.inputs[2])
-    return mix.outputs[0]
+    return shader_or_flat(tree, layer, emission, flat_switch(tree, (x + 200, y + 250)), (x + 200, y))

@@ -28,9 +28,9 @@ from __future__ import annotations
 
 import bpy
 
-from ..blender_read.materials import shader_node, surface_terms, view_terms
+from ..blender_read.materials import BASE, EMISSION, shader_node, surface_terms, view_terms
 from .glossy_layers import as_viewed, has_highlights, plus_highlights
-from .shader_nodes import BASE, FLAT_SWITCH, feed, flat_switch, output_node, times_light
+from .shader_nodes import feed, flat_switch, output_node, shader_or_flat, times_light
 
 TEXTURED_PROPERTY = "radiosity_textured_from"  # marks our copies: the source material's name
 LIVE_PROPERTY = "radiosity_live_lamps"  # marks copies whose own shader the lamps light (textured_material)
@@ -40,9 +40,6 @@ TEXTURED_SUFFIX = " Radiosity"
 BOUNCED_ATTRIBUTE = "Radiosity Bounced Light"  # live: the light arriving less the light Cycles draws live
 LAMPLESS_ATTRIBUTE = "Radiosity Light Less Lamps"  # live with lamps: the light arriving less the lamps' (EEVEE's)
 IDENTITY = ((1.0, 1.0, 1.0), (0.0, 0.0, 0.0))  # (scale, offset): the base colour is the reflectivity
-# The shader's emission colour and strength sockets.
-EMISSION = {"ShaderNodeBsdfPrincipled": ("Emission Color", "Emission Strength"),
-             "ShaderNodeEmission": ("Color", "Strength")}
 
 
 def is_textured_material(material) -> bool:
@@ -166,25 +163,8 @@ def _lit_by_lamps(tree, shader, emission, location):
     links.new(_ray_depth(tree, "COMPARE", (x - 400, y + 300)), either.inputs[0])  # (a ray leaving a camera hit)
     links.new(switch.outputs["Fac"], either.inputs[1])
     links.new(either.outputs[0], emission.inputs["Strength"])
-    shown = _shader_or_flat(tree, shader, emission, switch, (x, y))
+    shown = shader_or_flat(tree, shader, emission, switch, (x, y))
     return _seen_by(tree, shader, shown, (x + 200, y - 250))
-
-
-def _shader_or_flat(tree, shader, emission, switch, location):
-    """A socket: ``shader`` plus the Emission shader ``emission``, or where the flat switch
-    (``switch``, its attribute node) is on, ``emission`` alone."""
-    nodes, links = tree.nodes, tree.links
-    x, y = location
-    added = nodes.new("ShaderNodeAddShader")
-    added.location = (x, y)
-    links.new(emission.outputs["Emission"], added.inputs[0])
-    links.new(shader.outputs[0], added.inputs[1])
-    mix = nodes.new("ShaderNodeMixShader")
-    mix.location = (x + 200, y)
-    links.new(switch.outputs["Fac"], mix.inputs["Fac"])
-    links.new(added.outputs[0], mix.inputs[1])
-    links.new(emission.outputs["Emission"], mix.inputs[2])
-    return mix.outputs[0]
 
 
 def _seen_by(tree, shader, surface, location):
@@ -258,7 +238,7 @@ def _emitted(tree, shader, location):
 
 def emission_output(tree, colour, flat_attribute, location):
     """An Emission shader of ``colour`` (a socket), or of the colour attribute ``flat_attribute``
-    where the scene's FLAT_SWITCH is on."""
+    where the scene's flat switch is on (``shader_nodes.FLAT_SWITCH``)."""
     nodes, links = tree.nodes, tree.links
     x, y = location
     switch = flat_switch(tree, (x - 200, y + 250))

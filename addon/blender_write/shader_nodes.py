@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-# The shader's base colour socket.
-BASE = {"ShaderNodeBsdfPrincipled": "Base Color", "ShaderNodeBsdfDiffuse": "Color"}
 # The panel's switch to the flat per-patch colours, read by every result material from the scene
 # (a View Layer attribute: looked up in the view layer, then the scene).
 FLAT_SWITCH = "radiosity.show_patches"
@@ -53,3 +51,20 @@ def flat_switch(tree, location):
     switch.label = "Flat patches (paper)"
     switch.location = location
     return switch
+
+
+def shader_or_flat(tree, shader, emission, switch, location):
+    """A socket: ``shader`` plus the Emission shader ``emission``, or where the flat switch
+    (``switch``, its attribute node) is on, ``emission`` alone."""
+    nodes, links = tree.nodes, tree.links
+    x, y = location
+    added = nodes.new("ShaderNodeAddShader")
+    added.location = (x, y)
+    links.new(emission.outputs["Emission"], added.inputs[0])
+    links.new(shader.outputs[0], added.inputs[1])
+    mix = nodes.new("ShaderNodeMixShader")
+    mix.location = (x + 200, y)
+    links.new(switch.outputs["Fac"], mix.inputs["Fac"])
+    links.new(added.outputs[0], mix.inputs[1])
+    links.new(emission.outputs["Emission"], mix.inputs[2])
+    return mix.outputs[0]
