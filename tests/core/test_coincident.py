@@ -42,3 +42,39 @@ def _inside(tri, p):
     m = np.array([[e1 @ e1, e1 @ e2], [e1 @ e2, e2 @ e2]])
     v, u = np.linalg.solve(m, [w @ e1, w @ e2])
     return v > 0 and u > 0 and u + v < 1
+
+
+def test_a_slabs_grid_of_partners_counts_what_testing_every_partner_counts():
+    """A slab (two triangles) under 36 small squares facing either way, and a tilted slab under
+    them too: a hit tests only the partners filed in its cell of the slab's grid, and counts what
+    testing every partner of its triangle counts, at 5,000 random points, on the squares' edges
+    and corners as well."""
+    rng = np.random.default_rng(7)
+    slab = np.array([[(0, 0, 0), (1.2, 0, 0), (1.2, 1.2, 0)], [(0, 0, 0), (1.2, 1.2, 0), (0, 1.2, 0)]], float)
+    squares = grid_triangles(6) * 1.5 + np.array([0.1, 0.1, 0.0])  # (0.15 m squares)
+    flipped = squares.copy()
+    flip = rng.random(len(flipped)) < 0.5
+    flipped[flip] = flipped[flip][:, ::-1]
+    tilt = np.array([[1, 0, 0], [0, 0.8, -0.6], [0, 0.6, 0.8]])
+    corners = np.concatenate([slab, flipped, slab @ tilt.T, flipped @ tilt.T])
+    contacts = Contacts(corners)
+    assert contacts.side.max() > 1  # (the slabs' partners are filed on grids)
+    points = np.concatenate([rng.random((5000, 2)) * 1.2, squares[:, :, :2].reshape(-1, 2)])
+    points = np.column_stack([points, np.zeros(len(points))])
+    triangle = np.where(points[:, 0] > points[:, 1], 0, 1)
+    for frame, first in ((np.eye(3), 0), (tilt, len(slab) + len(flipped))):
+        at = points @ frame.T
+        assert np.array_equal(contacts.faces_at(triangle + first, at), _every_partner(contacts, corners, triangle + first, at))
+
+
+def _every_partner(contacts, corners, triangle, points):
+    """faces_at by testing each hit against every partner of its triangle."""
+    out = np.ones(len(triangle), np.int64)
+    for k, (t, p) in enumerate(zip(triangle, points)):
+        for r in range(contacts.first[t], contacts.first[t + 1]):
+            tri = corners[contacts.partner[r]]
+            w = p - contacts.origin[r]
+            v, u = w @ contacts.to_v[r], w @ contacts.to_u[r]
+            if 1e-6 < v < 1 - 1e-6 and u > 1e-6 and u + v < 1 - 1e-6:
+                out[k] += 1 if contacts.same[r] else -1
+    return out

@@ -5,7 +5,9 @@ on a floor slab: the wall's bottom and the slab's top, opposite ways, net 0; a w
 slab to its bottom: both bottoms, the same way, 2), but a ray tracer returns one of them, and a
 winding count (:func:`.visibility.windings`) then misses the others. Here each traced triangle
 knows the other triangles in its plane whose bounding boxes meet its own, and which way each
-faces; a hit counts every one of them that holds the hit point strictly inside.
+faces; a hit counts every one of them that holds the hit point strictly inside. A triangle with many
+partners (a floor slab under every wall and table standing on it) files them on a grid over its own
+barycentric square, each in the cells its bounding box there covers: a hit tests its cell's only.
 """
 from __future__ import annotations
 
@@ -20,6 +22,8 @@ INSIDE_MARGIN = 1e-6
 MAX_PAIRS = 1 << 20  # (a plane of up to 1,024 triangles: the pair test's arrays stay ~40 MB)
 # Candidate pairs tested for overlap at once.
 PAIR_BLOCK = 1 << 16
+# A triangle's grid of its partners: cells a side, about the square root of its partners', at most.
+MOST_GRID = 8
 
 
 class Contacts:
@@ -45,13 +49,19 @@ class Contacts:
         pairs = []
         order = np.argsort(plane, kind="stable")
         cuts = np.flatnonzero(np.diff(plane[order])) + 1
-        low, high = c.min(axis=1), c.max(axis=1)
-        for group in np.split(order, cuts):
-            if group.size < 2 or not ok[group[0]] or group.size ** 2 > MAX_PAIRS:
+        low, high = np.ascontiguousarray(c.min(axis=1).T), np.ascontiguousarray(c.max(axis=1).T)  # (3,N)
+        starts, ends = np.concatenate([[0], cuts]), np.concatenate([cuts, [len(order)]])
+        for a, b in zip(starts[ends - starts > 1], ends[ends - starts > 1]):  # (a plane of two triangles or more)
+            group = order[a:b]
+            if not ok[group[0]] or group.size ** 2 > MAX_PAIRS:
                 continue
             a, b = np.repeat(group, group.size), np.tile(group, group.size)
-            meet = (a != b) & np.all((low[a] <= high[b] + OFFSET_TOLERANCE) & (low[b] <= high[a] + OFFSET_TOLERANCE), axis=1)
-            pairs.append(np.column_stack([a[meet], b[meet]]))
+            keep = a != b
+            for axis in range(3):  # (an axis at a time, on the pairs still meeting: (m,) arrays, no (m,3))
+                a, b = a[keep], b[keep]
+                keep = (low[axis].take(a) <= high[axis].take(b) + OFFSET_TOLERANCE) & \
+                    (low[axis].take(b) <= high[axis].take(a) + OFFSET_TOLERANCE)
+            pairs.append(np.column_stack([a[keep], b[keep]]))
         pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), np.int64)
         # only pairs whose insides overlap: a grid's neighbours share edges, and a hit tests each pair
         pairs = pairs[_overlapping(c, n, pairs)]
@@ -61,6 +71,46 @@ class Contacts:
         self.same = side[pairs[:, 0]] == side[pairs[:, 1]]
         # each partner's barycentric rows, made once: a hit is then two dot products a partner
         self.origin, self.to_v, self.to_u = _barycentric_rows(c[self.partner])
+        self._grid(c, pairs[:, 0])
+
+    def _grid(self, corners, owner):
+        """Each triangle's partners filed by cell of a G x G grid over its own barycentric square
+        (G about the square root of its partners, MOST_GRID at most; 1 without partners):
+        ``cell_start`` (N,) its first cell, ``side`` (N,) G, ``cell_first``/``cell_rows`` (CSR)
+        the partner rows of each cell."""
+        count = np.diff(self.first)
+        self.side = np.clip(np.ceil(np.sqrt(count)), 1, MOST_GRID).astype(np.int64)
+        self.cell_start = np.cumsum(self.side ** 2) - self.side ** 2
+        has = np.flatnonzero(count > 0)
+        self.own = tuple(np.zeros((len(count), 3)) for _ in range(3))
+        if has.size:
+            for mine, rows in zip(self.own, _barycentric_rows(corners[has])):
+                mine[has] = rows
+        # the partners' corners in their owner's barycentric frame: each one's box of cells
+        w = corners[self.partner] - self.own[0][owner][:, None, :]
+        v = np.einsum("pkj,pj->pk", w, self.own[1][owner])
+        u = np.einsum("pkj,pj->pk", w, self.own[2][owner])
+        g = self.side[owner]
+        low_i, high_i = (np.clip(np.floor(x * g), 0, g - 1).astype(np.int64) for x in (v.min(axis=1), v.max(axis=1)))
+        low_j, high_j = (np.clip(np.floor(x * g), 0, g - 1).astype(np.int64) for x in (u.min(axis=1), u.max(axis=1)))
+        wide, tall = high_i - low_i + 1, high_j - low_j + 1
+        per = wide * tall
+        row = np.repeat(np.arange(len(owner)), per)
+        k = np.arange(int(per.sum())) - np.repeat(np.cumsum(per) - per, per)
+        i, j = low_i[row] + k // tall[row], low_j[row] + k % tall[row]
+        cell = self.cell_start[owner[row]] + i * g[row] + j
+        order = np.argsort(cell, kind="stable")
+        cells = int(self.cell_start[-1] + self.side[-1] ** 2) if len(count) else 0
+        self.cell_first = np.searchsorted(cell[order], np.arange(cells + 1))
+        self.cell_rows = row[order]
+
+    def _cells(self, triangle, points):
+        """(n,) the grid cell of each hit on ``triangle`` (n,) at ``points`` (n,3)."""
+        w = points - self.own[0].take(triangle, axis=0)
+        g = self.side.take(triangle)
+        i = np.clip(np.floor(np.einsum("ij,ij->i", w, self.own[1].take(triangle, axis=0)) * g), 0, g - 1).astype(np.int64)
+        j = np.clip(np.floor(np.einsum("ij,ij->i", w, self.own[2].take(triangle, axis=0)) * g), 0, g - 1).astype(np.int64)
+        return self.cell_start.take(triangle) + i * g + j
 
     @property
     def any(self):
@@ -70,25 +120,29 @@ class Contacts:
         """(n,) int: for each hit on ``triangle`` (n,) at ``points`` (n,3) float64, the faces
         met there counted as the hit face counts: 1 plus each coincident face facing the same
         way, minus each facing the other way (holding the point strictly inside)."""
-        count = self.first[triangle + 1] - self.first[triangle]
         out = np.ones(len(triangle), np.int64)
-        ends = np.cumsum(count)
-        if ends.size == 0 or ends[-1] == 0:
+        some = np.flatnonzero(self.first.take(triangle + 1) > self.first.take(triangle))
+        if some.size == 0:
             return out
-        # a block of hits at a time, about PAIR_BLOCK pairs each: a big slab's hits meet dozens of
-        # partners, and the pairs' arrays of a whole cast (millions) went out to memory and back
+        triangle, points = triangle.take(some), points.take(some, axis=0)
+        cell = self._cells(triangle, points)
+        count = self.cell_first.take(cell + 1) - self.cell_first.take(cell)
+        ends = np.cumsum(count)
+        # a block of hits at a time, about PAIR_BLOCK pairs each: the pairs' arrays of a whole cast
+        # (millions) went out to memory and back
         cuts = np.searchsorted(ends, np.arange(PAIR_BLOCK, ends[-1], PAIR_BLOCK), side="left")
         for a, b in zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [len(triangle)]])):
             if b > a:
-                out[a:b] += self._met(triangle[a:b], points[a:b], count[a:b])
+                out[some[a:b]] += self._met(cell[a:b], points[a:b], count[a:b])
         return out
 
-    def _met(self, triangle, points, count):
-        """(n,) the coincident faces each hit meets, counted +1 facing the hit face's way, -1 the other."""
-        hit = np.repeat(np.arange(len(triangle)), count)
+    def _met(self, cell, points, count):
+        """(n,) the coincident faces each hit (in ``cell``, with ``count`` partners filed there)
+        meets, counted +1 facing the hit face's way, -1 the other."""
+        hit = np.repeat(np.arange(len(cell)), count)
         if hit.size == 0:
             return 0
-        row = np.repeat(self.first[triangle] - np.cumsum(count) + count, count) + np.arange(hit.size)
+        row = self.cell_rows.take(np.repeat(self.cell_first.take(cell) - np.cumsum(count) + count, count) + np.arange(hit.size))
         w = points.take(hit, axis=0)
         w -= self.origin.take(row, axis=0)
         v = np.einsum("ij,ij->i", w, self.to_v.take(row, axis=0))
@@ -97,7 +151,7 @@ class Contacts:
         u = np.einsum("ij,ij->i", w.take(near, axis=0), self.to_u.take(row, axis=0))
         inside = (u > INSIDE_MARGIN) & (u + v < 1 - INSIDE_MARGIN)
         signs = np.where(self.same.take(row.compress(inside)), 1.0, -1.0)
-        return np.bincount(hit.take(near).compress(inside), weights=signs, minlength=len(triangle)).astype(np.int64)
+        return np.bincount(hit.take(near).compress(inside), weights=signs, minlength=len(cell)).astype(np.int64)
 
 
 def _overlapping(corners, normal, pairs):
@@ -113,8 +167,9 @@ def _overlapping(corners, normal, pairs):
             for i in range(3):
                 axis = np.cross(tri[:, (i + 1) % 3] - tri[:, i], n)
                 axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
-                pa, pb = np.einsum("nkj,nj->nk", a, axis), np.einsum("nkj,nj->nk", b, axis)
-                low_a, high_a, low_b, high_b = pa.min(axis=1), pa.max(axis=1), pb.min(axis=1), pb.max(axis=1)
+                pa, pb = np.einsum("nkj,nj->kn", a, axis), np.einsum("nkj,nj->kn", b, axis)  # (3,n): rows, not a short axis
+                low_a, high_a = np.minimum(np.minimum(pa[0], pa[1]), pa[2]), np.maximum(np.maximum(pa[0], pa[1]), pa[2])
+                low_b, high_b = np.minimum(np.minimum(pb[0], pb[1]), pb[2]), np.maximum(np.maximum(pb[0], pb[1]), pb[2])
                 apart |= (high_a <= low_b + OFFSET_TOLERANCE) | (high_b <= low_a + OFFSET_TOLERANCE)
         keep[start:start + PAIR_BLOCK] = ~apart
     return keep
