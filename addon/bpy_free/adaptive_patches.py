@@ -113,7 +113,7 @@ def of_cells(objects, patches: Patches, cells, geometry_key, steps, layers=False
                          f"limit of {MAX_PATCHES:,}: use a larger patch size or a lower detail")
     if cached is None:
         GEOMETRY_CACHE.store(geometry_key, meshes, combined)
-    materials = [patch_materials(o, m) for o, m in zip(objects, meshes)]
+    materials = [_unsplit_materials(patches, k, c) or patch_materials(o, m) for k, (o, m, c) in enumerate(zip(objects, meshes, cells))]
     reflectivity = np.concatenate([r for r, _ in materials]).reshape(-1, 3)
     emission = np.concatenate([e for _, e in materials]).reshape(-1, 3)
     names = {n: i for i, n in enumerate(patches.material_names)}  # (per-light groups read each patch's)
@@ -141,6 +141,17 @@ def refinement_text(patches: Patches) -> str:
     if not ROUNDS or solved:
         return text
     return text + (" after a refining solve" if ROUNDS == 1 else f" after up to {ROUNDS} refining solves")
+
+
+def _unsplit_materials(patches: Patches, k, cells):
+    """(reflectivity, emission) of object ``k``'s patches where none of its ``cells`` split (the
+    first patches, in order): the first patches' own, not read again (a texture's mean over each
+    patch's footprint is most of a material's reading); else None."""
+    first = patches.meshes[k].patch_count
+    if len(cells.level) != first or cells.level.max(initial=0) > 0 or not np.array_equal(cells.origin, np.arange(first)):
+        return None
+    start = sum(m.patch_count for m in patches.meshes[:k])
+    return patches.reflectivity[start:start + first].copy(), patches.emission[start:start + first].copy()
 
 
 def _copy(mesh, shading=True):

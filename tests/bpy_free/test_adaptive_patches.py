@@ -133,3 +133,21 @@ def test_a_rerun_of_the_split_patches_with_other_materials_reuses_their_meshes_g
     np.testing.assert_array_equal(rescene.hidden, scene.hidden)
     np.testing.assert_allclose(rescene.reflectivity[: again.combined.patch_offsets[1]],
                                0.5 * scene.reflectivity[: first.combined.patch_offsets[1]])
+
+
+def test_the_outline_split_reads_the_materials_of_the_objects_it_split_only(monkeypatch):
+    """An object none of whose patches split keeps its first patches' materials (a texture's mean
+    over each patch is most of a material's reading: read once, not again); the split ceiling's
+    object is read for its new patches. Before, every object was read twice."""
+    objects = slab_room()
+    objects[1].face_emission = np.array([[5.0, 4.0, 3.0]] * 5 + [[1.0, 2.0, 3.0]])
+    adaptive_patches._LAST.key = None
+    first = patches.make_patches(objects, 0.5, layers=True)
+    read = []
+    real = adaptive_patches.patch_materials
+    monkeypatch.setattr(adaptive_patches, "patch_materials", lambda o, m: read.append(o.name) or real(o, m))
+    split = adaptive_patches.refined(objects, first, "OFF", layers=True)
+    assert read == ["Room"]
+    offset = split.combined.patch_offsets[1]
+    np.testing.assert_array_equal(split.emission[offset:], first.emission[first.combined.patch_offsets[1]:])
+    np.testing.assert_array_equal(split.emission[offset:], objects[1].face_emission[split.meshes[1].patch_face])
