@@ -262,16 +262,17 @@ def emission_output(tree, colour, flat_attribute, location):
 
 def _keep_only_upstream(tree, outputs):
     """Remove every node that does not feed ``outputs`` (the original shaders, other outputs)."""
+    feeding = {}  # node name -> the nodes linked into it (one pass over the links: a socket's
+    for link in tree.links:  # .links scans them all again each time it is read)
+        feeding.setdefault(link.to_node.name, []).append(link.from_node)
     keep = {output.name for output in outputs}
     stack = list(outputs)
     while stack:
         node = stack.pop()
-        for socket in node.inputs:
-            for link in socket.links:
-                source = link.from_node
-                if source.name not in keep:
-                    keep.add(source.name)
-                    stack.append(source)
+        for source in feeding.get(node.name, ()):
+            if source.name not in keep:
+                keep.add(source.name)
+                stack.append(source)
     for node in [n for n in tree.nodes if n.name not in keep]:
         tree.nodes.remove(node)
 
