@@ -23,9 +23,9 @@ _registered_modules = []
 
 def _glue_modules():
     from .ui import estimate
-    from .ui import operators, panel, properties, relight, relight_update
+    from .ui import operators, panel, properties, relight, relight_update, world_watch
 
-    return [properties, operators, panel, estimate, relight, relight_update]
+    return [properties, operators, panel, estimate, relight, relight_update, world_watch]
 
 
 def register():

@@ -8,7 +8,8 @@ EEVEE: its surface to camera rays (the sky through a window stays in the picture
 probes. Cycles keeps the world's own output (set to Cycles where it was for every engine), and
 everything the add-on reads of the world (its light, its signature) ignores what is added here
 (``is_ours``). Taken out again, the user's output put back as it was, when a run no longer needs
-it (``restore``). EEVEE's own reflections (Raytracing, reflection probes) would add the room's
+it (``restore``), or when no object shows such a result any more (``restore_unless_shown``: the
+results deleted by hand; the sidebar's watch, ``ui.world_watch``, calls it). EEVEE's own reflections (Raytracing, reflection probes) would add the room's
 light again: a run says so (``reflection_notes``).
 """
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 from ..blender_read.lights import EEVEE_WORLD_PREFIX as PREFIX
 from ..blender_read.lights import added_for_eevee as is_ours
 from ..blender_read.lights import world_output as user_output
+from .materials import HIGHLIGHTS_PROPERTY
 
 WAS_ALL = "radiosity_output_was_all"  # on our output: the user's output was for every engine
 OUTPUT = PREFIX + "World Output"
@@ -74,6 +76,30 @@ def restore(world):
             output.is_active_output = True
     for node in [n for n in tree.nodes if is_ours(n)]:
         tree.nodes.remove(node)
+
+
+def has_output(world):
+    """Whether ``world`` (or None) has the EEVEE output ``camera_only`` adds (a dictionary look-up:
+    cheap enough for every depsgraph update)."""
+    tree = getattr(world, "node_tree", None)
+    return tree is not None and tree.nodes.get(OUTPUT) is not None
+
+
+def restore_unless_shown(world, scenes):
+    """``restore``s ``world`` where it has our EEVEE output and no object of ``scenes`` (those the
+    world lights) shows a material whose EEVEE output draws the highlights; True where it did.
+    A result moved out of its collection or copied still counts (it still draws the highlights)."""
+    if not has_output(world):
+        return False
+    if any(_shows_highlights(o) for scene in scenes for o in scene.objects):
+        return False
+    restore(world)
+    return True
+
+
+def _shows_highlights(obj):
+    return obj.type == "MESH" and any(slot.material is not None and slot.material.get(HIGHLIGHTS_PROPERTY)
+                                      for slot in obj.material_slots)
 
 
 def reflection_notes(scene):

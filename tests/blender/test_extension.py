@@ -76,9 +76,9 @@ def test_register_and_unregister_leave_no_trace():
                                         "VIEW3D_PT_radiosity", "RADIOSITY_OT_relight", "VIEW3D_PT_radiosity_relight",
                                         "RADIOSITY_OT_update"]
         assert during["scene_prop"] and during["ops"] == ["solve", "cancel", "relight", "update"]
-        # the estimate's and the live relight's
-        assert during["depsgraph_handlers"] == before["depsgraph_handlers"] + 2
-        assert during["load_handlers"] == before["load_handlers"] + 1  # (relight's arrays read on open)
+        # the estimate's, the live relight's and the world watch's
+        assert during["depsgraph_handlers"] == before["depsgraph_handlers"] + 3
+        assert during["load_handlers"] == before["load_handlers"] + 2  # (relight's arrays read on open, the world watch)
         addon.unregister()
         assert _trace() == before
 

@@ -98,3 +98,54 @@ def test_eevees_own_reflections_are_named_by_the_run(blender):
     scene.collection.objects.link(probe)
     notes = eevee_world.reflection_notes(scene)
     assert len(notes) == 2 and "Raytracing is on" in notes[0] and "(Mirror Probe)" in notes[1]
+
+
+def test_results_deleted_by_hand_give_the_world_back(blender):
+    """The results that need the world's EEVEE output deleted by hand (no run to take it out),
+    the next depsgraph update puts the user's world back as it was; while one such result is
+    left, moved out of its collection or not, the output stays. Before, it stayed until a run
+    without highlights, and objects outside the selection lost the world's light in EEVEE."""
+    from benchmarks import picture as pic
+
+    world = _sky()
+    _glossy_box()
+    scene = bpy.context.scene
+    pic.source_objects()
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    assert eevee_world.has_output(world)
+    results = [o for o in scene.objects if o.name.endswith(" Radiosity")]
+    assert results
+    kept = results[0]
+    for o in results[1:]:
+        bpy.data.objects.remove(o, do_unlink=True)
+    for collection in list(kept.users_collection):  # (moved out of the results' collection: still shown)
+        collection.objects.unlink(kept)
+    scene.collection.objects.link(kept)
+    bpy.context.view_layer.update()
+    assert eevee_world.has_output(world)
+    bpy.data.objects.remove(kept, do_unlink=True)
+    bpy.context.view_layer.update()
+    assert _outputs(world) == [("World Output", "ALL")]
+    assert not any(n.name.startswith(eevee_world.PREFIX) for n in world.node_tree.nodes)
+
+
+def test_a_file_saved_with_the_output_and_without_its_results_is_given_its_world_back_on_load(blender):
+    """Results deleted while the watch was not there (the add-on off, an older version): the
+    output is taken out when the file is opened (the load handler), not left for good."""
+    from addon.ui import world_watch
+    from benchmarks import picture as pic
+
+    world = _sky()
+    _glossy_box()
+    pic.source_objects()
+    assert bpy.ops.radiosity.solve() == {"FINISHED"}
+    world_watch.unregister()
+    try:
+        for o in [o for o in bpy.context.scene.objects if o.name.endswith(" Radiosity")]:
+            bpy.data.objects.remove(o, do_unlink=True)
+        bpy.context.view_layer.update()
+        assert eevee_world.has_output(world)  # (nothing watched)
+        world_watch.on_load(None)
+        assert _outputs(world) == [("World Output", "ALL")]
+    finally:
+        world_watch.register()

@@ -1,0 +1,51 @@
+"""The world's EEVEE output follows the results (bpy): where the results that need it
+(``blender_write.eevee_world``) are deleted by hand, the user's world is put back as it was.
+
+A depsgraph update costs a dictionary look-up while the world has no such output; while it has
+one, the scene's objects are looked at only when objects or collections changed (a deletion),
+not on every move of a transform."""
+from __future__ import annotations
+
+import bpy
+from bpy.app.handlers import persistent
+
+from ..blender_write import eevee_world
+
+
+def check(world):
+    """``eevee_world.restore_unless_shown`` for ``world`` and the scenes it lights; True where it
+    put the world back."""
+    if world is None or not eevee_world.has_output(world):
+        return False
+    return eevee_world.restore_unless_shown(world, [s for s in bpy.data.scenes if s.world == world])
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph):
+    world = getattr(scene, "world", None)
+    if not eevee_world.has_output(world):
+        return
+    if depsgraph.id_type_updated("OBJECT") or depsgraph.id_type_updated("COLLECTION"):
+        check(world)
+
+
+@persistent
+def on_load(_):
+    """A file saved with the output but without the results that need it (deleted before this
+    watch existed, or with the add-on off)."""
+    for world in bpy.data.worlds:
+        check(world)
+
+
+def register():
+    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+    if on_load not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(on_load)
+
+
+def unregister():
+    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    if on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(on_load)
