@@ -85,13 +85,14 @@ def has_output(world):
     return tree is not None and tree.nodes.get(OUTPUT) is not None
 
 
-def restore_unless_shown(world, scenes):
+def restore_unless_shown(world, scenes, first=()):
     """``restore``s ``world`` where it has our EEVEE output and no object of ``scenes`` (those the
     world lights) shows a material whose EEVEE output draws the highlights; True where it did.
-    A result moved out of its collection or copied still counts (it still draws the highlights)."""
+    The objects ``first`` (the results' collections) are looked at before the scenes' others: a
+    result moved out of its collection or copied still counts (it still draws the highlights)."""
     if not has_output(world):
         return False
-    if any(_shows_highlights(o) for scene in scenes for o in scene.objects):
+    if any(_shows_highlights(o) for o in first) or any(_shows_highlights(o) for scene in scenes for o in scene.objects):
         return False
     restore(world)
     return True

@@ -2,14 +2,15 @@
 (``blender_write.eevee_world``) are deleted by hand, the user's world is put back as it was.
 
 A depsgraph update costs a dictionary look-up while the world has no such output; while it has
-one, the scene's objects are looked at only when objects or collections changed (a deletion),
-not on every move of a transform."""
+one and objects or collections changed, the results' collections are looked at (a few objects),
+and every object of the scenes only where none there shows the highlights."""
 from __future__ import annotations
 
 import bpy
 from bpy.app.handlers import persistent
 
 from ..blender_write import eevee_world
+from ..blender_write.results import previous_results
 
 
 def check(world):
@@ -17,7 +18,8 @@ def check(world):
     put the world back."""
     if world is None or not eevee_world.has_output(world):
         return False
-    return eevee_world.restore_unless_shown(world, [s for s in bpy.data.scenes if s.world == world])
+    scenes = [s for s in bpy.data.scenes if s.world == world]
+    return eevee_world.restore_unless_shown(world, scenes, (o for s in scenes for o in previous_results(s)))
 
 
 @persistent
