@@ -168,10 +168,28 @@ def test_the_new_points_direct_light_is_the_lamps_exact_light():
     """Every corner of the split cells, new points included, gets the point lamp's I cos / r^2 (a
     hundredth of the way to its patch's centre, as every corner)."""
     mesh, scene = _ceiling([PointLight(LAMP, np.ones(3))])
-    _, _, (fine_surface, fine_direct, shown) = _display(mesh, scene, _patch_means_exact(scene))
+    surface, _, (fine_surface, fine_direct, shown) = _display(mesh, scene, _patch_means_exact(scene))
     points = shown.vertices[shown.triangles]
     inward = points + point_direct.INWARD * (fine_surface.patch_centroid[shown.triangle_patch][:, None] - points)
+    # (the mesh's own points where their patches share one evaluation: there, shared_corners')
+    coarse = _evaluated(surface, scene)
+    for t, c in zip(*np.nonzero(shown.triangles < len(mesh.points))):
+        inward[t, c] = coarse[(int(shown.triangle_patch[t]), int(shown.triangles[t, c]))]
     np.testing.assert_allclose(fine_direct.corners[..., 0], _exact(inward), rtol=1e-4)
+
+
+def _evaluated(surface, scene):
+    """{(patch, vertex): where the coarse corner there is evaluated} (``point_direct.corner_direct``)."""
+    from addon.core.display.shared_corners import shared_rows
+
+    P = scene.patch_count
+    keys, first = np.unique(surface.point.ravel().astype(np.int64) * P + np.repeat(surface.triangle_patch, 3),
+                            return_index=True)
+    vertex = scene.triangles.ravel()[first]
+    position = scene.vertices[vertex]
+    rows, read, towards = shared_rows(surface, scene.geometry, keys // P, keys % P, position, point_direct.INWARD)
+    at = position[rows] + point_direct.INWARD * (towards - position[rows])
+    return {(int(p), int(v)): at[read[k]] for k, (p, v) in enumerate(zip(keys % P, vertex))}
 
 
 def test_flat_light_splits_nothing():

@@ -18,9 +18,17 @@ def _surface(scene):
 
 
 def _shown_points(scene, surface):
-    """(T,3,3) where each corner's light is evaluated: a hundredth of the way to its patch's centre."""
-    corners = scene.vertices[scene.triangles]
-    return corners + point_direct.INWARD * (surface.patch_centroid[scene.triangle_patch][:, None, :] - corners)
+    """(T,3,3) where each corner's light is evaluated: a hundredth of the way to its patch's centre,
+    or where its point is shared (``shared_corners``), to the mean of its patches' centres."""
+    from addon.core.display.shared_corners import shared_rows
+
+    P = scene.patch_count
+    keys, first, corner_key = np.unique(surface.point.ravel().astype(np.int64) * P + np.repeat(surface.triangle_patch, 3),
+                                        return_index=True, return_inverse=True)
+    position = scene.vertices[scene.triangles.ravel()[first]]
+    rows, read, towards = shared_rows(surface, scene.geometry, keys // P, keys % P, position, point_direct.INWARD)
+    at = position[rows] + point_direct.INWARD * (towards - position[rows])
+    return at[read[corner_key.ravel()]].reshape(-1, 3, 3)
 
 
 def _point_lamp_light(points, normal, intensity=1.0):

@@ -39,8 +39,9 @@ the world's own light pixel by pixel, and the light shown is H less each patch's
 (``live_sources``), smooth.
 
 A corner is evaluated a hundredth of the way from its point towards its patch's centre (inside
-the patch: a point on the edge shared with a wall standing on it would graze the wall). A
-corner inside another object (a floor's corner under a box; ``visibility.buried_at``) takes the
+the patch: a point on the edge shared with a wall standing on it would graze the wall); the
+corners at a flat surface's inner point, clear of anything else, share one evaluation
+(``shared_corners``: one light there, half the shadow rays). A corner inside another object (a floor's corner under a box; ``visibility.buried_at``) takes the
 mean of its patch's corners that are not: the camera never sees it, and a dark corner would
 spread a dark rim onto the visible part.
 """
@@ -56,6 +57,7 @@ from ..lights.lamp_choice import LampChoice
 from ..lights.lights import SunLight, WorldLight
 from ..names import EXIT_RANDOM, FINITE
 from .sample_rounds import Part, rounds, sampled
+from .shared_corners import shared_rows
 from ..methods.tables import WalkTables
 from ..scene.visibility import buried_at
 
@@ -98,20 +100,25 @@ def corner_direct(surface, scene, triangles, samples=SAMPLES, seed=0, light_grou
     keys, first, corner_key = np.unique(surface.point.ravel().astype(np.int64) * P + np.repeat(surface.triangle_patch, 3),
                                         return_index=True, return_inverse=True)
     patch = keys % P
-    del keys
     position = scene.vertices[np.asarray(triangles).ravel()[first]]
     del first
-    value = points_direct(surface, scene, position, patch, samples, seed, light_group, patch_group, groups, deadline, light)
-    corners = value[..., corner_key.ravel(), :].reshape(value.shape[:-2] + (-1, 3, 3))
+    # (a flat surface's inner points one evaluation each, which their corners share: shared_corners)
+    rows, read, towards = shared_rows(surface, scene.geometry, keys // P, patch, position, INWARD)
+    del keys
+    value = points_direct(surface, scene, position[rows], patch[rows], samples, seed, light_group, patch_group, groups,
+                          deadline, light, towards=towards)
+    corners = value[..., read[corner_key.ravel()], :].reshape(value.shape[:-2] + (-1, 3, 3))
     return CornerDirect(corners, patch_means(surface, corners))
 
 
 def points_direct(surface, scene, position, patch, samples=SAMPLES, seed=0, light_group=None, patch_group=None, groups=0,
-                  deadline=None, light=None, retries=None):
-    """([G,]n,3) the direct light at the points ``position`` (n,3, moved in place: INWARD) of
-    ``patch`` (n,), as ``corner_direct`` takes it at corners (float32 without groups), the noisy ones
-    sampled again ``retries`` times (None: RETRIES)."""
-    towards = surface.patch_centroid[patch]  # (in place: four (n,3) temporaries were most of this stage's memory)
+                  deadline=None, light=None, retries=None, towards=None):
+    """([G,]n,3) the direct light at the points ``position`` (n,3, moved in place: INWARD, towards
+    ``towards`` (n,3), by default their patches' centres) of ``patch`` (n,), as ``corner_direct``
+    takes it at corners (float32 without groups), the noisy ones sampled again ``retries`` times
+    (None: RETRIES)."""
+    # (in place: four (n,3) temporaries were most of this stage's memory)
+    towards = surface.patch_centroid[patch] if towards is None else np.array(towards, np.float64)
     towards -= position
     towards *= INWARD
     position += towards
