@@ -33,34 +33,48 @@ def shared_rows(surface, g, point, patch, position, inward):
     row of ``rows`` each corner reads, ``towards`` (m,3) each evaluation's inward target: its
     patch's centre, or the mean of its point's patches' centres where they share it)."""
     K = len(point)
-    centre = surface.patch_centroid[patch]
-    alone = (np.arange(K), np.arange(K), centre)
     if K == 0 or g.regions is not None:  # (regions: each traced in a frame of its own)
-        return alone
+        return np.arange(K), np.arange(K), surface.patch_centroid[patch]
     starts = np.flatnonzero(np.r_[True, point[1:] != point[:-1]])
     count = np.diff(np.r_[starts, K])
     group = np.repeat(np.arange(starts.size), count)
-    normal = surface.patch_normal[patch]
-    flat = np.einsum("ij,ij->i", normal, normal[starts][group]) >= COPLANAR
-    # (a patch another object runs into keeps its corners: one inside the object takes its own patch's seen ones)
-    apart = ~flat if g.buried is None else ~flat | np.isin(patch, np.concatenate([g.buried.patch, g.buried.whole]))
+    # (one plane a patch, by its normal: (K,) ids, not (K,3) normals: the memory of the largest scenes)
+    plane = _planes(surface.patch_normal)
+    apart = plane[patch] != plane[patch[starts]][group]
+    if g.buried is not None:  # (a patch another object runs into keeps its corners: one inside the object takes its own patch's seen ones)
+        apart |= np.isin(patch, np.concatenate([g.buried.patch, g.buried.whole]))
     candidate = surface.smooth_point[point[starts]] & (count > 1) & (np.bincount(group, weights=apart, minlength=starts.size) == 0)
+    del apart
     if not candidate.any():
-        return alone
-    step = inward * np.linalg.norm(centre - position, axis=1)
+        return np.arange(K), np.arange(K), surface.patch_centroid[patch]
+    centre = surface.patch_centroid[patch]
+    centre -= position
     reach = np.zeros(starts.size)
-    np.maximum.at(reach, group, step)
+    np.maximum.at(reach, group, inward * np.sqrt(np.einsum("ij,ij->i", centre, centre)))
+    centre += position
     ask = np.flatnonzero(candidate)
     candidate[ask[~_clear(g, position[starts[ask]], patch[starts[ask]], reach[ask])]] = False
     shared = candidate[group]
     first = np.zeros(K, bool)
     first[starts] = True
-    rows = np.flatnonzero(~shared | first)
-    read = np.cumsum(~shared | first) - 1
+    evaluated = ~shared | first
+    rows = np.flatnonzero(evaluated)
+    read = np.cumsum(evaluated) - 1
     read[shared] = read[starts[group[shared]]]
-    mean = np.stack([np.bincount(group, weights=centre[:, k], minlength=starts.size) / count for k in range(3)], axis=1)
-    towards = np.where(shared[rows, None], mean[group[rows]], centre[rows])
+    towards = centre[rows]
+    at = np.flatnonzero(shared[rows])
+    for k in range(3):  # (the mean of its point's patches' centres, an axis at a time)
+        towards[at, k] = (np.bincount(group, weights=centre[:, k], minlength=starts.size) / count)[group[rows[at]]]
     return rows, read, towards
+
+
+def _planes(normal):
+    """(P,) int64 an id of each patch's normal direction (rounded to COPLANAR's tolerance): patches
+    round one point with the same id lie in one plane."""
+    step = np.sqrt(2.0 * (1.0 - COPLANAR))
+    most = int(np.ceil(1.0 / step)) + 1
+    key = np.round(np.asarray(normal, np.float64) / step).astype(np.int64) + most  # (0 .. 2 most, three of them in an int64)
+    return (key[:, 0] * (2 * most + 1) + key[:, 1]) * (2 * most + 1) + key[:, 2]
 
 
 def _clear(g, position, patch, reach):
