@@ -23,7 +23,7 @@ import numpy as np
 
 from ..scene.visibility import tangents
 
-COPLANAR = 1.0 - 1e-9  # the patches round a point lie in one plane: their normals' dot at least this
+COPLANAR = 1.0 - 1e-9  # the patches round a point lie in one plane: their normals' dot about this at least (_planes)
 CLEAR_OFFSETS = 4.0  # a probe segment's half length at least this many ray offsets
 
 
@@ -48,10 +48,12 @@ def shared_rows(surface, g, point, patch, position, inward):
     if not candidate.any():
         return np.arange(K), np.arange(K), surface.patch_centroid[patch]
     centre = surface.patch_centroid[patch]
-    centre -= position
+    squared = np.zeros(K)
+    for k in range(3):  # (each corner's distance to its patch's centre, an axis at a time)
+        squared += (centre[:, k] - position[:, k]) ** 2
     reach = np.zeros(starts.size)
-    np.maximum.at(reach, group, inward * np.sqrt(np.einsum("ij,ij->i", centre, centre)))
-    centre += position
+    np.maximum.at(reach, group, inward * np.sqrt(squared))
+    del squared
     ask = np.flatnonzero(candidate)
     candidate[ask[~_clear(g, position[starts[ask]], patch[starts[ask]], reach[ask])]] = False
     shared = candidate[group]
