@@ -19,6 +19,7 @@ from ..bpy_free import pipeline
 from ..blender_read.objects import skipped_objects, source_objects
 from ..blender_read.selection import read_selection
 from ..bpy_free import worker
+from . import handlers
 
 DELAY_SECONDS = 0.3
 POLL_SECONDS = 0.1
@@ -147,13 +148,11 @@ def _on_depsgraph_update(scene, depsgraph):
 
 
 def register():
-    if _on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
+    handlers.attach(("depsgraph_update_post", _on_depsgraph_update))
 
 
 def unregister():
-    if _on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
+    handlers.detach(("depsgraph_update_post", _on_depsgraph_update))
     for fn in (_start, _poll, _redraw_all):
         if bpy.app.timers.is_registered(fn):
             bpy.app.timers.unregister(fn)

@@ -14,6 +14,7 @@ from ..blender_read import sources
 from ..blender_write import relight_store
 from ..blender_write.materials import LIVE_EMITS_PROPERTY, TEXTURED_PROPERTY, follow_emission, is_textured_material
 from ..bpy_free import relit
+from . import handlers
 
 LIVE_DELAY = 0.02  # seconds: changes that come together (a slider drag) relight once
 _STATE = {"pending": False, "seconds": 0.0, "generation": 0, "panel": (None, None)}
@@ -255,22 +256,17 @@ def on_load(_):
 
 
 classes = (RADIOSITY_OT_relight, VIEW3D_PT_radiosity_relight)
+HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("load_post", on_load))
 
 
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
-    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
-    if on_load not in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.append(on_load)
+    handlers.attach(*HANDLERS)
 
 
 def unregister():
-    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
-    if on_load in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(on_load)
+    handlers.detach(*HANDLERS)
     if bpy.app.timers.is_registered(live_tick):
         bpy.app.timers.unregister(live_tick)
     _STATE["pending"] = False

@@ -11,13 +11,12 @@ from bpy.app.handlers import persistent
 
 from ..blender_write import eevee_world
 from ..blender_write.results import previous_results
+from . import handlers
 
 
 def check(world):
     """``eevee_world.restore_unless_shown`` for ``world`` and the scenes it lights; True where it
     put the world back."""
-    if world is None or not eevee_world.has_output(world):
-        return False
     scenes = [s for s in bpy.data.scenes if s.world == world]
     return eevee_world.restore_unless_shown(world, scenes, (o for s in scenes for o in previous_results(s)))
 
@@ -39,15 +38,12 @@ def on_load(_):
         check(world)
 
 
+HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("load_post", on_load))
+
+
 def register():
-    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
-    if on_load not in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.append(on_load)
+    handlers.attach(*HANDLERS)
 
 
 def unregister():
-    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
-    if on_load in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(on_load)
+    handlers.detach(*HANDLERS)
