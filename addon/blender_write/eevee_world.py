@@ -9,8 +9,8 @@ probes. Cycles keeps the world's own output (set to Cycles where it was for ever
 everything the add-on reads of the world (its light, its signature) ignores what is added here
 (``is_ours``). Taken out again, the user's output put back as it was, when a run no longer needs
 it (``restore``), or when no object shows such a result any more (``restore_unless_shown``: the
-results deleted by hand; the sidebar's watch, ``ui.world_watch``, calls it). EEVEE's own reflections (Raytracing, reflection probes) would add the room's
-light again: a run says so (``reflection_notes``).
+results deleted by hand; ``ui.world_watch`` calls it). EEVEE's own reflections (Raytracing,
+reflection probes) would add the room's light again: a run says so (``reflection_notes``).
 """
 from __future__ import annotations
 

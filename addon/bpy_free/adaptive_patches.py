@@ -150,8 +150,8 @@ def _unsplit_materials(patches: Patches, k, cells):
     first = patches.meshes[k].patch_count
     if len(cells.level) != first or cells.level.max(initial=0) > 0 or not np.array_equal(cells.origin, np.arange(first)):
         return None
-    start = sum(m.patch_count for m in patches.meshes[:k])
-    return patches.reflectivity[start:start + first].copy(), patches.emission[start:start + first].copy()
+    rows = patches.combined.patch_slice(k)
+    return patches.reflectivity[rows].copy(), patches.emission[rows].copy()
 
 
 def _copy(mesh, shading=True):

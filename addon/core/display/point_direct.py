@@ -41,9 +41,9 @@ the world's own light pixel by pixel, and the light shown is H less each patch's
 A corner is evaluated a hundredth of the way from its point towards its patch's centre (inside
 the patch: a point on the edge shared with a wall standing on it would graze the wall); the
 corners at a flat surface's inner point, clear of anything else, share one evaluation
-(``shared_corners``: one light there, half the shadow rays). A corner inside another object (a floor's corner under a box; ``visibility.buried_at``) takes the
-mean of its patch's corners that are not: the camera never sees it, and a dark corner would
-spread a dark rim onto the visible part.
+(``shared_corners``: one light there, half the shadow rays). A corner inside another object (a
+floor's corner under a box; ``visibility.buried_at``) takes the mean of its patch's corners that
+are not: the camera never sees it, and a dark corner would spread a dark rim onto the visible part.
 """
 from __future__ import annotations
 

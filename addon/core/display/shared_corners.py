@@ -41,7 +41,7 @@ def shared_rows(surface, g, point, patch, position, inward):
     # (one plane a patch, by its normal: (K,) ids, not (K,3) normals: the memory of the largest scenes)
     plane = _planes(surface.patch_normal)
     apart = plane[patch] != plane[patch[starts]][group]
-    if g.buried is not None:  # (a patch another object runs into keeps its corners: one inside the object takes its own patch's seen ones)
+    if g.buried is not None:  # (a patch another object runs into keeps its own corners: _fill_buried's)
         apart |= np.isin(patch, np.concatenate([g.buried.patch, g.buried.whole]))
     candidate = surface.smooth_point[point[starts]] & (count > 1) & (np.bincount(group, weights=apart, minlength=starts.size) == 0)
     del apart

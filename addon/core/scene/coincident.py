@@ -51,8 +51,9 @@ class Contacts:
         cuts = np.flatnonzero(np.diff(plane[order])) + 1
         low, high = np.ascontiguousarray(c.min(axis=1).T), np.ascontiguousarray(c.max(axis=1).T)  # (3,N)
         starts, ends = np.concatenate([[0], cuts]), np.concatenate([cuts, [len(order)]])
-        for a, b in zip(starts[ends - starts > 1], ends[ends - starts > 1]):  # (a plane of two triangles or more)
-            group = order[a:b]
+        several = ends - starts > 1  # (a plane of two triangles or more)
+        for start, end in zip(starts[several], ends[several]):
+            group = order[start:end]
             if not ok[group[0]] or group.size ** 2 > MAX_PAIRS:
                 continue
             a, b = np.repeat(group, group.size), np.tile(group, group.size)
