@@ -7,7 +7,7 @@ from boxes import rectangles_to_mesh
 from overlap_boxes import slab_room
 
 from addon.core import PatchScene
-from addon.core.display import live_sources, point_direct, smoothing
+from addon.core.display import live_sources, point_direct, slack, smoothing
 from addon.core.lights.lights import AreaLight, PointLight, WorldLight
 
 LAMP = np.array([0.4, 0.55, 0.8])
@@ -240,7 +240,9 @@ def test_live_lamps_leave_each_patch_its_solved_light_less_the_lamps_mean_and_gr
     drawn = live_sources.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
                                     patch_group=per_source.patch_group, groups=per_source.count)
     summed = point_direct.light_corners(surface, scene, surface.arriving_light(
-        result.irradiance - drawn.sum(axis=0), result.irradiance_variance, scene.reflectivity), None, live=True)
+        result.irradiance - drawn.sum(axis=0), result.irradiance_variance, scene.reflectivity), None, live=True,
+        slack=slack.slack_of(result.irradiance_variance, None if result.direct_irradiance is None else
+                                 result.irradiance - result.direct_irradiance))  # (as the parts: within each patch's error)
     np.testing.assert_allclose(parts.sum(axis=0), summed, rtol=0, atol=1e-12 * summed.max())
 
 

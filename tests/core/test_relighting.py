@@ -220,7 +220,7 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     test_point_direct checks); recombined with new weights they are the same linear map of the
     relit values."""
     from addon.bpy_free import pipeline
-    from addon.core.display import point_direct, smoothing
+    from addon.core.display import point_direct, slack, smoothing
     from addon.core.relight.relighting import combine, per_source_emission, smooth_sources
 
     scene = open_box()
@@ -251,7 +251,9 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     reflected = np.einsum("spc,sc->pc", ps.irradiance, WEIGHTS) * rho
     emission = np.einsum("spc,sc->pc", per_source_emission(scene, ps), WEIGHTS)
     expected = point_direct.shown(surface, filtered, point_direct.scaled(surface, whole_direct, rho), noise(reflected)[None],
-                                  point_direct.scaled(surface, relit_direct, rho))[1][0]
+                                  point_direct.scaled(surface, relit_direct, rho),
+                                  slack=slack.slack_of(r.reflected_variance, None if r.direct_irradiance is None
+                                                           else rho * (r.irradiance - r.direct_irradiance)))[1][0]
     expected += emission[scene.triangle_patch][:, None, :]
     np.testing.assert_allclose(relit, expected, rtol=0, atol=1e-12 * expected.max())
     with pytest.raises(ValueError, match=r"parts must have shape \(6, \.\.\., 3\)"):

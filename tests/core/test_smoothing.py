@@ -12,7 +12,7 @@ import pytest
 
 from addon.core import PatchScene, solve
 from addon.core.mesh import meshing
-from addon.core.display import smoothing
+from addon.core.display import slack, smoothing
 from addon.core.estimate.reference import rectangle_form_factors, solve_radiosity_system
 from boxes import box_rectangles, rectangles_to_mesh, small_source_box
 
@@ -238,6 +238,53 @@ def test_each_patch_keeps_its_mean_and_values_stay_non_negative(seed, iterations
     np.testing.assert_allclose(means, values, rtol=1e-12, atol=1e-15 * values.max())
     # and it is smooth: not the flat patch values themselves
     assert np.abs(corners - values[TP][:, None, :]).max() > 0.1
+
+
+def _point_spread(vertices, triangles, corners):
+    """(largest over the points of the spread of the corner values meeting at a point, per channel max)."""
+    key = np.unique(np.round(vertices[triangles].reshape(-1, 3), 9), axis=0, return_inverse=True)[1].ravel()
+    flat = corners.reshape(-1, corners.shape[2])
+    hi = np.full((key.max() + 1, flat.shape[1]), -np.inf)
+    lo = np.full_like(hi, np.inf)
+    np.maximum.at(hi, key, flat)
+    np.minimum.at(lo, key, flat)
+    return float((hi - lo).max())
+
+
+def test_a_patch_within_its_noise_of_its_neighbours_shows_their_light_not_a_square():
+    """A wall of even light (1) whose estimates are noisy (standard error 0.1, the light of one
+    patch read 1.15, of another 0.9): held to its exact mean, each of them shows a square, its
+    corners scaled apart from its neighbours' at its edges; given each patch's standard error as
+    the slack, every patch's mean stays within it of its value and the corners meet at every
+    point as one light (no jump). A real step (a patch at 3, far beyond its noise) keeps its mean
+    to within its slack; the means are exact without one."""
+    points, quads, triangles, patch = _grid(8, 8, (0, 0, 0), (1, 0, 0), (0, 1, 0))
+    values = np.ones((len(quads), 3))
+    values[27], values[44] = 1.15, 0.9
+    error = np.full_like(values, 0.1)
+    exact = smoothing.corner_values(points, triangles, patch, values)
+    loose = smoothing.corner_values(points, triangles, patch, values, slack=error)
+    np.testing.assert_allclose(_patch_means(points, triangles, patch, exact, len(quads)), values, rtol=1e-12)
+    assert _point_spread(points, triangles, exact) > 0.02  # (the squares' edges: 4% of the light)
+    means = _patch_means(points, triangles, patch, loose, len(quads))
+    assert (np.abs(means - values) <= error + 1e-12).all()
+    assert _point_spread(points, triangles, loose) < 1e-3  # (what ten steps leave beyond the slack: 4e-5)
+    stepped = values.copy()
+    stepped[27] = 3.0
+    means = _patch_means(points, triangles, patch, smoothing.corner_values(points, triangles, patch, stepped, slack=error),
+                         len(quads))
+    assert abs(means[27, 0] - 3.0) <= 0.1 + 1e-12 and (np.abs(means - stepped) <= error + 1e-12).all()
+
+
+def test_the_slack_is_the_standard_error_and_the_direct_light_kept_apart_keeps_its_means():
+    """slack_of: SLACK_ERRORS standard errors of the variances; none (NaN) where none was measured;
+    at most the light gathered after a bounce where the direct part is known apart (0 there: exact)."""
+    variance = np.array([[0.04, 0.09, np.nan], [np.inf, -1.0, 0.0]])
+    given = slack.slack_of(variance)
+    np.testing.assert_allclose(given[0, :2], slack.SLACK_ERRORS * np.array([0.2, 0.3]))
+    assert np.isnan(given[0, 2]) and np.isnan(given[1, :2]).all() and given[1, 2] == 0.0
+    capped = slack.slack_of(np.full((2, 3), 0.04), indirect=np.array([[0.0, 0.05, 1.0], [-1.0, 0.0, 0.3]]))
+    np.testing.assert_allclose(capped, [[0.0, 0.05, 0.2], [0.0, 0.0, 0.2]])
 
 
 def test_bad_values_are_refused_with_one_line_and_negative_light_is_none():

@@ -18,8 +18,10 @@ patch chosen by power and nearness and, near them, a cosine ray, weighed by the 
 area-weighted mean of D's linear interpolation, H the solved (filtered)
 light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``).
 Every patch's mean is still its solved
-value (float error; ``Surface.corner_values``' own guarantee), so the display moves no light,
-and the solve's noise stays where it was; what D adds is the light's shape within the patch.
+value (float error; ``Surface.corner_values``' own guarantee), or within its standard error
+where the caller gives it (``slack``: a patch the solve's noise set apart shows its neighbours'
+continuous light, not a square of its own), so the display moves no light beyond the solve's
+noise; what D adds is the light's shape within the patch.
 The sky stays in H - M (soft light, which a point estimate would need many rays for).
 
 Beside an emitter a corner's light is heavy-tailed: a corner whose standard error (measured on
@@ -300,10 +302,12 @@ def scaled(surface, direct, factor, in_place=False):
     return direct
 
 
-def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float64):
+def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float64, slack=None):
     """(T,3,3) the corners shown for per-patch ``values`` (P,3) whose direct part is ``direct``
     (None: ``Surface.corner_values`` alone): corners(values - M) + D (the module's docstring),
-    D scaled on the patches where M passes the value (``_fitted``). With ``parts`` (S,P,3), each
+    D scaled on the patches where M passes the value (``_fitted``); ``slack`` (P,3): each
+    patch's standard error in ``values``, within which its mean may stay (``Surface.corner_values``;
+    None: exact). With ``parts`` (S,P,3), each
     group's values as linear maps of the whole's make them (adding up to ``values``), and
     ``part_direct`` their CornerDirect, also (S,T,3,3) each group's corners, adding up to the
     whole's. Made in float64, given as ``dtype`` (the parts; the whole too where there are none:
@@ -311,12 +315,12 @@ def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float6
     maps = parts is not None
     if direct is None:
         if not maps:
-            return surface.corner_values(values, dtype=dtype)
-        whole, apply = surface.corner_values(values, return_filter=True)
+            return surface.corner_values(values, dtype=dtype, slack=slack)
+        whole, apply = surface.corner_values(values, return_filter=True, slack=slack)
         return whole, apply(parts, dtype)
     scale = _fitted(values, direct.means)
-    shown_corners, apply = surface.corner_values(values - direct.means * scale, return_filter=True) if maps else (
-        surface.corner_values(values - direct.means * scale, dtype=dtype), None)
+    shown_corners, apply = surface.corner_values(values - direct.means * scale, return_filter=True, slack=slack) if maps \
+        else (surface.corner_values(values - direct.means * scale, dtype=dtype, slack=slack), None)
     _add_kept(shown_corners, direct.corners, scale, surface.triangle_patch)
     if not maps:
         return shown_corners
@@ -346,9 +350,9 @@ def _add_kept(out, corners, scale, triangle_patch, block=1 << 16):
         out[rows] += corners[rows] * scale[triangle_patch[rows]][:, None, :]
 
 
-def light_corners(surface, scene, light, direct, live=False, dtype=np.float64):
+def light_corners(surface, scene, light, direct, live=False, dtype=np.float64, slack=None):
     """(T,3,3) the light arriving ``light`` (``arriving``) shown at the corners with the direct
-    light's shape (``shown``, given as ``dtype``; ``direct`` the CornerDirect of every source);
-    ``live``: smooth alone (the renderer draws every lamp's, sun's, emitter's and the world's own
-    light)."""
-    return shown(surface, light, None if live else direct, dtype=dtype)
+    light's shape (``shown``, given as ``dtype``; ``direct`` the CornerDirect of every source;
+    ``slack`` its standard errors); ``live``: smooth alone (the renderer draws every lamp's, sun's,
+    emitter's and the world's own light)."""
+    return shown(surface, light, None if live else direct, dtype=dtype, slack=slack)

@@ -23,7 +23,11 @@ triangles) is spread the same way, continuously, over the corners around it (ove
 values clipped at 0). A last step scales each patch's corners by value / mean, which makes every
 patch's mean exactly its value (float error) whatever the iteration count and whatever the mesh;
 what the iterations buy is small jumps left by that last step where a continuous answer exists
-(benchmarks/results/smoothing.md); a sharp step of light across a smooth joint has no
+(benchmarks/results/smoothing.md). Given a ``slack`` (``slack.slack_of``: the solve's
+values are estimates), the last step takes each mean only as far as to within it of the value:
+a patch whose value is its neighbours' plus noise shows their continuous light, not a square of
+its own (a scale of its own is a jump at its edges), and what a mean keeps from its value is
+within the patch's own noise; a sharp step of light across a smooth joint has no
 non-negative continuous answer, and keeps part of its step. Where light falls off faster than a
 patch can follow, the continuous answer swings corners up and down row after row (bands): where
 the iterations turn a patch's corners against the plain average's, it and its neighbours keep
@@ -37,9 +41,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .creases import crease_pairs
 from .noise_filter import NOISE_CUTOFF, NoiseFilter, checked_rows, sums_by
+from .slack import beyond
 from ..distributed.runners import each_on_threads
-from ..mesh.welding import run_starts, weld_points
+from ..mesh.welding import weld_points
 
 CREASE_ANGLE = 30.0  # degrees, as Blender's auto smooth
 WELD_FRACTION = 1e-4  # of the median patch's side
@@ -130,7 +136,7 @@ class Surface(NoiseFilter):
         point = weld_points(vertices, weld)[triangles]
         cos_crease = float(np.cos(np.radians(crease_angle)))
         covered = None if covered is None or not np.any(covered) else np.asarray(covered, bool)
-        smooth_point, pairs = _crease_pairs(point, triangle_patch, patch_normal, cos_crease, covered)
+        smooth_point, pairs = crease_pairs(point, triangle_patch, patch_normal, cos_crease, covered)
         hidden = None if hidden is None or not np.any(hidden) else np.asarray(hidden, bool)
         if visible is not None:
             visible = np.asarray(visible, np.float64).reshape(-1)
@@ -190,10 +196,11 @@ class Surface(NoiseFilter):
         area = self.visible_area if seen else self.patch_area
         return np.divide(sums, area, out=np.zeros_like(sums), where=area > 0)
 
-    def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64):
+    def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64, slack=None):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
         compatible corners, the area-weighted mean of each patch's linear interpolation equal to
-        its value (negative values taken as 0), non-negative. With ``return_filter``, also
+        its value (negative values taken as 0), or with ``slack`` (P,k), each patch's standard
+        error (NaN: none), within that of it; non-negative. With ``return_filter``, also
         ``apply`` (``LinearCorners``): the same steps with these values' clips, floors and final
         scales held fixed, a linear map of (P,k) or (S,P,k) values to (T,3,k) or (S,T,3,k) corners
         whose value at ``patch_values`` is these corners (float error), so that parts of the
@@ -202,6 +209,9 @@ class Surface(NoiseFilter):
         # a signed estimator's slightly negative patches show as black: light is never negative
         checked = checked_rows(patch_values, self.patch_count, "patch values")
         values = np.maximum(checked, 0.0)
+        if slack is not None:  # (what is not a finite standard error keeps the mean exact)
+            slack = np.asarray(slack, np.float64).reshape(values.shape)
+            slack = np.where(np.isfinite(slack) & (slack > 0), slack, 0.0)
         corner_patch = np.repeat(self.triangle_patch, 3)
         averaging = self._averaging()
         out = np.empty((len(self.triangle_patch), 3, values.shape[1]), dtype)
@@ -211,7 +221,7 @@ class Surface(NoiseFilter):
         def channel(k):  # (a colour channel a thread: a channel's memory each)
             record = {} if return_filter else None
             x, plain_scale, ringing = self._corner_channel(np.ascontiguousarray(values[:, k]), corner_patch, averaging,
-                                                           iterations, record)
+                                                           iterations, record, None if slack is None else slack[:, k])
             out[:, :, k] = x.reshape(-1, 3)
             made[k] = record, plain_scale, ringing
 
@@ -232,39 +242,52 @@ class Surface(NoiseFilter):
             return out
         return out, LinearCorners(self, checked > 0, corner_patch, averaging, int(iterations), records)
 
-    def _corner_channel(self, values, corner_patch, averaging, iterations, record=None):
+    def _corner_channel(self, values, corner_patch, averaging, iterations, record=None, slack=None):
         """One channel's corners (T*3,), the scales (P,) of its plain average (no iterations) and
         its ringing patches (P,) bool (``_ringing``); ``record`` (a dict), where given, keeps the
-        floored corners of each step, the floors' patches, the final scales and the flat corners."""
+        floored corners of each step, the floors' patches, the final scales and the flat corners;
+        ``slack`` (P,): how far each patch's mean may stay from its value (``_scale_to``)."""
         x = self._average_corners(values.take(corner_patch, mode="wrap"), averaging)
         floor = LOWEST_SHARE * self._corner_lowest(self._seen_values(values, corner_patch), averaging)
         floor[np.isinf(floor)] = 0.0  # (a point only hidden patches meet)
         if record is not None:
             record["lowest"] = self._corner_lowest_patch(values, corner_patch, averaging)
             record["floored"] = []
+        if record is not None and slack is not None:
+            record["kept"] = []
         for _ in range(int(iterations)):
-            # each patch's missing light, spread continuously over the corners around it
-            x += RELAXATION * self._average_corners((values - self.corner_means(x)).take(corner_patch, mode="wrap"), averaging)
+            # each patch's missing light, spread continuously over the corners around it (with a
+            # slack, only what is missing beyond it: noise within it is not chased into swings)
+            missing = values - self.corner_means(x)
+            if slack is not None:
+                kept = beyond(missing, slack)
+                missing *= kept
+                if record is not None:
+                    record["kept"].append(kept)
+            x += RELAXATION * self._average_corners(missing.take(corner_patch, mode="wrap"), averaging)
             if record is not None:
                 record["floored"].append(np.flatnonzero(x < floor))
             # a bright patch beside dim ones would push its neighbours' far corners down to black:
             # never below a share of the darkest patch meeting there (the last scale keeps means)
             np.maximum(x, floor, out=x)
         del floor  # (a (T*3,) array less while the plain average is made)
-        x, scale, flat = self._scale_to(values, x, corner_patch)
+        x, scale, flat = self._scale_to(values, x, corner_patch, slack)
         # (no iterations, made again rather than kept through them: what ringing falls back to)
-        plain, plain_scale, _ = self._scale_to(values, self._average_corners(values.take(corner_patch, mode="wrap"), averaging), corner_patch)
+        plain, plain_scale, _ = self._scale_to(values, self._average_corners(values.take(corner_patch, mode="wrap"), averaging),
+                                               corner_patch, slack)
         if record is not None:
             record["scale"], record["flat"] = scale, flat
         return x, plain_scale, self._ringing(values, x, plain, corner_patch)
 
-    def _scale_to(self, values, x, corner_patch):
-        """Corners ``x`` (T*3,) scaled in place to each patch's value (exact at last; a patch
-        whose corners all came to zero, or below FLAT_BELOW of its value, keeps its own value,
-        flat): (x, scales (P,), flat corners)."""
+    def _scale_to(self, values, x, corner_patch, slack=None):
+        """Corners ``x`` (T*3,) scaled in place to each patch's value (exact at last; with
+        ``slack`` (P,), only as far as to within it: a mean already that close keeps its corners;
+        a patch whose corners all came to zero, or below FLAT_BELOW of its value, keeps its own
+        value, flat): (x, scales (P,), flat corners)."""
         means = self.corner_means(x)
         low = means <= FLAT_BELOW * values
-        scale = np.divide(values, means, out=np.ones_like(values), where=~low)
+        target = values if slack is None else np.clip(means, values - slack, values + slack)
+        scale = np.divide(target, means, out=np.ones_like(values), where=~low)
         x *= scale.take(corner_patch, mode="wrap")
         flat = np.flatnonzero(low[corner_patch])
         x[flat] = values[corner_patch[flat]]
@@ -351,9 +374,11 @@ class LinearCorners:
             record, v = self.records[k], np.ascontiguousarray(values[:, k])
             corner = surface._average_corners(v.take(cp, mode="wrap"), self.averaging)
             plain = corner.copy()
-            for floored in record["floored"]:
-                corner += RELAXATION * surface._average_corners((v - surface.corner_means(corner)).take(cp, mode="wrap"),
-                                                                self.averaging)
+            for step, floored in enumerate(record["floored"]):
+                missing = v - surface.corner_means(corner)
+                if "kept" in record:  # (the whole's shares beyond its slack, held fixed)
+                    missing *= record["kept"][step]
+                corner += RELAXATION * surface._average_corners(missing.take(cp, mode="wrap"), self.averaging)
                 corner[floored] = LOWEST_SHARE * v[record["lowest"][floored]]
             corner *= record["scale"].take(cp, mode="wrap")
             corner[record["flat"]] = v[cp[record["flat"]]]
@@ -372,45 +397,11 @@ def _put_rings(out, plain, scale, rings, corner_patch, block=RINGING_BLOCK):
         out[at] = plain[at] * scale[corner_patch[at]]
 
 
-def _crease_pairs(point, triangle_patch, patch_normal, cos_crease, covered=None):
-    """(smooth point flags (n,), compatible (corner, other) pairs at the other points); a
-    corner's normal is its patch's, and its side of a cover's outline its patch's ``covered``."""
-    p = point.ravel()
-    cp = np.repeat(triangle_patch, 3)
-    n = int(p.max()) + 1 if len(p) else 0
-    mean = np.stack([np.bincount(p, weights=patch_normal[cp, k], minlength=n) for k in range(3)], axis=1)
-    length = np.linalg.norm(mean, axis=1, keepdims=True)
-    mean = np.divide(mean, length, out=np.zeros_like(mean), where=length > 0)
-    dot = np.zeros(len(p))
-    for k in range(3):  # over axes, not elements
-        dot += patch_normal[cp, k] * mean[p, k]
-    half = np.cos(0.5 * np.arccos(np.clip(cos_crease, -1.0, 1.0)))
-    lowest = np.full(n, np.inf)
-    np.minimum.at(lowest, p, dot)
-    del dot
-    smooth = (lowest >= half) & (length[:, 0] > 0)
-    if covered is not None:  # (a point both sides meet at is a crease point: some of its corners covered, not all)
-        smooth &= np.bincount(p, weights=covered[cp], minlength=n) % np.maximum(np.bincount(p, minlength=n), 1) == 0
-    corners = np.flatnonzero(~smooth[p])
-    if len(corners) == 0:
-        return smooth, (np.zeros(0, np.int64), np.zeros(0, np.int64))
-    corners = corners[np.argsort(p[corners], kind="stable")]
-    starts = run_starts(p[corners])
-    sizes = np.diff(np.r_[starts, len(corners)])
-    square = sizes * sizes
-    first = np.repeat(starts, square)
-    size = np.repeat(sizes, square)
-    rank = np.arange(len(first)) - np.repeat(np.cumsum(square) - square, square)
-    c, o = corners[first + rank // size], corners[first + rank % size]
-    keep = np.einsum("ij,ij->i", patch_normal[cp[c]], patch_normal[cp[o]]) >= cos_crease
-    keep &= True if covered is None else covered[cp[c]] == covered[cp[o]]
-    return smooth, (c[keep], o[keep])
-
-
-def corner_values(vertices, triangles, triangle_patch, patch_values, crease_angle=CREASE_ANGLE, iterations=ITERATIONS):
+def corner_values(vertices, triangles, triangle_patch, patch_values, crease_angle=CREASE_ANGLE, iterations=ITERATIONS,
+                  slack=None):
     """Smooth per-corner values (T,3,k) of per-patch values (P,k) (``Surface.corner_values``)."""
     surface = Surface.of(vertices, triangles, triangle_patch, len(patch_values), crease_angle)
-    return surface.corner_values(patch_values, iterations)
+    return surface.corner_values(patch_values, iterations, slack=slack)
 
 
 def filter_noise(vertices, triangles, triangle_patch, patch_values, patch_variances, crease_angle=CREASE_ANGLE,

@@ -59,12 +59,12 @@ class RefinedSurface:
     def corner_means(self, x):
         return self.fine.corner_means(x)
 
-    def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64):
+    def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64, slack=None):
         """``smoothing.Surface.corner_values`` of the coarse surface at the fine corners (with
         ``return_filter``, its ``apply`` too): the same means, continuous as the coarse ones."""
         if not return_filter:
-            return self.interpolated(self.coarse.corner_values(patch_values, iterations, dtype=dtype))
-        corners, apply = self.coarse.corner_values(patch_values, iterations, return_filter=True, dtype=dtype)
+            return self.interpolated(self.coarse.corner_values(patch_values, iterations, dtype=dtype, slack=slack))
+        corners, apply = self.coarse.corner_values(patch_values, iterations, return_filter=True, dtype=dtype, slack=slack)
         return self.interpolated(corners), lambda parts, dtype=np.float64: self.interpolated(apply(parts, dtype))
 
     def interpolated(self, corners):

@@ -1,0 +1,38 @@
+"""How far a shown patch's mean may stay from its solved value (``smoothing.Surface.corner_values``'
+``slack``): the solve's values are estimates, and a patch whose value is its neighbours' plus
+noise, held to it exactly, shows a square of its own (its corners scaled apart from theirs at
+its edges). No bpy.
+"""
+import numpy as np
+
+# The standard errors of its solved light a patch's shown mean may stay from it (``slack_of``):
+# within them the value is its neighbours' plus noise, and the last step's scale of its own
+# would draw it as a square (the skylight hall's dim walls: a patch in four scaled 10% or more).
+SLACK_ERRORS = 1.0
+
+
+def slack_of(variance, indirect=None):
+    """(P,k) the ``slack`` of ``Surface.corner_values`` for values of the given variances (P,k)
+    (of their estimates): SLACK_ERRORS standard errors, NaN where none was measured; with
+    ``indirect`` (P,k), the values' part gathered after a bounce where their direct part is known
+    apart, at most that: the direct light a solve kept apart keeps its means, as the noise filter
+    leaves it (a heavy-tailed direct estimate's spread is not its neighbours' light)."""
+    variance = np.asarray(variance, np.float64)
+    with np.errstate(invalid="ignore"):
+        slack = SLACK_ERRORS * np.sqrt(np.where(np.isfinite(variance) & (variance >= 0), variance, np.nan))
+    return slack if indirect is None else np.minimum(slack, np.maximum(indirect, 0.0))
+
+
+def result_slacks(result, reflectivity):
+    """(light, reflected) the slacks of a SolveResult's light arriving and reflected light
+    (``slack_of`` of its variances; its direct light, where known apart, keeping its means)."""
+    indirect = None if result.direct_irradiance is None else result.irradiance - result.direct_irradiance
+    return (slack_of(result.irradiance_variance, indirect),
+            slack_of(result.reflected_variance, None if indirect is None else reflectivity * indirect))
+
+
+def beyond(missing, slack):
+    """(P,) the share of each patch's ``missing`` light that lies beyond its ``slack`` (0 within
+    it): |missing| - slack over |missing|, at least 0."""
+    size = np.abs(missing)
+    return np.divide(np.maximum(size - slack, 0.0), size, out=np.zeros_like(size), where=size > 0)
