@@ -259,8 +259,8 @@ class Surface(NoiseFilter):
             # each patch's missing light, spread continuously over the corners around it (with a
             # slack, only what is missing beyond it: noise within it is not chased into swings)
             missing = values - self.corner_means(x)
-            if slack is not None:
-                kept = beyond(missing, slack)
+            if slack is not None:  # (the shares as float16: a relight's map keeps one a patch a step)
+                kept = beyond(missing, slack).astype(np.float16)
                 missing *= kept
                 if record is not None:
                     record["kept"].append(kept)

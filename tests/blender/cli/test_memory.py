@@ -58,7 +58,9 @@ def _peak_of(cmd, cwd):
 # Blender starts at 431 MiB against 273 here); 2,290-2,378 B with the display's cells (the written
 # meshes split where the direct light changes, and their colours: 596 against 641 MiB at the preview's
 # peak, 630 once the colours' own arrays were let go of before it), emitters' backs and the colours on
-# two threads. At a million patches it is about 0.75 KiB (docs/performance.md, results/memory_cli.md).
+# two threads; 2,338 B before the display's slack and 2,373-2,383 B with it (a relight map's share of
+# each patch's missing light, a step of the smoothing at a time, as float16: 2,470-2,511 B as float64,
+# 2,595 on a clean clone). At a million patches it is about 0.75 KiB (docs/performance.md, results/memory_cli.md).
 GROWTH_PER_PATCH = 2.5 * 1024
 
 
