@@ -15,7 +15,7 @@ from ..core import predict, solve
 from ..core.display import direct_means, final_gather, live_sources, point_direct, smoothing
 from ..core.scene.diagnostics import MAX_BOUNCES, check_bounces
 from ..core.display.covered import seen_parts
-from ..core.display.slack import result_slacks
+from ..core.display.slack import light_slack, reflected_slack
 from ..core.distributed.runners import local_threads
 from ..core.methods.first_shot import direct_irradiance
 from ..core.forecast import forecast
@@ -353,19 +353,20 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
         bounced = live_sources.arriving(surface, scene, result, True, deadline, drawn) if drawn is not None else None
         reflected = surface.filter_light(result.reflected, result.reflected_variance)
     # (each patch's shown mean within its standard error of its light: no square where noise set it apart)
-    light_slack, reflected_slack = result_slacks(result, scene.reflectivity)
+    slack = light_slack(result) if light or bounced is not None else None
     if light:
-        yield "light", point_direct.light_corners(surface, scene, arriving, direct, False, dtype, light_slack)
+        yield "light", point_direct.light_corners(surface, scene, arriving, direct, False, dtype, slack)
     if bounced is not None:
-        bounced = point_direct.light_corners(surface, scene, bounced, direct, True, dtype, light_slack)
+        bounced = point_direct.light_corners(surface, scene, bounced, direct, True, dtype, slack)
         yield "bounced", bounced
         if live_sources.draws_highlights(scene):  # (EEVEE's: the light less the lamps' it draws live; the rest put back)
             unlit = drawn - live_sources.lamp_part(scene, drawn, seed=result.seed, light=result.irradiance,
                                                    deadline=deadline)
             yield "lampless", bounced + surface.corner_values(unlit, dtype=dtype) if unlit.any() else bounced
         del bounced
+    del slack
     corners = point_direct.shown(surface, reflected, direct and point_direct.scaled(surface, direct, scene.reflectivity, True),
-                                 dtype=dtype, slack=reflected_slack)
+                                 dtype=dtype, slack=reflected_slack(result, scene.reflectivity))
     corners += scene.emission[surface.triangle_patch][:, None, :]
     yield "smooth", corners
 

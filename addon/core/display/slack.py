@@ -23,15 +23,23 @@ def slack_of(variance, indirect=None):
     variance = np.asarray(variance, np.float64)
     with np.errstate(invalid="ignore"):
         slack = SLACK_ERRORS * np.sqrt(np.where(np.isfinite(variance) & (variance >= 0), variance, np.nan))
-    return slack if indirect is None else np.minimum(slack, np.maximum(indirect, 0.0))
+    if indirect is not None:
+        slack = np.minimum(slack, np.maximum(indirect, 0.0))
+    with np.errstate(over="ignore"):  # (float32: a bound need not be exact, and it is held through the colours)
+        return slack.astype(np.float32)
 
 
-def result_slacks(result, reflectivity):
-    """(light, reflected) the slacks of a SolveResult's light arriving and reflected light
-    (``slack_of`` of its variances; its direct light, where known apart, keeping its means)."""
+def light_slack(result):
+    """(P,3) the slack of a SolveResult's light arriving (``slack_of`` of its variance; its direct
+    light, where known apart, keeping its means)."""
     indirect = None if result.direct_irradiance is None else result.irradiance - result.direct_irradiance
-    return (slack_of(result.irradiance_variance, indirect),
-            slack_of(result.reflected_variance, None if indirect is None else reflectivity * indirect))
+    return slack_of(result.irradiance_variance, indirect)
+
+
+def reflected_slack(result, reflectivity):
+    """(P,3) the slack of a SolveResult's reflected light (as ``light_slack``)."""
+    indirect = None if result.direct_irradiance is None else reflectivity * (result.irradiance - result.direct_irradiance)
+    return slack_of(result.reflected_variance, indirect)
 
 
 def beyond(missing, slack):

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..display import live_sources, point_direct
-from ..display.slack import result_slacks
+from ..display.slack import light_slack, reflected_slack
 from ..distributed.runners import each_on_threads
 from . import relit_checks
 
@@ -139,14 +139,15 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     if direct is None:  # (else the display's own: its finer cells')
         direct = group_direct(surface, scene, result, triangles, deadline)
     whole = _summed(direct)
-    light_slack, reflected_slack = result_slacks(result, rho)  # (each shown mean within its standard error)
+    slack = light_slack(result) if light else None  # (each shown mean within its standard error)
     if light:
-        yield "light", point_direct.shown(surface, arriving, whole, parts, direct, dtype, light_slack)[1]
+        yield "light", point_direct.shown(surface, arriving, whole, parts, direct, dtype, slack)[1]
     if light and live:  # (what the live outputs read: the light less what Cycles draws, and less what EEVEE does)
-        yield from _live_parts(surface, scene, result, rest, rest_parts, drawn, dtype, deadline, light_slack)
+        yield from _live_parts(surface, scene, result, rest, rest_parts, drawn, dtype, deadline, slack)
+    del slack
     _, smooth = point_direct.shown(surface, filtered, whole and point_direct.scaled(surface, whole, rho),
                                    noise(per_source.irradiance * rho - held) + held,
-                                   direct and point_direct.scaled(surface, direct, rho), dtype, reflected_slack)
+                                   direct and point_direct.scaled(surface, direct, rho), dtype, reflected_slack(result, rho))
     emitting = per_source_emission(scene, per_source)
     for s in range(per_source.count):  # (a part at a time: no (S,T,3) copy)
         smooth[s] += emitting[s, surface.triangle_patch][:, None, :]

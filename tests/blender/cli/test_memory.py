@@ -59,9 +59,12 @@ def _peak_of(cmd, cwd):
 # meshes split where the direct light changes, and their colours: 596 against 641 MiB at the preview's
 # peak, 630 once the colours' own arrays were let go of before it), emitters' backs and the colours on
 # two threads; 2,338 B before the display's slack and 2,373-2,383 B with it (a relight map's share of
-# each patch's missing light, a step of the smoothing at a time, as float16: 2,470-2,511 B as float64,
-# 2,595 on a clean clone). At a million patches it is about 0.75 KiB (docs/performance.md, results/memory_cli.md).
-GROWTH_PER_PATCH = 2.5 * 1024
+# each patch's missing light, a step of the smoothing at a time, as float16: 2,470-2,511 B as float64).
+# A clean clone runs higher: standalone 2,394-2,486 B before the slack, 2,493-2,514 B with it, and
+# inside the whole suite (whose Blender starts at 433 MiB against 363 standalone) 2,595-2,618 B; the
+# bound went from 2.5 to 2.75 KiB with that (runs differ by up to 250 B a patch, above). At a
+# million patches it is about 0.75 KiB (docs/performance.md, results/memory_cli.md).
+GROWTH_PER_PATCH = 2.75 * 1024
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ru_maxrss in KiB and os.wait4: Linux")
