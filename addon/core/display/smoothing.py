@@ -24,10 +24,11 @@ values clipped at 0). A last step scales each patch's corners by value / mean, w
 patch's mean exactly its value (float error) whatever the iteration count and whatever the mesh;
 what the iterations buy is small jumps left by that last step where a continuous answer exists
 (benchmarks/results/smoothing.md). Given a ``slack`` (``slack.slack_of``: the solve's
-values are estimates), the last step takes each mean only as far as to within it of the value:
-a patch whose value is its neighbours' plus noise shows their continuous light, not a square of
-its own (a scale of its own is a jump at its edges), and what a mean keeps from its value is
-within the patch's own noise; a sharp step of light across a smooth joint has no
+values are estimates), the steps spread only the light missing beyond it and the last step takes
+each mean only as far as to within it of the value: a patch whose value is its neighbours' plus
+noise shows their continuous light, not a square of its own (a scale of its own is a jump at its
+edges), and what a mean keeps from its value is within the patch's own noise; a sharp step of
+light across a smooth joint has no
 non-negative continuous answer, and keeps part of its step. Where light falls off faster than a
 patch can follow, the continuous answer swings corners up and down row after row (bands): where
 the iterations turn a patch's corners against the plain average's, it and its neighbours keep
@@ -199,8 +200,8 @@ class Surface(NoiseFilter):
     def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64, slack=None):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
         compatible corners, the area-weighted mean of each patch's linear interpolation equal to
-        its value (negative values taken as 0), or with ``slack`` (P,k), each patch's standard
-        error (NaN: none), within that of it; non-negative. With ``return_filter``, also
+        its value (negative values taken as 0), or with ``slack`` (P,k) (``slack.slack_of``; NaN:
+        none), within that of it; non-negative. With ``return_filter``, also
         ``apply`` (``LinearCorners``): the same steps with these values' clips, floors and final
         scales held fixed, a linear map of (P,k) or (S,P,k) values to (T,3,k) or (S,T,3,k) corners
         whose value at ``patch_values`` is these corners (float error), so that parts of the
