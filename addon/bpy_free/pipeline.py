@@ -352,7 +352,7 @@ def _smooth_corners(scene, result, light=False, shading=None, live=False, dtype=
         arriving = live_sources.arriving(surface, scene, result, False, deadline) if light else None
         bounced = live_sources.arriving(surface, scene, result, True, deadline, drawn) if drawn is not None else None
         reflected = surface.filter_light(result.reflected, result.reflected_variance)
-    # (each patch's shown mean within its standard error of its light: no square where noise set it apart)
+    # (each patch's shown mean within its slack of its light: no square where noise set it apart)
     slack = light_slack(result) if light or bounced is not None else None
     if light:
         yield "light", point_direct.light_corners(surface, scene, arriving, direct, False, dtype, slack)

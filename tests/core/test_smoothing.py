@@ -276,7 +276,7 @@ def test_a_patch_within_its_noise_of_its_neighbours_shows_their_light_not_a_squa
     assert abs(means[27, 0] - 3.0) <= 0.1 + 1e-12 and (np.abs(means - stepped) <= error + 1e-12).all()
 
 
-def test_the_slack_is_the_standard_error_and_the_direct_light_kept_apart_keeps_its_means():
+def test_the_slack_is_its_standard_errors_and_the_direct_light_kept_apart_keeps_its_means():
     """slack_of: SLACK_ERRORS standard errors of the variances; none (NaN) where none was measured;
     at most the light gathered after a bounce where the direct part is known apart (0 there: exact)."""
     variance = np.array([[0.04, 0.09, np.nan], [np.inf, -1.0, 0.0]])

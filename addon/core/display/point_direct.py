@@ -18,10 +18,10 @@ patch chosen by power and nearness and, near them, a cosine ray, weighed by the 
 area-weighted mean of D's linear interpolation, H the solved (filtered)
 light, and corners() the mean-preserving smooth corner values (``Surface.corner_values``).
 Every patch's mean is still its solved
-value (float error; ``Surface.corner_values``' own guarantee), or within its standard error
-where the caller gives it (``slack``: a patch the solve's noise set apart shows its neighbours'
-continuous light, not a square of its own), so the display moves no light beyond the solve's
-noise; what D adds is the light's shape within the patch.
+value (float error; ``Surface.corner_values``' own guarantee), or within its slack (two
+standard errors) where the caller gives it (``slack``: a patch the solve's noise set apart
+shows its neighbours' continuous light, not a square of its own), so the display moves no
+light beyond the solve's noise; what D adds is the light's shape within the patch.
 The sky stays in H - M (soft light, which a point estimate would need many rays for).
 
 Beside an emitter a corner's light is heavy-tailed: a corner whose standard error (measured on
@@ -305,9 +305,8 @@ def scaled(surface, direct, factor, in_place=False):
 def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float64, slack=None):
     """(T,3,3) the corners shown for per-patch ``values`` (P,3) whose direct part is ``direct``
     (None: ``Surface.corner_values`` alone): corners(values - M) + D (the module's docstring),
-    D scaled on the patches where M passes the value (``_fitted``); ``slack`` (P,3): each
-    patch's standard error in ``values``, within which its mean may stay (``Surface.corner_values``;
-    None: exact). With ``parts`` (S,P,3), each
+    D scaled on the patches where M passes the value (``_fitted``); ``slack`` (P,3): how far
+    each patch's mean may stay from ``values`` (``slack.slack_of``; None: exact). With ``parts`` (S,P,3), each
     group's values as linear maps of the whole's make them (adding up to ``values``), and
     ``part_direct`` their CornerDirect, also (S,T,3,3) each group's corners, adding up to the
     whole's. Made in float64, given as ``dtype`` (the parts; the whole too where there are none:

@@ -32,14 +32,18 @@ def slack_of(variance, indirect=None):
 def light_slack(result):
     """(P,3) the slack of a SolveResult's light arriving (``slack_of`` of its variance; its direct
     light, where known apart, keeping its means)."""
-    indirect = None if result.direct_irradiance is None else result.irradiance - result.direct_irradiance
-    return slack_of(result.irradiance_variance, indirect)
+    return slack_of(result.irradiance_variance, _bounced(result))
 
 
 def reflected_slack(result, reflectivity):
     """(P,3) the slack of a SolveResult's reflected light (as ``light_slack``)."""
-    indirect = None if result.direct_irradiance is None else reflectivity * (result.irradiance - result.direct_irradiance)
-    return slack_of(result.reflected_variance, indirect)
+    bounced = _bounced(result)
+    return slack_of(result.reflected_variance, None if bounced is None else reflectivity * bounced)
+
+
+def _bounced(result):
+    """(P,3) a SolveResult's light arriving less its direct light, where that is known apart (else None)."""
+    return None if result.direct_irradiance is None else result.irradiance - result.direct_irradiance
 
 
 def beyond(missing, slack):

@@ -254,8 +254,8 @@ class Surface(NoiseFilter):
         if record is not None:
             record["lowest"] = self._corner_lowest_patch(values, corner_patch, averaging)
             record["floored"] = []
-        if record is not None and slack is not None:
-            record["kept"] = []
+            if slack is not None:
+                record["kept"] = []
         for _ in range(int(iterations)):
             # each patch's missing light, spread continuously over the corners around it (with a
             # slack, only what is missing beyond it: noise within it is not chased into swings)

@@ -139,7 +139,7 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     if direct is None:  # (else the display's own: its finer cells')
         direct = group_direct(surface, scene, result, triangles, deadline)
     whole = _summed(direct)
-    slack = light_slack(result) if light else None  # (each shown mean within its standard error)
+    slack = light_slack(result) if light else None  # (each shown mean within its slack)
     if light:
         yield "light", point_direct.shown(surface, arriving, whole, parts, direct, dtype, slack)[1]
     if light and live:  # (what the live outputs read: the light less what Cycles draws, and less what EEVEE does)
