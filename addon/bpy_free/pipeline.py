@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,7 +17,7 @@ from ..core.display import direct_means, final_gather, live_sources, point_direc
 from ..core.scene.diagnostics import MAX_BOUNCES, check_bounces
 from ..core.display.covered import seen_parts
 from ..core.display.slack import light_slack, reflected_slack
-from ..core.distributed.runners import local_threads
+from ..core.distributed.runners import local_threads, machine_threads
 from ..core.methods.first_shot import direct_irradiance
 from ..core.forecast import forecast
 from ..core.names import AUTO
@@ -243,12 +244,15 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     if on_prediction is not None:
         on_prediction(prediction, int(scene.patch_count), patches)
     budget = run_budget.Budget.of(started, limit, scene, patches, settings, groups)
-    with trim.roomy(scene.patch_count):  # (freed memory kept for the next chunk: no page faults)
-        result = solve(scene, run_core(scene, settings, groups, max_seconds=budget.solve_seconds()),
-                       progress=progress, should_stop=should_stop)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="radiosity-beside") as beside:
+        first = _lamp_means_beside(beside, scene, groups, settings)
+        with trim.roomy(scene.patch_count):  # (freed memory kept for the next chunk: no page faults)
+            result = solve(scene, run_core(scene, settings, groups, max_seconds=budget.solve_seconds()),
+                           progress=progress, should_stop=should_stop)
+        first = None if first is None else first.result()
     # (the display's direct light in place of the solve's, whose weak lamps are heavy-tailed: core direct_means)
     with local_threads(settings.threads):  # (the display's work on the threads the solve had)
-        result = direct_means.corrected(scene, result, None if settings.paths else settings.relative_rms)
+        result = direct_means.corrected(scene, result, None if settings.paths else settings.relative_rms, first)
     out = SolveOutput(patches, result, prediction, target, notes=notes,
                       settings_relative_rms=None if settings.paths else settings.relative_rms,
                       sources=sources_text(scene))
@@ -260,6 +264,23 @@ def run_solve(objects, settings: SolveSettings, progress=None, should_stop=None,
     shown_mesh.let_go(out)
     out.seconds = time.perf_counter() - started
     return out
+
+
+def _lamp_means_beside(beside, scene, groups, settings):
+    """The future of the display's first lamp means (core ``direct_means.first_means``) on the
+    ``beside`` executor's one thread, made while the solve runs (they need nothing of it, and the
+    solve's threads leave a core idle part of the time); None where there are no groups of lamps
+    alone, or the run has one thread (they are made after the solve, as the same numbers)."""
+    if groups is None or machine_threads(settings.threads) < 2 \
+            or direct_means.replaced(scene, groups) is None:
+        return None
+
+    def first():
+        with local_threads(1):  # (its own thread alone: the solve has the others)
+            return direct_means.first_means(scene, groups.light_group, groups.patch_group(scene.patch_count),
+                                            groups.count, int(settings.seed))
+
+    return beside.submit(first)
 
 
 def write_colours(out, scene, result, settings, deadline=None):

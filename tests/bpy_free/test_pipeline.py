@@ -243,3 +243,50 @@ def test_the_threads_setting_holds_for_the_displays_colours_too(monkeypatch):
         out = pipeline.run_solve(room_objects(2), pipeline.SolveSettings(threads=threads, relative_rms=0.3, patch_size=0.5))
         assert out.light_colours and any(c is not None for c in out.light_colours)
     assert seen == [1, 2]
+
+
+def test_the_lamps_first_means_are_made_beside_the_solve_with_the_same_numbers(monkeypatch):
+    """The room with two lamps on two threads: the display's first lamp means (core
+    direct_means.first_means) are made on a thread of their own while the solve runs, and the
+    run writes the same colours, bit for bit, as one that makes them after the solve. On one
+    thread they are made after it."""
+    import threading
+
+    from many_lamps import room_objects
+
+    from addon.bpy_free import pipeline
+    from addon.core.display import direct_means
+
+    events, first_means, solve = [], direct_means.first_means, pipeline.solve
+
+    def recorded_first(*args, **kwargs):
+        events.append(("first", threading.current_thread().name))
+        return first_means(*args, **kwargs)
+
+    def recorded_solve(*args, **kwargs):
+        events.append(("solve starts", threading.current_thread().name))
+        result = solve(*args, **kwargs)
+        events.append(("solve ends", threading.current_thread().name))
+        return result
+
+    monkeypatch.setattr(direct_means, "first_means", recorded_first)
+    monkeypatch.setattr(pipeline, "solve", recorded_solve)
+    settings = lambda threads: pipeline.SolveSettings(threads=threads, relative_rms=0.3, patch_size=0.5, seed=3)  # noqa: E731
+    beside = pipeline.run_solve(room_objects(2), settings(2))
+    kinds = [kind for kind, _ in events]
+    assert kinds.index("first") < kinds.index("solve ends"), events
+    assert dict(events)["first"].startswith("radiosity-beside"), events
+    events.clear()
+    monkeypatch.setattr(pipeline, "_lamp_means_beside", lambda *args: None)
+    after = pipeline.run_solve(room_objects(2), settings(2))
+    assert "first" not in [kind for kind, _ in events]
+    np.testing.assert_array_equal(after.result.irradiance, beside.result.irradiance)
+    assert after.result.measured_mse == beside.result.measured_mse
+    for a, b in zip(after.light_colours + after.smooth_colours, beside.light_colours + beside.smooth_colours):
+        np.testing.assert_array_equal(a, b)
+    events.clear()
+    monkeypatch.undo()
+    monkeypatch.setattr(pipeline, "solve", recorded_solve)
+    monkeypatch.setattr(direct_means, "first_means", recorded_first)
+    pipeline.run_solve(room_objects(2), settings(1))
+    assert [kind for kind, _ in events] == ["solve starts", "solve ends"]

@@ -229,3 +229,22 @@ def test_the_batches_measure_the_rest_of_the_light_and_hold_it_to_the_rest_of_th
         assert total.measured_mse() == pytest.approx(by_hand, rel=1e-9)
         assert np.mean(total.increments) / total.paths == pytest.approx(by_hand, rel=1e-9)
         assert total.kept_share() == (1.0 - direct_means.REPLACED_SHARE if kept_out else 1.0)
+
+
+def test_the_first_means_made_beside_the_solve_give_the_same_result(lamp_box):
+    """``corrected`` given the first pair made ahead (``first_means``, which the pipeline makes
+    beside the solve) gives the result it makes alone, bit for bit; a scene without groups of
+    lamps alone has none."""
+    scene, groups, _, _ = lamp_box
+    settings = Settings(method="two_way", exit_point="random", target_error=TARGET, stop_rule="measured",
+                        error_scale="measured", per_source=True, groups=groups, direct_apart=True, seed=5, threads=1,
+                        chunk_paths=CHUNK, replaced_direct=direct_means.replaced(scene, groups))
+    result = solve(scene, settings)
+    first = direct_means.first_means(scene, groups.light_group, groups.patch_group(scene.patch_count), groups.count, 5)
+    alone, ahead = direct_means.corrected(scene, result, TARGET), direct_means.corrected(scene, result, TARGET, first)
+    for name in ("irradiance", "reflected", "radiosity", "direct_irradiance"):
+        np.testing.assert_array_equal(getattr(ahead, name), getattr(alone, name))
+    assert ahead.measured_mse == alone.measured_mse and ahead.measured_mse > result.measured_mse
+    np.testing.assert_array_equal(ahead.per_source.irradiance, alone.per_source.irradiance)
+    unlit = scene.with_materials(scene.reflectivity, scene.emission, lights=[])
+    assert direct_means.first_means(unlit, np.zeros(0, np.int32), groups.patch_group(scene.patch_count), groups.count) is None

@@ -20,7 +20,7 @@ to the result's measured error (docs/errors.md, "What the target is measured on"
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -82,16 +82,41 @@ def replaced(scene, groups):
     return Replaced(tuple(int(k) for k in lamps), REPLACED_SHARE) if lamps.size else None
 
 
-def measured_means(scene, made, seed=0, target_mse=None):
+@dataclass(frozen=True)
+class FirstMeans:
+    """``lamp_scene``'s ``made`` and the two halves (K,P,3) of ``measured_means``' first pair."""
+
+    made: tuple
+    halves: tuple
+
+
+def first_means(scene, light_group, patch_group, count, seed=0):
+    """The FirstMeans of the groups of lamps alone among ``count`` groups (``light_group`` (L,),
+    ``patch_group`` (P,) or None, as ``lamp_scene`` takes them), or None where there are none:
+    the first pair of ``measured_means``, which needs nothing of the solve and so can be made
+    beside it."""
+    made = lamp_scene(scene, light_group, patch_group, count)
+    if made is None:
+        return None
+    return FirstMeans(made, _pair(made, seed, 0, MEAN_SAMPLES // 2))
+
+
+def _pair(made, seed, k, half):
+    """Pair ``k`` of ``measured_means``: two independent halves of ``half`` points a patch."""
+    return tuple(lamp_means(made, seed=[int(seed), k, side], samples=half) for side in (0, 1))
+
+
+def measured_means(scene, made, seed=0, target_mse=None, first=None):
     """((K,P,3) each group of lamps alone's direct light on every patch, the MSE it brings the
     result, weighted as the solve's measured MSE): two independent halves of MEAN_SAMPLES / 2
     points, whose difference d gives each patch's variance of their mean, d^2 / 4; where that
     MSE passes ``target_mse``, one more pair as large as it says is needed (MOST_SAMPLES in all
-    at most), each pair weighing by its points."""
+    at most), each pair weighing by its points. ``first``: the first pair's halves, made already
+    (``first_means``)."""
     weight = scene.area_share
     total, points, mse, half = 0.0, 0, 0.0, MEAN_SAMPLES // 2
     for k in range(2):
-        a, b = (lamp_means(made, seed=[int(seed), k, side], samples=half) for side in (0, 1))
+        a, b = first if k == 0 and first is not None else _pair(made, seed, k, half)
         gap = scene.reflectivity * (a - b).sum(axis=0)  # (P,3) the two halves' difference in the reflected light
         pair_mse = float(np.einsum("p,pc->", weight, np.square(gap))) / (4 * gap.shape[1])
         total, points = total + half * (a + b), points + 2 * half
@@ -105,22 +130,23 @@ def measured_means(scene, made, seed=0, target_mse=None):
     return total / points, mse / points**2
 
 
-def corrected(scene, result, target_error=None):
+def corrected(scene, result, target_error=None, first=None):
     """``result`` (a per-source SolveResult with its groups' direct light apart) with each lamp
     group's direct light the display's (the module's docstring) and its error added to the
     measured one, else as it is. ``target_error``: the solve's, of which the display's means keep
-    to REPLACED_SHARE of the MSE."""
+    to REPLACED_SHARE of the MSE. ``first``: ``first_means`` of the solve's groups and seed, made
+    beside the solve (the same numbers as made here)."""
     ps = result.per_source
     if result.direct_irradiance is None or ps is None or ps.direct_irradiance is None or ps.light_group is None:
         return result
-    made = lamp_scene(scene, ps.light_group, ps.patch_group, ps.count)
+    made = lamp_scene(scene, ps.light_group, ps.patch_group, ps.count) if first is None else first.made
     if made is None:
         return result
     target = None
     if target_error:
         target = REPLACED_SHARE * (relative_rms_to_mse(result.prediction, target_error) if result.error_scale == SCALE_PAPER
                                    else (target_error * result.mean_reflected) ** 2)
-    means, mse = measured_means(scene, made, result.seed, target)
+    means, mse = measured_means(scene, made, result.seed, target, None if first is None else first.halves)
     parts = np.zeros_like(ps.direct_irradiance)
     parts[made[2]] = means - ps.direct_irradiance[made[2]]
     change = parts.sum(axis=0)
