@@ -89,6 +89,34 @@ def test_samples_go_where_the_light_lands_and_every_patch_keeps_its_floor():
     assert np.sort(allotted / area)[-2] > 10  # (the two wall patches: about 40% of the light)
 
 
+def test_a_large_chunk_gives_the_patches_beside_a_small_source_all_their_samples():
+    """In a large chunk the pilot's allotment gives the two wall patches beside the corner source
+    thousands of samples, and the chunk keeps DIRECT_SAMPLES a path in all: no patch's share is
+    clipped (at 256 a patch, the patches beside a small source had fewer than their share, and a
+    two-way run's error was heavy-tailed: benchmarks/results/stop_rule.md)."""
+    scene, _ = small_source_box(corner=True)
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    with tables.numpy_turn:
+        pilot = pilot_irradiance(tables, Gathering(scene, direct_samples(768, scene)), 0)
+    allotted = direct_samples(20_000, scene, pilot)
+    assert np.sort(allotted)[-2] > 1_000
+    assert math.isclose(allotted.sum(), two_way.DIRECT_SAMPLES * 20_000)
+
+
+def test_a_patchs_samples_longer_than_a_block_are_a_block_of_their_own():
+    """The gathering's blocks (``first_shot._blocks``) are whole runs of a patch's samples, about a
+    block's size, a run longer than a block a block alone: every sample in one block, in order."""
+    from addon.core.methods.first_shot import _blocks
+
+    patch = np.repeat(np.arange(6), [3, 800, 2, 900, 4, 1])
+    blocks = _blocks(patch, 500)
+    assert [(b.start, b.stop) for b in blocks] == [(0, 3), (3, 803), (803, 805), (805, 1705), (1705, 1710)]
+    patch = np.repeat(np.arange(50), 30)
+    blocks = _blocks(patch, 500)
+    assert blocks[0] == slice(0, 480) and blocks[-1].stop == patch.size
+    assert all(patch[b.start - 1] != patch[b.start] for b in blocks[1:])
+
+
 def test_allotted_by_the_light_the_corner_source_box_is_still_the_direct_solve():
     """Where the allotment is most uneven (a source in a corner of the ceiling: a few patches
     take most of the samples), each patch's direct light keeps its own unbiased estimate: per
@@ -519,6 +547,24 @@ def test_later_chunk_is_the_smallest_that_meets_the_target_on_the_fewest_chunks(
         assert least < n < most and (n > first) == (target < at_first)
         assert tw.later_estimate(P, first, m, variance, n) <= target < tw.later_estimate(P, first, m, variance, n - 1)
     assert tw.later_chunk(P, first, m, variance, 100 * at_first, least, most) == least
+
+
+def test_later_chunks_may_grow_past_the_plans_up_to_their_rays_a_patch():
+    """The two-way iteration sizes its later chunks past the plan's (``most``) where the plan's
+    are too small for the fewest chunks the stop rule reads: up to TWO_WAY_LATER_RAYS_PER_PATCH
+    first-generation rays a patch (at most TWO_WAY_MAX_CHUNK_PATHS), the largest where none
+    meets the target; with nothing measured, the first chunks' size."""
+    P, m, variance = 4_000, plan.RESIZE_AFTER, 1.0
+    first = most = 30_000
+    largest = math.ceil(tw.TWO_WAY_LATER_RAYS_PER_PATCH * P / tw.GENERATION_RAYS)
+    at_first = tw.later_estimate(P, first, m, variance, first)
+    method = tw.TwoWay()
+    n = method.later_chunk(P, first, m, variance, 0.7 * at_first, most)
+    assert most < n < largest
+    assert tw.later_estimate(P, first, m, variance, n) <= 0.7 * at_first
+    assert method.later_chunk(P, first, m, variance, 0.01 * at_first, most) == largest
+    assert method.later_chunk(P, first, m, 0.0, 0.7 * at_first, most) == first
+    assert method.later_chunk(10**6, first, m, variance, 1e-30, most) == tw.TWO_WAY_MAX_CHUNK_PATHS
 
 
 def test_a_run_whose_plan_overshoots_goes_on_with_smaller_chunks_and_still_meets_its_target():

@@ -70,7 +70,8 @@ class Method:
 
     def later_chunk(self, patch_count, first, done, variance, target_mse, most):
         """The paths of a run's chunks after its first ``done`` chunks of ``first`` paths measured
-        ``variance`` per path, for a measured stop at ``target_mse``, at most ``most``: ``first``
+        ``variance`` per path, for a measured stop at ``target_mse``, ``most`` the plan's chunk (a
+        method whose variance per path falls with its chunk may go past it: two_way): ``first``
         where paths are independent (the chunk's size changes nothing but the stop's steps)."""
         return first
 

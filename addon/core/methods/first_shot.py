@@ -42,7 +42,11 @@ from .tables import WalkTables
 
 # A chunk's gathering aims at about this share of the rays its walk traces.
 GATHER_SHARE = 0.3
-MAX_GATHER_SAMPLES = 256
+# A patch's gathering samples in a chunk, at most: its run of them stays a small part of a block
+# (SAMPLE_BLOCK). The two-way allotment (two_way.direct_samples) gives patches beside a small source
+# many times their area's share; 256 had clipped the lamp room's, more so in larger chunks
+# (docs/performance.md, "Later chunks past the plan's").
+MAX_GATHER_SAMPLES = 8192
 # A chunk's gathering samples are drawn and traced this many at a time.
 SAMPLE_BLOCK = 1 << 18
 # The numbers each gathering sample draws: its point (2), a source (1), a point or direction
@@ -243,10 +247,11 @@ def _gather_block(tables, gathering, patch, x32, value, rng, parts=None, lobe=No
 
 def _blocks(patch, size):
     """Slices of ``patch`` (sorted, each patch's samples a run) of whole runs, about ``size``
-    samples each (a run is at most MAX_GATHER_SAMPLES, far below it)."""
+    samples each (a run is at most MAX_GATHER_SAMPLES, far below it; a longer one a block alone)."""
     cuts = [0]
     while patch.size - cuts[-1] > size:
-        cuts.append(int(np.searchsorted(patch, patch[cuts[-1] + size], side="left")))
+        cut = int(np.searchsorted(patch, patch[cuts[-1] + size], side="left"))
+        cuts.append(cut if cut > cuts[-1] else int(np.searchsorted(patch, patch[cut], side="right")))
     cuts.append(patch.size)
     return [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
 

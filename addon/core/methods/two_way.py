@@ -257,6 +257,12 @@ TWO_WAY_CHUNK_RAYS_PER_PATCH = 32
 # room than in 32 chunks, 2-3% more in 8 (docs/performance.md); 16 leave the batch estimate 15
 # degrees of freedom.
 TWO_WAY_MIN_CHUNKS = 16
+# A run's later chunks (sized on its first ones: later_chunk) may grow past the plan's, up to this many
+# first-generation rays a patch: where the plan's chunks are several times too small for the stop rule's
+# fewest chunks, a run of many of them pays each one's start and sparse last generations, and their
+# variance per path, grown as (1 + G P / n), is nearly spent here (1.19 of its large-chunk value at
+# G = 12; the studio flat: 80 chunks of the plan's 47k paths, docs/performance.md).
+TWO_WAY_LATER_RAYS_PER_PATCH = 128
 # A chunk's gathering samples and rays go a block at a time (first_shot.SAMPLE_BLOCK,
 # two_way.RAY_BLOCK); what it holds at once beyond a block is its samples' points and values.
 TWO_WAY_MAX_CHUNK_PATHS = 1 << 20
@@ -304,7 +310,10 @@ class TwoWay(Method):
         return (1 + TWO_WAY_GROWTH * patch_count / chunk) / (1 + TWO_WAY_GROWTH * patch_count / pilot_chunk)
 
     def later_chunk(self, patch_count, first, done, variance, target_mse, most):
-        return later_chunk(patch_count, first, done, variance, target_mse, least_chunk(patch_count), most)
+        """``later_chunk``, up to the larger of ``most`` and TWO_WAY_LATER_RAYS_PER_PATCH first-generation
+        rays a patch (at most TWO_WAY_MAX_CHUNK_PATHS)."""
+        largest = min(TWO_WAY_MAX_CHUNK_PATHS, math.ceil(TWO_WAY_LATER_RAYS_PER_PATCH * patch_count / GENERATION_RAYS))
+        return later_chunk(patch_count, first, done, variance, target_mse, least_chunk(patch_count), max(most, largest))
 
     def resized(self, state, chunk, new_chunk):
         """Its gathering's samples scaled with the chunk (DIRECT_SAMPLES a path, as direct_samples)."""
@@ -343,9 +352,12 @@ def later_chunk(patch_count, first, done, variance, target_mse, least, most):
     growth differs runs a few more chunks), the batch estimate of chunks of two sizes as Batches
     makes it (``later_estimate``: each chunk's spread counts alike, and the smaller chunks' larger
     variance per path weighs more than in the true error, which it then covers); ``most`` where
-    none does. A plan's paths are the paper's guess for the walk, often several times off; a run
-    starts on the plan's chunks and sizes the rest, at most as large, on what they measured."""
-    if MEASURED_STOP_CHUNKS <= done or not (variance > 0 and target_mse > 0) or least >= most:
+    none does; ``first``, at most ``most``, where nothing is measured to size on. A plan's paths are
+    the paper's guess for the walk, often several times off; a run starts on the plan's chunks and
+    sizes the rest on what they measured."""
+    if MEASURED_STOP_CHUNKS <= done or not (variance > 0 and target_mse > 0):
+        return min(first, most)
+    if least >= most:
         return most
     expected = lambda n: later_estimate(patch_count, first, done, variance, n)  # noqa: E731
     if expected(least) <= target_mse:
