@@ -42,10 +42,8 @@ from .tables import WalkTables
 
 # A chunk's gathering aims at about this share of the rays its walk traces.
 GATHER_SHARE = 0.3
-# A patch's gathering samples in a chunk, at most: its run of them stays a small part of a block
-# (SAMPLE_BLOCK). The two-way allotment (two_way.direct_samples) gives patches beside a small source
-# many times their area's share; 256 had clipped the lamp room's, more so in larger chunks
-# (docs/performance.md, "Later chunks past the plan's").
+# A patch's gathering samples in a chunk, at most (a small part of a SAMPLE_BLOCK): beside a small
+# source the allotment gives many times the area's share (256 cut them: docs/performance.md).
 MAX_GATHER_SAMPLES = 8192
 # A chunk's gathering samples are drawn and traced this many at a time.
 SAMPLE_BLOCK = 1 << 18
