@@ -258,13 +258,17 @@ def test_the_lamps_first_means_are_made_beside_the_solve_with_the_same_numbers(m
     from addon.core.display import direct_means
 
     events, first_means, solve = [], direct_means.first_means, pipeline.solve
+    begun, waits = threading.Event(), [True]
 
     def recorded_first(*args, **kwargs):
         events.append(("first", threading.current_thread().name))
+        begun.set()
         return first_means(*args, **kwargs)
 
     def recorded_solve(*args, **kwargs):
         events.append(("solve starts", threading.current_thread().name))
+        if waits[0]:  # (a solve as long as the means' start: they begin during it, or it times out)
+            assert begun.wait(60)
         result = solve(*args, **kwargs)
         events.append(("solve ends", threading.current_thread().name))
         return result
@@ -277,6 +281,7 @@ def test_the_lamps_first_means_are_made_beside_the_solve_with_the_same_numbers(m
     assert kinds.index("first") < kinds.index("solve ends"), events
     assert dict(events)["first"].startswith("radiosity-beside"), events
     events.clear()
+    waits[0] = False
     monkeypatch.setattr(pipeline, "_lamp_means_beside", lambda *args: None)
     after = pipeline.run_solve(room_objects(2), settings(2))
     assert "first" not in [kind for kind, _ in events]
