@@ -292,7 +292,7 @@ class TwoWay(Method):
         usual = chunk_paths_for(rays_per_path(expected_path_length), planned_paths, TWO_WAY_MIN_CHUNKS)
         if time_limited:
             return usual
-        paths_for = lambda rays: math.ceil(rays * patch_count / GENERATION_RAYS)  # noqa: E731
+        paths_for = lambda rays: paths_for_rays(patch_count, rays)  # noqa: E731
         grown = min(paths_for(TWO_WAY_CHUNK_RAYS_PER_PATCH), math.ceil(planned_paths / TWO_WAY_MIN_CHUNKS))
         enough = min(paths_for(TWO_WAY_RAYS_PER_PATCH), math.ceil(planned_paths / MIN_MEASURED_CHUNKS))
         if guessed:
@@ -312,7 +312,7 @@ class TwoWay(Method):
     def later_chunk(self, patch_count, first, done, variance, target_mse, most):
         """``later_chunk``, up to the larger of ``most`` and TWO_WAY_LATER_RAYS_PER_PATCH first-generation
         rays a patch (at most TWO_WAY_MAX_CHUNK_PATHS)."""
-        largest = min(TWO_WAY_MAX_CHUNK_PATHS, math.ceil(TWO_WAY_LATER_RAYS_PER_PATCH * patch_count / GENERATION_RAYS))
+        largest = min(TWO_WAY_MAX_CHUNK_PATHS, paths_for_rays(patch_count, TWO_WAY_LATER_RAYS_PER_PATCH))
         return later_chunk(patch_count, first, done, variance, target_mse, least_chunk(patch_count), max(most, largest))
 
     def resized(self, state, chunk, new_chunk):
@@ -341,7 +341,7 @@ def balanced_chunk(patch_count, planned_paths):
 
 def least_chunk(patch_count):
     """The fewest paths a run's later chunks take: TWO_WAY_RAYS_PER_PATCH first-generation rays a patch."""
-    return max(MIN_CHUNK_PATHS, math.ceil(TWO_WAY_RAYS_PER_PATCH * patch_count / GENERATION_RAYS))
+    return max(MIN_CHUNK_PATHS, paths_for_rays(patch_count, TWO_WAY_RAYS_PER_PATCH))
 
 
 def later_chunk(patch_count, first, done, variance, target_mse, least, most):
@@ -379,6 +379,12 @@ def later_estimate(patch_count, chunk, done, variance, n):
     v = variance * (1.0 + TWO_WAY_GROWTH * patch_count / n) / (1.0 + TWO_WAY_GROWTH * patch_count / chunk)
     paths = m * chunk + (K - m) * n
     return (m * variance + (K - m) * v - (m * chunk * variance + (K - m) * n * v) / paths) / ((K - 1) * paths)
+
+
+def paths_for_rays(patch_count, rays):
+    """The paths of a chunk whose first generation gives each patch ``rays`` rays on average
+    (``first_generation_rays``' inverse, rounded up)."""
+    return math.ceil(rays * patch_count / GENERATION_RAYS)
 
 
 def first_generation_rays(patch_count, chunk_paths):
