@@ -20,7 +20,7 @@ from .distributed.cluster import ClusterRunner, WalkParameters
 from .distributed.cluster_connect import cluster_address
 from .distributed.runners import ThreadRunner
 from .estimate.batches import Batches
-from .estimate.plan import (RESIZE_AFTER, chunk_plan, meets_target, paths_to_target, relative_error, resize_inputs, resizes,
+from .estimate.plan import (RESIZE_AFTER, RESIZE_AGAIN_AFTER, RESIZE_AGAIN_FROM, chunk_plan, meets_target, paths_to_target, relative_error, resize_inputs, resizes,
                             target_bound, target_now)
 from .methods.tables import WalkTables
 from .names import (
@@ -70,6 +70,7 @@ class SolveResult:
     per_source: object = None  # estimate.per_source.PerSource (per_source=True), else None
     error_scale: str = SCALE_PAPER  # what relative_error is relative to (names.ERROR_SCALES)
     direct_irradiance: np.ndarray | None = None  # (P,3) H's part straight from the sources, where gathered apart
+    chunk_sizes: tuple = ()  # each chunk's paths, in order
 
     @property
     def relative_error(self):
@@ -119,7 +120,9 @@ class _Run:
     room; their tallies added in order; stopped by the plan's rule, a cancel or the time limit.
     A plan sized on a guess of its paths (``sized``: a measured stop, no paths, chunk or time limit
     given) sizes its chunks after its first RESIZE_AFTER (``Method.later_chunk``): the later ones
-    wait for them, so that every chunk's size is the same on any number of threads."""
+    wait for them, so that every chunk's size is the same on any number of threads. A method whose
+    variance per path changes with the chunk sizes them again from RESIZE_AGAIN_FROM on, on the
+    first RESIZE_AGAIN_AFTER (``Method.again_chunk``), the chunks between running meanwhile."""
 
     def __init__(self, plan, chunk, settings, done_rule, start, method, sized=False):
         self.plan, self.chunk, self.start, self.method = plan, chunk, start, method
@@ -127,7 +130,10 @@ class _Run:
         self.target_error, self.error_scale = settings.target_error, settings.error_scale
         self.done_rule = done_rule
         self.replaced = settings.replaced_direct
-        self.resize_at = RESIZE_AFTER if sized else None
+        self.resize_at = RESIZE_AFTER if sized else None  # (chunks measured when the next ones are sized)
+        self.wait_from = self.resize_at  # (the first chunk that waits for that)
+        self.again = None  # (a size made at RESIZE_AGAIN_AFTER chunks, taken from chunk wait_from on)
+        self.sizes = []  # each chunk's paths, as submitted
         self.state = None
 
     def target(self, total):
@@ -147,10 +153,14 @@ class _Run:
             runner.start(state, seed)
             while stopped is None:
                 while submitted < plan.cap and len(pending) < runner.slots and not self._waiting(next_chunk):
+                    if self.again is not None and next_chunk >= self.wait_from:
+                        self._take(self.again, runner)
+                        self.again, group = None, self.state.group(self.chunk, plan.prediction.expected_path_length)
                     sizes = []
                     while len(sizes) < group and submitted < plan.cap:
                         sizes.append(min(self.chunk, plan.cap - submitted))
                         submitted += sizes[-1]
+                    self.sizes += sizes
                     pending.append(runner.submit(next_chunk, sizes))
                     next_chunk += len(sizes)
                 if not pending:
@@ -165,7 +175,7 @@ class _Run:
                     break
                 pending.popleft()
                 stopped = self._add(total, tallies, progress, should_stop, max_seconds)
-                if stopped is None and self._waiting(next_chunk) and total.chunks >= self.resize_at:
+                if stopped is None and self.resize_at is not None and total.chunks >= self.resize_at:
                     self._resize(scene, total, runner)
                     group = self.state.group(self.chunk, plan.prediction.expected_path_length)
         finally:
@@ -175,20 +185,35 @@ class _Run:
 
     def _waiting(self, next_chunk):
         """Whether chunk ``next_chunk`` waits for the first ones to size it."""
-        return self.resize_at is not None and next_chunk >= self.resize_at
+        return self.resize_at is not None and next_chunk >= self.wait_from
 
     def _resize(self, scene, total, runner):
-        """The later chunks' size (and the state they read) from the first ones' measured error."""
-        self.resize_at, target = None, self.target(total)
+        """The later chunks' size (and the state they read) from the first ones' measured error;
+        where that changed it, the size again from RESIZE_AGAIN_FROM on, on what the first of
+        them measured too (``Method.again_chunk``), taken once the chunks before are submitted."""
+        again, self.resize_at, target = self.wait_from != RESIZE_AFTER, None, self.target(total)
+        if again:
+            measured = self.sizes[:total.chunks]
+            running = [self.chunk] * max(0, self.wait_from - total.chunks)
+            chunk = None if not target else self.method.again_chunk(
+                scene.patch_count, measured, total.increments[:len(measured) - 1], total.spread_terms(), target, running,
+                self.plan.chunk)
+            self.again = None if chunk is None or chunk == self.chunk else chunk
+            return
         inputs = None if target is None else resize_inputs(total, target)
         if inputs is None:
             return
         variance, target = inputs
         chunk = self.method.later_chunk(scene.patch_count, self.chunk, total.chunks, variance, target, self.plan.chunk)
         if chunk != self.chunk:
-            self.state = self.method.resized(self.state, self.chunk, chunk)
-            runner.restate(self.state)
-            self.chunk = chunk
+            self._take(chunk, runner)
+            self.resize_at, self.wait_from = RESIZE_AGAIN_AFTER, RESIZE_AGAIN_FROM
+
+    def _take(self, chunk, runner):
+        """Chunks of ``chunk`` paths from the next submitted on, and the state they read."""
+        self.state = self.method.resized(self.state, self.chunk, chunk)
+        runner.restate(self.state)
+        self.chunk = chunk
 
     def _add(self, total, tallies, progress, should_stop, max_seconds):
         """Adds a task's tallies (progress once per chunk); why the run stops now, or None."""
@@ -247,6 +272,7 @@ def _result(scene, total, stopped, run, method, state, settings, threads):
         seed=int(settings.seed),
         threads=threads,
         error_scale=settings.error_scale,
+        chunk_sizes=tuple(run.sizes[:total.chunks]),
     )
 
 

@@ -1,6 +1,8 @@
 """The light arriving at each patch (H in B = E + rho H) and its measured variance, also on black
 patches (rho = 0), where the reflected light's variance says nothing: what the textured output's
 smooth light is filtered with (addon/core/estimate/batches.py ``irradiance_variance``)."""
+import math
+
 import numpy as np
 import pytest
 
@@ -118,3 +120,76 @@ def test_chunks_of_two_sizes_are_estimated_as_later_chunk_expects():
     expected = tw.later_estimate(P, big, m, variance, small)
     assert grown > 1.5  # (the small chunks' variance a path well above the large ones')
     assert abs(readings.mean() - expected) <= 4 * readings.std(ddof=1) / np.sqrt(readings.size), (readings.mean(), expected)
+
+
+def test_the_increments_of_chunks_of_three_sizes_give_each_chunks_variance_a_path():
+    """What a run that sizes its chunks twice reads (``plan.chunk_variances``,
+    ``plan.expected_increments``): synthetic tallies, Gaussian incident power of variance n_k v_k
+    about its mean, two chunks of 6,000 paths, three of 3,000, seven of 1,500, each size its own
+    variance a path; over 400 replicas the increments' means are ``expected_increments``' and the
+    variances read from them the chunks' own, each within 4 standard errors; their mean over the
+    paths is the batch estimate (to rounding), which ``later_estimate`` gives for two sizes."""
+    from addon.core.estimate import plan
+    from addon.core.estimate.batches import Batches
+    from addon.core.methods import two_way as tw
+    from addon.core.methods.tables import WalkTables
+
+    scene, _, _ = _black_floor_box()
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    P = scene.patch_count
+    sizes = [6000] * 2 + [3000] * 3 + [1500] * 7
+    per_path = {6000: 1.0, 3000: 1.3, 1500: 1.9}
+    spread = 1e-3 * np.sqrt(np.random.default_rng(0).uniform(0.5, 2.0, (3, P)))
+    unit = Batches(scene, tables)
+    unit.add(_tally(1, spread))
+    unit.add(_tally(1, -spread))
+    v = unit.measured_mse()  # (the variance a path of a chunk of per_path 1)
+    variances = [v * per_path[n] for n in sizes]
+    mean = 1e-3 * np.ones((3, P))
+    rng, increments, read, estimates = np.random.default_rng(3), [], [], []
+    for _ in range(400):
+        total = Batches(scene, tables, increments=True)
+        for n in sizes:
+            total.add(_tally(n, n * mean + np.sqrt(n * per_path[n]) * spread * rng.standard_normal((3, P))))
+        increments.append(total.increments)
+        read.append(plan.chunk_variances(sizes, total.increments))
+        estimates.append(total.measured_mse())
+        assert np.mean(total.increments) / total.paths == pytest.approx(total.measured_mse(), rel=1e-9)
+    for got, want in ((np.asarray(increments), plan.expected_increments(sizes, variances)),
+                      (np.asarray(read), np.asarray(variances))):
+        error = got.std(axis=0, ddof=1) / np.sqrt(len(got))
+        assert np.all(np.abs(got.mean(axis=0) - want) <= 4 * error), (got.mean(axis=0) / want)
+    # the increments' expected mean over N is the batch estimate's expectation, as later_estimate has it
+    N, vs = sum(sizes), np.asarray(variances)
+    batch = (vs.sum() - (np.asarray(sizes) * vs).sum() / N) / ((len(sizes) - 1) * N)
+    assert np.mean(plan.expected_increments(sizes, variances)) / N == pytest.approx(batch, rel=1e-12)
+    assert np.mean(estimates) == pytest.approx(batch, rel=4 * np.std(estimates) / np.sqrt(len(estimates)) / batch)
+    two = [6000] * 2 + [1500] * 10
+    grown = (1 + tw.TWO_WAY_GROWTH * P / 1500) / (1 + tw.TWO_WAY_GROWTH * P / 6000)
+    assert np.mean(plan.expected_increments(two, [v] * 2 + [v * grown] * 10)) / sum(two) == pytest.approx(
+        tw.later_estimate(P, 6000, 2, v, 1500), rel=1e-12)
+
+
+def test_the_expected_bound_is_the_stop_rules_bound_on_chunks_as_expected():
+    """``plan.expected_bound`` of increments all read is ``Batches.mse_upper_bound`` of them; with
+    none read and no noise (terms inf) the mean of ``expected_increments`` plus z standard errors of
+    their spread; a noisier reading (fewer terms) bounds higher."""
+    from addon.core.estimate import plan
+    from addon.core.estimate.batches import Batches
+    from addon.core.methods.tables import WalkTables
+
+    scene, _, _ = _black_floor_box()
+    tables = WalkTables(scene, "finite", 1e-3, "random")
+    rng = np.random.default_rng(5)
+    sizes = [4000] * 2 + [2000] * 10
+    total = Batches(scene, tables, increments=True)
+    for n in sizes:
+        total.add(_tally(n, n * 1e-3 + np.sqrt(n) * 1e-3 * rng.standard_normal((3, scene.patch_count))))
+    variances = [1.0] * len(sizes)
+    assert plan.expected_bound(sizes, variances, total.increments, 100.0) == pytest.approx(
+        total.mse_upper_bound(plan.MEASURED_STOP_Z), rel=1e-12)
+    variances = [1.0] * 2 + [1.5] * 10
+    inc = plan.expected_increments(sizes, variances)
+    bare = plan.expected_bound(sizes, variances, [], math.inf)
+    assert bare == pytest.approx((inc.mean() + plan.MEASURED_STOP_Z * inc.std(ddof=1) / math.sqrt(inc.size)) / sum(sizes), rel=1e-12)
+    assert plan.expected_bound(sizes, variances, [], 50.0) > bare

@@ -74,9 +74,11 @@ def test_the_forecast_paths_are_within_2x_of_where_the_run_stops(relative_rms):
     assert 0.5 <= f.paths / r.paths <= 2.0, (f.paths, r.paths)
     assert 0.5 <= f.rays / r.rays <= 2.0, (f.rays, r.rays)
     assert f.measured and 0.5 <= f.chunks / r.chunks <= 2.0, (f.chunks, r.chunks)
-    # (the run's first chunks of the plan's size, the rest of one size: chunks.RESIZE_AFTER)
-    first = f.chunk
-    assert r.paths > plan.RESIZE_AFTER * first and (r.paths - plan.RESIZE_AFTER * first) % (r.chunks - plan.RESIZE_AFTER) == 0
+    # (the run's first chunks of the plan's size, then those its first sized, then those it sized again:
+    # chunks.RESIZE_AFTER, RESIZE_AGAIN_FROM)
+    sizes = r.chunk_sizes
+    assert len(sizes) == r.chunks and sum(sizes) == r.paths and set(sizes[:plan.RESIZE_AFTER]) == {f.chunk}
+    assert len(set(sizes[plan.RESIZE_AFTER:plan.RESIZE_AGAIN_FROM])) == 1 and len(set(sizes[plan.RESIZE_AGAIN_FROM:])) <= 1
 
 
 def test_a_run_predicts_its_end_from_its_measured_error_as_it_goes():

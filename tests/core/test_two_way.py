@@ -16,6 +16,7 @@ from addon.core.methods.first_shot import Gathering
 from addon.core.methods.two_way import pilot_irradiance
 from addon.core.methods import automatic
 from addon.core.methods import two_way as tw
+from addon.core.methods import two_way_sizes
 from addon.core.lights.lights import AreaLight, PointLight, SunLight, WorldLight
 from addon.core.estimate.reference import form_factors_raycast, rectangle_form_factors, solve_radiosity_system
 from addon.core.methods.tables import WalkTables
@@ -328,8 +329,8 @@ def test_a_guessed_plan_grows_the_two_way_chunks_to_the_balance_of_the_stop_rule
     assert chosen.chunk >= tw.balanced_chunk(scene.patch_count, tw.TwoWay().planned_paths(chosen.prediction.paths_for(target)))
     r = solve(scene, target_mse=target, seed=1, method="auto")
     assert r.method == "two_way" and r.stopped == "target"
-    first = plan.RESIZE_AFTER * chosen.chunk  # (the first chunks of the plan's size, the rest alike: later_chunk)
-    assert (r.paths - first) % (r.chunks - plan.RESIZE_AFTER) == 0 and r.paths <= r.chunks * chosen.chunk
+    sizes = r.chunk_sizes  # (the first chunks of the plan's size, the rest smaller: later_chunk, again_chunk)
+    assert set(sizes[:plan.RESIZE_AFTER]) == {chosen.chunk} and max(sizes) == chosen.chunk and sum(sizes) == r.paths
 
 
 def test_a_small_plan_runs_in_fewer_larger_chunks_than_the_walk_s():
@@ -584,10 +585,79 @@ def test_a_run_whose_plan_overshoots_goes_on_with_smaller_chunks_and_still_meets
     w = scene.patch_area / scene.total_area
     for seed in range(3):
         r = solve(scene, target_error=0.02, method="two_way", seed=seed, threads=2)
-        later = (r.paths - plan.RESIZE_AFTER * first) / (r.chunks - plan.RESIZE_AFTER)
-        assert later == int(later) and later != first, (r.paths, r.chunks, first)
+        sizes = r.chunk_sizes
+        assert set(sizes[:plan.RESIZE_AFTER]) == {first} and max(sizes[plan.RESIZE_AFTER:]) < first, (sizes, first)
         assert r.stopped == "target" and r.paths < plan.MEASURED_STOP_CHUNKS * planned / 1.5, (r.paths, r.chunks, planned)
         z = _z(r, exact)
         assert _z_ok(z, r.chunks), (np.abs(z).max(), np.mean(z**2))
         true = float((w[:, None] * (r.radiosity - exact) ** 2).mean(axis=1).sum())
         assert math.sqrt(true) / float((w[:, None] * (exact - scene.emission)).mean(axis=1).sum()) <= 0.02
+
+
+def test_the_growth_of_the_variance_a_path_is_read_from_two_chunk_sizes():
+    """``measured_growth`` gives back the G of v (1 + G P / n) that made two sizes' variances; 0
+    where the smaller chunks measured less (noise about no growth); TWO_WAY_MOST_GROWTH where they
+    measured more than any G makes (the ratio of the sizes); None where the sizes are too near."""
+    P, first, later = 4_000, 30_000, 10_000
+    for G in (0.0, 0.8, 3.0, 12.0, 40.0):
+        v = (1 + G * P / later) / (1 + G * P / first)
+        assert tw.measured_growth(P, first, later, 2.0, 2.0 * v) == pytest.approx(G, abs=1e-9)
+        # (the chunks may have grown as well: the same G from the other side)
+        assert tw.measured_growth(P, later, first, 2.0 * v, 2.0) == pytest.approx(G, abs=1e-9)
+    assert tw.measured_growth(P, first, later, 1.0, 0.9) == 0.0
+    assert tw.measured_growth(P, first, later, 1.0, 1.01 * first / later) == tw.TWO_WAY_MOST_GROWTH
+    assert tw.measured_growth(P, first, 29_500, 1.0, 1.5) is None
+    assert tw.measured_growth(P, first, later, 0.0, 1.0) is None
+
+
+def _again_bound(P, sizes, increments, terms, running, n):
+    """The stop rule's bound ``again_chunk`` expects at chunks of n after ``sizes`` and ``running``
+    (its variances: the last size's taken MEASURED_STOP_Z of its noise up, grown by the G measured)."""
+    v = plan.chunk_variances(sizes, increments)
+    up = v[-1] * (1 + plan.MEASURED_STOP_Z * math.sqrt(2 / terms))
+    G = tw.measured_growth(P, sizes[0], sizes[-1], v[0], up)
+    at = lambda m: up * (1 + G * P / m) / (1 + G * P / sizes[-1])  # noqa: E731
+    rest = plan.MEASURED_STOP_CHUNKS - len(sizes) - len(running)
+    return plan.expected_bound(list(sizes) + list(running) + [n] * rest, list(v) + [at(m) for m in running] + [at(n)] * rest,
+                               increments, terms)
+
+
+def test_chunks_sized_again_are_the_smallest_whose_expected_bound_meets_the_target(monkeypatch):
+    """``again_chunk``: with the variances of a growth G = 2 measured (no noise in the increments,
+    ``plan.expected_increments``), the smallest n whose expected bound meets the target; ``least``
+    where that does, ``most`` where none does; where they shrink, smaller than a growth of 12
+    would make them (a scene whose variance grows less than the suite's middle runs smaller chunks)."""
+    P, n1, n2, least, most, terms = 4_000, 30_000, 10_000, 2_000, 60_000, 5_000.0
+    model = lambda G, n: (1 + G * P / n) / (1 + G * P / n1)  # noqa: E731
+    sizes, running = [n1, n1, n2], [n2, n2]
+    increments = list(plan.expected_increments(sizes, [model(2.0, n) for n in sizes]))
+    target = 0.6 * _again_bound(P, sizes, increments, terms, running, n2)
+    n = tw.again_chunk(P, sizes, increments, terms, target, running, least, most)
+    assert least < n < most
+    assert _again_bound(P, sizes, increments, terms, running, n) <= target < _again_bound(P, sizes, increments, terms, running, n - 1)
+    assert tw.again_chunk(P, sizes, increments, terms, 100 * target, running, least, most) == least
+    assert tw.again_chunk(P, sizes, increments, terms, 1e-3 * target, running, least, most) == most
+    # where the chunks shrink, a growth of 12 read into the same variances keeps them larger
+    loose = 1.3 * _again_bound(P, sizes, increments, terms, running, n2)
+    small = tw.again_chunk(P, sizes, increments, terms, loose, running, least, most)
+    monkeypatch.setattr(two_way_sizes, "measured_growth", lambda *a: tw.TWO_WAY_GROWTH)
+    assert least < small < tw.again_chunk(P, sizes, increments, terms, loose, running, least, most) < n2
+    monkeypatch.undo()
+    # nothing left to size, or an error held by too few terms to read a growth from: the last size
+    assert tw.again_chunk(P, sizes, increments, 0.9 * tw.AGAIN_TERMS, target, running, least, most) == n2
+    assert tw.again_chunk(P, [n1] * 2 + [n2] * 8, increments + [increments[-1]] * 7, terms, target, [n2] * 2, least, most) == n2
+
+
+def test_a_run_sized_twice_has_the_same_chunks_on_one_thread_and_on_two():
+    """A run to a target whose plan overshoots sizes its chunks after RESIZE_AFTER and again from
+    RESIZE_AGAIN_FROM on (three sizes); the chunks between run meanwhile, so that on one thread and
+    on two every chunk's size, and the result, are the same, bit for bit."""
+    R, E = np.full((6, 3), 0.5), np.zeros((6, 3))
+    E[CEILING] = 1.0
+    scene, _, _ = box_scene(R, E, n=24)  # (3,456 patches: an error held by more than AGAIN_TERMS terms)
+    a = solve(scene, target_error=0.05, method="two_way", seed=1, threads=1)
+    b = solve(scene, target_error=0.05, method="two_way", seed=1, threads=2)
+    assert a.chunk_sizes == b.chunk_sizes and np.array_equal(a.radiosity, b.radiosity)
+    sizes = a.chunk_sizes
+    assert len(set(sizes[:plan.RESIZE_AFTER])) == len(set(sizes[plan.RESIZE_AFTER:plan.RESIZE_AGAIN_FROM])) == 1
+    assert len(set(sizes)) == 3 and len(set(sizes[plan.RESIZE_AGAIN_FROM:])) == 1, sizes

@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from .error_model import MAX_PATHS, mse_to_relative_rms, predict, relative_rms_to_mse
 from ..names import MEASURED, SCALE_PAPER
 
@@ -31,6 +33,12 @@ MEASURED_STOP_CHUNKS = 12
 # A run whose chunks were sized on a guess of its paths reads this many before it sizes the rest
 # (Method.later_chunk): the first of them run, the others wait.
 RESIZE_AFTER = 2
+# A method whose variance per path changes with its chunk (``Method.again_chunk``) sizes them once
+# more, on what the first RESIZE_AGAIN_AFTER chunks measured (the first of the later size among
+# them: how the variance changed with the size), for the chunks from RESIZE_AGAIN_FROM on; those
+# between run meanwhile, on any number of threads the same.
+RESIZE_AGAIN_AFTER = RESIZE_AFTER + 1
+RESIZE_AGAIN_FROM = RESIZE_AGAIN_AFTER + 2
 
 
 @dataclass(frozen=True)
@@ -112,6 +120,52 @@ def resize_inputs(total, target_mse):
     noise = math.sqrt(2.0 / total.spread_terms())
     variance = mse * total.paths * (1.0 + MEASURED_STOP_Z * noise)
     return variance, target_mse / (1.0 + MEASURED_STOP_Z * noise / math.sqrt(MEASURED_STOP_CHUNKS - 1))
+
+
+def chunk_variances(sizes, increments):
+    """(K,) the variance per path each of the chunks of ``sizes`` paths measured, from the Batches'
+    ``increments`` (K - 1 of them, one a chunk from the second on), whose expectation is
+    (N v_k + n_k V) / (N + n_k) for a chunk of n_k paths and v_k a path after N paths of mean
+    variance a path V = sum_i n_i v_i / N (``expected_increments``). The first chunk has no increment
+    of its own: it is given the second's, of its size."""
+    sizes = np.asarray(sizes, np.float64)
+    if len(sizes) < 2 or len(increments) < len(sizes) - 1 or sizes[0] != sizes[1]:
+        raise ValueError(f"chunk_variances needs two first chunks of one size and an increment a chunk from the second on; "
+                         f"got sizes {sizes.tolist()}, {len(increments)} increments")
+    v = np.empty(len(sizes))
+    v[0] = v[1] = increments[0]  # (two chunks alike: E = v)
+    paths, weighted = sizes[0] + sizes[1], (sizes[0] + sizes[1]) * increments[0]
+    for k in range(2, len(sizes)):
+        n = sizes[k]
+        v[k] = ((paths + n) * increments[k - 1] - n * weighted / paths) / paths
+        paths, weighted = paths + n, weighted + n * v[k]
+    return v
+
+
+def expected_increments(sizes, variances):
+    """(K - 1,) the expected Batches increments of chunks of ``sizes`` paths and ``variances`` per
+    path: (N v_k + n_k V) / (N + n_k), N the paths before chunk k and V their variance a path,
+    sum_i n_i v_i / N. Their mean over N is the batch estimate's expectation."""
+    out, paths, weighted = [], float(sizes[0]), float(sizes[0]) * float(variances[0])
+    for n, v in zip(sizes[1:], variances[1:]):
+        out.append((paths * v + n * weighted / paths) / (paths + n))
+        paths, weighted = paths + n, weighted + n * v
+    return np.asarray(out)
+
+
+def expected_bound(sizes, variances, read, terms, z=MEASURED_STOP_Z):
+    """What the measured stop rule's bound (``Batches.mse_upper_bound``) is expected to read on
+    chunks of ``sizes`` paths and ``variances`` per path, whose first increments are ``read``
+    (their values as measured): the increments' mean plus ``z`` standard errors of it, over the
+    paths; the increments yet to come at their expectation (``expected_increments``), and their
+    spread that of the expectations plus each one's own noise (a chi-square of ``terms`` degrees
+    of freedom, ``Batches.spread_terms``)."""
+    increments = expected_increments(sizes, variances)
+    increments[:len(read)] = read
+    mean = float(increments.mean())
+    coming = (len(increments) - len(read)) / len(increments)
+    spread = math.sqrt(float(increments.var(ddof=1)) + coming * mean * mean * 2.0 / terms)
+    return (mean + z * spread / math.sqrt(len(increments))) / float(np.sum(sizes))
 
 
 def target_now(plan, target_error, error_scale, mean_reflected):

@@ -75,6 +75,13 @@ class Method:
         where paths are independent (the chunk's size changes nothing but the stop's steps)."""
         return first
 
+    def again_chunk(self, patch_count, sizes, increments, terms, target_mse, running, most):
+        """The paths of a run's chunks from plan.RESIZE_AGAIN_FROM on, sized again on its first
+        chunks of ``sizes`` paths, their Batches ``increments`` and ``spread_terms`` (``terms``), for
+        a measured stop at ``target_mse``, the chunks of ``running`` paths before them already sized,
+        ``most`` the plan's chunk; None: not sized again (paths independent, as ``later_chunk``)."""
+        return None
+
     def resized(self, state, chunk, new_chunk):
         """The Integrator ``state`` (made for chunks of ``chunk`` paths) for chunks of ``new_chunk``."""
         return state

@@ -49,7 +49,7 @@ first-generation rays (fewer, and what a generation passes on is mostly its own 
 TWO_WAY_CHUNK_RAYS_PER_PATCH, and where the plan is only a guess (a run to an error target),
 at least the balance of the stop rule (``balanced_chunk``); its direct light's samples allotted
 partly by a pilot of the direct light (``two_way.direct_samples``); and what the forecast predicts of it: its
-variance per path falls as its chunks grow, as v_inf (1 + TWO_WAY_GROWTH P / n). The paper's
+variance per path falls as its chunks grow, as v_inf (1 + G P / n) (``two_way_sizes``). The paper's
 formulas do not predict its error, which is measured.
 
 """
@@ -68,7 +68,9 @@ from ..estimate.grouping import with_groups
 from ..estimate.tallies import ChunkTally
 from .first_shot import FATE_STREAM, Gathering
 from ..names import GATHERED, TWO_WAY
-from ..estimate.plan import MEASURED_STOP_CHUNKS, MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_paths_for
+from ..estimate.plan import MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_paths_for
+from .two_way_sizes import (AGAIN_TERMS, TWO_WAY_GROWTH, TWO_WAY_MOST_GROWTH, again_chunk, balanced_chunk,  # noqa: F401
+                            later_chunk, later_estimate, measured_growth)
 from .base import GatheringIntegrator, Method, check, solve_gathering, spec_gathering
 from .tables import chunk_wide
 
@@ -266,11 +268,6 @@ TWO_WAY_LATER_RAYS_PER_PATCH = 128
 # A chunk's gathering samples and rays go a block at a time (first_shot.SAMPLE_BLOCK,
 # two_way.RAY_BLOCK); what it holds at once beyond a block is its samples' points and values.
 TWO_WAY_MAX_CHUNK_PATHS = 1 << 20
-# The variance per path in chunks of n paths over P patches, as v_inf (1 + TWO_WAY_GROWTH P / n):
-# fitted over chunk sizes 4x apart, 6-30 in the suite and sample scenes (docs/performance.md,
-# "The time prediction").
-TWO_WAY_GROWTH = 12.0
-
 
 class TwoWay(Method):
     """The two-way stochastic Jacobi iteration."""
@@ -315,6 +312,13 @@ class TwoWay(Method):
         largest = min(TWO_WAY_MAX_CHUNK_PATHS, paths_for_rays(patch_count, TWO_WAY_LATER_RAYS_PER_PATCH))
         return later_chunk(patch_count, first, done, variance, target_mse, least_chunk(patch_count), max(most, largest))
 
+    def again_chunk(self, patch_count, sizes, increments, terms, target_mse, running, most):
+        """``again_chunk``: its variance's growth measured (``measured_growth``), from ``least_chunk``
+        to the larger of ``most`` and TWO_WAY_LATER_RAYS_PER_PATCH first-generation rays a patch."""
+        largest = min(TWO_WAY_MAX_CHUNK_PATHS, paths_for_rays(patch_count, TWO_WAY_LATER_RAYS_PER_PATCH))
+        return again_chunk(patch_count, sizes, increments, terms, target_mse, running, least_chunk(patch_count),
+                           max(most, largest))
+
     def resized(self, state, chunk, new_chunk):
         """Its gathering's samples scaled with the chunk (DIRECT_SAMPLES a path, as direct_samples)."""
         samples = np.clip(state.gathering.samples * (new_chunk / chunk), 1e-3, MAX_GATHER_SAMPLES)
@@ -330,55 +334,9 @@ class TwoWay(Method):
         return TwoWayChunks(tables, spec_gathering(scene, spec))
 
 
-def balanced_chunk(patch_count, planned_paths):
-    """The chunk of n paths at which the fewest chunks a measured stop reads (MEASURED_STOP_CHUNKS
-    of them, K) hold the paths the plan's run takes at that size, its variance per path grown
-    as (1 + G P / n) (TWO_WAY_GROWTH): K n = N (1 + G P / n), for N the plan's paths. Smaller
-    chunks need more paths for the same error; larger ones run past it."""
-    k, n = MEASURED_STOP_CHUNKS, float(planned_paths)
-    return math.ceil((n + math.sqrt(n * n + 4.0 * k * TWO_WAY_GROWTH * patch_count * n)) / (2.0 * k))
-
-
 def least_chunk(patch_count):
     """The fewest paths a run's later chunks take: TWO_WAY_RAYS_PER_PATCH first-generation rays a patch."""
     return max(MIN_CHUNK_PATHS, paths_for_rays(patch_count, TWO_WAY_RAYS_PER_PATCH))
-
-
-def later_chunk(patch_count, first, done, variance, target_mse, least, most):
-    """The smallest chunk n from ``least`` to ``most`` at which a run whose first ``done`` chunks
-    of ``first`` paths measured ``variance`` per path is expected to meet ``target_mse`` on the
-    fewest chunks the stop rule reads (MEASURED_STOP_CHUNKS, K): the rest of them of n paths,
-    their variance per path as (1 + G P / n) (TWO_WAY_GROWTH, the suite's middle: a scene whose
-    growth differs runs a few more chunks), the batch estimate of chunks of two sizes as Batches
-    makes it (``later_estimate``: each chunk's spread counts alike, and the smaller chunks' larger
-    variance per path weighs more than in the true error, which it then covers); ``most`` where
-    none does; ``first``, at most ``most``, where nothing is measured to size on. A plan's paths are
-    the paper's guess for the walk, often several times off; a run starts on the plan's chunks and
-    sizes the rest on what they measured."""
-    if MEASURED_STOP_CHUNKS <= done or not (variance > 0 and target_mse > 0):
-        return min(first, most)
-    if least >= most:
-        return most
-    expected = lambda n: later_estimate(patch_count, first, done, variance, n)  # noqa: E731
-    if expected(least) <= target_mse:
-        return least
-    if expected(most) > target_mse:
-        return most
-    low, high = least, most  # (expected(n) falls as n grows: the smallest n that meets it)
-    while high - low > 1:
-        middle = (low + high) // 2
-        low, high = (low, middle) if expected(middle) <= target_mse else (middle, high)
-    return high
-
-
-def later_estimate(patch_count, chunk, done, variance, n):
-    """The expected batch estimate (Batches.measured_mse) on MEASURED_STOP_CHUNKS chunks (K), the
-    first ``done`` of ``chunk`` paths and ``variance`` per path, the rest of n paths and that
-    variance grown as (1 + G P / n) (TWO_WAY_GROWTH): (sum_k v_k - sum_k n_k v_k / N) / ((K - 1) N)."""
-    K, m = MEASURED_STOP_CHUNKS, done
-    v = variance * (1.0 + TWO_WAY_GROWTH * patch_count / n) / (1.0 + TWO_WAY_GROWTH * patch_count / chunk)
-    paths = m * chunk + (K - m) * n
-    return (m * variance + (K - m) * v - (m * chunk * variance + (K - m) * n * v) / paths) / ((K - 1) * paths)
 
 
 def paths_for_rays(patch_count, rays):
