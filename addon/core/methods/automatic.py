@@ -2,7 +2,7 @@
 
 The two-way iteration pays where its chunks give every patch enough first-generation rays
 (``TwoWay.pays``: at error targets that plan at least plan.MIN_MEASURED_CHUNKS such chunks, or
-whose chunks grow to them at the stop rule's balance, ``two_way.balanced_chunk``; under a time
+whose chunks grow to them at the stop rule's balance, ``two_way_sizes.balanced_chunk``; under a time
 limit, in chunks of the usual size), in a scene of at most AUTO_MAX_PATCHES
 patches; elsewhere the walk needs fewer rays to the same error.
 
