@@ -20,8 +20,8 @@ from .distributed.cluster import ClusterRunner, WalkParameters
 from .distributed.cluster_connect import cluster_address
 from .distributed.runners import ThreadRunner
 from .estimate.batches import Batches
-from .estimate.plan import (RESIZE_AFTER, RESIZE_AGAIN_AFTER, RESIZE_AGAIN_FROM, chunk_plan, meets_target, paths_to_target, relative_error, resize_inputs, resizes,
-                            target_bound, target_now)
+from .estimate.plan import (RESIZE_AFTER, RESIZE_AGAIN_AFTER, RESIZE_AGAIN_FROM, chunk_plan, meets_target, paths_to_target,
+                            relative_error, resize_inputs, resizes, target_bound, target_now)
 from .methods.tables import WalkTables
 from .names import (
     FINITE,
@@ -189,17 +189,11 @@ class _Run:
 
     def _resize(self, scene, total, runner):
         """The later chunks' size (and the state they read) from the first ones' measured error;
-        where that changed it, the size again from RESIZE_AGAIN_FROM on, on what the first of
-        them measured too (``Method.again_chunk``), taken once the chunks before are submitted."""
-        again, self.resize_at, target = self.wait_from != RESIZE_AFTER, None, self.target(total)
-        if again:
-            measured = self.sizes[:total.chunks]
-            running = [self.chunk] * max(0, self.wait_from - total.chunks)
-            chunk = None if not target else self.method.again_chunk(
-                scene.patch_count, measured, total.increments[:len(measured) - 1], total.spread_terms(), target, running,
-                self.plan.chunk)
-            self.again = None if chunk is None or chunk == self.chunk else chunk
-            return
+        where that changed it, the chunks from RESIZE_AGAIN_FROM on wait to be sized again
+        (``_resize_again``)."""
+        if self.resize_at == RESIZE_AGAIN_AFTER:
+            return self._resize_again(scene, total)
+        self.resize_at, target = None, self.target(total)
         inputs = None if target is None else resize_inputs(total, target)
         if inputs is None:
             return
@@ -208,6 +202,18 @@ class _Run:
         if chunk != self.chunk:
             self._take(chunk, runner)
             self.resize_at, self.wait_from = RESIZE_AGAIN_AFTER, RESIZE_AGAIN_FROM
+
+    def _resize_again(self, scene, total):
+        """The size of the chunks from ``wait_from`` on, on what the first ones measured, the first
+        of the later size among them too (``Method.again_chunk``): taken once the chunks before
+        are submitted (``self.again``)."""
+        self.resize_at, target = None, self.target(total)
+        measured = self.sizes[:total.chunks]
+        running = [self.chunk] * max(0, self.wait_from - total.chunks)
+        chunk = None if not target else self.method.again_chunk(
+            scene.patch_count, measured, total.increments[:len(measured) - 1], total.spread_terms(), target, running,
+            self.plan.chunk)
+        self.again = None if chunk is None or chunk == self.chunk else chunk
 
     def _take(self, chunk, runner):
         """Chunks of ``chunk`` paths from the next submitted on, and the state they read."""

@@ -611,15 +611,8 @@ def test_the_growth_of_the_variance_a_path_is_read_from_two_chunk_sizes():
 
 
 def _again_bound(P, sizes, increments, terms, running, n):
-    """The stop rule's bound ``again_chunk`` expects at chunks of n after ``sizes`` and ``running``
-    (its variances: the last size's taken MEASURED_STOP_Z of its noise up, grown by the G measured)."""
-    v = plan.chunk_variances(sizes, increments)
-    up = v[-1] * (1 + plan.MEASURED_STOP_Z * math.sqrt(2 / terms))
-    G = tw.measured_growth(P, sizes[0], sizes[-1], v[0], up)
-    at = lambda m: up * (1 + G * P / m) / (1 + G * P / sizes[-1])  # noqa: E731
-    rest = plan.MEASURED_STOP_CHUNKS - len(sizes) - len(running)
-    return plan.expected_bound(list(sizes) + list(running) + [n] * rest, list(v) + [at(m) for m in running] + [at(n)] * rest,
-                               increments, terms)
+    """The stop rule's bound ``again_chunk`` expects at chunks of n after ``sizes`` and ``running``."""
+    return two_way_sizes.again_bound(P, sizes, increments, terms, running)(n)
 
 
 def test_chunks_sized_again_are_the_smallest_whose_expected_bound_meets_the_target(monkeypatch):

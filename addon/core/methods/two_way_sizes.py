@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from ..estimate.plan import MEASURED_STOP_CHUNKS, MEASURED_STOP_Z, chunk_variances, expected_bound
+from ..estimate.plan import MEASURED_STOP_CHUNKS, MEASURED_STOP_Z, chunk_variances, expected_bound, expected_increments
 
 # The variance per path in chunks of n paths over P patches, as v_inf (1 + TWO_WAY_GROWTH P / n):
 # fitted over chunk sizes 4x apart, 6-30 in the suite and sample scenes (docs/performance.md,
@@ -51,18 +51,7 @@ def later_chunk(patch_count, first, done, variance, target_mse, least, most):
     sizes the rest on what they measured."""
     if MEASURED_STOP_CHUNKS <= done or not (variance > 0 and target_mse > 0):
         return min(first, most)
-    if least >= most:
-        return most
-    expected = lambda n: later_estimate(patch_count, first, done, variance, n)  # noqa: E731
-    if expected(least) <= target_mse:
-        return least
-    if expected(most) > target_mse:
-        return most
-    low, high = least, most  # (expected(n) falls as n grows: the smallest n that meets it)
-    while high - low > 1:
-        middle = (low + high) // 2
-        low, high = (low, middle) if expected(middle) <= target_mse else (middle, high)
-    return high
+    return _smallest(lambda n: later_estimate(patch_count, first, done, variance, n) <= target_mse, least, most)
 
 
 def measured_growth(patch_count, first, later, first_variance, later_variance):
@@ -93,31 +82,46 @@ def again_chunk(patch_count, sizes, increments, terms, target_mse, running, leas
     rest = MEASURED_STOP_CHUNKS - len(sizes) - len(running)
     if rest <= 0 or not (target_mse > 0 and terms >= AGAIN_TERMS):
         return int(sizes[-1])
+    bound = again_bound(patch_count, sizes, increments, terms, running)
+    return _smallest(lambda n: bound(n) <= target_mse, least, most)
+
+
+def again_bound(patch_count, sizes, increments, terms, running):
+    """n -> the stop rule's bound ``again_chunk`` expects on MEASURED_STOP_CHUNKS chunks, the rest
+    after ``sizes`` and ``running`` of n paths (its variance model, above)."""
+    rest = MEASURED_STOP_CHUNKS - len(sizes) - len(running)
     v = chunk_variances(sizes, increments)
     later = float(sizes[-1])
     up = v[-1] * (1.0 + MEASURED_STOP_Z * math.sqrt(2.0 / terms))
     growth = measured_growth(patch_count, sizes[0], later, v[0], up)
     growth = TWO_WAY_GROWTH if growth is None else growth
     at = lambda n: up * (1.0 + growth * patch_count / n) / (1.0 + growth * patch_count / later)  # noqa: E731
-    known = list(sizes) + list(running)
-    variances = list(v) + [at(n) for n in running]
-    bound = lambda n: expected_bound(known + [n] * rest, variances + [at(n)] * rest, increments, terms)  # noqa: E731
-    if least >= most or bound(least) <= target_mse:
-        return int(least if least < most else most)
-    if bound(most) > target_mse:
+    known, variances = list(sizes) + list(running), list(v) + [at(n) for n in running]
+    return lambda n: expected_bound(known + [n] * rest, variances + [at(n)] * rest, increments, terms)
+
+
+def _smallest(meets, least, most):
+    """The smallest n from ``least`` to ``most`` that ``meets`` (true from some n on: it bisects);
+    ``most`` where none does or ``least`` is not below it."""
+    if least >= most:
         return int(most)
-    low, high = least, most  # (the bound falls as n grows: the smallest n that meets it)
+    if meets(least):
+        return int(least)
+    if not meets(most):
+        return int(most)
+    low, high = least, most
     while high - low > 1:
         middle = (low + high) // 2
-        low, high = (low, middle) if bound(middle) <= target_mse else (middle, high)
+        low, high = (low, middle) if meets(middle) else (middle, high)
     return int(high)
 
 
 def later_estimate(patch_count, chunk, done, variance, n):
     """The expected batch estimate (Batches.measured_mse) on MEASURED_STOP_CHUNKS chunks (K), the
     first ``done`` of ``chunk`` paths and ``variance`` per path, the rest of n paths and that
-    variance grown as (1 + G P / n) (TWO_WAY_GROWTH): (sum_k v_k - sum_k n_k v_k / N) / ((K - 1) N)."""
-    K, m = MEASURED_STOP_CHUNKS, done
+    variance grown as (1 + G P / n) (TWO_WAY_GROWTH): the mean of their ``plan.expected_increments``
+    over the paths, (sum_k v_k - sum_k n_k v_k / N) / ((K - 1) N)."""
+    rest = MEASURED_STOP_CHUNKS - done
     v = variance * (1.0 + TWO_WAY_GROWTH * patch_count / n) / (1.0 + TWO_WAY_GROWTH * patch_count / chunk)
-    paths = m * chunk + (K - m) * n
-    return (m * variance + (K - m) * v - (m * chunk * variance + (K - m) * n * v) / paths) / ((K - 1) * paths)
+    sizes = [chunk] * done + [n] * rest
+    return float(expected_increments(sizes, [variance] * done + [v] * rest).mean()) / float(sum(sizes))
