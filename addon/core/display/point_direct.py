@@ -60,6 +60,7 @@ from ..lights.lights import SunLight, WorldLight
 from ..names import EXIT_RANDOM, FINITE
 from .sample_rounds import Part, rounds, sampled
 from .shared_corners import shared_rows
+from .smoothing import parts_corners
 from ..methods.tables import WalkTables
 from ..scene.visibility import buried_at
 
@@ -307,7 +308,8 @@ def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float6
     (None: ``Surface.corner_values`` alone): corners(values - M) + D (the module's docstring),
     D scaled on the patches where M passes the value (``_fitted``); ``slack`` (P,3): how far
     each patch's mean may stay from ``values`` (``slack.slack_of``; None: exact). With ``parts`` (S,P,3), each
-    group's values as linear maps of the whole's make them (adding up to ``values``), and
+    group's values as linear maps of the whole's make them (adding up to ``values``: the largest the
+    whole less the others, ``smoothing.parts_corners``), and
     ``part_direct`` their CornerDirect, also (S,T,3,3) each group's corners, adding up to the
     whole's. Made in float64, given as ``dtype`` (the parts; the whole too where there are none:
     float32, as they are written, half the memory)."""
@@ -316,14 +318,14 @@ def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float6
         if not maps:
             return surface.corner_values(values, dtype=dtype, slack=slack)
         whole, apply = surface.corner_values(values, return_filter=True, slack=slack)
-        return whole, apply(parts, dtype)
+        return whole, parts_corners(whole, apply, parts, dtype)
     scale = _fitted(values, direct.means)
     shown_corners, apply = surface.corner_values(values - direct.means * scale, return_filter=True, slack=slack) if maps \
         else (surface.corner_values(values - direct.means * scale, dtype=dtype, slack=slack), None)
+    each = parts_corners(shown_corners, apply, parts - part_direct.means * scale, dtype) if maps else None
     _add_kept(shown_corners, direct.corners, scale, surface.triangle_patch)
     if not maps:
         return shown_corners
-    each = apply(parts - part_direct.means * scale, dtype)
     for part, corners in zip(each, part_direct.corners):
         _add_kept(part, corners, scale, surface.triangle_patch)
     return shown_corners, each

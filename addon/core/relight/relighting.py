@@ -17,6 +17,7 @@ import numpy as np
 
 from ..display import live_sources, point_direct
 from ..display.slack import light_slack, reflected_slack
+from ..display.smoothing import parts_corners
 from ..distributed.runners import each_on_threads
 from . import relit_checks
 
@@ -175,8 +176,8 @@ def _lampless(surface, scene, result, bounced, drawn, dtype, deadline):
     out = bounced.copy()
     rows = np.flatnonzero(unlit.any(axis=(1, 2)))  # (a lamp's group: its bounced light as it is)
     if rows.size:
-        _, apply = surface.corner_values(unlit[rows].sum(axis=0), return_filter=True)
-        out[rows] += apply(unlit[rows], dtype)
+        whole, apply = surface.corner_values(unlit[rows].sum(axis=0), return_filter=True)
+        out[rows] += parts_corners(whole, apply, unlit[rows], dtype)
     return out
 
 
