@@ -3,7 +3,8 @@ material's EEVEE output is the baked display as emission, (base colour x scale +
 whole light arriving + emission, and where the scene has lamps, a dielectric Principled BSDF's
 glossy layers lit by them (their highlights, which EEVEE draws) with the emission's glossy part
 lit by the light less the lamps'; no EEVEE world lighting or probe adds light (the world's EEVEE
-output lights nothing), so each part of the light counts once. Three scenes, each solved at the
+output lights nothing), so each part of the light counts once. Four scenes (the fourth lit by a
+spot, a disk area lamp and a soft point lamp), each solved at the
 panel's defaults (Live lamps on), rendered small (64 x 48) in one module (EEVEE compiles its
 shaders once): per object, on surface pixels, EEVEE's mean brightness against the product's own
 Cycles view of the same results and against a Cycles reference of the original scene; on a glossy
@@ -111,6 +112,34 @@ def _glossy_room():
     return ("Panel",)
 
 
+def _lamp_kinds_room():
+    """A closed 3 x 3 x 2.5 m room with a grey block, lit by the lamp kinds the other rooms do not
+    have: a tilted spot with a soft edge (70 degrees, blend 0.4, radius 0.1 m), a disk area lamp
+    under the ceiling facing down, and a soft point lamp (radius 0.3 m); a black world
+    (Lambertian: Specular IOR Level 0)."""
+    white, wood, red = (principled(n, c) for n, c in (("White", (0.75, 0.75, 0.75)), ("Wood", (0.5, 0.35, 0.2)),
+                                                        ("Red", (0.7, 0.15, 0.1))))
+    v, faces = box_arrays((0.0, 0.0, 0.0), (3.0, 3.0, 2.5), inward=True)
+    names = ("Floor", "Ceiling", "Front Wall", "Right Wall", "Back Wall", "Left Wall")
+    for name, face in zip(names, faces):
+        _quad(name, [v[i] for i in face], wood if name == "Floor" else red if name == "Left Wall" else white)
+    block_v, block_f = box_arrays((1.0, 1.6, 0.0), (1.8, 2.2, 0.8), inward=False)
+    make_object("Block", block_v, block_f, [principled("Grey", (0.5, 0.5, 0.5))])
+    spot = bpy.data.lights.new("Spot", "SPOT")
+    spot.energy, spot.spot_size, spot.spot_blend, spot.shadow_soft_size = 150.0, np.radians(70.0), 0.4, 0.1
+    disk = bpy.data.lights.new("Disk", "AREA")
+    disk.energy, disk.shape, disk.size = 80.0, "DISK", 0.8
+    point = bpy.data.lights.new("Lamp", "POINT")
+    point.energy, point.shadow_soft_size = 60.0, 0.3
+    for data, location, rotation in ((spot, (1.5, 1.5, 2.4), (np.radians(20.0), 0.0, 0.0)), (disk, (2.0, 1.0, 2.45), (0.0, 0.0, 0.0)),
+                                     (point, (0.7, 0.8, 1.6), (0.0, 0.0, 0.0))):
+        lamp = bpy.data.objects.new(data.name, data)
+        lamp.location, lamp.rotation_euler = location, rotation
+        bpy.context.scene.collection.objects.link(lamp)
+    _camera((1.5, 0.1, 1.6), (1.5, 3.0, 0.6))
+    return ()
+
+
 def _solve():
     from benchmarks import picture as pic
 
@@ -180,28 +209,31 @@ def _pictures(build):
 def rooms():
     addon.unregister()
     try:
-        yield {"box": _pictures(_box_room), "window": _pictures(_window_room), "glossy": _pictures(_glossy_room)}
+        yield {"box": _pictures(_box_room), "window": _pictures(_window_room), "glossy": _pictures(_glossy_room),
+               "lamp kinds": _pictures(_lamp_kinds_room)}
     finally:
         bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
-@pytest.mark.parametrize("room", ["box", "window"])
+@pytest.mark.parametrize("room", ["box", "window", "lamp kinds"])
 def test_eevee_shows_each_object_as_the_products_cycles_view_does(rooms, room):
     """EEVEE against the product's own Cycles view (its preview: Live lamps drawn by Cycles,
-    one bounce, denoised): each object's mean within 3% (measured: within 1.4%). Before, the box's
-    EEVEE objects were 0.42-0.65 of it (the ceiling 1.0), the room's 2.5-10x."""
+    one bounce, denoised): each object's mean within 3% (measured: within 1.4%; under the spot, the
+    disk and the soft point lamp 0.7%). Before, the box's EEVEE objects were 0.42-0.65 of it (the
+    ceiling 1.0), the room's 2.5-10x."""
     ratios = {n: m["eevee"] / m["cycles"] for n, m in rooms[room]["objects"].items()}
     print(room, {n: round(r, 3) for n, r in ratios.items()})
     assert len(ratios) >= 5 and all(abs(r - 1) < 0.03 for r in ratios.values()), ratios
 
 
-@pytest.mark.parametrize("room", ["box", "window", "glossy"])
+@pytest.mark.parametrize("room", ["box", "window", "glossy", "lamp kinds"])
 def test_eevee_shows_each_object_as_cycles_renders_the_original_scene(rooms, room):
     """EEVEE against Cycles' render of the original scene (64 bounces, two halves of 256
     samples): each object's mean within Z standard errors of their difference, the reference's
     from its two halves, the solve's its own measured relative error (a patch's: an upper bound
     on an object mean's, whose patches' errors are at most fully correlated). Measured: within
-    0.6% in the box (the solve's 1.5%), 1.3% in the room (5%). Before, EEVEE lit its results
+    0.6% in the box (the solve's 1.5%), 1.3% in the room (5%), 1.1% under the spot, the disk and the
+    soft point lamp (2.7%). Before, EEVEE lit its results
     again by its own lamps, world and probes beside the solved light, and the panel's light was
     left to EEVEE, which draws none from an emitting mesh."""
     out = {n: (m["eevee"] / m["reference"], Z * np.hypot(m["error"] / m["reference"], m["solve_error"]))
