@@ -137,9 +137,10 @@ def source_results(scene, patches, result, groups):
     return SourceResults(result.per_source, groups, listed)
 
 
-def source_corners(scene, result, light=False, shading=None, live=False, deadline=None, surface=None, direct=None):
-    """Like pipeline._smooth_corners for a per-source ``result``: ("light", (S,T,3,3)) with
-    ``light`` (``live``: the lamps' direct light left out), then ("smooth", (S,T,3,3)): each group's smooth values, the total's noise-filter
+def source_corners(scene, result, light=False, shading=None, live=False, deadline=None, surface=None, direct=None,
+                   display=None):
+    """Like pipeline._smooth_corners for a per-source ``result``: with ``light`` and ``live`` the live
+    parts, then ("light", (S,T,3,3)) with ``light``, then ("smooth", (S,T,3,3)): each group's smooth values, the total's noise-filter
     weights, clips and corner scales held (core relighting.smooth_sources), adding up to the
     total's; on the ``shading`` triangles (a refined mesh's) where given; the direct light's
     retries within ``deadline``."""
@@ -148,7 +149,7 @@ def source_corners(scene, result, light=False, shading=None, live=False, deadlin
         surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
                                        **seen_parts(scene, triangles, triangle_patch))
     yield from smooth_sources(surface, scene, result, light, triangles=triangles, live=live, deadline=deadline,
-                              direct=direct)
+                              direct=direct, display=display)
 
 
 def drawn_light(out, scene, result, deadline=None):
@@ -251,9 +252,10 @@ class SmoothSources:
     def __init__(self, out, at_polygon_corners):
         self.out, self.at_polygon_corners = out, at_polygon_corners
 
-    def corners(self, scene, result, light=False, shading=None, live=False, deadline=None, surface=None, direct=None):
+    def corners(self, scene, result, light=False, shading=None, live=False, deadline=None, surface=None, direct=None,
+                display=None):
         results = self.out.sources_out
-        for name, per_group in source_corners(scene, result, light, shading, live, deadline, surface, direct):
+        for name, per_group in source_corners(scene, result, light, shading, live, deadline, surface, direct, display):
             per_object = [self.at_polygon_corners(self.out, scene, corners, shading) for corners in per_group]
             results.smooth[name] = [None if parts[0] is None else np.stack(parts) for parts in zip(*per_object)]
             yield name, per_group.sum(axis=0)

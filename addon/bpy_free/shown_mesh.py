@@ -14,20 +14,48 @@ from ..core.refine import cell_meshes, display_cells
 from ..core.display.covered import seen_parts
 from ..core.mesh.faces import polygon_corner_rows
 from ..core.relight.relighting import group_direct
+from ..core.distributed.runners import in_background, local_thread_count
 
 TIME_SHARE = 0.5  # of the time left before a deadline the new points may take (the rest: the smoothing, the writing)
 NEW_POINT_RETRIES = 1  # a new point's noisy light sampled again once (8x the samples), a corner's twice
 SEED_STEP = 7919  # the seed of each level's new points, apart from the corners' and each other's
 
 
-def display(out, scene, result, shading=None, deadline=None, refine=True):
-    """(the smoothing surface, the direct light at its corners (``point_direct.CornerDirect``, each
-    source group's for a per-source run), Shown or None) the colours are made on: the solve's
-    shading triangles, their cells split where ``refine`` and the direct light say so (``out.shown``)."""
+def surface_of(scene, shading=None):
+    """The smoothing surface of the solve's shading triangles (``shading``: (triangles, patch of each),
+    else the scene's)."""
     triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
     # (the patches under a cover kept apart from the rest, as at a crease: the gap's light stays in the gap)
-    surface = smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
-                                   covered=scene.hidden, **seen_parts(scene, triangles, triangle_patch))
+    return smoothing.Surface.of(scene.vertices, triangles, triangle_patch, scene.patch_count,
+                                covered=scene.hidden, **seen_parts(scene, triangles, triangle_patch))
+
+
+def display_beside(out, scene, result, shading=None, deadline=None, refine=True, surface=None):
+    """A callable giving ``display``'s (surface, direct light at its corners) and setting ``out.shown``:
+    traced from now on a thread of its own where the local threads are two or more
+    (``threads.in_background``; the caller makes what reads neither meanwhile on the other,
+    ``threads.beside``), else when called."""
+    def traced():
+        return display(out, scene, result, shading, deadline, refine, surface)
+
+    # (a scene without direct light has no shadow rays to trace beside)
+    future = in_background(traced) if local_thread_count() > 1 and point_direct.has_direct(scene) else None
+
+    def made():
+        surface_made, direct, out.shown = traced() if future is None else future.result()
+        return surface_made, direct
+
+    made.beside = future is not None  # (the caller's work meanwhile on one thread: threads.beside)
+    return made
+
+
+def display(out, scene, result, shading=None, deadline=None, refine=True, surface=None):
+    """(the smoothing surface, the direct light at its corners (``point_direct.CornerDirect``, each
+    source group's for a per-source run), Shown or None) the colours are made on: the solve's
+    shading triangles (``surface``: their ``surface_of``, made here if not given), their cells split
+    where ``refine`` and the direct light say so (``out.shown``)."""
+    triangles, triangle_patch = shading if shading is not None else (scene.triangles, scene.triangle_patch)
+    surface = surface_of(scene, shading) if surface is None else surface
     grouped = out.sources_out is not None
     started = time.perf_counter()
     direct = (group_direct(surface, scene, result, triangles, deadline) if grouped else

@@ -228,21 +228,34 @@ def test_a_target_out_of_reach_is_said_before_the_run():
 
 def test_the_threads_setting_holds_for_the_displays_colours_too(monkeypatch):
     """The room with two lamps: the display's direct light at the corners runs on the threads the
-    setting gives (``runners.local_threads``), one thread at 1, two at 2, as the solve does.
-    (Before, the display took one thread whatever the setting: 1.6 of the 11k room's 4.3 s.)"""
+    setting gives (``runners.local_threads``): at 1 on the caller's thread; at 2 on a thread of its
+    own, beside the filters and the live parts made meanwhile on the caller's, one thread each
+    (``threads.in_background``, ``threads.beside``: two numpy streams on two threads each waited on
+    the GIL; one each, the 11k room's display and live parts 0.88 -> 0.73-0.78 s), and the same
+    colours. (Before, the display took one thread whatever the setting: 1.6 of the 11k room's 4.3 s.)"""
+    import threading
+
     from many_lamps import room_objects
 
     from addon.bpy_free import pipeline
-    from addon.core.display import point_direct
+    from addon.core.display import point_direct, smoothing
     from addon.core.distributed import runners
 
-    seen, corner_direct = [], point_direct.corner_direct
-    monkeypatch.setattr(point_direct, "corner_direct",
-                        lambda *args, **kwargs: seen.append(runners.local_thread_count()) or corner_direct(*args, **kwargs))
+    seen, corner_direct, filter_light = [], point_direct.corner_direct, smoothing.Surface.filter_light
+    monkeypatch.setattr(point_direct, "corner_direct", lambda *args, **kwargs: seen.append(
+        ("corners", threading.get_ident(), runners.local_thread_count())) or corner_direct(*args, **kwargs))
+    monkeypatch.setattr(smoothing.Surface, "filter_light", lambda *args, **kwargs: seen.append(
+        ("filter", threading.get_ident(), runners.local_thread_count())) or filter_light(*args, **kwargs))
+    colours = []
     for threads in (1, 2):
         out = pipeline.run_solve(room_objects(2), pipeline.SolveSettings(threads=threads, relative_rms=0.3, patch_size=0.5))
         assert out.light_colours and any(c is not None for c in out.light_colours)
-    assert seen == [1, 2]
+        colours.append(out.smooth_colours)
+    caller = threading.get_ident()
+    runs = [sorted((kind, ident == caller, count) for kind, ident, count in run) for run in (seen[:2], seen[2:])]
+    assert runs == [[("corners", True, 1), ("filter", True, 1)], [("corners", False, 1), ("filter", True, 1)]], seen
+    for one, two in zip(*colours):
+        assert (one is None) == (two is None) and (one is None or np.array_equal(one, two))
 
 
 def test_the_lamps_first_means_are_made_beside_the_solve_with_the_same_numbers(monkeypatch):

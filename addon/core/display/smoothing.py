@@ -197,6 +197,11 @@ class Surface(NoiseFilter):
         area = self.visible_area if seen else self.patch_area
         return np.divide(sums, area, out=np.zeros_like(sums), where=area > 0)
 
+    def interpolated(self, corners):
+        """``corners`` (..., T,3,k) as this surface shows them: its own (a refined surface carries a
+        coarse one's to its cells: ``refine.cell_meshes.RefinedSurface``)."""
+        return corners
+
     def corner_values(self, patch_values, iterations=ITERATIONS, return_filter=False, dtype=np.float64, slack=None):
         """Per triangle corner values (T,3,k) of per-patch values (P,k): continuous across
         compatible corners, the area-weighted mean of each patch's linear interpolation equal to

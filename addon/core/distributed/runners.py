@@ -14,10 +14,11 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..scene.threads import each_on_threads, local_thread_count, local_threads, machine_threads, on_threads
+from ..scene.threads import (beside, each_on_threads, in_background, local_thread_count, local_threads,
+                             machine_threads, on_threads)
 
-__all__ = ["ThreadRunner", "chunk_generator", "each_on_threads", "local_thread_count", "local_threads", "machine_threads",
-           "on_threads", "run_chunks"]
+__all__ = ["ThreadRunner", "beside", "chunk_generator", "each_on_threads", "in_background", "local_thread_count",
+           "local_threads", "machine_threads", "on_threads", "run_chunks"]
 
 
 def chunk_generator(seed, first_chunk):

@@ -18,7 +18,7 @@ import numpy as np
 from ..display import live_sources, point_direct
 from ..display.slack import light_slack, reflected_slack
 from ..display.smoothing import parts_corners
-from ..distributed.runners import each_on_threads
+from ..distributed.runners import beside, each_on_threads
 from . import relit_checks
 
 
@@ -94,27 +94,30 @@ def combine(per_source, parts, weights):
 
 
 def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triangles=None, live=False, deadline=None,
-                   direct=None):
+                   direct=None, display=None):
     """Each source group's smooth colours, made as the solve's own are (the pipeline's smooth
     output) with the whole's noise-filter weights, clips and corner scales held fixed, so that
     they add up over the groups to the solve's (float error) and recombine as ``relight`` does:
-    ("light", (S,T,3,3)) first with ``light``, the light arriving (``Surface.arriving_light``), and
-    with ``live`` too ("bounced", (S,T,3,3)) it less the sources' direct light (the renderer's), smooth alone, with lamps
-    ("lampless") less theirs alone (``_lampless``); then ("smooth", (S,T,3,3)), the reflected light filtered (``Surface.filter_light``)
-    and smooth, plus each group's own emission, flat. Both show the direct light at the corners (``point_direct``), each group's own.
+    with ``light`` and ``live`` first ("bounced", (S,T,3,3)), the light arriving less the sources'
+    direct light (the renderer's), smooth alone, with lamps ("lampless") less theirs alone
+    (``_lampless``); then with ``light`` ("light", (S,T,3,3)), the light arriving
+    (``Surface.arriving_light``); then ("smooth", (S,T,3,3)), the reflected light filtered
+    (``Surface.filter_light``) and smooth, plus each group's own emission, flat. Light and smooth
+    show the direct light at the corners (``point_direct``), each group's own.
     ``surface`` is ``smoothing.Surface.of`` the scene's triangles (or ``triangles``, (T,3) of its
     vertices); ``result`` a per-source solve's SolveResult. Made in float64, given as ``dtype``
     (float32: half the memory, as they are written; their sum then the whole's to float32
-    rounding). ``deadline``: the direct light's retries within it (``point_direct``)."""
+    rounding). ``deadline``: the direct light's retries within it (``point_direct``). ``display``:
+    a callable giving (the surface, its CornerDirect) of the display's finer cells, called once
+    the filters and the live parts, which read neither, are made on ``surface`` (on one thread
+    where its ``beside`` says the display's are traced beside them meanwhile, ``threads.beside``)
+    and carried to its cells (``Surface.interpolated``); else ``direct``, or the groups' own made here."""
     per_source = result.per_source
     if per_source is None:
         raise ValueError("the solve has no per-source results: solve with per_source=True")
     triangles = scene.triangles if triangles is None else triangles
     drawn = per_source.direct_irradiance  # (S,P,3) or None (known: the solve's noise is in the rest alone, direct_means)
     rho = scene.reflectivity
-    if light and live and drawn is None:  # (the lamps', suns', emitters' and world's direct light left to the renderer)
-        drawn = live_sources.live_means(scene, seed=result.seed, light=result.irradiance, light_group=per_source.light_group,
-                                        patch_group=per_source.patch_group, groups=per_source.count, deadline=deadline)
     made = {}
 
     def arriving_filter():  # (the noise filters first, as the pipeline's: with the direct light's corners held, the peak)
@@ -129,22 +132,33 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
                                                                return_filter=True)
         made["filtered"] += _whole(held)
 
-    surface.neighbours()  # (made once, before the two filters read it on the local threads)
-    filters = ([arriving_filter] if light else []) + [reflected_filter]  # (a bad input's error as before: the first's)
-    each_on_threads(len(filters), lambda k: filters[k]())
-    filtered, noise = made["filtered"], made["noise"]
-    if light:
-        rest, rest_parts = made["rest"], made["rest_parts"]
-        arriving, parts = (rest, rest_parts) if drawn is None else (rest + drawn.sum(axis=0), rest_parts + drawn)
-    held = 0.0 if per_source.direct_irradiance is None else per_source.direct_irradiance * rho
-    if direct is None:  # (else the display's own: its finer cells')
-        direct = group_direct(surface, scene, result, triangles, deadline)
-    whole = _summed(direct)
     slack = light_slack(result) if light else None  # (each shown mean within its slack)
+    early = []  # (the live parts, on ``surface``)
+    with beside(getattr(display, "beside", False)):
+        if light and live and drawn is None:  # (the lamps', suns', emitters' and world's direct light left to the renderer)
+            drawn = live_sources.live_means(scene, seed=result.seed, light=result.irradiance,
+                                            light_group=per_source.light_group, patch_group=per_source.patch_group,
+                                            groups=per_source.count, deadline=deadline)
+        surface.neighbours()  # (made once, before the two filters read it on the local threads)
+        filters = ([arriving_filter] if light else []) + [reflected_filter]  # (a bad input's error as before: the first's)
+        each_on_threads(len(filters), lambda k: filters[k]())
+        if light and live:  # (what the live outputs read: the light less what Cycles draws, and less what EEVEE does)
+            early = _live_parts(surface, scene, result, made["rest"], made["rest_parts"], drawn, dtype, deadline, slack)
+    if display is not None:
+        surface, direct = display()
+    elif direct is None:  # (else the display's own: its finer cells')
+        direct = group_direct(surface, scene, result, triangles, deadline)
+    while early:
+        name, corners = early.pop(0)
+        yield name, surface.interpolated(corners)
+        del corners
+    filtered, noise = made["filtered"], made["noise"]
+    held = 0.0 if per_source.direct_irradiance is None else per_source.direct_irradiance * rho
+    whole = _summed(direct)
     if light:
+        rest, rest_parts = made.pop("rest"), made.pop("rest_parts")
+        arriving, parts = (rest, rest_parts) if drawn is None else (rest + drawn.sum(axis=0), rest_parts + drawn)
         yield "light", point_direct.shown(surface, arriving, whole, parts, direct, dtype, slack)[1]
-    if light and live:  # (what the live outputs read: the light less what Cycles draws, and less what EEVEE does)
-        yield from _live_parts(surface, scene, result, rest, rest_parts, drawn, dtype, deadline, slack)
     del slack
     _, smooth = point_direct.shown(surface, filtered, whole and point_direct.scaled(surface, whole, rho),
                                    noise(per_source.irradiance * rho - held) + held,
@@ -156,13 +170,13 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
 
 
 def _live_parts(surface, scene, result, rest, rest_parts, drawn, dtype, deadline, slack=None):
-    """("bounced", (S,T,3,3)): each group's light arriving less its live sources' ``drawn`` (the
-    rest: ``rest`` (P,3), ``rest_parts`` (S,P,3)), smooth alone (its means within ``slack``); then
+    """[("bounced", (S,T,3,3))]: each group's light arriving less its live sources' ``drawn`` (the
+    rest: ``rest`` (P,3), ``rest_parts`` (S,P,3)), smooth alone (its means within ``slack``); and
     where there are lamps ("lampless", ``_lampless``)."""
     bounced = point_direct.shown(surface, rest, None, rest_parts, None, dtype, slack)[1]
-    yield "bounced", bounced
-    if live_sources.draws_highlights(scene):  # (EEVEE's: the light less the lamps' it draws)
-        yield "lampless", _lampless(surface, scene, result, bounced, drawn, dtype, deadline)
+    if not live_sources.draws_highlights(scene):
+        return [("bounced", bounced)]
+    return [("bounced", bounced), ("lampless", _lampless(surface, scene, result, bounced, drawn, dtype, deadline))]
 
 
 def _lampless(surface, scene, result, bounced, drawn, dtype, deadline):

@@ -1,6 +1,7 @@
 """This machine's threads for work that is not a solve's chunks: the display's shadow rays and the
 scene's probes of buried parts, the display's smoothing (``local_threads``, ``on_threads``,
-``each_on_threads``), the user's threads setting.
+``each_on_threads``), the user's threads setting; work traced on a thread of its own beside other
+work (``in_background``, ``beside``).
 
 Here, below every package that traces rays here, so that the scene's build may use them
 (``distributed.runners`` hands the same names on, where the solve's own threads are).
@@ -31,6 +32,31 @@ def local_threads(threads):
         yield
     finally:
         _LOCAL_THREADS.reset(token)
+
+
+@contextlib.contextmanager
+def beside(active=True):
+    """Within it, where ``active``, ``on_threads`` takes one thread: work made while another thread
+    traces beside it (``in_background``), one thread each (two streams of numpy on two threads each
+    wait on the GIL; one each, the other's ray casts let go of it)."""
+    if not active:
+        yield
+        return
+    with local_threads(1):
+        yield
+
+
+def in_background(work):
+    """``work()`` on a thread of its own from now, inside a copy of the caller's context in which
+    ``on_threads`` takes one thread (``beside``): a Future, whose ``result()`` waits for it and
+    raises its error."""
+    context = contextvars.copy_context()
+    context.run(_LOCAL_THREADS.set, 1)
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="radiosity-beside")
+    try:
+        return pool.submit(context.run, work)
+    finally:
+        pool.shutdown(wait=False)  # (the work goes on; the pool takes no other)
 
 
 def local_thread_count():
