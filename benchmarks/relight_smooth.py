@@ -6,7 +6,7 @@
 The closed Cornell box lit by its ceiling and S - 1 small point lamps under it, solved with
 per-source results (the walk, 300,000 paths, 2 threads). For each size and source count, the
 smooth colours the pipeline makes for the solve (the light arriving and the radiosity, each noise
-filtered and smooth: ``pipeline._smooth_corners``) and every source's (``smooth_sources``, the
+filtered and smooth: ``smooth_colours.smooth_corners``) and every source's (``smooth_sources``, the
 whole's filter weights, clips and corner scales held fixed), one after the other, alternately
 first, twice: wall seconds (the sum of both rounds over 2), and the largest difference of the
 sources' sum from the whole over the whole's largest value. Peak memory (tracemalloc) of each in
@@ -42,11 +42,11 @@ def scene_of(divisions, sources):
 
 
 def made(kind, surface, scene, result):
-    from addon.bpy_free import pipeline
+    from addon.bpy_free import smooth_colours
     from addon.core.relight.relighting import smooth_sources
 
     if kind == "whole":
-        return dict(pipeline._smooth_corners(scene, result, light=True))
+        return dict(smooth_colours.smooth_corners(scene, result, light=True))
     return dict(smooth_sources(surface, scene, result, light=True))
 
 

@@ -139,7 +139,7 @@ def source_results(scene, patches, result, groups):
 
 def source_corners(scene, result, light=False, shading=None, live=False, deadline=None, surface=None, direct=None,
                    display=None):
-    """Like pipeline._smooth_corners for a per-source ``result``: with ``light`` and ``live`` the live
+    """Like smooth_colours.smooth_corners for a per-source ``result``: with ``light`` and ``live`` the live
     parts, then ("light", (S,T,3,3)) with ``light``, then ("smooth", (S,T,3,3)): each group's smooth values, the total's noise-filter
     weights, clips and corner scales held (core relighting.smooth_sources), adding up to the
     total's; on the ``shading`` triangles (a refined mesh's) where given; the direct light's
@@ -246,7 +246,7 @@ def error_text(relit):
 
 class SmoothSources:
     """The smooth outputs of a per-source solve: ``corners`` yields the totals as
-    pipeline._smooth_corners does (the groups' sum, so that relighting at the solved strengths
+    smooth_colours.smooth_corners does (the groups' sum, so that relighting at the solved strengths
     gives the picture the solve wrote) and keeps each group's at the objects' polygon corners."""
 
     def __init__(self, out, at_polygon_corners):

@@ -9,7 +9,8 @@ from boxes import box_scene, open_box_with_card
 
 from addon.core import PatchScene, solve
 from addon.core.lights.lights import WorldLight
-from addon.bpy_free.pipeline import _smooth_light, light_account_text
+from addon.bpy_free.pipeline import light_account_text
+from addon.bpy_free.smooth_colours import smooth_light
 from addon.core.display import smoothing
 from addon.core.display.slack import SLACK_ERRORS
 from addon.core.mesh.meshing import mesh_patches
@@ -66,7 +67,7 @@ def test_a_target_missed_at_the_path_cap_is_said():
 
 
 # The textured output's light: what the result materials multiply the surface's own colour by
-# (_smooth_light(..., light=True), arriving_light), fed known arrays (no Monte Carlo).
+# (smooth_light(..., light=True), arriving_light), fed known arrays (no Monte Carlo).
 
 SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
 SQUARE_TRIANGLES = np.array([[0, 1, 2], [0, 2, 3]])
@@ -130,7 +131,7 @@ def test_texture_times_light_averages_to_each_patch_s_reflected_radiosity():
     rho = patch_texture_average(mesh, np.arange(mesh.patch_count), corners, uv, np.zeros(2, int), image, identity)
     variance = np.full_like(H, 1e-12)  # (known exactly: the noise filter keeps every patch's value)
     scene.reflectivity = rho
-    _, light = _smooth_light(scene, _result(H, variance, rho), light=True)
+    _, light = smooth_light(scene, _result(H, variance, rho), light=True)
     w = _fine_samples()
     points = np.einsum("si,tij->tsj", w, mesh.points[mesh.triangles])  # (T,S,3)
     light_at = np.einsum("si,tic->tsc", w, light)
@@ -171,7 +172,7 @@ def test_black_patches_take_their_neighbours_light_and_leave_no_dark_rim():
     H = np.where(black[:, None], 0.0, 1.0) * np.ones(3)
     variance = np.where(black[:, None], 1e-8, 1e-6) * np.ones(3)
     scene.reflectivity = rho
-    _, light = _smooth_light(scene, _result(H, variance, rho), light=True)
+    _, light = smooth_light(scene, _result(H, variance, rho), light=True)
     white_triangles = ~black[mesh.triangle_patch]
     np.testing.assert_allclose(light[white_triangles], 1.0, rtol=1e-6)
     np.testing.assert_allclose(light[~white_triangles], 1.0, rtol=1e-6)
@@ -191,7 +192,7 @@ def test_the_noise_filter_leaves_the_direct_light_the_solve_kept_apart_alone():
     scene.reflectivity = rho
     result = _result(H, (0.5 * H) ** 2, rho)
     result.direct_irradiance = H.copy()
-    smooth, light = _smooth_light(scene, result, light=True)
+    smooth, light = smooth_light(scene, result, light=True)
     surface = smoothing.Surface.of(mesh.points, mesh.triangles, mesh.triangle_patch, mesh.patch_count)
 
     def means(corners):

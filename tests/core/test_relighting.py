@@ -219,7 +219,7 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     lamps' rays, the whole all of them at once: the same light within their noise, as
     test_point_direct checks); recombined with new weights they are the same linear map of the
     relit values."""
-    from addon.bpy_free import pipeline
+    from addon.bpy_free import smooth_colours
     from addon.core.display import point_direct, slack, smoothing
     from addon.core.relight.relighting import combine, per_source_emission, smooth_sources
 
@@ -233,7 +233,7 @@ def test_each_sources_smooth_colours_add_up_to_the_solves_and_relight_as_the_fla
     with monkeypatch.context() as patched:
         patched.setattr(point_direct, "corner_direct", lambda *args, **kwargs: point_direct.CornerDirect(
             summed.copy(), point_direct.patch_means(surface, summed)))
-        whole = dict(pipeline._smooth_corners(scene, r, light=True))
+        whole = dict(smooth_colours.smooth_corners(scene, r, light=True))
     for name in ("light", "smooth"):  # (float32 rounding: the pipeline keeps the whole's direct light as written)
         assert parts[name].shape == (6,) + whole[name].shape
         np.testing.assert_allclose(parts[name].sum(axis=0), whole[name], rtol=0, atol=1e-6 * whole[name].max())

@@ -744,10 +744,12 @@ def test_the_corners_are_made_on_the_local_threads_with_the_same_bits(monkeypatc
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_parts_add_up_to_the_whole_to_its_rounding_and_each_is_its_own_map(dtype):
-    """``parts_corners``: of three parts (one with negative patches, one the largest), two are
+    """``point_direct.parts_corners``: of three parts (one with negative patches, one the largest), two are
     mapped and the largest is the whole's corners less theirs; each is its own map's value to the
     dtype's rounding, and their sum is the whole's corners to the rounding of the last (the maps
     alone left their sum a few float errors of each part away)."""
+    from addon.core.display import point_direct
+
     points, quads, triangles, patch = _grid(10, 6, (0, 0, 0), (5, 0, 0), (0, 3, 0))
     x = _centres(points, quads)[:, 0]
     rng = np.random.default_rng(4)
@@ -756,10 +758,10 @@ def test_parts_add_up_to_the_whole_to_its_rounding_and_each_is_its_own_map(dtype
     whole_values = parts.sum(axis=0)
     surface = smoothing.Surface.of(points, triangles, patch, len(quads))
     whole, apply = surface.corner_values(whole_values, return_filter=True)
-    out = smoothing.parts_corners(whole, apply, parts, dtype)
+    out = point_direct.parts_corners(whole, apply, parts, dtype)
     assert out.dtype == dtype and out.shape == (3,) + whole.shape
     eps = np.finfo(dtype).eps
     for part, alone in zip(out, apply(parts, np.float64)):
         np.testing.assert_allclose(part, alone, rtol=0, atol=8 * eps * whole.max())
     np.testing.assert_allclose(out.astype(np.float64).sum(axis=0), whole, rtol=0, atol=2 * eps * whole.max())
-    assert np.array_equal(smoothing.parts_corners(whole, apply, parts[:1], dtype), apply(parts[:1], dtype))
+    assert np.array_equal(point_direct.parts_corners(whole, apply, parts[:1], dtype), apply(parts[:1], dtype))

@@ -60,7 +60,6 @@ from ..lights.lights import SunLight, WorldLight
 from ..names import EXIT_RANDOM, FINITE
 from .sample_rounds import Part, rounds, sampled
 from .shared_corners import shared_rows
-from .smoothing import parts_corners
 from ..methods.tables import WalkTables
 from ..scene.visibility import buried_at
 
@@ -319,7 +318,7 @@ def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float6
     D scaled on the patches where M passes the value (``_fitted``); ``slack`` (P,3): how far
     each patch's mean may stay from ``values`` (``slack.slack_of``; None: exact). With ``parts`` (S,P,3), each
     group's values as linear maps of the whole's make them (adding up to ``values``: the largest the
-    whole less the others, ``smoothing.parts_corners``), and
+    whole less the others, ``parts_corners``), and
     ``part_direct`` their CornerDirect, also (S,T,3,3) each group's corners, adding up to the
     whole's. Made in float64, given as ``dtype`` (the parts; the whole too where there are none:
     float32, as they are written, half the memory)."""
@@ -339,6 +338,27 @@ def shown(surface, values, direct, parts=None, part_direct=None, dtype=np.float6
     for part, corners in zip(each, part_direct.corners):
         _add_kept(part, corners, scale, surface.triangle_patch)
     return shown_corners, each
+
+
+def parts_corners(whole, apply, parts, dtype=np.float64):
+    """(S,T,3,k) the corners of ``parts`` (S,P,k), which add up to the values whose corners are
+    ``whole`` (T,3,k, float64) and whose ``apply`` (a ``LinearCorners``, or a map of one) is given:
+    every part but the largest mapped, given as ``dtype``, and the largest the whole less their sum
+    as given, so that the parts add up to the whole to its own rounding (one map fewer; mapped alone it
+    would be the same to float error)."""
+    parts = np.asarray(parts)
+    if len(parts) < 2:
+        return apply(parts, dtype)
+    last = int(np.argmax(np.abs(parts).reshape(len(parts), -1).sum(axis=1)))
+    others = np.flatnonzero(np.arange(len(parts)) != last)
+    mapped = apply(parts[others], dtype)
+    out = np.empty((len(parts),) + mapped.shape[1:], dtype)
+    out[others] = mapped
+    rest = np.array(whole, np.float64)  # (a copy: the whole is the caller's)
+    for part in mapped:
+        rest -= part
+    out[last] = rest
+    return out
 
 
 def _fitted(values, means):

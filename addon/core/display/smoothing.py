@@ -395,27 +395,6 @@ class LinearCorners:
         return out
 
 
-def parts_corners(whole, apply, parts, dtype=np.float64):
-    """(S,T,3,k) the corners of ``parts`` (S,P,k), which add up to the values whose corners are
-    ``whole`` (T,3,k, float64) and whose ``apply`` (a ``LinearCorners``, or a map of one) is given:
-    every part but the largest mapped, given as ``dtype``, and the largest the whole less their sum
-    as given, so that the parts add up to the whole to its own rounding (one map fewer; mapped alone it
-    would be the same to float error)."""
-    parts = np.asarray(parts)
-    if len(parts) < 2:
-        return apply(parts, dtype)
-    last = int(np.argmax(np.abs(parts).reshape(len(parts), -1).sum(axis=1)))
-    others = np.flatnonzero(np.arange(len(parts)) != last)
-    mapped = apply(parts[others], dtype)
-    out = np.empty((len(parts),) + mapped.shape[1:], dtype)
-    out[others] = mapped
-    rest = np.array(whole, np.float64)  # (a copy: the whole is the caller's)
-    for part in mapped:
-        rest -= part
-    out[last] = rest
-    return out
-
-
 def _put_rings(out, plain, scale, rings, corner_patch, block=RINGING_BLOCK):
     """``out`` (T*3,) = the plain average ``plain`` x its ``scale`` (P,) at the corners of the
     patches ``rings`` (P,) bool: a block of corners at a time (no (T*3,) index)."""

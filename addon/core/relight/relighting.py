@@ -17,7 +17,6 @@ import numpy as np
 
 from ..display import live_sources, point_direct
 from ..display.slack import light_slack, reflected_slack
-from ..display.smoothing import parts_corners
 from ..distributed.runners import beside, each_on_threads
 from . import relit_checks
 
@@ -118,20 +117,6 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     triangles = scene.triangles if triangles is None else triangles
     drawn = per_source.direct_irradiance  # (S,P,3) or None (known: the solve's noise is in the rest alone, direct_means)
     rho = scene.reflectivity
-    made = {}
-
-    def arriving_filter():  # (the noise filters first, as the pipeline's: with the direct light's corners held, the peak)
-        held = 0.0 if drawn is None else drawn
-        rest, rest_fill = surface.arriving_light(result.irradiance - _whole(held), result.irradiance_variance, rho,
-                                                 return_filter=True)
-        made["rest"], made["rest_parts"] = rest, rest_fill(per_source.irradiance - held)
-
-    def reflected_filter():
-        held = 0.0 if per_source.direct_irradiance is None else per_source.direct_irradiance * rho
-        made["filtered"], made["noise"] = surface.filter_light(result.reflected - _whole(held), result.reflected_variance,
-                                                               return_filter=True)
-        made["filtered"] += _whole(held)
-
     slack = light_slack(result) if light else None  # (each shown mean within its slack)
     early = []  # (the live parts, on ``surface``)
     with beside(getattr(display, "beside", False)):
@@ -139,9 +124,7 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
             drawn = live_sources.live_means(scene, seed=result.seed, light=result.irradiance,
                                             light_group=per_source.light_group, patch_group=per_source.patch_group,
                                             groups=per_source.count, deadline=deadline)
-        surface.neighbours()  # (made once, before the two filters read it on the local threads)
-        filters = ([arriving_filter] if light else []) + [reflected_filter]  # (a bad input's error as before: the first's)
-        each_on_threads(len(filters), lambda k: filters[k]())
+        made = _filtered(surface, result, drawn, rho, light)
         if light and live:  # (what the live outputs read: the light less what Cycles draws, and less what EEVEE does)
             early = _live_parts(surface, scene, result, made["rest"], made["rest_parts"], drawn, dtype, deadline, slack)
     if display is not None:
@@ -169,6 +152,32 @@ def smooth_sources(surface, scene, result, light=False, dtype=np.float64, triang
     yield "smooth", smooth
 
 
+def _filtered(surface, result, drawn, rho, light):
+    """{"filtered", "noise"}: the reflected light filtered (``Surface.filter_light``, the groups' known
+    direct part held) and the filter's map of the groups' parts; with ``light`` also {"rest",
+    "rest_parts"}: the light arriving less the groups' ``drawn`` (S,P,3) filtered and its map of
+    the groups' parts. The noise filters first, as the pipeline's (with the direct light's corners
+    held, the peak), the two on the local threads."""
+    per_source, made = result.per_source, {}
+
+    def arriving_filter():
+        held = 0.0 if drawn is None else drawn
+        rest, rest_fill = surface.arriving_light(result.irradiance - _whole(held), result.irradiance_variance, rho,
+                                                 return_filter=True)
+        made["rest"], made["rest_parts"] = rest, rest_fill(per_source.irradiance - held)
+
+    def reflected_filter():
+        held = 0.0 if per_source.direct_irradiance is None else per_source.direct_irradiance * rho
+        made["filtered"], made["noise"] = surface.filter_light(result.reflected - _whole(held), result.reflected_variance,
+                                                               return_filter=True)
+        made["filtered"] += _whole(held)
+
+    surface.neighbours()  # (made once, before the two filters read it on the local threads)
+    filters = ([arriving_filter] if light else []) + [reflected_filter]  # (a bad input's error as before: the first's)
+    each_on_threads(len(filters), lambda k: filters[k]())
+    return made
+
+
 def _live_parts(surface, scene, result, rest, rest_parts, drawn, dtype, deadline, slack=None):
     """[("bounced", (S,T,3,3))]: each group's light arriving less its live sources' ``drawn`` (the
     rest: ``rest`` (P,3), ``rest_parts`` (S,P,3)), smooth alone (its means within ``slack``); and
@@ -191,7 +200,7 @@ def _lampless(surface, scene, result, bounced, drawn, dtype, deadline):
     rows = np.flatnonzero(unlit.any(axis=(1, 2)))  # (a lamp's group: its bounced light as it is)
     if rows.size:
         whole, apply = surface.corner_values(unlit[rows].sum(axis=0), return_filter=True)
-        out[rows] += parts_corners(whole, apply, unlit[rows], dtype)
+        out[rows] += point_direct.parts_corners(whole, apply, unlit[rows], dtype)
     return out
 
 
