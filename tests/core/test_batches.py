@@ -86,22 +86,22 @@ def _tally(n, incident):
 
 
 def test_chunks_of_two_sizes_are_estimated_as_later_chunk_expects():
-    """A run whose later chunks are smaller (two_way.later_chunk) is read by the same batch
+    """A run whose later chunks are smaller (two_way_sizes.later_chunk) is read by the same batch
     estimate: each chunk's spread counts alike, so its expectation is
     (sum_k v_k - sum_k n_k v_k / N) / ((K - 1) N) for chunks of n_k paths and variance v_k per
-    path (``two_way.later_estimate``, what later_chunk sizes them by). Synthetic tallies:
+    path (``two_way_sizes.later_estimate``, what later_chunk sizes them by). Synthetic tallies:
     Gaussian incident power of variance n_k v_k about its mean at every patch, RESIZE_AFTER
     chunks of 6,000 paths, the rest of 1,500 with the variance per path TWO_WAY_GROWTH makes of
     it; 400 replicas, their mean within 4 standard errors of it."""
     from addon.core.estimate import plan
     from addon.core.estimate.batches import Batches
-    from addon.core.methods import two_way as tw
+    from addon.core.methods import two_way_sizes
     from addon.core.methods.tables import WalkTables
 
     scene, _, _ = _black_floor_box()
     tables = WalkTables(scene, "finite", 1e-3, "random")
     P, K, m, big, small = scene.patch_count, plan.MEASURED_STOP_CHUNKS, plan.RESIZE_AFTER, 6000, 1500
-    grown = (1 + tw.TWO_WAY_GROWTH * P / small) / (1 + tw.TWO_WAY_GROWTH * P / big)
+    grown = (1 + two_way_sizes.TWO_WAY_GROWTH * P / small) / (1 + two_way_sizes.TWO_WAY_GROWTH * P / big)
     spread = 1e-3 * np.sqrt(np.random.default_rng(0).uniform(0.5, 2.0, (3, P)))  # (a patch's noise a path)
     # the variance a path that chunks of one size measure: two one-path chunks +a and -a read sum W a^2
     unit = Batches(scene, tables)
@@ -117,7 +117,7 @@ def test_chunks_of_two_sizes_are_estimated_as_later_chunk_expects():
             total.add(_tally(n, n * mean + np.sqrt(n * v) * spread * rng.standard_normal((3, P))))
         readings.append(total.measured_mse())
     readings = np.asarray(readings)
-    expected = tw.later_estimate(P, big, m, variance, small)
+    expected = two_way_sizes.later_estimate(P, big, m, variance, small)
     assert grown > 1.5  # (the small chunks' variance a path well above the large ones')
     assert abs(readings.mean() - expected) <= 4 * readings.std(ddof=1) / np.sqrt(readings.size), (readings.mean(), expected)
 
@@ -131,7 +131,7 @@ def test_the_increments_of_chunks_of_three_sizes_give_each_chunks_variance_a_pat
     paths is the batch estimate (to rounding), which ``later_estimate`` gives for two sizes."""
     from addon.core.estimate import plan
     from addon.core.estimate.batches import Batches
-    from addon.core.methods import two_way as tw
+    from addon.core.methods import two_way_sizes
     from addon.core.methods.tables import WalkTables
 
     scene, _, _ = _black_floor_box()
@@ -165,9 +165,9 @@ def test_the_increments_of_chunks_of_three_sizes_give_each_chunks_variance_a_pat
     assert np.mean(plan.expected_increments(sizes, variances)) / N == pytest.approx(batch, rel=1e-12)
     assert np.mean(estimates) == pytest.approx(batch, rel=4 * np.std(estimates) / np.sqrt(len(estimates)) / batch)
     two = [6000] * 2 + [1500] * 10
-    grown = (1 + tw.TWO_WAY_GROWTH * P / 1500) / (1 + tw.TWO_WAY_GROWTH * P / 6000)
+    grown = (1 + two_way_sizes.TWO_WAY_GROWTH * P / 1500) / (1 + two_way_sizes.TWO_WAY_GROWTH * P / 6000)
     assert np.mean(plan.expected_increments(two, [v] * 2 + [v * grown] * 10)) / sum(two) == pytest.approx(
-        tw.later_estimate(P, 6000, 2, v, 1500), rel=1e-12)
+        two_way_sizes.later_estimate(P, 6000, 2, v, 1500), rel=1e-12)
 
 
 def test_the_expected_bound_is_the_stop_rules_bound_on_chunks_as_expected():

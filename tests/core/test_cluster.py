@@ -75,7 +75,7 @@ def test_the_two_way_iteration_on_a_cluster_is_bitwise_the_local_one(client, sce
 
 def test_a_two_way_run_that_shrinks_its_chunks_on_a_cluster_is_bitwise_the_local_one(client):
     """After its first chunks a run to a loose target goes on with smaller chunks and a smaller
-    gathering (chunks._Run, two_way.later_chunk): the workers rebuild that state too."""
+    gathering (chunks._Run, two_way_sizes.later_chunk): the workers rebuild that state too."""
     from boxes import grey_room
 
     room, _ = grey_room()

@@ -38,7 +38,7 @@ def test_methods_give_the_pinned_results(case):
     """The gathered walk, Jacobi, the two-way iteration and Automatic, under every stop rule,
     give the results recorded with benchmarks/hash_solves.py (on c085628, before each method
     owned its policy; the two-way iteration's runs to an error target again when their chunks
-    grew to the stop rule's balance, two_way.balanced_chunk, and the Cornell box's two-way runs again
+    grew to the stop rule's balance, two_way_sizes.balanced_chunk, and the Cornell box's two-way runs again
     when a patch's gathering samples were let past 256, first_shot.MAX_GATHER_SAMPLES)."""
     scene = _scene(case["scene"])
     assert method_fingerprint(solve(scene, **solve_arguments(scene, case))) == METHOD_PINS[case["id"]]

@@ -314,8 +314,8 @@ def test_a_guessed_plan_grows_the_two_way_chunks_to_the_balance_of_the_stop_rule
     TWO_WAY_CHUNK_RAYS_PER_PATCH; a plan of given paths keeps its chunks (its batch estimate
     needs them), and so does a plan already at that size."""
     P, planned = 4_000, 64_000
-    n = tw.balanced_chunk(P, planned)
-    K, G = plan.MEASURED_STOP_CHUNKS, tw.TWO_WAY_GROWTH
+    n = two_way_sizes.balanced_chunk(P, planned)
+    K, G = plan.MEASURED_STOP_CHUNKS, two_way_sizes.TWO_WAY_GROWTH
     assert K * n == pytest.approx(planned * (1 + G * P / n), rel=1e-3)
     given, guessed = (tw.TwoWay().chunk_paths(P, 2.5, planned, guessed=g) for g in (False, True))
     assert given < n == guessed  # (given: 4 rays a patch, 2P paths)
@@ -326,7 +326,7 @@ def test_a_guessed_plan_grows_the_two_way_chunks_to_the_balance_of_the_stop_rule
     scene, _ = _box_with_one_emitter()
     target = 1e-4
     chosen = plan.chunk_plan(scene, tw.TwoWay(), Settings.for_mse(scene, target))
-    assert chosen.chunk >= tw.balanced_chunk(scene.patch_count, tw.TwoWay().planned_paths(chosen.prediction.paths_for(target)))
+    assert chosen.chunk >= two_way_sizes.balanced_chunk(scene.patch_count, tw.TwoWay().planned_paths(chosen.prediction.paths_for(target)))
     r = solve(scene, target_mse=target, seed=1, method="auto")
     assert r.method == "two_way" and r.stopped == "target"
     sizes = r.chunk_sizes  # (the first chunks of the plan's size, the rest smaller: later_chunk, again_chunk)
@@ -540,14 +540,14 @@ def test_later_chunk_is_the_smallest_that_meets_the_target_on_the_fewest_chunks(
     plan's.)"""
     P, first, m, least, most = 4_000, 30_000, plan.RESIZE_AFTER, 2_000, 60_000
     variance = 1.0
-    at_first = tw.later_estimate(P, first, m, variance, first)
+    at_first = two_way_sizes.later_estimate(P, first, m, variance, first)
     assert at_first == pytest.approx(variance / (plan.MEASURED_STOP_CHUNKS * first))  # (equal chunks: v / N)
-    assert tw.later_chunk(P, first, m, variance, 0.1 * at_first, least, most) == most
+    assert two_way_sizes.later_chunk(P, first, m, variance, 0.1 * at_first, least, most) == most
     for target in (0.8 * at_first, 2.0 * at_first):  # (larger chunks than the first, or smaller)
-        n = tw.later_chunk(P, first, m, variance, target, least, most)
+        n = two_way_sizes.later_chunk(P, first, m, variance, target, least, most)
         assert least < n < most and (n > first) == (target < at_first)
-        assert tw.later_estimate(P, first, m, variance, n) <= target < tw.later_estimate(P, first, m, variance, n - 1)
-    assert tw.later_chunk(P, first, m, variance, 100 * at_first, least, most) == least
+        assert two_way_sizes.later_estimate(P, first, m, variance, n) <= target < two_way_sizes.later_estimate(P, first, m, variance, n - 1)
+    assert two_way_sizes.later_chunk(P, first, m, variance, 100 * at_first, least, most) == least
 
 
 def test_later_chunks_may_grow_past_the_plans_up_to_their_rays_a_patch():
@@ -558,11 +558,11 @@ def test_later_chunks_may_grow_past_the_plans_up_to_their_rays_a_patch():
     P, m, variance = 4_000, plan.RESIZE_AFTER, 1.0
     first = most = 30_000
     largest = math.ceil(tw.TWO_WAY_LATER_RAYS_PER_PATCH * P / tw.GENERATION_RAYS)
-    at_first = tw.later_estimate(P, first, m, variance, first)
+    at_first = two_way_sizes.later_estimate(P, first, m, variance, first)
     method = tw.TwoWay()
     n = method.later_chunk(P, first, m, variance, 0.7 * at_first, most)
     assert most < n < largest
-    assert tw.later_estimate(P, first, m, variance, n) <= 0.7 * at_first
+    assert two_way_sizes.later_estimate(P, first, m, variance, n) <= 0.7 * at_first
     assert method.later_chunk(P, first, m, variance, 0.01 * at_first, most) == largest
     assert method.later_chunk(P, first, m, 0.0, 0.7 * at_first, most) == first
     assert method.later_chunk(10**6, first, m, variance, 1e-30, most) == tw.TWO_WAY_MAX_CHUNK_PATHS
@@ -601,13 +601,13 @@ def test_the_growth_of_the_variance_a_path_is_read_from_two_chunk_sizes():
     P, first, later = 4_000, 30_000, 10_000
     for G in (0.0, 0.8, 3.0, 12.0, 40.0):
         v = (1 + G * P / later) / (1 + G * P / first)
-        assert tw.measured_growth(P, first, later, 2.0, 2.0 * v) == pytest.approx(G, abs=1e-9)
+        assert two_way_sizes.measured_growth(P, first, later, 2.0, 2.0 * v) == pytest.approx(G, abs=1e-9)
         # (the chunks may have grown as well: the same G from the other side)
-        assert tw.measured_growth(P, later, first, 2.0 * v, 2.0) == pytest.approx(G, abs=1e-9)
-    assert tw.measured_growth(P, first, later, 1.0, 0.9) == 0.0
-    assert tw.measured_growth(P, first, later, 1.0, 1.01 * first / later) == tw.TWO_WAY_MOST_GROWTH
-    assert tw.measured_growth(P, first, 29_500, 1.0, 1.5) is None
-    assert tw.measured_growth(P, first, later, 0.0, 1.0) is None
+        assert two_way_sizes.measured_growth(P, later, first, 2.0 * v, 2.0) == pytest.approx(G, abs=1e-9)
+    assert two_way_sizes.measured_growth(P, first, later, 1.0, 0.9) == 0.0
+    assert two_way_sizes.measured_growth(P, first, later, 1.0, 1.01 * first / later) == two_way_sizes.TWO_WAY_MOST_GROWTH
+    assert two_way_sizes.measured_growth(P, first, 29_500, 1.0, 1.5) is None
+    assert two_way_sizes.measured_growth(P, first, later, 0.0, 1.0) is None
 
 
 def _again_bound(P, sizes, increments, terms, running, n):
@@ -625,20 +625,20 @@ def test_chunks_sized_again_are_the_smallest_whose_expected_bound_meets_the_targ
     sizes, running = [n1, n1, n2], [n2, n2]
     increments = list(plan.expected_increments(sizes, [model(2.0, n) for n in sizes]))
     target = 0.6 * _again_bound(P, sizes, increments, terms, running, n2)
-    n = tw.again_chunk(P, sizes, increments, terms, target, running, least, most)
+    n = two_way_sizes.again_chunk(P, sizes, increments, terms, target, running, least, most)
     assert least < n < most
     assert _again_bound(P, sizes, increments, terms, running, n) <= target < _again_bound(P, sizes, increments, terms, running, n - 1)
-    assert tw.again_chunk(P, sizes, increments, terms, 100 * target, running, least, most) == least
-    assert tw.again_chunk(P, sizes, increments, terms, 1e-3 * target, running, least, most) == most
+    assert two_way_sizes.again_chunk(P, sizes, increments, terms, 100 * target, running, least, most) == least
+    assert two_way_sizes.again_chunk(P, sizes, increments, terms, 1e-3 * target, running, least, most) == most
     # where the chunks shrink, a growth of 12 read into the same variances keeps them larger
     loose = 1.3 * _again_bound(P, sizes, increments, terms, running, n2)
-    small = tw.again_chunk(P, sizes, increments, terms, loose, running, least, most)
-    monkeypatch.setattr(two_way_sizes, "measured_growth", lambda *a: tw.TWO_WAY_GROWTH)
-    assert least < small < tw.again_chunk(P, sizes, increments, terms, loose, running, least, most) < n2
+    small = two_way_sizes.again_chunk(P, sizes, increments, terms, loose, running, least, most)
+    monkeypatch.setattr(two_way_sizes, "measured_growth", lambda *a: two_way_sizes.TWO_WAY_GROWTH)
+    assert least < small < two_way_sizes.again_chunk(P, sizes, increments, terms, loose, running, least, most) < n2
     monkeypatch.undo()
     # nothing left to size, or an error held by too few terms to read a growth from: the last size
-    assert tw.again_chunk(P, sizes, increments, 0.9 * tw.AGAIN_TERMS, target, running, least, most) == n2
-    assert tw.again_chunk(P, [n1] * 2 + [n2] * 8, increments + [increments[-1]] * 7, terms, target, [n2] * 2, least, most) == n2
+    assert two_way_sizes.again_chunk(P, sizes, increments, 0.9 * two_way_sizes.AGAIN_TERMS, target, running, least, most) == n2
+    assert two_way_sizes.again_chunk(P, [n1] * 2 + [n2] * 8, increments + [increments[-1]] * 7, terms, target, [n2] * 2, least, most) == n2
 
 
 def test_a_run_sized_twice_has_the_same_chunks_on_one_thread_and_on_two():

@@ -113,26 +113,17 @@ def _means_of(tables, patches, rng, add, light, spheres, paired=False):
             np.float64), spheres[1][rows])
         return Points(g, rows[local], u, anchor, local)
 
-    # (the patches the source cannot light, a lamp below their horizon: 0, and no samples)
-    dark = None if spheres is None else unlit(add, spheres[0][patches].T, g.patch_normal_rows.take(patches, axis=1).astype(
-        np.float64), spheres[1][patches])
-
     def sample(rows, count):
-        lit = rows if dark is None else rows[~dark[rows]]
-        at = patches[lit]
-        made = sampled(tables, len(at), count, rng, add, lambda block, local, u: points(at[block], local, u),
-                       SAMPLE_DIMENSIONS, paired=paired) if at.size or lit is rows else None
-        if lit is rows:
-            return made
-        mean, error = np.zeros((len(rows), 3)), np.zeros(len(rows))
-        if made is not None:
-            some = ~dark[rows]
-            mean[some], error[some] = made
-        return mean, error
+        rows = patches[rows]
+        return sampled(tables, len(rows), count, rng, add, lambda block, local, u: points(rows[block], local, u),
+                       SAMPLE_DIMENSIONS, paired=paired)
 
     def noise(mean, error):
         shown_light = mean.sum(axis=1) if light is None else np.maximum(light.sum(axis=1), mean.sum(axis=1))
         allowed = NOISE_SHARE * shown_light
         return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
 
-    return Part(sample, noise)
+    # (the patches a lamp is behind, whole: 0, and no samples)
+    dark = None if spheres is None else unlit(add, spheres[0][patches].T, g.patch_normal_rows.take(patches, axis=1).astype(
+        np.float64), spheres[1][patches])
+    return Part(sample, noise, dark)

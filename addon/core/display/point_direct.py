@@ -244,24 +244,14 @@ def _part_at(tables, position, patch, rng, add, paired=False, shown=None):
     error passes NOISE_SHARE of its patch's brightest corner's light (beside an emitter the
     light is heavy-tailed), or of the light ``shown`` (n,) at it where that is more."""
     g = tables.geometry
-    # (the corners the source cannot light, a lamp below their horizon: 0, and no samples)
-    dark = unlit(add, position.T, g.patch_normal_rows.take(patch, axis=1).astype(np.float64))
 
     def sample(rows, count):
-        lit = rows if dark is None else rows[~dark[rows]]
-
         def points(block, local, u):
-            at = lit[block]
+            at = rows[block]
             unit = _unit_points(g, position[at], patch[at])[:, local]
             anchor = (position[at], g.patch_normal_rows.take(patch[at], axis=1).T.astype(np.float64), 0.0)
             return _Corners(g, patch[at][local], unit, position[at].T[:, local], anchor, local)
-        if lit is rows:
-            return sampled(tables, len(rows), count, rng, add, points, DIMENSIONS, np.float32, paired)  # (as shown)
-        mean, error = np.zeros((len(rows), 3), np.float32), np.zeros(len(rows), np.float32)
-        if lit.size:
-            some = ~dark[rows]
-            mean[some], error[some] = sampled(tables, len(lit), count, rng, add, points, DIMENSIONS, np.float32, paired)
-        return mean, error
+        return sampled(tables, len(rows), count, rng, add, points, DIMENSIONS, np.float32, paired)  # (as shown)
 
     def noise(value, error):
         grey = value.sum(axis=1)
@@ -270,7 +260,8 @@ def _part_at(tables, position, patch, rng, add, paired=False, shown=None):
         allowed = NOISE_SHARE * (brightest[patch] if shown is None else np.maximum(brightest[patch], shown))
         return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
 
-    return Part(sample, noise)
+    # (the corners a lamp is behind: 0, and no samples)
+    return Part(sample, noise, unlit(add, position.T, g.patch_normal_rows.take(patch, axis=1).astype(np.float64)))
 
 
 def inside_other(g, position, patch):

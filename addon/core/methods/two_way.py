@@ -69,8 +69,7 @@ from ..estimate.tallies import ChunkTally
 from .first_shot import FATE_STREAM, Gathering
 from ..names import GATHERED, TWO_WAY
 from ..estimate.plan import MIN_CHUNK_PATHS, MIN_MEASURED_CHUNKS, chunk_paths_for
-from .two_way_sizes import (AGAIN_TERMS, TWO_WAY_GROWTH, TWO_WAY_MOST_GROWTH, again_chunk, balanced_chunk,  # noqa: F401
-                            later_chunk, later_estimate, measured_growth)
+from .two_way_sizes import TWO_WAY_GROWTH, again_chunk, balanced_chunk, later_chunk
 from .base import GatheringIntegrator, Method, check, solve_gathering, spec_gathering
 from .tables import chunk_wide
 
