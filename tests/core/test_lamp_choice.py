@@ -110,36 +110,3 @@ def test_samples_choose_lamps_by_their_weights_and_by_power_where_none_can_light
         assert (counts[share == 0] == 0).all()
         np.testing.assert_array_less(np.abs(counts - n * share), 4 * np.sqrt(n * share * (1 - share)) + 1e-9)
         np.testing.assert_allclose(chance[local == point], share[lamp[local == point]], rtol=1e-12)
-
-
-def test_what_a_lamp_is_behind_gets_none_of_its_light_whatever_its_samples():
-    """``behind``: for every kind of lamp alone and for all of them together, the points it calls
-    dark get exactly 0 from 256 samples of each of their lamps (a point or sphere lamp and a spot
-    wholly below the horizon, an area lamp's bounding sphere below it or its back turned, the sun's
-    disc below it), and it calls dark most of the points that get 0 from a point lamp (so the
-    display's corners facing away need no samples); with a spread, what is dark within it stays
-    dark at every point of a flat piece that size about the point."""
-    rng = np.random.default_rng(8)
-    x, normal = _points(rng, 4000)
-    lamps = _lamps()
-    for choice in [LampChoice([lamp]) for lamp in lamps] + [LampChoice(lamps)]:
-        dark = choice.behind(x.T, normal.T)
-        assert dark.any() and not dark.all(), choice.lamps
-        for k in range(len(choice)):
-            for _ in range(16):
-                u = rng.random((2, int(dark.sum())), dtype=np.float32)
-                value = choice.lamps[k].gather(x[dark].T, normal[dark].T, u)[2]
-                assert (value == 0).all(), choice.lamps[k].name
-    point = LampChoice([lamps[0]])
-    unlit = (point.lamps[0].gather(x.T, normal.T, np.zeros((2, len(x)), np.float32))[2] == 0).all(axis=0)
-    assert point.behind(x.T, normal.T).sum() > 0.99 * unlit.sum()
-    # a flat piece within the spread: points in the plane about each dark point
-    spread = np.full(len(x), 0.05)
-    for choice in [LampChoice([lamp]) for lamp in lamps]:
-        dark = choice.behind(x.T, normal.T, spread)
-        tangent = np.cross(normal, rng.normal(size=normal.shape))
-        tangent *= (0.05 * rng.random(len(x)) / np.linalg.norm(tangent, axis=1))[:, None]
-        moved = (x + tangent)[dark]
-        for k in range(len(choice)):
-            u = rng.random((2, len(moved)), dtype=np.float32)
-            assert (choice.lamps[k].gather(moved.T, normal[dark].T, u)[2] == 0).all(), choice.lamps[k].name

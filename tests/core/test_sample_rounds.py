@@ -133,21 +133,3 @@ def test_two_threads_share_each_block_so_the_samples_in_flight_stay_one_blocks(m
         point_direct.corner_direct(surface, scene, scene.triangles, seed=4)
     assert sizes and max(sizes) <= 128 and sum(sizes) % point_direct.SAMPLES == 0
 
-
-def test_a_parts_dark_points_are_0_and_never_sampled(monkeypatch):
-    """A Part's ``dark`` points (a lamp behind them) take no samples in any round and read 0; the
-    rest are sampled as before, and the samples spent are theirs alone."""
-    clock = _Clock()
-    monkeypatch.setattr(sample_rounds.time, "perf_counter", clock)
-    log = []
-    part = _part(clock, 1e-3, [0.5, 3.0, 9.0, 2.0, 7.0], log)
-
-    def sample(rows, count):
-        mean, error = part.sample(rows, count)
-        return mean + 1.0, error  # (a light of 1 wherever sampled)
-
-    dark = np.array([False, True, False, False, True])
-    spent = sample_rounds.Spent()
-    means = sample_rounds.rounds([sample_rounds.Part(sample, part.noise, dark)], 5, 16, retries=2, more=8, spent=spent)[0]
-    assert [(rows.tolist(), count) for _, rows, count in log] == [([0, 2, 3], 16), ([2, 3], 128)]
-    assert np.array_equal(means[:, 0], [1.0, 0.0, 1.0, 1.0, 0.0]) and spent.samples == 3 * 16 + 2 * 128

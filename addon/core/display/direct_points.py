@@ -81,15 +81,6 @@ def chosen_lamps(tables, points, choice, u, value):
     value += v * (seen / chance)
 
 
-def unlit(add, x, normal, spread=0.0):
-    """(n,) bool: the world points ``x`` (3,n) of unit ``normal`` (3,n) (or the flat pieces within
-    ``spread`` of them) that a source's ``add`` can give no light whatever its samples (a lamps'
-    choice: ``LampChoice.behind``), which need none; None where it cannot tell (the emitting
-    patches, the sky)."""
-    choice = add.keywords.get("choice") if isinstance(add, partial) and add.func is chosen_lamps else None
-    return None if choice is None else choice.behind(x, normal, spread)
-
-
 def sky_at(tables, points, worlds, u, value):
     """Adds the sky's light along one cosine ray a point to ``value``."""
     towards = worlds[0].gather(points.world, points.normal, u[3:5])[0]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .direct_points import SAMPLE_DIMENSIONS, Points, unlit
+from .direct_points import SAMPLE_DIMENSIONS, Points
 from ..lights.lamp_choice import patch_spheres
 from ..lights.lights import WorldLight
 from ..names import EXIT_RANDOM, FINITE
@@ -123,7 +123,4 @@ def _means_of(tables, patches, rng, add, light, spheres, paired=False):
         allowed = NOISE_SHARE * shown_light
         return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
 
-    # (the patches a lamp is behind, whole: 0, and no samples)
-    dark = None if spheres is None else unlit(add, spheres[0][patches].T, g.patch_normal_rows.take(patches, axis=1).astype(
-        np.float64), spheres[1][patches])
-    return Part(sample, noise, dark)
+    return Part(sample, noise)

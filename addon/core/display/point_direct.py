@@ -54,7 +54,7 @@ from functools import partial
 
 import numpy as np
 
-from .direct_points import Points, chosen_lamps, emitting, sky_at, unlit
+from .direct_points import Points, chosen_lamps, emitting, sky_at
 from ..lights.lamp_choice import LampChoice
 from ..lights.lights import SunLight, WorldLight
 from ..names import EXIT_RANDOM, FINITE
@@ -260,8 +260,7 @@ def _part_at(tables, position, patch, rng, add, paired=False, shown=None):
         allowed = NOISE_SHARE * (brightest[patch] if shown is None else np.maximum(brightest[patch], shown))
         return np.divide(error, allowed, out=np.where(error > 0, np.inf, 0.0), where=allowed > 0)
 
-    # (the corners a lamp is behind: 0, and no samples)
-    return Part(sample, noise, unlit(add, position.T, g.patch_normal_rows.take(patch, axis=1).astype(np.float64)))
+    return Part(sample, noise)
 
 
 def inside_other(g, position, patch):

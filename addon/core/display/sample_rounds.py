@@ -1,8 +1,7 @@
 """Rounds of stratified samples at points or patches, again where a mean is noisier than allowed,
 within a deadline where one is given (the display's direct light: ``point_direct``).
 
-Every source (``Part``) first takes ``samples`` samples at every point (none at those it cannot
-light, its ``dark`` ones, whose light is 0); then, up to ``retries``
+Every source (``Part``) first takes ``samples`` samples at every point; then, up to ``retries``
 times, the points whose standard error passes what is allowed take ``more`` times as many,
 new ones (the mean of the last round stands). With a deadline, a round takes the noisiest points
 first, of every source together, as many as the pace each source's rounds have shown leaves
@@ -32,7 +31,6 @@ class Part:
 
     sample: Callable
     noise: Callable
-    dark: np.ndarray | None = None  # (n,) bool: points it gives no light whatever its samples (0, none drawn)
 
 
 @dataclass
@@ -72,25 +70,13 @@ def rounds(parts, n, samples, retries, more, deadline=None, spent=None):
 
 
 def _timed(part, rows, count, spent):
-    """``part.sample(rows, count)`` (its ``dark`` rows 0, not sampled) and the seconds it took,
-    added to ``spent``."""
+    """``part.sample(rows, count)`` and the seconds it took, added to ``spent``."""
     started = time.perf_counter()
-    lit = rows if part.dark is None else rows[~part.dark[rows]]
-    mean, error = part.sample(lit, count)
-    if lit is not rows:
-        keep = ~part.dark[rows]
-        mean, error = _filled(mean, keep), _filled(error, keep)
+    mean, error = part.sample(rows, count)
     seconds = time.perf_counter() - started
-    spent.samples += lit.size * count
+    spent.samples += rows.size * count
     spent.seconds += seconds
     return mean, error, seconds
-
-
-def _filled(values, keep):
-    """``values`` (k,...) at the rows ``keep`` (n,) bool marks, 0 at the others."""
-    out = np.zeros((keep.size,) + values.shape[1:], values.dtype)
-    out[keep] = values
-    return out
 
 
 def _within(again, ratios, pace, count, left):

@@ -37,9 +37,6 @@ NEAR = 0.5
 # the light from its centre is nearer its light than the bound where it is wholly in view, and
 # the bound keeps a weight where only a part of it is (its centre below the horizon).
 BOUND_SHARE = 0.1
-# ``behind`` is sure of a point this far past the horizon (of the distance, or of a radian for a sun):
-# rounding at the edge may not light it.
-BEHIND_MARGIN = 1e-9
 
 
 def _widened(cosine, cos_u, sin_u):
@@ -102,27 +99,6 @@ class LampChoice:
 
     def __len__(self):
         return len(self.lamps)
-
-    def behind(self, x, normal, spread=0.0):
-        """(n,) bool: the world points ``x`` (3,n) of unit ``normal`` (3,n), or the flat pieces of
-        surface within ``spread`` (n,) of them, that no lamp or sun of the choice can light, whatever
-        its samples: each below their surface's horizon whole (a point or sphere lamp, or a spot's;
-        an area lamp's bounding sphere; the sun's disc), or an area lamp's emitting side facing away
-        from them. Their samples' light is 0, so they need none."""
-        dark = np.ones(x.shape[1], bool)
-        for k in range(len(self.lamps)):
-            if self.kind[k] == SUN:
-                below = dot(normal, np.broadcast_to(self.axis[k][:, None], normal.shape)) < -(np.sin(self.radius[k]) + BEHIND_MARGIN)
-            else:
-                d = self.centre[k][:, None] - x
-                margin = BEHIND_MARGIN * np.sqrt(dot(d, d)) + spread
-                below = dot(normal, d) < -(self.radius[k] + margin)
-                if self.kind[k] == AREA:  # (the lamp's plane between: its light goes the other way)
-                    below |= dot(np.broadcast_to(self.axis[k][:, None], d.shape), d) > margin
-            dark &= below
-            if not dark.any():
-                break
-        return dark
 
     def weights(self, x, normal, spread=0.0):
         """(L, n) each lamp's weight at world points ``x`` (n,3) of unit ``normal`` (n,3), each
